@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The test command: runs voxlab's whole test suite in release mode.
+#
+# GPU tests need a Vulkan (or Metal/DX12) adapter. When none is found and this runs as
+# root on a Debian/Ubuntu machine, Mesa's software Vulkan driver (lavapipe, package
+# mesa-vulkan-drivers) is installed first, so the GPU tests really run. Without an
+# adapter they fail, unless VOXLAB_ALLOW_NO_GPU=1, in which case they say loudly that
+# they skipped.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+have_vulkan_driver() {
+    # A Vulkan loader and at least one installable client driver (ICD) manifest.
+    ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1' || return 1
+    ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json \
+       /usr/local/share/vulkan/icd.d/*.json 2>/dev/null | grep -q . || return 1
+}
+
+if [ "$(uname -s)" = "Linux" ] && ! have_vulkan_driver; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "test.sh: no Vulkan driver found; installing mesa-vulkan-drivers (lavapipe)…"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update -qq
+        apt-get install -y -qq --no-install-recommends mesa-vulkan-drivers libvulkan1 >/dev/null
+    else
+        echo "test.sh: no Vulkan driver found and cannot install one (needs root and apt-get)."
+        echo "test.sh: install mesa-vulkan-drivers, or set VOXLAB_ALLOW_NO_GPU=1 to skip GPU tests."
+    fi
+fi
+
+rm -f target/gpu-tests-skipped.txt
+cargo test --release --all-targets "$@"
+cargo test --release --doc
+
+if [ -s target/gpu-tests-skipped.txt ]; then
+    echo
+    echo "************************************************************"
+    echo "*  GPU TESTS SKIPPED (no adapter, VOXLAB_ALLOW_NO_GPU=1):  *"
+    sed 's/^/*    /' target/gpu-tests-skipped.txt
+    echo "************************************************************"
+fi

@@ -1,0 +1,432 @@
+//! Cameras: orthographic and perspective, orbit parameters, axis-aligned views, ray
+//! generation and ray–box intersection.
+//!
+//! Image conventions: row 0 is at the top; pixel `(col, row)` has its centre at image
+//! coordinates `(col + 0.5, row + 0.5)`. A camera is an eye (or, for orthographic views,
+//! the centre of the image plane), a unit `forward` direction and unit `right` and `up`
+//! vectors spanning the image plane. Pixel x grows along `right`, pixel y along `−up`.
+//! Cameras are set up in f64 world coordinates (mm).
+
+use crate::error::{Error, Result};
+use glam::{DMat3, DMat4, DVec3};
+use serde::{Deserialize, Serialize};
+
+/// How rays leave the camera.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Projection {
+    /// Parallel rays along `forward`; the image plane is `width_mm × height_mm`.
+    Orthographic { width_mm: f64, height_mm: f64 },
+    /// Rays from the eye; `fov_y_deg` is the full vertical field of view.
+    Perspective { fov_y_deg: f64 },
+}
+
+/// A ray in world space: `origin + t · dir`, `dir` of unit length, valid for
+/// `t ∈ [t_min, ∞)` (`t_min` is −∞ for orthographic rays, 0 for perspective ones).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: DVec3,
+    pub dir: DVec3,
+    pub t_min: f64,
+}
+
+/// One of the six axis-aligned orthographic views of a volume's index axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AxisView {
+    PlusX,
+    MinusX,
+    PlusY,
+    MinusY,
+    PlusZ,
+    MinusZ,
+}
+
+impl std::str::FromStr for AxisView {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Ok(match s {
+            "+x" | "x" => AxisView::PlusX,
+            "-x" => AxisView::MinusX,
+            "+y" | "y" => AxisView::PlusY,
+            "-y" => AxisView::MinusY,
+            "+z" | "z" => AxisView::PlusZ,
+            "-z" => AxisView::MinusZ,
+            _ => {
+                return Err(Error::invalid(
+                    "view",
+                    format!("'{s}' is not one of +x, -x, +y, -y, +z, -z"),
+                ))
+            }
+        })
+    }
+}
+
+impl AxisView {
+    /// The index axis rays travel along, and the sign of their direction.
+    pub fn axis(self) -> (usize, f64) {
+        match self {
+            AxisView::PlusX => (0, 1.0),
+            AxisView::MinusX => (0, -1.0),
+            AxisView::PlusY => (1, 1.0),
+            AxisView::MinusY => (1, -1.0),
+            AxisView::PlusZ => (2, 1.0),
+            AxisView::MinusZ => (2, -1.0),
+        }
+    }
+    /// The index axes along image columns and image rows: the remaining two axes,
+    /// the faster one across columns, the slower one down the rows. That is NumPy's
+    /// layout of `vol.max(axis=…)` for a `(nz, ny, nx)` array, so the image equals the
+    /// reduction pixel for pixel, for either sign of the view.
+    pub fn image_axes(self) -> (usize, usize) {
+        match self.axis().0 {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        }
+    }
+}
+
+/// Orbit parameters around a target point.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Orbit {
+    /// Rotation about the world +z axis, degrees; 0 looks along +y (from −y).
+    pub azimuth_deg: f64,
+    /// Angle above the xy-plane, degrees (−89 … 89).
+    pub elevation_deg: f64,
+    /// Distance from the target in mm; `None` fits the volume in view.
+    pub distance_mm: Option<f64>,
+}
+
+impl Default for Orbit {
+    fn default() -> Self {
+        Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance_mm: None,
+        }
+    }
+}
+
+/// A camera: where rays start, which way they go, and the image size.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// The eye (perspective) or the centre of the image plane (orthographic).
+    pub eye: DVec3,
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+    pub projection: Projection,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// The largest image side accepted (a 16384² RGBA f64 frame is 8 GiB).
+pub const MAX_IMAGE_SIDE: usize = 16384;
+
+fn check_image(width: usize, height: usize) -> Result<()> {
+    if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(Error::invalid(
+            "image size",
+            format!("{width}×{height}: each side must be 1 … {MAX_IMAGE_SIDE}"),
+        ));
+    }
+    Ok(())
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, with `up_hint` roughly up.
+    pub fn look_at(
+        eye: DVec3,
+        target: DVec3,
+        up_hint: DVec3,
+        projection: Projection,
+        width: usize,
+        height: usize,
+    ) -> Result<Self> {
+        check_image(width, height)?;
+        let forward = (target - eye).normalize_or_zero();
+        let right = forward.cross(up_hint).normalize_or_zero();
+        if forward == DVec3::ZERO || right == DVec3::ZERO || !right.is_finite() {
+            return Err(Error::invalid(
+                "camera",
+                "eye and target coincide, or the up vector is parallel to the view direction",
+            ));
+        }
+        let up = right.cross(forward);
+        let cam = Camera {
+            eye,
+            forward,
+            right,
+            up,
+            projection,
+            width,
+            height,
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    /// An orbit camera around a volume of world-space centre `center` and extent
+    /// `extent` (mm), with the world +z axis up. With `distance_mm: None` the whole
+    /// volume fits the view (its bounding sphere with a 5 % margin).
+    pub fn orbit(
+        center: DVec3,
+        extent: [f64; 3],
+        orbit: Orbit,
+        projection: Projection,
+        width: usize,
+        height: usize,
+    ) -> Result<Self> {
+        check_image(width, height)?;
+        if !(-89.999..=89.999).contains(&orbit.elevation_deg) || !orbit.azimuth_deg.is_finite() {
+            return Err(Error::invalid(
+                "orbit",
+                "elevation must lie in (−90°, 90°) and azimuth be finite",
+            ));
+        }
+        let radius = 0.5 * DVec3::from_array(extent).length() * 1.05;
+        let (sa, ca) = orbit.azimuth_deg.to_radians().sin_cos();
+        let (se, ce) = orbit.elevation_deg.to_radians().sin_cos();
+        let toward_eye = DVec3::new(ce * sa, -ce * ca, se);
+        let aspect = width as f64 / height.max(1) as f64;
+        let (projection, fit_distance) = match projection {
+            Projection::Perspective { fov_y_deg } => {
+                let half = 0.5 * fov_y_deg.to_radians();
+                let half_min = if aspect < 1.0 {
+                    (half.tan() * aspect).atan()
+                } else {
+                    half
+                };
+                (projection, radius / half_min.sin())
+            }
+            Projection::Orthographic {
+                width_mm,
+                height_mm,
+            } => {
+                // Non-positive sizes mean "fit".
+                let (w, h) = if width_mm > 0.0 && height_mm > 0.0 {
+                    (width_mm, height_mm)
+                } else {
+                    let h = 2.0 * radius / aspect.min(1.0);
+                    (h * aspect, h)
+                };
+                (
+                    Projection::Orthographic {
+                        width_mm: w,
+                        height_mm: h,
+                    },
+                    2.0 * radius,
+                )
+            }
+        };
+        let distance = orbit.distance_mm.unwrap_or(fit_distance);
+        if !(distance.is_finite() && distance > 0.0) {
+            return Err(Error::invalid("orbit distance", "must be positive"));
+        }
+        Self::look_at(
+            center + toward_eye * distance,
+            center,
+            DVec3::Z,
+            projection,
+            width,
+            height,
+        )
+    }
+
+    /// The orthographic view along an index axis of a volume with `dims` and `affine`.
+    /// The image spans the volume's cross-section; with `width × height` equal to the
+    /// cross-section's dimensions every pixel centre lies on a ray through voxel centres.
+    /// See [`AxisView::image_axes`] for the orientation.
+    pub fn axis_view(
+        dims: [usize; 3],
+        affine: DMat4,
+        view: AxisView,
+        width: usize,
+        height: usize,
+    ) -> Result<Self> {
+        check_image(width, height)?;
+        let (a, sign) = view.axis();
+        let (ca, ra) = view.image_axes();
+        let lin = DMat3::from_mat4(affine);
+        let col = |i: usize| lin.col(i);
+        let center = affine.transform_point3(DVec3::new(
+            (dims[0] as f64 - 1.0) * 0.5,
+            (dims[1] as f64 - 1.0) * 0.5,
+            (dims[2] as f64 - 1.0) * 0.5,
+        ));
+        let forward = (col(a) * sign).normalize();
+        let right = col(ca).normalize();
+        let up = -col(ra).normalize();
+        let width_mm = col(ca).length() * dims[ca] as f64;
+        let height_mm = col(ra).length() * dims[ra] as f64;
+        // The eye plane sits just outside the volume on the side rays come from.
+        let eye = center - forward * (col(a).length() * dims[a] as f64);
+        let cam = Camera {
+            eye,
+            forward,
+            right,
+            up,
+            projection: Projection::Orthographic {
+                width_mm,
+                height_mm,
+            },
+            width,
+            height,
+        };
+        cam.validate()?;
+        Ok(cam)
+    }
+
+    fn validate(&self) -> Result<()> {
+        check_image(self.width, self.height)?;
+        match self.projection {
+            Projection::Perspective { fov_y_deg } if !(fov_y_deg > 0.0 && fov_y_deg < 179.0) => {
+                Err(Error::invalid(
+                    "field of view",
+                    format!("{fov_y_deg}° must lie in (0°, 179°)"),
+                ))
+            }
+            Projection::Orthographic {
+                width_mm,
+                height_mm,
+            } if !(width_mm > 0.0
+                && height_mm > 0.0
+                && width_mm.is_finite()
+                && height_mm.is_finite()) =>
+            {
+                Err(Error::invalid("orthographic view size", "must be positive"))
+            }
+            _ if !(self.eye.is_finite() && self.forward.is_finite()) => Err(Error::invalid(
+                "camera",
+                "position and direction must be finite",
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// The ray through continuous image point `(x, y)` (pixel centres at `+ 0.5`).
+    pub fn ray_at(&self, x: f64, y: f64) -> Ray {
+        let u = x / self.width as f64 - 0.5;
+        let v = 0.5 - y / self.height as f64;
+        match self.projection {
+            Projection::Orthographic {
+                width_mm,
+                height_mm,
+            } => Ray {
+                origin: self.eye + self.right * (u * width_mm) + self.up * (v * height_mm),
+                dir: self.forward,
+                t_min: f64::NEG_INFINITY,
+            },
+            Projection::Perspective { fov_y_deg } => {
+                let h = (0.5 * fov_y_deg.to_radians()).tan();
+                let aspect = self.width as f64 / self.height as f64;
+                let dir =
+                    (self.forward + self.right * (2.0 * u * h * aspect) + self.up * (2.0 * v * h))
+                        .normalize();
+                Ray {
+                    origin: self.eye,
+                    dir,
+                    t_min: 0.0,
+                }
+            }
+        }
+    }
+
+    /// The ray through the centre of pixel `(col, row)`.
+    pub fn ray(&self, col: usize, row: usize) -> Ray {
+        self.ray_at(col as f64 + 0.5, row as f64 + 0.5)
+    }
+}
+
+/// Entry and exit parameters of the ray `o + t d` through the box `[lo, hi]` (slab
+/// method), or `None` when it misses. Mirrors `shaders/raycast.wgsl: intersect_box`.
+pub fn intersect_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    crate::phantom::slab_interval(o, d, lo, hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn orbit_zero_looks_along_plus_y_with_x_right_and_z_up() {
+        let c = Camera::orbit(
+            DVec3::ZERO,
+            [10.0; 3],
+            Orbit {
+                azimuth_deg: 0.0,
+                elevation_deg: 0.0,
+                distance_mm: Some(100.0),
+            },
+            Projection::Perspective { fov_y_deg: 30.0 },
+            8,
+            8,
+        )
+        .unwrap();
+        assert!((c.forward - DVec3::Y).length() < 1e-12);
+        assert!((c.right - DVec3::X).length() < 1e-12);
+        assert!((c.up - DVec3::Z).length() < 1e-12);
+        // The centre of the image looks straight ahead.
+        let r = c.ray_at(4.0, 4.0);
+        assert!((r.dir - DVec3::Y).length() < 1e-12);
+    }
+
+    #[test]
+    fn axis_view_pixels_hit_voxel_centres() {
+        let dims = [5, 4, 3];
+        let affine = DMat4::from_scale(DVec3::new(1.0, 2.0, 0.5));
+        let inv = affine.inverse();
+        for view in [AxisView::PlusZ, AxisView::MinusY, AxisView::PlusX] {
+            let (ca, ra) = view.image_axes();
+            let cam = Camera::axis_view(dims, affine, view, dims[ca], dims[ra]).unwrap();
+            for row in 0..dims[ra] {
+                for col in 0..dims[ca] {
+                    let r = cam.ray(col, row);
+                    let p = inv.transform_point3(r.origin);
+                    assert!((p[ca] - col as f64).abs() < 1e-12, "{view:?}");
+                    assert!((p[ra] - row as f64).abs() < 1e-12, "{view:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_cameras_are_refused() {
+        assert!(Camera::look_at(
+            DVec3::ZERO,
+            DVec3::ZERO,
+            DVec3::Z,
+            Projection::Perspective { fov_y_deg: 30.0 },
+            4,
+            4
+        )
+        .is_err());
+        assert!(Camera::look_at(
+            DVec3::ZERO,
+            DVec3::Z,
+            DVec3::Z,
+            Projection::Perspective { fov_y_deg: 30.0 },
+            4,
+            4
+        )
+        .is_err());
+        assert!(Camera::look_at(
+            DVec3::ZERO,
+            DVec3::X,
+            DVec3::Z,
+            Projection::Perspective { fov_y_deg: 200.0 },
+            4,
+            4
+        )
+        .is_err());
+        assert!(Camera::look_at(
+            DVec3::ZERO,
+            DVec3::X,
+            DVec3::Z,
+            Projection::Perspective { fov_y_deg: 30.0 },
+            0,
+            4
+        )
+        .is_err());
+    }
+}

@@ -1,0 +1,9 @@
+//! The CPU oracle: exact, rayon-parallel implementations generic over `f32`/`f64`.
+//!
+//! One file per algorithm family; the GPU port in `crate::gpu` mirrors the per-element
+//! functions by name. The f64 instance is the oracle (its output never depends on the
+//! thread count); the f32 instance is the fair baseline for speed comparisons.
+
+pub mod filter;
+pub mod gradient;
+pub mod raycast;

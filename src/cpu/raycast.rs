@@ -1,0 +1,565 @@
+//! The CPU ray caster: the oracle every GPU ray-casting path is checked against.
+//!
+//! For each pixel a ray is generated in world space (`camera`), carried into the
+//! volume's index space by the inverse affine, clipped to the volume's box
+//! `[-0.5, n − 0.5]³`, and cut into steps of `step` voxels; the last step is shortened
+//! to end exactly on the box. Each step is represented by the sample at its midpoint,
+//! weighted by its length (the midpoint rule), so with `step = 1` on an axis-aligned
+//! view the samples fall exactly on voxel centres.
+//!
+//! Modes (Fluør 2006 §2.1–2.4, Gavrilov & Turlapov §2):
+//! - **DVR**, emission–absorption: `α' = 1 − (1 − α)^(Δs/Δs₀)` per step; front to back
+//!   `C += (1 − A) α' c`, `A += (1 − A) α'` with early ray termination once
+//!   `A ≥ ert_threshold`; back to front `C = α' c + (1 − α') C`. Post-classification
+//!   interpolates the data and classifies each sample; pre-classification classifies
+//!   every voxel and interpolates opacity-weighted colours `(αr, αg, αb, α)`.
+//!   Phong shading with the normal `n = −∇f/|∇f|` (two-sided):
+//!   `c' = c (k_a + k_d |n·L|) + k_s |n·H|^s`.
+//! - **MIP / MinIP**: the maximum / minimum sample.
+//! - **X-ray**: `Σ f(p_k) Δℓ_k`, the line integral in value × mm.
+//!
+//! Pixels are independent and every sum runs in a fixed order, so the result is
+//! bit-identical for any number of threads. The same code runs in f64 (the oracle) and
+//! f32 (the fair CPU baseline).
+
+use super::filter::{sample, Grid};
+use super::gradient::{gradient_at, gradient_stencil, precompute_gradients};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::real::{Real, M3, V3};
+use crate::settings::{
+    Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
+};
+use crate::transfer::{LutR, TransferFunction};
+use crate::volume::AnyVolume;
+use glam::{DMat3, DMat4};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A scalar field the ray caster samples, in index coordinates.
+pub trait Field<R: Real>: Sync {
+    /// Grid dimensions; the field's box is `[-0.5, n − 0.5]` on each axis.
+    fn dims(&self) -> [usize; 3];
+    /// The value at index-space point `p`.
+    fn value(&self, p: V3<R>) -> R;
+    /// The index-space gradient at `p`.
+    fn gradient(&self, p: V3<R>) -> V3<R>;
+    /// Minimum and maximum value (scales the shading threshold).
+    fn value_range(&self) -> (f64, f64);
+    /// The voxel grid behind the field, if any (pre-classification needs one).
+    fn grid(&self) -> Option<&Grid<R>> {
+        None
+    }
+}
+
+/// A voxel grid reconstructed with a filter; gradients on the fly or precomputed.
+/// `grid` holds what the filter samples (see `filter::prepare`).
+pub struct GridField<R> {
+    pub grid: Grid<R>,
+    pub filter: Filter,
+    pub method: GradientMethod,
+    /// Precomputed gradient components, interpolated with the same filter.
+    pub gradients: Option<[Grid<R>; 3]>,
+    range: (f64, f64),
+}
+
+impl<R: Real> GridField<R> {
+    pub fn new(grid: Grid<R>, filter: Filter, method: GradientMethod, precompute: bool) -> Self {
+        let gradients = precompute.then(|| {
+            precompute_gradients(&grid, method).map(|g| super::filter::prepare(&g, filter))
+        });
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for v in &grid.data {
+            lo = lo.min(v.f64());
+            hi = hi.max(v.f64());
+        }
+        GridField {
+            grid: super::filter::prepare(&grid, filter),
+            filter,
+            method,
+            gradients,
+            range: (lo, hi),
+        }
+    }
+}
+
+impl<R: Real> Field<R> for GridField<R> {
+    fn dims(&self) -> [usize; 3] {
+        self.grid.dims
+    }
+    #[inline]
+    fn value(&self, p: V3<R>) -> R {
+        sample(&self.grid, self.filter, p)
+    }
+    #[inline]
+    fn gradient(&self, p: V3<R>) -> V3<R> {
+        match &self.gradients {
+            Some([gx, gy, gz]) => V3::new(
+                sample(gx, self.filter, p),
+                sample(gy, self.filter, p),
+                sample(gz, self.filter, p),
+            ),
+            None => gradient_at(&self.grid, self.filter, p, self.method),
+        }
+    }
+    fn value_range(&self) -> (f64, f64) {
+        self.range
+    }
+    fn grid(&self) -> Option<&Grid<R>> {
+        Some(&self.grid)
+    }
+}
+
+/// An analytic phantom seen through a virtual grid of `dims` (the grid
+/// `Phantom::sample(dims)` would produce), sampled exactly at every point: no
+/// reconstruction filter stands between the ray caster and the truth.
+pub struct PhantomField<'a> {
+    pub phantom: &'a crate::phantom::Phantom,
+    pub dims: [usize; 3],
+    pub method: GradientMethod,
+}
+
+impl PhantomField<'_> {
+    fn to_phantom(&self, p: V3<f64>) -> glam::DVec3 {
+        let c = |x: f64, n: usize| (x + 0.5) * 2.0 / n as f64 - 1.0;
+        glam::DVec3::new(
+            c(p.x(), self.dims[0]),
+            c(p.y(), self.dims[1]),
+            c(p.z(), self.dims[2]),
+        )
+    }
+}
+
+impl<R: Real> Field<R> for PhantomField<'_> {
+    fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    fn value(&self, p: V3<R>) -> R {
+        let q = V3::new(p.x().f64(), p.y().f64(), p.z().f64());
+        R::of(self.phantom.value_at(self.to_phantom(q)))
+    }
+    fn gradient(&self, p: V3<R>) -> V3<R> {
+        gradient_stencil(|q| <Self as Field<R>>::value(self, q), p, self.method)
+    }
+    fn value_range(&self) -> (f64, f64) {
+        (0.0, 1.0)
+    }
+}
+
+/// What a render returns.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// RGBA (DVR) or scalar (MIP, MinIP, X-ray) image.
+    pub image: Frame,
+    /// Samples taken per ray, when asked for.
+    pub samples: Option<Frame>,
+    /// Total samples over all rays.
+    pub total_samples: u64,
+}
+
+/// Ray–box intersection in precision `R` (slab method), box `[lo, hi]` on every axis.
+/// Mirrors `shaders/raycast.wgsl: intersect_box`.
+#[inline]
+pub fn intersect_box<R: Real>(o: V3<R>, d: V3<R>, lo: V3<R>, hi: V3<R>) -> Option<(R, R)> {
+    let mut t0 = R::neg_infinity();
+    let mut t1 = R::infinity();
+    for a in 0..3 {
+        if d.0[a] == R::zero() {
+            if o.0[a] < lo.0[a] || o.0[a] > hi.0[a] {
+                return None;
+            }
+        } else {
+            let inv = R::one() / d.0[a];
+            let ta = (lo.0[a] - o.0[a]) * inv;
+            let tb = (hi.0[a] - o.0[a]) * inv;
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t1 > t0).then_some((t0, t1))
+}
+
+/// Phong shading of colour `c` with normal `n`, light `l` and half vector `h` (all
+/// unit, world space; two-sided). Mirrors `shaders/raycast.wgsl: phong`.
+#[inline]
+pub fn phong<R: Real>(c: [R; 3], n: V3<R>, l: V3<R>, h: V3<R>, k: &ShadingR<R>) -> [R; 3] {
+    let ndl = n.dot(l).abs();
+    let ndh = n.dot(h).abs();
+    let diffuse = k.ambient + k.diffuse * ndl;
+    let spec = k.specular * ndh.powf(k.shininess);
+    [
+        c[0] * diffuse + spec,
+        c[1] * diffuse + spec,
+        c[2] * diffuse + spec,
+    ]
+}
+
+/// Shading constants in the working precision.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingR<R> {
+    pub ambient: R,
+    pub diffuse: R,
+    pub specular: R,
+    pub shininess: R,
+}
+
+/// Everything a ray needs, prepared once per render.
+struct Setup<R> {
+    to_index: DMat4,
+    normal: M3<R>,
+    lo: V3<R>,
+    hi: V3<R>,
+    step: R,
+    ref_step: R,
+    lut: LutR<R>,
+    pre: Option<[Grid<R>; 4]>,
+    filter: Filter,
+    k: ShadingR<R>,
+    shade: bool,
+    light: Option<V3<R>>,
+    grad_thr: R,
+    ert: R,
+    bg: [R; 4],
+    miss: R,
+}
+
+/// Renders a volume with precision `R`. `progress(done_rows, total_rows)` is called as
+/// rows finish (from worker threads).
+pub fn render<R: Real>(
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<RenderOutput> {
+    settings.validate()?;
+    tf.validate()?;
+    volume.check_finite("volume")?;
+    check_cost(volume.dims(), camera, settings)?;
+    let grid = match volume {
+        AnyVolume::U8(v) => Grid::<R>::from_volume(v),
+        AnyVolume::U16(v) => Grid::from_volume(v),
+        AnyVolume::I16(v) => Grid::from_volume(v),
+        AnyVolume::F32(v) => Grid::from_volume(v),
+    };
+    let field = GridField::new(
+        grid,
+        settings.filter,
+        settings.gradient,
+        settings.precompute_gradients,
+    );
+    render_field(&field, volume.affine(), tf, camera, settings, progress)
+}
+
+/// Refuses renders whose cost is absurd (the full sinc is O(n³) per sample).
+fn check_cost(dims: [usize; 3], camera: &Camera, settings: &RenderSettings) -> Result<()> {
+    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    let per_ray = diag / settings.step;
+    if per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
+        return Err(Error::too_large(
+            "render",
+            format!(
+                "step {} gives up to {per_ray:.0} samples per ray",
+                settings.step
+            ),
+        ));
+    }
+    if settings.filter == Filter::Sinc {
+        let voxels = (dims[0] * dims[1] * dims[2]) as f64;
+        let work = camera.width as f64 * camera.height as f64 * per_ray * voxels;
+        if work > 1e12 {
+            return Err(Error::too_large(
+                "full-sinc render",
+                format!(
+                    "about {work:.1e} multiply-adds (every sample sums the whole grid); \
+                     use lanczos4, a smaller volume, a smaller image or a larger step"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Renders any [`Field`] placed in the world by `affine` (index → world).
+pub fn render_field<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<RenderOutput> {
+    settings.validate()?;
+    tf.validate()?;
+    let dims = field.dims();
+    let lin = DMat3::from_mat4(affine);
+    // World-space gradient = J⁻ᵀ × index-space gradient.
+    let normal = M3::from_dmat3(lin.inverse().transpose());
+    let lut = tf.lut(settings.lut_size).to_real::<R>();
+    let pre = match (settings.mode, settings.classification, field.grid()) {
+        (Mode::Dvr, Classification::Pre, Some(grid)) => Some(preclassify(grid, &lut)),
+        (Mode::Dvr, Classification::Pre, None) => {
+            return Err(Error::invalid(
+                "classification",
+                "pre-classification needs a voxel grid",
+            ))
+        }
+        _ => None,
+    };
+    let (lo_v, hi_v) = field.value_range();
+    let s = &settings.shading;
+    let setup = Setup {
+        to_index: affine.inverse(),
+        normal,
+        lo: V3::splat(R::of(-0.5)),
+        hi: V3::new(
+            R::of(dims[0] as f64 - 0.5),
+            R::of(dims[1] as f64 - 0.5),
+            R::of(dims[2] as f64 - 0.5),
+        ),
+        step: R::of(settings.step),
+        ref_step: R::of(settings.reference_step),
+        lut,
+        pre,
+        filter: settings.filter,
+        k: ShadingR {
+            ambient: R::of(s.ambient),
+            diffuse: R::of(s.diffuse),
+            specular: R::of(s.specular),
+            shininess: R::of(s.shininess),
+        },
+        shade: s.enabled && settings.mode == Mode::Dvr,
+        light: match s.light {
+            Light::Headlight => None,
+            Light::Direction(d) => Some(V3::from_dvec(glam::DVec3::from_array(d).normalize())),
+        },
+        grad_thr: R::of(s.gradient_threshold * (hi_v - lo_v).max(f64::MIN_POSITIVE)),
+        ert: R::of(settings.ert_threshold),
+        bg: settings.background.map(R::of),
+        miss: R::of(settings.miss_value),
+    };
+
+    let channels = if settings.mode == Mode::Dvr { 4 } else { 1 };
+    let (w, h) = (camera.width, camera.height);
+    let mut image = Frame::new(w, h, channels);
+    let mut counts = vec![0u32; w * h];
+    let done = AtomicUsize::new(0);
+    image
+        .data
+        .par_chunks_mut(w * channels)
+        .zip(counts.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(row, (pixels, row_counts))| {
+            for col in 0..w {
+                let ray = camera.ray(col, row);
+                let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray);
+                for (c, v) in px.iter().take(channels).enumerate() {
+                    pixels[col * channels + c] = v.f64();
+                }
+                row_counts[col] = n;
+            }
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, h);
+        });
+    let total_samples = counts.iter().map(|&c| c as u64).sum();
+    let samples = settings.sample_count.then(|| Frame {
+        width: w,
+        height: h,
+        channels: 1,
+        data: counts.iter().map(|&c| c as f64).collect(),
+    });
+    Ok(RenderOutput {
+        image,
+        samples,
+        total_samples,
+    })
+}
+
+/// Classifies every voxel: opacity-weighted colour grids `(αr, αg, αb, α)`.
+fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
+    let rgba: Vec<[R; 4]> = grid
+        .data
+        .par_iter()
+        .map(|&v| {
+            let c = lut.classify(v);
+            [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]]
+        })
+        .collect();
+    let ch = |c: usize| Grid {
+        dims: grid.dims,
+        data: rgba.iter().map(|p| p[c]).collect(),
+    };
+    [ch(0), ch(1), ch(2), ch(3)]
+}
+
+/// Casts one ray; returns the pixel (RGBA, or the scalar in channel 0) and the number
+/// of samples taken. Mirrors `shaders/raycast.wgsl: cast_ray`.
+fn cast_ray<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    mode: Mode,
+    order: Compositing,
+    ray: crate::camera::Ray,
+) -> ([R; 4], u32) {
+    let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
+    let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
+    let miss = if mode == Mode::Dvr {
+        s.bg
+    } else {
+        [s.miss, R::zero(), R::zero(), R::zero()]
+    };
+    let Some((t_in, t_out)) = intersect_box(o, d, s.lo, s.hi) else {
+        return (miss, 0);
+    };
+    let t_in = t_in.max(R::of(ray.t_min));
+    if t_out <= t_in {
+        return (miss, 0);
+    }
+    let speed = d.length(); // voxels per unit t (t is world mm along a unit direction)
+    let dt = s.step / speed;
+    let n = ((t_out - t_in) / dt - R::of(1e-3)).ceil().max(R::one());
+    let n = n.to_usize().unwrap_or(1);
+    // Step k covers [t_in + k dt, t_in + (k+1) dt], the last one ends at t_out.
+    let segment = |k: usize| {
+        let ta = t_in + R::of(k as f64) * dt;
+        let tb = if k + 1 == n {
+            t_out
+        } else {
+            t_in + R::of((k + 1) as f64) * dt
+        };
+        (o + d * ((ta + tb) * R::of(0.5)), tb - ta)
+    };
+    match mode {
+        Mode::Mip | Mode::Minip => {
+            let mut best = field.value(segment(0).0);
+            for k in 1..n {
+                let v = field.value(segment(k).0);
+                best = if mode == Mode::Mip {
+                    best.max(v)
+                } else {
+                    best.min(v)
+                };
+            }
+            ([best, R::zero(), R::zero(), R::zero()], n as u32)
+        }
+        Mode::Xray => {
+            let mut sum = R::zero();
+            for k in 0..n {
+                let (p, len) = segment(k);
+                sum = sum + field.value(p) * len;
+            }
+            ([sum, R::zero(), R::zero(), R::zero()], n as u32)
+        }
+        Mode::Dvr => {
+            let dir = V3::<R>::from_dvec(ray.dir);
+            let view = -dir;
+            let light = s.light.unwrap_or(view);
+            let half = (light + view).normalize_or_zero();
+            let mut c = [R::zero(); 3];
+            let mut a = R::zero();
+            let mut taken = 0u32;
+            for i in 0..n {
+                let k = if order == Compositing::FrontToBack {
+                    i
+                } else {
+                    n - 1 - i
+                };
+                let (p, len) = segment(k);
+                taken += 1;
+                let (rgb, alpha) = classify_sample(field, s, p);
+                if alpha <= R::zero() {
+                    continue;
+                }
+                // Opacity correction for a step of len·speed voxels.
+                let alpha = R::one() - (R::one() - alpha).powf(len * speed / s.ref_step);
+                let rgb = if s.shade {
+                    shade_sample(field, s, p, rgb, light, half)
+                } else {
+                    rgb
+                };
+                match order {
+                    Compositing::FrontToBack => {
+                        let w = (R::one() - a) * alpha;
+                        for ch in 0..3 {
+                            c[ch] = c[ch] + w * rgb[ch];
+                        }
+                        a = a + w;
+                        if a >= s.ert {
+                            break;
+                        }
+                    }
+                    Compositing::BackToFront => {
+                        for ch in 0..3 {
+                            c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
+                        }
+                        a = alpha + (R::one() - alpha) * a;
+                    }
+                }
+            }
+            let t = R::one() - a;
+            let bg = s.bg;
+            (
+                [
+                    c[0] + t * bg[0] * bg[3],
+                    c[1] + t * bg[1] * bg[3],
+                    c[2] + t * bg[2] * bg[3],
+                    a + t * bg[3],
+                ],
+                taken,
+            )
+        }
+    }
+}
+
+/// Colour and opacity (per reference step) of the sample at `p`.
+/// Mirrors `shaders/raycast.wgsl: classify_sample`.
+#[inline]
+fn classify_sample<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>) -> ([R; 3], R) {
+    match &s.pre {
+        None => {
+            let c = s.lut.classify(field.value(p));
+            ([c[0], c[1], c[2]], c[3])
+        }
+        Some(g) => {
+            let a = sample(&g[3], s.filter, p).max(R::zero()).min(R::one());
+            if a <= R::zero() {
+                return ([R::zero(); 3], R::zero());
+            }
+            let un = |ch: usize| {
+                (sample(&g[ch], s.filter, p) / a)
+                    .max(R::zero())
+                    .min(R::one())
+            };
+            ([un(0), un(1), un(2)], a)
+        }
+    }
+}
+
+/// Phong-shades a sample, blending in from unshaded where the gradient is tiny.
+/// Mirrors `shaders/raycast.wgsl: shade_sample`.
+#[inline]
+fn shade_sample<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    p: V3<R>,
+    rgb: [R; 3],
+    light: V3<R>,
+    half: V3<R>,
+) -> [R; 3] {
+    let g = field.gradient(p);
+    let mag = g.length();
+    let two = R::of(2.0);
+    let w = ((mag / s.grad_thr - R::of(0.5)) * two)
+        .max(R::zero())
+        .min(R::one());
+    if w <= R::zero() {
+        return rgb;
+    }
+    let n = -(s.normal.mul_vec(g)).normalize_or_zero();
+    let lit = phong(rgb, n, light, half, &s.k);
+    [
+        rgb[0] + w * (lit[0] - rgb[0]),
+        rgb[1] + w * (lit[1] - rgb[1]),
+        rgb[2] + w * (lit[2] - rgb[2]),
+    ]
+}

@@ -1,0 +1,244 @@
+//! `voxlab demo`: the main job on an embedded default. Renders a small gallery of the
+//! analytic phantoms in several modes and filters into a folder, with no download and
+//! no flags, and writes an `index.html` and a `README.md` that show them.
+
+use crate::camera::{AxisView, Camera, Orbit, Projection};
+use crate::error::{Error, Result};
+use crate::frame::PngOptions;
+use crate::phantom::Phantom;
+use crate::render::{render_with_progress, Backend, Scene};
+use crate::settings::{Classification, Filter, Mode, RenderSettings};
+use crate::transfer::{ControlPoint, TransferFunction, WindowMap};
+use std::path::{Path, PathBuf};
+
+/// One picture of the gallery.
+#[derive(Clone, Debug)]
+pub struct DemoItem {
+    pub file: PathBuf,
+    pub title: String,
+    pub seconds: f64,
+}
+
+/// A transfer function that shows Marschner–Lobb as a soft iso-surface near 0.5, the
+/// classic way to compare reconstruction filters.
+pub fn marschner_lobb_tf() -> TransferFunction {
+    let p = |value, rgba| ControlPoint { value, rgba };
+    TransferFunction {
+        name: "marschner-lobb iso 0.5".into(),
+        domain: [0.0, 1.0],
+        points: vec![
+            p(0.0, [0.0, 0.0, 0.0, 0.0]),
+            p(0.44, [0.9, 0.8, 0.6, 0.0]),
+            p(0.5, [0.95, 0.85, 0.65, 0.9]),
+            p(0.56, [0.9, 0.8, 0.6, 0.0]),
+            p(1.0, [0.0, 0.0, 0.0, 0.0]),
+        ],
+        window: WindowMap::default(),
+    }
+}
+
+/// Renders the gallery into `out`, creating it; reports each finished picture.
+pub fn run_demo(out: &Path, report: &dyn Fn(&DemoItem, usize, usize)) -> Result<Vec<DemoItem>> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let size = 256;
+    let head = Phantom::shepp_logan_modified();
+    let head_vol: crate::AnyVolume = head.sample([128; 3])?.into();
+    let spheres_vol: crate::AnyVolume = Phantom::by_name("spheres")?.sample([96; 3])?.into();
+    let ml = Phantom::marschner_lobb();
+    let ml_vol: crate::AnyVolume = ml.sample([41; 3])?.into();
+    let phantom_tf = TransferFunction::preset("phantom")?;
+    // Frame the phantoms' content (radius ≈ 0.95 of the half extent), not the corners
+    // of their cubes.
+    let orbit = |vol: &crate::AnyVolume, projection, elevation_deg: f64| {
+        let half = 0.5 * vol_extent(vol)[0];
+        let projection = match projection {
+            Projection::Orthographic { .. } => Projection::Orthographic {
+                width_mm: 2.1 * half,
+                height_mm: 2.1 * half,
+            },
+            p => p,
+        };
+        Camera::orbit(
+            with_center(vol),
+            vol_extent(vol),
+            Orbit {
+                azimuth_deg: 30.0,
+                elevation_deg,
+                distance_mm: Some(4.2 * half),
+            },
+            projection,
+            size,
+            size,
+        )
+    };
+    let persp = Projection::Perspective { fov_y_deg: 30.0 };
+    let ortho = Projection::Orthographic {
+        width_mm: 0.0,
+        height_mm: 0.0,
+    };
+
+    struct Job {
+        file: &'static str,
+        title: String,
+        scene: Scene,
+        settings: RenderSettings,
+        png: PngOptions,
+    }
+    let base = RenderSettings::default();
+    let mut jobs = vec![
+        Job {
+            file: "shepp-logan-dvr.png",
+            title: "Shepp–Logan (modified), shaded DVR, trilinear, post-classification".into(),
+            scene: Scene {
+                volume: head_vol.clone(),
+                transfer: phantom_tf.clone(),
+                camera: orbit(&head_vol, persp, 20.0)?,
+            },
+            settings: RenderSettings { step: 0.25, ..base.clone() },
+            png: PngOptions::default(),
+        },
+        Job {
+            file: "shepp-logan-dvr-preclassified.png",
+            title: "Shepp–Logan, shaded DVR, pre-classification".into(),
+            scene: Scene {
+                volume: head_vol.clone(),
+                transfer: phantom_tf.clone(),
+                camera: orbit(&head_vol, persp, 20.0)?,
+            },
+            settings: RenderSettings {
+                classification: Classification::Pre,
+                step: 0.25,
+                ..base.clone()
+            },
+            png: PngOptions::default(),
+        },
+        Job {
+            file: "spheres-mip.png",
+            title: "Nested spheres, maximum intensity projection (orthographic): 1.5 where the inner sphere adds to the outer".into(),
+            scene: Scene {
+                volume: spheres_vol.clone(),
+                transfer: phantom_tf.clone(),
+                camera: orbit(&spheres_vol, ortho, 20.0)?,
+            },
+            settings: RenderSettings { mode: Mode::Mip, ..base.clone() },
+            png: PngOptions::default(),
+        },
+        Job {
+            file: "shepp-logan-xray.png",
+            title: "Shepp–Logan, X-ray line integrals along +y (axis view)".into(),
+            scene: Scene {
+                volume: head_vol.clone(),
+                transfer: phantom_tf.clone(),
+                camera: Camera::axis_view(head_vol.dims(), head_vol.affine(), AxisView::PlusY, 128, 128)?,
+            },
+            settings: RenderSettings { mode: Mode::Xray, step: 1.0, ..base.clone() },
+            png: PngOptions::default(),
+        },
+    ];
+    for filter in [
+        Filter::Nearest,
+        Filter::Trilinear,
+        Filter::CatmullRom,
+        Filter::Lanczos3,
+    ] {
+        let file: &'static str = match filter {
+            Filter::Nearest => "marschner-lobb-nearest.png",
+            Filter::Trilinear => "marschner-lobb-trilinear.png",
+            Filter::CatmullRom => "marschner-lobb-catmull-rom.png",
+            _ => "marschner-lobb-lanczos3.png",
+        };
+        jobs.push(Job {
+            file,
+            title: format!(
+                "Marschner–Lobb 41³, iso 0.5, {} reconstruction",
+                filter.name()
+            ),
+            scene: Scene {
+                volume: ml_vol.clone(),
+                transfer: marschner_lobb_tf(),
+                camera: orbit(&ml_vol, persp, 35.0)?,
+            },
+            settings: RenderSettings {
+                filter,
+                step: 0.25,
+                ..base.clone()
+            },
+            png: PngOptions::default(),
+        });
+    }
+    let total = jobs.len() + 1;
+    let mut items = Vec::new();
+    for (n, job) in jobs.into_iter().enumerate() {
+        let t = std::time::Instant::now();
+        let mut settings = job.settings;
+        let counts = n == 0;
+        settings.sample_count = counts;
+        let out_img = render_with_progress(&job.scene, &settings, Backend::Cpu, &|_, _| {})?;
+        let path = out.join(job.file);
+        out_img.image.save(&path, job.png)?;
+        let item = DemoItem {
+            file: path,
+            title: job.title,
+            seconds: t.elapsed().as_secs_f64(),
+        };
+        report(&item, items.len() + 1, total);
+        items.push(item);
+        if let Some(samples) = out_img.samples {
+            let path = out.join("shepp-logan-samples.png");
+            samples.save(&path, PngOptions::default())?;
+            let item = DemoItem {
+                file: path,
+                title: "Samples per ray of the first picture (early ray termination at 0.99; white = most)".into(),
+                seconds: 0.0,
+            };
+            report(&item, items.len() + 1, total);
+            items.push(item);
+        }
+    }
+    write_index(out, &items)?;
+    Ok(items)
+}
+
+fn with_center(v: &crate::AnyVolume) -> glam::DVec3 {
+    let d = v.dims();
+    v.affine().transform_point3(glam::DVec3::new(
+        (d[0] as f64 - 1.0) * 0.5,
+        (d[1] as f64 - 1.0) * 0.5,
+        (d[2] as f64 - 1.0) * 0.5,
+    ))
+}
+
+fn vol_extent(v: &crate::AnyVolume) -> [f64; 3] {
+    let (d, s) = (v.dims(), v.spacing());
+    [d[0] as f64 * s[0], d[1] as f64 * s[1], d[2] as f64 * s[2]]
+}
+
+fn write_index(out: &Path, items: &[DemoItem]) -> Result<()> {
+    let name = |p: &Path| {
+        p.file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let mut html = String::from(
+        "<!doctype html><meta charset=utf-8><title>voxlab demo</title>\n\
+         <style>body{font-family:sans-serif;background:#222;color:#eee}figure{display:inline-block;margin:8px}\
+         img{image-rendering:pixelated;width:256px}</style>\n<h1>voxlab demo</h1>\n",
+    );
+    let mut md = String::from("# voxlab demo gallery\n\nRendered by the CPU oracle (f64).\n\n");
+    for it in items {
+        let f = name(&it.file);
+        html += &format!(
+            "<figure><img src=\"{f}\"><figcaption>{}</figcaption></figure>\n",
+            it.title
+        );
+        md += &format!("## {}\n\n![{}]({f})\n\n", it.title, it.title);
+    }
+    for (file, text) in [("index.html", html), ("README.md", md)] {
+        let path = out.join(file);
+        crate::io::write_atomic(&path, |w| {
+            w.write_all(text.as_bytes())
+                .map_err(|e| Error::io(&path, e))
+        })?;
+    }
+    Ok(())
+}

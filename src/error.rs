@@ -1,0 +1,86 @@
+//! Errors a user can cause. Every condition that bad input, a missing file, an absurd
+//! size or a missing GPU can produce has a variant here; programmer errors panic with a
+//! documented reason instead.
+
+use std::path::PathBuf;
+
+/// The crate-wide result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong because of input, the file system or the machine.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Reading or writing a file failed at the operating-system level.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file was read but its contents are not what its format promises.
+    #[error("{path}: {field}: {message}")]
+    Format {
+        path: PathBuf,
+        /// The header field or part of the file that is wrong.
+        field: String,
+        message: String,
+    },
+    /// A parameter (from the command line, a settings file or an API call) is invalid.
+    #[error("invalid {what}: {message}")]
+    Invalid { what: String, message: String },
+    /// A size that would need more memory than is reasonable, refused before allocating.
+    #[error("{what} is too large: {message}")]
+    TooLarge { what: String, message: String },
+    /// A volume or image contains NaN or infinite values where finite ones are required.
+    #[error("{what} contains {count} non-finite value(s) (first at element {first})")]
+    NonFinite {
+        what: String,
+        count: usize,
+        first: usize,
+    },
+    /// No usable GPU adapter was found.
+    #[error("no GPU adapter found: {0}")]
+    NoAdapter(String),
+    /// A GPU operation failed (shader compilation, out of memory, device lost).
+    #[error("GPU error: {0}")]
+    Gpu(String),
+}
+
+impl Error {
+    /// Shorthand for [`Error::Invalid`].
+    pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Invalid {
+            what: what.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Shorthand for [`Error::Format`].
+    pub fn format(
+        path: impl Into<PathBuf>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Format {
+            path: path.into(),
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+
+    /// Shorthand for [`Error::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// Shorthand for [`Error::TooLarge`].
+    pub fn too_large(what: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::TooLarge {
+            what: what.into(),
+            message: message.into(),
+        }
+    }
+}

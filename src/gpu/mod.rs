@@ -1,0 +1,11 @@
+//! The GPU side: wgpu on Vulkan, Metal or DX12 (never the GL backend), with WGSL
+//! compute shaders under `shaders/`.
+//!
+//! `context` finds an adapter, opens a device with the adapter's own limits, and turns
+//! every failure into a typed [`crate::Error`]. `probe` is the smallest end-to-end
+//! check that a device really computes: upload, dispatch, read back, compare.
+
+pub mod context;
+pub mod probe;
+
+pub use context::{AdapterSummary, GpuContext};

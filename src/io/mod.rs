@@ -1,0 +1,559 @@
+//! Volume file formats: NRRD (`.nrrd`, `.nhdr`) and NumPy (`.npy`), and the atomic
+//! writer that every output file of the crate goes through.
+//!
+//! - [`read_volume`] and [`write_volume`] choose the format from the file extension.
+//! - [`nrrd`] and [`npy`] hold the format-specific readers and writers; both are
+//!   written by hand (no format crate) and are small enough to read in one sitting.
+//! - [`write_atomic`] writes to a temporary file beside the target and renames it into
+//!   place, so a failed or interrupted write never leaves a half-written file.
+//!
+//! # From stored samples to voxels
+//!
+//! Files store many scalar types; a [`Volume`] holds one of four
+//! ([`VoxelKind`](crate::volume::VoxelKind)). The readers share one mapping, chosen so
+//! that every value arrives exactly when it can:
+//!
+//! | stored in the file                    | read as | exact?                          |
+//! |---------------------------------------|---------|---------------------------------|
+//! | unsigned 8-bit                        | `u8`    | yes                             |
+//! | signed 8-bit                          | `i16`   | yes (widened)                   |
+//! | unsigned 16-bit                       | `u16`   | yes                             |
+//! | signed 16-bit                         | `i16`   | yes                             |
+//! | 32-bit float                          | `f32`   | yes                             |
+//! | 32/64-bit integers, 64-bit float      | `f32`   | rounded to the nearest `f32`    |
+//!
+//! Rounding to `f32` keeps 24 significant bits: integers up to 2^24 = 16 777 216 in
+//! magnitude stay exact, and doubles keep about 7 significant digits; doubles beyond the
+//! `f32` range (about 3.4e38) become ±infinity. Which stored types each format accepts
+//! is listed in its module.
+//!
+//! Malformed files give [`Error::Format`] naming the file and the header field; absurd
+//! sizes are refused before anything is allocated. `docs/io.md` has the full rules.
+
+pub mod npy;
+pub mod nrrd;
+
+use crate::error::{Error, Result};
+use crate::volume::{AnyVolume, Volume, Voxel};
+use glam::DMat4;
+use std::fs::{File, OpenOptions};
+use std::io::{self, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Reads a volume, choosing the format from the extension: `.nrrd` or `.nhdr` (NRRD,
+/// see [`nrrd::read_nrrd`]) or `.npy` (see [`npy::read_npy_volume`]).
+pub fn read_volume(path: &Path) -> Result<AnyVolume> {
+    match extension(path).as_deref() {
+        Some("nrrd") | Some("nhdr") => nrrd::read_nrrd(path),
+        Some("npy") => npy::read_npy_volume(path),
+        _ => Err(unsupported_extension(path)),
+    }
+}
+
+/// Writes a volume, choosing the format from the extension, atomically:
+/// - `.nrrd`: one file, header and gzip-compressed data;
+/// - `.nhdr`: a detached header, with the gzip-compressed data in `<stem>.raw.gz`
+///   beside it;
+/// - `.npy`: shape `(nz, ny, nx)`, little-endian (the geometry is not stored).
+pub fn write_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
+    match extension(path).as_deref() {
+        Some("nrrd") => nrrd::write_nrrd(path, vol, nrrd::NrrdWriteOptions::default()),
+        Some("nhdr") => nrrd::write_nrrd(
+            path,
+            vol,
+            nrrd::NrrdWriteOptions {
+                gzip: true,
+                detached: true,
+            },
+        ),
+        Some("npy") => npy::write_npy_volume(path, vol),
+        _ => Err(unsupported_extension(path)),
+    }
+}
+
+/// The extension in lower case, if any.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+}
+
+fn unsupported_extension(path: &Path) -> Error {
+    Error::invalid(
+        "volume file",
+        format!(
+            "{}: unsupported extension; supported are .nrrd and .nhdr (NRRD) and .npy (NumPy)",
+            path.display()
+        ),
+    )
+}
+
+// ---------------------------------------------------------------------------------
+// Atomic writes
+// ---------------------------------------------------------------------------------
+
+/// Tells concurrent writers in one process apart (the pid tells processes apart).
+static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
+
+/// A temporary file that is deleted when dropped, unless it was renamed into place.
+/// Dropping also happens when the writer closure panics, so even then nothing is left.
+struct TempFile {
+    path: PathBuf,
+    renamed: bool,
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        if !self.renamed {
+            // Best effort: the file may not exist any more, and there is nobody to tell.
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+/// Writes `path` atomically: `f` writes into a temporary file in the same directory
+/// (named `.<name>.tmp-<pid>-<n>`), which is flushed to disk and then renamed over
+/// `path`. If `f` or anything else fails, the temporary file is removed and `path` is
+/// left as it was (absent, or with its old contents): a half-written file is never
+/// seen under `path`.
+///
+/// `f` should name `path` in its own I/O errors (`Error::io(path, e)`); the temporary
+/// name is an implementation detail. Fails with [`Error::Io`] naming `path` when its
+/// directory does not exist.
+pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let name = path.file_name().ok_or_else(|| {
+        Error::invalid(
+            "output file",
+            format!("{} does not name a file", path.display()),
+        )
+    })?;
+    // `Path::parent` of a bare file name is "", meaning the current directory.
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::io(
+            path,
+            io::Error::new(
+                io::ErrorKind::NotFound,
+                format!(
+                    "cannot write: the directory {} does not exist",
+                    dir.display()
+                ),
+            ),
+        ));
+    }
+
+    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".tmp-{}-{n}", std::process::id()));
+    let mut temp = TempFile {
+        path: dir.join(tmp_name),
+        renamed: false,
+    };
+
+    // `create_new` never clobbers a file we did not create.
+    let file = OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&temp.path)
+        .map_err(|e| Error::io(path, e))?;
+    let mut writer = BufWriter::new(file);
+    f(&mut writer)?;
+    let file = writer
+        .into_inner()
+        .map_err(|e| Error::io(path, e.into_error()))?;
+    // The data must be on disk before the rename makes it visible under `path`.
+    file.sync_all().map_err(|e| Error::io(path, e))?;
+    drop(file);
+    std::fs::rename(&temp.path, path).map_err(|e| Error::io(path, e))?;
+    temp.renamed = true;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------
+// Stored sample types, shared by the readers
+// ---------------------------------------------------------------------------------
+
+/// A scalar type as stored in a file, before it is mapped to a [`VoxelKind`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Stored {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    U64,
+    I64,
+    F32,
+    F64,
+}
+
+impl Stored {
+    /// Bytes per sample in the file.
+    pub(crate) fn size(self) -> usize {
+        match self {
+            Stored::U8 | Stored::I8 => 1,
+            Stored::U16 | Stored::I16 => 2,
+            Stored::U32 | Stored::I32 | Stored::F32 => 4,
+            Stored::U64 | Stored::I64 | Stored::F64 => 8,
+        }
+    }
+}
+
+/// Byte order of multi-byte samples in a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Endian {
+    Little,
+    Big,
+}
+
+/// Decoded voxel values, already in the voxel type their stored type maps to.
+#[derive(Debug)]
+pub(crate) enum Samples {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    I16(Vec<i16>),
+    F32(Vec<f32>),
+}
+
+impl Samples {
+    /// Wraps the samples in a volume (`dims` must already be checked against the
+    /// number of samples, and `affine` validated, by the caller).
+    pub(crate) fn into_volume(self, dims: [usize; 3], affine: DMat4) -> Result<AnyVolume> {
+        Ok(match self {
+            Samples::U8(v) => Volume::with_affine(dims, affine, v)?.into(),
+            Samples::U16(v) => Volume::with_affine(dims, affine, v)?.into(),
+            Samples::I16(v) => Volume::with_affine(dims, affine, v)?.into(),
+            Samples::F32(v) => Volume::with_affine(dims, affine, v)?.into(),
+        })
+    }
+
+    /// The values as f32 (exact: u8, u16 and i16 all fit in f32).
+    pub(crate) fn into_f32(self) -> Vec<f32> {
+        match self {
+            Samples::U8(v) => v.into_iter().map(f32::from).collect(),
+            Samples::U16(v) => v.into_iter().map(f32::from).collect(),
+            Samples::I16(v) => v.into_iter().map(f32::from).collect(),
+            Samples::F32(v) => v,
+        }
+    }
+}
+
+/// A fixed-size number that can be decoded from bytes in either order.
+trait FromBytes: Copy {
+    const SIZE: usize;
+    /// `bytes` has exactly `SIZE` bytes.
+    fn from_bytes(bytes: &[u8], endian: Endian) -> Self;
+}
+
+macro_rules! from_bytes {
+    ($($t:ty),*) => {$(
+        impl FromBytes for $t {
+            const SIZE: usize = std::mem::size_of::<$t>();
+            #[inline(always)]
+            fn from_bytes(bytes: &[u8], endian: Endian) -> Self {
+                let mut a = [0u8; std::mem::size_of::<$t>()];
+                a.copy_from_slice(bytes);
+                match endian {
+                    Endian::Little => <$t>::from_le_bytes(a),
+                    Endian::Big => <$t>::from_be_bytes(a),
+                }
+            }
+        }
+    )*};
+}
+from_bytes!(u8, i8, u16, i16, u32, i32, u64, i64, f32, f64);
+
+/// Bytes decoded per step while reading (a multiple of every sample size).
+const CHUNK_BYTES: usize = 1 << 20;
+
+/// Reads `n` binary samples of type `stored` from `reader`.
+///
+/// Fails with [`Error::Format`] (field `data`) when the stream ends early, saying how
+/// many bytes were expected and found, or when a decoder (gzip) reports corrupt data.
+/// `path` names the file in errors. Bytes after the `n` samples are not read.
+pub(crate) fn read_samples(
+    reader: &mut dyn Read,
+    stored: Stored,
+    endian: Endian,
+    n: usize,
+    path: &Path,
+) -> Result<Samples> {
+    // The conversions below are the table in the module docs.
+    Ok(match stored {
+        Stored::U8 => Samples::U8(read_vec(reader, n, endian, path, |x: u8| x)?),
+        Stored::I8 => Samples::I16(read_vec(reader, n, endian, path, |x: i8| i16::from(x))?),
+        Stored::U16 => Samples::U16(read_vec(reader, n, endian, path, |x: u16| x)?),
+        Stored::I16 => Samples::I16(read_vec(reader, n, endian, path, |x: i16| x)?),
+        Stored::U32 => Samples::F32(read_vec(reader, n, endian, path, |x: u32| x as f32)?),
+        Stored::I32 => Samples::F32(read_vec(reader, n, endian, path, |x: i32| x as f32)?),
+        Stored::U64 => Samples::F32(read_vec(reader, n, endian, path, |x: u64| x as f32)?),
+        Stored::I64 => Samples::F32(read_vec(reader, n, endian, path, |x: i64| x as f32)?),
+        Stored::F32 => Samples::F32(read_vec(reader, n, endian, path, |x: f32| x)?),
+        Stored::F64 => Samples::F32(read_vec(reader, n, endian, path, |x: f64| x as f32)?),
+    })
+}
+
+/// Reserves room for `n` values, reporting an allocation failure as an error instead
+/// of aborting the process.
+fn reserve<T>(n: usize, path: &Path) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| {
+        Error::too_large(
+            format!("data of {}", path.display()),
+            format!("cannot allocate memory for {n} values"),
+        )
+    })?;
+    Ok(v)
+}
+
+fn read_vec<S: FromBytes, T>(
+    reader: &mut dyn Read,
+    n: usize,
+    endian: Endian,
+    path: &Path,
+    convert: impl Fn(S) -> T,
+) -> Result<Vec<T>> {
+    let total = n
+        .checked_mul(S::SIZE)
+        .ok_or_else(|| Error::format(path, "data", format!("{n} samples do not fit in memory")))?;
+    let mut out = reserve(n, path)?;
+    let mut buf = vec![0u8; CHUNK_BYTES.min(total)];
+    let mut done = 0;
+    while done < total {
+        // Both `total - done` and the buffer length are multiples of `S::SIZE`.
+        let want = (total - done).min(buf.len());
+        let got = fill(reader, &mut buf[..want]).map_err(|e| read_error(path, e))?;
+        if got < want {
+            return Err(too_short(path, total as u64, (done + got) as u64));
+        }
+        out.extend(
+            buf[..want]
+                .chunks_exact(S::SIZE)
+                .map(|c| convert(S::from_bytes(c, endian))),
+        );
+        done += want;
+    }
+    Ok(out)
+}
+
+/// Reads until `buf` is full or the stream ends; returns how many bytes were read.
+fn fill(reader: &mut dyn Read, buf: &mut [u8]) -> io::Result<usize> {
+    let mut got = 0;
+    while got < buf.len() {
+        match reader.read(&mut buf[got..]) {
+            Ok(0) => break,
+            Ok(k) => got += k,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(got)
+}
+
+/// The error for data that ends before the header's promise is kept.
+pub(crate) fn too_short(path: &Path, expected: u64, found: u64) -> Error {
+    Error::format(
+        path,
+        "data",
+        format!("the data is too short: expected {expected} bytes, found {found}"),
+    )
+}
+
+/// Classifies a read error: decoders (gzip) report corrupt input as `InvalidInput` or
+/// `InvalidData`, which is a format problem; anything else is the file system's.
+pub(crate) fn read_error(path: &Path, e: io::Error) -> Error {
+    match e.kind() {
+        io::ErrorKind::InvalidInput | io::ErrorKind::InvalidData | io::ErrorKind::UnexpectedEof => {
+            Error::format(
+                path,
+                "data",
+                format!("the data cannot be decoded (corrupt or truncated): {e}"),
+            )
+        }
+        _ => Error::io(path, e),
+    }
+}
+
+/// Parses `n` samples written as text, separated by white space or commas.
+/// Integers must be integers within the stored type's range; floats may be `nan` or
+/// `inf`. Fails with [`Error::Format`] (field `data`) naming the first bad value.
+pub(crate) fn parse_text_samples(
+    text: &str,
+    stored: Stored,
+    n: usize,
+    path: &Path,
+    type_name: &str,
+) -> Result<Samples> {
+    let mut tokens = text
+        .split(|c: char| c.is_ascii_whitespace() || c == ',')
+        .filter(|t| !t.is_empty());
+    let mut next = |convert: &mut dyn FnMut(&str) -> bool| -> Result<()> {
+        for i in 0..n {
+            let tok = tokens.next().ok_or_else(|| {
+                Error::format(
+                    path,
+                    "data",
+                    format!("the text data is too short: expected {n} values, found {i}"),
+                )
+            })?;
+            if !convert(tok) {
+                return Err(Error::format(
+                    path,
+                    "data",
+                    format!("value #{i} '{}' is not a valid {type_name}", snippet(tok)),
+                ));
+            }
+        }
+        Ok(())
+    };
+    // Each value takes at least two characters (digit and separator), which bounds
+    // the allocation by the size of the text rather than by the header's promise.
+    let cap = n.min(text.len() / 2 + 1);
+    macro_rules! parse {
+        ($variant:ident, $s:ty, $convert:expr) => {{
+            let mut v = reserve(cap, path)?;
+            next(&mut |tok| match tok.parse::<$s>() {
+                Ok(x) => {
+                    v.push($convert(x));
+                    true
+                }
+                Err(_) => false,
+            })?;
+            Samples::$variant(v)
+        }};
+    }
+    Ok(match stored {
+        Stored::U8 => parse!(U8, u8, |x| x),
+        Stored::I8 => parse!(I16, i8, i16::from),
+        Stored::U16 => parse!(U16, u16, |x| x),
+        Stored::I16 => parse!(I16, i16, |x| x),
+        Stored::U32 => parse!(F32, u32, |x| x as f32),
+        Stored::I32 => parse!(F32, i32, |x| x as f32),
+        Stored::U64 => parse!(F32, u64, |x| x as f32),
+        Stored::I64 => parse!(F32, i64, |x| x as f32),
+        Stored::F32 => parse!(F32, f32, |x| x),
+        Stored::F64 => parse!(F32, f64, |x| x as f32),
+    })
+}
+
+/// At most the first 40 characters of `s`, for quoting file contents in messages.
+pub(crate) fn snippet(s: &str) -> String {
+    let mut out: String = s.chars().take(40).collect();
+    if out.len() < s.len() {
+        out.push('…');
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------
+// Writing samples
+// ---------------------------------------------------------------------------------
+
+/// Writes the volume's voxels, x fastest, little-endian.
+pub(crate) fn write_samples_le(w: &mut dyn Write, vol: &AnyVolume) -> io::Result<()> {
+    crate::with_volume!(vol, v => write_le(w, v.data()))
+}
+
+/// Writes values little-endian, whatever the machine's byte order.
+pub(crate) fn write_le<T: Voxel>(w: &mut dyn Write, data: &[T]) -> io::Result<()> {
+    let size = std::mem::size_of::<T>();
+    for chunk in data.chunks(CHUNK_BYTES / size.max(1)) {
+        let bytes: &[u8] = bytemuck::cast_slice(chunk);
+        if cfg!(target_endian = "little") || size == 1 {
+            w.write_all(bytes)?;
+        } else {
+            let mut swapped = bytes.to_vec();
+            swapped.chunks_exact_mut(size).for_each(|s| s.reverse());
+            w.write_all(&swapped)?;
+        }
+    }
+    Ok(())
+}
+
+/// Opens a file for reading, with its length.
+pub(crate) fn open(path: &Path) -> Result<(File, u64)> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    Ok((file, len))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("voxlab-io-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_cleans_up() {
+        let dir = temp_dir("atomic");
+        let p = dir.join("out.bin");
+        write_atomic(&p, |w| w.write_all(b"one").map_err(|e| Error::io(&p, e))).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        // A failing writer leaves the old contents and no temporary file.
+        let r = write_atomic(&p, |w| {
+            w.write_all(b"half").map_err(|e| Error::io(&p, e))?;
+            Err(Error::invalid("test", "fails on purpose"))
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        assert_eq!(entries(&dir), vec!["out.bin"]);
+        // A panicking writer too.
+        let r = std::panic::catch_unwind(|| {
+            let _ = write_atomic(&p, |_| panic!("on purpose"));
+        });
+        assert!(r.is_err());
+        assert_eq!(entries(&dir), vec!["out.bin"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn atomic_write_refuses_missing_directory() {
+        let p = std::env::temp_dir().join("voxlab-no-such-dir-xyz/out.bin");
+        let e = write_atomic(&p, |_| Ok(())).unwrap_err();
+        assert!(matches!(e, Error::Io { .. }), "{e}");
+        assert!(e.to_string().contains("voxlab-no-such-dir-xyz"), "{e}");
+    }
+
+    #[test]
+    fn text_samples() {
+        let p = Path::new("t.nrrd");
+        let s = parse_text_samples("1, 2\n-3 4", Stored::I8, 4, p, "int8").unwrap();
+        assert!(matches!(s, Samples::I16(v) if v == [1, 2, -3, 4]));
+        let e = parse_text_samples("1 2 300", Stored::U8, 3, p, "uchar").unwrap_err();
+        assert!(e.to_string().contains("'300'"), "{e}");
+        let e = parse_text_samples("1 2", Stored::F32, 3, p, "float").unwrap_err();
+        assert!(e.to_string().contains("expected 3 values, found 2"), "{e}");
+    }
+
+    #[test]
+    fn binary_samples_both_orders() {
+        let p = Path::new("t.raw");
+        let bytes = [0x01u8, 0x02, 0xff, 0xfe];
+        let le = read_samples(&mut &bytes[..], Stored::I16, Endian::Little, 2, p).unwrap();
+        assert!(matches!(le, Samples::I16(v) if v == [0x0201, -257]));
+        let be = read_samples(&mut &bytes[..], Stored::U16, Endian::Big, 2, p).unwrap();
+        assert!(matches!(be, Samples::U16(v) if v == [0x0102, 0xfffe]));
+        let e = read_samples(&mut &bytes[..], Stored::F32, Endian::Big, 2, p).unwrap_err();
+        assert!(e.to_string().contains("expected 8 bytes, found 4"), "{e}");
+    }
+}

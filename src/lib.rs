@@ -1,0 +1,37 @@
+//! # voxlab
+//!
+//! Volume rendering and tomography, implemented twice: an exact, rayon-parallel CPU
+//! implementation generic over `f32`/`f64` (the f64 instance is the *oracle*), and a
+//! mirrored GPU implementation on wgpu + WGSL compute shaders that must match it within
+//! a stated tolerance.
+//!
+//! ## Conventions
+//! - Volumes are stored x fastest; voxel `(i, j, k)` has its centre at index
+//!   coordinates `(i, j, k)` and owns the cell `[i - 0.5, i + 0.5]` (and so on), so a
+//!   volume's box in index space is `[-0.5, n - 0.5]³`.
+//! - `Volume::affine` maps index coordinates to world coordinates in millimetres.
+//! - Transfer functions are defined over a domain of *mapped* values `Ψ(t) = a·t + b`
+//!   of the raw data value `t` (the window/level map).
+//! - Images have row 0 at the top; pixel `(col, row)` has its centre at
+//!   `(col + 0.5, row + 0.5)` in image coordinates.
+//! - Step sizes are in voxels (index-space length); opacity is defined per reference
+//!   step `Δs₀ = 1` voxel and corrected as `α' = 1 − (1 − α)^(Δs/Δs₀)`.
+//!
+//! `docs/conventions.md` states all of them in one place.
+
+pub mod camera;
+pub mod cpu;
+pub mod demo;
+pub mod error;
+pub mod frame;
+pub mod gpu;
+pub mod io;
+pub mod phantom;
+pub mod real;
+pub mod render;
+pub mod settings;
+pub mod transfer;
+pub mod volume;
+
+pub use error::{Error, Result};
+pub use volume::{AnyVolume, Volume, Voxel, VoxelKind};

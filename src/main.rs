@@ -1,0 +1,512 @@
+//! The `voxlab` command line: a thin layer over the library.
+
+use clap::{Args, Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+use voxlab::frame::PngOptions;
+use voxlab::render::{render_with_progress, Backend, Scene};
+use voxlab::settings::{
+    Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
+};
+use voxlab::transfer::{TransferFunction, WindowMap};
+use voxlab::{AnyVolume, Error, Result};
+
+#[derive(Parser)]
+#[command(
+    name = "voxlab",
+    version,
+    about = "Volume rendering and tomography: an exact CPU oracle and a GPU port that must agree with it",
+    long_about = "voxlab renders volumes (CT, MRI, analytic phantoms) by ray casting: direct volume \
+rendering with transfer functions and shading, maximum/minimum intensity projection, and X-ray \
+line integrals. Every algorithm has an exact f64 CPU implementation (the oracle) and an f32 twin.\n\n\
+Start with `voxlab demo`, which renders a gallery from built-in phantoms."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a gallery of built-in phantoms into a folder (no input needed).
+    Demo {
+        /// Folder to write the pictures, index.html and README.md into.
+        #[arg(long, default_value = "voxlab-demo")]
+        out: PathBuf,
+    },
+    /// Render a volume or a phantom to an image (.png or .npy).
+    Render(RenderArgs),
+    /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr or .npy).
+    Phantom {
+        /// Phantom and size: NAME, NAME:N or NAME:NX,NY,NZ. Names: shepp-logan,
+        /// shepp-logan-modified, marschner-lobb, sphere, spheres, ellipsoid, slab.
+        spec: String,
+        /// Output volume file (.nrrd, .nhdr or .npy).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Describe a volume (dimensions, spacing, type, value range, histogram), or the GPU.
+    Info {
+        /// Volume file or phantom:NAME[:SIZE]. Not needed with --gpu.
+        input: Option<String>,
+        /// Number of histogram bins to print.
+        #[arg(long, default_value_t = 16)]
+        bins: usize,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// List the GPU adapters, open the best one, print its limits and features, and
+        /// run a small self-test on it.
+        #[arg(long)]
+        gpu: bool,
+    },
+    /// List the built-in transfer-function presets, or print one as JSON.
+    Tf {
+        /// Preset to print as JSON (omit to list them).
+        name: Option<String>,
+    },
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// A volume file (.nrrd, .nhdr, .npy; an .npy of shape (nz, ny, nx) is x fastest) or
+    /// a phantom: phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128.
+    input: String,
+    /// Output image: .png (8-bit; 16-bit with --sixteen-bit) or .npy (float32: RGBA
+    /// (h, w, 4) for DVR, scalar (h, w) for MIP, MinIP and X-ray).
+    #[arg(long)]
+    out: PathBuf,
+    /// What rays compute: dvr (colour and opacity through the transfer function), mip,
+    /// minip, xray (line integral, value × mm).
+    #[arg(long, value_enum, default_value = "dvr")]
+    mode: Mode,
+    /// Transfer function: a preset name (see `voxlab tf`) or a JSON file.
+    #[arg(long, default_value = "phantom")]
+    tf: String,
+    /// Window width in raw data units: maps [level − width/2, level + width/2] onto the
+    /// transfer function's domain (Ψ(t) = a·t + b). Needs --level.
+    #[arg(long, requires = "level", allow_negative_numbers = true)]
+    window: Option<f64>,
+    /// Window centre (level) in raw data units. Needs --window.
+    #[arg(long, requires = "window", allow_negative_numbers = true)]
+    level: Option<f64>,
+    /// Axis-aligned orthographic view: +x, -x, +y, -y, +z, -z (rays along that index
+    /// axis). The image is laid out like NumPy's reduction over that axis of the
+    /// (nz, ny, nx) array; its default size is the volume's cross-section, so every pixel
+    /// centre lies on a ray through voxel centres.
+    #[arg(long, allow_hyphen_values = true)]
+    view: Option<String>,
+    /// Orbit camera: rotation about world +z in degrees (0 looks along +y).
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    azimuth: f64,
+    /// Orbit camera: degrees above the xy-plane.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    elevation: f64,
+    /// Orbit camera: distance from the volume centre in mm (default: fit the volume).
+    #[arg(long)]
+    distance: Option<f64>,
+    /// Orthographic instead of perspective projection for the orbit camera.
+    #[arg(long)]
+    ortho: bool,
+    /// Perspective vertical field of view in degrees.
+    #[arg(long, default_value_t = 30.0)]
+    fov: f64,
+    /// Image width in pixels (default 256, or the cross-section with --view).
+    #[arg(long)]
+    width: Option<usize>,
+    /// Image height in pixels (default 256, or the cross-section with --view).
+    #[arg(long)]
+    height: Option<usize>,
+    /// Reconstruction filter.
+    #[arg(long, value_enum, default_value = "trilinear")]
+    filter: Filter,
+    /// Step along rays in voxels.
+    #[arg(long, default_value_t = 0.5)]
+    step: f64,
+    /// Apply the transfer function after (post) or before (pre) interpolation.
+    #[arg(long, value_enum, default_value = "post")]
+    classification: Classification,
+    /// Compositing order.
+    #[arg(long, value_enum, default_value = "front-to-back")]
+    compositing: Compositing,
+    /// Early ray termination: stop a front-to-back ray at this opacity (1 = off).
+    #[arg(long, default_value_t = 0.99)]
+    ert: f64,
+    /// Gradient stencil for shading.
+    #[arg(long, value_enum, default_value = "central")]
+    gradient: GradientMethod,
+    /// Precompute a gradient volume instead of differencing the reconstructed field.
+    #[arg(long)]
+    precompute_gradients: bool,
+    /// Turn Phong shading off.
+    #[arg(long)]
+    no_shading: bool,
+    /// Directional light x,y,z (world, toward the light); default: a headlight.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 3,
+        allow_negative_numbers = true
+    )]
+    light: Option<Vec<f64>>,
+    /// Background r,g,b,a in [0, 1] for DVR.
+    #[arg(long, value_delimiter = ',', num_args = 4, default_values_t = [0.0, 0.0, 0.0, 1.0])]
+    background: Vec<f64>,
+    /// Render settings from a JSON file (the fields of RenderSettings); other options
+    /// on the command line are ignored where the file sets them.
+    #[arg(long)]
+    settings: Option<PathBuf>,
+    /// Who computes: cpu (the f64 oracle) or cpu-f32.
+    #[arg(long, value_enum, default_value = "cpu")]
+    backend: Backend,
+    /// Write 16-bit PNG.
+    #[arg(long)]
+    sixteen_bit: bool,
+    /// Also write the samples-per-ray image to this file (.png or .npy).
+    #[arg(long)]
+    samples: Option<PathBuf>,
+    /// Phantom grid size when INPUT is phantom:NAME without a size.
+    #[arg(long, default_value_t = 128)]
+    phantom_size: usize,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("voxlab: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Demo { out } => demo(&out),
+        Command::Render(args) => render(args),
+        Command::Phantom { spec, out } => {
+            let spec = spec.strip_prefix("phantom:").unwrap_or(&spec);
+            let (phantom, dims) = voxlab::phantom::parse_spec(spec, 128)?;
+            let vol: AnyVolume = phantom.sample(dims)?.into();
+            voxlab::io::write_volume(&out, &vol)?;
+            println!(
+                "wrote {} ({} {}×{}×{}, spacing {:.4} mm)",
+                out.display(),
+                phantom.name,
+                dims[0],
+                dims[1],
+                dims[2],
+                vol.spacing()[0]
+            );
+            Ok(())
+        }
+        Command::Info {
+            input,
+            bins,
+            json,
+            gpu,
+        } => {
+            if gpu {
+                return gpu_info();
+            }
+            let input = input.ok_or_else(|| {
+                Error::invalid("arguments", "give a volume file or phantom:NAME, or --gpu")
+            })?;
+            info(&input, bins, json)
+        }
+        Command::Tf { name } => {
+            match name {
+                None => {
+                    for (n, _) in voxlab::transfer::PRESETS {
+                        let tf = TransferFunction::preset(n)?;
+                        println!(
+                            "{n:16} domain [{}, {}], {} points",
+                            tf.domain[0],
+                            tf.domain[1],
+                            tf.points.len()
+                        );
+                    }
+                }
+                Some(n) => println!("{}", TransferFunction::preset(&n)?.to_json()),
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Loads a volume file or samples `phantom:NAME[:SIZE]`.
+fn load_input(input: &str, phantom_size: usize) -> Result<AnyVolume> {
+    if let Some(spec) = input.strip_prefix("phantom:") {
+        let (phantom, dims) = voxlab::phantom::parse_spec(spec, phantom_size)?;
+        Ok(phantom.sample(dims)?.into())
+    } else {
+        voxlab::io::read_volume(Path::new(input))
+    }
+}
+
+fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg} [{bar:40}] {pos}/{len} rows, {elapsed} (eta {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    pb.set_message(what.to_string());
+    pb
+}
+
+fn render(a: RenderArgs) -> Result<()> {
+    let volume = load_input(&a.input, a.phantom_size)?;
+    let mut tf = TransferFunction::preset_or_file(&a.tf)?;
+    if let (Some(w), Some(l)) = (a.window, a.level) {
+        tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
+    }
+    let dims = volume.dims();
+    let camera = match &a.view {
+        Some(v) => {
+            let view: AxisView = v.parse()?;
+            let (ca, ra) = view.image_axes();
+            Camera::axis_view(
+                dims,
+                volume.affine(),
+                view,
+                a.width.unwrap_or(dims[ca]),
+                a.height.unwrap_or(dims[ra]),
+            )?
+        }
+        None => {
+            let d = dims.map(|n| (n as f64 - 1.0) * 0.5);
+            let center = volume.affine().transform_point3(glam::DVec3::from_array(d));
+            let s = volume.spacing();
+            let extent = [
+                dims[0] as f64 * s[0],
+                dims[1] as f64 * s[1],
+                dims[2] as f64 * s[2],
+            ];
+            let projection = if a.ortho {
+                Projection::Orthographic {
+                    width_mm: 0.0,
+                    height_mm: 0.0,
+                }
+            } else {
+                Projection::Perspective { fov_y_deg: a.fov }
+            };
+            let orbit = Orbit {
+                azimuth_deg: a.azimuth,
+                elevation_deg: a.elevation,
+                distance_mm: a.distance,
+            };
+            Camera::orbit(
+                center,
+                extent,
+                orbit,
+                projection,
+                a.width.unwrap_or(256),
+                a.height.unwrap_or(256),
+            )?
+        }
+    };
+    let settings = match &a.settings {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            serde_json::from_str::<RenderSettings>(&text)
+                .map_err(|e| Error::format(p, "render settings JSON", e.to_string()))?
+        }
+        None => {
+            let mut s = RenderSettings {
+                mode: a.mode,
+                filter: a.filter,
+                step: a.step,
+                classification: a.classification,
+                compositing: a.compositing,
+                ert_threshold: a.ert,
+                gradient: a.gradient,
+                precompute_gradients: a.precompute_gradients,
+                background: [
+                    a.background[0],
+                    a.background[1],
+                    a.background[2],
+                    a.background[3],
+                ],
+                sample_count: a.samples.is_some(),
+                ..RenderSettings::default()
+            };
+            s.shading.enabled = !a.no_shading;
+            if let Some(l) = &a.light {
+                s.shading.light = Light::Direction([l[0], l[1], l[2]]);
+            }
+            s
+        }
+    };
+    settings.validate()?;
+    check_output(&a.out)?;
+    if let Some(s) = &a.samples {
+        check_output(s)?;
+    }
+    let scene = Scene {
+        volume,
+        transfer: tf,
+        camera,
+    };
+    let pb = progress_bar(
+        scene.camera.height as u64,
+        &format!("rendering ({})", a.backend.name()),
+    );
+    let t = std::time::Instant::now();
+    let out = render_with_progress(&scene, &settings, a.backend, &|done, _| {
+        pb.set_position(done as u64)
+    })?;
+    pb.finish_and_clear();
+    let png = PngOptions {
+        sixteen_bit: a.sixteen_bit,
+        range: None,
+    };
+    out.image.save(&a.out, png)?;
+    if let (Some(path), Some(samples)) = (&a.samples, &out.samples) {
+        samples.save(path, png)?;
+    }
+    eprintln!(
+        "wrote {} ({}×{}, {:?}, {} samples, {:.2} s on {})",
+        a.out.display(),
+        scene.camera.width,
+        scene.camera.height,
+        settings.mode,
+        out.total_samples,
+        t.elapsed().as_secs_f64(),
+        a.backend.name()
+    );
+    Ok(())
+}
+
+/// Fails early (before a long render) if the output cannot be written.
+fn check_output(path: &Path) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    if !matches!(ext.as_deref(), Some("png") | Some("npy")) {
+        return Err(Error::invalid(
+            "output file",
+            format!("{}: the extension must be .png or .npy", path.display()),
+        ));
+    }
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        return Err(Error::invalid(
+            "output file",
+            format!(
+                "{}: folder {} does not exist",
+                path.display(),
+                parent.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn info(input: &str, bins: usize, json: bool) -> Result<()> {
+    let v = load_input(input, 128)?;
+    let r = v.value_range();
+    let h = v.histogram(bins.clamp(1, 4096));
+    if json {
+        let j = serde_json::json!({
+            "input": input,
+            "dims": v.dims(),
+            "spacing_mm": v.spacing(),
+            "type": v.kind(),
+            "affine_rows": (0..4).map(|i| v.affine().row(i).to_array()).collect::<Vec<_>>(),
+            "range": r,
+            "histogram": h,
+        });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&j).expect("serialisable")
+        );
+        return Ok(());
+    }
+    let d = v.dims();
+    let s = v.spacing();
+    println!("{input}");
+    println!(
+        "  dims      {} × {} × {} ({} voxels, {})",
+        d[0],
+        d[1],
+        d[2],
+        d[0] * d[1] * d[2],
+        v.kind().name()
+    );
+    println!("  spacing   {:.6} × {:.6} × {:.6} mm", s[0], s[1], s[2]);
+    let a = v.affine();
+    for i in 0..3 {
+        let row = a.row(i);
+        println!(
+            "  affine    [{:10.4} {:10.4} {:10.4} | {:10.4}]",
+            row.x, row.y, row.z, row.w
+        );
+    }
+    println!(
+        "  range     [{}, {}]{}",
+        r.min,
+        r.max,
+        if r.non_finite > 0 {
+            format!(" ({} non-finite values)", r.non_finite)
+        } else {
+            String::new()
+        }
+    );
+    println!("  histogram ({} bins)", h.counts.len());
+    let max = h.counts.iter().copied().max().unwrap_or(1).max(1);
+    for (b, &c) in h.counts.iter().enumerate() {
+        let bar = "#".repeat(((c as f64 / max as f64) * 40.0).round() as usize);
+        println!("  {:>12.5} {:>10} {bar}", h.bin_center(b), c);
+    }
+    Ok(())
+}
+
+fn gpu_info() -> Result<()> {
+    let adapters = voxlab::gpu::context::list_adapters();
+    if adapters.is_empty() {
+        return Err(Error::NoAdapter(
+            voxlab::gpu::context::NO_ADAPTER_HELP.into(),
+        ));
+    }
+    println!("adapters (best first):");
+    for a in &adapters {
+        println!(
+            "  {} [{} {}] driver {} {}",
+            a.name, a.backend, a.device_type, a.driver, a.driver_info
+        );
+    }
+    let ctx = voxlab::gpu::GpuContext::new()?;
+    println!("\nopened:\n{}", ctx.describe());
+    let n = voxlab::gpu::probe::self_test(&ctx)?;
+    println!("self-test:    {n} values computed on the device match the CPU");
+    Ok(())
+}
+
+fn demo(out: &Path) -> Result<()> {
+    eprintln!("voxlab demo: rendering a gallery of built-in phantoms with the CPU oracle (f64)…");
+    let t = std::time::Instant::now();
+    let items = voxlab::demo::run_demo(out, &|item, n, total| {
+        eprintln!(
+            "  [{n}/{total}] {} ({:.1} s)",
+            item.file.display(),
+            item.seconds
+        );
+    })?;
+    println!(
+        "wrote {} pictures to {} in {:.1} s; open {} to see them",
+        items.len(),
+        out.display(),
+        t.elapsed().as_secs_f64(),
+        out.join("index.html").display()
+    );
+    Ok(())
+}

@@ -1,0 +1,163 @@
+//! The floating-point abstraction the CPU oracle is generic over.
+//!
+//! Every CPU algorithm is written once for `R: Real` and instantiated at `f64` (the
+//! oracle) and `f32` (the fair speed baseline, and the precision the GPU works in).
+
+use std::fmt::{Debug, Display};
+use std::iter::Sum;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// A floating-point type the CPU algorithms can run in: `f32` or `f64`.
+pub trait Real:
+    num_traits::Float + num_traits::FloatConst + Default + Debug + Display + Sum + Send + Sync + 'static
+{
+    /// Name used in reports ("f32" / "f64").
+    const NAME: &'static str;
+    /// Converts from `f64` (rounding to nearest for `f32`).
+    fn of(x: f64) -> Self;
+    /// Converts to `f64` (exact).
+    fn f64(self) -> f64;
+}
+
+impl Real for f32 {
+    const NAME: &'static str = "f32";
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x as f32
+    }
+    #[inline(always)]
+    fn f64(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Real for f64 {
+    const NAME: &'static str = "f64";
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn f64(self) -> f64 {
+        self
+    }
+}
+
+/// A 3-vector in the working precision `R` (glam only offers concrete `f32`/`f64`
+/// types, and the oracle must be generic).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct V3<R>(pub [R; 3]);
+
+impl<R: Real> V3<R> {
+    #[inline(always)]
+    pub fn new(x: R, y: R, z: R) -> Self {
+        V3([x, y, z])
+    }
+    #[inline(always)]
+    pub fn splat(v: R) -> Self {
+        V3([v; 3])
+    }
+    #[inline(always)]
+    pub fn zero() -> Self {
+        V3([R::zero(); 3])
+    }
+    /// Converts from a glam `DVec3` (world-space quantities are set up in f64).
+    #[inline(always)]
+    pub fn from_dvec(v: glam::DVec3) -> Self {
+        V3([R::of(v.x), R::of(v.y), R::of(v.z)])
+    }
+    #[inline(always)]
+    pub fn to_dvec(self) -> glam::DVec3 {
+        glam::DVec3::new(self.0[0].f64(), self.0[1].f64(), self.0[2].f64())
+    }
+    #[inline(always)]
+    pub fn x(self) -> R {
+        self.0[0]
+    }
+    #[inline(always)]
+    pub fn y(self) -> R {
+        self.0[1]
+    }
+    #[inline(always)]
+    pub fn z(self) -> R {
+        self.0[2]
+    }
+    #[inline(always)]
+    pub fn dot(self, o: Self) -> R {
+        self.0[0] * o.0[0] + self.0[1] * o.0[1] + self.0[2] * o.0[2]
+    }
+    #[inline(always)]
+    pub fn length(self) -> R {
+        self.dot(self).sqrt()
+    }
+    /// Unit vector, or zero when the length is zero.
+    #[inline(always)]
+    pub fn normalize_or_zero(self) -> Self {
+        let l = self.length();
+        if l > R::zero() {
+            self * (R::one() / l)
+        } else {
+            Self::zero()
+        }
+    }
+}
+
+impl<R: Real> Add for V3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        V3([self.0[0] + o.0[0], self.0[1] + o.0[1], self.0[2] + o.0[2]])
+    }
+}
+impl<R: Real> Sub for V3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        V3([self.0[0] - o.0[0], self.0[1] - o.0[1], self.0[2] - o.0[2]])
+    }
+}
+impl<R: Real> Mul<R> for V3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, s: R) -> Self {
+        V3([self.0[0] * s, self.0[1] * s, self.0[2] * s])
+    }
+}
+impl<R: Real> Div<R> for V3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn div(self, s: R) -> Self {
+        V3([self.0[0] / s, self.0[1] / s, self.0[2] / s])
+    }
+}
+impl<R: Real> Neg for V3<R> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        V3([-self.0[0], -self.0[1], -self.0[2]])
+    }
+}
+
+/// A 3×3 matrix in the working precision, rows first.
+#[derive(Clone, Copy, Debug)]
+pub struct M3<R>(pub [[R; 3]; 3]);
+
+impl<R: Real> M3<R> {
+    /// Converts from a glam `DMat3` (column-major) to rows in `R`.
+    pub fn from_dmat3(m: glam::DMat3) -> Self {
+        let r = |i: usize| {
+            let row = m.row(i);
+            [R::of(row.x), R::of(row.y), R::of(row.z)]
+        };
+        M3([r(0), r(1), r(2)])
+    }
+    #[inline(always)]
+    pub fn mul_vec(&self, v: V3<R>) -> V3<R> {
+        let m = &self.0;
+        V3([
+            m[0][0] * v.0[0] + m[0][1] * v.0[1] + m[0][2] * v.0[2],
+            m[1][0] * v.0[0] + m[1][1] * v.0[1] + m[1][2] * v.0[2],
+            m[2][0] * v.0[0] + m[2][1] * v.0[1] + m[2][2] * v.0[2],
+        ])
+    }
+}

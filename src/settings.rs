@@ -1,0 +1,279 @@
+//! Render settings shared by every backend.
+//!
+//! One struct, serialisable to JSON, read by the CPU oracle (`cpu::raycast`) and the
+//! GPU port alike, so a setting means the same thing everywhere.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// What a ray computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// Direct volume rendering: emission–absorption compositing through a transfer
+    /// function (RGBA output).
+    Dvr,
+    /// Maximum intensity projection of the raw values (scalar output).
+    Mip,
+    /// Minimum intensity projection of the raw values (scalar output).
+    Minip,
+    /// X-ray: the line integral of the raw values, in value × mm (scalar output).
+    Xray,
+}
+
+/// The reconstruction filter used to sample the volume between voxel centres.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Filter {
+    /// The nearest voxel (box kernel, radius ½).
+    Nearest,
+    /// Tent kernel (radius 1): trilinear interpolation.
+    Trilinear,
+    /// Cubic B-spline (radius 2) on the voxel values: smooth and approximating (it
+    /// does not pass through the voxel values, and blurs).
+    Bspline,
+    /// Cubic B-spline (radius 2) on prefiltered coefficients: interpolating, and the
+    /// most accurate cubic (Unser's B-spline interpolation).
+    BsplineInterp,
+    /// Catmull–Rom cubic (Keys, a = −½; radius 2): interpolating.
+    CatmullRom,
+    /// Lanczos-2 windowed sinc (radius 2), weights normalised to sum to 1.
+    Lanczos2,
+    /// Lanczos-3 windowed sinc (radius 3), weights normalised to sum to 1.
+    Lanczos3,
+    /// Lanczos-4 windowed sinc (radius 4), weights normalised to sum to 1.
+    Lanczos4,
+    /// The full sinc over the whole grid and the clamp-to-edge extension beyond it (no
+    /// window, no normalisation); O(n³) per sample, slow.
+    Sinc,
+}
+
+impl Filter {
+    pub const ALL: [Filter; 9] = [
+        Filter::Nearest,
+        Filter::Trilinear,
+        Filter::Bspline,
+        Filter::BsplineInterp,
+        Filter::CatmullRom,
+        Filter::Lanczos2,
+        Filter::Lanczos3,
+        Filter::Lanczos4,
+        Filter::Sinc,
+    ];
+    /// The kernel's radius in voxels (the grid's half-size for the full sinc).
+    pub fn radius(self) -> usize {
+        match self {
+            Filter::Nearest | Filter::Trilinear => 1,
+            Filter::Bspline | Filter::BsplineInterp | Filter::CatmullRom | Filter::Lanczos2 => 2,
+            Filter::Lanczos3 => 3,
+            Filter::Lanczos4 => 4,
+            Filter::Sinc => usize::MAX,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Filter::Nearest => "nearest",
+            Filter::Trilinear => "trilinear",
+            Filter::Bspline => "bspline",
+            Filter::BsplineInterp => "bspline-interp",
+            Filter::CatmullRom => "catmull-rom",
+            Filter::Lanczos2 => "lanczos2",
+            Filter::Lanczos3 => "lanczos3",
+            Filter::Lanczos4 => "lanczos4",
+            Filter::Sinc => "sinc",
+        }
+    }
+}
+
+/// The finite-difference stencil for gradients.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum GradientMethod {
+    /// `(f(x+h) − f(x−h)) / 2h`: exact on quadratics.
+    Central,
+    /// `(f(x+h) − f(x)) / h`: exact on linear functions only.
+    Forward,
+    /// 3D Sobel: central difference smoothed by `[1 2 1]/4` across the other two axes.
+    Sobel,
+}
+
+/// Where the transfer function is applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Classification {
+    /// Interpolate the data, then classify each sample (the default, sharper).
+    Post,
+    /// Classify every voxel, then interpolate opacity-weighted colours.
+    Pre,
+}
+
+/// The order samples are composited in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Compositing {
+    /// `C += (1 − A) α c; A += (1 − A) α`, nearest sample first; allows early ray
+    /// termination.
+    FrontToBack,
+    /// `C = α c + (1 − α) C`, farthest sample first (the "over" operator).
+    BackToFront,
+}
+
+/// Direction of the light.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Light {
+    /// A light at the eye: `L = −ray direction`.
+    Headlight,
+    /// A directional light: world-space direction *toward* the light.
+    Direction([f64; 3]),
+}
+
+/// Phong shading parameters; the normal is the normalised negative gradient.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Shading {
+    pub enabled: bool,
+    pub ambient: f64,
+    pub diffuse: f64,
+    pub specular: f64,
+    pub shininess: f64,
+    pub light: Light,
+    /// Gradient magnitudes below this fraction of the data range per voxel leave a
+    /// sample unshaded (ramping in linearly from half of it), so that rounding noise in
+    /// flat regions does not pick random normals.
+    pub gradient_threshold: f64,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Shading {
+            enabled: true,
+            ambient: 0.3,
+            diffuse: 0.7,
+            specular: 0.3,
+            shininess: 32.0,
+            light: Light::Headlight,
+            gradient_threshold: 1e-3,
+        }
+    }
+}
+
+/// Everything that decides how a scene becomes an image, for every backend.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RenderSettings {
+    pub mode: Mode,
+    pub filter: Filter,
+    /// Step along the ray in voxels (index-space length). The last step of a ray is
+    /// shortened to end exactly at the volume's boundary.
+    pub step: f64,
+    /// The step the transfer function's opacities are defined for (voxels).
+    pub reference_step: f64,
+    pub classification: Classification,
+    pub compositing: Compositing,
+    /// Front-to-back rays stop once their opacity reaches this (1 disables it).
+    pub ert_threshold: f64,
+    pub gradient: GradientMethod,
+    /// Precompute a gradient volume and interpolate it, instead of differencing the
+    /// reconstructed field at each sample.
+    pub precompute_gradients: bool,
+    pub shading: Shading,
+    /// RGBA behind the volume (DVR).
+    pub background: [f64; 4],
+    /// Value of scalar pixels whose ray misses the volume (MIP, MinIP, X-ray).
+    pub miss_value: f64,
+    /// Lookup-table resolution of the transfer function.
+    pub lut_size: usize,
+    /// Also return the number of samples each ray took.
+    pub sample_count: bool,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            mode: Mode::Dvr,
+            filter: Filter::Trilinear,
+            step: 0.5,
+            reference_step: 1.0,
+            classification: Classification::Post,
+            compositing: Compositing::FrontToBack,
+            ert_threshold: 0.99,
+            gradient: GradientMethod::Central,
+            precompute_gradients: false,
+            shading: Shading::default(),
+            background: [0.0, 0.0, 0.0, 1.0],
+            miss_value: 0.0,
+            lut_size: crate::transfer::DEFAULT_LUT_SIZE,
+            sample_count: false,
+        }
+    }
+}
+
+/// The most samples one ray may take (guards against a tiny step on a huge volume).
+pub const MAX_SAMPLES_PER_RAY: f64 = 1e7;
+
+impl RenderSettings {
+    /// Checks every number a user can set.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |what: &str, x: f64| {
+            if x.is_finite() && x > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::invalid(
+                    what,
+                    format!("{x} must be finite and positive"),
+                ))
+            }
+        };
+        positive("step", self.step)?;
+        if self.step < 1e-4 {
+            return Err(Error::invalid(
+                "step",
+                format!("{} voxels is below the minimum of 1e-4", self.step),
+            ));
+        }
+        positive("reference step", self.reference_step)?;
+        if !(self.ert_threshold > 0.0 && self.ert_threshold <= 1.0) {
+            return Err(Error::invalid(
+                "early-ray-termination threshold",
+                format!("{} must lie in (0, 1]", self.ert_threshold),
+            ));
+        }
+        if !(2..=1 << 20).contains(&self.lut_size) {
+            return Err(Error::invalid(
+                "lookup-table size",
+                "must lie in 2 … 1048576",
+            ));
+        }
+        let s = &self.shading;
+        for (what, x) in [
+            ("ambient", s.ambient),
+            ("diffuse", s.diffuse),
+            ("specular", s.specular),
+            ("shininess", s.shininess),
+            ("gradient threshold", s.gradient_threshold),
+        ] {
+            if !(x.is_finite() && x >= 0.0) {
+                return Err(Error::invalid(what, format!("{x} must be finite and ≥ 0")));
+            }
+        }
+        if let Light::Direction(d) = s.light {
+            if !d.iter().all(|c| c.is_finite()) || d == [0.0; 3] {
+                return Err(Error::invalid(
+                    "light direction",
+                    "must be finite and non-zero",
+                ));
+            }
+        }
+        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(Error::invalid(
+                "background",
+                "RGBA components must lie in [0, 1]",
+            ));
+        }
+        if !self.miss_value.is_finite() {
+            return Err(Error::invalid("miss value", "must be finite"));
+        }
+        Ok(())
+    }
+}

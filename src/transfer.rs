@@ -1,0 +1,341 @@
+//! 1D transfer functions: RGBA control points over a domain, the window/level map Ψ,
+//! lookup tables, JSON and presets.
+//!
+//! A raw data value `t` is first mapped by the window map `Ψ(t) = a·t + b` into the
+//! transfer function's domain `[d0, d1]`; the RGBA there is the piecewise-linear
+//! interpolation of the control points (constant beyond the first and last). Opacity is
+//! per reference step `Δs₀ = 1` voxel; colours are not premultiplied.
+//!
+//! Renderers do not evaluate the control points per sample: they use a [`Lut`] of
+//! `n` entries at `d0 + k (d1 − d0)/(n − 1)`, read with linear interpolation between
+//! entries and clamped at the ends, exactly as a GPU reads a 1D texture.
+
+use crate::error::{Error, Result};
+use crate::real::Real;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Default lookup-table resolution.
+pub const DEFAULT_LUT_SIZE: usize = 4096;
+
+/// One control point: a mapped value and its colour and opacity.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ControlPoint {
+    pub value: f64,
+    /// Red, green, blue in [0, 1]; alpha is the opacity per voxel-length step.
+    pub rgba: [f64; 4],
+}
+
+/// The affine window map `Ψ(t) = a·t + b` applied to raw values before lookup.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowMap {
+    pub a: f64,
+    pub b: f64,
+}
+
+impl Default for WindowMap {
+    fn default() -> Self {
+        WindowMap { a: 1.0, b: 0.0 }
+    }
+}
+
+impl WindowMap {
+    /// The map that sends the window `[level − width/2, level + width/2]` of raw values
+    /// onto the domain `[d0, d1]`.
+    pub fn from_window_level(width: f64, level: f64, domain: [f64; 2]) -> Result<Self> {
+        if !(width.is_finite() && width > 0.0 && level.is_finite()) {
+            return Err(Error::invalid(
+                "window",
+                format!("width {width} must be positive and level {level} finite"),
+            ));
+        }
+        let a = (domain[1] - domain[0]) / width;
+        let b = domain[0] - a * (level - width / 2.0);
+        Ok(WindowMap { a, b })
+    }
+    #[inline(always)]
+    pub fn apply(&self, t: f64) -> f64 {
+        self.a * t + self.b
+    }
+}
+
+/// A 1D RGBA transfer function.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TransferFunction {
+    #[serde(default)]
+    pub name: String,
+    /// The domain `[d0, d1]` of mapped values the lookup table covers.
+    pub domain: [f64; 2],
+    /// Control points, sorted by value.
+    pub points: Vec<ControlPoint>,
+    /// The window map from raw data values into the domain.
+    #[serde(default)]
+    pub window: WindowMap,
+}
+
+/// Built-in presets: (name, JSON).
+pub const PRESETS: &[(&str, &str)] = &[
+    ("ct-bone", include_str!("../data/tf/ct-bone.json")),
+    (
+        "ct-soft-tissue",
+        include_str!("../data/tf/ct-soft-tissue.json"),
+    ),
+    ("ct-vessels", include_str!("../data/tf/ct-vessels.json")),
+    ("mri-brain", include_str!("../data/tf/mri-brain.json")),
+    ("phantom", include_str!("../data/tf/phantom.json")),
+    ("grayscale", include_str!("../data/tf/grayscale.json")),
+];
+
+impl TransferFunction {
+    /// Checks the domain, the points (finite, sorted, colours in [0, 1]) and the map.
+    pub fn validate(&self) -> Result<()> {
+        let [d0, d1] = self.domain;
+        if !(d0.is_finite() && d1.is_finite() && d1 > d0) {
+            return Err(Error::invalid(
+                "transfer function domain",
+                format!("[{d0}, {d1}] must be finite with d0 < d1"),
+            ));
+        }
+        if self.points.is_empty() {
+            return Err(Error::invalid(
+                "transfer function",
+                "needs at least one control point",
+            ));
+        }
+        for (i, p) in self.points.iter().enumerate() {
+            if !p.value.is_finite() {
+                return Err(Error::invalid(
+                    "transfer function",
+                    format!("point {i} has a non-finite value"),
+                ));
+            }
+            if p.rgba.iter().any(|c| !(0.0..=1.0).contains(c)) {
+                return Err(Error::invalid(
+                    "transfer function",
+                    format!("point {i}: rgba {:?} must lie in [0, 1]", p.rgba),
+                ));
+            }
+            if i > 0 && p.value < self.points[i - 1].value {
+                return Err(Error::invalid(
+                    "transfer function",
+                    format!("point {i} is out of order (values must not decrease)"),
+                ));
+            }
+        }
+        if !(self.window.a.is_finite() && self.window.b.is_finite() && self.window.a != 0.0) {
+            return Err(Error::invalid(
+                "window map",
+                "a must be finite and non-zero, b finite",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Parses and validates JSON.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let tf: TransferFunction = serde_json::from_str(text)
+            .map_err(|e| Error::invalid("transfer function JSON", e.to_string()))?;
+        tf.validate()?;
+        Ok(tf)
+    }
+
+    /// Pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a transfer function always serialises")
+    }
+
+    /// Loads a JSON file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let tf: TransferFunction =
+            serde_json::from_str(&text).map_err(|e| Error::format(path, "JSON", e.to_string()))?;
+        tf.validate()
+            .map_err(|e| Error::format(path, "transfer function", e.to_string()))?;
+        Ok(tf)
+    }
+
+    /// Saves as JSON (atomically).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let json = self.to_json();
+        crate::io::write_atomic(path, |w| {
+            w.write_all(json.as_bytes()).map_err(|e| Error::io(path, e))
+        })
+    }
+
+    /// A built-in preset by name (see [`PRESETS`]).
+    pub fn preset(name: &str) -> Result<Self> {
+        let (_, json) = PRESETS.iter().find(|(n, _)| *n == name).ok_or_else(|| {
+            let names: Vec<&str> = PRESETS.iter().map(|(n, _)| *n).collect();
+            Error::invalid(
+                "transfer function preset",
+                format!("'{name}' is not one of {}", names.join(", ")),
+            )
+        })?;
+        Self::from_json(json)
+    }
+
+    /// A preset name or a JSON file path.
+    pub fn preset_or_file(spec: &str) -> Result<Self> {
+        if PRESETS.iter().any(|(n, _)| *n == spec) {
+            Self::preset(spec)
+        } else {
+            Self::load(Path::new(spec))
+        }
+    }
+
+    /// Piecewise-linear evaluation at mapped value `u` (exact, no table).
+    pub fn eval(&self, u: f64) -> [f64; 4] {
+        let pts = &self.points;
+        if u <= pts[0].value {
+            return pts[0].rgba;
+        }
+        let last = pts[pts.len() - 1];
+        if u >= last.value {
+            return last.rgba;
+        }
+        // First point strictly greater than u.
+        let i = pts.partition_point(|p| p.value <= u);
+        let (p0, p1) = (pts[i - 1], pts[i]);
+        let w = (u - p0.value) / (p1.value - p0.value);
+        let mut out = [0.0; 4];
+        for c in 0..4 {
+            out[c] = p0.rgba[c] + w * (p1.rgba[c] - p0.rgba[c]);
+        }
+        out
+    }
+
+    /// The lookup table of `n ≥ 2` entries over the domain.
+    pub fn lut(&self, n: usize) -> Lut {
+        let n = n.max(2);
+        let [d0, d1] = self.domain;
+        let entries = (0..n)
+            .map(|k| self.eval(d0 + (d1 - d0) * k as f64 / (n - 1) as f64))
+            .collect();
+        Lut {
+            domain: self.domain,
+            window: self.window,
+            entries,
+        }
+    }
+}
+
+/// A transfer function sampled into `n` RGBA entries, with its window map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lut {
+    pub domain: [f64; 2],
+    pub window: WindowMap,
+    pub entries: Vec<[f64; 4]>,
+}
+
+/// A [`Lut`] in the working precision `R`, with the window map and the domain folded
+/// into one affine map from raw value to table coordinate: `x = scale·t + offset`.
+#[derive(Clone, Debug)]
+pub struct LutR<R> {
+    pub scale: R,
+    pub offset: R,
+    pub entries: Vec<[R; 4]>,
+}
+
+impl Lut {
+    /// Converts to precision `R`. The table coordinate of raw value `t` is
+    /// `x = (Ψ(t) − d0) / (d1 − d0) · (n − 1)`.
+    pub fn to_real<R: Real>(&self) -> LutR<R> {
+        let n = self.entries.len();
+        let k = (n - 1) as f64 / (self.domain[1] - self.domain[0]);
+        LutR {
+            scale: R::of(self.window.a * k),
+            offset: R::of((self.window.b - self.domain[0]) * k),
+            entries: self
+                .entries
+                .iter()
+                .map(|e| [R::of(e[0]), R::of(e[1]), R::of(e[2]), R::of(e[3])])
+                .collect(),
+        }
+    }
+}
+
+impl<R: Real> LutR<R> {
+    /// Classifies raw value `t`: linear interpolation between table entries, clamped at
+    /// both ends. Mirrors the GPU's manual 1D-texture lookup.
+    #[inline]
+    pub fn classify(&self, t: R) -> [R; 4] {
+        let n = self.entries.len();
+        let last = R::of((n - 1) as f64);
+        let x = (self.scale * t + self.offset).max(R::zero()).min(last);
+        let i0 = x.floor();
+        let f = x - i0;
+        let i0 = i0.to_usize().unwrap_or(0).min(n - 1);
+        let i1 = (i0 + 1).min(n - 1);
+        let (a, b) = (&self.entries[i0], &self.entries[i1]);
+        [
+            a[0] + f * (b[0] - a[0]),
+            a[1] + f * (b[1] - a[1]),
+            a[2] + f * (b[2] - a[2]),
+            a[3] + f * (b[3] - a[3]),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_load() {
+        for (name, _) in PRESETS {
+            let tf = TransferFunction::preset(name).unwrap();
+            assert!(tf.points.len() >= 2, "{name}");
+        }
+    }
+
+    #[test]
+    fn window_level_maps_window_onto_domain() {
+        let w = WindowMap::from_window_level(400.0, 40.0, [0.0, 1.0]).unwrap();
+        assert!((w.apply(-160.0) - 0.0).abs() < 1e-15);
+        assert!((w.apply(240.0) - 1.0).abs() < 1e-15);
+        assert!((w.apply(40.0) - 0.5).abs() < 1e-15);
+        assert!(WindowMap::from_window_level(0.0, 1.0, [0.0, 1.0]).is_err());
+    }
+
+    #[test]
+    fn lut_reproduces_piecewise_linear_at_entries_and_between() {
+        let tf = TransferFunction {
+            name: String::new(),
+            domain: [0.0, 1.0],
+            points: vec![
+                ControlPoint {
+                    value: 0.25,
+                    rgba: [0.0, 0.0, 0.0, 0.0],
+                },
+                ControlPoint {
+                    value: 0.75,
+                    rgba: [1.0, 0.5, 0.25, 1.0],
+                },
+            ],
+            window: WindowMap { a: 2.0, b: -0.5 },
+        };
+        tf.validate().unwrap();
+        // 5 entries at 0, .25, .5, .75, 1: the TF is linear between entries, so the
+        // table reproduces it exactly.
+        let lut = tf.lut(5).to_real::<f64>();
+        for &t in &[0.0, 0.3, 0.4, 0.5, 0.61, 0.75, 1.0] {
+            let got = lut.classify(t);
+            let want = tf.eval(2.0 * t - 0.5);
+            for c in 0..4 {
+                assert!((got[c] - want[c]).abs() < 1e-14, "t={t} c={c}");
+            }
+        }
+    }
+
+    #[test]
+    fn json_round_trip_and_bad_json() {
+        let tf = TransferFunction::preset("ct-bone").unwrap();
+        let back = TransferFunction::from_json(&tf.to_json()).unwrap();
+        assert_eq!(tf, back);
+        assert!(TransferFunction::from_json("{").is_err());
+        let bad = r#"{"domain":[1,0],"points":[{"value":0,"rgba":[0,0,0,0]}]}"#;
+        assert!(TransferFunction::from_json(bad).is_err());
+        let bad = r#"{"domain":[0,1],"points":[{"value":0,"rgba":[2,0,0,0]}]}"#;
+        assert!(TransferFunction::from_json(bad).is_err());
+    }
+}

@@ -1,0 +1,505 @@
+//! `Volume<T>`: a regular grid of voxels with its geometry.
+//!
+//! Conventions (see `docs/conventions.md`):
+//! - memory order is x fastest: voxel `(i, j, k)` is `data[i + nx * (j + ny * k)]`;
+//! - voxel `(i, j, k)`'s centre is at *index coordinates* `(i, j, k)`; the volume's
+//!   box in index space is `[-0.5, n - 0.5]` on every axis (each voxel owns a cell);
+//! - `affine` maps index coordinates to world coordinates in millimetres; its linear
+//!   part's columns are the world vectors of one step along x, y and z, so their
+//!   lengths are the spacing.
+
+use crate::error::{Error, Result};
+use glam::{DMat3, DMat4, DVec3};
+
+/// The largest number of voxels a volume may have (2^31, 8 GiB of f32), refused
+/// before allocating so that a lying header cannot exhaust memory.
+pub const MAX_VOXELS: usize = 1 << 31;
+
+/// The scalar types a volume can hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VoxelKind {
+    U8,
+    U16,
+    I16,
+    F32,
+}
+
+impl VoxelKind {
+    /// Bytes per voxel.
+    pub fn size(self) -> usize {
+        match self {
+            VoxelKind::U8 => 1,
+            VoxelKind::U16 | VoxelKind::I16 => 2,
+            VoxelKind::F32 => 4,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            VoxelKind::U8 => "u8",
+            VoxelKind::U16 => "u16",
+            VoxelKind::I16 => "i16",
+            VoxelKind::F32 => "f32",
+        }
+    }
+}
+
+/// A voxel type: u8, u16, i16 or f32.
+pub trait Voxel: bytemuck::Pod + Default + PartialOrd + Send + Sync + std::fmt::Debug {
+    const KIND: VoxelKind;
+    /// The voxel's value as f64 (exact for every supported type).
+    fn to_f64(self) -> f64;
+    /// Rounds and saturates an f64 into this type (NaN becomes 0 for integers).
+    fn from_f64(x: f64) -> Self;
+}
+
+macro_rules! int_voxel {
+    ($t:ty, $kind:ident) => {
+        impl Voxel for $t {
+            const KIND: VoxelKind = VoxelKind::$kind;
+            #[inline(always)]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            #[inline(always)]
+            fn from_f64(x: f64) -> Self {
+                // `as` saturates and maps NaN to 0.
+                x.round() as $t
+            }
+        }
+    };
+}
+int_voxel!(u8, U8);
+int_voxel!(u16, U16);
+int_voxel!(i16, I16);
+
+impl Voxel for f32 {
+    const KIND: VoxelKind = VoxelKind::F32;
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    #[inline(always)]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+}
+
+/// Checks dimensions: every axis at least 1 and the product below [`MAX_VOXELS`].
+pub fn check_dims(dims: [usize; 3]) -> Result<usize> {
+    if dims.contains(&0) {
+        return Err(Error::invalid(
+            "volume dimensions",
+            format!("{dims:?} has an empty axis"),
+        ));
+    }
+    let n = dims
+        .iter()
+        .try_fold(1usize, |acc, &d| acc.checked_mul(d))
+        .filter(|&n| n <= MAX_VOXELS)
+        .ok_or_else(|| {
+            Error::too_large(
+                "volume",
+                format!("{dims:?} exceeds the limit of {MAX_VOXELS} voxels"),
+            )
+        })?;
+    Ok(n)
+}
+
+/// Checks a spacing: finite and strictly positive on every axis.
+pub fn check_spacing(spacing: [f64; 3]) -> Result<()> {
+    if spacing.iter().all(|s| s.is_finite() && *s > 0.0) {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            "voxel spacing",
+            format!("{spacing:?} must be finite and positive on every axis"),
+        ))
+    }
+}
+
+/// A regular grid of voxels, x fastest, with spacing and a voxel-to-world affine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume<T> {
+    dims: [usize; 3],
+    affine: DMat4,
+    data: Vec<T>,
+}
+
+impl<T: Voxel> Volume<T> {
+    /// A volume with the given spacing (mm) whose voxel (0,0,0) sits at the world origin
+    /// and whose axes are the world axes.
+    pub fn new(dims: [usize; 3], spacing: [f64; 3], data: Vec<T>) -> Result<Self> {
+        check_spacing(spacing)?;
+        let affine = DMat4::from_scale(DVec3::from_array(spacing));
+        Self::with_affine(dims, affine, data)
+    }
+
+    /// A volume with an explicit voxel-to-world affine.
+    pub fn with_affine(dims: [usize; 3], affine: DMat4, data: Vec<T>) -> Result<Self> {
+        let n = check_dims(dims)?;
+        if data.len() != n {
+            return Err(Error::invalid(
+                "volume data",
+                format!(
+                    "{} values for dimensions {dims:?} (expected {n})",
+                    data.len()
+                ),
+            ));
+        }
+        let lin = DMat3::from_mat4(affine);
+        let det = lin.determinant();
+        if !affine.is_finite() || det.abs() < 1e-300 || !det.is_finite() {
+            return Err(Error::invalid(
+                "voxel-to-world affine",
+                "must be finite and invertible",
+            ));
+        }
+        let bottom = affine.row(3);
+        if bottom != glam::DVec4::new(0.0, 0.0, 0.0, 1.0) {
+            return Err(Error::invalid(
+                "voxel-to-world affine",
+                "last row must be (0, 0, 0, 1)",
+            ));
+        }
+        Ok(Volume { dims, affine, data })
+    }
+
+    /// A volume of `dims` filled with `value`.
+    pub fn filled(dims: [usize; 3], spacing: [f64; 3], value: T) -> Result<Self> {
+        let n = check_dims(dims)?;
+        Self::new(dims, spacing, vec![value; n])
+    }
+
+    /// Samples `f(i, j, k)` at every voxel index (in parallel over z-slices).
+    pub fn from_fn(
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        f: impl Fn(usize, usize, usize) -> T + Sync,
+    ) -> Result<Self> {
+        use rayon::prelude::*;
+        let n = check_dims(dims)?;
+        let mut data = vec![T::default(); n];
+        let slice = dims[0] * dims[1];
+        data.par_chunks_mut(slice).enumerate().for_each(|(k, s)| {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    s[i + dims[0] * j] = f(i, j, k);
+                }
+            }
+        });
+        Self::new(dims, spacing, data)
+    }
+}
+
+impl<T> Volume<T> {
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+    /// The index-to-world affine.
+    pub fn affine(&self) -> DMat4 {
+        self.affine
+    }
+    /// Replaces the affine (it must be finite and invertible).
+    pub fn set_affine(&mut self, affine: DMat4) -> Result<()>
+    where
+        T: Voxel,
+    {
+        let data = std::mem::take(&mut self.data);
+        let v = Volume::with_affine(self.dims, affine, data);
+        match v {
+            Ok(v) => {
+                *self = v;
+                Ok(())
+            }
+            Err(e) => Err(e),
+        }
+    }
+    /// Spacing in mm: the lengths of the affine's columns.
+    pub fn spacing(&self) -> [f64; 3] {
+        let m = DMat3::from_mat4(self.affine);
+        [m.x_axis.length(), m.y_axis.length(), m.z_axis.length()]
+    }
+    /// World position of the volume's centre (index `(n - 1) / 2`).
+    pub fn center_world(&self) -> DVec3 {
+        let c = DVec3::new(
+            (self.dims[0] as f64 - 1.0) * 0.5,
+            (self.dims[1] as f64 - 1.0) * 0.5,
+            (self.dims[2] as f64 - 1.0) * 0.5,
+        );
+        self.affine.transform_point3(c)
+    }
+    /// World-space extent of the volume's box (`n * spacing` per axis).
+    pub fn extent_world(&self) -> [f64; 3] {
+        let s = self.spacing();
+        [
+            s[0] * self.dims[0] as f64,
+            s[1] * self.dims[1] as f64,
+            s[2] * self.dims[2] as f64,
+        ]
+    }
+    /// Moves the origin so that the volume's centre is at the world origin.
+    pub fn centered(mut self) -> Self {
+        let c = self.center_world();
+        self.affine.w_axis -= c.extend(0.0);
+        self
+    }
+    /// Linear index of voxel (i, j, k).
+    #[inline(always)]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+    #[inline(always)]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> &T {
+        &self.data[self.index(i, j, k)]
+    }
+}
+
+/// Minimum and maximum of a set of values, with a count of the non-finite ones.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ValueRange {
+    pub min: f64,
+    pub max: f64,
+    /// How many values were NaN or infinite (left out of min and max).
+    pub non_finite: usize,
+}
+
+/// A histogram of voxel values over `[min, max]` with equal-width bins; the maximum
+/// falls in the last bin.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Histogram {
+    pub min: f64,
+    pub max: f64,
+    pub counts: Vec<u64>,
+}
+
+impl Histogram {
+    /// Value at the centre of bin `b`.
+    pub fn bin_center(&self, b: usize) -> f64 {
+        let w = (self.max - self.min) / self.counts.len() as f64;
+        self.min + (b as f64 + 0.5) * w
+    }
+}
+
+impl<T: Voxel> Volume<T> {
+    /// Minimum and maximum over the finite values.
+    pub fn value_range(&self) -> ValueRange {
+        use rayon::prelude::*;
+        let (min, max, bad) = self
+            .data
+            .par_chunks(1 << 16)
+            .map(|c| {
+                let mut r = (f64::INFINITY, f64::NEG_INFINITY, 0usize);
+                for v in c {
+                    let x = v.to_f64();
+                    if x.is_finite() {
+                        r.0 = r.0.min(x);
+                        r.1 = r.1.max(x);
+                    } else {
+                        r.2 += 1;
+                    }
+                }
+                r
+            })
+            .reduce(
+                || (f64::INFINITY, f64::NEG_INFINITY, 0),
+                |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 + b.2),
+            );
+        ValueRange {
+            min,
+            max,
+            non_finite: bad,
+        }
+    }
+
+    /// Fails with [`Error::NonFinite`] if any voxel is NaN or infinite.
+    pub fn check_finite(&self, what: &str) -> Result<()> {
+        if T::KIND != VoxelKind::F32 {
+            return Ok(());
+        }
+        let mut first = None;
+        let mut count = 0;
+        for (i, v) in self.data.iter().enumerate() {
+            if !v.to_f64().is_finite() {
+                count += 1;
+                first.get_or_insert(i);
+            }
+        }
+        match first {
+            None => Ok(()),
+            Some(first) => Err(Error::NonFinite {
+                what: what.to_string(),
+                count,
+                first,
+            }),
+        }
+    }
+
+    /// Histogram of the finite values in `bins` equal bins over the value range.
+    pub fn histogram(&self, bins: usize) -> Histogram {
+        let bins = bins.max(1);
+        let r = self.value_range();
+        let (min, max) = if r.min <= r.max {
+            (r.min, r.max)
+        } else {
+            (0.0, 0.0)
+        };
+        let mut counts = vec![0u64; bins];
+        let width = max - min;
+        for v in &self.data {
+            let x = v.to_f64();
+            if !x.is_finite() {
+                continue;
+            }
+            let b = if width > 0.0 {
+                (((x - min) / width) * bins as f64) as usize
+            } else {
+                0
+            };
+            counts[b.min(bins - 1)] += 1;
+        }
+        Histogram { min, max, counts }
+    }
+
+    /// Converts every voxel to another type (rounding and saturating into integers).
+    pub fn convert<U: Voxel>(&self) -> Volume<U> {
+        Volume {
+            dims: self.dims,
+            affine: self.affine,
+            data: self.data.iter().map(|v| U::from_f64(v.to_f64())).collect(),
+        }
+    }
+}
+
+/// A volume of any supported voxel type, as read from a file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AnyVolume {
+    U8(Volume<u8>),
+    U16(Volume<u16>),
+    I16(Volume<i16>),
+    F32(Volume<f32>),
+}
+
+/// Applies an expression to the typed volume inside an [`AnyVolume`].
+#[macro_export]
+macro_rules! with_volume {
+    ($any:expr, $v:ident => $body:expr) => {
+        match $any {
+            $crate::volume::AnyVolume::U8($v) => $body,
+            $crate::volume::AnyVolume::U16($v) => $body,
+            $crate::volume::AnyVolume::I16($v) => $body,
+            $crate::volume::AnyVolume::F32($v) => $body,
+        }
+    };
+}
+
+impl AnyVolume {
+    pub fn kind(&self) -> VoxelKind {
+        with_volume!(self, v => voxel_kind_of(v))
+    }
+    pub fn dims(&self) -> [usize; 3] {
+        with_volume!(self, v => v.dims())
+    }
+    pub fn spacing(&self) -> [f64; 3] {
+        with_volume!(self, v => v.spacing())
+    }
+    pub fn affine(&self) -> DMat4 {
+        with_volume!(self, v => v.affine())
+    }
+    pub fn value_range(&self) -> ValueRange {
+        with_volume!(self, v => v.value_range())
+    }
+    pub fn histogram(&self, bins: usize) -> Histogram {
+        with_volume!(self, v => v.histogram(bins))
+    }
+    pub fn check_finite(&self, what: &str) -> Result<()> {
+        with_volume!(self, v => v.check_finite(what))
+    }
+    /// The voxel values as f64, x fastest.
+    pub fn values_f64(&self) -> Vec<f64> {
+        with_volume!(self, v => v.data().iter().map(|x| x.to_f64()).collect())
+    }
+    /// Converts to an f32 volume (exact for u8, u16 and i16).
+    pub fn to_f32(&self) -> Volume<f32> {
+        with_volume!(self, v => v.convert::<f32>())
+    }
+}
+
+fn voxel_kind_of<T: Voxel>(_: &Volume<T>) -> VoxelKind {
+    T::KIND
+}
+
+macro_rules! any_from {
+    ($t:ty, $kind:ident) => {
+        impl From<Volume<$t>> for AnyVolume {
+            fn from(v: Volume<$t>) -> Self {
+                AnyVolume::$kind(v)
+            }
+        }
+    };
+}
+any_from!(u8, U8);
+any_from!(u16, U16);
+any_from!(i16, I16);
+any_from!(f32, F32);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_x_fastest() {
+        let v =
+            Volume::from_fn([3, 4, 5], [1.0; 3], |i, j, k| (i + 10 * j + 100 * k) as f32).unwrap();
+        assert_eq!(v.data()[1], 1.0);
+        assert_eq!(v.data()[3], 10.0);
+        assert_eq!(v.data()[12], 100.0);
+        assert_eq!(*v.get(2, 3, 4), 432.0);
+    }
+
+    #[test]
+    fn refuses_absurd_sizes_before_allocating() {
+        let e = check_dims([1 << 20, 1 << 20, 1 << 20]).unwrap_err();
+        assert!(matches!(e, Error::TooLarge { .. }));
+        assert!(check_dims([usize::MAX, 2, 2]).is_err());
+        assert!(check_dims([0, 2, 2]).is_err());
+    }
+
+    #[test]
+    fn range_and_histogram() {
+        let v = Volume::new([4, 1, 1], [1.0; 3], vec![0u8, 1, 2, 3]).unwrap();
+        let r = v.value_range();
+        assert_eq!((r.min, r.max), (0.0, 3.0));
+        let h = v.histogram(2);
+        assert_eq!(h.counts, vec![2, 2]);
+        let f = Volume::new([3, 1, 1], [1.0; 3], vec![1.0f32, f32::NAN, -2.0]).unwrap();
+        let r = f.value_range();
+        assert_eq!((r.min, r.max, r.non_finite), (-2.0, 1.0, 1));
+        assert!(f.check_finite("test").is_err());
+    }
+
+    #[test]
+    fn centre_and_spacing() {
+        let v = Volume::filled([5, 3, 2], [2.0, 1.0, 0.5], 0u8)
+            .unwrap()
+            .centered();
+        assert_eq!(v.spacing(), [2.0, 1.0, 0.5]);
+        assert!(v.center_world().length() < 1e-12);
+        assert_eq!(v.extent_world(), [10.0, 3.0, 1.0]);
+    }
+}

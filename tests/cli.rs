@@ -1,0 +1,322 @@
+//! The `voxlab` command line as a user meets it: the demo, rendering files and
+//! phantoms, and clear errors (with no output left behind) for bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn voxlab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxlab"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("the voxlab binary runs")
+}
+
+/// A fresh scratch folder under target/ for one test.
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/cli-tests")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn demo_writes_the_gallery() {
+    let d = scratch("demo");
+    let o = voxlab(&["demo", "--out", s(&d)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let pngs: Vec<_> = std::fs::read_dir(&d)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
+        .collect();
+    assert_eq!(pngs.len(), 9);
+    assert!(d.join("index.html").is_file() && d.join("README.md").is_file());
+    // Every picture decodes and is not blank.
+    for p in pngs {
+        let img = image::open(p.path()).unwrap().to_rgba8();
+        assert!(
+            img.pixels().any(|px| px.0[0] > 40),
+            "{:?} is blank",
+            p.path()
+        );
+    }
+}
+
+/// Render an X-ray along +z of a phantom written to NRRD, as .npy, and compare with the
+/// sum over z of the same NRRD's voxels times the z spacing.
+#[test]
+fn render_xray_of_a_file_equals_the_array_sum() {
+    let d = scratch("xray");
+    let vol = d.join("ellipsoid.nrrd");
+    let o = voxlab(&["phantom", "ellipsoid:20,16,12", "--out", s(&vol)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = d.join("xray.npy");
+    let o = voxlab(&[
+        "render",
+        s(&vol),
+        "--mode",
+        "xray",
+        "--view",
+        "+z",
+        "--step",
+        "1",
+        "--out",
+        s(&img),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v = voxlab::io::read_volume(&vol).unwrap().to_f32();
+    let (shape, px) = voxlab::io::npy::read_npy_f32(&img).unwrap();
+    assert_eq!(shape, vec![16, 20]);
+    let dz = v.spacing()[2];
+    for j in 0..16 {
+        for i in 0..20 {
+            let want: f64 = (0..12).map(|k| *v.get(i, j, k) as f64).sum::<f64>() * dz;
+            let got = px[j * 20 + i] as f64;
+            assert!(
+                (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                "({i},{j}) {got} vs {want}"
+            );
+        }
+    }
+    assert!(px.iter().any(|&x| x > 10.0));
+}
+
+/// NumPy, an independent implementation, agrees: MIP along −y of an .npy volume equals
+/// `np.load(v).max(axis=1)`. Skipped (with a message) where NumPy is not installed.
+#[test]
+fn mip_agrees_with_numpy() {
+    let have_numpy = Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have_numpy {
+        eprintln!("SKIPPED mip_agrees_with_numpy: python3 with numpy not found");
+        return;
+    }
+    let d = scratch("numpy");
+    let vol = d.join("spheres.npy");
+    assert!(voxlab(&["phantom", "spheres:24,20,16", "--out", s(&vol)])
+        .status
+        .success());
+    let img = d.join("mip.npy");
+    let o = voxlab(&[
+        "render",
+        s(&vol),
+        "--mode",
+        "mip",
+        "--view",
+        "-y",
+        "--filter",
+        "nearest",
+        "--step",
+        "1",
+        "--out",
+        s(&img),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let script = format!(
+        "import numpy as np, sys\nv = np.load('{}')\nm = np.load('{}')\nr = v.max(axis=1)\n\
+         assert m.shape == r.shape, (m.shape, r.shape)\nprint(float(np.abs(m - r).max()))",
+        s(&vol),
+        s(&img)
+    );
+    let o = Command::new("python3")
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let diff: f64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();
+    assert_eq!(diff, 0.0);
+}
+
+#[test]
+fn dvr_png_and_samples_image() {
+    let d = scratch("dvr");
+    let out = d.join("dvr.png");
+    let samples = d.join("samples.npy");
+    let o = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:48",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--backend",
+        "cpu-f32",
+        "--sixteen-bit",
+        "--samples",
+        s(&samples),
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&out).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 30));
+    assert!(matches!(img, image::DynamicImage::ImageRgba16(_)));
+    let (shape, counts) = voxlab::io::npy::read_npy_f32(&samples).unwrap();
+    assert_eq!(shape, vec![30, 40]);
+    assert!(counts.iter().any(|&c| c > 10.0));
+}
+
+/// Bad input: a clear message on stderr, exit status 1, and no output file.
+#[test]
+fn bad_input_gets_a_clear_error_and_no_output() {
+    let d = scratch("bad");
+    let out = d.join("out.png");
+    let truncated = d.join("truncated.nrrd");
+    std::fs::write(&truncated, b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nencoding: raw\nendian: little\n\n\x00\x00").unwrap();
+    let nan = d.join("nan.npy");
+    voxlab::io::npy::write_npy_f32(
+        &nan,
+        &[2, 2, 2],
+        &[0.0, 1.0, f32::NAN, 0.5, 0.0, 0.0, 0.0, 0.0],
+    )
+    .unwrap();
+    let (bmp, missing) = (d.join("out.bmp"), d.join("missing/out.png"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["render", "no/such/file.nrrd", "--out", s(&out)],
+            "no/such/file.nrrd",
+        ),
+        (
+            vec!["render", s(&truncated), "--out", s(&out)],
+            "truncated.nrrd",
+        ),
+        (vec!["render", s(&nan), "--out", s(&out)], "non-finite"),
+        (
+            vec!["render", "phantom:nope:8", "--out", s(&out)],
+            "not one of",
+        ),
+        (
+            vec!["render", "phantom:sphere:0", "--out", s(&out)],
+            "empty axis",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--step",
+                "0",
+                "--out",
+                s(&out),
+            ],
+            "step",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--view",
+                "+w",
+                "--out",
+                s(&out),
+            ],
+            "+w",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--tf",
+                "no-such-tf.json",
+                "--out",
+                s(&out),
+            ],
+            "no-such-tf.json",
+        ),
+        (
+            vec!["render", "phantom:sphere:8", "--out", s(&bmp)],
+            ".png or .npy",
+        ),
+        (
+            vec!["render", "phantom:sphere:8", "--out", s(&missing)],
+            "does not exist",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--window",
+                "0",
+                "--level",
+                "1",
+                "--out",
+                s(&out),
+            ],
+            "window",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--width",
+                "0",
+                "--out",
+                s(&out),
+            ],
+            "image size",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:16",
+                "--filter",
+                "sinc",
+                "--width",
+                "512",
+                "--height",
+                "512",
+                "--step",
+                "0.01",
+                "--out",
+                s(&out),
+            ],
+            "too large",
+        ),
+    ];
+    for (args, needle) in cases {
+        let o = voxlab(&args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?} should fail: {err}");
+        assert!(
+            err.contains("voxlab: error:") && err.contains(needle),
+            "{args:?}: '{err}' lacks '{needle}'"
+        );
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        assert!(!out.exists(), "{args:?} left an output file");
+    }
+    // Nothing half-written is left in the folder (no temporary files either).
+    let left: Vec<_> = std::fs::read_dir(&d)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(left.len(), 2, "{left:?}");
+}
+
+#[test]
+fn info_and_tf_listing() {
+    let o = voxlab(&["info", "phantom:shepp-logan-modified:32", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["dims"], serde_json::json!([32, 32, 32]));
+    assert_eq!(j["spacing_mm"][0], serde_json::json!(8.0));
+    assert_eq!(j["range"]["max"], serde_json::json!(1.0));
+    let o = voxlab(&["tf"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("ct-bone"));
+    let o = voxlab(&["tf", "ct-bone"]);
+    assert!(
+        voxlab::transfer::TransferFunction::from_json(&String::from_utf8_lossy(&o.stdout)).is_ok()
+    );
+}
