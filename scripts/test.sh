@@ -11,9 +11,12 @@ cd "$(dirname "$0")/.."
 
 have_vulkan_driver() {
     # A Vulkan loader and at least one installable client driver (ICD) manifest.
-    ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1' || return 1
-    ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json \
-       /usr/local/share/vulkan/icd.d/*.json 2>/dev/null | grep -q . || return 1
+    # (No `grep -q` in pipes: under pipefail its early exit kills the writer.)
+    local loader icds
+    loader=$(ldconfig -p 2>/dev/null | grep -c 'libvulkan\.so\.1' || true)
+    icds=$(ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json \
+           /usr/local/share/vulkan/icd.d/*.json 2>/dev/null | wc -l)
+    [ "${loader:-0}" -gt 0 ] && [ "${icds:-0}" -gt 0 ]
 }
 
 if [ "$(uname -s)" = "Linux" ] && ! have_vulkan_driver; then
@@ -26,6 +29,12 @@ if [ "$(uname -s)" = "Linux" ] && ! have_vulkan_driver; then
         echo "test.sh: no Vulkan driver found and cannot install one (needs root and apt-get)."
         echo "test.sh: install mesa-vulkan-drivers, or set VOXLAB_ALLOW_NO_GPU=1 to skip GPU tests."
     fi
+fi
+
+# Mesa complains when XDG_RUNTIME_DIR is unset; give it a private one.
+if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
+    export XDG_RUNTIME_DIR="${TMPDIR:-/tmp}/voxlab-xdg-$(id -u)"
+    mkdir -p "$XDG_RUNTIME_DIR" && chmod 700 "$XDG_RUNTIME_DIR"
 fi
 
 rm -f target/gpu-tests-skipped.txt

@@ -8,7 +8,7 @@ use crate::frame::PngOptions;
 use crate::phantom::Phantom;
 use crate::render::{render_with_progress, Backend, Scene};
 use crate::settings::{Classification, Filter, Mode, RenderSettings};
-use crate::transfer::{ControlPoint, TransferFunction, WindowMap};
+use crate::transfer::TransferFunction;
 use std::path::{Path, PathBuf};
 
 /// One picture of the gallery.
@@ -19,22 +19,10 @@ pub struct DemoItem {
     pub seconds: f64,
 }
 
-/// A transfer function that shows Marschner–Lobb as a soft iso-surface near 0.5, the
-/// classic way to compare reconstruction filters.
-pub fn marschner_lobb_tf() -> TransferFunction {
-    let p = |value, rgba| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "marschner-lobb iso 0.5".into(),
-        domain: [0.0, 1.0],
-        points: vec![
-            p(0.0, [0.0, 0.0, 0.0, 0.0]),
-            p(0.44, [0.9, 0.8, 0.6, 0.0]),
-            p(0.5, [0.95, 0.85, 0.65, 0.9]),
-            p(0.56, [0.9, 0.8, 0.6, 0.0]),
-            p(1.0, [0.0, 0.0, 0.0, 0.0]),
-        ],
-        window: WindowMap::default(),
-    }
+/// The `marschner-lobb` preset: a soft iso-surface near 0.5, the classic way to
+/// compare reconstruction filters.
+pub fn marschner_lobb_tf() -> Result<TransferFunction> {
+    TransferFunction::preset("marschner-lobb")
 }
 
 /// Renders the gallery into `out`, creating it; reports each finished picture.
@@ -155,7 +143,7 @@ pub fn run_demo(out: &Path, report: &dyn Fn(&DemoItem, usize, usize)) -> Result<
             ),
             scene: Scene {
                 volume: ml_vol.clone(),
-                transfer: marschner_lobb_tf(),
+                transfer: marschner_lobb_tf()?,
                 camera: orbit(&ml_vol, persp, 35.0)?,
             },
             settings: RenderSettings {

@@ -18,6 +18,29 @@
 //!   step `Δs₀ = 1` voxel and corrected as `α' = 1 − (1 − α)^(Δs/Δs₀)`.
 //!
 //! `docs/conventions.md` states all of them in one place.
+//!
+//! ## Example
+//!
+//! Render the modified Shepp–Logan phantom with the f64 oracle:
+//!
+//! ```
+//! use voxlab::{camera::*, phantom::Phantom, render::*, settings::*, transfer::TransferFunction};
+//!
+//! let volume = Phantom::shepp_logan_modified().sample([32; 3])?.into();
+//! let camera = Camera::orbit(
+//!     glam::DVec3::ZERO,
+//!     [256.0; 3],
+//!     Orbit::default(),
+//!     Projection::Perspective { fov_y_deg: 30.0 },
+//!     48,
+//!     48,
+//! )?;
+//! let scene = Scene { volume, transfer: TransferFunction::preset("phantom")?, camera };
+//! let out = render(&scene, &RenderSettings::default(), Backend::Cpu)?;
+//! assert_eq!((out.image.width, out.image.height, out.image.channels), (48, 48, 4));
+//! out.image.save(&std::env::temp_dir().join("voxlab-doc-head.png"), Default::default())?;
+//! # Ok::<(), voxlab::Error>(())
+//! ```
 
 pub mod camera;
 pub mod cpu;

@@ -36,7 +36,7 @@ enum Command {
         out: PathBuf,
     },
     /// Render a volume or a phantom to an image (.png or .npy).
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr or .npy).
     Phantom {
         /// Phantom and size: NAME, NAME:N or NAME:NX,NY,NZ. Names: shepp-logan,
@@ -81,8 +81,10 @@ struct RenderArgs {
     /// minip, xray (line integral, value × mm).
     #[arg(long, value_enum, default_value = "dvr")]
     mode: Mode,
-    /// Transfer function: a preset name (see `voxlab tf`) or a JSON file.
-    #[arg(long, default_value = "phantom")]
+    /// Transfer function: a preset name (see `voxlab tf`), a JSON file, or auto (the
+    /// `phantom` preset for phantoms; for files, a soft grayscale ramp over the volume's
+    /// value range).
+    #[arg(long, default_value = "auto")]
     tf: String,
     /// Window width in raw data units: maps [level − width/2, level + width/2] onto the
     /// transfer function's domain (Ψ(t) = a·t + b). Needs --level.
@@ -185,7 +187,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo { out } => demo(&out),
-        Command::Render(args) => render(args),
+        Command::Render(args) => render(*args),
         Command::Phantom { spec, out } => {
             let spec = spec.strip_prefix("phantom:").unwrap_or(&spec);
             let (phantom, dims) = voxlab::phantom::parse_spec(spec, 128)?;
@@ -261,7 +263,16 @@ fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
 
 fn render(a: RenderArgs) -> Result<()> {
     let volume = load_input(&a.input, a.phantom_size)?;
-    let mut tf = TransferFunction::preset_or_file(&a.tf)?;
+    let mut tf = if a.tf == "auto" {
+        if a.input.starts_with("phantom:") {
+            TransferFunction::preset("phantom")?
+        } else {
+            let r = volume.value_range();
+            TransferFunction::auto_for_range(r.min, r.max)
+        }
+    } else {
+        TransferFunction::preset_or_file(&a.tf)?
+    };
     if let (Some(w), Some(l)) = (a.window, a.level) {
         tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
     }

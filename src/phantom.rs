@@ -353,7 +353,7 @@ impl Phantom {
                 .filter_map(|pr| {
                     let (a, b) = pr.chord(op, dp)?;
                     let (a, b) = (a.max(t0), b.min(t1));
-                    (b > a).then(|| pr.density * (b - a) * speed)
+                    (b > a).then_some(pr.density * (b - a) * speed)
                 })
                 .sum(),
             PhantomKind::MarschnerLobb { .. } => {

@@ -83,6 +83,10 @@ pub const PRESETS: &[(&str, &str)] = &[
     ("ct-vessels", include_str!("../data/tf/ct-vessels.json")),
     ("mri-brain", include_str!("../data/tf/mri-brain.json")),
     ("phantom", include_str!("../data/tf/phantom.json")),
+    (
+        "marschner-lobb",
+        include_str!("../data/tf/marschner-lobb.json"),
+    ),
     ("grayscale", include_str!("../data/tf/grayscale.json")),
 ];
 
@@ -183,6 +187,35 @@ impl TransferFunction {
         }
     }
 
+    /// A soft grayscale ramp over the data range `[lo, hi]`: transparent black at `lo`
+    /// to white with opacity 0.1 per voxel at `hi`. What `--tf auto` uses for files.
+    pub fn auto_for_range(lo: f64, hi: f64) -> Self {
+        let (lo, hi) = if hi > lo {
+            (lo, hi)
+        } else {
+            (lo - 0.5, lo + 0.5)
+        };
+        TransferFunction {
+            name: "auto".into(),
+            domain: [lo, hi],
+            points: vec![
+                ControlPoint {
+                    value: lo,
+                    rgba: [0.0, 0.0, 0.0, 0.0],
+                },
+                ControlPoint {
+                    value: lo + 0.1 * (hi - lo),
+                    rgba: [0.1, 0.1, 0.1, 0.0],
+                },
+                ControlPoint {
+                    value: hi,
+                    rgba: [1.0, 1.0, 1.0, 0.1],
+                },
+            ],
+            window: WindowMap::default(),
+        }
+    }
+
     /// Piecewise-linear evaluation at mapped value `u` (exact, no table).
     pub fn eval(&self, u: f64) -> [f64; 4] {
         let pts = &self.points;
@@ -197,11 +230,7 @@ impl TransferFunction {
         let i = pts.partition_point(|p| p.value <= u);
         let (p0, p1) = (pts[i - 1], pts[i]);
         let w = (u - p0.value) / (p1.value - p0.value);
-        let mut out = [0.0; 4];
-        for c in 0..4 {
-            out[c] = p0.rgba[c] + w * (p1.rgba[c] - p0.rgba[c]);
-        }
-        out
+        std::array::from_fn(|c| p0.rgba[c] + w * (p1.rgba[c] - p0.rgba[c]))
     }
 
     /// The lookup table of `n ≥ 2` entries over the domain.

@@ -44,8 +44,7 @@ fn broken_shader_is_a_typed_error() {
     };
     let e = ctx
         .shader("broken.wgsl", "fn main( {")
-        .err()
-        .expect("must not compile");
+        .expect_err("must not compile");
     assert!(matches!(e, voxlab::Error::Gpu(_)));
     assert!(e.to_string().contains("broken.wgsl"));
 }

@@ -23,12 +23,12 @@ fn check(g: &Grid<f64>, method: GradientMethod, want: impl Fn(f64, f64, f64) -> 
             for i in 1..N[0] - 1 {
                 let got = gradient_at_voxel(g, i, j, k, method);
                 let w = want(i as f64, j as f64, k as f64);
-                for a in 0..3 {
+                for (a, wa) in w.iter().enumerate() {
                     assert!(
-                        (got.0[a] - w[a]).abs() < 1e-10,
+                        (got.0[a] - wa).abs() < 1e-10,
                         "{method:?} at ({i},{j},{k}) axis {a}: {} vs {}",
                         got.0[a],
-                        w[a]
+                        wa
                     );
                 }
             }

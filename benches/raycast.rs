@@ -1,0 +1,114 @@
+//! `cargo bench --bench raycast`: the CPU ray caster, f64 oracle against the f32
+//! baseline, on the same inputs. Each case: one warm-up run, then `VOXLAB_BENCH_RUNS`
+//! (default 5) timed runs; the median, minimum and maximum are printed with the
+//! f64/f32 ratio of medians. Set-up (phantom sampling) is outside the timed region.
+//! Pass a substring to run only matching cases: `cargo bench --bench raycast -- mip`.
+//! Under `cargo test` (no `--bench` argument) each case runs once on a tiny input, as
+//! a smoke test of the benchmark code.
+
+use std::time::Instant;
+use voxlab::camera::{Camera, Orbit, Projection};
+use voxlab::cpu::raycast::render;
+use voxlab::phantom::Phantom;
+use voxlab::settings::{Filter, Mode, RenderSettings};
+use voxlab::transfer::TransferFunction;
+use voxlab::AnyVolume;
+
+fn median_min_max(mut t: Vec<f64>) -> (f64, f64, f64) {
+    t.sort_by(|a, b| a.total_cmp(b));
+    (t[t.len() / 2], t[0], t[t.len() - 1])
+}
+
+fn main() {
+    let filter_arg = std::env::args().skip(1).find(|a| !a.starts_with('-'));
+    let smoke = !std::env::args().any(|a| a == "--bench");
+    let runs: usize = if smoke {
+        1
+    } else {
+        std::env::var("VOXLAB_BENCH_RUNS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(5)
+    };
+    let (n, size) = if smoke { (16, 16) } else { (128, 256) };
+    let vol: AnyVolume = Phantom::shepp_logan_modified()
+        .sample([n; 3])
+        .unwrap()
+        .into();
+    let tf = TransferFunction::preset("phantom").unwrap();
+    let cam = Camera::orbit(
+        glam::DVec3::ZERO,
+        [256.0; 3],
+        Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance_mm: Some(540.0),
+        },
+        Projection::Perspective { fov_y_deg: 30.0 },
+        size,
+        size,
+    )
+    .unwrap();
+    let cases: Vec<(&str, RenderSettings)> = vec![
+        ("dvr-shaded-trilinear", RenderSettings::default()),
+        (
+            "dvr-shaded-catmull-rom",
+            RenderSettings {
+                filter: Filter::CatmullRom,
+                ..RenderSettings::default()
+            },
+        ),
+        (
+            "mip-trilinear",
+            RenderSettings {
+                mode: Mode::Mip,
+                ..RenderSettings::default()
+            },
+        ),
+        (
+            "xray-trilinear",
+            RenderSettings {
+                mode: Mode::Xray,
+                ..RenderSettings::default()
+            },
+        ),
+    ];
+    println!(
+        "ray caster, Shepp–Logan {n}³, {size}×{size} image, step 0.5, {} threads, {runs} runs after 1 warm-up",
+        rayon::current_num_threads()
+    );
+    println!(
+        "{:<24} {:>22} {:>22} {:>9} {:>12}",
+        "case", "f64 median (min–max) s", "f32 median (min–max) s", "f64/f32", "Msamples/s f32"
+    );
+    for (name, s) in cases {
+        if filter_arg.as_deref().is_some_and(|f| !name.contains(f)) {
+            continue;
+        }
+        let mut samples = 0;
+        let mut time = |f32_path: bool| {
+            let mut t = Vec::new();
+            for i in 0..=runs {
+                let start = Instant::now();
+                let out = if f32_path {
+                    render::<f32>(&vol, &tf, &cam, &s, &|_, _| {})
+                } else {
+                    render::<f64>(&vol, &tf, &cam, &s, &|_, _| {})
+                }
+                .unwrap();
+                samples = out.total_samples;
+                if i > 0 {
+                    t.push(start.elapsed().as_secs_f64());
+                }
+            }
+            median_min_max(t)
+        };
+        let (m64, lo64, hi64) = time(false);
+        let (m32, lo32, hi32) = time(true);
+        println!(
+            "{name:<24} {m64:>8.3} ({lo64:.3}–{hi64:.3}) {m32:>8.3} ({lo32:.3}–{hi32:.3}) {:>9.2} {:>12.1}",
+            m64 / m32,
+            samples as f64 / m32 / 1e6
+        );
+    }
+}
