@@ -507,3 +507,84 @@ fn f64_oracle_is_identical_for_any_thread_count() {
         );
     }
 }
+
+/// Pre-classification classifies the voxel values (not a filter's prefiltered
+/// coefficients): along an axis view with step 1 every sample sits on a voxel centre,
+/// where interpolating filters return the classified voxel exactly, so the image is the
+/// front-to-back composite of `classify(f[k])` over k.
+#[test]
+fn preclassification_composites_classified_voxels_on_axis_views() {
+    let v = test_volume();
+    let dims = v.dims();
+    let any: AnyVolume = v.clone().into();
+    let tf = TransferFunction {
+        name: String::new(),
+        domain: [-4.0, 6.0],
+        points: vec![
+            ControlPoint {
+                value: -4.0,
+                rgba: [0.1, 0.2, 0.9, 0.05],
+            },
+            ControlPoint {
+                value: 1.0,
+                rgba: [0.9, 0.3, 0.1, 0.4],
+            },
+            ControlPoint {
+                value: 6.0,
+                rgba: [1.0, 1.0, 0.5, 0.2],
+            },
+        ],
+        window: WindowMap::default(),
+    };
+    let lut = tf.lut(4096).to_real::<f64>();
+    let cam = Camera::axis_view(dims, v.affine(), AxisView::PlusZ, dims[0], dims[1]).unwrap();
+    for filter in [
+        Filter::Nearest,
+        Filter::Trilinear,
+        Filter::CatmullRom,
+        Filter::BsplineInterp,
+        Filter::Lanczos3,
+    ] {
+        let s = RenderSettings {
+            filter,
+            step: 1.0,
+            classification: Classification::Pre,
+            ert_threshold: 1.0,
+            background: [0.0; 4],
+            ..RenderSettings::default()
+        };
+        let s = RenderSettings {
+            shading: voxlab::settings::Shading {
+                enabled: false,
+                ..s.shading
+            },
+            ..s
+        };
+        let out = render::<f64>(&any, &tf, &cam, &s, no_progress()).unwrap();
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let (mut c, mut a) = ([0.0f64; 3], 0.0f64);
+                for k in 0..dims[2] {
+                    let rgba = lut.classify(*v.get(i, j, k) as f64);
+                    let w = (1.0 - a) * rgba[3];
+                    for ch in 0..3 {
+                        c[ch] += w * rgba[ch];
+                    }
+                    a += w;
+                }
+                let p = out.image.pixel(i, j);
+                assert!(
+                    (p[3] - a).abs() < 1e-12,
+                    "{filter:?} alpha at ({i},{j}): {} vs {a}",
+                    p[3]
+                );
+                for ch in 0..3 {
+                    assert!(
+                        (p[ch] - c[ch]).abs() < 1e-12,
+                        "{filter:?} colour at ({i},{j})"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -22,7 +22,7 @@
 //! bit-identical for any number of threads. The same code runs in f64 (the oracle) and
 //! f32 (the fair CPU baseline).
 
-use super::filter::{sample, Grid};
+use super::filter::{prepare, sample, Grid};
 use super::gradient::{gradient_at, gradient_stencil, precompute_gradients};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -47,40 +47,53 @@ pub trait Field<R: Real>: Sync {
     fn gradient(&self, p: V3<R>) -> V3<R>;
     /// Minimum and maximum value (scales the shading threshold).
     fn value_range(&self) -> (f64, f64);
-    /// The voxel grid behind the field, if any (pre-classification needs one).
-    fn grid(&self) -> Option<&Grid<R>> {
+    /// The voxel values behind the field, if any (pre-classification needs them).
+    fn voxel_values(&self) -> Option<&Grid<R>> {
         None
     }
 }
 
 /// A voxel grid reconstructed with a filter; gradients on the fly or precomputed.
-/// `grid` holds what the filter samples (see `filter::prepare`).
 pub struct GridField<R> {
+    /// What the filter samples (see `filter::prepare`): the voxel values, or for
+    /// `BsplineInterp` their B-spline coefficients.
     pub grid: Grid<R>,
+    /// The voxel values, kept apart only when `grid` holds coefficients.
+    values: Option<Grid<R>>,
     pub filter: Filter,
     pub method: GradientMethod,
-    /// Precomputed gradient components, interpolated with the same filter.
+    /// Precomputed gradient components (prepared for the filter like the data).
     pub gradients: Option<[Grid<R>; 3]>,
     range: (f64, f64),
 }
 
 impl<R: Real> GridField<R> {
-    pub fn new(grid: Grid<R>, filter: Filter, method: GradientMethod, precompute: bool) -> Self {
-        let gradients = precompute.then(|| {
-            precompute_gradients(&grid, method).map(|g| super::filter::prepare(&g, filter))
-        });
+    pub fn new(values: Grid<R>, filter: Filter, method: GradientMethod, precompute: bool) -> Self {
+        let gradients =
+            precompute.then(|| precompute_gradients(&values, method).map(|g| prepare(&g, filter)));
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for v in &grid.data {
+        for v in &values.data {
             lo = lo.min(v.f64());
             hi = hi.max(v.f64());
         }
+        let (grid, values) = if filter == Filter::BsplineInterp {
+            (prepare(&values, filter), Some(values))
+        } else {
+            (values, None)
+        };
         GridField {
-            grid: super::filter::prepare(&grid, filter),
+            grid,
+            values,
             filter,
             method,
             gradients,
             range: (lo, hi),
         }
+    }
+
+    /// The voxel values.
+    pub fn values(&self) -> &Grid<R> {
+        self.values.as_ref().unwrap_or(&self.grid)
     }
 }
 
@@ -106,8 +119,8 @@ impl<R: Real> Field<R> for GridField<R> {
     fn value_range(&self) -> (f64, f64) {
         self.range
     }
-    fn grid(&self) -> Option<&Grid<R>> {
-        Some(&self.grid)
+    fn voxel_values(&self) -> Option<&Grid<R>> {
+        Some(self.values())
     }
 }
 
@@ -297,8 +310,10 @@ pub fn render_field<R: Real, F: Field<R>>(
     // World-space gradient = J⁻ᵀ × index-space gradient.
     let normal = M3::from_dmat3(lin.inverse().transpose());
     let lut = tf.lut(settings.lut_size).to_real::<R>();
-    let pre = match (settings.mode, settings.classification, field.grid()) {
-        (Mode::Dvr, Classification::Pre, Some(grid)) => Some(preclassify(grid, &lut)),
+    let pre = match (settings.mode, settings.classification, field.voxel_values()) {
+        (Mode::Dvr, Classification::Pre, Some(values)) => {
+            Some(preclassify(values, &lut).map(|g| prepare(&g, settings.filter)))
+        }
         (Mode::Dvr, Classification::Pre, None) => {
             return Err(Error::invalid(
                 "classification",
@@ -376,7 +391,8 @@ pub fn render_field<R: Real, F: Field<R>>(
 }
 
 /// Classifies every voxel: opacity-weighted colour grids `(αr, αg, αb, α)`.
-fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
+/// Mirrors `shaders/raycast.wgsl: preclassify`.
+pub fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
     let rgba: Vec<[R; 4]> = grid
         .data
         .par_iter()
