@@ -6,7 +6,7 @@ use crate::camera::{AxisView, Camera, Orbit, Projection};
 use crate::error::{Error, Result};
 use crate::frame::PngOptions;
 use crate::phantom::Phantom;
-use crate::render::{render_with_progress, Backend, Scene};
+use crate::render::{Renderer, Scene};
 use crate::settings::{Classification, Filter, Mode, RenderSettings};
 use crate::transfer::TransferFunction;
 use std::path::{Path, PathBuf};
@@ -25,8 +25,13 @@ pub fn marschner_lobb_tf() -> Result<TransferFunction> {
     TransferFunction::preset("marschner-lobb")
 }
 
-/// Renders the gallery into `out`, creating it; reports each finished picture.
-pub fn run_demo(out: &Path, report: &dyn Fn(&DemoItem, usize, usize)) -> Result<Vec<DemoItem>> {
+/// Renders the gallery into `out` with `renderer`, creating the folder; reports each
+/// finished picture.
+pub fn run_demo(
+    out: &Path,
+    renderer: &Renderer,
+    report: &dyn Fn(&DemoItem, usize, usize),
+) -> Result<Vec<DemoItem>> {
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let size = 256;
     let head = Phantom::shepp_logan_modified();
@@ -161,7 +166,7 @@ pub fn run_demo(out: &Path, report: &dyn Fn(&DemoItem, usize, usize)) -> Result<
         let mut settings = job.settings;
         let counts = n == 0;
         settings.sample_count = counts;
-        let out_img = render_with_progress(&job.scene, &settings, Backend::Cpu, &|_, _| {})?;
+        let out_img = renderer.render(&job.scene, &settings, &|_, _| {})?.output;
         let path = out.join(job.file);
         out_img.image.save(&path, job.png)?;
         let item = DemoItem {
@@ -183,7 +188,7 @@ pub fn run_demo(out: &Path, report: &dyn Fn(&DemoItem, usize, usize)) -> Result<
             items.push(item);
         }
     }
-    write_index(out, &items)?;
+    write_index(out, &items, &renderer.describe())?;
     Ok(items)
 }
 
@@ -201,7 +206,7 @@ fn vol_extent(v: &crate::AnyVolume) -> [f64; 3] {
     [d[0] as f64 * s[0], d[1] as f64 * s[1], d[2] as f64 * s[2]]
 }
 
-fn write_index(out: &Path, items: &[DemoItem]) -> Result<()> {
+fn write_index(out: &Path, items: &[DemoItem], who: &str) -> Result<()> {
     let name = |p: &Path| {
         p.file_name()
             .map(|f| f.to_string_lossy().into_owned())
@@ -212,7 +217,8 @@ fn write_index(out: &Path, items: &[DemoItem]) -> Result<()> {
          <style>body{font-family:sans-serif;background:#222;color:#eee}figure{display:inline-block;margin:8px}\
          img{image-rendering:pixelated;width:256px}</style>\n<h1>voxlab demo</h1>\n",
     );
-    let mut md = String::from("# voxlab demo gallery\n\nRendered by the CPU oracle (f64).\n\n");
+    html += &format!("<p>Rendered by {who}.</p>\n");
+    let mut md = format!("# voxlab demo gallery\n\nRendered by {who}.\n\n");
     for it in items {
         let f = name(&it.file);
         html += &format!(

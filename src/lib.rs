@@ -49,6 +49,7 @@ pub mod error;
 pub mod frame;
 pub mod gpu;
 pub mod io;
+pub mod metrics;
 pub mod phantom;
 pub mod real;
 pub mod render;

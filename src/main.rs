@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use voxlab::camera::{AxisView, Camera, Orbit, Projection};
 use voxlab::frame::PngOptions;
-use voxlab::render::{render_with_progress, Backend, Scene};
+use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::{
     Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
 };
@@ -37,6 +37,9 @@ enum Command {
     },
     /// Render a volume or a phantom to an image (.png or .npy).
     Render(Box<RenderArgs>),
+    /// Render on the CPU f64 oracle and on the GPU and compare: images, a diff heat map,
+    /// error statistics and timings. Takes the options of `render`.
+    Compare(Box<CompareArgs>),
     /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr or .npy).
     Phantom {
         /// Phantom and size: NAME, NAME:N or NAME:NX,NY,NZ. Names: shepp-logan,
@@ -68,15 +71,12 @@ enum Command {
     },
 }
 
+/// What to render and how: shared by `render` and `compare`.
 #[derive(Args)]
-struct RenderArgs {
+struct SceneArgs {
     /// A volume file (.nrrd, .nhdr, .npy; an .npy of shape (nz, ny, nx) is x fastest) or
     /// a phantom: phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128.
     input: String,
-    /// Output image: .png (8-bit; 16-bit with --sixteen-bit) or .npy (float32: RGBA
-    /// (h, w, 4) for DVR, scalar (h, w) for MIP, MinIP and X-ray).
-    #[arg(long)]
-    out: PathBuf,
     /// What rays compute: dvr (colour and opacity through the transfer function), mip,
     /// minip, xray (line integral, value × mm).
     #[arg(long, value_enum, default_value = "dvr")]
@@ -159,7 +159,25 @@ struct RenderArgs {
     /// on the command line are ignored where the file sets them.
     #[arg(long)]
     settings: Option<PathBuf>,
-    /// Who computes: cpu (the f64 oracle) or cpu-f32.
+    /// GPU only: trilinear filtering by the texture unit instead of the exact manual
+    /// interpolation (real GPUs quantise its weights to about 8 bits).
+    #[arg(long)]
+    hardware_filtering: bool,
+    /// Phantom grid size when INPUT is phantom:NAME without a size.
+    #[arg(long, default_value_t = 128)]
+    phantom_size: usize,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Output image: .png (8-bit; 16-bit with --sixteen-bit) or .npy (float32: RGBA
+    /// (h, w, 4) for DVR, scalar (h, w) for MIP, MinIP and X-ray).
+    #[arg(long)]
+    out: PathBuf,
+    /// Who computes: cpu (the f64 oracle), cpu-f32, gpu (the WGSL port), or auto
+    /// (the GPU when an adapter exists, else the CPU oracle; it says which it used).
     #[arg(long, value_enum, default_value = "cpu")]
     backend: Backend,
     /// Write 16-bit PNG.
@@ -168,15 +186,27 @@ struct RenderArgs {
     /// Also write the samples-per-ray image to this file (.png or .npy).
     #[arg(long)]
     samples: Option<PathBuf>,
-    /// Phantom grid size when INPUT is phantom:NAME without a size.
-    #[arg(long, default_value_t = 128)]
-    phantom_size: usize,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Folder for cpu.png, gpu.png, diff.png (|Δ| heat map with its scale) and stats.json.
+    #[arg(long, default_value = "voxlab-compare")]
+    out_dir: PathBuf,
+    /// Fail (exit status 3) when any element differs by more than this.
+    #[arg(long)]
+    max_abs: Option<f64>,
+    /// Fail (exit status 3) when the RMS difference exceeds this.
+    #[arg(long)]
+    rmse: Option<f64>,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             eprintln!("voxlab: error: {e}");
             ExitCode::FAILURE
@@ -184,10 +214,18 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
-    match cli.command {
+fn run(cli: Cli) -> Result<ExitCode> {
+    if let Command::Compare(args) = cli.command {
+        return compare(*args);
+    }
+    run_other(cli.command).map(|()| ExitCode::SUCCESS)
+}
+
+fn run_other(command: Command) -> Result<()> {
+    match command {
         Command::Demo { out } => demo(&out),
         Command::Render(args) => render(*args),
+        Command::Compare(_) => unreachable!("handled in run"),
         Command::Phantom { spec, out } => {
             let spec = spec.strip_prefix("phantom:").unwrap_or(&spec);
             let (phantom, dims) = voxlab::phantom::parse_spec(spec, 128)?;
@@ -261,7 +299,8 @@ fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
     pb
 }
 
-fn render(a: RenderArgs) -> Result<()> {
+/// Loads the input and builds the camera, transfer function and settings.
+fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettings)> {
     let volume = load_input(&a.input, a.phantom_size)?;
     let mut tf = if a.tf == "auto" {
         if a.input.starts_with("phantom:") {
@@ -343,7 +382,8 @@ fn render(a: RenderArgs) -> Result<()> {
                     a.background[2],
                     a.background[3],
                 ],
-                sample_count: a.samples.is_some(),
+                sample_count,
+                hardware_filtering: a.hardware_filtering,
                 ..RenderSettings::default()
             };
             s.shading.enabled = !a.no_shading;
@@ -354,23 +394,31 @@ fn render(a: RenderArgs) -> Result<()> {
         }
     };
     settings.validate()?;
-    check_output(&a.out)?;
-    if let Some(s) = &a.samples {
-        check_output(s)?;
-    }
     let scene = Scene {
         volume,
         transfer: tf,
         camera,
     };
-    let pb = progress_bar(
-        scene.camera.height as u64,
-        &format!("rendering ({})", a.backend.name()),
-    );
+    Ok((scene, settings))
+}
+
+fn render(r: RenderArgs) -> Result<()> {
+    check_output(&r.out)?;
+    if let Some(s) = &r.samples {
+        check_output(s)?;
+    }
+    let (scene, settings) = build_scene(&r.scene, r.samples.is_some())?;
+    let a = &r;
+    let renderer = Renderer::new(a.backend)?;
+    if let Some(why) = &renderer.fallback_reason {
+        eprintln!("voxlab: no GPU ({why}); rendering with the CPU oracle");
+    }
+    let who = renderer.describe();
+    let pb = progress_bar(scene.camera.height as u64, &format!("rendering ({who})"));
     let t = std::time::Instant::now();
-    let out = render_with_progress(&scene, &settings, a.backend, &|done, _| {
-        pb.set_position(done as u64)
-    })?;
+    let out = renderer
+        .render(&scene, &settings, &|done, _| pb.set_position(done as u64))?
+        .output;
     pb.finish_and_clear();
     let png = PngOptions {
         sixteen_bit: a.sixteen_bit,
@@ -388,9 +436,83 @@ fn render(a: RenderArgs) -> Result<()> {
         settings.mode,
         out.total_samples,
         t.elapsed().as_secs_f64(),
-        a.backend.name()
+        who
     );
     Ok(())
+}
+
+/// Renders on the oracle and the GPU, writes the evidence, prints the numbers; exit
+/// status 3 when a given tolerance is exceeded.
+fn compare(c: CompareArgs) -> Result<ExitCode> {
+    let (scene, settings) = build_scene(&c.scene, true)?;
+    let gpu = Renderer::new(Backend::Gpu)?;
+    let pb = progress_bar(scene.camera.height as u64, "cpu (f64 oracle)");
+    let t = std::time::Instant::now();
+    let cpu_out = Renderer::new(Backend::Cpu)?
+        .render(&scene, &settings, &|d, _| pb.set_position(d as u64))?
+        .output;
+    let cpu_time = t.elapsed().as_secs_f64();
+    pb.finish_and_clear();
+    let g = gpu.render(&scene, &settings, &|_, _| {})?;
+    let timings = g.gpu_timings.unwrap_or_default();
+    let tol = voxlab::metrics::Tolerance {
+        max_abs: c.max_abs.unwrap_or(f64::INFINITY),
+        rmse: c.rmse.unwrap_or(f64::INFINITY),
+    };
+    let report =
+        voxlab::metrics::check_parity("compare", &cpu_out.image, &g.output.image, tol, None)?;
+    voxlab::metrics::write_artifacts(
+        &c.out_dir,
+        &cpu_out.image,
+        &g.output.image,
+        &report.stats,
+        tol,
+    )?;
+    let json = serde_json::to_string_pretty(&serde_json::json!({
+        "input": c.scene.input,
+        "adapter": gpu.describe(),
+        "settings": settings,
+        "image": [scene.camera.width, scene.camera.height],
+        "stats": report.stats,
+        "tolerance": { "max_abs": c.max_abs, "rmse": c.rmse },
+        "passed": report.passed,
+        "cpu_f64_seconds": cpu_time,
+        "gpu_seconds": timings,
+        "samples": { "cpu": cpu_out.total_samples, "gpu": g.output.total_samples },
+    }))
+    .expect("serialisable");
+    let path = c.out_dir.join("stats.json");
+    voxlab::io::write_atomic(&path, |w| {
+        w.write_all(json.as_bytes())
+            .map_err(|e| Error::io(&path, e))
+    })?;
+    let s = &report.stats;
+    println!("oracle  cpu f64, {:.3} s", cpu_time);
+    println!(
+        "port    {}, {:.3} s end to end (set-up {:.3}, upload {:.3}, prepare {:.3}, kernel {:.3}{}, readback {:.3})",
+        gpu.describe(),
+        timings.total,
+        timings.setup,
+        timings.upload,
+        timings.prepare,
+        timings.kernel,
+        if timings.kernel_from_timestamps { " by timestamps" } else { " wall" },
+        timings.readback
+    );
+    println!(
+        "error   max |Δ| {:.3e}, rmse {:.3e}, rel L2 {:.3e}, PSNR {:.1} dB, over tolerance {}/{}",
+        s.max_abs, s.rmse, s.rel_l2, s.psnr_db, s.n_over, s.n
+    );
+    println!(
+        "wrote   {}/{{cpu,gpu,diff}}.png and stats.json",
+        c.out_dir.display()
+    );
+    if report.passed {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!("voxlab: tolerance exceeded: {}", report.message);
+        Ok(ExitCode::from(3))
+    }
 }
 
 /// Fails early (before a long render) if the output cannot be written.
@@ -503,9 +625,16 @@ fn gpu_info() -> Result<()> {
 }
 
 fn demo(out: &Path) -> Result<()> {
-    eprintln!("voxlab demo: rendering a gallery of built-in phantoms with the CPU oracle (f64)…");
+    let renderer = Renderer::new(Backend::Auto)?;
+    eprintln!(
+        "voxlab demo: rendering a gallery of built-in phantoms on {}…",
+        renderer.describe()
+    );
+    if let Some(why) = &renderer.fallback_reason {
+        eprintln!("  (no GPU: {why})");
+    }
     let t = std::time::Instant::now();
-    let items = voxlab::demo::run_demo(out, &|item, n, total| {
+    let items = voxlab::demo::run_demo(out, &renderer, &|item, n, total| {
         eprintln!(
             "  [{n}/{total}] {} ({:.1} s)",
             item.file.display(),

@@ -2,12 +2,14 @@
 //!
 //! A [`Scene`] is what is rendered (volume, transfer function, camera); the
 //! [`RenderSettings`](crate::settings::RenderSettings) say how. The backend says who
-//! computes it: the f64 oracle or the same code in f32. (The GPU backend joins with the
-//! GPU port of the ray caster.)
+//! computes it: the f64 oracle, the same code in f32, or the GPU port. A [`Renderer`]
+//! keeps one GPU device open across many renders.
 
 use crate::camera::Camera;
 use crate::cpu::raycast::{self, RenderOutput};
 use crate::error::Result;
+use crate::gpu::raycast::GpuTimings;
+use crate::gpu::GpuContext;
 use crate::settings::RenderSettings;
 use crate::transfer::TransferFunction;
 use crate::volume::AnyVolume;
@@ -22,6 +24,10 @@ pub enum Backend {
     Cpu,
     /// The same CPU code in f32: the fair baseline for speed comparisons.
     CpuF32,
+    /// The WGSL port on the GPU (f32).
+    Gpu,
+    /// The GPU when an adapter exists, else the CPU oracle.
+    Auto,
 }
 
 impl Backend {
@@ -29,6 +35,8 @@ impl Backend {
         match self {
             Backend::Cpu => "cpu (f64 oracle)",
             Backend::CpuF32 => "cpu-f32",
+            Backend::Gpu => "gpu",
+            Backend::Auto => "auto",
         }
     }
 }
@@ -41,21 +49,114 @@ pub struct Scene {
     pub camera: Camera,
 }
 
-/// Renders `scene` with `settings` on `backend`.
-pub fn render(scene: &Scene, settings: &RenderSettings, backend: Backend) -> Result<RenderOutput> {
-    render_with_progress(scene, settings, backend, &|_, _| {})
+/// A render and how it was made.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    pub output: RenderOutput,
+    /// The backend that computed it (never `Auto`).
+    pub backend: Backend,
+    /// GPU timings, for GPU renders.
+    pub gpu_timings: Option<GpuTimings>,
 }
 
-/// [`render`] with a progress callback `(rows done, rows total)`.
+/// A backend made ready: for the GPU, an open device reused by every render.
+pub struct Renderer {
+    backend: Backend,
+    gpu: Option<GpuContext>,
+    /// Why `Auto` fell back to the CPU, if it did.
+    pub fallback_reason: Option<String>,
+}
+
+impl Renderer {
+    /// Opens the backend. `Gpu` fails without an adapter; `Auto` falls back to the CPU
+    /// oracle and records why.
+    pub fn new(backend: Backend) -> Result<Self> {
+        match backend {
+            Backend::Gpu => Ok(Renderer {
+                backend,
+                gpu: Some(GpuContext::new()?),
+                fallback_reason: None,
+            }),
+            Backend::Auto => match GpuContext::new() {
+                Ok(ctx) => Ok(Renderer {
+                    backend: Backend::Gpu,
+                    gpu: Some(ctx),
+                    fallback_reason: None,
+                }),
+                Err(e) => Ok(Renderer {
+                    backend: Backend::Cpu,
+                    gpu: None,
+                    fallback_reason: Some(e.to_string()),
+                }),
+            },
+            b => Ok(Renderer {
+                backend: b,
+                gpu: None,
+                fallback_reason: None,
+            }),
+        }
+    }
+
+    /// The backend renders run on (never `Auto`).
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The GPU context, for GPU renderers.
+    pub fn gpu(&self) -> Option<&GpuContext> {
+        self.gpu.as_ref()
+    }
+
+    /// A description: the backend, and the adapter for the GPU.
+    pub fn describe(&self) -> String {
+        match &self.gpu {
+            Some(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
+            None => self.backend.name().to_string(),
+        }
+    }
+
+    /// Renders with a progress callback `(rows done, rows total)`.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rendered> {
+        let (v, tf, cam) = (&scene.volume, &scene.transfer, &scene.camera);
+        let (output, gpu_timings) = match (self.backend, &self.gpu) {
+            (Backend::Gpu, Some(ctx)) => {
+                let g = crate::gpu::raycast::render(ctx, v, tf, cam, settings, progress)?;
+                (g.output, Some(g.timings))
+            }
+            (Backend::CpuF32, _) => (
+                raycast::render::<f32>(v, tf, cam, settings, progress)?,
+                None,
+            ),
+            _ => (
+                raycast::render::<f64>(v, tf, cam, settings, progress)?,
+                None,
+            ),
+        };
+        Ok(Rendered {
+            output,
+            backend: self.backend,
+            gpu_timings,
+        })
+    }
+}
+
+/// Renders `scene` with `settings` on `backend`.
+pub fn render(scene: &Scene, settings: &RenderSettings, backend: Backend) -> Result<RenderOutput> {
+    Ok(render_with_progress(scene, settings, backend, &|_, _| {})?.output)
+}
+
+/// [`render`] with a progress callback `(rows done, rows total)`, saying which backend
+/// computed it.
 pub fn render_with_progress(
     scene: &Scene,
     settings: &RenderSettings,
     backend: Backend,
     progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<RenderOutput> {
-    let (v, tf, cam) = (&scene.volume, &scene.transfer, &scene.camera);
-    match backend {
-        Backend::Cpu => raycast::render::<f64>(v, tf, cam, settings, progress),
-        Backend::CpuF32 => raycast::render::<f32>(v, tf, cam, settings, progress),
-    }
+) -> Result<Rendered> {
+    Renderer::new(backend)?.render(scene, settings, progress)
 }

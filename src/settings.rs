@@ -186,6 +186,10 @@ pub struct RenderSettings {
     pub lut_size: usize,
     /// Also return the number of samples each ray took.
     pub sample_count: bool,
+    /// GPU only: sample the volume through the texture unit's trilinear filtering
+    /// instead of the exact manual interpolation (trilinear filter only; the CPU has
+    /// one trilinear path and ignores this).
+    pub hardware_filtering: bool,
 }
 
 impl Default for RenderSettings {
@@ -205,6 +209,7 @@ impl Default for RenderSettings {
             miss_value: 0.0,
             lut_size: crate::transfer::DEFAULT_LUT_SIZE,
             sample_count: false,
+            hardware_filtering: false,
         }
     }
 }

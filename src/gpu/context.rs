@@ -231,3 +231,150 @@ impl GpuContext {
         Ok(out)
     }
 }
+
+/// A pair of timestamp queries around one compute pass, resolved into a buffer.
+pub struct TimestampPair {
+    pub set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+}
+
+impl TimestampPair {
+    /// Resolves the two timestamps (call after the pass, in the same encoder).
+    pub fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.resolve_query_set(&self.set, 0..2, &self.resolved, 0);
+    }
+    /// The time between the two timestamps, once the submission has completed.
+    pub fn seconds(&self, ctx: &GpuContext) -> Result<f64> {
+        let bytes = ctx.read_buffer(&self.resolved, 16)?;
+        let t: &[u64] = bytemuck::cast_slice(&bytes);
+        let ticks = t[1].saturating_sub(t[0]);
+        Ok(ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-9)
+    }
+}
+
+impl GpuContext {
+    /// A storage buffer the host can read back, refused with a clear error when it
+    /// exceeds the adapter's limits.
+    pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
+        if bytes > self.limits.max_storage_buffer_binding_size
+            || bytes > self.limits.max_buffer_size
+        {
+            return Err(Error::too_large(
+                label,
+                format!(
+                    "{bytes} bytes exceed the adapter's storage-binding limit of {} bytes",
+                    self.limits.max_storage_buffer_binding_size
+                ),
+            ));
+        }
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        }))
+    }
+
+    fn texture_3d(
+        &self,
+        label: &str,
+        dims: [usize; 3],
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> Result<wgpu::Texture> {
+        let max = self.limits.max_texture_dimension_3d as usize;
+        if dims.iter().any(|&n| n == 0 || n > max) {
+            return Err(Error::too_large(
+                label,
+                format!("{dims:?}: a 3D texture holds 1 … {max} texels per axis on this adapter"),
+            ));
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let tex = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: dims[0] as u32,
+                height: dims[1] as u32,
+                depth_or_array_layers: dims[2] as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format,
+            usage,
+            view_formats: &[],
+        });
+        match pollster::block_on(scope.pop()) {
+            None => Ok(tex),
+            Some(e) => Err(Error::Gpu(format!(
+                "out of GPU memory for {label} {dims:?}: {e}"
+            ))),
+        }
+    }
+
+    fn write_texture_3d(&self, tex: &wgpu::Texture, dims: [usize; 3], bytes: &[u8], texel: usize) {
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: tex,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some((dims[0] * texel) as u32),
+                rows_per_image: Some(dims[1] as u32),
+            },
+            wgpu::Extent3d {
+                width: dims[0] as u32,
+                height: dims[1] as u32,
+                depth_or_array_layers: dims[2] as u32,
+            },
+        );
+    }
+
+    /// Uploads f32 voxels (x fastest) into an `R32Float` 3D texture.
+    pub fn upload_volume_r32(&self, dims: [usize; 3], data: &[f32]) -> Result<wgpu::Texture> {
+        let tex = self.texture_3d(
+            "volume",
+            dims,
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        )?;
+        self.write_texture_3d(&tex, dims, bytemuck::cast_slice(data), 4);
+        Ok(tex)
+    }
+
+    /// An `Rgba32Float` 3D texture, writable from shaders when `storage`.
+    pub fn rgba_texture(&self, dims: [usize; 3], storage: bool) -> Result<wgpu::Texture> {
+        let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        if storage {
+            usage |= wgpu::TextureUsages::STORAGE_BINDING;
+        }
+        self.texture_3d("rgba volume", dims, wgpu::TextureFormat::Rgba32Float, usage)
+    }
+
+    /// Uploads RGBA texels (x fastest) into an `Rgba32Float` 3D texture.
+    pub fn upload_rgba(&self, dims: [usize; 3], data: &[[f32; 4]]) -> Result<wgpu::Texture> {
+        let tex = self.rgba_texture(dims, false)?;
+        self.write_texture_3d(&tex, dims, bytemuck::cast_slice(data), 16);
+        Ok(tex)
+    }
+
+    /// Two timestamp queries (needs `TIMESTAMP_QUERY`).
+    pub fn timestamp_pair(&self) -> TimestampPair {
+        let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("timestamps"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let resolved = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("timestamps"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        TimestampPair { set, resolved }
+    }
+}

@@ -7,5 +7,6 @@
 
 pub mod context;
 pub mod probe;
+pub mod raycast;
 
 pub use context::{AdapterSummary, GpuContext};

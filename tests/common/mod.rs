@@ -37,3 +37,18 @@ pub fn gpu(test: &str) -> Option<GpuContext> {
         }
     }
 }
+
+/// Asserts parity of `port` against `oracle`, writing `target/parity/<case>/` on failure.
+pub fn assert_parity(
+    case: &str,
+    oracle: &voxlab::frame::Frame,
+    port: &voxlab::frame::Frame,
+    tol: voxlab::metrics::Tolerance,
+) -> voxlab::metrics::ErrorStats {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/parity")
+        .join(case);
+    let report = voxlab::metrics::check_parity(case, oracle, port, tol, Some(&dir)).unwrap();
+    assert!(report.passed, "{}", report.message);
+    report.stats
+}

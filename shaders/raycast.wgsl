@@ -1,0 +1,433 @@
+// The GPU ray caster: one invocation per pixel.
+//
+// No loops per sample: llvmpipe (Mesa's CPU Vulkan driver, which CI runs on) stops
+// every loop of an invocation once 65535 iterations have run in total, silently. The
+// tap sums and the Sobel stencil are therefore generated per filter as straight-line
+// code, and the ray march is the only loop.
+// Mirrors src/cpu/raycast.rs (cast_ray, classify_sample, shade_sample, phong,
+// intersect_box), src/cpu/filter.rs (axis_taps, sample, the kernels) and
+// src/cpu/gradient.rs (gradient_stencil). Each helper names its Rust twin.
+// Prepended at load time: shaders/shared/raycast_params.wgsl.
+
+const MODE_DVR: u32 = 0u;
+const MODE_MIP: u32 = 1u;
+const MODE_MINIP: u32 = 2u;
+const MODE_XRAY: u32 = 3u;
+
+const FILTER_NEAREST: u32 = 0u;
+const FILTER_TRILINEAR: u32 = 1u;
+const FILTER_BSPLINE: u32 = 2u;
+const FILTER_BSPLINE_INTERP: u32 = 3u;
+const FILTER_CATMULL_ROM: u32 = 4u;
+const FILTER_LANCZOS2: u32 = 5u;
+const FILTER_LANCZOS3: u32 = 6u;
+const FILTER_LANCZOS4: u32 = 7u;
+
+
+const PI: f32 = 3.14159265358979323846;
+const BIG: f32 = 3.0e38;
+
+@group(0) @binding(0) var<uniform> params: RaycastParams;
+// The volume (values, or B-spline coefficients for bspline-interp).
+@group(0) @binding(1) var volume: texture_3d<f32>;
+// Pre-classified opacity-weighted colours (αr, αg, αb, α), when pre-classifying.
+@group(0) @binding(2) var preclassified: texture_3d<f32>;
+// Precomputed index-space gradients (xyz), when asked for.
+@group(0) @binding(3) var gradients: texture_3d<f32>;
+@group(0) @binding(4) var linear_clamp: sampler;
+@group(0) @binding(5) var<storage, read> lut: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> out_pixels: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> out_samples: array<u32>;
+
+// ---------------------------------------------------------------- kernels
+// mirrors src/cpu/filter.rs: weight_tent
+fn weight_tent(x: f32) -> f32 {
+    return max(1.0 - abs(x), 0.0);
+}
+
+// mirrors src/cpu/filter.rs: weight_bspline
+fn weight_bspline(x: f32) -> f32 {
+    let a = abs(x);
+    let sixth = 1.0 / 6.0;
+    if (a < 1.0) {
+        return (4.0 - 6.0 * a * a + 3.0 * a * a * a) * sixth;
+    } else if (a < 2.0) {
+        let t = 2.0 - a;
+        return t * t * t * sixth;
+    }
+    return 0.0;
+}
+
+// mirrors src/cpu/filter.rs: weight_catmull_rom
+fn weight_catmull_rom(x: f32) -> f32 {
+    let a = abs(x);
+    if (a < 1.0) {
+        return 1.5 * a * a * a - 2.5 * a * a + 1.0;
+    } else if (a < 2.0) {
+        return -0.5 * a * a * a + 2.5 * a * a - 4.0 * a + 2.0;
+    }
+    return 0.0;
+}
+
+// Rust's f32::round: halves away from zero (WGSL's round() goes to even).
+fn round_away(x: f32) -> f32 {
+    return sign(x) * floor(abs(x) + 0.5);
+}
+
+// mirrors src/cpu/filter.rs: sin_pi (exactly zero at integers)
+fn sin_pi(x: f32) -> f32 {
+    let r = x - 2.0 * round_away(x / 2.0);
+    if (r > 0.5) {
+        return sin(PI * (1.0 - r));
+    } else if (r < -0.5) {
+        return -sin(PI * (1.0 + r));
+    }
+    return sin(PI * r);
+}
+
+// mirrors src/cpu/filter.rs: sinc
+fn sinc(x: f32) -> f32 {
+    if (x == 0.0) {
+        return 1.0;
+    }
+    return sin_pi(x) / (PI * x);
+}
+
+// mirrors src/cpu/filter.rs: weight_lanczos
+fn weight_lanczos(x: f32, n: u32) -> f32 {
+    let nr = f32(n);
+    if (abs(x) >= nr) {
+        return 0.0;
+    }
+    return sinc(x) * sinc(x / nr);
+}
+
+fn lanczos_radius(filter_kind: u32) -> u32 {
+    if (filter_kind == FILTER_LANCZOS2) {
+        return 2u;
+    } else if (filter_kind == FILTER_LANCZOS3) {
+        return 3u;
+    }
+    return 4u;
+}
+
+// The unnormalised weight of tap m at fractional position f = x − floor(x). With the
+// generated accumulate_taps (first tap, count, Lanczos normalisation) this mirrors
+// src/cpu/filter.rs: axis_taps.
+fn tap_weight(filter_kind: u32, f: f32, m: u32) -> f32 {
+    if (filter_kind == FILTER_TRILINEAR) {
+        if (m == 0u) {
+            return 1.0 - f;
+        }
+        return f;
+    }
+    if (filter_kind == FILTER_BSPLINE || filter_kind == FILTER_BSPLINE_INTERP || filter_kind == FILTER_CATMULL_ROM) {
+        // Taps at offsets f + 1, f, 1 − f, 2 − f.
+        var d = f + 1.0;
+        if (m == 1u) {
+            d = f;
+        } else if (m == 2u) {
+            d = 1.0 - f;
+        } else if (m == 3u) {
+            d = 2.0 - f;
+        }
+        if (filter_kind == FILTER_CATMULL_ROM) {
+            return weight_catmull_rom(d);
+        }
+        return weight_bspline(d);
+    }
+    // Tap i0 − n + 1 + m lies at offset x − i = f + n − 1 − m.
+    let n = lanczos_radius(filter_kind);
+    return weight_lanczos(f + (f32(n) - 1.0 - f32(m)), n);
+}
+
+fn clamp_index(i: i32, n: u32) -> i32 {
+    return clamp(i, 0, i32(n) - 1);
+}
+
+// mirrors src/cpu/filter.rs: sample; p in index coordinates.
+// Exact path: every tap is a textureLoad, weights computed in voxel coordinates, summed
+// by accumulate_taps, which src/gpu/raycast.rs generates for the render's filter as
+// straight-line code in the CPU's order (mirrors src/cpu/filter.rs: apply_taps).
+// Hardware path (trilinear only): one filtered textureSampleLevel.
+fn sample_tex(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {
+    let filter_kind = params.image.w;
+    let n = params.dims.xyz;
+    if (filter_kind == FILTER_NEAREST) {
+        let q = vec3<i32>(floor(p + vec3<f32>(0.5)));
+        let c = vec3<i32>(clamp_index(q.x, n.x), clamp_index(q.y, n.y), clamp_index(q.z, n.z));
+        return textureLoad(t, c, 0);
+    }
+    if (filter_kind == FILTER_TRILINEAR && params.flags2.y == 1u) {
+        let uvw = (p + vec3<f32>(0.5)) / vec3<f32>(n);
+        return textureSampleLevel(t, linear_clamp, uvw, 0.0);
+    }
+    return accumulate_taps(t, p);
+}
+
+fn sample_value(p: vec3<f32>) -> f32 {
+    return sample_tex(volume, p).x;
+}
+
+// ---------------------------------------------------------------- gradients
+
+// gradient_at(p), mirroring src/cpu/gradient.rs: gradient_stencil on the reconstructed
+// field (h = 1 voxel), is generated by src/gpu/raycast.rs: gradient_wgsl for the
+// render's method, so only the stencil in use is compiled.
+
+// mirrors src/cpu/raycast.rs: GridField::gradient
+fn field_gradient(p: vec3<f32>) -> vec3<f32> {
+    if (params.flags.z == 1u) {
+        return sample_tex(gradients, p).xyz;
+    }
+    return gradient_at(p);
+}
+
+// ---------------------------------------------------------------- classification
+// mirrors src/transfer.rs: LutR::classify
+fn classify(t: f32) -> vec4<f32> {
+    let last = params.lut.z;
+    let x = min(max(params.lut.x * t + params.lut.y, 0.0), last);
+    let i0f = floor(x);
+    let f = x - i0f;
+    let n = u32(last) + 1u;
+    let i0 = min(u32(i0f), n - 1u);
+    let i1 = min(i0 + 1u, n - 1u);
+    let a = lut[i0];
+    let b = lut[i1];
+    return a + f * (b - a);
+}
+
+// mirrors src/cpu/raycast.rs: classify_sample; returns (rgb, alpha per reference step)
+fn classify_sample(p: vec3<f32>) -> vec4<f32> {
+    if (params.flags.x == 0u) {
+        return classify(sample_value(p));
+    }
+    let s = sample_tex(preclassified, p);
+    let a = min(max(s.w, 0.0), 1.0);
+    if (a <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let rgb = min(max(s.xyz / a, vec3<f32>(0.0)), vec3<f32>(1.0));
+    return vec4<f32>(rgb, a);
+}
+
+fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let l = length(v);
+    if (l > 0.0) {
+        return v * (1.0 / l);
+    }
+    return vec3<f32>(0.0);
+}
+
+// mirrors src/cpu/raycast.rs: phong (two-sided)
+fn phong(c: vec3<f32>, n: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec3<f32> {
+    let ndl = abs(dot(n, l));
+    let ndh = abs(dot(n, h));
+    let diffuse = params.shading.x + params.shading.y * ndl;
+    var spec = 0.0;
+    if (ndh > 0.0) {
+        spec = params.shading.z * pow(ndh, params.shading.w);
+    }
+    return c * diffuse + vec3<f32>(spec);
+}
+
+// mirrors src/cpu/raycast.rs: shade_sample
+fn shade_sample(p: vec3<f32>, rgb: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec3<f32> {
+    let g = field_gradient(p);
+    let mag = length(g);
+    let w = min(max((mag / params.misc.z - 0.5) * 2.0, 0.0), 1.0);
+    if (w <= 0.0) {
+        return rgb;
+    }
+    let gw = vec3<f32>(dot(params.normal_0.xyz, g), dot(params.normal_1.xyz, g), dot(params.normal_2.xyz, g));
+    let n = -normalize_or_zero(gw);
+    let lit = phong(rgb, n, l, h);
+    return rgb + w * (lit - rgb);
+}
+
+// ---------------------------------------------------------------- rays
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_min: f32,
+}
+
+// mirrors src/camera.rs: Camera::ray (pixel centres at +0.5)
+fn camera_ray(col: u32, row: u32) -> Ray {
+    let u = (f32(col) + 0.5) / f32(params.image.x) - 0.5;
+    let v = 0.5 - (f32(row) + 0.5) / f32(params.image.y);
+    var r: Ray;
+    if (params.eye.w == 1.0) {
+        let h = params.forward.w;
+        let aspect = params.right.w;
+        r.origin = params.eye.xyz;
+        r.dir = normalize(params.forward.xyz + params.right.xyz * (2.0 * u * h * aspect) + params.up.xyz * (2.0 * v * h));
+        r.t_min = 0.0;
+    } else {
+        r.origin = params.eye.xyz + params.right.xyz * (u * params.right.w) + params.up.xyz * (v * params.up.w);
+        r.dir = params.forward.xyz;
+        r.t_min = -BIG;
+    }
+    return r;
+}
+
+struct Hit {
+    ok: bool,
+    t0: f32,
+    t1: f32,
+}
+
+// mirrors src/cpu/raycast.rs: intersect_box
+fn intersect_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> Hit {
+    var t0 = -BIG;
+    var t1 = BIG;
+    for (var a = 0u; a < 3u; a++) {
+        if (d[a] == 0.0) {
+            if (o[a] < lo[a] || o[a] > hi[a]) {
+                return Hit(false, 0.0, 0.0);
+            }
+        } else {
+            let inv = 1.0 / d[a];
+            let ta = (lo[a] - o[a]) * inv;
+            let tb = (hi[a] - o[a]) * inv;
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
+        }
+    }
+    return Hit(t1 > t0, t0, t1);
+}
+
+struct Pixel {
+    value: vec4<f32>,
+    samples: u32,
+}
+
+// mirrors src/cpu/raycast.rs: cast_ray
+fn cast_ray(ray: Ray) -> Pixel {
+    let mode = params.image.z;
+    let o = vec3<f32>(
+        dot(params.to_index_0, vec4<f32>(ray.origin, 1.0)),
+        dot(params.to_index_1, vec4<f32>(ray.origin, 1.0)),
+        dot(params.to_index_2, vec4<f32>(ray.origin, 1.0)),
+    );
+    let d = vec3<f32>(dot(params.to_index_0.xyz, ray.dir), dot(params.to_index_1.xyz, ray.dir), dot(params.to_index_2.xyz, ray.dir));
+    var miss = vec4<f32>(params.misc.w, 0.0, 0.0, 0.0);
+    if (mode == MODE_DVR) {
+        miss = params.background;
+    }
+    let hit = intersect_box(o, d, vec3<f32>(-0.5), params.box_hi.xyz);
+    if (!hit.ok) {
+        return Pixel(miss, 0u);
+    }
+    let t_in = max(hit.t0, ray.t_min);
+    let t_out = hit.t1;
+    if (t_out <= t_in) {
+        return Pixel(miss, 0u);
+    }
+    let speed = length(d);
+    let dt = params.box_hi.w / speed;
+    let n = u32(max(ceil((t_out - t_in) / dt - 1e-3), 1.0));
+
+    if (mode == MODE_MIP || mode == MODE_MINIP) {
+        var best = sample_value(segment_point(0u, n, t_in, t_out, dt, o, d));
+        for (var k = 1u; k < n; k++) {
+            let v = sample_value(segment_point(k, n, t_in, t_out, dt, o, d));
+            if (mode == MODE_MIP) {
+                best = max(best, v);
+            } else {
+                best = min(best, v);
+            }
+        }
+        return Pixel(vec4<f32>(best, 0.0, 0.0, 0.0), n);
+    }
+    if (mode == MODE_XRAY) {
+        var sum = 0.0;
+        for (var k = 0u; k < n; k++) {
+            sum = sum + sample_value(segment_point(k, n, t_in, t_out, dt, o, d)) * segment_length(k, n, t_in, t_out, dt);
+        }
+        return Pixel(vec4<f32>(sum, 0.0, 0.0, 0.0), n);
+    }
+
+    // DVR
+    let view = -ray.dir;
+    var light = view;
+    if (params.light.w == 1.0) {
+        light = params.light.xyz;
+    }
+    let half_vec = normalize_or_zero(light + view);
+    let back_to_front = params.flags.w == 1u;
+    var c = vec3<f32>(0.0);
+    var a = 0.0;
+    var taken = 0u;
+    for (var i = 0u; i < n; i++) {
+        var k = i;
+        if (back_to_front) {
+            k = n - 1u - i;
+        }
+        let p = segment_point(k, n, t_in, t_out, dt, o, d);
+        let len = segment_length(k, n, t_in, t_out, dt);
+        taken = taken + 1u;
+        let s = classify_sample(p);
+        if (s.w <= 0.0) {
+            continue;
+        }
+        // Opacity correction for a step of len·speed voxels.
+        var alpha = 1.0;
+        if (s.w < 1.0) {
+            alpha = 1.0 - pow(1.0 - s.w, len * speed / params.misc.x);
+        }
+        var rgb = s.xyz;
+        if (params.flags.y == 1u) {
+            rgb = shade_sample(p, rgb, light, half_vec);
+        }
+        if (back_to_front) {
+            c = alpha * rgb + (1.0 - alpha) * c;
+            a = alpha + (1.0 - alpha) * a;
+        } else {
+            let w = (1.0 - a) * alpha;
+            c = c + w * rgb;
+            a = a + w;
+            if (a >= params.misc.y) {
+                break;
+            }
+        }
+    }
+    let t = 1.0 - a;
+    let bg = params.background;
+    return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
+}
+
+// Step k covers [t_in + k dt, t_in + (k+1) dt]; the last one ends at t_out.
+fn segment_bounds(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32) -> vec2<f32> {
+    let ta = t_in + f32(k) * dt;
+    var tb = t_out;
+    if (k + 1u != n) {
+        tb = t_in + f32(k + 1u) * dt;
+    }
+    return vec2<f32>(ta, tb);
+}
+
+fn segment_point(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    let b = segment_bounds(k, n, t_in, t_out, dt);
+    return o + d * ((b.x + b.y) * 0.5);
+}
+
+fn segment_length(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32) -> f32 {
+    let b = segment_bounds(k, n, t_in, t_out, dt);
+    return b.y - b.x;
+}
+
+@compute @workgroup_size(8, 8)
+fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
+    let col = id.x;
+    let local_row = id.y;
+    if (col >= params.image.x || local_row >= params.flags2.w) {
+        return;
+    }
+    let row = params.flags2.z + local_row;
+    let px = cast_ray(camera_ray(col, row));
+    let idx = local_row * params.image.x + col;
+    out_pixels[idx] = px.value;
+    out_samples[idx] = px.samples;
+}

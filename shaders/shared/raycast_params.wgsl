@@ -1,0 +1,42 @@
+// Parameters of one ray-casting dispatch.
+// Rust twin: src/gpu/raycast.rs: RaycastParams (#[repr(C)], bytemuck). Every member is a
+// 16-byte vector so both sides agree without padding rules; tests/gpu_layout.rs checks
+// the offsets with naga.
+
+struct RaycastParams {
+    // Camera in world space (mm). eye.w = 1 for perspective, 0 for orthographic.
+    eye: vec4<f32>,
+    // forward.w = tan(fov_y / 2) (perspective).
+    forward: vec4<f32>,
+    // right.w = image width in mm (orthographic) or the aspect ratio (perspective).
+    right: vec4<f32>,
+    // up.w = image height in mm (orthographic).
+    up: vec4<f32>,
+    // Rows of the world-to-index affine (3×4).
+    to_index_0: vec4<f32>,
+    to_index_1: vec4<f32>,
+    to_index_2: vec4<f32>,
+    // Rows of J⁻ᵀ: index-space gradient to world-space gradient.
+    normal_0: vec4<f32>,
+    normal_1: vec4<f32>,
+    normal_2: vec4<f32>,
+    // Box upper corner n − 0.5 per axis; box_hi.w = step in voxels.
+    box_hi: vec4<f32>,
+    background: vec4<f32>,
+    // light.xyz = direction toward the light (unit); light.w = 1 directional, 0 headlight.
+    light: vec4<f32>,
+    // ambient, diffuse, specular, shininess.
+    shading: vec4<f32>,
+    // reference step, early-ray-termination threshold, shading gradient threshold, miss value.
+    misc: vec4<f32>,
+    // LUT: raw value → table coordinate x = scale·t + offset; z = entries − 1.
+    lut: vec4<f32>,
+    // Volume dimensions (w unused).
+    dims: vec4<u32>,
+    // width, height, mode, filter.
+    image: vec4<u32>,
+    // pre-classification, shading, precomputed gradients, back-to-front.
+    flags: vec4<u32>,
+    // gradient method, hardware trilinear, first row of this tile, rows in this tile.
+    flags2: vec4<u32>,
+}

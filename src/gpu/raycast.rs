@@ -1,0 +1,837 @@
+//! The GPU ray caster: a WGSL port of `cpu::raycast` that must match the f64 oracle.
+//!
+//! Shaders: `shaders/raycast.wgsl` (one invocation per pixel; every helper mirrors its
+//! Rust twin by name) and `shaders/raycast_prepare.wgsl` (pre-classification and
+//! gradient volumes, one invocation per voxel). Parameters: [`RaycastParams`], whose
+//! WGSL twin is `shaders/shared/raycast_params.wgsl`.
+//!
+//! Data on the device:
+//! - the volume as an `R32Float` 3D texture holding the raw values (u8/u16/i16 are exact
+//!   in f32, so every voxel type is normalised exactly as on the CPU: not at all);
+//! - the transfer function's lookup table as a storage buffer, read with the same
+//!   manual linear interpolation as `LutR::classify`;
+//! - pre-classified colours and precomputed gradients as `Rgba32Float` 3D textures,
+//!   computed on the GPU by `raycast_prepare.wgsl`.
+//!
+//! Two trilinear paths: the *exact* one loads the 8 voxels with `textureLoad` and
+//! weights them in voxel coordinates (the CPU's arithmetic), and the *hardware* one
+//! (`RenderSettings::hardware_filtering`) uses one `textureSampleLevel` through a linear
+//! sampler. Real GPUs quantise the hardware filter's weights to about 8 bits; lavapipe
+//! does not, so only a real GPU shows the hardware path's true error.
+//!
+//! What stays on the CPU, and why:
+//! - the full sinc: every sample sums the whole grid (n³ texture reads per sample, about
+//!   2·10⁶ for 128³), which is no GPU algorithm; it is refused with a clear error;
+//! - the B-spline prefilter of `bspline-interp`: a sequential recurrence along every
+//!   line, run once at set-up in f32 by the same code as the CPU path
+//!   (`cpu::filter::prepare`), together with the pre-classified and gradient volumes it
+//!   would have to prefilter.
+
+use super::context::GpuContext;
+use crate::camera::{Camera, Projection};
+use crate::cpu::filter::{prepare, Grid};
+use crate::cpu::raycast::RenderOutput;
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::settings::{
+    Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
+};
+use crate::transfer::TransferFunction;
+use crate::volume::AnyVolume;
+use glam::{DMat3, DVec3};
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+/// Parameters of one ray-casting dispatch; twin of `shaders/shared/raycast_params.wgsl`
+/// (`tests/gpu_layout.rs` checks that the two layouts agree).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RaycastParams {
+    pub eye: [f32; 4],
+    pub forward: [f32; 4],
+    pub right: [f32; 4],
+    pub up: [f32; 4],
+    pub to_index_0: [f32; 4],
+    pub to_index_1: [f32; 4],
+    pub to_index_2: [f32; 4],
+    pub normal_0: [f32; 4],
+    pub normal_1: [f32; 4],
+    pub normal_2: [f32; 4],
+    pub box_hi: [f32; 4],
+    pub background: [f32; 4],
+    pub light: [f32; 4],
+    pub shading: [f32; 4],
+    pub misc: [f32; 4],
+    pub lut: [f32; 4],
+    pub dims: [u32; 4],
+    pub image: [u32; 4],
+    pub flags: [u32; 4],
+    pub flags2: [u32; 4],
+}
+
+/// The WGSL struct shared by both shaders.
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/raycast_params.wgsl");
+/// The ray-casting shader (without the shared struct).
+pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
+/// The set-up shader (without the shared struct).
+pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
+
+/// Where the time of a GPU render went, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct GpuTimings {
+    /// Shader compilation, pipelines, buffers (excluding uploads).
+    pub setup: f64,
+    /// Volume and lookup-table uploads (host to device, waited for).
+    pub upload: f64,
+    /// Pre-classification and gradient passes (and CPU prefiltering for bspline-interp).
+    pub prepare: f64,
+    /// The ray-casting passes: from timestamp queries when the adapter has them,
+    /// otherwise wall-clock time of the waited-for submissions.
+    pub kernel: f64,
+    /// Whether `kernel` comes from timestamp queries.
+    pub kernel_from_timestamps: bool,
+    /// Copying the image back to the host.
+    pub readback: f64,
+    /// Everything, end to end.
+    pub total: f64,
+}
+
+/// What a GPU render returns: the same output as the CPU, and timings.
+#[derive(Clone, Debug)]
+pub struct GpuRenderOutput {
+    pub output: RenderOutput,
+    pub timings: GpuTimings,
+}
+
+/// The most loop iterations one llvmpipe invocation may run in total (Mesa's
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`); past it every loop silently stops.
+pub const LLVMPIPE_LOOP_LIMIT: usize = 65535;
+
+/// The first tap's offset from `floor(x)` and the number of taps of a truncated filter.
+fn tap_layout(f: Filter) -> (i32, usize) {
+    match f {
+        Filter::Trilinear => (0, 2),
+        Filter::Bspline | Filter::BsplineInterp | Filter::CatmullRom => (-1, 4),
+        Filter::Lanczos2 => (-1, 4),
+        Filter::Lanczos3 => (-2, 6),
+        Filter::Lanczos4 => (-3, 8),
+        Filter::Nearest | Filter::Sinc => (0, 1),
+    }
+}
+
+/// WGSL of `accumulate_taps(t, p)` for `filter`: the weights of every tap, then
+/// `Σ_k w_z[k] Σ_j w_y[j] Σ_i w_x[i] f[i, j, k]` written out in full, in the order of
+/// `cpu::filter::apply_taps`. Straight-line code keeps the ray march the only loop.
+pub fn accumulate_taps_wgsl(filter: Filter) -> String {
+    let (off, count) = tap_layout(filter);
+    let lanczos = matches!(
+        filter,
+        Filter::Lanczos2 | Filter::Lanczos3 | Filter::Lanczos4
+    );
+    let mut w = String::new();
+    w += &format!(
+        "// Generated by src/gpu/raycast.rs: accumulate_taps_wgsl({:?}).\n\
+         fn accumulate_taps(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {{\n\
+         \x20   let filter_kind = params.image.w;\n\
+         \x20   let n = params.dims.xyz;\n\
+         \x20   let fl = floor(p);\n\
+         \x20   let f = p - fl;\n\
+         \x20   let i0 = vec3<i32>(fl);\n",
+        filter
+    );
+    for (axis, c) in ["x", "y", "z"].iter().enumerate() {
+        for m in 0..count {
+            w += &format!("    let w{c}{m}r = tap_weight(filter_kind, f.{c}, {m}u);\n");
+        }
+        if lanczos {
+            let sum: Vec<String> = (0..count).map(|m| format!("w{c}{m}r")).collect();
+            w += &format!("    let s{c} = {};\n", sum.join(" + "));
+            for m in 0..count {
+                w += &format!("    let w{c}{m} = w{c}{m}r / s{c};\n");
+            }
+        } else {
+            for m in 0..count {
+                w += &format!("    let w{c}{m} = w{c}{m}r;\n");
+            }
+        }
+        for m in 0..count {
+            w += &format!(
+                "    let {c}{m} = clamp_index(i0.{c} + {}, n.{c});\n",
+                off + m as i32
+            );
+        }
+        let _ = axis;
+    }
+    let mut z_terms = Vec::new();
+    for b in 0..count {
+        let mut y_terms = Vec::new();
+        for a in 0..count {
+            let x_terms: Vec<String> = (0..count)
+                .map(|i| format!("wx{i} * textureLoad(t, vec3<i32>(x{i}, y{a}, z{b}), 0)"))
+                .collect();
+            w += &format!("    let ax_{b}_{a} = {};\n", x_terms.join(" + "));
+            y_terms.push(format!("wy{a} * ax_{b}_{a}"));
+        }
+        w += &format!("    let ay_{b} = {};\n", y_terms.join(" + "));
+        z_terms.push(format!("wz{b} * ay_{b}"));
+    }
+    w += &format!("    return {};\n}}\n", z_terms.join(" + "));
+    w
+}
+
+/// WGSL of `gradient_at(p)` for one stencil of `cpu::gradient::gradient_stencil`,
+/// written out (the Sobel stencil is 54 field samples); `None` gives a stub for renders
+/// that never difference the field on the fly.
+pub fn gradient_wgsl(method: Option<GradientMethod>) -> String {
+    let e = |axis: usize, s: i32| {
+        let mut v = ["0.0"; 3].map(String::from);
+        v[axis] = format!("{s}.0");
+        format!("vec3<f32>({}, {}, {})", v[0], v[1], v[2])
+    };
+    let mut w = format!("// Generated by src/gpu/raycast.rs: gradient_wgsl({method:?}).\nfn gradient_at(p: vec3<f32>) -> vec3<f32> {{\n");
+    match method {
+        None => w += "    return vec3<f32>(0.0);\n",
+        Some(GradientMethod::Central) => {
+            for a in 0..3 {
+                w += &format!(
+                    "    let g{a} = (sample_value(p + {}) - sample_value(p + {})) * 0.5;\n",
+                    e(a, 1),
+                    e(a, -1)
+                );
+            }
+            w += "    return vec3<f32>(g0, g1, g2);\n";
+        }
+        Some(GradientMethod::Forward) => {
+            w += "    let f0 = sample_value(p);\n";
+            for a in 0..3 {
+                w += &format!("    let g{a} = sample_value(p + {}) - f0;\n", e(a, 1));
+            }
+            w += "    return vec3<f32>(g0, g1, g2);\n";
+        }
+        Some(GradientMethod::Sobel) => {
+            let wts = [0.25f64, 0.5, 0.25];
+            for a in 0..3 {
+                let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+                let mut terms = Vec::new();
+                for ob in 0..3 {
+                    for oc in 0..3 {
+                        let q = format!("p + {} + {}", e(b, ob as i32 - 1), e(c, oc as i32 - 1));
+                        w += &format!(
+                            "    let d{a}_{ob}{oc} = sample_value({q} + {}) - sample_value({q} + {});\n",
+                            e(a, 1),
+                            e(a, -1)
+                        );
+                        terms.push(format!("{:?} * d{a}_{ob}{oc}", wts[ob] * wts[oc]));
+                    }
+                }
+                // The CPU sums the nine terms in this order, from zero.
+                w += &format!("    let g{a} = ({}) * 0.5;\n", terms.join(" + "));
+            }
+            w += "    return vec3<f32>(g0, g1, g2);\n";
+        }
+    }
+    w + "}\n"
+}
+
+/// The complete ray-casting shader for these settings: the shared struct, the
+/// hand-written body, and the generated tap sums and gradient stencil.
+pub fn raycast_shader(settings: &RenderSettings) -> String {
+    let taps = match settings.filter {
+        // Nearest and hardware trilinear never reach accumulate_taps.
+        Filter::Nearest | Filter::Sinc => STUB_TAPS.to_string(),
+        Filter::Trilinear if settings.hardware_filtering => STUB_TAPS.to_string(),
+        f => accumulate_taps_wgsl(f),
+    };
+    let on_the_fly =
+        settings.mode == Mode::Dvr && settings.shading.enabled && !settings.precompute_gradients;
+    let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
+    format!("{PARAMS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+}
+
+const STUB_TAPS: &str = "// Unreachable for this filter.\nfn accumulate_taps(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {\n    return vec4<f32>(0.0);\n}\n";
+
+fn filter_id(f: Filter) -> Result<u32> {
+    Ok(match f {
+        Filter::Nearest => 0,
+        Filter::Trilinear => 1,
+        Filter::Bspline => 2,
+        Filter::BsplineInterp => 3,
+        Filter::CatmullRom => 4,
+        Filter::Lanczos2 => 5,
+        Filter::Lanczos3 => 6,
+        Filter::Lanczos4 => 7,
+        Filter::Sinc => {
+            return Err(Error::invalid(
+                "filter",
+                "the full sinc runs on the CPU only: every sample sums the whole grid \
+                 (n³ texture reads per sample); use lanczos4 on the GPU",
+            ))
+        }
+    })
+}
+
+fn v4(v: DVec3, w: f64) -> [f32; 4] {
+    [v.x as f32, v.y as f32, v.z as f32, w as f32]
+}
+
+/// Fills the parameter block for a render (everything but the tile rows).
+pub fn raycast_params(
+    dims: [usize; 3],
+    affine: glam::DMat4,
+    lut: &crate::transfer::LutR<f32>,
+    value_range: (f64, f64),
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Result<RaycastParams> {
+    let to_index = affine.inverse();
+    let normal = DMat3::from_mat4(affine).inverse().transpose();
+    let (eye_w, fwd_w, right_w, up_w) = match camera.projection {
+        Projection::Perspective { fov_y_deg } => (
+            1.0,
+            (0.5 * fov_y_deg.to_radians()).tan(),
+            camera.width as f64 / camera.height as f64,
+            0.0,
+        ),
+        Projection::Orthographic {
+            width_mm,
+            height_mm,
+        } => (0.0, 0.0, width_mm, height_mm),
+    };
+    let s = &settings.shading;
+    let (light, light_w) = match s.light {
+        Light::Headlight => (DVec3::ZERO, 0.0),
+        Light::Direction(d) => (DVec3::from_array(d).normalize(), 1.0),
+    };
+    let row = |m: glam::DMat4, i: usize| {
+        let r = m.row(i);
+        [r.x as f32, r.y as f32, r.z as f32, r.w as f32]
+    };
+    let nrow = |i: usize| v4(normal.row(i), 0.0);
+    let mode = match settings.mode {
+        Mode::Dvr => 0,
+        Mode::Mip => 1,
+        Mode::Minip => 2,
+        Mode::Xray => 3,
+    };
+    let hardware = settings.hardware_filtering;
+    if hardware && settings.filter != Filter::Trilinear {
+        return Err(Error::invalid(
+            "hardware filtering",
+            format!(
+                "the sampler filters trilinearly only; the {} filter always runs on the exact path",
+                settings.filter.name()
+            ),
+        ));
+    }
+    let gradient = match settings.gradient {
+        GradientMethod::Central => 0,
+        GradientMethod::Forward => 1,
+        GradientMethod::Sobel => 2,
+    };
+    Ok(RaycastParams {
+        eye: v4(camera.eye, eye_w),
+        forward: v4(camera.forward, fwd_w),
+        right: v4(camera.right, right_w),
+        up: v4(camera.up, up_w),
+        to_index_0: row(to_index, 0),
+        to_index_1: row(to_index, 1),
+        to_index_2: row(to_index, 2),
+        normal_0: nrow(0),
+        normal_1: nrow(1),
+        normal_2: nrow(2),
+        box_hi: [
+            dims[0] as f32 - 0.5,
+            dims[1] as f32 - 0.5,
+            dims[2] as f32 - 0.5,
+            settings.step as f32,
+        ],
+        background: settings.background.map(|c| c as f32),
+        light: v4(light, light_w),
+        shading: [
+            s.ambient as f32,
+            s.diffuse as f32,
+            s.specular as f32,
+            s.shininess as f32,
+        ],
+        misc: [
+            settings.reference_step as f32,
+            settings.ert_threshold as f32,
+            (s.gradient_threshold * (value_range.1 - value_range.0).max(f64::MIN_POSITIVE)) as f32,
+            settings.miss_value as f32,
+        ],
+        lut: [lut.scale, lut.offset, (lut.entries.len() - 1) as f32, 0.0],
+        dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0],
+        image: [
+            camera.width as u32,
+            camera.height as u32,
+            mode,
+            filter_id(settings.filter)?,
+        ],
+        flags: [
+            (settings.mode == Mode::Dvr && settings.classification == Classification::Pre) as u32,
+            (settings.mode == Mode::Dvr && s.enabled) as u32,
+            (settings.mode == Mode::Dvr && s.enabled && settings.precompute_gradients) as u32,
+            (settings.compositing == Compositing::BackToFront) as u32,
+        ],
+        flags2: [gradient, hardware as u32, 0, camera.height as u32],
+    })
+}
+
+/// Renders on the GPU. Same inputs and outputs as `cpu::raycast::render`.
+pub fn render(
+    ctx: &GpuContext,
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<GpuRenderOutput> {
+    let t_start = Instant::now();
+    settings.validate()?;
+    tf.validate()?;
+    volume.check_finite("volume")?;
+    let dims = volume.dims();
+    let max3d = ctx.limits.max_texture_dimension_3d as usize;
+    if dims.iter().any(|&n| n > max3d) {
+        return Err(Error::too_large(
+            "volume",
+            format!("{dims:?} exceeds the adapter's 3D texture limit of {max3d} per axis"),
+        ));
+    }
+    if ctx.summary.is_cpu() {
+        // The ray march is the only loop per invocation (plus 3 box-slab iterations).
+        let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+        let steps = diag / settings.step + 2.0;
+        if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
+            return Err(Error::invalid(
+                "step",
+                format!(
+                    "up to {steps:.0} steps per ray exceed the {LLVMPIPE_LOOP_LIMIT} loop \
+                     iterations a CPU Vulkan driver (llvmpipe) runs per invocation; use a \
+                     larger step"
+                ),
+            ));
+        }
+    }
+    let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+    if settings.hardware_filtering && !filterable {
+        return Err(Error::Gpu(
+            "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
+             which this adapter lacks"
+                .into(),
+        ));
+    }
+    let values = volume.to_f32();
+    let range = {
+        let r = values.value_range();
+        (r.min, r.max)
+    };
+    let lut = tf.lut(settings.lut_size).to_real::<f32>();
+    let mut params = raycast_params(dims, volume.affine(), &lut, range, camera, settings)?;
+    let pre = params.flags[0] == 1;
+    let precomputed = params.flags[2] == 1;
+
+    // Pipelines.
+    let dev = &ctx.device;
+    let raycast_module = ctx.shader("raycast.wgsl", &raycast_shader(settings))?;
+    let texture_entry = |binding: u32| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    };
+    let buffer_entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("raycast"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            texture_entry(1),
+            texture_entry(2),
+            texture_entry(3),
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Sampler(if filterable {
+                    wgpu::SamplerBindingType::Filtering
+                } else {
+                    wgpu::SamplerBindingType::NonFiltering
+                }),
+                count: None,
+            },
+            buffer_entry(5, storage(true)),
+            buffer_entry(6, storage(false)),
+            buffer_entry(7, storage(false)),
+        ],
+    });
+    let pipeline = compute_pipeline(ctx, "raycast", &raycast_module, "raycast", &layout)?;
+    let filter_mode = if filterable {
+        wgpu::FilterMode::Linear
+    } else {
+        wgpu::FilterMode::Nearest
+    };
+    let sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("linear clamp"),
+        address_mode_u: wgpu::AddressMode::ClampToEdge,
+        address_mode_v: wgpu::AddressMode::ClampToEdge,
+        address_mode_w: wgpu::AddressMode::ClampToEdge,
+        mag_filter: filter_mode,
+        min_filter: filter_mode,
+        ..Default::default()
+    });
+    let t_setup = t_start.elapsed().as_secs_f64();
+
+    // Uploads: the volume (prefiltered on the CPU for bspline-interp) and the LUT.
+    let t_up = Instant::now();
+    let bspline_interp = settings.filter == Filter::BsplineInterp;
+    let grid = Grid::<f32> {
+        dims,
+        data: values.data().to_vec(),
+    };
+    let sampled = if bspline_interp {
+        prepare(&grid, settings.filter)
+    } else {
+        grid.clone()
+    };
+    let volume_tex = ctx.upload_volume_r32(dims, &sampled.data)?;
+    let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("lut"),
+        contents: bytemuck::cast_slice(&lut.entries),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    ctx.wait()?;
+    let upload = t_up.elapsed().as_secs_f64();
+
+    // Set-up passes: pre-classified colours and gradient volumes.
+    let t_prep = Instant::now();
+    let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+    let pre_tex = if !pre {
+        None
+    } else if bspline_interp {
+        let rgba =
+            crate::cpu::raycast::preclassify(&grid, &lut).map(|g| prepare(&g, settings.filter));
+        Some(ctx.upload_rgba(
+            dims,
+            &interleave(&rgba[0], &rgba[1], &rgba[2], Some(&rgba[3])),
+        )?)
+    } else {
+        Some(run_prepare(
+            ctx,
+            &params,
+            &volume_tex,
+            &lut_buf,
+            dims,
+            "preclassify",
+        )?)
+    };
+    let grad_tex = if !precomputed {
+        None
+    } else if bspline_interp {
+        let g = crate::cpu::gradient::precompute_gradients(&grid, settings.gradient)
+            .map(|g| prepare(&g, settings.filter));
+        Some(ctx.upload_rgba(dims, &interleave(&g[0], &g[1], &g[2], None))?)
+    } else {
+        Some(run_prepare(
+            ctx,
+            &params,
+            &volume_tex,
+            &lut_buf,
+            dims,
+            "precompute_gradients",
+        )?)
+    };
+    ctx.wait()?;
+    let prepare_time = t_prep.elapsed().as_secs_f64();
+
+    // Ray casting, in bands of rows that fit the storage-binding limit.
+    let (w, h) = (camera.width, camera.height);
+    let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
+    let rows_per_tile = (max_binding / (w * 16))
+        .clamp(1, h)
+        .min((1 << 20) / w + 1)
+        .max(1);
+    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+    let (vol_view, pre_view, grad_view) = (
+        view(&volume_tex),
+        view(pre_tex.as_ref().unwrap_or(&dummy)),
+        view(grad_tex.as_ref().unwrap_or(&dummy)),
+    );
+    let mut image = Frame::new(w, h, if settings.mode == Mode::Dvr { 4 } else { 1 });
+    let mut counts = vec![0u32; w * h];
+    let (mut kernel, mut readback) = (0.0, 0.0);
+    let mut row0 = 0;
+    while row0 < h {
+        let rows = rows_per_tile.min(h - row0);
+        params.flags2[2] = row0 as u32;
+        params.flags2[3] = rows as u32;
+        let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("raycast params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let pix_bytes = (rows * w * 16) as u64;
+        let cnt_bytes = (rows * w * 4) as u64;
+        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
+        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
+        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: pbuf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&vol_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&pre_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&grad_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: lut_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: out_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: cnt_buf.as_entire_binding(),
+                },
+            ],
+        });
+        let t_k = Instant::now();
+        let query = timestamps.then(|| ctx.timestamp_pair());
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raycast"),
+                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
+        }
+        if let Some(q) = &query {
+            q.resolve(&mut enc);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        kernel += match &query {
+            Some(q) => q.seconds(ctx)?,
+            None => t_k.elapsed().as_secs_f64(),
+        };
+        let t_r = Instant::now();
+        let px: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
+        let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
+        readback += t_r.elapsed().as_secs_f64();
+        let ch = image.channels;
+        for (i, p) in px.iter().enumerate() {
+            let dst = (row0 * w + i) * ch;
+            image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
+        }
+        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+        row0 += rows;
+        progress(row0, h);
+    }
+    let total_samples = counts.iter().map(|&c| c as u64).sum();
+    let samples = settings.sample_count.then(|| Frame {
+        width: w,
+        height: h,
+        channels: 1,
+        data: counts.iter().map(|&c| c as f64).collect(),
+    });
+    Ok(GpuRenderOutput {
+        output: RenderOutput {
+            image,
+            samples,
+            total_samples,
+        },
+        timings: GpuTimings {
+            setup: t_setup,
+            upload,
+            prepare: prepare_time,
+            kernel,
+            kernel_from_timestamps: timestamps,
+            readback,
+            total: t_start.elapsed().as_secs_f64(),
+        },
+    })
+}
+
+/// Interleaves three or four grids into RGBA texels (the fourth channel 0 if absent).
+fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>) -> Vec<[f32; 4]> {
+    (0..r.data.len())
+        .map(|i| {
+            [
+                r.data[i],
+                g.data[i],
+                b.data[i],
+                a.map_or(0.0, |a| a.data[i]),
+            ]
+        })
+        .collect()
+}
+
+fn compute_pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> Result<wgpu::ComputePipeline> {
+    let dev = &ctx.device;
+    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pl),
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    match pollster::block_on(scope.pop()) {
+        None => Ok(pipeline),
+        Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
+    }
+}
+
+/// Runs one of `raycast_prepare.wgsl`'s passes into a new RGBA texture.
+fn run_prepare(
+    ctx: &GpuContext,
+    params: &RaycastParams,
+    volume: &wgpu::Texture,
+    lut: &wgpu::Buffer,
+    dims: [usize; 3],
+    entry: &str,
+) -> Result<wgpu::Texture> {
+    let dev = &ctx.device;
+    let module = ctx.shader(
+        "raycast_prepare.wgsl",
+        &format!("{PARAMS_WGSL}\n{PREPARE_WGSL}"),
+    )?;
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("prepare"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D3,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 2,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    view_dimension: wgpu::TextureViewDimension::D3,
+                },
+                count: None,
+            },
+        ],
+    });
+    let pipeline = compute_pipeline(ctx, entry, &module, entry, &layout)?;
+    let target = ctx.rgba_texture(dims, true)?;
+    let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("prepare params"),
+        contents: bytemuck::bytes_of(params),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let vol_view = volume.create_view(&Default::default());
+    let target_view = target.create_view(&Default::default());
+    let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("prepare"),
+        layout: &layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: pbuf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&vol_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: lut.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(&target_view),
+            },
+        ],
+    });
+    let mut enc = dev.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(
+            (dims[0] as u32).div_ceil(4),
+            (dims[1] as u32).div_ceil(4),
+            (dims[2] as u32).div_ceil(4),
+        );
+    }
+    ctx.queue.submit([enc.finish()]);
+    Ok(target)
+}

@@ -1,0 +1,111 @@
+//! The parameter structs shared by Rust and WGSL have one layout: naga's offsets for
+//! the WGSL struct equal Rust's `offset_of!` for every member, and the sizes agree.
+//! Needs no GPU. Also checks that every generated shader variant validates.
+
+use std::mem::{offset_of, size_of};
+use voxlab::gpu::raycast::{RaycastParams, PARAMS_WGSL};
+use wgpu::naga;
+
+fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
+    let module = naga::front::wgsl::parse_str(src).expect("the shared WGSL parses");
+    for (_, ty) in module.types.iter() {
+        if ty.name.as_deref() == Some(name) {
+            if let naga::TypeInner::Struct { members, span } = &ty.inner {
+                return (
+                    *span,
+                    members
+                        .iter()
+                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                        .collect(),
+                );
+            }
+        }
+    }
+    panic!("struct {name} not found in the WGSL");
+}
+
+#[test]
+fn raycast_params_layout_agrees() {
+    // The struct alone is not a complete module for naga's validator, but parsing
+    // computes the layout.
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "RaycastParams");
+    assert_eq!(span as usize, size_of::<RaycastParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("eye", offset_of!(RaycastParams, eye)),
+        ("forward", offset_of!(RaycastParams, forward)),
+        ("right", offset_of!(RaycastParams, right)),
+        ("up", offset_of!(RaycastParams, up)),
+        ("to_index_0", offset_of!(RaycastParams, to_index_0)),
+        ("to_index_1", offset_of!(RaycastParams, to_index_1)),
+        ("to_index_2", offset_of!(RaycastParams, to_index_2)),
+        ("normal_0", offset_of!(RaycastParams, normal_0)),
+        ("normal_1", offset_of!(RaycastParams, normal_1)),
+        ("normal_2", offset_of!(RaycastParams, normal_2)),
+        ("box_hi", offset_of!(RaycastParams, box_hi)),
+        ("background", offset_of!(RaycastParams, background)),
+        ("light", offset_of!(RaycastParams, light)),
+        ("shading", offset_of!(RaycastParams, shading)),
+        ("misc", offset_of!(RaycastParams, misc)),
+        ("lut", offset_of!(RaycastParams, lut)),
+        ("dims", offset_of!(RaycastParams, dims)),
+        ("image", offset_of!(RaycastParams, image)),
+        ("flags", offset_of!(RaycastParams, flags)),
+        ("flags2", offset_of!(RaycastParams, flags2)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
+#[test]
+fn probe_params_layout_agrees() {
+    let src = voxlab::gpu::probe::SHADER;
+    let (span, members) = wgsl_struct_layout(src, "Params");
+    assert_eq!(span as usize, size_of::<voxlab::gpu::probe::ProbeParams>());
+    let offs: Vec<u32> = members.iter().map(|m| m.1).collect();
+    assert_eq!(offs, vec![0, 4, 8, 12]);
+}
+
+/// Every shader variant the ray caster can generate parses and validates.
+#[test]
+fn every_generated_shader_validates() {
+    use voxlab::settings::{Filter, GradientMethod, RenderSettings};
+    let mut n = 0;
+    for filter in Filter::ALL.into_iter().filter(|f| *f != Filter::Sinc) {
+        for gradient in [
+            GradientMethod::Central,
+            GradientMethod::Forward,
+            GradientMethod::Sobel,
+        ] {
+            for precompute in [false, true] {
+                let s = RenderSettings {
+                    filter,
+                    gradient,
+                    precompute_gradients: precompute,
+                    ..RenderSettings::default()
+                };
+                let src = voxlab::gpu::raycast::raycast_shader(&s);
+                let module = naga::front::wgsl::parse_str(&src)
+                    .unwrap_or_else(|e| panic!("{filter:?}: {}", e.emit_to_string(&src)));
+                naga::valid::Validator::new(
+                    naga::valid::ValidationFlags::all(),
+                    naga::valid::Capabilities::all(),
+                )
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("{filter:?} {gradient:?}: {e:?}"));
+                n += 1;
+            }
+        }
+    }
+    let prepare = format!("{PARAMS_WGSL}\n{}", voxlab::gpu::raycast::PREPARE_WGSL);
+    let module = naga::front::wgsl::parse_str(&prepare).unwrap();
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap();
+    assert_eq!(n, 48);
+}

@@ -1,0 +1,322 @@
+//! The GPU ray caster against the CPU f64 oracle: every mode, filter, camera and
+//! option, generated from one case list.
+
+mod common;
+
+use glam::DVec3;
+use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+use voxlab::metrics::Tolerance;
+use voxlab::phantom::Phantom;
+use voxlab::settings::Filter::*;
+use voxlab::settings::{
+    Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
+};
+use voxlab::transfer::TransferFunction;
+use voxlab::AnyVolume;
+
+#[derive(Clone, Copy, Debug)]
+enum Cam {
+    /// Perspective orbit camera.
+    Orbit,
+    /// Orthographic orbit camera.
+    Ortho,
+    /// Axis view along −y (pixels on voxel centres).
+    Axis,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    mode: Mode,
+    filter: Filter,
+    cam: Cam,
+    classification: Classification,
+    compositing: Compositing,
+    gradient: GradientMethod,
+    precompute: bool,
+    shading: bool,
+    hardware: bool,
+    ert: f64,
+    directional: bool,
+}
+
+const BASE: Case = Case {
+    mode: Mode::Dvr,
+    filter: Filter::Trilinear,
+    cam: Cam::Orbit,
+    classification: Classification::Post,
+    compositing: Compositing::FrontToBack,
+    gradient: GradientMethod::Central,
+    precompute: false,
+    shading: true,
+    hardware: false,
+    ert: 0.99,
+    directional: false,
+};
+
+fn scene(
+    case: &Case,
+    n: usize,
+    size: usize,
+) -> (AnyVolume, TransferFunction, Camera, RenderSettings) {
+    let vol: AnyVolume = Phantom::shepp_logan_modified()
+        .sample([n, n + 3, n - 2])
+        .unwrap()
+        .into();
+    let tf = TransferFunction::preset("phantom").unwrap();
+    let orbit = |projection| {
+        Camera::orbit(
+            DVec3::ZERO,
+            [256.0; 3],
+            Orbit {
+                azimuth_deg: 30.0,
+                elevation_deg: 20.0,
+                distance_mm: Some(540.0),
+            },
+            projection,
+            size,
+            size * 3 / 4,
+        )
+        .unwrap()
+    };
+    let cam = match case.cam {
+        Cam::Orbit => orbit(Projection::Perspective { fov_y_deg: 30.0 }),
+        Cam::Ortho => orbit(Projection::Orthographic {
+            width_mm: 270.0,
+            height_mm: 270.0 * 0.75,
+        }),
+        Cam::Axis => {
+            let d = vol.dims();
+            Camera::axis_view(d, vol.affine(), AxisView::MinusY, d[0], d[2]).unwrap()
+        }
+    };
+    let mut s = RenderSettings {
+        mode: case.mode,
+        filter: case.filter,
+        classification: case.classification,
+        compositing: case.compositing,
+        gradient: case.gradient,
+        precompute_gradients: case.precompute,
+        hardware_filtering: case.hardware,
+        ert_threshold: case.ert,
+        sample_count: true,
+        ..RenderSettings::default()
+    };
+    s.shading.enabled = case.shading;
+    if case.directional {
+        s.shading.light = Light::Direction([0.3, -1.0, 0.6]);
+    }
+    (vol, tf, cam, s)
+}
+
+/// Renders a case on the CPU oracle and the GPU; None when the GPU test is skipped.
+fn run(
+    name: &str,
+    case: Case,
+    n: usize,
+    size: usize,
+) -> Option<(
+    voxlab::frame::Frame,
+    voxlab::frame::Frame,
+    Vec<f64>,
+    Vec<f64>,
+)> {
+    let ctx = common::gpu(name)?;
+    let (vol, tf, cam, s) = scene(&case, n, size);
+    let cpu = voxlab::cpu::raycast::render::<f64>(&vol, &tf, &cam, &s, &|_, _| {}).unwrap();
+    let gpu = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {})
+        .unwrap()
+        .output;
+    Some((
+        cpu.image,
+        gpu.image,
+        cpu.samples.unwrap().data,
+        gpu.samples.unwrap().data,
+    ))
+}
+
+/// DVR on [0, 1] RGBA, exact path, lavapipe (Mesa 22.3.6), Shepp–Logan 32×35×30 at
+/// 48×36: the worst of 24 filter × camera cases was max |Δ| 2.4e-4 (Lanczos-3,
+/// orthographic), RMSE 1.3e-5. The differences are f32 rounding of sample positions
+/// (|t| ≈ 540 mm) amplified by the `phantom` preset's narrow opacity bands (slope ≈ 12
+/// per unit value). Bound: 4× the worst measurement.
+const EXACT_DVR: Tolerance = Tolerance {
+    max_abs: 1e-3,
+    rmse: 5e-5,
+};
+
+/// MIP, MinIP and X-ray, exact path, relative to the data scale (see `check`): worst
+/// measured 1.3e-5 (MIP, Catmull–Rom, orthographic) and 4.5e-6 (X-ray), RMSE 3e-6.
+/// Bound: about 4× the worst.
+const EXACT_SCALAR: Tolerance = Tolerance {
+    max_abs: 5e-5,
+    rmse: 1e-5,
+};
+
+/// The hardware trilinear path. Real GPUs compute the sampler's interpolation weights
+/// with 8 fractional bits, so a filtered value may be off by up to 1/256 of the largest
+/// difference between neighbouring voxels (≤ the data range, 1 here); on scalar images
+/// that is the bound. DVR maps values through opacity bands of slope up to 12 per unit,
+/// compounding along a ray: the bound there is 12× larger and the RMSE a quarter of
+/// it. lavapipe filters in full f32 and meets the exact bounds; only a real GPU tests
+/// these.
+const HARDWARE_SCALAR: Tolerance = Tolerance {
+    max_abs: 1.0 / 256.0,
+    rmse: 1.0 / 1024.0,
+};
+const HARDWARE_DVR: Tolerance = Tolerance {
+    max_abs: 12.0 / 256.0,
+    rmse: 3.0 / 256.0,
+};
+
+/// Renders a case on the oracle and the GPU and checks parity of the image and of the
+/// samples-per-ray image.
+fn check(name: &str, case: Case, n: usize, size: usize, tol: Tolerance) {
+    let Some((cpu, gpu, cpu_samples, gpu_samples)) = run(name, case, n, size) else {
+        return;
+    };
+    let tol = if case.mode == Mode::Dvr {
+        tol
+    } else {
+        // Relative to the data's scale: the phantom's value range [0, 1], or the image's
+        // largest value where that is larger (X-ray integrates along the ray).
+        tol.scaled(cpu.data.iter().fold(1.0f64, |m, x| m.max(x.abs())))
+    };
+    let stats = common::assert_parity(name, &cpu, &gpu, tol);
+    // Ray lengths are identical; early ray termination may flip at the threshold for
+    // a ray whose opacity lands within rounding of it (not seen on lavapipe).
+    let differ = cpu_samples
+        .iter()
+        .zip(&gpu_samples)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differ * 200 <= cpu_samples.len(),
+        "{name}: {differ} rays took a different number of samples"
+    );
+    eprintln!(
+        "{name}: max |Δ| {:.2e}, rmse {:.2e}, {differ} sample counts differ",
+        stats.max_abs, stats.rmse
+    );
+}
+
+/// One test per case, all from this list.
+macro_rules! parity_cases {
+    ($($name:ident: $case:expr, $n:expr, $size:expr, $tol:expr;)*) => {
+        $(
+            #[test]
+            fn $name() {
+                check(stringify!($name), $case, $n, $size, $tol);
+            }
+        )*
+    };
+}
+
+parity_cases! {
+    // Every filter: shaded DVR in perspective and MIP orthographic, MinIP and X-ray.
+    dvr_nearest_perspective: Case { filter: Nearest, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_trilinear_perspective: Case { filter: Trilinear, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_bspline_perspective: Case { filter: Bspline, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_bspline_interp_perspective: Case { filter: BsplineInterp, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_catmull_rom_perspective: Case { filter: CatmullRom, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_lanczos2_perspective: Case { filter: Lanczos2, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_lanczos3_perspective: Case { filter: Lanczos3, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_lanczos4_perspective: Case { filter: Lanczos4, ..BASE }, 32, 48, EXACT_DVR;
+    mip_nearest_ortho: Case { mode: Mode::Mip, filter: Nearest, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_trilinear_ortho: Case { mode: Mode::Mip, filter: Trilinear, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_bspline_ortho: Case { mode: Mode::Mip, filter: Bspline, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_bspline_interp_ortho: Case { mode: Mode::Mip, filter: BsplineInterp, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_catmull_rom_ortho: Case { mode: Mode::Mip, filter: CatmullRom, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_lanczos2_ortho: Case { mode: Mode::Mip, filter: Lanczos2, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_lanczos3_ortho: Case { mode: Mode::Mip, filter: Lanczos3, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    mip_lanczos4_ortho: Case { mode: Mode::Mip, filter: Lanczos4, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    minip_trilinear_axis: Case { mode: Mode::Minip, filter: Trilinear, cam: Cam::Axis, ..BASE }, 32, 48, EXACT_SCALAR;
+    minip_catmull_rom_perspective: Case { mode: Mode::Minip, filter: CatmullRom, ..BASE }, 32, 48, EXACT_SCALAR;
+    minip_lanczos3_ortho: Case { mode: Mode::Minip, filter: Lanczos3, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    xray_nearest_axis: Case { mode: Mode::Xray, filter: Nearest, cam: Cam::Axis, ..BASE }, 32, 48, EXACT_SCALAR;
+    xray_trilinear_perspective: Case { mode: Mode::Xray, filter: Trilinear, ..BASE }, 32, 48, EXACT_SCALAR;
+    xray_bspline_interp_ortho: Case { mode: Mode::Xray, filter: BsplineInterp, cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_SCALAR;
+    xray_lanczos4_axis: Case { mode: Mode::Xray, filter: Lanczos4, cam: Cam::Axis, ..BASE }, 32, 48, EXACT_SCALAR;
+    // Cameras for DVR.
+    dvr_trilinear_ortho: Case { cam: Cam::Ortho, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_catmull_rom_axis: Case { filter: CatmullRom, cam: Cam::Axis, ..BASE }, 32, 48, EXACT_DVR;
+    // Options.
+    dvr_preclassified: Case { classification: Classification::Pre, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_preclassified_catmull_rom: Case { classification: Classification::Pre, filter: CatmullRom, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_preclassified_bspline_interp: Case { classification: Classification::Pre, filter: BsplineInterp, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_back_to_front: Case { compositing: Compositing::BackToFront, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_no_early_termination: Case { ert: 1.0, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_unshaded: Case { shading: false, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_directional_light: Case { directional: true, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_forward_gradients: Case { gradient: GradientMethod::Forward, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_sobel_gradients: Case { gradient: GradientMethod::Sobel, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_precomputed_central: Case { precompute: true, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_precomputed_sobel_catmull_rom: Case { precompute: true, gradient: GradientMethod::Sobel, filter: CatmullRom, ..BASE }, 32, 48, EXACT_DVR;
+    dvr_precomputed_forward_bspline_interp: Case { precompute: true, gradient: GradientMethod::Forward, filter: BsplineInterp, ..BASE }, 32, 48, EXACT_DVR;
+    // The hardware trilinear path.
+    mip_hardware_trilinear: Case { mode: Mode::Mip, hardware: true, cam: Cam::Ortho, ..BASE }, 32, 48, HARDWARE_SCALAR;
+    dvr_hardware_trilinear: Case { hardware: true, ..BASE }, 32, 48, HARDWARE_DVR;
+    // The reference size: 128³-class volume at 256².
+    dvr_trilinear_128_at_256: Case { ..BASE }, 128, 256, EXACT_DVR;
+}
+
+/// The full sinc and a hardware path for other filters are refused, clearly.
+#[test]
+fn unsupported_gpu_options_are_refused() {
+    let Some(ctx) = common::gpu("unsupported_gpu_options_are_refused") else {
+        return;
+    };
+    let (vol, tf, cam, s) = scene(
+        &Case {
+            filter: Sinc,
+            ..BASE
+        },
+        8,
+        8,
+    );
+    let e = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
+    assert!(e.to_string().contains("CPU only"), "{e}");
+    let (vol, tf, cam, s) = scene(
+        &Case {
+            filter: CatmullRom,
+            hardware: true,
+            ..BASE
+        },
+        8,
+        8,
+    );
+    let e = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
+    assert!(e.to_string().contains("trilinear"), "{e}");
+}
+
+/// A parity failure leaves its evidence behind: cpu, gpu and diff images and stats.
+#[test]
+fn a_failing_parity_check_writes_its_images() {
+    let Some((cpu, gpu, _, _)) = run(
+        "a_failing_parity_check_writes_its_images",
+        Case {
+            filter: Nearest,
+            shading: false,
+            ..BASE
+        },
+        16,
+        16,
+    ) else {
+        return;
+    };
+    let mut wrong = gpu.clone();
+    wrong.data[7] += 0.5;
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/parity/deliberately-wrong");
+    let r =
+        voxlab::metrics::check_parity("deliberately-wrong", &cpu, &wrong, EXACT_DVR, Some(&dir))
+            .unwrap();
+    assert!(!r.passed);
+    assert!(
+        r.message.contains("col 1, row 0, channel 3"),
+        "{}",
+        r.message
+    );
+    for f in ["cpu.png", "gpu.png", "diff.png", "stats.json"] {
+        assert!(dir.join(f).is_file());
+    }
+}
