@@ -177,7 +177,8 @@ struct RenderArgs {
     #[arg(long)]
     out: PathBuf,
     /// Who computes: cpu (the f64 oracle), cpu-f32, gpu (the WGSL port), or auto
-    /// (the GPU when an adapter exists, else the CPU oracle; it says which it used).
+    /// (the GPU when a hardware adapter exists, else the CPU oracle; it says which it
+    /// used and why).
     #[arg(long, value_enum, default_value = "cpu")]
     backend: Backend,
     /// Write 16-bit PNG.
@@ -411,7 +412,7 @@ fn render(r: RenderArgs) -> Result<()> {
     let a = &r;
     let renderer = Renderer::new(a.backend)?;
     if let Some(why) = &renderer.fallback_reason {
-        eprintln!("voxlab: no GPU ({why}); rendering with the CPU oracle");
+        eprintln!("voxlab: not using a GPU: {why}; rendering with the CPU oracle");
     }
     let who = renderer.describe();
     let pb = progress_bar(scene.camera.height as u64, &format!("rendering ({who})"));
@@ -631,7 +632,7 @@ fn demo(out: &Path) -> Result<()> {
         renderer.describe()
     );
     if let Some(why) = &renderer.fallback_reason {
-        eprintln!("  (no GPU: {why})");
+        eprintln!("  (not using a GPU: {why})");
     }
     let t = std::time::Instant::now();
     let items = voxlab::demo::run_demo(out, &renderer, &|item, n, total| {

@@ -26,7 +26,8 @@ pub enum Backend {
     CpuF32,
     /// The WGSL port on the GPU (f32).
     Gpu,
-    /// The GPU when an adapter exists, else the CPU oracle.
+    /// The GPU when a hardware adapter exists, else the CPU oracle (a CPU-emulated
+    /// adapter such as lavapipe is used only when `VOXLAB_ADAPTER` names it).
     Auto,
 }
 
@@ -78,6 +79,19 @@ impl Renderer {
                 fallback_reason: None,
             }),
             Backend::Auto => match GpuContext::new() {
+                // A CPU emulating a GPU (lavapipe) is slower than the CPU oracle itself;
+                // auto takes it only when VOXLAB_ADAPTER chose it.
+                Ok(ctx) if ctx.summary.is_cpu() && std::env::var_os("VOXLAB_ADAPTER").is_none() => {
+                    Ok(Renderer {
+                        backend: Backend::Cpu,
+                        gpu: None,
+                        fallback_reason: Some(format!(
+                        "the only adapter, {}, is a CPU emulating a GPU; the CPU oracle is faster \
+                         (set VOXLAB_ADAPTER to use it anyway)",
+                        ctx.summary.name
+                    )),
+                    })
+                }
                 Ok(ctx) => Ok(Renderer {
                     backend: Backend::Gpu,
                     gpu: Some(ctx),

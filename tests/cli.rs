@@ -1,6 +1,8 @@
 //! The `voxlab` command line as a user meets it: the demo, rendering files and
 //! phantoms, and clear errors (with no output left behind) for bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -319,4 +321,94 @@ fn info_and_tf_listing() {
     assert!(
         voxlab::transfer::TransferFunction::from_json(&String::from_utf8_lossy(&o.stdout)).is_ok()
     );
+}
+
+/// `voxlab compare` on a file: images, stats, timings, and exit status 3 over tolerance.
+#[test]
+fn compare_writes_evidence_and_enforces_tolerances() {
+    if common::gpu("compare_writes_evidence_and_enforces_tolerances").is_none() {
+        return;
+    }
+    let d = scratch("compare");
+    let vol = d.join("head.nrrd");
+    assert!(
+        voxlab(&["phantom", "shepp-logan-modified:32", "--out", s(&vol)])
+            .status
+            .success()
+    );
+    let out_dir = d.join("cmp");
+    let common_args = ["--width", "48", "--height", "40", "--out-dir", s(&out_dir)];
+    let mut args = vec![
+        "compare",
+        s(&vol),
+        "--tf",
+        "phantom",
+        "--max-abs",
+        "1e-3",
+        "--rmse",
+        "5e-5",
+    ];
+    args.extend(common_args);
+    let o = voxlab(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("max |Δ|") && stdout.contains("kernel"),
+        "{stdout}"
+    );
+    for f in ["cpu.png", "gpu.png", "diff.png", "stats.json"] {
+        assert!(out_dir.join(f).is_file(), "{f}");
+    }
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("stats.json")).unwrap())
+            .unwrap();
+    assert_eq!(stats["passed"], serde_json::json!(true));
+    assert!(stats["stats"]["max_abs"].as_f64().unwrap() < 1e-3);
+    assert!(stats["gpu_seconds"]["kernel"].as_f64().unwrap() > 0.0);
+    // An impossible tolerance: exit status 3 and a message naming the worst element.
+    let mut args = vec!["compare", s(&vol), "--tf", "phantom", "--max-abs", "1e-12"];
+    args.extend(common_args);
+    let o = voxlab(&args);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(stderr(&o).contains("tolerance exceeded"));
+}
+
+/// `--backend gpu` renders the same MIP as the oracle along an axis view.
+#[test]
+fn render_backend_gpu_matches_the_array() {
+    if common::gpu("render_backend_gpu_matches_the_array").is_none() {
+        return;
+    }
+    let d = scratch("gpu-render");
+    let vol = d.join("spheres.npy");
+    assert!(voxlab(&["phantom", "spheres:24,20,16", "--out", s(&vol)])
+        .status
+        .success());
+    let img = d.join("mip.npy");
+    let o = voxlab(&[
+        "render",
+        s(&vol),
+        "--backend",
+        "gpu",
+        "--mode",
+        "mip",
+        "--view",
+        "+z",
+        "--filter",
+        "nearest",
+        "--step",
+        "1",
+        "--out",
+        s(&img),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("on gpu"), "{}", stderr(&o));
+    let v = voxlab::io::read_volume(&vol).unwrap().to_f32();
+    let (_, px) = voxlab::io::npy::read_npy_f32(&img).unwrap();
+    for j in 0..20 {
+        for i in 0..24 {
+            let want = (0..16).map(|k| *v.get(i, j, k)).fold(f32::MIN, f32::max);
+            assert_eq!(px[j * 24 + i], want, "({i},{j})");
+        }
+    }
 }
