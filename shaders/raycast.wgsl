@@ -7,7 +7,7 @@
 // Mirrors src/cpu/raycast.rs (cast_ray, classify_sample, shade_sample, phong,
 // intersect_box), src/cpu/filter.rs (axis_taps, sample, the kernels) and
 // src/cpu/gradient.rs (gradient_stencil). Each helper names its Rust twin.
-// Prepended at load time: shaders/shared/raycast_params.wgsl.
+// Prepended at load time: shaders/shared/raycast_params.wgsl and classify.wgsl.
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -184,19 +184,8 @@ fn field_gradient(p: vec3<f32>) -> vec3<f32> {
 }
 
 // ---------------------------------------------------------------- classification
-// mirrors src/transfer.rs: LutR::classify
-fn classify(t: f32) -> vec4<f32> {
-    let last = params.lut.z;
-    let x = min(max(params.lut.x * t + params.lut.y, 0.0), last);
-    let i0f = floor(x);
-    let f = x - i0f;
-    let n = u32(last) + 1u;
-    let i0 = min(u32(i0f), n - 1u);
-    let i1 = min(i0 + 1u, n - 1u);
-    let a = lut[i0];
-    let b = lut[i1];
-    return a + f * (b - a);
-}
+// classify(t): shaders/shared/classify.wgsl (mirrors src/transfer.rs: LutR::classify).
+
 
 // mirrors src/cpu/raycast.rs: classify_sample; returns (rgb, alpha per reference step)
 fn classify_sample(p: vec3<f32>) -> vec4<f32> {

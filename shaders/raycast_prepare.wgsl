@@ -1,26 +1,15 @@
 // Set-up passes of the GPU ray caster, one invocation per voxel, written to
 // rgba32float storage textures that the ray caster then samples like the data.
 // Mirrors src/cpu/raycast.rs: preclassify and src/cpu/gradient.rs: gradient_at_voxel.
-// Prepended at load time: shaders/shared/raycast_params.wgsl.
+// Prepended at load time: shaders/shared/raycast_params.wgsl and classify.wgsl.
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> lut: array<vec4<f32>>;
 @group(0) @binding(3) var target_tex: texture_storage_3d<rgba32float, write>;
 
-// mirrors src/transfer.rs: LutR::classify (same as shaders/raycast.wgsl: classify)
-fn classify(t: f32) -> vec4<f32> {
-    let last = params.lut.z;
-    let x = min(max(params.lut.x * t + params.lut.y, 0.0), last);
-    let i0f = floor(x);
-    let f = x - i0f;
-    let n = u32(last) + 1u;
-    let i0 = min(u32(i0f), n - 1u);
-    let i1 = min(i0 + 1u, n - 1u);
-    let a = lut[i0];
-    let b = lut[i1];
-    return a + f * (b - a);
-}
+// classify(t): shaders/shared/classify.wgsl.
+
 
 fn voxel(i: vec3<i32>) -> f32 {
     let n = vec3<i32>(params.dims.xyz) - vec3<i32>(1);

@@ -99,7 +99,7 @@ fn every_generated_shader_validates() {
             }
         }
     }
-    let prepare = format!("{PARAMS_WGSL}\n{}", voxlab::gpu::raycast::PREPARE_WGSL);
+    let prepare = voxlab::gpu::raycast::prepare_shader();
     let module = naga::front::wgsl::parse_str(&prepare).unwrap();
     naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),

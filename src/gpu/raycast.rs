@@ -71,7 +71,9 @@ pub struct RaycastParams {
 
 /// The WGSL struct shared by both shaders.
 pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/raycast_params.wgsl");
-/// The ray-casting shader (without the shared struct).
+/// The transfer-function lookup shared by both shaders.
+pub const CLASSIFY_WGSL: &str = include_str!("../../shaders/shared/classify.wgsl");
+/// The ray-casting shader (without the shared parts).
 pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
 /// The set-up shader (without the shared struct).
 pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
@@ -245,7 +247,12 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
     let on_the_fly =
         settings.mode == Mode::Dvr && settings.shading.enabled && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
-    format!("{PARAMS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+}
+
+/// The complete set-up shader: the shared struct and lookup, and the passes.
+pub fn prepare_shader() -> String {
+    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{PREPARE_WGSL}")
 }
 
 const STUB_TAPS: &str = "// Unreachable for this filter.\nfn accumulate_taps(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {\n    return vec4<f32>(0.0);\n}\n";
@@ -434,34 +441,14 @@ pub fn render(
     // Pipelines.
     let dev = &ctx.device;
     let raycast_module = ctx.shader("raycast.wgsl", &raycast_shader(settings))?;
-    let texture_entry = |binding: u32| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    };
-    let buffer_entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("raycast"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1),
-            texture_entry(2),
-            texture_entry(3),
+            texture_entry(1, filterable),
+            texture_entry(2, filterable),
+            texture_entry(3, filterable),
             wgpu::BindGroupLayoutEntry {
                 binding: 4,
                 visibility: wgpu::ShaderStages::COMPUTE,
@@ -703,6 +690,34 @@ fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>
         .collect()
 }
 
+/// A compute-stage buffer binding.
+fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A compute-stage 3D float texture binding.
+fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 fn compute_pipeline(
     ctx: &GpuContext,
     label: &str,
@@ -741,43 +756,13 @@ fn run_prepare(
     entry: &str,
 ) -> Result<wgpu::Texture> {
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "raycast_prepare.wgsl",
-        &format!("{PARAMS_WGSL}\n{PREPARE_WGSL}"),
-    )?;
+    let module = ctx.shader("raycast_prepare.wgsl", &prepare_shader())?;
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("prepare"),
         entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-                count: None,
-            },
-            wgpu::BindGroupLayoutEntry {
-                binding: 2,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            texture_entry(1, false),
+            buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
             wgpu::BindGroupLayoutEntry {
                 binding: 3,
                 visibility: wgpu::ShaderStages::COMPUTE,
