@@ -171,6 +171,24 @@ pub struct RenderOutput {
     pub total_samples: u64,
 }
 
+impl RenderOutput {
+    /// Assembles an output from the image and the per-ray sample counts (row by row);
+    /// the counts become a scalar frame when `keep_counts`. Shared by every backend.
+    pub fn from_counts(image: Frame, counts: &[u32], keep_counts: bool) -> Self {
+        let (width, height) = (image.width, image.height);
+        RenderOutput {
+            total_samples: counts.iter().map(|&c| c as u64).sum(),
+            samples: keep_counts.then(|| Frame {
+                width,
+                height,
+                channels: 1,
+                data: counts.iter().map(|&c| c as f64).collect(),
+            }),
+            image,
+        }
+    }
+}
+
 /// Ray–box intersection in precision `R` (slab method), box `[lo, hi]` on every axis.
 /// Mirrors `shaders/raycast.wgsl: intersect_box`.
 #[inline]
@@ -376,18 +394,11 @@ pub fn render_field<R: Real, F: Field<R>>(
             }
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, h);
         });
-    let total_samples = counts.iter().map(|&c| c as u64).sum();
-    let samples = settings.sample_count.then(|| Frame {
-        width: w,
-        height: h,
-        channels: 1,
-        data: counts.iter().map(|&c| c as f64).collect(),
-    });
-    Ok(RenderOutput {
+    Ok(RenderOutput::from_counts(
         image,
-        samples,
-        total_samples,
-    })
+        &counts,
+        settings.sample_count,
+    ))
 }
 
 /// Classifies every voxel: opacity-weighted colour grids `(αr, αg, αb, α)`.

@@ -362,6 +362,28 @@ impl GpuContext {
         Ok(tex)
     }
 
+    /// A bind group whose entries are `resources` at bindings 0, 1, 2, … in order.
+    pub fn bind_group(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        resources: &[wgpu::BindingResource<'_>],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = resources
+            .iter()
+            .enumerate()
+            .map(|(i, r)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: r.clone(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+
     /// Two timestamp queries (needs `TIMESTAMP_QUERY`).
     pub fn timestamp_pair(&self) -> TimestampPair {
         let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {

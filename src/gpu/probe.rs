@@ -62,24 +62,15 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
         compilation_options: Default::default(),
         cache: None,
     });
-    let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("probe"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: pbuf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: xbuf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: ybuf.as_entire_binding(),
-            },
+    let bind = ctx.bind_group(
+        "probe",
+        &pipeline.get_bind_group_layout(0),
+        &[
+            pbuf.as_entire_binding(),
+            xbuf.as_entire_binding(),
+            ybuf.as_entire_binding(),
         ],
-    });
+    );
     let mut enc = dev.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());

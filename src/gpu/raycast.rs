@@ -488,12 +488,11 @@ pub fn render(
         dims,
         data: values.data().to_vec(),
     };
-    let sampled = if bspline_interp {
-        prepare(&grid, settings.filter)
+    let volume_tex = if bspline_interp {
+        ctx.upload_volume_r32(dims, &prepare(&grid, settings.filter).data)?
     } else {
-        grid.clone()
+        ctx.upload_volume_r32(dims, &grid.data)?
     };
-    let volume_tex = ctx.upload_volume_r32(dims, &sampled.data)?;
     let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("lut"),
         contents: bytemuck::cast_slice(&lut.entries),
@@ -574,44 +573,20 @@ pub fn render(
         let cnt_bytes = (rows * w * 4) as u64;
         let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
-        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: pbuf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&vol_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&pre_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&grad_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: lut_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: out_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: cnt_buf.as_entire_binding(),
-                },
+        let bind = ctx.bind_group(
+            "raycast",
+            &layout,
+            &[
+                pbuf.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&vol_view),
+                wgpu::BindingResource::TextureView(&pre_view),
+                wgpu::BindingResource::TextureView(&grad_view),
+                wgpu::BindingResource::Sampler(&sampler),
+                lut_buf.as_entire_binding(),
+                out_buf.as_entire_binding(),
+                cnt_buf.as_entire_binding(),
             ],
-        });
+        );
         let t_k = Instant::now();
         let query = timestamps.then(|| ctx.timestamp_pair());
         let mut enc = dev.create_command_encoder(&Default::default());
@@ -651,19 +626,8 @@ pub fn render(
         row0 += rows;
         progress(row0, h);
     }
-    let total_samples = counts.iter().map(|&c| c as u64).sum();
-    let samples = settings.sample_count.then(|| Frame {
-        width: w,
-        height: h,
-        channels: 1,
-        data: counts.iter().map(|&c| c as f64).collect(),
-    });
     Ok(GpuRenderOutput {
-        output: RenderOutput {
-            image,
-            samples,
-            total_samples,
-        },
+        output: RenderOutput::from_counts(image, &counts, settings.sample_count),
         timings: GpuTimings {
             setup: t_setup,
             upload,
@@ -784,28 +748,16 @@ fn run_prepare(
     });
     let vol_view = volume.create_view(&Default::default());
     let target_view = target.create_view(&Default::default());
-    let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("prepare"),
-        layout: &layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: pbuf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::TextureView(&vol_view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: lut.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: wgpu::BindingResource::TextureView(&target_view),
-            },
+    let bind = ctx.bind_group(
+        "prepare",
+        &layout,
+        &[
+            pbuf.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&vol_view),
+            lut.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&target_view),
         ],
-    });
+    );
     let mut enc = dev.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
