@@ -11,9 +11,25 @@
 use crate::error::{Error, Result};
 use glam::{DMat3, DMat4, DVec3};
 
-/// The largest number of voxels a volume may have (2^31, 8 GiB of f32), refused
-/// before allocating so that a lying header cannot exhaust memory.
+/// The default largest number of voxels a volume may have (2^31, 8 GiB of f32),
+/// refused before allocating so that a lying header cannot exhaust memory. The limit
+/// in force is [`max_voxels`]; change it with [`set_max_voxels`] (the command line
+/// reads `VOXLAB_MAX_VOXELS` and `--max-voxels`).
 pub const MAX_VOXELS: usize = 1 << 31;
+
+static MAX_VOXELS_NOW: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(MAX_VOXELS);
+
+/// The voxel limit in force: every reader refuses a header that promises more voxels
+/// (or samples) than this before allocating anything. [`MAX_VOXELS`] unless changed.
+pub fn max_voxels() -> usize {
+    MAX_VOXELS_NOW.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Sets the voxel limit for the whole process (at least 1).
+pub fn set_max_voxels(n: usize) {
+    MAX_VOXELS_NOW.store(n.max(1), std::sync::atomic::Ordering::Relaxed);
+}
 
 /// The scalar types a volume can hold.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -85,7 +101,7 @@ impl Voxel for f32 {
     }
 }
 
-/// Checks dimensions: every axis at least 1 and the product below [`MAX_VOXELS`].
+/// Checks dimensions: every axis at least 1 and the product at most [`max_voxels`].
 pub fn check_dims(dims: [usize; 3]) -> Result<usize> {
     if dims.contains(&0) {
         return Err(Error::invalid(
@@ -96,11 +112,11 @@ pub fn check_dims(dims: [usize; 3]) -> Result<usize> {
     let n = dims
         .iter()
         .try_fold(1usize, |acc, &d| acc.checked_mul(d))
-        .filter(|&n| n <= MAX_VOXELS)
+        .filter(|&n| n <= max_voxels())
         .ok_or_else(|| {
             Error::too_large(
                 "volume",
-                format!("{dims:?} exceeds the limit of {MAX_VOXELS} voxels"),
+                format!("{dims:?} exceeds the limit of {} voxels", max_voxels()),
             )
         })?;
     Ok(n)

@@ -30,8 +30,14 @@
 //! Malformed files give [`Error::Format`] naming the file and the header field; absurd
 //! sizes are refused before anything is allocated. `docs/io.md` has the full rules.
 
+pub mod den;
+pub mod dicom;
+pub mod nifti;
 pub mod npy;
 pub mod nrrd;
+pub mod pvm;
+pub mod raw;
+pub mod tiff;
 
 use crate::error::{Error, Result};
 use crate::volume::{AnyVolume, Volume, Voxel};
@@ -41,13 +47,132 @@ use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Reads a volume, choosing the format from the extension: `.nrrd` or `.nhdr` (NRRD,
-/// see [`nrrd::read_nrrd`]) or `.npy` (see [`npy::read_npy_volume`]).
+/// The volume formats voxlab reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// NRRD, attached (`.nrrd`) or detached (`.nhdr`) header.
+    Nrrd,
+    /// NumPy `.npy`.
+    Npy,
+    /// NIfTI-1, `.nii` or `.nii.gz`.
+    Nifti,
+    /// DICOM: one file (single- or multi-frame) or a directory holding a series.
+    Dicom,
+    /// Stefan Roettger's PVM (`PVM`, `PVM2`, `PVM3`; `DDS v3d` compressed).
+    Pvm,
+    /// VolPack's `.den` density files (Lacroute's classic volume library).
+    Den,
+    /// A multi-page TIFF stack (one page per slice).
+    Tiff,
+    /// Headerless raw samples, described on the command line ([`raw::RawSpec`]).
+    Raw,
+}
+
+impl Format {
+    /// The format's name as `voxlab info` prints it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Nrrd => "NRRD",
+            Format::Npy => "NumPy .npy",
+            Format::Nifti => "NIfTI-1",
+            Format::Dicom => "DICOM",
+            Format::Pvm => "PVM",
+            Format::Den => "VolPack .den",
+            Format::Tiff => "TIFF stack",
+            Format::Raw => "raw",
+        }
+    }
+}
+
+/// Tells a file's format from its first bytes (magic numbers), falling back to its
+/// extension; a directory is a DICOM series. Fails with [`Error::Io`] when the file
+/// cannot be opened and [`Error::Invalid`] when neither magic nor extension is known.
+pub fn detect_format(path: &Path) -> Result<Format> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.is_dir() {
+        return Ok(Format::Dicom);
+    }
+    let mut head = [0u8; 352];
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let n = fill(&mut file, &mut head).map_err(|e| Error::io(path, e))?;
+    if let Some(f) = sniff(&head[..n]) {
+        return Ok(f);
+    }
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    Ok(match extension(path).as_deref() {
+        Some("nrrd") | Some("nhdr") => Format::Nrrd,
+        Some("npy") => Format::Npy,
+        Some("nii") => Format::Nifti,
+        Some("gz") if name.ends_with(".nii.gz") => Format::Nifti,
+        Some("dcm") | Some("dicom") => Format::Dicom,
+        Some("pvm") => Format::Pvm,
+        Some("den") => Format::Den,
+        Some("tif") | Some("tiff") => Format::Tiff,
+        Some("raw") => {
+            return Err(Error::invalid(
+                "volume file",
+                format!(
+                    "{}: a raw file has no header; describe it with --raw-dims, --raw-type \
+                     (and --raw-endian, --raw-spacing, --raw-offset)",
+                    path.display()
+                ),
+            ))
+        }
+        _ => return Err(unsupported_extension(path)),
+    })
+}
+
+/// Recognises a format from the first bytes of a file (up to 352 of them).
+fn sniff(head: &[u8]) -> Option<Format> {
+    let starts = |m: &[u8]| head.starts_with(m);
+    if starts(b"NRRD000") {
+        Some(Format::Nrrd)
+    } else if starts(b"\x93NUMPY") {
+        Some(Format::Npy)
+    } else if starts(b"PVM\n") || starts(b"PVM2\n") || starts(b"PVM3\n") || starts(b"DDS ") {
+        Some(Format::Pvm)
+    } else if starts(b"II*\0") || starts(b"MM\0*") || starts(b"II+\0") || starts(b"MM\0+") {
+        Some(Format::Tiff)
+    } else if head.len() >= 132 && &head[128..132] == b"DICM" {
+        Some(Format::Dicom)
+    } else if head.len() >= 348
+        && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0")
+    {
+        Some(Format::Nifti)
+    } else {
+        None
+    }
+}
+
+/// Reads a volume in any format voxlab knows, telling the format from the file's
+/// magic number or extension ([`detect_format`]); a directory is read as a DICOM
+/// series. Raw files need [`raw::read_raw`] with a [`raw::RawSpec`].
 pub fn read_volume(path: &Path) -> Result<AnyVolume> {
-    match extension(path).as_deref() {
-        Some("nrrd") | Some("nhdr") => nrrd::read_nrrd(path),
-        Some("npy") => npy::read_npy_volume(path),
-        _ => Err(unsupported_extension(path)),
+    read_volume_as(path, detect_format(path)?)
+}
+
+/// Reads a volume in the given format.
+pub fn read_volume_as(path: &Path, format: Format) -> Result<AnyVolume> {
+    match format {
+        Format::Nrrd => nrrd::read_nrrd(path),
+        Format::Npy => npy::read_npy_volume(path),
+        Format::Nifti => nifti::read_nifti(path),
+        Format::Dicom => dicom::read_dicom(path),
+        Format::Pvm => pvm::read_pvm(path),
+        Format::Den => den::read_den(path),
+        Format::Tiff => tiff::read_tiff(path),
+        Format::Raw => Err(Error::invalid(
+            "volume file",
+            format!(
+                "{}: raw files need their layout (dims, type, endianness, spacing)",
+                path.display()
+            ),
+        )),
     }
 }
 
@@ -55,8 +180,14 @@ pub fn read_volume(path: &Path) -> Result<AnyVolume> {
 /// - `.nrrd`: one file, header and gzip-compressed data;
 /// - `.nhdr`: a detached header, with the gzip-compressed data in `<stem>.raw.gz`
 ///   beside it;
-/// - `.npy`: shape `(nz, ny, nx)`, little-endian (the geometry is not stored).
+/// - `.npy`: shape `(nz, ny, nx)`, little-endian (the geometry is not stored);
+/// - `.nii` / `.nii.gz`: NIfTI-1 with the affine as sform and qform.
 pub fn write_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     match extension(path).as_deref() {
         Some("nrrd") => nrrd::write_nrrd(path, vol, nrrd::NrrdWriteOptions::default()),
         Some("nhdr") => nrrd::write_nrrd(
@@ -68,7 +199,15 @@ pub fn write_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
             },
         ),
         Some("npy") => npy::write_npy_volume(path, vol),
-        _ => Err(unsupported_extension(path)),
+        Some("nii") => nifti::write_nifti(path, vol),
+        Some("gz") if name.ends_with(".nii.gz") => nifti::write_nifti(path, vol),
+        _ => Err(Error::invalid(
+            "output volume file",
+            format!(
+                "{}: unsupported extension; volumes are written as .nrrd, .nhdr, .npy, .nii or .nii.gz",
+                path.display()
+            ),
+        )),
     }
 }
 
@@ -83,7 +222,9 @@ fn unsupported_extension(path: &Path) -> Error {
     Error::invalid(
         "volume file",
         format!(
-            "{}: unsupported extension; supported are .nrrd and .nhdr (NRRD) and .npy (NumPy)",
+            "{}: unknown format; voxlab reads NRRD (.nrrd, .nhdr), NumPy (.npy), NIfTI-1 \
+             (.nii, .nii.gz), DICOM (a file or a directory), PVM (.pvm), VolPack (.den), \
+             TIFF stacks (.tif, .tiff) and raw files (with --raw-* options)",
             path.display()
         ),
     )

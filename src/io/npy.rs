@@ -37,7 +37,7 @@
 use super::{open, read_samples, too_short, write_atomic, write_le, write_samples_le};
 use super::{Endian, Samples, Stored};
 use crate::error::{Error, Result};
-use crate::volume::{check_dims, AnyVolume, VoxelKind, MAX_VOXELS};
+use crate::volume::{check_dims, max_voxels, AnyVolume, VoxelKind};
 use glam::DMat4;
 use std::io::{BufReader, Read};
 use std::path::Path;
@@ -128,7 +128,7 @@ struct Header {
     endian: Endian,
     fortran_order: bool,
     shape: Vec<usize>,
-    /// How many values the shape holds (checked against [`MAX_VOXELS`]).
+    /// How many values the shape holds (checked against [`max_voxels`]).
     count: usize,
     /// Bytes before the data: magic, version, length field and dict.
     data_offset: u64,
@@ -168,7 +168,7 @@ fn f32_from_reader(
 
 /// Reads the samples that follow the header, in C order.
 fn read_data(reader: &mut dyn Read, h: &Header, file_len: u64, path: &Path) -> Result<Samples> {
-    // `count` is at most MAX_VOXELS, so this cannot overflow on a 64-bit machine;
+    // `count` is at most the voxel limit (≤ 2^63 / 8), so this cannot overflow on a 64-bit machine;
     // the file length tells whether the data is all there before anything is allocated.
     let expected = h.count as u64 * h.stored.size() as u64;
     let available = file_len.saturating_sub(h.data_offset);
@@ -315,11 +315,11 @@ fn parse_dict(text: &str, path: &Path, allowed: &[Stored], allowed_text: &str) -
     let count = shape
         .iter()
         .try_fold(1usize, |acc, &d| acc.checked_mul(d))
-        .filter(|&n| n <= MAX_VOXELS)
+        .filter(|&n| n <= max_voxels())
         .ok_or_else(|| {
             bad(
                 "shape",
-                format!("{shape:?} holds more than the limit of {MAX_VOXELS} values"),
+                format!("{shape:?} holds more than the limit of {} values", max_voxels()),
             )
         })?;
 

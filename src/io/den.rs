@@ -1,0 +1,10 @@
+//! (being written)
+
+use crate::error::{Error, Result};
+use crate::volume::AnyVolume;
+use std::path::Path;
+
+/// Reads a volume (not written yet).
+pub fn read_den(path: &Path) -> Result<AnyVolume> {
+    Err(Error::invalid("volume file", format!("{}: reader not written yet", path.display())))
+}
