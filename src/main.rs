@@ -25,6 +25,10 @@ Start with `voxlab demo`, which renders a gallery from built-in phantoms."
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Refuse volumes with more voxels than this before allocating anything (default
+    /// 2147483648, or the VOXLAB_MAX_VOXELS environment variable).
+    #[arg(long, global = true)]
+    max_voxels: Option<usize>,
 }
 
 #[derive(Subcommand)]
@@ -51,8 +55,14 @@ enum Command {
     },
     /// Describe a volume (dimensions, spacing, type, value range, histogram), or the GPU.
     Info {
-        /// Volume file or phantom:NAME[:SIZE]. Not needed with --gpu.
+        /// Volume file, DICOM directory or phantom:NAME[:SIZE]. Not needed with --gpu.
         input: Option<String>,
+        #[command(flatten)]
+        load: LoadArgs,
+        /// Also draw the histogram (256 bins, log counts, minimum to maximum from left to
+        /// right) into this PNG file.
+        #[arg(long)]
+        plot: Option<PathBuf>,
         /// Number of histogram bins to print.
         #[arg(long, default_value_t = 16)]
         bins: usize,
@@ -64,6 +74,9 @@ enum Command {
         #[arg(long)]
         gpu: bool,
     },
+    /// Convert a volume between formats, optionally cropping, resampling and changing
+    /// its voxel type on the way (e.g. a DICOM series to NRRD).
+    Convert(Box<ConvertArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -74,9 +87,12 @@ enum Command {
 /// What to render and how: shared by `render` and `compare`.
 #[derive(Args)]
 struct SceneArgs {
-    /// A volume file (.nrrd, .nhdr, .npy; an .npy of shape (nz, ny, nx) is x fastest) or
-    /// a phantom: phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128.
+    /// A volume: a file (NRRD, NIfTI, DICOM, PVM, VolPack .den, TIFF stack, .npy of
+    /// shape (nz, ny, nx), or raw with --raw-*), a DICOM directory, or a phantom:
+    /// phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128.
     input: String,
+    #[command(flatten)]
+    load: LoadArgs,
     /// What rays compute: dvr (colour and opacity through the transfer function), mip,
     /// minip, xray (line integral, value × mm).
     #[arg(long, value_enum, default_value = "dvr")]
@@ -145,16 +161,11 @@ struct SceneArgs {
     #[arg(long)]
     no_shading: bool,
     /// Directional light x,y,z (world, toward the light); default: a headlight.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        num_args = 3,
-        allow_negative_numbers = true
-    )]
-    light: Option<Vec<f64>>,
+    #[arg(long, value_parser = list::<f64, 3>, allow_hyphen_values = true)]
+    light: Option<[f64; 3]>,
     /// Background r,g,b,a in [0, 1] for DVR.
-    #[arg(long, value_delimiter = ',', num_args = 4, default_values_t = [0.0, 0.0, 0.0, 1.0])]
-    background: Vec<f64>,
+    #[arg(long, value_parser = list::<f64, 4>, default_value = "0,0,0,1")]
+    background: [f64; 4],
     /// Render settings from a JSON file (the fields of RenderSettings); other options
     /// on the command line are ignored where the file sets them.
     #[arg(long)]
@@ -163,9 +174,73 @@ struct SceneArgs {
     /// interpolation (real GPUs quantise its weights to about 8 bits).
     #[arg(long)]
     hardware_filtering: bool,
+}
+
+/// How to load INPUT: phantom size, raw layout, and what to do with NaN/Inf voxels.
+#[derive(Args, Clone)]
+struct LoadArgs {
     /// Phantom grid size when INPUT is phantom:NAME without a size.
     #[arg(long, default_value_t = 128)]
     phantom_size: usize,
+    /// Raw input: dimensions NX,NY,NZ (x fastest). Reads INPUT as headerless samples.
+    #[arg(long, value_parser = list::<usize, 3>)]
+    raw_dims: Option<[usize; 3]>,
+    /// Raw input: sample type (u8, i8, u16, i16, u32, i32, u64, i64, f32, f64).
+    #[arg(long, default_value = "u8")]
+    raw_type: String,
+    /// Raw input: byte order of multi-byte samples.
+    #[arg(long, value_enum, default_value = "little")]
+    raw_endian: RawEndian,
+    /// Raw input: voxel spacing SX,SY,SZ in mm.
+    #[arg(long, value_parser = list::<f64, 3>, default_value = "1,1,1")]
+    raw_spacing: [f64; 3],
+    /// Raw input: bytes to skip before the first sample.
+    #[arg(long, default_value_t = 0)]
+    raw_offset: u64,
+    /// NaN or infinite voxels: replace them (NaN and -inf by the smallest finite value,
+    /// +inf by the largest, with a warning; see docs/io.md) or refuse the volume.
+    #[arg(long, value_enum, default_value = "replace")]
+    non_finite: NonFiniteRule,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum RawEndian {
+    Little,
+    Big,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum NonFiniteRule {
+    Replace,
+    Error,
+}
+
+#[derive(Args)]
+struct ConvertArgs {
+    /// Input volume (any format `info` reads, or a phantom).
+    input: String,
+    /// Output volume: .nrrd, .nhdr, .npy, .nii or .nii.gz.
+    output: PathBuf,
+    #[command(flatten)]
+    load: LoadArgs,
+    /// Keep only the voxels X0..X1, Y0..Y1, Z0..Z1 (index ranges, end exclusive),
+    /// given as X0,Y0,Z0,X1,Y1,Z1. The world position of every kept voxel is unchanged.
+    #[arg(long, value_parser = list::<usize, 6>)]
+    crop: Option<[usize; 6]>,
+    /// Resample (after cropping) to NX,NY,NZ voxels over the same box, with --filter.
+    #[arg(long, value_parser = list::<usize, 3>, conflicts_with = "spacing")]
+    resize: Option<[usize; 3]>,
+    /// Resample (after cropping) to this voxel spacing in mm (one value, or SX,SY,SZ),
+    /// over the same box, with --filter.
+    #[arg(long, value_delimiter = ',')]
+    spacing: Option<Vec<f64>>,
+    /// Reconstruction filter for resampling (in f64, through the CPU oracle's filters).
+    #[arg(long, value_enum, default_value = "trilinear")]
+    filter: Filter,
+    /// Voxel type of the output: u8, u16, i16 or f32 (values rounded and clamped into
+    /// integer types). Default: the input's type, or f32 after resampling.
+    #[arg(long = "type")]
+    voxel_type: Option<String>,
 }
 
 #[derive(Args)]
@@ -204,6 +279,27 @@ struct CompareArgs {
     rmse: Option<f64>,
 }
 
+/// Parses exactly `N` comma-separated values, e.g. `1,2,3` for `--light`.
+fn list<T: std::str::FromStr, const N: usize>(s: &str) -> std::result::Result<[T; N], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != N {
+        return Err(format!(
+            "expected {N} comma-separated values, got {}",
+            parts.len()
+        ));
+    }
+    let values = parts
+        .iter()
+        .map(|p| {
+            p.parse::<T>()
+                .map_err(|_| format!("'{p}' is not a valid number"))
+        })
+        .collect::<std::result::Result<Vec<T>, String>>()?;
+    values
+        .try_into()
+        .map_err(|_| "wrong number of values".to_string())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -216,6 +312,21 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
+    let limit = match cli.max_voxels {
+        Some(n) => Some(n),
+        None => match std::env::var("VOXLAB_MAX_VOXELS") {
+            Ok(s) => Some(s.trim().parse::<usize>().map_err(|_| {
+                Error::invalid("VOXLAB_MAX_VOXELS", format!("'{s}' is not a whole number"))
+            })?),
+            Err(_) => None,
+        },
+    };
+    if let Some(n) = limit {
+        if n == 0 {
+            return Err(Error::invalid("--max-voxels", "must be at least 1"));
+        }
+        voxlab::volume::set_max_voxels(n);
+    }
     if let Command::Compare(args) = cli.command {
         return compare(*args);
     }
@@ -243,8 +354,11 @@ fn run_other(command: Command) -> Result<()> {
             );
             Ok(())
         }
+        Command::Convert(args) => convert(*args),
         Command::Info {
             input,
+            load,
+            plot,
             bins,
             json,
             gpu,
@@ -255,7 +369,7 @@ fn run_other(command: Command) -> Result<()> {
             let input = input.ok_or_else(|| {
                 Error::invalid("arguments", "give a volume file or phantom:NAME, or --gpu")
             })?;
-            info(&input, bins, json)
+            info(&input, &load, bins, json, plot.as_deref())
         }
         Command::Tf { name } => {
             match name {
@@ -277,13 +391,70 @@ fn run_other(command: Command) -> Result<()> {
     }
 }
 
-/// Loads a volume file or samples `phantom:NAME[:SIZE]`.
-fn load_input(input: &str, phantom_size: usize) -> Result<AnyVolume> {
-    if let Some(spec) = input.strip_prefix("phantom:") {
-        let (phantom, dims) = voxlab::phantom::parse_spec(spec, phantom_size)?;
-        Ok(phantom.sample(dims)?.into())
+/// Where a volume came from, for `info`.
+fn input_format(input: &str, load: &LoadArgs) -> Result<&'static str> {
+    if input.starts_with("phantom:") {
+        Ok("analytic phantom")
+    } else if load.raw_dims.is_some() {
+        Ok(voxlab::io::Format::Raw.name())
     } else {
-        voxlab::io::read_volume(Path::new(input))
+        Ok(voxlab::io::detect_format(Path::new(input))?.name())
+    }
+}
+
+/// Loads a volume file, a DICOM directory, a raw file (with `--raw-dims`) or samples
+/// `phantom:NAME[:SIZE]`; then applies the non-finite rule: NaN/±inf voxels are
+/// reported, and replaced or refused (`--non-finite`).
+fn load_input(input: &str, load: &LoadArgs) -> Result<AnyVolume> {
+    let mut volume = load_raw_input(input, load)?;
+    let count = volume.non_finite();
+    if count.total() > 0 {
+        let what = format!(
+            "{input}: {} NaN, {} +inf and {} -inf voxel(s) (first at index {})",
+            count.nan,
+            count.pos_inf,
+            count.neg_inf,
+            count.first.unwrap_or(0)
+        );
+        match load.non_finite {
+            NonFiniteRule::Error => {
+                return Err(Error::NonFinite {
+                    what: input.to_string(),
+                    count: count.total(),
+                    first: count.first.unwrap_or(0),
+                })
+            }
+            NonFiniteRule::Replace => {
+                volume.replace_non_finite();
+                eprintln!(
+                    "voxlab: warning: {what}; NaN and -inf replaced by the smallest finite value, \
+                     +inf by the largest (--non-finite error refuses instead)"
+                );
+            }
+        }
+    }
+    Ok(volume)
+}
+
+/// Loads without the non-finite rule (`info` reports them as they are).
+fn load_raw_input(input: &str, load: &LoadArgs) -> Result<AnyVolume> {
+    if let Some(spec) = input.strip_prefix("phantom:") {
+        let (phantom, dims) = voxlab::phantom::parse_spec(spec, load.phantom_size)?;
+        return Ok(phantom.sample(dims)?.into());
+    }
+    let path = Path::new(input);
+    match &load.raw_dims {
+        Some(d) => {
+            let spec = voxlab::io::raw::RawSpec {
+                dims: *d,
+                sample: voxlab::io::raw::RawType::parse(&load.raw_type)?,
+                big_endian: matches!(load.raw_endian, RawEndian::Big),
+                spacing: load.raw_spacing,
+                offset: load.raw_offset,
+            };
+            voxlab::io::raw::read_raw(path, &spec)
+        }
+        None => voxlab::io::read_volume(path),
     }
 }
 
@@ -302,7 +473,7 @@ fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
 
 /// Loads the input and builds the camera, transfer function and settings.
 fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettings)> {
-    let volume = load_input(&a.input, a.phantom_size)?;
+    let volume = load_input(&a.input, &a.load)?;
     let mut tf = if a.tf == "auto" {
         if a.input.starts_with("phantom:") {
             TransferFunction::preset("phantom")?
@@ -377,19 +548,14 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
                 ert_threshold: a.ert,
                 gradient: a.gradient,
                 precompute_gradients: a.precompute_gradients,
-                background: [
-                    a.background[0],
-                    a.background[1],
-                    a.background[2],
-                    a.background[3],
-                ],
+                background: a.background,
                 sample_count,
                 hardware_filtering: a.hardware_filtering,
                 ..RenderSettings::default()
             };
             s.shading.enabled = !a.no_shading;
-            if let Some(l) = &a.light {
-                s.shading.light = Light::Direction([l[0], l[1], l[2]]);
+            if let Some(l) = a.light {
+                s.shading.light = Light::Direction(l);
             }
             s
         }
@@ -545,18 +711,65 @@ fn check_output(path: &Path) -> Result<()> {
     Ok(())
 }
 
-fn info(input: &str, bins: usize, json: bool) -> Result<()> {
-    let v = load_input(input, 128)?;
+/// The nearest world axis of each index axis, as anatomical letters when the format
+/// fixes the world frame (NIfTI: RAS+, DICOM: LPS+), else as ±X/±Y/±Z.
+fn orientation(affine: glam::DMat4, format: &str) -> String {
+    let letters: Option<[[&str; 2]; 3]> = match format {
+        "NIfTI-1" => Some([["R", "L"], ["A", "P"], ["S", "I"]]),
+        "DICOM" => Some([["L", "R"], ["P", "A"], ["S", "I"]]),
+        _ => None,
+    };
+    let m = glam::DMat3::from_mat4(affine);
+    let mut out = Vec::new();
+    for c in 0..3 {
+        let v = m.col(c).to_array();
+        let (axis, val) = v
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            .expect("three components");
+        let neg = usize::from(*val < 0.0);
+        out.push(match letters {
+            Some(l) => l[axis][neg].to_string(),
+            None => format!("{}{}", ["+", "-"][neg], ["X", "Y", "Z"][axis]),
+        });
+    }
+    match letters {
+        Some(_) => format!(
+            "{} (index axes x, y, z point to {}; world frame {})",
+            out.concat(),
+            out.join(", "),
+            if format == "DICOM" { "LPS+" } else { "RAS+" }
+        ),
+        None => format!(
+            "x → {}, y → {}, z → {} (world frame as the file gives it)",
+            out[0], out[1], out[2]
+        ),
+    }
+}
+
+fn info(input: &str, load: &LoadArgs, bins: usize, json: bool, plot: Option<&Path>) -> Result<()> {
+    let format = input_format(input, load)?;
+    let v = load_raw_input(input, load)?;
     let r = v.value_range();
+    let nf = v.non_finite();
     let h = v.histogram(bins.clamp(1, 4096));
+    if let Some(p) = plot {
+        // The plot has room for finer bins than the text listing.
+        voxlab::frame::histogram_plot(&v.histogram(256), 768, 320)?.save(p, Default::default())?;
+    }
+    let orient = orientation(v.affine(), format);
     if json {
         let j = serde_json::json!({
             "input": input,
+            "format": format,
             "dims": v.dims(),
             "spacing_mm": v.spacing(),
             "type": v.kind(),
+            "orientation": orient,
             "affine_rows": (0..4).map(|i| v.affine().row(i).to_array()).collect::<Vec<_>>(),
             "range": r,
+            "non_finite": nf,
             "histogram": h,
         });
         println!(
@@ -568,6 +781,7 @@ fn info(input: &str, bins: usize, json: bool) -> Result<()> {
     let d = v.dims();
     let s = v.spacing();
     println!("{input}");
+    println!("  format    {format}");
     println!(
         "  dims      {} × {} × {} ({} voxels, {})",
         d[0],
@@ -577,6 +791,7 @@ fn info(input: &str, bins: usize, json: bool) -> Result<()> {
         v.kind().name()
     );
     println!("  spacing   {:.6} × {:.6} × {:.6} mm", s[0], s[1], s[2]);
+    println!("  orient    {orient}");
     let a = v.affine();
     for i in 0..3 {
         let row = a.row(i);
@@ -585,15 +800,10 @@ fn info(input: &str, bins: usize, json: bool) -> Result<()> {
             row.x, row.y, row.z, row.w
         );
     }
+    println!("  range     [{}, {}]", r.min, r.max);
     println!(
-        "  range     [{}, {}]{}",
-        r.min,
-        r.max,
-        if r.non_finite > 0 {
-            format!(" ({} non-finite values)", r.non_finite)
-        } else {
-            String::new()
-        }
+        "  NaN/inf   {} NaN, {} +inf, {} -inf",
+        nf.nan, nf.pos_inf, nf.neg_inf
     );
     println!("  histogram ({} bins)", h.counts.len());
     let max = h.counts.iter().copied().max().unwrap_or(1).max(1);
@@ -601,6 +811,77 @@ fn info(input: &str, bins: usize, json: bool) -> Result<()> {
         let bar = "#".repeat(((c as f64 / max as f64) * 40.0).round() as usize);
         println!("  {:>12.5} {:>10} {bar}", h.bin_center(b), c);
     }
+    if let Some(p) = plot {
+        println!("  plot      {}", p.display());
+    }
+    Ok(())
+}
+
+fn convert(c: ConvertArgs) -> Result<()> {
+    use voxlab::volume::VoxelKind;
+    let mut vol = load_input(&c.input, &c.load)?;
+    if let Some(b) = &c.crop {
+        vol = vol.crop([b[0], b[1], b[2]], [b[3], b[4], b[5]])?;
+    }
+    let resample_dims = match (&c.resize, &c.spacing) {
+        (Some(d), _) => Some(*d),
+        (None, Some(sp)) => {
+            let sp: Vec<f64> = if sp.len() == 1 {
+                vec![sp[0]; 3]
+            } else {
+                sp.clone()
+            };
+            if sp.len() != 3 || !sp.iter().all(|x| x.is_finite() && *x > 0.0) {
+                return Err(Error::invalid(
+                    "--spacing",
+                    "give one or three positive numbers (mm)",
+                ));
+            }
+            let (d, s) = (vol.dims(), vol.spacing());
+            Some([0, 1, 2].map(|a| ((d[a] as f64 * s[a] / sp[a]).round() as usize).max(1)))
+        }
+        (None, None) => None,
+    };
+    if let Some(dims) = resample_dims {
+        let pb = indicatif::ProgressBar::new_spinner();
+        pb.set_message(format!(
+            "resampling to {}×{}×{} ({:?})",
+            dims[0], dims[1], dims[2], c.filter
+        ));
+        pb.enable_steady_tick(std::time::Duration::from_millis(200));
+        let r = voxlab::cpu::filter::resample_volume(&vol.to_f32(), c.filter, dims);
+        pb.finish_and_clear();
+        vol = r?.into();
+    }
+    if let Some(t) = &c.voxel_type {
+        let kind = match t.to_ascii_lowercase().as_str() {
+            "u8" | "uint8" => VoxelKind::U8,
+            "u16" | "uint16" => VoxelKind::U16,
+            "i16" | "int16" => VoxelKind::I16,
+            "f32" | "float32" | "float" => VoxelKind::F32,
+            other => {
+                return Err(Error::invalid(
+                    "--type",
+                    format!("'{other}' is not u8, u16, i16 or f32"),
+                ))
+            }
+        };
+        vol = vol.convert_to(kind);
+    }
+    voxlab::io::write_volume(&c.output, &vol)?;
+    let d = vol.dims();
+    let s = vol.spacing();
+    println!(
+        "wrote {} ({}×{}×{} {}, spacing {:.4} × {:.4} × {:.4} mm)",
+        c.output.display(),
+        d[0],
+        d[1],
+        d[2],
+        vol.kind().name(),
+        s[0],
+        s[1],
+        s[2]
+    );
     Ok(())
 }
 

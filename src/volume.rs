@@ -295,6 +295,22 @@ pub struct ValueRange {
     pub non_finite: usize,
 }
 
+/// How many voxels are NaN, +∞ or −∞, and the first of them (x-fastest index).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct NonFiniteCount {
+    pub nan: usize,
+    pub pos_inf: usize,
+    pub neg_inf: usize,
+    pub first: Option<usize>,
+}
+
+impl NonFiniteCount {
+    /// All non-finite voxels.
+    pub fn total(&self) -> usize {
+        self.nan + self.pos_inf + self.neg_inf
+    }
+}
+
 /// A histogram of voxel values over `[min, max]` with equal-width bins; the maximum
 /// falls in the last bin.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -366,6 +382,56 @@ impl<T: Voxel> Volume<T> {
         }
     }
 
+    /// Counts the NaN, +∞ and −∞ voxels (always zero for integer volumes).
+    pub fn non_finite(&self) -> NonFiniteCount {
+        let mut c = NonFiniteCount::default();
+        if T::KIND != VoxelKind::F32 {
+            return c;
+        }
+        for (i, v) in self.data.iter().enumerate() {
+            let x = v.to_f64();
+            if x.is_finite() {
+                continue;
+            }
+            if x.is_nan() {
+                c.nan += 1;
+            } else if x > 0.0 {
+                c.pos_inf += 1;
+            } else {
+                c.neg_inf += 1;
+            }
+            c.first.get_or_insert(i);
+        }
+        c
+    }
+
+    /// Applies voxlab's rule for non-finite data before rendering (`docs/io.md`):
+    /// NaN and −∞ become the smallest finite value, +∞ the largest (0 when no value is
+    /// finite). NaN marks missing data in most tools, and the minimum is what empty
+    /// space holds in CT and MR, so missing voxels render as background: transparent
+    /// under a transfer function that starts at the minimum, never the maximum of a
+    /// MIP, and no contribution beyond the background's in an X-ray. Returns what was
+    /// replaced.
+    pub fn replace_non_finite(&mut self) -> NonFiniteCount {
+        let count = self.non_finite();
+        if count.total() == 0 {
+            return count;
+        }
+        let r = self.value_range();
+        let (lo, hi) = if r.min <= r.max {
+            (r.min, r.max)
+        } else {
+            (0.0, 0.0)
+        };
+        for v in &mut self.data {
+            let x = v.to_f64();
+            if !x.is_finite() {
+                *v = T::from_f64(if x == f64::INFINITY { hi } else { lo });
+            }
+        }
+        count
+    }
+
     /// Histogram of the finite values in `bins` equal bins over the value range.
     pub fn histogram(&self, bins: usize) -> Histogram {
         let bins = bins.max(1);
@@ -390,6 +456,32 @@ impl<T: Voxel> Volume<T> {
             counts[b.min(bins - 1)] += 1;
         }
         Histogram { min, max, counts }
+    }
+
+    /// Keeps the voxels `lo..hi` (end exclusive) on each axis. Every kept voxel stays
+    /// where it was in the world: the affine is moved by `lo` index steps.
+    pub fn crop(&self, lo: [usize; 3], hi: [usize; 3]) -> Result<Volume<T>> {
+        for a in 0..3 {
+            if lo[a] >= hi[a] || hi[a] > self.dims[a] {
+                return Err(Error::invalid(
+                    "crop box",
+                    format!(
+                        "{lo:?}..{hi:?} must satisfy lo < hi ≤ dims {:?} on every axis",
+                        self.dims
+                    ),
+                ));
+            }
+        }
+        let dims = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+        for k in lo[2]..hi[2] {
+            for j in lo[1]..hi[1] {
+                let row = self.index(lo[0], j, k);
+                data.extend_from_slice(&self.data[row..row + dims[0]]);
+            }
+        }
+        let shift = DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
+        Volume::with_affine(dims, self.affine * DMat4::from_translation(shift), data)
     }
 
     /// Converts every voxel to another type (rounding and saturating into integers).
@@ -446,6 +538,27 @@ impl AnyVolume {
     pub fn check_finite(&self, what: &str) -> Result<()> {
         with_volume!(self, v => v.check_finite(what))
     }
+    /// Counts the NaN and infinite voxels.
+    pub fn non_finite(&self) -> NonFiniteCount {
+        with_volume!(self, v => v.non_finite())
+    }
+    /// Replaces non-finite voxels by voxlab's rule ([`Volume::replace_non_finite`]).
+    pub fn replace_non_finite(&mut self) -> NonFiniteCount {
+        with_volume!(self, v => v.replace_non_finite())
+    }
+    /// Keeps the voxels `lo..hi` (end exclusive) on each axis; see [`Volume::crop`].
+    pub fn crop(&self, lo: [usize; 3], hi: [usize; 3]) -> Result<AnyVolume> {
+        Ok(with_volume!(self, v => v.crop(lo, hi)?.into()))
+    }
+    /// Converts to another voxel type (rounding and saturating into integer types).
+    pub fn convert_to(&self, kind: VoxelKind) -> AnyVolume {
+        with_volume!(self, v => match kind {
+            VoxelKind::U8 => v.convert::<u8>().into(),
+            VoxelKind::U16 => v.convert::<u16>().into(),
+            VoxelKind::I16 => v.convert::<i16>().into(),
+            VoxelKind::F32 => v.convert::<f32>().into(),
+        })
+    }
     /// The voxel values as f64, x fastest.
     pub fn values_f64(&self) -> Vec<f64> {
         with_volume!(self, v => v.data().iter().map(|x| x.to_f64()).collect())
@@ -476,6 +589,38 @@ any_from!(f32, F32);
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn crop_keeps_world_positions() {
+        let v = Volume::from_fn([4, 3, 2], [0.5, 1.0, 2.0], |i, j, k| {
+            (i + 10 * j + 100 * k) as f32
+        })
+        .unwrap();
+        let c = v.crop([1, 1, 1], [3, 3, 2]).unwrap();
+        assert_eq!(c.dims(), [2, 2, 1]);
+        assert_eq!(c.data(), &[111.0, 112.0, 121.0, 122.0]);
+        let w_old = v.affine().transform_point3(DVec3::new(1.0, 1.0, 1.0));
+        let w_new = c.affine().transform_point3(DVec3::ZERO);
+        assert_eq!(w_old, w_new);
+        assert!(v.crop([0, 0, 0], [5, 1, 1]).is_err());
+        assert!(v.crop([2, 0, 0], [2, 1, 1]).is_err());
+    }
+
+    #[test]
+    fn non_finite_rule_replaces_by_the_finite_range() {
+        let data = vec![f32::NAN, 2.0, f32::INFINITY, -3.0, f32::NEG_INFINITY, 5.0];
+        let mut v = Volume::new([6, 1, 1], [1.0; 3], data).unwrap();
+        let c = v.non_finite();
+        assert_eq!((c.nan, c.pos_inf, c.neg_inf, c.first), (1, 1, 1, Some(0)));
+        let replaced = v.replace_non_finite();
+        assert_eq!(replaced, c);
+        assert_eq!(v.data(), &[-3.0, 2.0, 5.0, -3.0, -3.0, 5.0]);
+        assert_eq!(v.non_finite().total(), 0);
+        let mut all_nan = Volume::new([2, 1, 1], [1.0; 3], vec![f32::NAN; 2]).unwrap();
+        all_nan.replace_non_finite();
+        assert_eq!(all_nan.data(), &[0.0, 0.0]);
+    }
+
     use super::*;
 
     #[test]

@@ -6,5 +6,8 @@ use std::path::Path;
 
 /// Reads a volume (not written yet).
 pub fn read_den(path: &Path) -> Result<AnyVolume> {
-    Err(Error::invalid("volume file", format!("{}: reader not written yet", path.display())))
+    Err(Error::invalid(
+        "volume file",
+        format!("{}: reader not written yet", path.display()),
+    ))
 }

@@ -140,9 +140,7 @@ fn sniff(head: &[u8]) -> Option<Format> {
         Some(Format::Tiff)
     } else if head.len() >= 132 && &head[128..132] == b"DICM" {
         Some(Format::Dicom)
-    } else if head.len() >= 348
-        && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0")
-    {
+    } else if head.len() >= 348 && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0") {
         Some(Format::Nifti)
     } else {
         None

@@ -319,7 +319,10 @@ fn parse_dict(text: &str, path: &Path, allowed: &[Stored], allowed_text: &str) -
         .ok_or_else(|| {
             bad(
                 "shape",
-                format!("{shape:?} holds more than the limit of {} values", max_voxels()),
+                format!(
+                    "{shape:?} holds more than the limit of {} values",
+                    max_voxels()
+                ),
             )
         })?;
 
