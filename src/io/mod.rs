@@ -174,6 +174,21 @@ pub fn read_volume_as(path: &Path, format: Format) -> Result<AnyVolume> {
     }
 }
 
+/// Reads a volume file held in memory, in the given format (`path` only names it in
+/// errors). Formats that live in several files (DICOM series, detached NRRD headers,
+/// raw) are refused. This is what the fuzz targets and the fuzz smoke test call: it
+/// must return an error, never panic, whatever the bytes.
+pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<AnyVolume> {
+    match format {
+        Format::Nrrd => nrrd::read_nrrd_bytes(bytes, path),
+        Format::Npy => npy::read_npy_bytes(bytes, path),
+        other => Err(Error::invalid(
+            "in-memory volume",
+            format!("{} files are read from disk only", other.name()),
+        )),
+    }
+}
+
 /// Writes a volume, choosing the format from the extension, atomically:
 /// - `.nrrd`: one file, header and gzip-compressed data;
 /// - `.nhdr`: a detached header, with the gzip-compressed data in `<stem>.raw.gz`

@@ -134,6 +134,12 @@ struct Header {
     data_offset: u64,
 }
 
+/// Reads a `.npy` volume held in memory (`path` only names it in errors). Used by the
+/// fuzz targets; never panics.
+pub fn read_npy_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    volume_from_reader(&mut &bytes[..], bytes.len() as u64, path)
+}
+
 fn volume_from_reader(reader: &mut dyn Read, file_len: u64, path: &Path) -> Result<AnyVolume> {
     let header = read_header(reader, file_len, path, VOLUME_TYPES, VOLUME_TYPES_TEXT)?;
     let dims = match header.shape[..] {

@@ -118,6 +118,24 @@ pub fn read_nrrd(path: &Path) -> Result<AnyVolume> {
     samples.into_volume(header.dims, header.affine)
 }
 
+/// Reads an attached-header NRRD file held in memory (`path` only names it in
+/// errors). A header that names a detached data file is refused: there is no
+/// directory to find it in. Used by the fuzz targets; never panics.
+pub fn read_nrrd_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    let mut reader = io::Cursor::new(bytes);
+    let fields = read_fields(&mut reader, path)?;
+    let header = Header::parse(&fields, path)?;
+    if header.data_file.is_some() {
+        return Err(Error::format(
+            path,
+            "data file",
+            "a detached header cannot be read from memory",
+        ));
+    }
+    let samples = read_data(&mut reader, bytes.len() as u64, path, &header)?;
+    samples.into_volume(header.dims, header.affine)
+}
+
 /// Writes a volume as NRRD, atomically. With `detached`, the data file is written
 /// first, so a header never names a data file that is not there.
 pub fn write_nrrd(path: &Path, vol: &AnyVolume, options: NrrdWriteOptions) -> Result<()> {
@@ -763,7 +781,12 @@ fn parse_vector(s: &str) -> std::result::Result<Vec<f64>, String> {
 
 /// Reads the samples from `reader`, which holds the data file (`path`, `len` bytes)
 /// positioned where the data part starts (after the header, or at 0 when detached).
-fn read_data(reader: &mut BufReader<File>, len: u64, path: &Path, h: &Header) -> Result<Samples> {
+fn read_data<R: BufRead + Seek>(
+    reader: &mut R,
+    len: u64,
+    path: &Path,
+    h: &Header,
+) -> Result<Samples> {
     for i in 0..h.line_skip {
         let n = reader.skip_until(b'\n').map_err(|e| Error::io(path, e))?;
         if n == 0 {
@@ -793,7 +816,7 @@ fn read_data(reader: &mut BufReader<File>, len: u64, path: &Path, h: &Header) ->
                     return Err(past_end(path, skip, available));
                 }
                 reader
-                    .seek_relative(skip as i64)
+                    .seek(SeekFrom::Current(skip as i64))
                     .map_err(|e| Error::io(path, e))?;
                 available -= skip;
                 // Checked before allocating: the file must hold all the data.
