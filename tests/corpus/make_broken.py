@@ -1,0 +1,82 @@
+#!/usr/bin/env python3
+"""Writes the regression corpus of broken volume files, tests/corpus/broken/.
+
+Each file is small and broken in one way a real file can be: truncated data, a header
+that promises more than the file holds, sizes whose product overflows or exceeds the
+voxel limit, unknown types and encodings, lying lengths. tests/io_corpus.rs reads every
+file and checks that it gets its expected error (listed in EXPECTED.tsv beside them:
+file, error kind, field, words the message must contain).
+
+Run from anywhere: python3 tests/corpus/make_broken.py  (standard library only)
+"""
+import gzip
+import os
+import struct
+
+HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "broken")
+os.makedirs(HERE, exist_ok=True)
+expected = []
+
+
+def put(name, data, kind, field, words):
+    with open(os.path.join(HERE, name), "wb") as f:
+        f.write(data)
+    expected.append((name, kind, field, words))
+
+
+def nrrd(fields, data=b"", magic=b"NRRD0004"):
+    return magic + b"\n" + "".join(f"{k}: {v}\n" for k, v in fields).encode() + b"\n" + data
+
+
+base = [("type", "uchar"), ("dimension", "3"), ("sizes", "4 4 4"), ("encoding", "raw")]
+
+# --- NRRD ------------------------------------------------------------------------
+put("nrrd-truncated-data.nrrd", nrrd(base, bytes(63)), "format", "data", "expected 64 bytes, found 63")
+put("nrrd-sizes-overflow.nrrd",
+    nrrd([("type", "float"), ("dimension", "3"), ("sizes", "4294967296 4294967296 4294967296"),
+          ("encoding", "raw"), ("endian", "little")], bytes(16)),
+    "format", "sizes", "")
+put("nrrd-over-voxel-limit.nrrd",
+    nrrd([("type", "uchar"), ("dimension", "3"), ("sizes", "2048 2048 1024"), ("encoding", "raw")], bytes(16)),
+    "format", "sizes", "limit")
+put("nrrd-unknown-type.nrrd", nrrd([("type", "quaternion"), ("dimension", "3"), ("sizes", "1 1 1"),
+                                    ("encoding", "raw")], bytes(8)), "format", "type", "quaternion")
+put("nrrd-unknown-encoding.nrrd", nrrd([("type", "uchar"), ("dimension", "3"), ("sizes", "1 1 1"),
+                                        ("encoding", "bzip2")], bytes(8)), "format", "encoding", "bzip2")
+put("nrrd-corrupt-gzip.nrrd", nrrd([("type", "uchar"), ("dimension", "3"), ("sizes", "4 4 4"),
+                                    ("encoding", "gzip")], b"\x1f\x8b\x08\x00garbage-not-deflate"),
+    "format", "data", "")
+gz = gzip.compress(bytes(64))
+put("nrrd-gzip-truncated.nrrd", nrrd([("type", "uchar"), ("dimension", "3"), ("sizes", "4 4 4"),
+                                      ("encoding", "gzip")], gz[: len(gz) // 2]), "format", "data", "")
+put("nrrd-missing-endian.nrrd", nrrd([("type", "short"), ("dimension", "3"), ("sizes", "2 2 2"),
+                                      ("encoding", "raw")], bytes(16)), "format", "endian", "")
+put("nrrd-nan-spacing.nrrd", nrrd(base + [("spacings", "1 nan 1")], bytes(64)), "format", "spacings", "")
+put("nrrd-missing-data-file.nhdr", nrrd(base + [("data file", "no-such-file.raw")]), "format", "data file",
+    "no-such-file.raw")
+put("nrrd-bad-magic.nrrd", b"NRRD9999\n" + nrrd(base, bytes(64))[9:], "format", "magic", "")
+
+# --- .npy ------------------------------------------------------------------------
+def npy(dict_text, data, major=1):
+    d = dict_text.encode()
+    pad = (64 - (10 + len(d) + 1) % 64) % 64
+    d = d + b" " * pad + b"\n"
+    return b"\x93NUMPY" + bytes([major, 0]) + struct.pack("<H", len(d)) + d + data
+
+
+put("npy-truncated.npy", npy("{'descr': '<f4', 'fortran_order': False, 'shape': (4, 4, 4), }", bytes(255)),
+    "format", "data", "expected 256 bytes, found 255")
+put("npy-shape-overflow.npy",
+    npy("{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 4294967296), }", bytes(8)),
+    "format", "shape", "")
+put("npy-complex.npy", npy("{'descr': '<c8', 'fortran_order': False, 'shape': (2, 2, 2), }", bytes(64)),
+    "format", "descr", "")
+put("npy-header-past-end.npy", b"\x93NUMPY\x01\x00\xff\xff{'descr'", "format", "", "")
+put("npy-4d.npy", npy("{'descr': '|u1', 'fortran_order': False, 'shape': (1, 2, 2, 2), }", bytes(8)),
+    "format", "shape", "")
+
+with open(os.path.join(HERE, "EXPECTED.tsv"), "w") as f:
+    f.write("# file\terror kind\tfield (empty: any)\twords the message must contain (empty: none)\n")
+    for row in expected:
+        f.write("\t".join(row) + "\n")
+print(f"wrote {len(expected)} broken files to {HERE}")
