@@ -1,0 +1,239 @@
+//! The command line's input side: raw files described by options, the voxel limit,
+//! the rule for NaN/inf voxels, `info` (format, orientation, NaN counts, plot) and
+//! `convert` (crop, resample, type), all checked against values computed here.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn voxlab(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxlab"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .env_remove("VOXLAB_MAX_VOXELS")
+        .output()
+        .expect("the voxlab binary runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/cli-io-tests")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn ok(o: &Output) -> String {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn json(o: &Output) -> serde_json::Value {
+    serde_json::from_str(&ok(o)).unwrap()
+}
+
+/// A big-endian u16 raw file with a 10-byte header: value = i + 10 j + 100 k.
+fn raw_file(d: &Path) -> PathBuf {
+    let mut bytes = b"0123456789".to_vec();
+    for k in 0..3u16 {
+        for j in 0..4u16 {
+            for i in 0..5u16 {
+                bytes.extend_from_slice(&(i + 10 * j + 100 * k).to_be_bytes());
+            }
+        }
+    }
+    let p = d.join("vol.raw");
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn raw_input_is_read_as_described() {
+    let d = scratch("raw");
+    let p = raw_file(&d);
+    let raw = [
+        "--raw-dims",
+        "5,4,3",
+        "--raw-type",
+        "u16",
+        "--raw-endian",
+        "big",
+        "--raw-offset",
+        "10",
+        "--raw-spacing",
+        "0.5,0.5,2",
+    ];
+    let mut args = vec!["info", s(&p), "--json"];
+    args.extend(raw);
+    let j = json(&voxlab(&args));
+    assert_eq!(j["format"], "raw");
+    assert_eq!(j["dims"], serde_json::json!([5, 4, 3]));
+    assert_eq!(j["spacing_mm"], serde_json::json!([0.5, 0.5, 2.0]));
+    assert_eq!(j["range"]["min"], 0.0);
+    assert_eq!(j["range"]["max"], 234.0);
+    // Converted to NRRD and read back: every value where it belongs.
+    let out = d.join("vol.nrrd");
+    let mut args = vec!["convert", s(&p), s(&out)];
+    args.extend(raw);
+    ok(&voxlab(&args));
+    let v = voxlab::io::read_volume(&out).unwrap();
+    let vals = v.values_f64();
+    assert_eq!(vals[2 + 5 * (3 + 4 * 2)], 232.0);
+    // A wrong guess of the dims is caught by the file's length.
+    let o = voxlab(&["info", s(&p), "--raw-dims", "5,4,4", "--raw-type", "u16"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("has 130 bytes"));
+    // No description at all: the error says what to add.
+    let o = voxlab(&["info", s(&p)]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--raw-dims"));
+}
+
+#[test]
+fn voxel_limit_from_option_and_environment() {
+    let d = scratch("limit");
+    let p = d.join("v.nrrd");
+    ok(&voxlab(&["phantom", "sphere:8", "--out", s(&p)]));
+    let o = voxlab(&["--max-voxels", "511", "info", s(&p)]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("limit of 511 voxels"));
+    ok(&voxlab(&["--max-voxels", "512", "info", s(&p)]));
+    let o = Command::new(env!("CARGO_BIN_EXE_voxlab"))
+        .args(["info", s(&p)])
+        .env("VOXLAB_MAX_VOXELS", "100")
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("limit of 100 voxels"));
+}
+
+#[test]
+fn non_finite_voxels_are_reported_and_replaced_or_refused() {
+    let d = scratch("nan");
+    // 4×1×1 floats: NaN, 2, +inf, -1.
+    let mut bytes = Vec::new();
+    for v in [f32::NAN, 2.0, f32::INFINITY, -1.0] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    let p = d.join("nan.raw");
+    std::fs::write(&p, bytes).unwrap();
+    let raw = ["--raw-dims", "4,1,1", "--raw-type", "f32"];
+    let mut args = vec!["info", s(&p), "--json"];
+    args.extend(raw);
+    let j = json(&voxlab(&args));
+    assert_eq!(j["non_finite"]["nan"], 1);
+    assert_eq!(j["non_finite"]["pos_inf"], 1);
+    assert_eq!(j["range"]["min"], -1.0);
+    // Rendering replaces them by the rule and says so.
+    let out = d.join("x.npy");
+    let mut args = vec![
+        "render",
+        s(&p),
+        "--mode",
+        "xray",
+        "--view",
+        "+z",
+        "--step",
+        "1",
+        "--out",
+        s(&out),
+    ];
+    args.extend(raw);
+    let o = voxlab(&args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("1 NaN, 1 +inf and 0 -inf"), "{err}");
+    let img = voxlab::io::npy::read_npy_f32(&out).unwrap().1;
+    // NaN → min (-1), +inf → max (2): one voxel along z, spacing 1.
+    assert_eq!(img, vec![-1.0, 2.0, 2.0, -1.0]);
+    // --non-finite error refuses and writes nothing.
+    std::fs::remove_file(&out).unwrap();
+    args.extend(["--non-finite", "error"]);
+    let o = voxlab(&args);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("non-finite"));
+    assert!(!out.exists());
+}
+
+#[test]
+fn convert_crops_resamples_and_retypes() {
+    let d = scratch("convert");
+    let src = d.join("sl.nrrd");
+    ok(&voxlab(&["phantom", "shepp-logan:32", "--out", s(&src)]));
+    let v = voxlab::io::read_volume(&src).unwrap();
+    // Crop: the kept voxels equal the source's, at the same world positions.
+    let crop = d.join("crop.nrrd");
+    let o = voxlab(&["convert", s(&src), s(&crop), "--crop", "4,5,6,20,21,22"]);
+    ok(&o);
+    let c = voxlab::io::read_volume(&crop).unwrap();
+    assert_eq!(c.dims(), [16, 16, 16]);
+    let (sv, cv) = (v.values_f64(), c.values_f64());
+    for (i, j, k) in [(0, 0, 0), (15, 3, 7), (9, 15, 15)] {
+        assert_eq!(
+            cv[i + 16 * (j + 16 * k)],
+            sv[(i + 4) + 32 * ((j + 5) + 32 * (k + 6))]
+        );
+        let w_src = v.affine().transform_point3(glam::DVec3::new(
+            (i + 4) as f64,
+            (j + 5) as f64,
+            (k + 6) as f64,
+        ));
+        let w_crop = c
+            .affine()
+            .transform_point3(glam::DVec3::new(i as f64, j as f64, k as f64));
+        assert!((w_src - w_crop).length() < 1e-4, "{w_src} vs {w_crop}");
+    }
+    // Resample to half the spacing with nearest: every source voxel becomes 2×2×2.
+    let fine = d.join("fine.npy");
+    let sp = v.spacing()[0] / 2.0;
+    ok(&voxlab(&[
+        "convert",
+        s(&src),
+        s(&fine),
+        "--spacing",
+        &sp.to_string(),
+        "--filter",
+        "nearest",
+    ]));
+    let f = voxlab::io::read_volume(&fine).unwrap();
+    assert_eq!(f.dims(), [64, 64, 64]);
+    let fv = f.values_f64();
+    for (i, j, k) in [(0, 0, 0), (33, 17, 40), (63, 63, 63)] {
+        assert_eq!(
+            fv[i + 64 * (j + 64 * k)],
+            sv[i / 2 + 32 * (j / 2 + 32 * (k / 2))]
+        );
+    }
+    // --type u8 rounds and clamps.
+    let u8p = d.join("u8.nrrd");
+    ok(&voxlab(&["convert", s(&src), s(&u8p), "--type", "u8"]));
+    let u = voxlab::io::read_volume(&u8p).unwrap();
+    assert_eq!(u.kind(), voxlab::volume::VoxelKind::U8);
+    for (a, b) in u.values_f64().iter().zip(&sv) {
+        assert_eq!(*a, b.round().clamp(0.0, 255.0));
+    }
+    // A crop box outside the volume is refused, and nothing is written.
+    let bad = d.join("bad.nrrd");
+    let o = voxlab(&["convert", s(&src), s(&bad), "--crop", "0,0,0,33,1,1"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("crop box"));
+    assert!(!bad.exists());
+}
+
+#[test]
+fn info_reports_format_orientation_and_draws_a_plot() {
+    let d = scratch("info");
+    let src = d.join("v.nrrd");
+    ok(&voxlab(&["phantom", "spheres:16", "--out", s(&src)]));
+    let plot = d.join("hist.png");
+    let text = ok(&voxlab(&["info", s(&src), "--plot", s(&plot)]));
+    assert!(text.contains("format    NRRD"), "{text}");
+    assert!(text.contains("x → +X, y → +Y, z → +Z"), "{text}");
+    assert!(text.contains("0 NaN"), "{text}");
+    let img = image::open(&plot).unwrap().to_rgba8();
+    assert_eq!(img.dimensions(), (768, 320));
+    // Bars are drawn: some pixels are the bar colour.
+    assert!(img.pixels().any(|p| p.0[2] > 200 && p.0[0] < 160));
+}
