@@ -44,12 +44,13 @@ enum Command {
     /// Render on the CPU f64 oracle and on the GPU and compare: images, a diff heat map,
     /// error statistics and timings. Takes the options of `render`.
     Compare(Box<CompareArgs>),
-    /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr or .npy).
+    /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr, .npy,
+    /// .nii or .nii.gz).
     Phantom {
         /// Phantom and size: NAME, NAME:N or NAME:NX,NY,NZ. Names: shepp-logan,
         /// shepp-logan-modified, marschner-lobb, sphere, spheres, ellipsoid, slab.
         spec: String,
-        /// Output volume file (.nrrd, .nhdr or .npy).
+        /// Output volume file (.nrrd, .nhdr, .npy, .nii or .nii.gz).
         #[arg(long)]
         out: PathBuf,
     },
@@ -77,6 +78,9 @@ enum Command {
     /// Convert a volume between formats, optionally cropping, resampling and changing
     /// its voxel type on the way (e.g. a DICOM series to NRRD).
     Convert(Box<ConvertArgs>),
+    /// Write one axis-aligned slice of a volume as an image: 8- or 16-bit gray PNG, or
+    /// float32 .npy; laid out like the NumPy slice of the (nz, ny, nx) array.
+    Slice(Box<SliceArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -244,6 +248,33 @@ struct ConvertArgs {
 }
 
 #[derive(Args)]
+struct SliceArgs {
+    /// Input volume (any format `info` reads, or a phantom).
+    input: String,
+    #[command(flatten)]
+    load: LoadArgs,
+    /// The axis across which to cut: z gives a[k, :, :], y a[:, j, :], x a[:, :, i].
+    #[arg(long, default_value = "z")]
+    axis: String,
+    /// Slice index along the axis (default: the middle slice).
+    #[arg(long)]
+    index: Option<usize>,
+    /// Output image: .png (gray) or .npy (float32, raw values).
+    #[arg(long)]
+    out: PathBuf,
+    /// Write 16-bit PNG.
+    #[arg(long)]
+    sixteen_bit: bool,
+    /// Gray-scale window width in data units (with --level); default: the volume's
+    /// whole value range, the same for every slice.
+    #[arg(long, requires = "level", allow_negative_numbers = true)]
+    window: Option<f64>,
+    /// Gray-scale window centre in data units (with --window).
+    #[arg(long, requires = "window", allow_negative_numbers = true)]
+    level: Option<f64>,
+}
+
+#[derive(Args)]
 struct RenderArgs {
     #[command(flatten)]
     scene: SceneArgs,
@@ -355,6 +386,7 @@ fn run_other(command: Command) -> Result<()> {
             Ok(())
         }
         Command::Convert(args) => convert(*args),
+        Command::Slice(args) => slice(*args),
         Command::Info {
             input,
             load,
@@ -814,6 +846,52 @@ fn info(input: &str, load: &LoadArgs, bins: usize, json: bool, plot: Option<&Pat
     if let Some(p) = plot {
         println!("  plot      {}", p.display());
     }
+    Ok(())
+}
+
+fn slice(a: SliceArgs) -> Result<()> {
+    let vol = load_input(&a.input, &a.load)?;
+    let axis = match a.axis.to_ascii_lowercase().as_str() {
+        "x" => 0,
+        "y" => 1,
+        "z" => 2,
+        other => {
+            return Err(Error::invalid(
+                "--axis",
+                format!("'{other}' is not x, y or z"),
+            ))
+        }
+    };
+    let index = a.index.unwrap_or(vol.dims()[axis] / 2);
+    let frame = vol.slice(axis, index)?;
+    let range = match (a.window, a.level) {
+        (Some(w), Some(l)) if w > 0.0 && w.is_finite() && l.is_finite() => {
+            (l - 0.5 * w, l + 0.5 * w)
+        }
+        (Some(_), Some(_)) => {
+            return Err(Error::invalid("--window", "must be positive and finite"));
+        }
+        _ => {
+            let r = vol.value_range();
+            (r.min, r.max)
+        }
+    };
+    frame.save(
+        &a.out,
+        PngOptions {
+            sixteen_bit: a.sixteen_bit,
+            range: Some(range),
+        },
+    )?;
+    println!(
+        "wrote {} ({}×{}, axis {} index {index}, gray {} → black, {} → white)",
+        a.out.display(),
+        frame.width,
+        frame.height,
+        a.axis,
+        range.0,
+        range.1
+    );
     Ok(())
 }
 

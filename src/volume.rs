@@ -550,6 +550,41 @@ impl AnyVolume {
     pub fn crop(&self, lo: [usize; 3], hi: [usize; 3]) -> Result<AnyVolume> {
         Ok(with_volume!(self, v => v.crop(lo, hi)?.into()))
     }
+    /// An axis-aligned slice as a scalar frame, laid out as NumPy lays out the slice of
+    /// the `(nz, ny, nx)` array: `axis` 2 (z) at `index` k is `a[k, :, :]` (rows y,
+    /// columns x), axis 1 (y) is `a[:, j, :]` (rows z, columns x), axis 0 (x) is
+    /// `a[:, :, i]` (rows z, columns y). Row 0 is the top of the image.
+    pub fn slice(&self, axis: usize, index: usize) -> Result<crate::frame::Frame> {
+        let d = self.dims();
+        if axis > 2 || index >= d[axis] {
+            return Err(Error::invalid(
+                "slice",
+                format!(
+                    "index {index} on axis {} is outside the volume's {} voxels",
+                    ["x", "y", "z"][axis.min(2)],
+                    d[axis.min(2)]
+                ),
+            ));
+        }
+        let vals = self.values_f64();
+        let at = |i: usize, j: usize, k: usize| vals[i + d[0] * (j + d[1] * k)];
+        let (w, h) = match axis {
+            2 => (d[0], d[1]),
+            1 => (d[0], d[2]),
+            _ => (d[1], d[2]),
+        };
+        let mut f = crate::frame::Frame::new(w, h, 1);
+        for row in 0..h {
+            for col in 0..w {
+                f.data[row * w + col] = match axis {
+                    2 => at(col, row, index),
+                    1 => at(col, index, row),
+                    _ => at(index, col, row),
+                };
+            }
+        }
+        Ok(f)
+    }
     /// Converts to another voxel type (rounding and saturating into integer types).
     pub fn convert_to(&self, kind: VoxelKind) -> AnyVolume {
         with_volume!(self, v => match kind {

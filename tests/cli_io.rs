@@ -237,3 +237,78 @@ fn info_reports_format_orientation_and_draws_a_plot() {
     // Bars are drawn: some pixels are the bar colour.
     assert!(img.pixels().any(|p| p.0[2] > 200 && p.0[0] < 160));
 }
+
+#[test]
+fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
+    let d = scratch("slice");
+    let p = raw_file(&d);
+    let raw = [
+        "--raw-dims",
+        "5,4,3",
+        "--raw-type",
+        "u16",
+        "--raw-endian",
+        "big",
+        "--raw-offset",
+        "10",
+    ];
+    let value = |i: usize, j: usize, k: usize| (i + 10 * j + 100 * k) as f32;
+    // a[k=1, :, :] as float32 .npy: rows y, columns x.
+    let npy = d.join("z1.npy");
+    let mut args = vec![
+        "slice",
+        s(&p),
+        "--axis",
+        "z",
+        "--index",
+        "1",
+        "--out",
+        s(&npy),
+    ];
+    args.extend(raw);
+    ok(&voxlab(&args));
+    let (shape, vals) = voxlab::io::npy::read_npy_f32(&npy).unwrap();
+    assert_eq!(shape, vec![4, 5]);
+    for (n, v) in vals.iter().enumerate() {
+        assert_eq!(*v, value(n % 5, n / 5, 1));
+    }
+    // a[:, :, i=3] as 16-bit PNG with the window [0, 65535]: pixel = value exactly.
+    let png = d.join("x3.png");
+    let mut args = vec![
+        "slice",
+        s(&p),
+        "--axis",
+        "x",
+        "--index",
+        "3",
+        "--sixteen-bit",
+        "--window",
+        "65535",
+        "--level",
+        "32767.5",
+        "--out",
+        s(&png),
+    ];
+    args.extend(raw);
+    ok(&voxlab(&args));
+    let img = image::open(&png).unwrap().to_luma16();
+    assert_eq!(img.dimensions(), (4, 3));
+    for (col, row, px) in img.enumerate_pixels() {
+        assert_eq!(px.0[0] as f32, value(3, col as usize, row as usize));
+    }
+    // Out of range.
+    let mut args = vec![
+        "slice",
+        s(&p),
+        "--axis",
+        "y",
+        "--index",
+        "4",
+        "--out",
+        s(&png),
+    ];
+    args.extend(raw);
+    let o = voxlab(&args);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("outside the volume"));
+}
