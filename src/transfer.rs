@@ -82,6 +82,7 @@ pub const PRESETS: &[(&str, &str)] = &[
     ),
     ("ct-vessels", include_str!("../data/tf/ct-vessels.json")),
     ("mri-brain", include_str!("../data/tf/mri-brain.json")),
+    ("microct-bone", include_str!("../data/tf/microct-bone.json")),
     ("phantom", include_str!("../data/tf/phantom.json")),
     (
         "marschner-lobb",
