@@ -498,6 +498,24 @@ mod tests {
     }
 
     #[test]
+    fn dds_files_by_name() {
+        let dir = std::env::temp_dir().join(format!("voxlab-pvm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut plain = b"PVM3\n3 2 1\n0.5 0.5 1\n2\n".to_vec();
+        plain.extend((0..12u8).map(|i| i * 19));
+        plain.extend(b"desc\0\0\0\0");
+        for (i, per_block) in [false, true].into_iter().enumerate() {
+            let p = dir.join(format!("c{i}.pvm"));
+            std::fs::write(&p, dds_encode(&plain, 2, 3, per_block)).unwrap();
+            assert_eq!(
+                crate::io::read_volume(&p).unwrap(),
+                read_pvm_bytes(&plain, &p).unwrap()
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn bad_files() {
         let p = Path::new("t.pvm");
         let field = |bytes: &[u8]| match read_pvm_bytes(bytes, p).unwrap_err() {
