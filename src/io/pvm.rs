@@ -204,7 +204,7 @@ fn from_plain(reader: &mut dyn Read, file_len: u64, path: &Path) -> Result<AnyVo
         }
     };
     let n = check_dims(dims).map_err(|e| Error::format(path, "dimensions", e.to_string()))?;
-    let expected = n as u64 * size;
+    let expected = (n as u64).saturating_mul(size);
     let available = file_len.saturating_sub(consumed);
     if available < expected {
         return Err(too_short(path, expected, available));
