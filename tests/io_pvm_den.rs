@@ -276,3 +276,56 @@ fn pvm_truncations_and_garbage_give_errors_not_panics() {
         let _ = read_pvm_bytes(&m, p);
     }
 }
+
+/// The plain PVM files that tests/data/pvm/*.pvm hold DDS-compressed (see the README
+/// there): `ramp16` is PVM3 16-bit with trailing strings, `ramp8` PVM2 8-bit.
+fn ramp16_plain() -> Vec<u8> {
+    let mut out = b"PVM3\n12 10 6\n0.5 0.75 1.25\n2\n".to_vec();
+    for k in 0..6u32 {
+        for j in 0..10u32 {
+            for i in 0..12u32 {
+                let v = 1000 + 37 * i + 11 * j * j + 300 * k + ((7 * i + 13 * j + 29 * k) % 5) * 50;
+                out.extend((v as u16).to_be_bytes());
+            }
+        }
+    }
+    out.extend(b"ramp\0\0\0\0");
+    out
+}
+
+fn ramp8_plain() -> Vec<u8> {
+    let mut out = b"PVM2\n16 8 5\n1 1 2\n1\n".to_vec();
+    for k in 0..5u32 {
+        for j in 0..8u32 {
+            for i in 0..16u32 {
+                out.push(((i * i + 3 * j + 17 * k + ((i * j * k) % 7) * 9) % 256) as u8);
+            }
+        }
+    }
+    out
+}
+
+/// Files compressed by the reference DDS encoder decode to the plain files.
+#[test]
+fn dds_files_from_the_reference_encoder() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/pvm");
+    let p16 = dir.join("ramp16_v3d.pvm");
+    assert!(std::fs::read(&p16).unwrap().starts_with(b"DDS v3d\n"));
+    let v = read_volume(&p16).unwrap();
+    assert_eq!(v, read_pvm_bytes(&ramp16_plain(), &p16).unwrap());
+    assert_eq!((v.kind(), v.dims()), (VoxelKind::U16, [12, 10, 6]));
+    assert_eq!(v.spacing(), [0.5, 0.75, 1.25]);
+    assert_eq!(
+        v.values_f64()[1 + 12 * 2 + 120 * 3],
+        1000.0 + 37.0 + 44.0 + 900.0 + 50.0 * ((7 + 26 + 87) % 5) as f64
+    );
+
+    let p8 = dir.join("ramp8_v3e.pvm");
+    assert!(std::fs::read(&p8).unwrap().starts_with(b"DDS v3e\n"));
+    let v = read_pvm(&p8).unwrap();
+    assert_eq!(v, read_pvm_bytes(&ramp8_plain(), &p8).unwrap());
+    assert_eq!(
+        (v.kind(), v.dims(), v.spacing()),
+        (VoxelKind::U8, [16, 8, 5], [1.0, 1.0, 2.0])
+    );
+}
