@@ -705,6 +705,67 @@ fn nibabel_fixtures_match() {
     }
 }
 
+/// Files written by voxlab read back in nibabel with the same affine (from the sform
+/// and from the qform, which includes a reflection here) and values. Runs when a Python
+/// with nibabel is available: `$VOXLAB_PYTHON`, else `python3`.
+#[test]
+fn written_files_read_in_nibabel_when_available() {
+    let dir = scratch("to_nibabel");
+    let affine = f32_affine() * DMat4::from_scale(DVec3::new(1.0, -1.0, 1.0));
+    let values: Vec<i16> = (0..60).map(|i| (i * 97 % 1000 - 500) as i16).collect();
+    let v: AnyVolume = Volume::with_affine([5, 4, 3], affine, values.clone())
+        .unwrap()
+        .into();
+    let path = dir.join("w.nii.gz");
+    write_nifti(&path, &v).unwrap();
+    let script = format!(
+        "import json, nibabel as nib, numpy as np; img = nib.load(r'{}'); \
+         d = np.asarray(img.dataobj); \
+         print(json.dumps({{'affine': img.affine.tolist(), 'qform': img.get_qform().tolist(), \
+         'codes': [int(img.header['qform_code']), int(img.header['sform_code'])], \
+         'dtype': str(d.dtype), 'shape': list(d.shape), \
+         'values': d.ravel(order='F').astype(float).tolist()}}))",
+        path.display()
+    );
+    let python = std::env::var("VOXLAB_PYTHON").unwrap_or_else(|_| "python3".into());
+    let out = std::process::Command::new(python)
+        .args(["-c", &script])
+        .stderr(std::process::Stdio::null())
+        .output();
+    let out = match out {
+        Ok(o) if o.status.success() => o.stdout,
+        _ => {
+            println!("note: no Python with nibabel; nibabel read-back test skipped");
+            return;
+        }
+    };
+    let e: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    let matrix = |key: &str| {
+        let mut m = [0.0; 16];
+        for (r, row) in e[key].as_array().unwrap().iter().enumerate() {
+            for (c, x) in row.as_array().unwrap().iter().enumerate() {
+                m[c * 4 + r] = x.as_f64().unwrap();
+            }
+        }
+        DMat4::from_cols_array(&m)
+    };
+    assert_eq!(matrix("affine"), affine);
+    assert_affine_near(matrix("qform"), affine, 1e-5);
+    assert_eq!(e["codes"], serde_json::json!([2, 2]));
+    assert_eq!(e["dtype"], "int16");
+    assert_eq!(e["shape"], serde_json::json!([5, 4, 3]));
+    let got: Vec<f64> = e["values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!(
+        got,
+        values.iter().map(|&x| f64::from(x)).collect::<Vec<_>>()
+    );
+}
+
 /// The Colin27 average brain (ch2.nii.gz, from Debian's mricron-data). Expected
 /// numbers from nibabel 5: `img = nib.load(...)`; `img.shape` = (181, 217, 181),
 /// dtype uint8, sform_code 4, `img.affine` = [[1,0,0,-90],[0,1,0,-125],[0,0,1,-71]];
