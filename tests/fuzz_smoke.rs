@@ -10,7 +10,13 @@ use std::path::{Path, PathBuf};
 use voxlab::io::{read_volume_bytes, Format};
 
 /// The formats with an in-memory reader, and the folder of their seeds.
-const FORMATS: &[(Format, &str)] = &[(Format::Nrrd, "nrrd"), (Format::Npy, "npy")];
+const FORMATS: &[(Format, &str)] = &[
+    (Format::Nrrd, "nrrd"),
+    (Format::Npy, "npy"),
+    (Format::Nifti, "nifti"),
+    (Format::Pvm, "pvm"),
+    (Format::Den, "den"),
+];
 
 /// Mutations per seed.
 const MUTATIONS: usize = 10_000;

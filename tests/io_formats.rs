@@ -187,7 +187,7 @@ fn npy_round_trips_every_type() {
 fn read_and_write_volume_dispatch_on_extension() {
     let dir = scratch("dispatch");
     let vol = &sample_volumes()[2];
-    for name in ["a.nrrd", "b.NHDR", "c.npy"] {
+    for name in ["a.nrrd", "b.NHDR", "c.npy", "d.nii", "e.nii.gz"] {
         let path = dir.join(name);
         write_volume(&path, vol).unwrap();
         let back = read_volume(&path).unwrap();
@@ -199,16 +199,23 @@ fn read_and_write_volume_dispatch_on_extension() {
     assert!(header.contains("data file: b.raw.gz"), "{header}");
     assert!(header.contains("encoding: gzip"), "{header}");
 
-    for bad in ["x.nii", "x", "x.raw"] {
-        let e = read_volume(&dir.join(bad)).unwrap_err();
+    // Existing files in no format voxlab knows (by magic or extension): the error
+    // lists the formats; a raw file asks for its description.
+    for (bad, words) in [("x.xyz", ".nrrd"), ("x", ".npy"), ("x.raw", "--raw-dims")] {
+        let path = dir.join(bad);
+        std::fs::write(&path, b"just some bytes, not a volume").unwrap();
+        let e = read_volume(&path).unwrap_err();
         assert!(matches!(e, Error::Invalid { .. }), "{e}");
-        assert!(
-            e.to_string().contains(".nrrd") && e.to_string().contains(".npy"),
-            "{e}"
-        );
+        assert!(e.to_string().contains(words), "{e}");
         let e = write_volume(&dir.join(bad), vol).unwrap_err();
         assert!(matches!(e, Error::Invalid { .. }), "{e}");
     }
+    // The magic number wins over the extension: a NIfTI file named .dat reads.
+    std::fs::copy(dir.join("d.nii"), dir.join("renamed.dat")).unwrap();
+    assert_eq!(
+        bits(&read_volume(&dir.join("renamed.dat")).unwrap()),
+        bits(vol)
+    );
     let e = read_volume(&dir.join("missing.nrrd")).unwrap_err();
     assert!(matches!(e, Error::Io { .. }), "{e}");
 }

@@ -108,7 +108,8 @@ pub fn detect_format(path: &Path) -> Result<Format> {
         Some("nrrd") | Some("nhdr") => Format::Nrrd,
         Some("npy") => Format::Npy,
         Some("nii") => Format::Nifti,
-        Some("gz") if name.ends_with(".nii.gz") => Format::Nifti,
+        Some("hdr") => Format::Nifti,
+        Some("gz") if name.ends_with(".nii.gz") || name.ends_with(".hdr.gz") => Format::Nifti,
         Some("dcm") | Some("dicom") => Format::Dicom,
         Some("pvm") => Format::Pvm,
         Some("den") => Format::Den,
@@ -182,6 +183,9 @@ pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<An
     match format {
         Format::Nrrd => nrrd::read_nrrd_bytes(bytes, path),
         Format::Npy => npy::read_npy_bytes(bytes, path),
+        Format::Nifti => nifti::read_nifti_bytes(bytes, path),
+        Format::Pvm => pvm::read_pvm_bytes(bytes, path),
+        Format::Den => den::read_den_bytes(bytes, path),
         other => Err(Error::invalid(
             "in-memory volume",
             format!("{} files are read from disk only", other.name()),

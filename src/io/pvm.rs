@@ -74,7 +74,7 @@ pub fn read_pvm(path: &Path) -> Result<AnyVolume> {
             .read_to_end(&mut rest)
             .map_err(|e| read_error(path, e))?;
         let decoded = dds_decode(&rest, head[..] == *DDS_V3E, path)?;
-        return from_plain(&mut &decoded[..], decoded.len() as u64, path);
+        return from_decoded(&decoded, path);
     }
     from_plain(&mut (&head[..got]).chain(reader), len, path)
 }
@@ -84,9 +84,25 @@ pub fn read_pvm(path: &Path) -> Result<AnyVolume> {
 pub fn read_pvm_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
     if is_dds(bytes) {
         let decoded = dds_decode(&bytes[DDS_V3D.len()..], bytes.starts_with(DDS_V3E), path)?;
-        return from_plain(&mut &decoded[..], decoded.len() as u64, path);
+        return from_decoded(&decoded, path);
     }
     from_plain(&mut &bytes[..], bytes.len() as u64, path)
+}
+
+/// Reads the PVM file that DDS decompression gave, saying so in its errors.
+fn from_decoded(decoded: &[u8], path: &Path) -> Result<AnyVolume> {
+    from_plain(&mut &decoded[..], decoded.len() as u64, path).map_err(|e| match e {
+        Error::Format {
+            path,
+            field,
+            message,
+        } => Error::Format {
+            path,
+            field,
+            message: format!("in the DDS-decompressed data: {message}"),
+        },
+        other => other,
+    })
 }
 
 fn is_dds(head: &[u8]) -> bool {

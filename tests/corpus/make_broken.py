@@ -75,6 +75,57 @@ put("npy-header-past-end.npy", b"\x93NUMPY\x01\x00\xff\xff{'descr'", "format", "
 put("npy-4d.npy", npy("{'descr': '|u1', 'fortran_order': False, 'shape': (1, 2, 2, 2), }", bytes(8)),
     "format", "shape", "")
 
+
+# --- NIfTI-1 ----------------------------------------------------------------------
+def nifti(dims=(4, 4, 4), datatype=2, bitpix=8, sizeof_hdr=348, magic=b"n+1\0", vox_offset=352.0,
+          data=None, endian="<"):
+    h = bytearray(348)
+    struct.pack_into(endian + "i", h, 0, sizeof_hdr)
+    dim = [len(dims)] + list(dims) + [1] * (7 - len(dims))
+    struct.pack_into(endian + "8h", h, 40, *dim)
+    struct.pack_into(endian + "hh", h, 70, datatype, bitpix)
+    struct.pack_into(endian + "8f", h, 76, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    struct.pack_into(endian + "f", h, 108, vox_offset)
+    struct.pack_into(endian + "f", h, 112, 1.0)  # scl_slope
+    h[344:348] = magic
+    if data is None:
+        n = 1
+        for d in dims:
+            n *= d
+        data = bytes(n * bitpix // 8)
+    return bytes(h) + bytes(4) + data
+
+
+put("nifti-truncated.nii", nifti(data=bytes(63)), "format", "data", "")
+put("nifti-bad-sizeof-hdr.nii", nifti(sizeof_hdr=349), "format", "sizeof_hdr", "")
+put("nifti-4d.nii", nifti(dims=(2, 2, 2, 3)), "format", "dim", "")
+put("nifti-complex.nii", nifti(datatype=32, bitpix=64), "format", "datatype", "")
+put("nifti-bitpix-mismatch.nii", nifti(datatype=4, bitpix=8), "format", "bitpix", "")
+put("nifti-over-voxel-limit.nii", nifti(dims=(32767, 32767, 32767), data=bytes(16)), "format", "dim", "")
+put("nifti-vox-offset-past-end.nii", nifti(vox_offset=1e9), "format", "vox_offset", "")
+put("nifti-corrupt-gzip.nii.gz", b"\x1f\x8b\x08\x00" + b"not deflate at all" * 4, "format", "", "")
+
+# --- PVM --------------------------------------------------------------------------
+put("pvm-truncated.pvm", b"PVM\n4 4 4\n1\n" + bytes(40), "format", "data", "")
+put("pvm-rgb.pvm", b"PVM2\n2 2 2\n1 1 1\n3\n" + bytes(24), "format", "components", "")
+put("pvm-zero-dims.pvm", b"PVM\n0 4 4\n1\n", "format", "", "")
+put("pvm-negative-spacing.pvm", b"PVM2\n2 2 2\n1 -1 1\n1\n" + bytes(8), "format", "", "")
+put("pvm-dds-garbage.pvm", b"DDS v3d\n" + bytes(5), "format", "", "DDS")
+
+# --- VolPack .den -----------------------------------------------------------------
+def den(dims=(3, 2, 2), length=None, version=1, data=None):
+    h = struct.pack("<h", version)
+    for arr in ([0, 0, 0], [d - 1 for d in dims], list(dims)) * 3:
+        h += struct.pack("<3h", *arr)
+    n = dims[0] * dims[1] * dims[2]
+    h += struct.pack("<h", 0) + struct.pack("<i", n if length is None else length)
+    return h + (bytes(n) if data is None else data)
+
+
+put("den-truncated.den", den(data=bytes(5)), "format", "data", "")
+put("den-bad-length.den", den(length=13), "format", "map_length", "")
+put("den-bad-version.den", den(version=7), "format", "", "")
+
 with open(os.path.join(HERE, "EXPECTED.tsv"), "w") as f:
     f.write("# file\terror kind\tfield (empty: any)\twords the message must contain (empty: none)\n")
     for row in expected:
