@@ -473,6 +473,31 @@ fn multi_frame_without_positions_uses_thickness_and_float_rescale() {
 }
 
 #[test]
+fn bits_stored_are_masked_and_sign_extended() {
+    let dir = scratch("bits");
+    let path = dir.join("signed12.dcm");
+    // 12 stored bits, signed: 0x0FFF is -1, 0x0800 is -2048, 0x07FF is 2047; the bits
+    // above the high bit (set in the first two words) are ignored.
+    let words: Vec<u16> = vec![0xF000 | 5, 0xFFFF, 0x0800, 0x07FF, 0, 1, 2, 3, 4, 5, 6, 7];
+    write_synthetic(
+        &path,
+        1,
+        vec![
+            DataElement::new(
+                tags::PIXEL_REPRESENTATION,
+                VR::US,
+                PrimitiveValue::from(1u16),
+            ),
+            DataElement::new(tags::PIXEL_DATA, VR::OW, PrimitiveValue::U16(words.into())),
+        ],
+    );
+    let AnyVolume::I16(v) = read_dicom(&path).unwrap() else {
+        panic!("expected i16")
+    };
+    assert_eq!(&v.data()[..6], &[5, -1, -2048, 2047, 0, 1]);
+}
+
+#[test]
 fn colour_is_refused() {
     let dir = scratch("colour");
     let path = dir.join("rgb.dcm");

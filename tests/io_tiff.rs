@@ -234,10 +234,10 @@ fn truncated_and_garbage_are_errors() {
 
 #[test]
 fn page_count_is_checked_against_the_voxel_limit() {
-    // A 1000 x 1000 page times 3 pages exceeds a limit of 2.5 million voxels (the bundled 128³ stack, read
-    // concurrently, stays below it); refused
-    // without decoding. (The limit is process-wide: this is the only test here that
-    // sets it, and it restores it.)
+    // A 1000 x 1000 page times 3 pages exceeds a limit of 2.5 million voxels;
+    // refused without decoding. The limit is process-wide: this is the only test here
+    // that sets it, it restores it, and the other stacks read meanwhile (the bundled
+    // 128³ one included) stay below it.
     let dir = scratch("limit");
     let p = dir.join("big.tif");
     let page = vec![0u8; 1000 * 1000];
