@@ -332,6 +332,13 @@ fn list<T: std::str::FromStr, const N: usize>(s: &str) -> std::result::Result<[T
 }
 
 fn main() -> ExitCode {
+    // Die quietly when stdout is a closed pipe (`voxlab info … | head`), as command-line
+    // tools do, instead of failing on the write.
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => code,
