@@ -195,7 +195,12 @@ fn bad_input_gets_a_clear_error_and_no_output() {
             vec!["render", s(&truncated), "--out", s(&out)],
             "truncated.nrrd",
         ),
-        (vec!["render", s(&nan), "--out", s(&out)], "non-finite"),
+        // NaN voxels are replaced by default (tests/cli_io.rs checks the values);
+        // --non-finite error refuses them.
+        (
+            vec!["render", s(&nan), "--non-finite", "error", "--out", s(&out)],
+            "non-finite",
+        ),
         (
             vec!["render", "phantom:nope:8", "--out", s(&out)],
             "not one of",
