@@ -240,6 +240,22 @@ fn garbage_and_truncated_files_are_errors() {
     assert!(e.contains("not a DICOM file"), "{e}");
 }
 
+#[test]
+fn truncated_headers_never_panic() {
+    // Truncations every 19 bytes through the header (the pixel data starts at byte
+    // ~1800): every outcome is an error, never a panic. (Random byte flips are not
+    // tested here: a corrupted length field makes the parser allocate and zero up to
+    // 4 GiB before it fails, which takes seconds; it fails cleanly.)
+    let dir = scratch("corrupt");
+    let path = dir.join("c.dcm");
+    let bytes = std::fs::read(root().join(CORPUS).join("implicit_little.dcm")).unwrap();
+    let cases: Vec<&[u8]> = (0..1900).step_by(19).map(|n| &bytes[..n]).collect();
+    for b in cases {
+        std::fs::write(&path, b).unwrap();
+        assert!(read_dicom(&path).is_err());
+    }
+}
+
 // ---------------------------------------------------------------------------------
 // Single files in several transfer syntaxes
 // ---------------------------------------------------------------------------------
