@@ -514,6 +514,42 @@ fn bits_stored_are_masked_and_sign_extended() {
 }
 
 #[test]
+fn absurd_frame_count_is_refused_before_allocating() {
+    let dir = scratch("frames");
+    let path = dir.join("many.dcm");
+    write_synthetic(
+        &path,
+        1,
+        vec![DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from("999999999999"),
+        )],
+    );
+    match read_dicom(&path) {
+        Err(e @ Error::TooLarge { .. }) => {
+            assert!(
+                e.to_string().contains("many.dcm") && e.to_string().contains("voxels"),
+                "{e}"
+            )
+        }
+        other => panic!("expected TooLarge, got {other:?}"),
+    }
+    // A frame count the pixel data does not hold is a short-data error.
+    write_synthetic(
+        &path,
+        1,
+        vec![DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from("3"),
+        )],
+    );
+    let e = format_err(read_dicom(&path));
+    assert!(e.contains("too short"), "{e}");
+}
+
+#[test]
 fn colour_is_refused() {
     let dir = scratch("colour");
     let path = dir.join("rgb.dcm");

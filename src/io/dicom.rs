@@ -713,6 +713,16 @@ fn same_plane(a: &Plane, b: &Plane) -> std::result::Result<(), &'static str> {
 /// Turns the images into slices and geometry, and decodes the voxels.
 fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
     let first = &images[0];
+    // Refuse absurd sizes (NumberOfFrames can claim anything) before building slices.
+    let frames = images
+        .iter()
+        .fold(0usize, |acc, im| acc.saturating_add(im.px.frames));
+    check_dims([first.px.cols, first.px.rows, frames]).map_err(|e| match e {
+        Error::TooLarge { message, .. } => {
+            Error::too_large(format!("DICOM volume {}", first.path.display()), message)
+        }
+        e => e,
+    })?;
     let plane;
     let mut slices = Vec::new();
     let mut fallback_dz = None;
