@@ -466,6 +466,40 @@ fn multi_frame_positions_from_functional_groups() {
 }
 
 #[test]
+fn multi_frame_with_mixed_orientations_is_refused() {
+    let dir = scratch("multiframe-mixed");
+    let path = dir.join("mf.dcm");
+    let per_frame: Vec<InMemDicomObject> = [("0", "1\\0\\0\\0\\1\\0"), ("5", "0\\1\\0\\1\\0\\0")]
+        .iter()
+        .map(|(z, iop)| {
+            item(vec![
+                seq(
+                    tags::PLANE_POSITION_SEQUENCE,
+                    vec![item(vec![ds(
+                        tags::IMAGE_POSITION_PATIENT,
+                        &format!("0\\0\\{z}"),
+                    )])],
+                ),
+                seq(
+                    tags::PLANE_ORIENTATION_SEQUENCE,
+                    vec![item(vec![ds(tags::IMAGE_ORIENTATION_PATIENT, iop)])],
+                ),
+            ])
+        })
+        .collect();
+    write_synthetic(
+        &path,
+        2,
+        vec![seq(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, per_frame)],
+    );
+    let e = format_err(read_dicom(&path));
+    assert!(
+        e.contains("frame 2") && e.contains("ImageOrientationPatient"),
+        "{e}"
+    );
+}
+
+#[test]
 fn multi_frame_without_positions_uses_thickness_and_float_rescale() {
     let dir = scratch("multiframe-plain");
     let path = dir.join("mf.dcm");

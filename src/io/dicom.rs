@@ -737,15 +737,16 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
             .flatten()
             .and_then(|e| e.items())
             .unwrap_or(&[]);
-        let group = |frame: Option<usize>, seq: Tag| -> Option<&InMemDicomObject> {
-            frame
-                .and_then(|f| per_frame.get(f))
+        // The item of a functional group sequence for a frame: its own, else the shared.
+        let group = |frame: usize, seq: Tag| -> Option<&InMemDicomObject> {
+            per_frame
+                .get(frame)
                 .and_then(|g| first_item(g, seq))
                 .or_else(|| shared.and_then(|g| first_item(g, seq)))
         };
         // Orientation and spacing: frame 0's groups, the shared groups, the top level.
-        let orient_src = group(Some(0), tags::PLANE_ORIENTATION_SEQUENCE).unwrap_or(obj);
-        let measures = group(Some(0), tags::PIXEL_MEASURES_SEQUENCE);
+        let orient_src = group(0, tags::PLANE_ORIENTATION_SEQUENCE).unwrap_or(obj);
+        let measures = group(0, tags::PIXEL_MEASURES_SEQUENCE);
         let mut p = plane_of(path, orient_src)?;
         if p.orientation.is_none() {
             p.orientation = plane_of(path, obj)?.orientation;
@@ -776,11 +777,32 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                 Some(g) => position(path, g)?,
                 None => None,
             };
-            let rs = match group(Some(f), tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE) {
+            let rs = match group(f, tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE) {
                 Some(g) => rescale(path, g)?.or(top_rescale),
                 None => top_rescale,
             };
             let (slope, intercept) = rs.unwrap_or((1.0, 0.0));
+            // Every frame must share frame 1's orientation and pixel spacing.
+            for seq in [
+                tags::PLANE_ORIENTATION_SEQUENCE,
+                tags::PIXEL_MEASURES_SEQUENCE,
+            ] {
+                if let Some(g) = per_frame.get(f).and_then(|g| first_item(g, seq)) {
+                    let mut own = plane_of(path, g)?;
+                    own.orientation = own.orientation.or(plane.orientation);
+                    own.spacing = own.spacing.or(plane.spacing);
+                    if let Err(field) = same_plane(&own, &plane) {
+                        return Err(Error::format(
+                            path,
+                            field,
+                            format!(
+                                "mixed sizes: frame {} has a different {field} from frame 1",
+                                f + 1
+                            ),
+                        ));
+                    }
+                }
+            }
             slices.push(Slice {
                 image: 0,
                 frame: f,
