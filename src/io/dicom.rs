@@ -39,7 +39,8 @@
 //!   come from PerFrameFunctionalGroupsSequence → PlanePositionSequence →
 //!   ImagePositionPatient; orientation and pixel spacing from the per-frame or the
 //!   SharedFunctionalGroupsSequence (PlaneOrientationSequence, PixelMeasuresSequence),
-//!   else from the top-level attributes. When every frame has a position, frames are
+//!   else from the top-level attributes; a frame with its own orientation or pixel
+//!   spacing must match frame 1. When every frame has a position, frames are
 //!   sorted and checked like a series. Otherwise frames are taken in file order with
 //!   the spacing given by SpacingBetweenSlices, else SliceThickness, else 1 mm.
 //!   A directory may hold one multi-frame file, but not a multi-frame file mixed
