@@ -240,6 +240,22 @@ fn garbage_and_truncated_files_are_errors() {
     assert!(e.contains("not a DICOM file"), "{e}");
 }
 
+#[test]
+fn truncated_headers_never_panic() {
+    // Truncations every 19 bytes through the header (the pixel data starts at byte
+    // ~1800): every outcome is an error, never a panic. (Random byte flips are not
+    // tested here: a corrupted length field makes the parser allocate and zero up to
+    // 4 GiB before it fails, which takes seconds; it fails cleanly.)
+    let dir = scratch("corrupt");
+    let path = dir.join("c.dcm");
+    let bytes = std::fs::read(root().join(CORPUS).join("implicit_little.dcm")).unwrap();
+    let cases: Vec<&[u8]> = (0..1900).step_by(19).map(|n| &bytes[..n]).collect();
+    for b in cases {
+        std::fs::write(&path, b).unwrap();
+        assert!(read_dicom(&path).is_err());
+    }
+}
+
 // ---------------------------------------------------------------------------------
 // Single files in several transfer syntaxes
 // ---------------------------------------------------------------------------------
@@ -450,6 +466,40 @@ fn multi_frame_positions_from_functional_groups() {
 }
 
 #[test]
+fn multi_frame_with_mixed_orientations_is_refused() {
+    let dir = scratch("multiframe-mixed");
+    let path = dir.join("mf.dcm");
+    let per_frame: Vec<InMemDicomObject> = [("0", "1\\0\\0\\0\\1\\0"), ("5", "0\\1\\0\\1\\0\\0")]
+        .iter()
+        .map(|(z, iop)| {
+            item(vec![
+                seq(
+                    tags::PLANE_POSITION_SEQUENCE,
+                    vec![item(vec![ds(
+                        tags::IMAGE_POSITION_PATIENT,
+                        &format!("0\\0\\{z}"),
+                    )])],
+                ),
+                seq(
+                    tags::PLANE_ORIENTATION_SEQUENCE,
+                    vec![item(vec![ds(tags::IMAGE_ORIENTATION_PATIENT, iop)])],
+                ),
+            ])
+        })
+        .collect();
+    write_synthetic(
+        &path,
+        2,
+        vec![seq(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, per_frame)],
+    );
+    let e = format_err(read_dicom(&path));
+    assert!(
+        e.contains("frame 2") && e.contains("ImageOrientationPatient"),
+        "{e}"
+    );
+}
+
+#[test]
 fn multi_frame_without_positions_uses_thickness_and_float_rescale() {
     let dir = scratch("multiframe-plain");
     let path = dir.join("mf.dcm");
@@ -495,6 +545,42 @@ fn bits_stored_are_masked_and_sign_extended() {
         panic!("expected i16")
     };
     assert_eq!(&v.data()[..6], &[5, -1, -2048, 2047, 0, 1]);
+}
+
+#[test]
+fn absurd_frame_count_is_refused_before_allocating() {
+    let dir = scratch("frames");
+    let path = dir.join("many.dcm");
+    write_synthetic(
+        &path,
+        1,
+        vec![DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from("999999999999"),
+        )],
+    );
+    match read_dicom(&path) {
+        Err(e @ Error::TooLarge { .. }) => {
+            assert!(
+                e.to_string().contains("many.dcm") && e.to_string().contains("voxels"),
+                "{e}"
+            )
+        }
+        other => panic!("expected TooLarge, got {other:?}"),
+    }
+    // A frame count the pixel data does not hold is a short-data error.
+    write_synthetic(
+        &path,
+        1,
+        vec![DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from("3"),
+        )],
+    );
+    let e = format_err(read_dicom(&path));
+    assert!(e.contains("too short"), "{e}");
 }
 
 #[test]

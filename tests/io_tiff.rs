@@ -233,6 +233,38 @@ fn truncated_and_garbage_are_errors() {
 }
 
 #[test]
+fn corrupted_files_never_panic() {
+    // Random bytes overwritten in a small two-page stack, and random truncations:
+    // every outcome is a volume or an error (no panic, no huge allocation).
+    let dir = scratch("corrupt");
+    let good = dir.join("good.tif");
+    let pages: Vec<Vec<u16>> = (0..2).map(|k| vec![k; 16 * 8]).collect();
+    write_pages::<colortype::Gray16>(&good, 16, 8, &pages);
+    let bytes = std::fs::read(&good).unwrap();
+    let path = dir.join("c.tif");
+    let mut x = 5u64;
+    let mut rnd = || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (x >> 33) as usize
+    };
+    for t in 0..300 {
+        let mut b = bytes.clone();
+        if t % 4 == 0 {
+            b.truncate(rnd() % b.len());
+        } else {
+            for _ in 0..1 + t % 5 {
+                let i = rnd() % b.len();
+                b[i] = rnd() as u8;
+            }
+        }
+        std::fs::write(&path, &b).unwrap();
+        let _ = read_tiff(&path);
+    }
+}
+
+#[test]
 fn page_count_is_checked_against_the_voxel_limit() {
     // A 1000 x 1000 page times 3 pages exceeds a limit of 2.5 million voxels;
     // refused without decoding. The limit is process-wide: this is the only test here

@@ -39,7 +39,8 @@
 //!   come from PerFrameFunctionalGroupsSequence → PlanePositionSequence →
 //!   ImagePositionPatient; orientation and pixel spacing from the per-frame or the
 //!   SharedFunctionalGroupsSequence (PlaneOrientationSequence, PixelMeasuresSequence),
-//!   else from the top-level attributes. When every frame has a position, frames are
+//!   else from the top-level attributes; a frame with its own orientation or pixel
+//!   spacing must match frame 1. When every frame has a position, frames are
 //!   sorted and checked like a series. Otherwise frames are taken in file order with
 //!   the spacing given by SpacingBetweenSlices, else SliceThickness, else 1 mm.
 //!   A directory may hold one multi-frame file, but not a multi-frame file mixed
@@ -713,6 +714,16 @@ fn same_plane(a: &Plane, b: &Plane) -> std::result::Result<(), &'static str> {
 /// Turns the images into slices and geometry, and decodes the voxels.
 fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
     let first = &images[0];
+    // Refuse absurd sizes (NumberOfFrames can claim anything) before building slices.
+    let frames = images
+        .iter()
+        .fold(0usize, |acc, im| acc.saturating_add(im.px.frames));
+    check_dims([first.px.cols, first.px.rows, frames]).map_err(|e| match e {
+        Error::TooLarge { message, .. } => {
+            Error::too_large(format!("DICOM volume {}", first.path.display()), message)
+        }
+        e => e,
+    })?;
     let plane;
     let mut slices = Vec::new();
     let mut fallback_dz = None;
@@ -727,15 +738,16 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
             .flatten()
             .and_then(|e| e.items())
             .unwrap_or(&[]);
-        let group = |frame: Option<usize>, seq: Tag| -> Option<&InMemDicomObject> {
-            frame
-                .and_then(|f| per_frame.get(f))
+        // The item of a functional group sequence for a frame: its own, else the shared.
+        let group = |frame: usize, seq: Tag| -> Option<&InMemDicomObject> {
+            per_frame
+                .get(frame)
                 .and_then(|g| first_item(g, seq))
                 .or_else(|| shared.and_then(|g| first_item(g, seq)))
         };
         // Orientation and spacing: frame 0's groups, the shared groups, the top level.
-        let orient_src = group(Some(0), tags::PLANE_ORIENTATION_SEQUENCE).unwrap_or(obj);
-        let measures = group(Some(0), tags::PIXEL_MEASURES_SEQUENCE);
+        let orient_src = group(0, tags::PLANE_ORIENTATION_SEQUENCE).unwrap_or(obj);
+        let measures = group(0, tags::PIXEL_MEASURES_SEQUENCE);
         let mut p = plane_of(path, orient_src)?;
         if p.orientation.is_none() {
             p.orientation = plane_of(path, obj)?.orientation;
@@ -766,11 +778,32 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                 Some(g) => position(path, g)?,
                 None => None,
             };
-            let rs = match group(Some(f), tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE) {
+            let rs = match group(f, tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE) {
                 Some(g) => rescale(path, g)?.or(top_rescale),
                 None => top_rescale,
             };
             let (slope, intercept) = rs.unwrap_or((1.0, 0.0));
+            // Every frame must share frame 1's orientation and pixel spacing.
+            for seq in [
+                tags::PLANE_ORIENTATION_SEQUENCE,
+                tags::PIXEL_MEASURES_SEQUENCE,
+            ] {
+                if let Some(g) = per_frame.get(f).and_then(|g| first_item(g, seq)) {
+                    let mut own = plane_of(path, g)?;
+                    own.orientation = own.orientation.or(plane.orientation);
+                    own.spacing = own.spacing.or(plane.spacing);
+                    if let Err(field) = same_plane(&own, &plane) {
+                        return Err(Error::format(
+                            path,
+                            field,
+                            format!(
+                                "mixed sizes: frame {} has a different {field} from frame 1",
+                                f + 1
+                            ),
+                        ));
+                    }
+                }
+            }
             slices.push(Slice {
                 image: 0,
                 frame: f,

@@ -148,11 +148,14 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
     }
 }
 
-fn open(path: &Path) -> Result<Decoder<BufReader<File>>> {
+/// Opens a TIFF decoder. `page_bytes` is the size of one decoded page (already checked
+/// against the voxel limit), or 0 while only tags are read; the crate's default
+/// buffer limit (256 MiB, which also bounds the values a tag may claim) is raised to
+/// it, never removed.
+fn open(path: &Path, page_bytes: usize) -> Result<Decoder<BufReader<File>>> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut limits = Limits::default();
-    // Page sizes are checked against the voxel limit before decoding.
-    limits.decoding_buffer_size = usize::MAX;
+    limits.decoding_buffer_size = limits.decoding_buffer_size.max(page_bytes);
     Ok(Decoder::new(BufReader::new(file))
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits))
@@ -203,7 +206,7 @@ fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
     let mut first: Option<([usize; 2], SampleType, PathBuf)> = None;
     let mut pages = 0usize;
     for path in files {
-        let mut dec = open(path)?;
+        let mut dec = open(path, 0)?;
         let mut page = 0;
         loop {
             let (size, ty) = page_info(&mut dec, path, page)?;
@@ -256,17 +259,18 @@ fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
             page += 1;
         }
     }
-    let Some(([w, h], _, first_path)) = first else {
+    let Some(([w, h], first_type, first_path)) = first else {
         return Err(Error::format(what, "file", "no pages"));
     };
     let dims = [w, h, pages];
     let n = check_dims(dims)?;
     let spacing = spacing(&first_path)?;
+    let page_bytes = w * h * (first_type.bits as usize / 8);
 
     // Pass 2: decode, converting each page to the volume's type.
     let mut out: Option<Samples> = None;
     for path in files {
-        let mut dec = open(path)?;
+        let mut dec = open(path, page_bytes)?;
         let mut page = 0;
         loop {
             let data = dec.read_image().map_err(|e| tiff_error(path, e))?;
@@ -391,7 +395,7 @@ fn resolution(dec: &mut Decoder<BufReader<File>>, tag: Tag) -> Option<f64> {
 
 /// The spacing (mm) from the first page of `path`; see the module docs.
 fn spacing(path: &Path) -> Result<[f64; 3]> {
-    let mut dec = open(path)?;
+    let mut dec = open(path, 0)?;
     let desc = match dec.find_tag(Tag::ImageDescription) {
         Ok(Some(v)) => v.into_string().unwrap_or_default(),
         _ => String::new(),
