@@ -313,6 +313,25 @@ fn uncompressed_syntaxes_match_pydicom() {
 }
 
 #[test]
+fn trailing_padding_is_ignored_in_every_native_syntax() {
+    // Bytes after the pixel data that do not parse as elements (zeros in
+    // brain_001.dcm; here a truncated element) must not change the volume. The
+    // explicit VR parsers fail on them and the pixel data is then located by hand
+    // (big endian here, little endian in the MR series); the implicit VR parser stops
+    // quietly.
+    let dir = scratch("padded");
+    for name in ["implicit_little.dcm", "explicit_big.dcm"] {
+        let src = root().join(CORPUS).join(name);
+        let mut bytes = std::fs::read(&src).unwrap();
+        bytes.extend_from_slice(&[0xFF, 0xFF, 0xFF, 0xFF, 0x10, 0x00, 0x00, 0x00, 1, 2, 3]);
+        let p = dir.join(name);
+        std::fs::write(&p, &bytes).unwrap();
+        let padded = read_dicom(&p).unwrap();
+        assert_eq!(padded, read_dicom(&src).unwrap(), "{name}");
+    }
+}
+
+#[test]
 fn compressed_syntaxes_are_refused_clearly() {
     for (name, uid) in [
         ("rle.dcm", "1.2.840.10008.1.2.5"),
