@@ -1,6 +1,8 @@
-//! `voxlab demo`: the main job on an embedded default. Renders a small gallery of the
-//! analytic phantoms in several modes and filters into a folder, with no download and
-//! no flags, and writes an `index.html` and a `README.md` that show them.
+//! `voxlab demo`: the main job on an embedded default. Renders a small gallery into a
+//! folder, with no download and no flags: two real scans embedded in the binary (an
+//! X-ray micro-CT of bone and the classic UNC MR brain, see `data/README.md`) and the
+//! analytic phantoms in several modes and filters; then writes an `index.html` and a
+//! `README.md` that show them.
 
 use crate::camera::{AxisView, Camera, Orbit, Projection};
 use crate::error::{Error, Result};
@@ -17,6 +19,45 @@ pub struct DemoItem {
     pub file: PathBuf,
     pub title: String,
     pub seconds: f64,
+}
+
+/// The X-ray micro-CT of trabecular bone from `data/microct-bone/` (qim3d, MIT), a
+/// 128³ u8 TIFF stack, embedded so that the demo needs no file.
+pub const MICROCT_BONE_TIFF: &[u8] = include_bytes!("../data/microct-bone/bone_128x128x128.tif");
+
+/// The UNC MR brain as shipped with VolPack (`data/mr-brain-volpack/`, 128×128×84 u8).
+pub const MR_BRAIN_DEN: &[u8] = include_bytes!("../data/mr-brain-volpack/brainsmall.den");
+
+/// Reads the embedded micro-CT of bone.
+pub fn microct_bone() -> Result<crate::AnyVolume> {
+    crate::io::read_volume_bytes(
+        MICROCT_BONE_TIFF,
+        crate::io::Format::Tiff,
+        Path::new("data/microct-bone/bone_128x128x128.tif"),
+    )
+}
+
+/// Reads the embedded VolPack MR brain, placed upright in a head frame.
+///
+/// `.den` files carry no orientation; this scan's slices along z are sagittal, with
+/// index x running from the face to the back of the head and index y from the top of
+/// the head down. The demo gives it the affine that maps index x to posterior (−y),
+/// index y to inferior (−z) and index z to +x (a rotation, 1 mm voxels), so that the
+/// orbit camera, whose up is world +z, sees the head upright.
+pub fn mr_brain() -> Result<crate::AnyVolume> {
+    let mut vol = crate::io::read_volume_bytes(
+        MR_BRAIN_DEN,
+        crate::io::Format::Den,
+        Path::new("data/mr-brain-volpack/brainsmall.den"),
+    )?;
+    let upright = glam::DMat4::from_cols(
+        glam::DVec4::new(0.0, -1.0, 0.0, 0.0),
+        glam::DVec4::new(0.0, 0.0, -1.0, 0.0),
+        glam::DVec4::new(1.0, 0.0, 0.0, 0.0),
+        glam::DVec4::W,
+    );
+    crate::with_volume!(&mut vol, v => v.set_affine(upright))?;
+    Ok(vol)
 }
 
 /// The `marschner-lobb` preset: a soft iso-surface near 0.5, the classic way to
@@ -78,7 +119,51 @@ pub fn run_demo(
         png: PngOptions,
     }
     let base = RenderSettings::default();
+    let bone_vol = microct_bone()?;
+    let brain_vol = mr_brain()?;
+    let mut brain_tf = TransferFunction::preset("mri-brain")?;
+    // The mri-brain preset's domain is [0, 1]; this 8-bit scan's tissue lies in 0…140.
+    brain_tf.window = crate::transfer::WindowMap::from_window_level(140.0, 70.0, brain_tf.domain)?;
+    // `distance` is in half-extents of the volume's longest side.
+    let real_orbit =
+        |vol: &crate::AnyVolume, azimuth_deg: f64, elevation_deg: f64, distance: f64| {
+            let half = 0.5 * vol_extent(vol).iter().cloned().fold(0.0, f64::max);
+            Camera::orbit(
+                with_center(vol),
+                vol_extent(vol),
+                Orbit {
+                    azimuth_deg,
+                    elevation_deg,
+                    distance_mm: Some(distance * half),
+                },
+                Projection::Perspective { fov_y_deg: 30.0 },
+                size,
+                size,
+            )
+        };
     let mut jobs = vec![
+        Job {
+            file: "microct-bone-dvr.png",
+            title: "X-ray micro-CT of bone (real scan, 128³ u8 TIFF stack), shaded DVR, microct-bone preset".into(),
+            scene: Scene {
+                volume: bone_vol.clone(),
+                transfer: TransferFunction::preset("microct-bone")?,
+                camera: real_orbit(&bone_vol, -60.0, 30.0, 5.2)?,
+            },
+            settings: RenderSettings { step: 0.5, ..base.clone() },
+            png: PngOptions::default(),
+        },
+        Job {
+            file: "mr-brain-dvr.png",
+            title: "MR head (real scan, UNC brain from VolPack, 128×128×84 u8), shaded DVR, mri-brain preset".into(),
+            scene: Scene {
+                volume: brain_vol.clone(),
+                transfer: brain_tf,
+                camera: real_orbit(&brain_vol, 150.0, 15.0, 3.6)?,
+            },
+            settings: RenderSettings { step: 0.5, ..base.clone() },
+            png: PngOptions::default(),
+        },
         Job {
             file: "shepp-logan-dvr.png",
             title: "Shepp–Logan (modified), shaded DVR, trilinear, post-classification".into(),
@@ -161,10 +246,10 @@ pub fn run_demo(
     }
     let total = jobs.len() + 1;
     let mut items = Vec::new();
-    for (n, job) in jobs.into_iter().enumerate() {
+    for job in jobs {
         let t = std::time::Instant::now();
         let mut settings = job.settings;
-        let counts = n == 0;
+        let counts = job.file == "shepp-logan-dvr.png";
         settings.sample_count = counts;
         let out_img = renderer.render(&job.scene, &settings, &|_, _| {})?.output;
         let path = out.join(job.file);

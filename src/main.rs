@@ -33,7 +33,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a gallery of built-in phantoms into a folder (no input needed).
+    /// Render a gallery into a folder (no input needed): two real scans embedded in the
+    /// binary (micro-CT of bone, MR head) and the built-in phantoms.
     Demo {
         /// Folder to write the pictures, index.html and README.md into.
         #[arg(long, default_value = "voxlab-demo")]
@@ -994,7 +995,7 @@ fn gpu_info() -> Result<()> {
 fn demo(out: &Path) -> Result<()> {
     let renderer = Renderer::new(Backend::Auto)?;
     eprintln!(
-        "voxlab demo: rendering a gallery of built-in phantoms on {}…",
+        "voxlab demo: rendering a gallery of embedded real scans and built-in phantoms on {}…",
         renderer.describe()
     );
     if let Some(why) = &renderer.fallback_reason {

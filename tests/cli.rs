@@ -42,7 +42,8 @@ fn demo_writes_the_gallery() {
         .filter_map(|e| e.ok())
         .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
         .collect();
-    assert_eq!(pngs.len(), 9);
+    assert_eq!(pngs.len(), 11);
+    assert!(d.join("microct-bone-dvr.png").is_file() && d.join("mr-brain-dvr.png").is_file());
     assert!(d.join("index.html").is_file() && d.join("README.md").is_file());
     // Every picture decodes and is not blank.
     for p in pngs {

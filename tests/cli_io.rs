@@ -312,3 +312,24 @@ fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("outside the volume"));
 }
+
+#[test]
+fn a_directory_of_tiff_files_is_a_stack_in_natural_order() {
+    use tiff::encoder::{colortype::Gray16, TiffEncoder};
+    let d = scratch("tiffdir");
+    let stack = d.join("stack");
+    std::fs::create_dir_all(&stack).unwrap();
+    // Slices named so that plain string order (s1, s10, s2) would be wrong.
+    for (name, value) in [("s1.tif", 1u16), ("s2.tif", 2), ("s10.tif", 10)] {
+        let f = std::fs::File::create(stack.join(name)).unwrap();
+        let mut enc = TiffEncoder::new(f).unwrap();
+        enc.write_image::<Gray16>(3, 2, &[value; 6]).unwrap();
+    }
+    std::fs::write(stack.join("notes.txt"), b"not an image").unwrap();
+    let j = json(&voxlab(&["info", s(&stack), "--json"]));
+    assert_eq!(j["format"], "TIFF stack");
+    assert_eq!(j["dims"], serde_json::json!([3, 2, 3]));
+    let v = voxlab::io::read_volume(&stack).unwrap();
+    let vals = v.values_f64();
+    assert_eq!([vals[0], vals[6], vals[12]], [1.0, 2.0, 10.0]);
+}

@@ -91,7 +91,7 @@ impl Format {
 pub fn detect_format(path: &Path) -> Result<Format> {
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     if meta.is_dir() {
-        return Ok(Format::Dicom);
+        return Ok(directory_format(path));
     }
     let mut head = [0u8; 352];
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
@@ -128,6 +128,38 @@ pub fn detect_format(path: &Path) -> Result<Format> {
     })
 }
 
+/// A directory holds a DICOM series, or a stack of TIFF files: TIFF when it has
+/// `.tif`/`.tiff` files and no file with the DICOM marker, else DICOM (whose reader
+/// says what it found when that is not a series either).
+fn directory_format(dir: &Path) -> Format {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Format::Dicom;
+    };
+    let mut tiffs = 0;
+    for e in entries.flatten() {
+        let p = e.path();
+        if !p.is_file() {
+            continue;
+        }
+        if matches!(extension(&p).as_deref(), Some("tif") | Some("tiff")) {
+            tiffs += 1;
+            continue;
+        }
+        let mut head = [0u8; 132];
+        let is_dicom = File::open(&p)
+            .and_then(|mut f| fill(&mut f, &mut head))
+            .is_ok_and(|n| n == 132 && &head[128..] == b"DICM");
+        if is_dicom {
+            return Format::Dicom;
+        }
+    }
+    if tiffs > 0 {
+        Format::Tiff
+    } else {
+        Format::Dicom
+    }
+}
+
 /// Recognises a format from the first bytes of a file (up to 352 of them).
 fn sniff(head: &[u8]) -> Option<Format> {
     let starts = |m: &[u8]| head.starts_with(m);
@@ -150,7 +182,7 @@ fn sniff(head: &[u8]) -> Option<Format> {
 
 /// Reads a volume in any format voxlab knows, telling the format from the file's
 /// magic number or extension ([`detect_format`]); a directory is read as a DICOM
-/// series. Raw files need [`raw::read_raw`] with a [`raw::RawSpec`].
+/// series, or as a stack of TIFF files when it holds those and no DICOM file. Raw files need [`raw::read_raw`] with a [`raw::RawSpec`].
 pub fn read_volume(path: &Path) -> Result<AnyVolume> {
     read_volume_as(path, detect_format(path)?)
 }
@@ -164,6 +196,7 @@ pub fn read_volume_as(path: &Path, format: Format) -> Result<AnyVolume> {
         Format::Dicom => dicom::read_dicom(path),
         Format::Pvm => pvm::read_pvm(path),
         Format::Den => den::read_den(path),
+        Format::Tiff if path.is_dir() => tiff::read_tiff_dir(path),
         Format::Tiff => tiff::read_tiff(path),
         Format::Raw => Err(Error::invalid(
             "volume file",
@@ -186,6 +219,7 @@ pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<An
         Format::Nifti => nifti::read_nifti_bytes(bytes, path),
         Format::Pvm => pvm::read_pvm_bytes(bytes, path),
         Format::Den => den::read_den_bytes(bytes, path),
+        Format::Tiff => tiff::read_tiff_bytes(bytes, path),
         other => Err(Error::invalid(
             "in-memory volume",
             format!("{} files are read from disk only", other.name()),

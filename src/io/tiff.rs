@@ -40,7 +40,7 @@ use crate::error::{Error, Result};
 use crate::volume::{check_dims, AnyVolume};
 use glam::{DMat4, DVec3};
 use std::fs::File;
-use std::io::BufReader;
+use std::io::{BufReader, Cursor, Read, Seek};
 use std::path::{Path, PathBuf};
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
@@ -48,8 +48,33 @@ use tiff::ColorType;
 
 /// Reads a multi-page TIFF as a volume, one page per slice; see the module docs.
 pub fn read_tiff(path: &Path) -> Result<AnyVolume> {
-    read_stack(&[path.to_path_buf()], path)
+    read_stack(&[Input::File(path.to_path_buf())], path)
 }
+
+/// Reads a multi-page TIFF held in memory (`path` only names it in errors), exactly
+/// as [`read_tiff`] reads a file; the demo reads its embedded scan this way.
+pub fn read_tiff_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    read_stack(&[Input::Bytes(bytes, path.to_path_buf())], path)
+}
+
+/// Where a TIFF file comes from: the disk, or memory.
+enum Input<'a> {
+    File(PathBuf),
+    Bytes(&'a [u8], PathBuf),
+}
+
+impl Input<'_> {
+    fn path(&self) -> &Path {
+        match self {
+            Input::File(p) | Input::Bytes(_, p) => p,
+        }
+    }
+}
+
+/// A TIFF byte source: a file or a slice.
+trait Source: Read + Seek {}
+impl<T: Read + Seek> Source for T {}
+type Dec<'a> = Decoder<Box<dyn Source + 'a>>;
 
 /// Reads a directory of TIFF files (`.tif` or `.tiff`, any case) as one stack, the
 /// files in natural order of their names (`slice2.tif` before `slice10.tif`); each
@@ -74,7 +99,8 @@ pub fn read_tiff_dir(dir: &Path) -> Result<AnyVolume> {
         ));
     }
     files.sort_by(|a, b| natural_cmp(&file_name(a), &file_name(b)));
-    read_stack(&files, dir)
+    let inputs: Vec<Input> = files.into_iter().map(Input::File).collect();
+    read_stack(&inputs, dir)
 }
 
 fn file_name(p: &Path) -> String {
@@ -152,21 +178,21 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
 /// against the voxel limit), or 0 while only tags are read; the crate's default
 /// buffer limit (256 MiB, which also bounds the values a tag may claim) is raised to
 /// it, never removed.
-fn open(path: &Path, page_bytes: usize) -> Result<Decoder<BufReader<File>>> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+fn open<'a>(input: &'a Input, page_bytes: usize) -> Result<Dec<'a>> {
+    let path = input.path();
+    let source: Box<dyn Source + 'a> = match input {
+        Input::File(p) => Box::new(BufReader::new(File::open(p).map_err(|e| Error::io(p, e))?)),
+        Input::Bytes(b, _) => Box::new(Cursor::new(*b)),
+    };
     let mut limits = Limits::default();
     limits.decoding_buffer_size = limits.decoding_buffer_size.max(page_bytes);
-    Ok(Decoder::new(BufReader::new(file))
+    Ok(Decoder::new(source)
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits))
 }
 
 /// The size and sample type of the current page; refuses non-grayscale pages.
-fn page_info(
-    dec: &mut Decoder<BufReader<File>>,
-    path: &Path,
-    page: usize,
-) -> Result<([usize; 2], SampleType)> {
+fn page_info(dec: &mut Dec, path: &Path, page: usize) -> Result<([usize; 2], SampleType)> {
     let (w, h) = dec.dimensions().map_err(|e| tiff_error(path, e))?;
     let color = dec.colortype().map_err(|e| tiff_error(path, e))?;
     let bits = match color {
@@ -201,17 +227,18 @@ fn page_info(
 }
 
 /// Checks every page of every file, then decodes them into one volume.
-fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
+fn read_stack(inputs: &[Input], what: &Path) -> Result<AnyVolume> {
     // Pass 1: sizes and types, without decoding any pixels.
-    let mut first: Option<([usize; 2], SampleType, PathBuf)> = None;
+    let mut first: Option<([usize; 2], SampleType, &Input)> = None;
     let mut pages = 0usize;
-    for path in files {
-        let mut dec = open(path, 0)?;
+    for input in inputs {
+        let path = input.path();
+        let mut dec = open(input, 0)?;
         let mut page = 0;
         loop {
             let (size, ty) = page_info(&mut dec, path, page)?;
             match &first {
-                None => first = Some((size, ty, path.clone())),
+                None => first = Some((size, ty, input)),
                 Some((size0, ty0, path0)) => {
                     if size != *size0 {
                         return Err(Error::format(
@@ -222,7 +249,7 @@ fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
                                  a stack must have the same size",
                                 size[0],
                                 size[1],
-                                path0.display(),
+                                path0.path().display(),
                                 size0[0],
                                 size0[1]
                             ),
@@ -236,7 +263,7 @@ fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
                                 "page {page} holds {} samples but page 0 of {} holds {}: all \
                                  pages of a stack must have the same sample type",
                                 ty.name(),
-                                path0.display(),
+                                path0.path().display(),
                                 ty0.name()
                             ),
                         ));
@@ -259,18 +286,19 @@ fn read_stack(files: &[PathBuf], what: &Path) -> Result<AnyVolume> {
             page += 1;
         }
     }
-    let Some(([w, h], first_type, first_path)) = first else {
+    let Some(([w, h], first_type, first_input)) = first else {
         return Err(Error::format(what, "file", "no pages"));
     };
     let dims = [w, h, pages];
     let n = check_dims(dims)?;
-    let spacing = spacing(&first_path)?;
+    let spacing = spacing(first_input)?;
     let page_bytes = w * h * (first_type.bits as usize / 8);
 
     // Pass 2: decode, converting each page to the volume's type.
     let mut out: Option<Samples> = None;
-    for path in files {
-        let mut dec = open(path, page_bytes)?;
+    for input in inputs {
+        let path = input.path();
+        let mut dec = open(input, page_bytes)?;
         let mut page = 0;
         loop {
             let data = dec.read_image().map_err(|e| tiff_error(path, e))?;
@@ -377,7 +405,7 @@ fn unit_mm(unit: &str) -> Option<f64> {
 }
 
 /// A resolution tag (pixels per unit) as a number.
-fn resolution(dec: &mut Decoder<BufReader<File>>, tag: Tag) -> Option<f64> {
+fn resolution(dec: &mut Dec, tag: Tag) -> Option<f64> {
     use tiff::decoder::ifd::Value;
     let v = dec.find_tag(tag).ok()??;
     let x = match v {
@@ -393,9 +421,9 @@ fn resolution(dec: &mut Decoder<BufReader<File>>, tag: Tag) -> Option<f64> {
     (x.is_finite() && x > 0.0).then_some(x)
 }
 
-/// The spacing (mm) from the first page of `path`; see the module docs.
-fn spacing(path: &Path) -> Result<[f64; 3]> {
-    let mut dec = open(path, 0)?;
+/// The spacing (mm) from the first page of `input`; see the module docs.
+fn spacing(input: &Input) -> Result<[f64; 3]> {
+    let mut dec = open(input, 0)?;
     let desc = match dec.find_tag(Tag::ImageDescription) {
         Ok(Some(v)) => v.into_string().unwrap_or_default(),
         _ => String::new(),
