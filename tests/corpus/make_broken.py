@@ -126,6 +126,19 @@ put("den-truncated.den", den(data=bytes(5)), "format", "data", "")
 put("den-bad-length.den", den(length=13), "format", "map_length", "")
 put("den-bad-version.den", den(version=7), "format", "", "")
 
+# --- DICOM and TIFF (cut from the bundled files) ----------------------------------
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+def src(rel):
+    with open(os.path.join(ROOT, rel), "rb") as f:
+        return f.read()
+
+
+put("dicom-truncated-pixels.dcm", src("tests/corpus/dicom/explicit_big.dcm")[:60000], "format", "file", "truncated")
+put("dicom-truncated-header.dcm", src("tests/corpus/dicom/implicit_little.dcm")[:200], "format", "file", "truncated")
+put("dicom-jpeg2000.dcm", src("tests/corpus/dicom/jpeg_2000.dcm"), "format", "TransferSyntaxUID", "JPEG 2000")
+put("tiff-truncated.tif", src("data/microct-bone/bone_128x128x128.tif")[:40000], "format", "file", "truncated")
+put("tiff-ifd-past-end.tif", b"II*\x00" + struct.pack("<I", 1 << 30) + bytes(16), "format", "file", "")
+
 with open(os.path.join(HERE, "EXPECTED.tsv"), "w") as f:
     f.write("# file\terror kind\tfield (empty: any)\twords the message must contain (empty: none)\n")
     for row in expected:
