@@ -795,8 +795,17 @@ fn info(input: &str, load: &LoadArgs, bins: usize, json: bool, plot: Option<&Pat
     let nf = v.non_finite();
     let h = v.histogram(bins.clamp(1, 4096));
     if let Some(p) = plot {
-        // The plot has room for finer bins than the text listing.
-        voxlab::frame::histogram_plot(&v.histogram(256), 768, 320)?.save(p, Default::default())?;
+        // The plot has room for finer bins than the text listing: 256, or one bin per
+        // integer value for integer volumes with at most 1024 distinct values.
+        let integer = v.kind() != voxlab::volume::VoxelKind::F32;
+        let span = r.max - r.min;
+        let plot_bins = if integer && span.is_finite() && span < 1024.0 {
+            span as usize + 1
+        } else {
+            256
+        };
+        voxlab::frame::histogram_plot(&v.histogram(plot_bins), 768, 320)?
+            .save(p, Default::default())?;
     }
     let orient = orientation(v.affine(), format);
     if json {
