@@ -20,7 +20,10 @@ use voxlab::{AnyVolume, Error, Result};
     long_about = "voxlab renders volumes (CT, MRI, analytic phantoms) by ray casting: direct volume \
 rendering with transfer functions and shading, maximum/minimum intensity projection, and X-ray \
 line integrals. Every algorithm has an exact f64 CPU implementation (the oracle) and an f32 twin.\n\n\
-Start with `voxlab demo`, which renders a gallery from built-in phantoms."
+It reads NRRD, NIfTI-1, DICOM (files and series), PVM, VolPack .den, TIFF stacks, .npy and \
+raw volumes, and refuses broken files with an error naming the file and the field.\n\n\
+Start with `voxlab demo`, which renders a gallery from two embedded real scans and the \
+built-in phantoms."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -55,7 +58,8 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Describe a volume (dimensions, spacing, type, value range, histogram), or the GPU.
+    /// Describe a volume (format, dimensions, spacing, orientation, type, value range,
+    /// NaN/inf counts, histogram; --plot draws it), or the GPU.
     Info {
         /// Volume file, DICOM directory or phantom:NAME[:SIZE]. Not needed with --gpu.
         input: Option<String>,
