@@ -2,33 +2,14 @@
 //! the rule for NaN/inf voxels, `info` (format, orientation, NaN counts, plot) and
 //! `convert` (crop, resample, type), all checked against values computed here.
 
+mod common;
+
+use common::{s, scratch, stderr, voxlab, voxlab_command};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn voxlab(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxlab"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .env_remove("VOXLAB_MAX_VOXELS")
-        .output()
-        .expect("the voxlab binary runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("target/cli-io-tests")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use std::process::Output;
 
 fn ok(o: &Output) -> String {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{}", stderr(o));
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
@@ -51,25 +32,31 @@ fn raw_file(d: &Path) -> PathBuf {
     p
 }
 
+/// The options that describe [`raw_file`].
+const RAW: [&str; 8] = [
+    "--raw-dims",
+    "5,4,3",
+    "--raw-type",
+    "u16",
+    "--raw-endian",
+    "big",
+    "--raw-offset",
+    "10",
+];
+
+/// `args` followed by [`RAW`].
+fn with_raw<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    [args, &RAW[..]].concat()
+}
+
 #[test]
 fn raw_input_is_read_as_described() {
     let d = scratch("raw");
     let p = raw_file(&d);
-    let raw = [
-        "--raw-dims",
-        "5,4,3",
-        "--raw-type",
-        "u16",
-        "--raw-endian",
-        "big",
-        "--raw-offset",
-        "10",
-        "--raw-spacing",
-        "0.5,0.5,2",
-    ];
-    let mut args = vec!["info", s(&p), "--json"];
-    args.extend(raw);
-    let j = json(&voxlab(&args));
+    let spacing = ["--raw-spacing", "0.5,0.5,2"];
+    let j = json(&voxlab(
+        &[with_raw(&["info", s(&p), "--json"]), spacing.to_vec()].concat(),
+    ));
     assert_eq!(j["format"], "raw");
     assert_eq!(j["dims"], serde_json::json!([5, 4, 3]));
     assert_eq!(j["spacing_mm"], serde_json::json!([0.5, 0.5, 2.0]));
@@ -77,19 +64,19 @@ fn raw_input_is_read_as_described() {
     assert_eq!(j["range"]["max"], 234.0);
     // Converted to NRRD and read back: every value where it belongs.
     let out = d.join("vol.nrrd");
-    let mut args = vec!["convert", s(&p), s(&out)];
-    args.extend(raw);
-    ok(&voxlab(&args));
+    ok(&voxlab(
+        &[with_raw(&["convert", s(&p), s(&out)]), spacing.to_vec()].concat(),
+    ));
     let v = voxlab::io::read_volume(&out).unwrap();
     let vals = v.values_f64();
     assert_eq!(vals[2 + 5 * (3 + 4 * 2)], 232.0);
     // A wrong guess of the dims is caught by the file's length.
     let o = voxlab(&["info", s(&p), "--raw-dims", "5,4,4", "--raw-type", "u16"]);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("has 130 bytes"));
+    assert!(stderr(&o).contains("has 130 bytes"));
     // No description at all: the error says what to add.
     let o = voxlab(&["info", s(&p)]);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--raw-dims"));
+    assert!(stderr(&o).contains("--raw-dims"));
 }
 
 #[test]
@@ -99,14 +86,13 @@ fn voxel_limit_from_option_and_environment() {
     ok(&voxlab(&["phantom", "sphere:8", "--out", s(&p)]));
     let o = voxlab(&["--max-voxels", "511", "info", s(&p)]);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("limit of 511 voxels"));
+    assert!(stderr(&o).contains("limit of 511 voxels"));
     ok(&voxlab(&["--max-voxels", "512", "info", s(&p)]));
-    let o = Command::new(env!("CARGO_BIN_EXE_voxlab"))
-        .args(["info", s(&p)])
+    let o = voxlab_command(&["info", s(&p)])
         .env("VOXLAB_MAX_VOXELS", "100")
         .output()
         .unwrap();
-    assert!(String::from_utf8_lossy(&o.stderr).contains("limit of 100 voxels"));
+    assert!(stderr(&o).contains("limit of 100 voxels"));
 }
 
 #[test]
@@ -142,7 +128,7 @@ fn non_finite_voxels_are_reported_and_replaced_or_refused() {
     ];
     args.extend(raw);
     let o = voxlab(&args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("1 NaN, 1 +inf and 0 -inf"), "{err}");
     let img = voxlab::io::npy::read_npy_f32(&out).unwrap().1;
@@ -153,7 +139,7 @@ fn non_finite_voxels_are_reported_and_replaced_or_refused() {
     args.extend(["--non-finite", "error"]);
     let o = voxlab(&args);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("non-finite"));
+    assert!(stderr(&o).contains("non-finite"));
     assert!(!out.exists());
 }
 
@@ -218,7 +204,7 @@ fn convert_crops_resamples_and_retypes() {
     let bad = d.join("bad.nrrd");
     let o = voxlab(&["convert", s(&src), s(&bad), "--crop", "0,0,0,33,1,1"]);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("crop box"));
+    assert!(stderr(&o).contains("crop box"));
     assert!(!bad.exists());
 }
 
@@ -242,20 +228,10 @@ fn info_reports_format_orientation_and_draws_a_plot() {
 fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
     let d = scratch("slice");
     let p = raw_file(&d);
-    let raw = [
-        "--raw-dims",
-        "5,4,3",
-        "--raw-type",
-        "u16",
-        "--raw-endian",
-        "big",
-        "--raw-offset",
-        "10",
-    ];
     let value = |i: usize, j: usize, k: usize| (i + 10 * j + 100 * k) as f32;
     // a[k=1, :, :] as float32 .npy: rows y, columns x.
     let npy = d.join("z1.npy");
-    let mut args = vec![
+    ok(&voxlab(&with_raw(&[
         "slice",
         s(&p),
         "--axis",
@@ -264,9 +240,7 @@ fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
         "1",
         "--out",
         s(&npy),
-    ];
-    args.extend(raw);
-    ok(&voxlab(&args));
+    ])));
     let (shape, vals) = voxlab::io::npy::read_npy_f32(&npy).unwrap();
     assert_eq!(shape, vec![4, 5]);
     for (n, v) in vals.iter().enumerate() {
@@ -274,7 +248,7 @@ fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
     }
     // a[:, :, i=3] as 16-bit PNG with the window [0, 65535]: pixel = value exactly.
     let png = d.join("x3.png");
-    let mut args = vec![
+    ok(&voxlab(&with_raw(&[
         "slice",
         s(&p),
         "--axis",
@@ -288,16 +262,14 @@ fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
         "32767.5",
         "--out",
         s(&png),
-    ];
-    args.extend(raw);
-    ok(&voxlab(&args));
+    ])));
     let img = image::open(&png).unwrap().to_luma16();
     assert_eq!(img.dimensions(), (4, 3));
     for (col, row, px) in img.enumerate_pixels() {
         assert_eq!(px.0[0] as f32, value(3, col as usize, row as usize));
     }
     // Out of range.
-    let mut args = vec![
+    let o = voxlab(&with_raw(&[
         "slice",
         s(&p),
         "--axis",
@@ -306,11 +278,9 @@ fn slices_are_laid_out_like_numpy_and_16_bit_png_keeps_values() {
         "4",
         "--out",
         s(&png),
-    ];
-    args.extend(raw);
-    let o = voxlab(&args);
+    ]));
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("outside the volume"));
+    assert!(stderr(&o).contains("outside the volume"));
 }
 
 #[test]

@@ -1,20 +1,12 @@
 //! Reconstruction filters against analytic truth.
 
+mod common;
+
+use common::Rng;
 use voxlab::cpu::filter::{prepare, sample, Grid};
 use voxlab::phantom::{marschner_lobb, Phantom};
 use voxlab::real::V3;
 use voxlab::settings::Filter;
-
-/// A small deterministic generator (xorshift64*), so tests need no RNG crate.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// RMS error of `filter` reconstructing Marschner–Lobb sampled on `n³`, at random
 /// points whose phantom coordinates lie in `[-r, r]³`.
@@ -25,7 +17,7 @@ fn ml_rms(filter: Filter, n: usize, r: f64, points: usize) -> f64 {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut sum = 0.0;
     for _ in 0..points {
-        let p = [(); 3].map(|_| (2.0 * rng.next() - 1.0) * r);
+        let p = [(); 3].map(|_| (2.0 * rng.unit() - 1.0) * r);
         // Phantom coordinate x ↔ index (x + 1) n / 2 − 0.5.
         let idx = p.map(|x| (x + 1.0) * n as f64 / 2.0 - 0.5);
         let got = sample(&grid, filter, V3(idx));
@@ -96,7 +88,7 @@ fn sinc_reproduces_band_limited_signals_and_lanczos_does_not() {
             (0..n)
                 .map(|j| {
                     if (4..n - 4).contains(&j) {
-                        2.0 * rng.next() - 1.0
+                        2.0 * rng.unit() - 1.0
                     } else {
                         0.0
                     }
@@ -119,7 +111,7 @@ fn sinc_reproduces_band_limited_signals_and_lanczos_does_not() {
     let (mut sinc_max, mut l3_max) = (0.0f64, 0.0f64);
     for _ in 0..400 {
         // Anywhere in the volume's box, borders included.
-        let p = [(); 3].map(|_| -0.5 + rng.next() * n as f64);
+        let p = [(); 3].map(|_| -0.5 + rng.unit() * n as f64);
         let want = f(p);
         sinc_max = sinc_max.max((sample(&grid, Filter::Sinc, V3(p)) - want).abs());
         l3_max = l3_max.max((sample(&grid, Filter::Lanczos3, V3(p)) - want).abs());
@@ -166,9 +158,9 @@ fn constants_and_ramps() {
         let r = prepare(&ramp, filter);
         for _ in 0..200 {
             let p = [
-                -0.5 + rng.next() * 10.0,
-                -0.5 + rng.next() * 9.0,
-                -0.5 + rng.next() * 8.0,
+                -0.5 + rng.unit() * 10.0,
+                -0.5 + rng.unit() * 9.0,
+                -0.5 + rng.unit() * 8.0,
             ];
             assert!(
                 (sample(&c, filter, V3(p)) - 3.25).abs() < 1e-12,

@@ -5,6 +5,9 @@
 //! volume or an error, never a panic. The same entry points are the cargo-fuzz
 //! targets in `fuzz/` (`bash scripts/fuzz.sh` runs those for longer).
 
+mod common;
+
+use common::Rng;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use voxlab::io::{read_volume_bytes, Format};
@@ -20,20 +23,6 @@ const FORMATS: &[(Format, &str)] = &[
 
 /// Mutations per seed.
 const MUTATIONS: usize = 10_000;
-
-/// xorshift64*: a fixed, dependency-free generator, so a failure reproduces.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
     let mut b = seed.to_vec();

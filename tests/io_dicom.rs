@@ -3,6 +3,9 @@
 //! (`tests/data/dicom_reference.py`); a synthetic multi-frame file; and every kind of
 //! broken series (missing slice, mixed sizes, two series, garbage).
 
+mod common;
+
+use common::{format_err, root, scratch};
 use dicom_core::value::DataSetSequence;
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
@@ -15,20 +18,6 @@ use voxlab::{AnyVolume, Error, VoxelKind};
 
 const SERIES: &str = "data/mr-brain-dicom";
 const CORPUS: &str = "tests/corpus/dicom";
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// A fresh, empty directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("io_dicom")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A copy of the MR series in a scratch directory.
 fn series_copy(name: &str) -> PathBuf {
@@ -60,14 +49,6 @@ fn assert_vec(got: DVec3, want: [f64; 3], tol: f64, what: &str) {
         (got - want).abs().max_element() <= tol,
         "{what}: got {got}, want {want}"
     );
-}
-
-fn format_err(r: voxlab::Result<AnyVolume>) -> String {
-    match r {
-        Err(e @ Error::Format { .. }) => e.to_string(),
-        Err(e) => panic!("expected a format error, got {e}"),
-        Ok(v) => panic!("expected an error, got a volume {:?}", v.dims()),
-    }
 }
 
 // ---------------------------------------------------------------------------------

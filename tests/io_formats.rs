@@ -1,8 +1,12 @@
 //! Volume I/O: NRRD and .npy round trips, hand-written files checked against known
 //! values, every kind of bad input, and the atomic writer.
 
-use glam::{DMat3, DMat4, DQuat, DVec3};
-use std::io::Write;
+mod common;
+
+use common::{
+    assert_format, bits, format_field, gzip, oblique_affine, sample_volumes, scratch, XorShift,
+};
+use glam::{DMat3, DMat4, DVec3};
 use std::path::{Path, PathBuf};
 use voxlab::io::npy::{read_npy_f32, read_npy_volume, write_npy_f32, write_npy_volume};
 use voxlab::io::nrrd::{read_nrrd, write_nrrd, NrrdWriteOptions};
@@ -12,16 +16,6 @@ use voxlab::{AnyVolume, Error, Volume, VoxelKind};
 // ---------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------
-
-/// A fresh, empty directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("io_formats")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// The names in a directory, sorted.
 fn listing(dir: &Path) -> Vec<String> {
@@ -33,74 +27,11 @@ fn listing(dir: &Path) -> Vec<String> {
     names
 }
 
-/// A rotated, anisotropic, translated voxel-to-world affine.
-fn oblique_affine() -> DMat4 {
-    let rotation = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
-    DMat4::from_scale_rotation_translation(
-        DVec3::new(0.5, 1.25, 2.0),
-        rotation,
-        DVec3::new(-12.5, 3.25, 100.1),
-    )
-}
-
-/// One volume of each voxel type, with extreme and special values.
-fn sample_volumes() -> Vec<AnyVolume> {
-    let dims = [5, 4, 3];
-    let n = 60;
-    let affine = oblique_affine();
-    let mut u8s: Vec<u8> = (0..n).map(|i| (i * 37 % 256) as u8).collect();
-    u8s[n - 1] = u8::MAX;
-    let mut u16s: Vec<u16> = (0..n).map(|i| (i * 1097 % 65536) as u16).collect();
-    u16s[n - 1] = u16::MAX;
-    let mut i16s: Vec<i16> = (0..n).map(|i| (i as i16 - 30) * 1000).collect();
-    i16s[0] = i16::MIN;
-    i16s[1] = i16::MAX;
-    let mut f32s: Vec<f32> = (0..n).map(|i| (i as f32 - 20.5) * 0.1).collect();
-    f32s[..6].copy_from_slice(&[
-        f32::NAN,
-        f32::INFINITY,
-        -0.0,
-        1e-40,
-        f32::MAX,
-        -f32::MIN_POSITIVE,
-    ]);
-    vec![
-        Volume::with_affine(dims, affine, u8s).unwrap().into(),
-        Volume::with_affine(dims, affine, u16s).unwrap().into(),
-        Volume::with_affine(dims, affine, i16s).unwrap().into(),
-        Volume::with_affine(dims, affine, f32s).unwrap().into(),
-    ]
-}
-
-/// The voxel values as exact bit patterns (so NaN equals NaN and -0 differs from 0).
-fn bits(v: &AnyVolume) -> Vec<u64> {
-    match v {
-        AnyVolume::F32(v) => v.data().iter().map(|x| x.to_bits() as u64).collect(),
-        other => other.values_f64().iter().map(|x| x.to_bits()).collect(),
-    }
-}
-
 fn assert_same(a: &AnyVolume, b: &AnyVolume, affine: DMat4) {
     assert_eq!(a.kind(), b.kind());
     assert_eq!(a.dims(), b.dims());
     assert_eq!(b.affine(), affine);
     assert_eq!(bits(a), bits(b));
-}
-
-/// The field of a format error (fails the test on any other error).
-fn format_field(e: &Error) -> &str {
-    match e {
-        Error::Format { field, .. } => field,
-        other => panic!("expected a format error, got {other:?}"),
-    }
-}
-
-/// Asserts a format error about `field` whose message mentions `words`.
-#[track_caller]
-fn assert_format(r: voxlab::Result<impl std::fmt::Debug>, field: &str, words: &str) {
-    let e = r.expect_err("expected an error");
-    assert_eq!(format_field(&e), field, "{e}");
-    assert!(e.to_string().contains(words), "'{words}' not in: {e}");
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> PathBuf {
@@ -113,12 +44,6 @@ fn nrrd_file(dir: &Path, name: &str, header: &str, data: &[u8]) -> PathBuf {
     let mut bytes = header.as_bytes().to_vec();
     bytes.extend_from_slice(data);
     write_file(&dir.join(name), &bytes)
-}
-
-fn gzip(data: &[u8]) -> Vec<u8> {
-    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-    gz.write_all(data).unwrap();
-    gz.finish().unwrap()
 }
 
 /// An .npy file built from the format specification (not with the writer under
@@ -152,7 +77,7 @@ fn npy_dict(descr: &str, fortran: bool, shape: &str) -> String {
 #[test]
 fn nrrd_round_trips_every_type_and_layout() {
     let dir = scratch("nrrd_round_trip");
-    for vol in sample_volumes() {
+    for vol in sample_volumes(oblique_affine()) {
         for gzip in [false, true] {
             for detached in [false, true] {
                 let ext = if detached { "nhdr" } else { "nrrd" };
@@ -174,7 +99,7 @@ fn nrrd_round_trips_every_type_and_layout() {
 #[test]
 fn npy_round_trips_every_type() {
     let dir = scratch("npy_round_trip");
-    for vol in sample_volumes() {
+    for vol in sample_volumes(oblique_affine()) {
         let path = dir.join(format!("v_{}.npy", vol.kind().name()));
         write_npy_volume(&path, &vol).unwrap();
         let back = read_npy_volume(&path).unwrap();
@@ -186,7 +111,7 @@ fn npy_round_trips_every_type() {
 #[test]
 fn read_and_write_volume_dispatch_on_extension() {
     let dir = scratch("dispatch");
-    let vol = &sample_volumes()[2];
+    let vol = &sample_volumes(oblique_affine())[2];
     for name in ["a.nrrd", "b.NHDR", "c.npy", "d.nii", "e.nii.gz"] {
         let path = dir.join(name);
         write_volume(&path, vol).unwrap();
@@ -754,17 +679,6 @@ fn nrrd_bad_data() {
     assert!(e.to_string().contains("vol.raw"), "{e}");
 }
 
-/// A small deterministic generator (xorshift), so that failures reproduce.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-}
-
 #[test]
 fn nrrd_truncations_and_garbage_give_errors_not_panics() {
     let dir = scratch("nrrd_fuzz");
@@ -773,7 +687,7 @@ fn nrrd_truncations_and_garbage_give_errors_not_panics() {
     })
     .unwrap()
     .into();
-    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    let mut rng = XorShift(0x2545_f491_4f6c_dd1d);
     let target = dir.join("t.nrrd");
     for gzip in [false, true] {
         let path = dir.join(format!("valid_{gzip}.nrrd"));
@@ -931,7 +845,7 @@ fn atomic_writer_leaves_nothing_behind_on_failure() {
     assert!(listing(&dir).is_empty(), "{:?}", listing(&dir));
 
     // An existing file is unchanged by a failed write.
-    let vol = &sample_volumes()[0];
+    let vol = &sample_volumes(oblique_affine())[0];
     write_volume(&path, vol).unwrap();
     let before = std::fs::read(&path).unwrap();
     let r = write_atomic(&path, |w| {
@@ -954,7 +868,7 @@ fn atomic_writer_leaves_nothing_behind_on_failure() {
 #[test]
 fn writing_into_a_missing_directory_is_an_io_error_naming_the_path() {
     let dir = scratch("atomic_missing");
-    let vol = &sample_volumes()[3];
+    let vol = &sample_volumes(oblique_affine())[3];
     for name in ["out.nrrd", "out.nhdr", "out.npy"] {
         let path = dir.join("no/such/dir").join(name);
         let e = write_volume(&path, vol).unwrap_err();

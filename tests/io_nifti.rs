@@ -2,8 +2,10 @@
 //! orders, every geometry rule, bad input, fixtures written by nibabel (an independent
 //! implementation) and the bundled Colin27 scan.
 
-use glam::{DMat4, DQuat, DVec3};
-use std::io::Write;
+mod common;
+
+use common::{assert_format, bits, gzip, oblique_affine, sample_volumes, scratch};
+use glam::{DMat4, DVec3};
 use std::path::{Path, PathBuf};
 use voxlab::io::nifti::{read_nifti, read_nifti_bytes, write_nifti};
 use voxlab::io::{read_volume, write_volume};
@@ -13,69 +15,14 @@ use voxlab::{AnyVolume, Error, Volume, VoxelKind};
 // Helpers
 // ---------------------------------------------------------------------------------
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("io_nifti")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn data_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nifti")
-}
-
-fn gzip(data: &[u8]) -> Vec<u8> {
-    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
-    gz.write_all(data).unwrap();
-    gz.finish().unwrap()
 }
 
 /// An oblique, anisotropic affine whose entries are all f32-representable (NIfTI
 /// stores the sform as f32).
 fn f32_affine() -> DMat4 {
-    let r = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
-    let m = DMat4::from_scale_rotation_translation(
-        DVec3::new(0.5, 1.25, 2.0),
-        r,
-        DVec3::new(-12.5, 3.25, 100.1),
-    );
-    DMat4::from_cols_array(&m.to_cols_array().map(|v| v as f32 as f64))
-}
-
-fn sample_volumes(affine: DMat4) -> Vec<AnyVolume> {
-    let dims = [5, 4, 3];
-    let n = 60;
-    let u8s: Vec<u8> = (0..n).map(|i| (i * 37 % 256) as u8).collect();
-    let u16s: Vec<u16> = (0..n).map(|i| (i * 1097 % 65536) as u16).collect();
-    let mut i16s: Vec<i16> = (0..n).map(|i| (i as i16 - 30) * 1000).collect();
-    i16s[0] = i16::MIN;
-    let mut f32s: Vec<f32> = (0..n).map(|i| (i as f32 - 20.5) * 0.1).collect();
-    f32s[..4].copy_from_slice(&[f32::NAN, f32::INFINITY, -0.0, 1e-40]);
-    vec![
-        Volume::with_affine(dims, affine, u8s).unwrap().into(),
-        Volume::with_affine(dims, affine, u16s).unwrap().into(),
-        Volume::with_affine(dims, affine, i16s).unwrap().into(),
-        Volume::with_affine(dims, affine, f32s).unwrap().into(),
-    ]
-}
-
-fn bits(v: &AnyVolume) -> Vec<u64> {
-    match v {
-        AnyVolume::F32(v) => v.data().iter().map(|x| x.to_bits() as u64).collect(),
-        other => other.values_f64().iter().map(|x| x.to_bits()).collect(),
-    }
-}
-
-#[track_caller]
-fn assert_format(r: voxlab::Result<AnyVolume>, field: &str, words: &str) {
-    let e = r.expect_err("expected an error");
-    match &e {
-        Error::Format { field: f, .. } => assert_eq!(f, field, "{e}"),
-        other => panic!("expected a format error, got {other:?}"),
-    }
-    assert!(e.to_string().contains(words), "'{words}' not in: {e}");
+    DMat4::from_cols_array(&oblique_affine().to_cols_array().map(|v| v as f32 as f64))
 }
 
 #[track_caller]

@@ -1,40 +1,14 @@
 //! PVM and VolPack `.den` readers: files written per the formats' reference C code,
 //! the bundled VolPack brain, bad input, truncations and garbage.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::{assert_format, scratch, XorShift};
+use std::path::Path;
 use voxlab::io::den::{read_den, read_den_bytes};
 use voxlab::io::pvm::{read_pvm, read_pvm_bytes};
 use voxlab::io::{detect_format, read_volume, Format};
 use voxlab::{AnyVolume, Error, VoxelKind};
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("io_pvm_den")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-#[track_caller]
-fn assert_format(r: voxlab::Result<AnyVolume>, field: &str, words: &str) {
-    let e = r.expect_err("expected an error");
-    match &e {
-        Error::Format { field: f, .. } => assert_eq!(f, field, "{e}"),
-        other => panic!("expected a format error, got {other:?}"),
-    }
-    assert!(e.to_string().contains(words), "'{words}' not in: {e}");
-}
-
-fn xorshift(seed: u64) -> impl FnMut() -> u64 {
-    let mut x = seed;
-    move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    }
-}
 
 // ---------------------------------------------------------------------------------
 // VolPack .den
@@ -140,9 +114,9 @@ fn den_bad_input() {
     for n in 0..good.len() {
         assert!(read_den_bytes(&good[..n], p).is_err());
     }
-    let mut next = xorshift(0x1234_5678_9abc_def1);
+    let mut rng = XorShift(0x1234_5678_9abc_def1);
     for len in [0usize, 1, 2, 61, 62, 63, 500] {
-        let mut g: Vec<u8> = (0..len).map(|_| next() as u8).collect();
+        let mut g: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
         let _ = read_den_bytes(&g, p);
         if len >= 2 {
             g[..2].copy_from_slice(&[1, 0]);
@@ -194,53 +168,22 @@ fn pvm_files_of_every_version() {
 #[test]
 fn pvm_bad_input() {
     let p = Path::new("t.pvm");
-    assert_format(read_pvm_bytes(b"PVM5\n1 1 1\n1\n\0", p), "magic", "PVM5");
-    assert_format(read_pvm_bytes(b"P", p), "magic", "not a PVM");
-    assert_format(
-        read_pvm_bytes(b"PVM\n1 1 x\n1\n\0", p),
-        "dimensions",
-        "three numbers",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n1 1 1 1\n1\n\0", p),
-        "dimensions",
-        "three numbers",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM2\n1 1 1\n1 1\n1\n\0", p),
-        "scale",
-        "three",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM2\n1 1 1\n1 -1 1\n1\n\0", p),
-        "scale",
-        "positive",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n1 1 1\n4\n\0\0\0\0", p),
-        "components",
-        "scalar",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n1 1 1\n0\n", p),
-        "components",
-        "scalar",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n2 2 2\n2\n\0\0", p),
-        "data",
-        "expected 16 bytes, found 2",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n4000 4000 4000\n1\n", p),
-        "dimensions",
-        "limit",
-    );
-    assert_format(
-        read_pvm_bytes(b"PVM\n1000 1000 1000\n1\n", p),
-        "data",
-        "too short",
-    );
+    let cases: [(&[u8], &str, &str); 11] = [
+        (b"PVM5\n1 1 1\n1\n\0", "magic", "PVM5"),
+        (b"P", "magic", "not a PVM"),
+        (b"PVM\n1 1 x\n1\n\0", "dimensions", "three numbers"),
+        (b"PVM\n1 1 1 1\n1\n\0", "dimensions", "three numbers"),
+        (b"PVM2\n1 1 1\n1 1\n1\n\0", "scale", "three"),
+        (b"PVM2\n1 1 1\n1 -1 1\n1\n\0", "scale", "positive"),
+        (b"PVM\n1 1 1\n4\n\0\0\0\0", "components", "scalar"),
+        (b"PVM\n1 1 1\n0\n", "components", "scalar"),
+        (b"PVM\n2 2 2\n2\n\0\0", "data", "expected 16 bytes, found 2"),
+        (b"PVM\n4000 4000 4000\n1\n", "dimensions", "limit"),
+        (b"PVM\n1000 1000 1000\n1\n", "data", "too short"),
+    ];
+    for (bytes, field, words) in cases {
+        assert_format(read_pvm_bytes(bytes, p), field, words);
+    }
     let long = format!("PVM\n{}\n", "1 ".repeat(300));
     assert_format(
         read_pvm_bytes(long.as_bytes(), p),
@@ -261,18 +204,18 @@ fn pvm_truncations_and_garbage_give_errors_not_panics() {
     for n in 0..f.len() {
         assert!(read_pvm_bytes(&f[..n], p).is_err(), "cut at {n}");
     }
-    let mut next = xorshift(0x0fed_cba9_8765_4321);
+    let mut rng = XorShift(0x0fed_cba9_8765_4321);
     for len in [0usize, 1, 5, 8, 9, 20, 100, 1000] {
         for prefix in [&b""[..], b"PVM\n", b"PVM3\n", b"DDS v3d\n", b"DDS v3e\n"] {
             let mut g = prefix.to_vec();
-            g.extend((0..len).map(|_| next() as u8));
+            g.extend((0..len).map(|_| rng.next() as u8));
             let _ = read_pvm_bytes(&g, p);
         }
     }
     for _ in 0..1000 {
         let mut m = f.clone();
-        let i = (next() % m.len() as u64) as usize;
-        m[i] = next() as u8;
+        let i = (rng.next() % m.len() as u64) as usize;
+        m[i] = rng.next() as u8;
         let _ = read_pvm_bytes(&m, p);
     }
 }

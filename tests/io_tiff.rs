@@ -3,30 +3,16 @@
 //! stacks written with the `tiff` crate's encoder (types, ImageJ calibration,
 //! directories of single pages), and bad input.
 
+mod common;
+
+use common::{format_err, scratch};
 use std::fs::File;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tiff::encoder::{colortype, Rational, TiffEncoder};
 use tiff::tags::{ResolutionUnit, Tag};
 use voxlab::io::read_volume;
 use voxlab::io::tiff::{read_tiff, read_tiff_dir};
 use voxlab::{AnyVolume, Error, VoxelKind};
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("io_tiff")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn format_err(r: voxlab::Result<AnyVolume>) -> String {
-    match r {
-        Err(e @ Error::Format { .. }) => e.to_string(),
-        Err(e) => panic!("expected a format error, got {e}"),
-        Ok(v) => panic!("expected an error, got a volume {:?}", v.dims()),
-    }
-}
 
 /// Writes pages of `w` x `h` samples of colour type `C`.
 fn write_pages<C: colortype::ColorType>(path: &Path, w: u32, h: u32, pages: &[Vec<C::Inner>])

@@ -37,7 +37,7 @@
 //! version number, negative or zero lengths, an inconsistent `map_length`, and data
 //! shorter than `map_length`.
 
-use super::{fill, open, read_error, read_samples, too_short, Endian, Stored};
+use super::{fill, open, read_error, read_samples, too_short, truncated_header, Endian, Stored};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, AnyVolume};
 use glam::DMat4;
@@ -80,11 +80,7 @@ fn from_reader(reader: &mut dyn Read, file_len: u64, path: &Path) -> Result<AnyV
         }
     };
     if got < HEADER_LEN {
-        return Err(Error::format(
-            path,
-            "header",
-            format!("the header is truncated: {got} of {HEADER_LEN} bytes"),
-        ));
+        return Err(truncated_header(path, got, HEADER_LEN));
     }
     let i16_at = |off: usize| {
         let b = [h[off], h[off + 1]];

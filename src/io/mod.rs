@@ -491,9 +491,19 @@ pub(crate) fn read_samples(
     })
 }
 
+/// The error for a fixed-size binary header that the file ends inside: `got` of the
+/// `len` header bytes were read.
+pub(crate) fn truncated_header(path: &Path, got: usize, len: usize) -> Error {
+    Error::format(
+        path,
+        "header",
+        format!("the header is truncated: {got} of {len} bytes"),
+    )
+}
+
 /// Reserves room for `n` values, reporting an allocation failure as an error instead
 /// of aborting the process.
-fn reserve<T>(n: usize, path: &Path) -> Result<Vec<T>> {
+pub(crate) fn reserve<T>(n: usize, path: &Path) -> Result<Vec<T>> {
     let mut v = Vec::new();
     v.try_reserve_exact(n).map_err(|_| {
         Error::too_large(

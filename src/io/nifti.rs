@@ -73,7 +73,7 @@
 //! Axes longer than 32767 voxels cannot be stored and are refused.
 
 use super::{fill, open, read_error, read_samples, too_short, write_atomic, write_samples_le};
-use super::{Endian, Samples, Stored};
+use super::{truncated_header, Endian, Samples, Stored};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, AnyVolume, Volume, VoxelKind};
 use flate2::read::MultiGzDecoder;
@@ -263,11 +263,7 @@ fn read_header(reader: &mut dyn Read, path: &Path) -> Result<Header> {
         }
     };
     if got < HEADER_LEN {
-        return Err(Error::format(
-            path,
-            "header",
-            format!("the header is truncated: {got} of {HEADER_LEN} bytes"),
-        ));
+        return Err(truncated_header(path, got, HEADER_LEN));
     }
     parse_header(&Raw { b: &b, endian }, path)
 }

@@ -35,7 +35,7 @@
 //! no calibration and read with 1 mm voxels; give the spacing explicitly where it
 //! matters.
 
-use super::Samples;
+use super::{reserve, Samples};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, AnyVolume};
 use glam::{DMat4, DVec3};
@@ -313,17 +313,6 @@ fn read_stack(inputs: &[Input], what: &Path) -> Result<AnyVolume> {
     let samples = out.ok_or_else(|| Error::format(what, "file", "no pages"))?;
     let affine = DMat4::from_scale(DVec3::from_array(spacing));
     samples.into_volume(dims, affine)
-}
-
-fn reserve<T>(n: usize, path: &Path) -> Result<Vec<T>> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| {
-        Error::too_large(
-            format!("data of {}", path.display()),
-            format!("cannot allocate memory for {n} values"),
-        )
-    })?;
-    Ok(v)
 }
 
 /// Appends one decoded page, converted as in the module docs.

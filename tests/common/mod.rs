@@ -1,8 +1,186 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+use glam::{DMat4, DQuat, DVec3};
 use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use voxlab::gpu::GpuContext;
+use voxlab::{AnyVolume, Error, Volume};
+
+// ---------------------------------------------------------------------------------
+// Files and folders
+// ---------------------------------------------------------------------------------
+
+/// The repository root.
+pub fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh, empty directory for one test: `<test file>/<name>` under Cargo's
+/// temporary folder for integration tests, so that tests running in parallel (within
+/// one file or across files) never share one.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(env!("CARGO_CRATE_NAME"))
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn gzip(data: &[u8]) -> Vec<u8> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(data).unwrap();
+    gz.finish().unwrap()
+}
+
+// ---------------------------------------------------------------------------------
+// Volumes and reader errors
+// ---------------------------------------------------------------------------------
+
+/// A rotated, anisotropic, translated voxel-to-world affine.
+pub fn oblique_affine() -> DMat4 {
+    let rotation = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+    DMat4::from_scale_rotation_translation(
+        DVec3::new(0.5, 1.25, 2.0),
+        rotation,
+        DVec3::new(-12.5, 3.25, 100.1),
+    )
+}
+
+/// One 5×4×3 volume of each voxel type (u8, u16, i16, f32, in that order) with
+/// `affine`, holding extreme and special values.
+pub fn sample_volumes(affine: DMat4) -> Vec<AnyVolume> {
+    let dims = [5, 4, 3];
+    let n = 60;
+    let mut u8s: Vec<u8> = (0..n).map(|i| (i * 37 % 256) as u8).collect();
+    u8s[n - 1] = u8::MAX;
+    let mut u16s: Vec<u16> = (0..n).map(|i| (i * 1097 % 65536) as u16).collect();
+    u16s[n - 1] = u16::MAX;
+    let mut i16s: Vec<i16> = (0..n).map(|i| (i as i16 - 30) * 1000).collect();
+    i16s[0] = i16::MIN;
+    i16s[1] = i16::MAX;
+    let mut f32s: Vec<f32> = (0..n).map(|i| (i as f32 - 20.5) * 0.1).collect();
+    f32s[..6].copy_from_slice(&[
+        f32::NAN,
+        f32::INFINITY,
+        -0.0,
+        1e-40,
+        f32::MAX,
+        -f32::MIN_POSITIVE,
+    ]);
+    vec![
+        Volume::with_affine(dims, affine, u8s).unwrap().into(),
+        Volume::with_affine(dims, affine, u16s).unwrap().into(),
+        Volume::with_affine(dims, affine, i16s).unwrap().into(),
+        Volume::with_affine(dims, affine, f32s).unwrap().into(),
+    ]
+}
+
+/// The voxel values as exact bit patterns (so NaN equals NaN and -0 differs from 0).
+pub fn bits(v: &AnyVolume) -> Vec<u64> {
+    match v {
+        AnyVolume::F32(v) => v.data().iter().map(|x| x.to_bits() as u64).collect(),
+        other => other.values_f64().iter().map(|x| x.to_bits()).collect(),
+    }
+}
+
+/// The field of a format error (fails the test on any other error).
+pub fn format_field(e: &Error) -> &str {
+    match e {
+        Error::Format { field, .. } => field,
+        other => panic!("expected a format error, got {other:?}"),
+    }
+}
+
+/// Asserts a format error about `field` whose message mentions `words`.
+#[track_caller]
+pub fn assert_format(r: voxlab::Result<impl std::fmt::Debug>, field: &str, words: &str) {
+    let e = r.expect_err("expected an error");
+    assert_eq!(format_field(&e), field, "{e}");
+    assert!(e.to_string().contains(words), "'{words}' not in: {e}");
+}
+
+/// The message of a format error (fails the test on a volume or any other error).
+pub fn format_err(r: voxlab::Result<AnyVolume>) -> String {
+    match r {
+        Err(e @ Error::Format { .. }) => e.to_string(),
+        Err(e) => panic!("expected a format error, got {e}"),
+        Ok(v) => panic!("expected an error, got a volume {:?}", v.dims()),
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// The command line
+// ---------------------------------------------------------------------------------
+
+/// The `voxlab` binary with `args`, in a clean environment: no voxel limit from the
+/// caller's environment, and a runtime directory that exists.
+pub fn voxlab_command(args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_voxlab"));
+    c.args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .env_remove("VOXLAB_MAX_VOXELS");
+    c
+}
+
+/// Runs `voxlab` with `args` (see [`voxlab_command`]).
+pub fn voxlab(args: &[&str]) -> Output {
+    voxlab_command(args)
+        .output()
+        .expect("the voxlab binary runs")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+// ---------------------------------------------------------------------------------
+// Deterministic pseudo-random numbers (no RNG crate; a failure reproduces)
+// ---------------------------------------------------------------------------------
+
+/// xorshift64*.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    /// Uniform in `0..n` (0 when `n` is 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+
+    /// Uniform in `[0, 1)`, from the top 53 bits.
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Plain xorshift64 (shifts 13, 7, 17).
+pub struct XorShift(pub u64);
+
+impl XorShift {
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+}
+
+// ---------------------------------------------------------------------------------
+// GPU
+// ---------------------------------------------------------------------------------
 
 /// Opens the GPU, or decides what a missing adapter means: a failure, unless
 /// `VOXLAB_ALLOW_NO_GPU=1`, in which case the skip is announced loudly (straight to the
