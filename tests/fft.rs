@@ -605,3 +605,23 @@ fn irfft_ignores_imaginary_dc_and_nyquist() {
     let b = irfft_nd(&clean, &[6], Normalization::Unnormalized);
     assert!(a.iter().zip(&b).all(|(p, q)| (p - q).abs() < 1e-15));
 }
+
+/// Degenerate shapes: empty arrays stay empty, a 0-D array (one element, no axes) is
+/// left alone, and unit axes transform as the identity up to scale.
+#[test]
+fn degenerate_shapes() {
+    let f = Direction::Forward;
+    assert!(dft_1d(&[], f, Normalization::Unitary).is_empty());
+    assert!(dft_nd(&[], &[0, 3], f, Normalization::Unitary).is_empty());
+    let mut e: Vec<C> = Vec::new();
+    fft_nd(&mut e, &[3, 0], f, Normalization::Unitary);
+    assert!(fftshift::<C>(&[], &[0]).is_empty());
+    let one = [C::new(2.0, -1.0)];
+    assert_eq!(dft_nd(&one, &[], f, Normalization::Unitary), one);
+    let mut x = one.to_vec();
+    fft_nd(&mut x, &[], f, Normalization::Unitary);
+    assert_eq!(x, one);
+    let x = Rng(43).complex(6);
+    let got = dft_nd(&x, &[1, 6, 1], f, Normalization::None);
+    assert!(rel_l2(&got, &dft_1d(&x, f, Normalization::None)) < 1e-15);
+}
