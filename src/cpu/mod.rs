@@ -4,6 +4,8 @@
 //! functions by name. The f64 instance is the oracle (its output never depends on the
 //! thread count); the f32 instance is the fair baseline for speed comparisons.
 
+pub mod dft;
+pub mod fft;
 pub mod filter;
 pub mod gradient;
 pub mod raycast;
