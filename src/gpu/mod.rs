@@ -3,9 +3,11 @@
 //!
 //! `context` finds an adapter, opens a device with the adapter's own limits, and turns
 //! every failure into a typed [`crate::Error`]. `probe` is the smallest end-to-end
-//! check that a device really computes: upload, dispatch, read back, compare.
+//! check that a device really computes: upload, dispatch, read back, compare. `fft`
+//! is the power-of-two FFT (split-stream and Stockham variants).
 
 pub mod context;
+pub mod fft;
 pub mod probe;
 pub mod raycast;
 

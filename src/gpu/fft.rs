@@ -1,0 +1,670 @@
+//! The GPU Fourier transform: power-of-two complex FFTs in f32, in two variants that
+//! compute the same thing as [`crate::cpu::dft::dft_nd`] (same [`Direction`], same
+//! [`Normalization`], DC at index 0, row-major arrays with the last axis fastest).
+//!
+//! - [`GpuFftVariant::SplitStream`] — the teaching version: the split-stream radix-2
+//!   decimation-in-frequency FFT of Jansen et al., *Fourier volume rendering on the
+//!   GPU using a split-stream FFT* (VMV 2004), §4. `log2 N` stages; the bit reversal
+//!   ("tangling") is folded into the first pass, which reads its input from
+//!   bit-reversed indices; every pass reads its input interleaved (elements `2i`,
+//!   `2i+1`) and writes its output concatenated: the butterfly is split in two, the
+//!   invocations of the first half of a line computing `f_e = a + b`, those of the
+//!   second half `f_o = (a − b)·w`, one output each. The last two stages are merged
+//!   into one pass (four radix-4 sums, one per quarter of the output), so a line of
+//!   length `N ≥ 4` takes `log2 N − 1` passes. Shader: `shaders/fft_split_stream.wgsl`.
+//! - [`GpuFftVariant::Stockham`] — the fast path: Stockham autosort passes
+//!   (decimation in time), radix 4 with one radix-2 pass first when `log2 N` is odd:
+//!   no bit reversal, `⌈log2 N / 2⌉` passes, one invocation per butterfly. Workgroup
+//!   memory is not used (yet). Shader: `shaders/fft_stockham.wgsl`.
+//!
+//! **Axes.** An N-D transform runs the 1-D batches along every axis in turn. Lines
+//! along an axis other than the last are addressed with a stride parameter
+//! ([`FftParams::stride`]), not transposed: the ping-pong buffers already give every
+//! pass a fresh output, so a transpose would only add passes and traffic. Along a
+//! strided axis neighbouring invocations take the same element of neighbouring lines,
+//! which are neighbours in memory, so the accesses stay coalesced.
+//!
+//! **Twiddles.** One table per axis length, `exp(∓2πi·m/N)` for `m = 0 … N−1`, made in
+//! f64 with the exact [`twiddle`] of the oracle and rounded once to f32; multiplications
+//! by `∓i` are exact swaps ([`times_w4`]). No twiddle is computed on the device.
+//!
+//! **Scale.** The normalisation factor of the whole transform is applied once, in the
+//! last pass (every other pass multiplies by 1, exactly).
+//!
+//! **Mirrors.** Every per-element WGSL function has a Rust twin of the same name in
+//! this file (`split_stream_element`, `split_stream_last_two_element`,
+//! `stockham_radix4_butterfly`, …), and [`split_stream_reference`] and
+//! [`stockham_reference`] run the same pass plans on the CPU in f64, so the algorithm
+//! can be checked without a device.
+//!
+//! **Limits.** Power-of-two lengths only: any other length is refused with
+//! [`Error::Invalid`] naming the axis (Bluestein's algorithm, which would reduce other
+//! lengths to powers of two, is out of scope for now: use [`crate::cpu::fft::fft_nd`]).
+//! The whole array must fit one storage binding
+//! (`max_storage_buffer_binding_size`, 128 MiB on lavapipe, i.e. 16 Mi complex values);
+//! larger arrays are refused with [`Error::TooLarge`].
+#![expect(
+    clippy::needless_range_loop,
+    reason = "Keeps the CPU twins easily comparable to the shaders"
+)]
+
+use super::context::GpuContext;
+use crate::cpu::dft::{twiddle, Direction, Normalization};
+use crate::error::{Error, Result};
+use rustfft::num_complex::Complex;
+use wgpu::util::DeviceExt;
+
+/// `shaders/shared/fft_params.wgsl`: the WGSL twin of [`FftParams`].
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/fft_params.wgsl");
+/// `shaders/fft_common.wgsl`: bindings and helpers of both variants.
+pub const COMMON_WGSL: &str = include_str!("../../shaders/fft_common.wgsl");
+/// `shaders/fft_split_stream.wgsl`.
+pub const SPLIT_STREAM_WGSL: &str = include_str!("../../shaders/fft_split_stream.wgsl");
+/// `shaders/fft_stockham.wgsl`.
+pub const STOCKHAM_WGSL: &str = include_str!("../../shaders/fft_stockham.wgsl");
+
+/// Invocations per workgroup (`WORKGROUP` in `shaders/fft_common.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// Which GPU FFT to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GpuFftVariant {
+    /// Jansen et al.'s split-stream radix-2 DIF FFT (the teaching version).
+    SplitStream,
+    /// Radix-4 Stockham autosort (the fast path).
+    Stockham,
+}
+
+impl GpuFftVariant {
+    pub const ALL: [GpuFftVariant; 2] = [GpuFftVariant::SplitStream, GpuFftVariant::Stockham];
+
+    /// The complete WGSL module of this variant.
+    pub fn shader_source(self) -> String {
+        let body = match self {
+            GpuFftVariant::SplitStream => SPLIT_STREAM_WGSL,
+            GpuFftVariant::Stockham => STOCKHAM_WGSL,
+        };
+        format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{body}")
+    }
+}
+
+/// Parameters of one FFT pass, shared with `shaders/shared/fft_params.wgsl: FftParams`
+/// (32 bytes, eight 4-byte scalars, no padding; `tests/gpu_fft.rs` checks the layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FftParams {
+    /// Line length (a power of two).
+    pub n: u32,
+    /// `log2 n`.
+    pub log2n: u32,
+    /// Distance in elements between neighbours of a line (1 along the last axis).
+    pub stride: u32,
+    /// Number of lines.
+    pub batch: u32,
+    /// Split stream: the stage `s` of this pass (0 reads bit-reversed).
+    pub stage: u32,
+    /// 0 forward, 1 inverse.
+    pub direction: u32,
+    /// Stockham: `Ns`, the length of the sub-transforms already finished.
+    pub span: u32,
+    /// Multiplies every output (the normalisation in the last pass, else 1).
+    pub scale: f32,
+}
+
+/// One pass of a 1-D transform: which kernel, and its stage (split stream) or span
+/// (Stockham).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FftPass {
+    /// `split_stream_pass` at stage `s`.
+    SplitStream { stage: u32 },
+    /// `split_stream_last_two`: stages `log2 N − 2` and `log2 N − 1` merged
+    /// (`stage` is `log2 N − 2`; 0 when it is also the first pass).
+    SplitStreamLastTwo { stage: u32 },
+    /// `stockham_radix2` with `Ns = span`.
+    Radix2 { span: u32 },
+    /// `stockham_radix4` with `Ns = span`.
+    Radix4 { span: u32 },
+}
+
+impl FftPass {
+    fn entry_point(self) -> &'static str {
+        match self {
+            FftPass::SplitStream { .. } => "split_stream_pass",
+            FftPass::SplitStreamLastTwo { .. } => "split_stream_last_two",
+            FftPass::Radix2 { .. } => "stockham_radix2",
+            FftPass::Radix4 { .. } => "stockham_radix4",
+        }
+    }
+    /// Invocations per line.
+    fn items_per_line(self, n: u32) -> u32 {
+        match self {
+            FftPass::SplitStream { .. } | FftPass::SplitStreamLastTwo { .. } => n,
+            FftPass::Radix2 { .. } => n / 2,
+            FftPass::Radix4 { .. } => n / 4,
+        }
+    }
+    fn stage(self) -> u32 {
+        match self {
+            FftPass::SplitStream { stage } | FftPass::SplitStreamLastTwo { stage } => stage,
+            _ => 0,
+        }
+    }
+    fn span(self) -> u32 {
+        match self {
+            FftPass::Radix2 { span } | FftPass::Radix4 { span } => span,
+            _ => 0,
+        }
+    }
+}
+
+/// The passes of one line of length `2^log2n` (none for `log2n = 0`).
+///
+/// Split stream: stages `0 … log2n − 3` one pass each, then the last two stages merged;
+/// `log2n = 1` is a single radix-2 stage. Stockham: a radix-2 pass first when `log2n`
+/// is odd, then radix-4 passes, `Ns` growing by the radix each pass.
+pub fn plan(variant: GpuFftVariant, log2n: u32) -> Vec<FftPass> {
+    match variant {
+        GpuFftVariant::SplitStream => match log2n {
+            0 => vec![],
+            1 => vec![FftPass::SplitStream { stage: 0 }],
+            _ => (0..log2n - 2)
+                .map(|stage| FftPass::SplitStream { stage })
+                .chain([FftPass::SplitStreamLastTwo { stage: log2n - 2 }])
+                .collect(),
+        },
+        GpuFftVariant::Stockham => {
+            let mut passes = Vec::new();
+            let mut span = 1u32;
+            if log2n % 2 == 1 {
+                passes.push(FftPass::Radix2 { span });
+                span *= 2;
+            }
+            while span < (1u32 << log2n) {
+                passes.push(FftPass::Radix4 { span });
+                span *= 4;
+            }
+            passes
+        }
+    }
+}
+
+/// The twiddle table `exp(∓2πi·m/n)`, `m = 0 … n−1`, exact in f64 ([`twiddle`]).
+pub fn twiddle_table(n: usize, dir: Direction) -> Vec<Complex<f64>> {
+    (0..n).map(|m| twiddle(m, n, dir)).collect()
+}
+
+// ---------------------------------------------------------------------------------
+// CPU twins of the per-element shader functions (one line at a time, f64)
+// ---------------------------------------------------------------------------------
+
+/// Multiplies by `exp(∓2πi/4) = ∓i` exactly.
+/// mirrors shaders/fft_common.wgsl: times_w4
+pub fn times_w4(v: Complex<f64>, dir: Direction) -> Complex<f64> {
+    match dir {
+        Direction::Forward => Complex::new(v.im, -v.re),
+        Direction::Inverse => Complex::new(-v.im, v.re),
+    }
+}
+
+/// The buffer index of element `j` of line `line` (see [`FftParams::stride`]).
+/// mirrors shaders/fft_common.wgsl: element_address
+pub fn element_address(p: &FftParams, line: u32, j: u32) -> u32 {
+    let s = p.stride;
+    (line / s) * p.n * s + line % s + j * s
+}
+
+/// The lowest `bits` bits of `x` in reverse order (0 when `bits` is 0).
+/// mirrors shaders/fft_split_stream.wgsl: reverse_low_bits
+pub fn reverse_low_bits(x: u32, bits: u32) -> u32 {
+    if bits == 0 {
+        0
+    } else {
+        x.reverse_bits() >> (32 - bits)
+    }
+}
+
+/// Input element `k` of the current split-stream pass (bit-reversed in pass 0).
+/// mirrors shaders/fft_split_stream.wgsl: split_stream_load
+fn split_stream_load(src: &[Complex<f64>], p: &FftParams, k: u32) -> Complex<f64> {
+    let j = if p.stage == 0 {
+        reverse_low_bits(k, p.log2n)
+    } else {
+        k
+    };
+    src[j as usize]
+}
+
+/// Output `t` of split-stream stage `s = p.stage` of one line: with `i = t mod N/2`,
+/// `a = in[2i]`, `b = in[2i+1]`, the first half of the output is `f_e = a + b` and the
+/// second half `f_o = (a − b)·exp(∓2πi·j·2^s/N)`, `j` the low `log2 N − s − 1` bits of
+/// `i` reversed.
+///
+/// Why this is the DIF FFT: relabel the in-place DIF of stage `s` (pairs `2^(L−s−1)`
+/// apart, natural input, bit-reversed output) by bit-reversing every index, then rotate
+/// the index bits right by `s`; the pairs of every stage become `2i, 2i+1` on input and
+/// `i, i + N/2` on output (the constant geometry of Jansen et al.'s Figure 7), the input
+/// of stage 0 is the bit-reversed data and the output of the last stage is in natural
+/// order.
+/// mirrors shaders/fft_split_stream.wgsl: split_stream_element
+pub fn split_stream_element(
+    src: &[Complex<f64>],
+    tw: &[Complex<f64>],
+    p: &FftParams,
+    t: u32,
+) -> Complex<f64> {
+    let half = p.n / 2;
+    let i = t % half;
+    let a = split_stream_load(src, p, 2 * i);
+    let b = split_stream_load(src, p, 2 * i + 1);
+    if t < half {
+        return a + b; // f_e
+    }
+    let bits = p.log2n - p.stage - 1;
+    let j = reverse_low_bits(i & ((1u32 << bits) - 1), bits);
+    (a - b) * tw[(j << p.stage) as usize] // f_o
+}
+
+/// Output `t` of the merged last two split-stream stages: quarter `q = t / (N/4)`
+/// reads `a0 … a3 = in[4r … 4r+3]` (`r = t mod N/4`) and computes
+/// `(a0+a1) + (a2+a3)`, `(a0−a1) + w(a2−a3)`, `(a0+a1) − (a2+a3)`, `(a0−a1) − w(a2−a3)`
+/// for `q = 0, 1, 2, 3`, with `w = ∓i` (the last stage's twiddles are all 1, the one
+/// before has only `1` and `∓i`).
+/// mirrors shaders/fft_split_stream.wgsl: split_stream_last_two_element
+pub fn split_stream_last_two_element(
+    src: &[Complex<f64>],
+    p: &FftParams,
+    dir: Direction,
+    t: u32,
+) -> Complex<f64> {
+    let quarter = p.n / 4;
+    let (q, r) = (t / quarter, t % quarter);
+    let a0 = split_stream_load(src, p, 4 * r);
+    let a1 = split_stream_load(src, p, 4 * r + 1);
+    let a2 = split_stream_load(src, p, 4 * r + 2);
+    let a3 = split_stream_load(src, p, 4 * r + 3);
+    match q {
+        0 => (a0 + a1) + (a2 + a3),
+        1 => (a0 - a1) + times_w4(a2 - a3, dir),
+        2 => (a0 + a1) - (a2 + a3),
+        _ => (a0 - a1) - times_w4(a2 - a3, dir),
+    }
+}
+
+/// Radix-4 Stockham butterfly `j` of one line: inputs `j + m·N/4` times
+/// `exp(∓2πi·m·k/(4Ns))` (`k = j mod Ns`), a 4-point DFT, outputs at
+/// `(j / Ns)·4Ns + k + m·Ns`, `m = 0 … 3`.
+/// mirrors shaders/fft_stockham.wgsl: stockham_radix4_butterfly
+pub fn stockham_radix4_butterfly(
+    src: &[Complex<f64>],
+    tw: &[Complex<f64>],
+    p: &FftParams,
+    dir: Direction,
+    j: u32,
+    dst: &mut [Complex<f64>],
+) {
+    let ns = p.span;
+    let quarter = p.n / 4;
+    let k = j % ns;
+    let step = p.n / (4 * ns);
+    let v0 = src[j as usize];
+    let v1 = src[(j + quarter) as usize] * tw[(k * step) as usize];
+    let v2 = src[(j + 2 * quarter) as usize] * tw[(2 * k * step) as usize];
+    let v3 = src[(j + 3 * quarter) as usize] * tw[(3 * k * step) as usize];
+    let (a, b, c, d) = (v0 + v2, v0 - v2, v1 + v3, times_w4(v1 - v3, dir));
+    let out = ((j / ns) * 4 * ns + k) as usize;
+    let ns = ns as usize;
+    dst[out] = a + c;
+    dst[out + ns] = b + d;
+    dst[out + 2 * ns] = a - c;
+    dst[out + 3 * ns] = b - d;
+}
+
+/// Radix-2 Stockham butterfly `j`: inputs `j` and `j + N/2`, the second times
+/// `exp(∓2πi·k/(2Ns))`.
+/// mirrors shaders/fft_stockham.wgsl: stockham_radix2_butterfly
+pub fn stockham_radix2_butterfly(
+    src: &[Complex<f64>],
+    tw: &[Complex<f64>],
+    p: &FftParams,
+    j: u32,
+    dst: &mut [Complex<f64>],
+) {
+    let ns = p.span;
+    let k = j % ns;
+    let step = p.n / (2 * ns);
+    let v0 = src[j as usize];
+    let v1 = src[(j + p.n / 2) as usize] * tw[(k * step) as usize];
+    let out = ((j / ns) * 2 * ns + k) as usize;
+    dst[out] = v0 + v1;
+    dst[out + ns as usize] = v0 - v1;
+}
+
+/// The parameters of `pass` on lines of length `n` (scale 1, one contiguous line).
+fn line_params(n: usize, dir: Direction, pass: FftPass) -> FftParams {
+    FftParams {
+        n: n as u32,
+        log2n: n.trailing_zeros(),
+        stride: 1,
+        batch: 1,
+        stage: pass.stage(),
+        direction: (dir == Direction::Inverse) as u32,
+        span: pass.span(),
+        scale: 1.0,
+    }
+}
+
+/// Runs the pass plan of `variant` on one line on the CPU, in f64, with the twins of
+/// the shader functions: the unscaled transform, as the GPU computes it.
+///
+/// # Panics
+/// If the length is not a power of two.
+pub fn reference_line(
+    line: &[Complex<f64>],
+    dir: Direction,
+    variant: GpuFftVariant,
+) -> Vec<Complex<f64>> {
+    let n = line.len();
+    assert!(n.is_power_of_two(), "length {n} is not a power of two");
+    let tw = twiddle_table(n, dir);
+    let mut src = line.to_vec();
+    let mut dst = vec![Complex::new(0.0, 0.0); n];
+    for pass in plan(variant, n.trailing_zeros()) {
+        let p = line_params(n, dir, pass);
+        match pass {
+            FftPass::SplitStream { .. } => {
+                for t in 0..n {
+                    dst[t] = split_stream_element(&src, &tw, &p, t as u32);
+                }
+            }
+            FftPass::SplitStreamLastTwo { .. } => {
+                for t in 0..n {
+                    dst[t] = split_stream_last_two_element(&src, &p, dir, t as u32);
+                }
+            }
+            FftPass::Radix2 { .. } => {
+                for j in 0..n / 2 {
+                    stockham_radix2_butterfly(&src, &tw, &p, j as u32, &mut dst);
+                }
+            }
+            FftPass::Radix4 { .. } => {
+                for j in 0..n / 4 {
+                    stockham_radix4_butterfly(&src, &tw, &p, dir, j as u32, &mut dst);
+                }
+            }
+        }
+        std::mem::swap(&mut src, &mut dst);
+    }
+    src
+}
+
+/// The split-stream FFT of one line on the CPU (unscaled), through the shader twins.
+pub fn split_stream_reference(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
+    reference_line(line, dir, GpuFftVariant::SplitStream)
+}
+
+/// The Stockham FFT of one line on the CPU (unscaled), through the shader twins.
+pub fn stockham_reference(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
+    reference_line(line, dir, GpuFftVariant::Stockham)
+}
+
+// ---------------------------------------------------------------------------------
+// The GPU transform
+// ---------------------------------------------------------------------------------
+
+/// The N-D FFT on the GPU of a row-major array of `shape` (last axis fastest): 1-D
+/// transforms along every axis, scaled by `norm` as the whole transform must
+/// (`cpu::dft::dft_nd`'s conventions). Uploads, runs, reads back.
+///
+/// # Errors
+/// [`Error::Invalid`] when the shape does not describe the data or an axis length is
+/// not a power of two; [`Error::TooLarge`] when the array exceeds one storage binding;
+/// [`Error::Gpu`] when the device fails.
+pub fn fft_nd(
+    ctx: &GpuContext,
+    data: &[Complex<f32>],
+    shape: &[usize],
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+) -> Result<Vec<Complex<f32>>> {
+    let axes: Vec<usize> = (0..shape.len()).collect();
+    transform(ctx, data, shape, &axes, dir, norm, variant)
+}
+
+/// A batch of 1-D FFTs of length `n` of the contiguous lines of `data` (the last axis
+/// of the array `[data.len() / n, n]`), each scaled by `norm` for length `n`.
+///
+/// # Errors
+/// As [`fft_nd`]; also when `n` is 0 or does not divide `data.len()`.
+pub fn fft_lines(
+    ctx: &GpuContext,
+    data: &[Complex<f32>],
+    n: usize,
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+) -> Result<Vec<Complex<f32>>> {
+    if n == 0 || data.len() % n != 0 {
+        return Err(Error::invalid(
+            "fft line length",
+            format!("{n} does not divide the {} values", data.len()),
+        ));
+    }
+    transform(ctx, data, &[data.len() / n, n], &[1], dir, norm, variant)
+}
+
+/// Checks the input and refuses what the GPU FFT cannot do.
+fn validate(ctx: &GpuContext, len: usize, shape: &[usize], axes: &[usize]) -> Result<()> {
+    let total = shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n));
+    if total != Some(len) {
+        return Err(Error::invalid(
+            "fft shape",
+            format!("shape {shape:?} does not describe {len} values"),
+        ));
+    }
+    let bytes = (len as u64).saturating_mul(8);
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    if bytes > limit || len > u32::MAX as usize / 4 {
+        return Err(Error::too_large(
+            "GPU FFT data",
+            format!(
+                "{len} complex values ({bytes} bytes) exceed the adapter's storage-binding \
+                 limit of {limit} bytes (max_storage_buffer_binding_size): use cpu::fft::fft_nd"
+            ),
+        ));
+    }
+    for &axis in axes {
+        let n = shape[axis];
+        if n > 0 && !n.is_power_of_two() {
+            return Err(Error::invalid(
+                format!("fft axis {axis}"),
+                format!(
+                    "length {n} is not a power of two; the GPU FFT handles powers of two only \
+                     (Bluestein's algorithm for other lengths is not implemented): \
+                     use the CPU path, cpu::fft::fft_nd, which takes every length"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The workgroup counts for `invocations` (rows of at most the per-dimension limit).
+fn workgroups(ctx: &GpuContext, invocations: u32) -> (u32, u32) {
+    let groups = invocations.div_ceil(WORKGROUP).max(1);
+    let x = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
+    (x, groups.div_ceil(x))
+}
+
+fn transform(
+    ctx: &GpuContext,
+    data: &[Complex<f32>],
+    shape: &[usize],
+    axes: &[usize],
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+) -> Result<Vec<Complex<f32>>> {
+    validate(ctx, data.len(), shape, axes)?;
+    if data.is_empty() {
+        return Ok(Vec::new());
+    }
+    let total = data.len();
+    let transformed: usize = axes.iter().map(|&a| shape[a]).product();
+    let factor = norm.apply(1.0, transformed, dir) as f32;
+    // (axis, pass) for every pass of the whole transform.
+    let passes: Vec<(usize, FftPass)> = axes
+        .iter()
+        .flat_map(|&axis| {
+            plan(variant, shape[axis].trailing_zeros())
+                .into_iter()
+                .map(move |p| (axis, p))
+        })
+        .collect();
+    if passes.is_empty() {
+        // Every transformed axis has length 1: the transform is the identity.
+        return Ok(data.iter().map(|v| v * factor).collect());
+    }
+
+    let dev = &ctx.device;
+    let module = ctx.shader(
+        match variant {
+            GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
+            GpuFftVariant::Stockham => "fft_stockham.wgsl",
+        },
+        &variant.shader_source(),
+    )?;
+    let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("fft"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            storage(true, 1),
+            storage(false, 2),
+            storage(true, 3),
+        ],
+    });
+    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("fft"),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = |entry: &str| {
+        dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    };
+    let mut pipelines: Vec<(&'static str, wgpu::ComputePipeline)> = Vec::new();
+    for (_, p) in &passes {
+        if !pipelines.iter().any(|(e, _)| *e == p.entry_point()) {
+            pipelines.push((p.entry_point(), pipeline(p.entry_point())));
+        }
+    }
+
+    let bytes = (total * 8) as u64;
+    let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
+    let ping = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("fft data a"),
+        contents: bytemuck::cast_slice(&host),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    let pong = ctx.storage_buffer("fft data b", bytes)?;
+    let bufs = [&ping, &pong];
+    // One twiddle table per transformed axis.
+    let tables: Vec<wgpu::Buffer> = axes
+        .iter()
+        .map(|&axis| {
+            let t: Vec<[f32; 2]> = twiddle_table(shape[axis], dir)
+                .iter()
+                .map(|w| [w.re as f32, w.im as f32])
+                .collect();
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("fft twiddles"),
+                contents: bytemuck::cast_slice(&t),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        })
+        .collect();
+
+    let mut enc = dev.create_command_encoder(&Default::default());
+    let last = passes.len() - 1;
+    let mut uniforms = Vec::with_capacity(passes.len());
+    for (i, &(axis, pass)) in passes.iter().enumerate() {
+        let n = shape[axis];
+        let params = FftParams {
+            n: n as u32,
+            log2n: n.trailing_zeros(),
+            stride: shape[axis + 1..].iter().product::<usize>() as u32,
+            batch: (total / n) as u32,
+            stage: pass.stage(),
+            direction: (dir == Direction::Inverse) as u32,
+            span: pass.span(),
+            scale: if i == last { factor } else { 1.0 },
+        };
+        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("fft params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let table = &tables[axes.iter().position(|&a| a == axis).unwrap_or(0)];
+        let bind = ctx.bind_group(
+            "fft pass",
+            &layout,
+            &[
+                ubuf.as_entire_binding(),
+                bufs[i % 2].as_entire_binding(),
+                bufs[(i + 1) % 2].as_entire_binding(),
+                table.as_entire_binding(),
+            ],
+        );
+        let pipeline = &pipelines
+            .iter()
+            .find(|(e, _)| *e == pass.entry_point())
+            .expect("every entry point has a pipeline")
+            .1;
+        let (x, y) = workgroups(ctx, pass.items_per_line(n as u32) * params.batch);
+        {
+            let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(pass.entry_point()),
+                timestamp_writes: None,
+            });
+            cpass.set_pipeline(pipeline);
+            cpass.set_bind_group(0, &bind, &[]);
+            cpass.dispatch_workgroups(x, y, 1);
+        }
+        uniforms.push(ubuf);
+    }
+    ctx.queue.submit([enc.finish()]);
+    let out = ctx.read_buffer(bufs[passes.len() % 2], bytes)?;
+    // (A byte vector need not be aligned for f32: copy rather than cast in place.)
+    Ok(bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&out)
+        .iter()
+        .map(|v| Complex::new(v[0], v[1]))
+        .collect())
+}
