@@ -90,7 +90,8 @@ fn cpu_twins_match_the_exact_dft() {
 fn pass_plans_have_the_promised_lengths() {
     use FftPass::*;
     let ss = |l| fft::plan(GpuFftVariant::SplitStream, l);
-    let st = |l| fft::plan(GpuFftVariant::Stockham, l);
+    let st = |l| fft::plan(GpuFftVariant::StockhamGlobal, l);
+    let local = |l| fft::plan(GpuFftVariant::Stockham, l);
     assert!(ss(0).is_empty() && st(0).is_empty());
     assert_eq!(ss(1), [SplitStream { stage: 0 }]);
     assert_eq!(ss(2), [SplitStreamLastTwo { stage: 0 }]);
@@ -108,6 +109,12 @@ fn pass_plans_have_the_promised_lengths() {
         st(5),
         [Radix2 { span: 1 }, Radix4 { span: 2 }, Radix4 { span: 8 }]
     );
+    assert!(local(0).is_empty());
+    for l in 1..=10 {
+        assert_eq!(local(l), [StockhamLocal], "log2 N = {l}");
+    }
+    assert_eq!(fft::LOCAL_MAX_N, 1 << 10);
+    assert_eq!(local(11), st(11));
     for l in 2..=20 {
         assert_eq!(ss(l).len() as u32, l - 1, "split stream, log2 N = {l}");
         assert_eq!(st(l).len() as u32, l.div_ceil(2), "Stockham, log2 N = {l}");
@@ -231,7 +238,8 @@ fn parity(name: &str, case: Case, variant: GpuFftVariant) {
     }
 }
 
-/// One parity test per case and variant, from one list.
+/// One parity test per case and variant, from one list (`Stockham` uses workgroup
+/// memory for lines up to `LOCAL_MAX_N`, so `lines_4096` exercises its fallback).
 macro_rules! parity_cases {
     ($($name:ident: $case:expr;)*) => {$(
         mod $name {
@@ -243,6 +251,10 @@ macro_rules! parity_cases {
             #[test]
             fn stockham() {
                 parity(stringify!($name), $case, GpuFftVariant::Stockham);
+            }
+            #[test]
+            fn stockham_global() {
+                parity(stringify!($name), $case, GpuFftVariant::StockhamGlobal);
             }
         }
     )*};
@@ -366,4 +378,30 @@ fn oversized_data_is_refused() {
         e.to_string().contains("max_storage_buffer_binding_size"),
         "{e}"
     );
+}
+
+/// The workgroup-memory Stockham path runs the same butterflies on the same twiddles
+/// as the storage-buffer passes: the results agree to the last bit.
+#[test]
+fn workgroup_memory_path_equals_the_global_passes() {
+    let Some(ctx) = common::gpu("workgroup_memory_path_equals_the_global_passes") else {
+        return;
+    };
+    let mut rng = common::Rng(0xb17_b17);
+    for shape in [&[2usize][..], &[8, 512], &[16, 32, 8], &[4, 1024]] {
+        let total: usize = shape.iter().product();
+        let x = to_f32(&random_complex(&mut rng, total));
+        for dir in [Direction::Forward, Direction::Inverse] {
+            let run = |variant| {
+                fft::fft_nd(&ctx, &x, shape, dir, Normalization::Unitary, variant).unwrap()
+            };
+            let local = run(GpuFftVariant::Stockham);
+            let global = run(GpuFftVariant::StockhamGlobal);
+            let same = local
+                .iter()
+                .zip(&global)
+                .all(|(a, b)| a.re.to_bits() == b.re.to_bits() && a.im.to_bits() == b.im.to_bits());
+            assert!(same, "{shape:?} {dir:?}: the two Stockham paths differ");
+        }
+    }
 }

@@ -14,8 +14,11 @@
 //!   length `N ≥ 4` takes `log2 N − 1` passes. Shader: `shaders/fft_split_stream.wgsl`.
 //! - [`GpuFftVariant::Stockham`] — the fast path: Stockham autosort passes
 //!   (decimation in time), radix 4 with one radix-2 pass first when `log2 N` is odd:
-//!   no bit reversal, `⌈log2 N / 2⌉` passes, one invocation per butterfly. Workgroup
-//!   memory is not used (yet). Shader: `shaders/fft_stockham.wgsl`.
+//!   no bit reversal, `⌈log2 N / 2⌉` passes, one invocation per butterfly. Lines of
+//!   up to [`LOCAL_MAX_N`] values are read once into workgroup memory, go through
+//!   every pass there (one workgroup per line, one dispatch per axis) and are written
+//!   once; [`GpuFftVariant::StockhamGlobal`] runs every pass through the storage
+//!   buffers at any length. Shader: `shaders/fft_stockham.wgsl`.
 //!
 //! **Axes.** An N-D transform runs the 1-D batches along every axis in turn. Lines
 //! along an axis other than the last are addressed with a stride parameter
@@ -66,23 +69,38 @@ pub const STOCKHAM_WGSL: &str = include_str!("../../shaders/fft_stockham.wgsl");
 /// Invocations per workgroup (`WORKGROUP` in `shaders/fft_common.wgsl`).
 const WORKGROUP: u32 = 64;
 
+/// The longest line the Stockham variant transforms in workgroup memory: two lines of
+/// 1024 complex f32 values are 16 KiB, the least workgroup memory WebGPU guarantees
+/// (`LOCAL_MAX_N` in `shaders/fft_stockham.wgsl`).
+pub const LOCAL_MAX_N: usize = 1024;
+
 /// Which GPU FFT to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum GpuFftVariant {
     /// Jansen et al.'s split-stream radix-2 DIF FFT (the teaching version).
     SplitStream,
-    /// Radix-4 Stockham autosort (the fast path).
+    /// Radix-4 Stockham autosort (the fast path): lines of up to [`LOCAL_MAX_N`]
+    /// values do every pass in workgroup memory (one dispatch per axis), longer lines
+    /// go through the storage buffers as [`GpuFftVariant::StockhamGlobal`] does.
     Stockham,
+    /// The same Stockham passes, every one through the storage buffers (one dispatch
+    /// per pass), whatever the length: the plain form of the algorithm, kept to check
+    /// and to time the workgroup-memory path against.
+    StockhamGlobal,
 }
 
 impl GpuFftVariant {
-    pub const ALL: [GpuFftVariant; 2] = [GpuFftVariant::SplitStream, GpuFftVariant::Stockham];
+    pub const ALL: [GpuFftVariant; 3] = [
+        GpuFftVariant::SplitStream,
+        GpuFftVariant::Stockham,
+        GpuFftVariant::StockhamGlobal,
+    ];
 
     /// The complete WGSL module of this variant.
     pub fn shader_source(self) -> String {
         let body = match self {
             GpuFftVariant::SplitStream => SPLIT_STREAM_WGSL,
-            GpuFftVariant::Stockham => STOCKHAM_WGSL,
+            GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => STOCKHAM_WGSL,
         };
         format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{body}")
     }
@@ -124,6 +142,9 @@ pub enum FftPass {
     Radix2 { span: u32 },
     /// `stockham_radix4` with `Ns = span`.
     Radix4 { span: u32 },
+    /// `stockham_local`: every Stockham pass of a line of at most [`LOCAL_MAX_N`]
+    /// values, in workgroup memory, one workgroup per line.
+    StockhamLocal,
 }
 
 impl FftPass {
@@ -133,6 +154,7 @@ impl FftPass {
             FftPass::SplitStreamLastTwo { .. } => "split_stream_last_two",
             FftPass::Radix2 { .. } => "stockham_radix2",
             FftPass::Radix4 { .. } => "stockham_radix4",
+            FftPass::StockhamLocal => "stockham_local",
         }
     }
     /// Invocations per line.
@@ -141,6 +163,7 @@ impl FftPass {
             FftPass::SplitStream { .. } | FftPass::SplitStreamLastTwo { .. } => n,
             FftPass::Radix2 { .. } => n / 2,
             FftPass::Radix4 { .. } => n / 4,
+            FftPass::StockhamLocal => WORKGROUP,
         }
     }
     fn stage(self) -> u32 {
@@ -161,7 +184,9 @@ impl FftPass {
 ///
 /// Split stream: stages `0 … log2n − 3` one pass each, then the last two stages merged;
 /// `log2n = 1` is a single radix-2 stage. Stockham: a radix-2 pass first when `log2n`
-/// is odd, then radix-4 passes, `Ns` growing by the radix each pass.
+/// is odd, then radix-4 passes, `Ns` growing by the radix each pass (for
+/// [`GpuFftVariant::Stockham`] and `N ≤ LOCAL_MAX_N`, all of them in one
+/// [`FftPass::StockhamLocal`]).
 pub fn plan(variant: GpuFftVariant, log2n: u32) -> Vec<FftPass> {
     match variant {
         GpuFftVariant::SplitStream => match log2n {
@@ -172,7 +197,10 @@ pub fn plan(variant: GpuFftVariant, log2n: u32) -> Vec<FftPass> {
                 .chain([FftPass::SplitStreamLastTwo { stage: log2n - 2 }])
                 .collect(),
         },
-        GpuFftVariant::Stockham => {
+        GpuFftVariant::Stockham if log2n >= 1 && (1usize << log2n) <= LOCAL_MAX_N => {
+            vec![FftPass::StockhamLocal]
+        }
+        GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => {
             let mut passes = Vec::new();
             let mut span = 1u32;
             if log2n % 2 == 1 {
@@ -293,7 +321,7 @@ pub fn split_stream_last_two_element(
 /// Radix-4 Stockham butterfly `j` of one line: inputs `j + m·N/4` times
 /// `exp(∓2πi·m·k/(4Ns))` (`k = j mod Ns`), a 4-point DFT, outputs at
 /// `(j / Ns)·4Ns + k + m·Ns`, `m = 0 … 3`.
-/// mirrors shaders/fft_stockham.wgsl: stockham_radix4_butterfly
+/// mirrors shaders/fft_stockham.wgsl: stockham_radix4_butterfly (and local_radix4_butterfly)
 pub fn stockham_radix4_butterfly(
     src: &[Complex<f64>],
     tw: &[Complex<f64>],
@@ -310,18 +338,32 @@ pub fn stockham_radix4_butterfly(
     let v1 = src[(j + quarter) as usize] * tw[(k * step) as usize];
     let v2 = src[(j + 2 * quarter) as usize] * tw[(2 * k * step) as usize];
     let v3 = src[(j + 3 * quarter) as usize] * tw[(3 * k * step) as usize];
-    let (a, b, c, d) = (v0 + v2, v0 - v2, v1 + v3, times_w4(v1 - v3, dir));
+    let y = radix4_dft(v0, v1, v2, v3, dir);
     let out = ((j / ns) * 4 * ns + k) as usize;
     let ns = ns as usize;
-    dst[out] = a + c;
-    dst[out + ns] = b + d;
-    dst[out + 2 * ns] = a - c;
-    dst[out + 3 * ns] = b - d;
+    dst[out] = y[0];
+    dst[out + ns] = y[1];
+    dst[out + 2 * ns] = y[2];
+    dst[out + 3 * ns] = y[3];
+}
+
+/// The 4-point DFT (unscaled), `y_m = Σ_r v_r·w₄^(m·r)` with `w₄ = ∓i`, in two radix-2
+/// steps.
+/// mirrors shaders/fft_stockham.wgsl: radix4_dft
+pub fn radix4_dft(
+    v0: Complex<f64>,
+    v1: Complex<f64>,
+    v2: Complex<f64>,
+    v3: Complex<f64>,
+    dir: Direction,
+) -> [Complex<f64>; 4] {
+    let (a, b, c, d) = (v0 + v2, v0 - v2, v1 + v3, times_w4(v1 - v3, dir));
+    [a + c, b + d, a - c, b - d]
 }
 
 /// Radix-2 Stockham butterfly `j`: inputs `j` and `j + N/2`, the second times
 /// `exp(∓2πi·k/(2Ns))`.
-/// mirrors shaders/fft_stockham.wgsl: stockham_radix2_butterfly
+/// mirrors shaders/fft_stockham.wgsl: stockham_radix2_butterfly (and local_radix2_butterfly)
 pub fn stockham_radix2_butterfly(
     src: &[Complex<f64>],
     tw: &[Complex<f64>],
@@ -368,7 +410,15 @@ pub fn reference_line(
     let tw = twiddle_table(n, dir);
     let mut src = line.to_vec();
     let mut dst = vec![Complex::new(0.0, 0.0); n];
-    for pass in plan(variant, n.trailing_zeros()) {
+    let log2n = n.trailing_zeros();
+    // The workgroup-memory pass runs the same butterflies as the global plan.
+    let passes = plan(variant, log2n)
+        .into_iter()
+        .flat_map(|pass| match pass {
+            FftPass::StockhamLocal => plan(GpuFftVariant::StockhamGlobal, log2n),
+            other => vec![other],
+        });
+    for pass in passes {
         let p = line_params(n, dir, pass);
         match pass {
             FftPass::SplitStream { .. } => {
@@ -391,6 +441,7 @@ pub fn reference_line(
                     stockham_radix4_butterfly(&src, &tw, &p, dir, j as u32, &mut dst);
                 }
             }
+            FftPass::StockhamLocal => unreachable!("expanded above"),
         }
         std::mem::swap(&mut src, &mut dst);
     }
@@ -533,7 +584,7 @@ fn transform(
     let module = ctx.shader(
         match variant {
             GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
-            GpuFftVariant::Stockham => "fft_stockham.wgsl",
+            GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
         },
         &variant.shader_source(),
     )?;
