@@ -405,3 +405,41 @@ fn workgroup_memory_path_equals_the_global_passes() {
         }
     }
 }
+
+/// `fft_nd_timed` reports where the time went (printed; lavapipe's times say nothing
+/// about a GPU's) and returns the same data as `fft_nd`.
+#[test]
+fn timings_are_reported() {
+    let Some(ctx) = common::gpu("timings_are_reported") else {
+        return;
+    };
+    let shape = [256usize, 128];
+    let x = to_f32(&random_complex(&mut common::Rng(0x7133), 256 * 128));
+    for variant in GpuFftVariant::ALL {
+        let (dir, norm) = (Direction::Forward, Normalization::Unitary);
+        let out = fft::fft_nd_timed(&ctx, &x, &shape, dir, norm, variant).unwrap();
+        let t = out.timings;
+        eprintln!(
+            "gpu fft timings 256x128 {variant:<14?} setup {:.2} ms, upload {:.2} ms, \
+             kernel {:.2} ms ({}), readback {:.2} ms, total {:.2} ms",
+            t.setup * 1e3,
+            t.upload * 1e3,
+            t.kernel * 1e3,
+            if t.kernel_from_timestamps {
+                "timestamps"
+            } else {
+                "wall clock"
+            },
+            t.readback * 1e3,
+            t.total * 1e3,
+        );
+        let parts = [t.setup, t.upload, t.kernel, t.readback, t.total];
+        assert!(parts.iter().all(|v| v.is_finite() && *v >= 0.0), "{t:?}");
+        assert!(
+            t.kernel > 0.0 && t.total >= t.setup + t.upload + t.readback,
+            "{t:?}"
+        );
+        let plain = fft::fft_nd(&ctx, &x, &shape, dir, norm, variant).unwrap();
+        assert_eq!(out.data, plain);
+    }
+}

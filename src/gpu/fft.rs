@@ -55,6 +55,7 @@ use super::context::GpuContext;
 use crate::cpu::dft::{twiddle, Direction, Normalization};
 use crate::error::{Error, Result};
 use rustfft::num_complex::Complex;
+use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 /// `shaders/shared/fft_params.wgsl`: the WGSL twin of [`FftParams`].
@@ -478,6 +479,47 @@ pub fn fft_nd(
     norm: Normalization,
     variant: GpuFftVariant,
 ) -> Result<Vec<Complex<f32>>> {
+    Ok(fft_nd_timed(ctx, data, shape, dir, norm, variant)?.data)
+}
+
+/// Where the time of a GPU FFT went, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FftTimings {
+    /// Validation, shader compilation, pipelines, twiddle tables, empty buffers.
+    pub setup: f64,
+    /// The data upload (host to device, waited for).
+    pub upload: f64,
+    /// Every pass: from timestamp queries (start of the first pass to the end of the
+    /// last) when the adapter has them, otherwise the wall-clock time of the
+    /// waited-for submission.
+    pub kernel: f64,
+    /// Whether `kernel` comes from timestamp queries.
+    pub kernel_from_timestamps: bool,
+    /// Copying the result back to the host.
+    pub readback: f64,
+    /// Everything, end to end.
+    pub total: f64,
+}
+
+/// What [`fft_nd_timed`] returns: the transform, and where the time went.
+#[derive(Clone, Debug)]
+pub struct GpuFftOutput {
+    pub data: Vec<Complex<f32>>,
+    pub timings: FftTimings,
+}
+
+/// [`fft_nd`], with timings of the set-up, upload, passes and readback.
+///
+/// # Errors
+/// As [`fft_nd`].
+pub fn fft_nd_timed(
+    ctx: &GpuContext,
+    data: &[Complex<f32>],
+    shape: &[usize],
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+) -> Result<GpuFftOutput> {
     let axes: Vec<usize> = (0..shape.len()).collect();
     transform(ctx, data, shape, &axes, dir, norm, variant)
 }
@@ -501,7 +543,7 @@ pub fn fft_lines(
             format!("{n} does not divide the {} values", data.len()),
         ));
     }
-    transform(ctx, data, &[data.len() / n, n], &[1], dir, norm, variant)
+    Ok(transform(ctx, data, &[data.len() / n, n], &[1], dir, norm, variant)?.data)
 }
 
 /// Checks the input and refuses what the GPU FFT cannot do.
@@ -558,10 +600,20 @@ fn transform(
     dir: Direction,
     norm: Normalization,
     variant: GpuFftVariant,
-) -> Result<Vec<Complex<f32>>> {
+) -> Result<GpuFftOutput> {
+    let t_start = Instant::now();
+    let done = |data: Vec<Complex<f32>>, timings: FftTimings| {
+        Ok(GpuFftOutput {
+            data,
+            timings: FftTimings {
+                total: t_start.elapsed().as_secs_f64(),
+                ..timings
+            },
+        })
+    };
     validate(ctx, data.len(), shape, axes)?;
     if data.is_empty() {
-        return Ok(Vec::new());
+        return done(Vec::new(), FftTimings::default());
     }
     let total = data.len();
     let transformed: usize = axes.iter().map(|&a| shape[a]).product();
@@ -577,7 +629,10 @@ fn transform(
         .collect();
     if passes.is_empty() {
         // Every transformed axis has length 1: the transform is the identity.
-        return Ok(data.iter().map(|v| v * factor).collect());
+        return done(
+            data.iter().map(|v| v * factor).collect(),
+            FftTimings::default(),
+        );
     }
 
     let dev = &ctx.device;
@@ -639,14 +694,7 @@ fn transform(
     }
 
     let bytes = (total * 8) as u64;
-    let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
-    let ping = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("fft data a"),
-        contents: bytemuck::cast_slice(&host),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-    });
     let pong = ctx.storage_buffer("fft data b", bytes)?;
-    let bufs = [&ping, &pong];
     // One twiddle table per transformed axis.
     let tables: Vec<wgpu::Buffer> = axes
         .iter()
@@ -662,7 +710,22 @@ fn transform(
             })
         })
         .collect();
+    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    let query = timestamps.then(|| ctx.timestamp_pair());
+    let setup = t_start.elapsed().as_secs_f64();
 
+    let t_up = Instant::now();
+    let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
+    let ping = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("fft data a"),
+        contents: bytemuck::cast_slice(&host),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    ctx.wait()?;
+    let upload = t_up.elapsed().as_secs_f64();
+    let bufs = [&ping, &pong];
+
+    let t_k = Instant::now();
     let mut enc = dev.create_command_encoder(&Default::default());
     let last = passes.len() - 1;
     let mut uniforms = Vec::with_capacity(passes.len());
@@ -703,7 +766,15 @@ fn transform(
         {
             let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(pass.entry_point()),
-                timestamp_writes: None,
+                // The first pass writes the start, the last the end (a pass must
+                // write at least one, so the middle ones write none).
+                timestamp_writes: query.as_ref().filter(|_| i == 0 || i == last).map(|q| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: &q.set,
+                        beginning_of_pass_write_index: (i == 0).then_some(0),
+                        end_of_pass_write_index: (i == last).then_some(1),
+                    }
+                }),
             });
             cpass.set_pipeline(pipeline);
             cpass.set_bind_group(0, &bind, &[]);
@@ -711,11 +782,32 @@ fn transform(
         }
         uniforms.push(ubuf);
     }
+    if let Some(q) = &query {
+        q.resolve(&mut enc);
+    }
     ctx.queue.submit([enc.finish()]);
+    ctx.wait()?;
+    let kernel = match &query {
+        Some(q) => q.seconds(ctx)?,
+        None => t_k.elapsed().as_secs_f64(),
+    };
+    let t_r = Instant::now();
     let out = ctx.read_buffer(bufs[passes.len() % 2], bytes)?;
     // (A byte vector need not be aligned for f32: copy rather than cast in place.)
-    Ok(bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&out)
+    let result = bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&out)
         .iter()
         .map(|v| Complex::new(v[0], v[1]))
-        .collect())
+        .collect();
+    let readback = t_r.elapsed().as_secs_f64();
+    done(
+        result,
+        FftTimings {
+            setup,
+            upload,
+            kernel,
+            kernel_from_timestamps: timestamps,
+            readback,
+            total: 0.0,
+        },
+    )
 }
