@@ -48,6 +48,15 @@ fn rel_l2(port: &[Complex<f32>], oracle: &[C]) -> f64 {
     (num / den.max(f64::MIN_POSITIVE)).sqrt()
 }
 
+/// The index and size of the largest difference.
+fn worst(port: &[Complex<f32>], oracle: &[C]) -> (usize, f64) {
+    port.iter()
+        .zip(oracle)
+        .map(|(p, o)| (C::new(p.re as f64, p.im as f64) - o).norm())
+        .enumerate()
+        .fold((0, 0.0), |a, (i, d)| if d > a.1 { (i, d) } else { a })
+}
+
 fn rel_l2_f64(a: &[C], b: &[C]) -> f64 {
     let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).norm_sqr()).sum();
     let den: f64 = b.iter().map(|y| y.norm_sqr()).sum();
@@ -230,10 +239,14 @@ fn parity(name: &str, case: Case, variant: GpuFftVariant) {
             eprintln!(
                 "gpu fft {name:<10} {variant:<11?} {dir:<7?} {norm:<12?} rel L2 {e:.2e} (bound {tol:.1e})"
             );
-            assert!(
-                e <= tol,
-                "{test} {dir:?} {norm:?}: rel L2 {e:e} over the bound {tol:e}"
-            );
+            if e > tol {
+                let (i, d) = worst(&got, &want);
+                panic!(
+                    "{test} {dir:?} {norm:?}: rel L2 {e:e} over the bound {tol:e}; \
+                     worst element {i}: gpu {}, oracle {}, |Δ| = {d:e}",
+                    got[i], want[i]
+                );
+            }
         }
     }
 }
@@ -441,5 +454,28 @@ fn timings_are_reported() {
         );
         let plain = fft::fft_nd(&ctx, &x, &shape, dir, norm, variant).unwrap();
         assert_eq!(out.data, plain);
+    }
+}
+
+/// Forward then inverse restores the input (unitary and unnormalised), on a 3-D array.
+#[test]
+fn round_trip_restores_the_input() {
+    let Some(ctx) = common::gpu("round_trip_restores_the_input") else {
+        return;
+    };
+    let shape = [8usize, 16, 32];
+    let x = to_f32(&random_complex(&mut common::Rng(0x4242), 8 * 16 * 32));
+    for variant in GpuFftVariant::ALL {
+        for norm in [Normalization::Unitary, Normalization::Unnormalized] {
+            let y = fft::fft_nd(&ctx, &x, &shape, Direction::Forward, norm, variant).unwrap();
+            let z = fft::fft_nd(&ctx, &y, &shape, Direction::Inverse, norm, variant).unwrap();
+            let e = rel_l2(&z, &to_f64(&x));
+            eprintln!("gpu fft round trip 8x16x32 {variant:<14?} {norm:<12?} rel L2 {e:.2e}");
+            // Two transforms, each within the parity bound.
+            assert!(
+                e <= 2.0 * REL_L2_PER_STAGE * 12.0,
+                "{variant:?} {norm:?}: {e:e}"
+            );
+        }
     }
 }
