@@ -3,10 +3,10 @@
 //!   equal the exact DFT (no device needed);
 //! - the shared parameter struct has one layout in Rust and WGSL, and both shaders
 //!   validate (naga, no device needed);
-//! - on the device, both variants match `cpu::dft::dft_nd` (or, where the `O(N²)`
+//! - on the device, every variant matches `cpu::dft::dft_nd` (or, where the `O(N²)`
 //!   oracle is too slow, `cpu::fft::fft_nd` in f64, itself tested against the DFT in
 //!   tests/fft.rs) on random data, both directions, unitary and unnormalised; the
-//!   parity cases are generated from one list for both variants;
+//!   parity cases are generated from one list for every variant;
 //! - a delta transforms to a constant exactly; bad sizes are typed errors.
 //!
 //! `cargo test --release --test gpu_fft -- --nocapture` prints every measured error.
@@ -23,7 +23,7 @@ type C = Complex<f64>;
 
 /// The parity bound: relative L2 error ≤ `REL_L2_PER_STAGE · log2(N)`, `N` the total
 /// size transformed (the project's target for f32 FFTs, as for `cpu::fft` in f32).
-/// Measured on lavapipe (Mesa 22.3.6, LLVM 15): at most 1.6e-7 for both variants over
+/// Measured on lavapipe (Mesa 22.3.6, LLVM 15): at most 1.6e-7 for every variant over
 /// every case below (see docs/fft.md), well inside the bound.
 const REL_L2_PER_STAGE: f64 = 1e-6;
 
