@@ -395,3 +395,59 @@ fn gaussian_blob_lanczos3_within_one_percent_of_its_analytic_projection() {
         }
     }
 }
+
+/// Writes the error figures of `docs/fvr.md` and prints its 128³ table
+/// (`cargo test --release --test fvr docs_figures -- --ignored --nocapture`).
+#[test]
+#[ignore = "writes docs/images; run by hand"]
+fn docs_figures() {
+    use voxlab::frame::{Frame, PngOptions};
+    let phantom = Phantom::shepp_logan();
+    let v = phantom.sample([128; 3]).unwrap();
+    let dir = common::root().join("docs/images");
+    for (name, view) in [
+        ("+y", FvrView::Axis(AxisView::PlusY)),
+        ("oblique", oblique()),
+    ] {
+        for padding in [1, 2] {
+            let spec = FvrSpectrum::new(&v, padding).unwrap();
+            let g = spec.geometry(view).unwrap();
+            let truth = analytic(&phantom, &g);
+            let errs: Vec<String> = KERNELS
+                .iter()
+                .map(|&k| {
+                    let e = rel_rmse(&fvr_project(&spec, view, k, false).unwrap().data, &truth);
+                    format!("{} {e:.4}", k.name())
+                })
+                .collect();
+            eprintln!("128³ {name} padding {padding}: {}", errs.join(", "));
+            if name != "oblique" {
+                continue;
+            }
+            let k = if padding == 1 {
+                Kernel::Trilinear
+            } else {
+                Kernel::Lanczos3
+            };
+            {
+                let img = fvr_project(&spec, view, k, false).unwrap();
+                let mut err = Frame::new(g.width, g.height, 1);
+                for (e, (a, b)) in err.data.iter_mut().zip(img.data.iter().zip(&truth)) {
+                    *e = (a - b).abs();
+                }
+                let png = PngOptions {
+                    sixteen_bit: false,
+                    range: Some((0.0, 20.0)),
+                };
+                let file = format!("fvr-oblique-{}-pad{padding}-error.png", k.name());
+                err.save(&dir.join(&file), png).unwrap();
+                let png = PngOptions {
+                    sixteen_bit: false,
+                    range: Some((0.0, truth.iter().cloned().fold(0.0, f64::max))),
+                };
+                let file = format!("fvr-oblique-{}-pad{padding}.png", k.name());
+                img.save(&dir.join(&file), png).unwrap();
+            }
+        }
+    }
+}
