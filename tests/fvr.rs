@@ -390,6 +390,13 @@ fn gaussian_blob_lanczos3_within_one_percent_of_its_analytic_projection() {
             errs[0], errs[1], errs[2], errs[3], errs[4]
         );
         assert!(errs[3] < errs[1] && errs[1] < errs[0], "{errs:?}");
+        let l3 = fvr_project(&spec, view, Kernel::Lanczos3, false).unwrap();
+        let rc = raycast(&v, &g, 0.1);
+        eprintln!(
+            "  ray caster (step 0.1) vs truth {:.5}; Lanczos-3 vs ray caster {:.5}",
+            rel_rmse(&rc, &truth),
+            rel_rmse(&l3.data, &rc)
+        );
         if padding == 2 {
             assert!(errs[3] < 0.01, "Lanczos-3, padding 2: {:.4}", errs[3]);
         }
