@@ -17,7 +17,7 @@
 //!    of the origin. The array is `ifftshift`ed (origin to index 0) — done here by
 //!    writing each voxel at `r mod M` directly;
 //! 2. the unnormalised forward 3-D DFT `F(κ) = Σ_r f(r) e^{−2πi κ·r/M}` (f64,
-//!    [`fft_nd`]), then `fftshift`, so frequency `κ` sits at index `M/2 + κ`;
+//!    [`fft_nd`]), then `fftshift` (in place), so frequency `κ` sits at index `M/2 + κ`;
 //! 3. for a view with in-plane unit axes `r`, `u` (index space), the slice
 //!    `S(k_r, k_u) = F(k_r·r + k_u·u)`, `k ∈ [−M/2, M/2)`, is interpolated from the
 //!    spectrum's grid with a [`Kernel`] (indices wrap: the DFT is periodic in `κ`);
@@ -38,7 +38,7 @@
 //! volume, one voxel per pixel.
 
 use crate::camera::{AxisView, Camera, Orbit, Projection};
-use crate::cpu::dft::{fftshift, Direction, Normalization};
+use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fft::fft_nd;
 use crate::cpu::filter::{sinc, weight_lanczos, weight_tent};
 use crate::error::{Error, Result};
@@ -260,6 +260,29 @@ pub fn padded_side(dims: [usize; 3], padding: usize) -> Result<usize> {
     Ok(m)
 }
 
+/// `fftshift` of an `M³` cube of even side `M`, in place: the shift by `M/2` on every
+/// axis pairs element `(z, y, x)` with `(z + M/2, y + M/2, x + M/2) mod M`, so it is a
+/// set of swaps (and its own inverse). Saves the copy
+/// [`crate::cpu::dft::fftshift`] would make.
+pub fn fftshift_cube_in_place<T: Send>(data: &mut [T], m: usize) {
+    assert!(
+        m % 2 == 0 && data.len() == m * m * m,
+        "an M³ cube of even side"
+    );
+    let h = m / 2;
+    let (lower, upper) = data.split_at_mut(h * m * m);
+    lower
+        .par_chunks_mut(m * m)
+        .zip(upper.par_chunks_mut(m * m))
+        .for_each(|(a, b)| {
+            for y in 0..m {
+                for x in 0..m {
+                    std::mem::swap(&mut a[y * m + x], &mut b[((y + h) % m) * m + (x + h) % m]);
+                }
+            }
+        });
+}
+
 /// The voxel size of an isotropic, unsheared affine, or an error.
 fn isotropic_spacing(affine: DMat4) -> Result<f64> {
     let lin = DMat3::from_mat4(affine);
@@ -314,10 +337,10 @@ impl FvrSpectrum {
             Direction::Forward,
             Normalization::Unnormalized,
         );
-        let spectrum = fftshift(&cube, &[m, m, m]);
+        fftshift_cube_in_place(&mut cube, m);
         Ok(FvrSpectrum {
             m,
-            spectrum,
+            spectrum: cube,
             values,
             dims,
             offset,
@@ -588,6 +611,7 @@ pub fn fvr_project(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cpu::dft::fftshift;
 
     #[test]
     fn padded_side_rounds_to_even_and_refuses_absurd_sizes() {
@@ -617,6 +641,17 @@ mod tests {
         let t = Kernel::Lanczos3.transfer(16.0, 64);
         assert!(t > 0.95 && t < 1.05, "{t}");
         assert!(Kernel::Trilinear.transfer(32.0, 64) < 0.41);
+    }
+
+    #[test]
+    fn the_in_place_cube_shift_is_fftshift() {
+        for m in [2, 4, 6] {
+            let data: Vec<u32> = (0..(m * m * m) as u32).collect();
+            let want = fftshift(&data, &[m, m, m]);
+            let mut got = data.clone();
+            fftshift_cube_in_place(&mut got, m);
+            assert_eq!(got, want, "M = {m}");
+        }
     }
 
     #[test]
