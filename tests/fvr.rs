@@ -108,6 +108,30 @@ fn axis_views_with_nearest_and_dirichlet_equal_the_sum_along_the_axis() {
     }
 }
 
+/// The axis views have the ray caster's layout: its X-ray at step 1 (which samples
+/// voxel centres) is the same image.
+#[test]
+fn axis_views_equal_the_ray_casters_xray_pixel_by_pixel() {
+    use voxlab::camera::Camera;
+    let v = random_volume([9, 8, 6], 0.8, 5);
+    let spec = FvrSpectrum::new(&v, 2).unwrap();
+    let settings = RenderSettings {
+        mode: Mode::Xray,
+        filter: Filter::Trilinear,
+        step: 1.0,
+        ..RenderSettings::default()
+    };
+    let tf = TransferFunction::preset("grayscale").unwrap();
+    let vol: AnyVolume = v.clone().into();
+    for view in AXES {
+        let img = fvr_project(&spec, FvrView::Axis(view), Kernel::Lanczos3, false).unwrap();
+        let cam = Camera::axis_view(v.dims(), v.affine(), view, img.width, img.height).unwrap();
+        let rc = render::<f64>(&vol, &tf, &cam, &settings, &|_, _| {}).unwrap();
+        let e = max_rel(&img.data, &rc.image.data);
+        assert!(e < 1e-9, "{view:?}: {e:e}");
+    }
+}
+
 /// The projection the Dirichlet slice must give: each voxel splatted onto the image
 /// plane with the periodic Dirichlet kernel `D(t) = (1/M) Σ_{k=−M/2}^{M/2−1} e^{−2πikt/M}`
 /// in both image axes, `P(x, y) = Σ_n f(n) D(x_n − x) D(y_n − y)`.
