@@ -379,6 +379,17 @@ fn cli_writes_an_fvr_image_and_refuses_the_gpu() {
     ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("not available yet"), "{}", stderr(&o));
+    // The padded cube counts against the voxel limit, before anything is allocated.
+    let o = voxlab(&[
+        "--max-voxels",
+        "100000",
+        "fvr",
+        "phantom:sphere:40",
+        "--out",
+        s(&png),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("80³ voxels exceed"), "{}", stderr(&o));
 }
 
 /// A smooth, nearly band-limited volume: a Gaussian blob whose X-ray is known in closed
