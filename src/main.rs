@@ -86,6 +86,9 @@ enum Command {
     /// Write one axis-aligned slice of a volume as an image: 8- or 16-bit gray PNG, or
     /// float32 .npy; laid out like the NumPy slice of the (nz, ny, nx) array.
     Slice(Box<SliceArgs>),
+    /// Fourier volume rendering: an X-ray projection (value × mm) from one slice of the
+    /// volume's 3-D spectrum (projection-slice theorem), written as .png or .npy.
+    Fvr(Box<FvrArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -280,6 +283,43 @@ struct SliceArgs {
 }
 
 #[derive(Args)]
+struct FvrArgs {
+    /// A volume file or phantom:NAME[:N | :NX,NY,NZ] (isotropic voxels only).
+    input: String,
+    #[command(flatten)]
+    load: LoadArgs,
+    /// Output image: .png (gray) or .npy (float32, value × mm).
+    #[arg(long)]
+    out: PathBuf,
+    /// Axis-aligned view: +x, -x, +y, -y, +z, -z, laid out like `render --view`
+    /// (and NumPy's `vol.sum(axis=…)`). Without it, the orthographic orbit view.
+    #[arg(long, allow_hyphen_values = true)]
+    view: Option<String>,
+    /// Orbit view: rotation about world +z in degrees (0 looks along +y).
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    azimuth: f64,
+    /// Orbit view: degrees above the xy-plane.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    elevation: f64,
+    /// How the spectrum is sampled on the slice (dirichlet: exact, small volumes only).
+    #[arg(long, value_enum, default_value = "lanczos3")]
+    kernel: voxlab::cpu::fvr::Kernel,
+    /// Oversampling factor: the volume is zero-padded to a cube of side
+    /// padding × max(dims), rounded up to even.
+    #[arg(long, default_value_t = 2)]
+    padding: usize,
+    /// Divide the image by the kernel's spatial transfer (undo its apodisation).
+    #[arg(long)]
+    deapodize: bool,
+    /// Who computes: cpu only for now.
+    #[arg(long, default_value = "cpu")]
+    backend: String,
+    /// Write 16-bit PNG.
+    #[arg(long)]
+    sixteen_bit: bool,
+}
+
+#[derive(Args)]
 struct RenderArgs {
     #[command(flatten)]
     scene: SceneArgs,
@@ -399,6 +439,7 @@ fn run_other(command: Command) -> Result<()> {
         }
         Command::Convert(args) => convert(*args),
         Command::Slice(args) => slice(*args),
+        Command::Fvr(args) => fvr(*args),
         Command::Info {
             input,
             load,
@@ -867,6 +908,58 @@ fn info(input: &str, load: &LoadArgs, bins: usize, json: bool, plot: Option<&Pat
     if let Some(p) = plot {
         println!("  plot      {}", p.display());
     }
+    Ok(())
+}
+
+fn fvr(a: FvrArgs) -> Result<()> {
+    use voxlab::cpu::fvr::{fvr_project, padded_side, FvrSpectrum, FvrView};
+    match a.backend.as_str() {
+        "cpu" => {}
+        "gpu" | "auto" | "cpu-f32" => {
+            return Err(Error::invalid(
+                "--backend",
+                format!(
+                    "'{}': Fourier volume rendering on it is not available yet (use cpu)",
+                    a.backend
+                ),
+            ))
+        }
+        other => return Err(Error::invalid("--backend", format!("'{other}' is not cpu"))),
+    }
+    check_output(&a.out)?;
+    let view = match &a.view {
+        Some(v) => FvrView::Axis(v.parse()?),
+        None => FvrView::Orbit {
+            azimuth_deg: a.azimuth,
+            elevation_deg: a.elevation,
+        },
+    };
+    let vol = load_input(&a.input, &a.load)?.to_f32();
+    let m = padded_side(vol.dims(), a.padding)?;
+    eprintln!("3-D FFT of the {m}³ padded volume …");
+    let t = std::time::Instant::now();
+    let spectrum = FvrSpectrum::new(&vol, a.padding)?;
+    eprintln!("  {:.2} s", t.elapsed().as_secs_f64());
+    eprintln!("{} slice and 2-D inverse FFT ({m}²) …", a.kernel.name());
+    let t = std::time::Instant::now();
+    let frame = fvr_project(&spectrum, view, a.kernel, a.deapodize)?;
+    eprintln!("  {:.2} s", t.elapsed().as_secs_f64());
+    frame.save(
+        &a.out,
+        PngOptions {
+            sixteen_bit: a.sixteen_bit,
+            range: None,
+        },
+    )?;
+    println!(
+        "wrote {} ({}×{}, FVR X-ray, {} kernel, padding {}{})",
+        a.out.display(),
+        frame.width,
+        frame.height,
+        a.kernel.name(),
+        a.padding,
+        if a.deapodize { ", de-apodized" } else { "" }
+    );
     Ok(())
 }
 

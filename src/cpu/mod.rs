@@ -7,5 +7,6 @@
 pub mod dft;
 pub mod fft;
 pub mod filter;
+pub mod fvr;
 pub mod gradient;
 pub mod raycast;

@@ -1,0 +1,663 @@
+//! Fourier volume rendering (FVR): X-ray projections from one 2-D slice of the volume's
+//! 3-D spectrum, after Jansen et al. 2004, "Fourier volume rendering on the GPU using a
+//! split-stream-FFT" (§2, eq. 8).
+//!
+//! **The projection-slice theorem.** The 2-D Fourier transform of the projection
+//! `P(x, y) = ∫ f(x·r + y·u + t·v) dt` along a unit direction `v` equals the 3-D Fourier
+//! transform of `f` on the central plane spanned by `r` and `u`:
+//! `P̂(k_r, k_u) = F(k_r·r + k_u·u)`. A volume is transformed once (`O(M³ log M)`); every
+//! view then costs one slice (`O(M²)` samples of the spectrum) and one 2-D inverse FFT
+//! (`O(M² log M)`).
+//!
+//! **Pipeline and normalisation.** With `M = padding · max(dims)` rounded up to an even
+//! number (the only rounding; every FFT size is fine):
+//! 1. the volume (isotropic voxels only) is zero-padded into an `M³` cube whose origin is
+//!    the array centre `M/2`: voxel `n` sits at position `r = n + o − M/2` with the
+//!    integer offset `o_i = ⌊(M − n_i)/2⌋`, so the volume centre is within half a voxel
+//!    of the origin. The array is `ifftshift`ed (origin to index 0) — done here by
+//!    writing each voxel at `r mod M` directly;
+//! 2. the unnormalised forward 3-D DFT `F(κ) = Σ_r f(r) e^{−2πi κ·r/M}` (f64,
+//!    [`fft_nd`]), then `fftshift` (in place), so frequency `κ` sits at index `M/2 + κ`;
+//! 3. for a view with in-plane unit axes `r`, `u` (index space), the slice
+//!    `S(k_r, k_u) = F(k_r·r + k_u·u)`, `k ∈ [−M/2, M/2)`, is interpolated from the
+//!    spectrum's grid with a [`Kernel`] (indices wrap: the DFT is periodic in `κ`);
+//!    a phase ramp `e^{2πi(k_r δ_r + k_u δ_u)/M}` shifts the result by the sub-pixel
+//!    offset `δ` of the image's pixel centres (zero for axis views);
+//! 4. `ifftshift`, the unnormalised-convention inverse 2-D DFT (`1/M²`), `fftshift`
+//!    (steps done by index arithmetic), real part. With the forward transform unscaled
+//!    and the inverse `1/M²`, the result is `Σ_t f` along the ray in voxel units — for a
+//!    nearest-neighbour slice of an axis view exactly `vol.sum(axis)`. Multiplying by
+//!    the voxel size gives the line integral in value × mm, the unit of the ray
+//!    caster's X-ray mode. (With the unitary convention, as in the paper, the factor
+//!    would be `s·√M³/M` = `s·√M`.)
+//!
+//! Only isotropic voxels are handled (the slice would otherwise have to be taken in a
+//! sheared frequency frame); anisotropic or sheared volumes are refused with a clear
+//! error. The image of an axis view has the layout of [`Camera::axis_view`] (and of
+//! NumPy's `vol.sum(axis=…)`); other views are `max(dims)²` images centred on the
+//! volume, one voxel per pixel.
+
+use crate::camera::{AxisView, Camera, Orbit, Projection};
+use crate::cpu::dft::{Direction, Normalization};
+use crate::cpu::fft::fft_nd;
+use crate::cpu::filter::{sinc, weight_lanczos, weight_tent};
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::volume::{check_dims, Volume};
+use glam::{DMat3, DMat4, DVec3};
+use rayon::prelude::*;
+use rustfft::num_complex::Complex;
+use std::f64::consts::PI;
+
+/// How the spectrum is sampled between its grid points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Kernel {
+    /// The nearest grid frequency (box, 1 tap per axis).
+    Nearest,
+    /// Tent kernel, 2 taps per axis.
+    Trilinear,
+    /// Lanczos-2 windowed sinc `sinc(x)·sinc(x/2)` (eq. 8, `a = 2`), 4 taps per axis.
+    /// The weights of every Lanczos kernel are normalised to sum to 1 per axis (eq. 8's
+    /// raw weights sum to 1 only at grid points: half-way between them to 1.019 for
+    /// `a = 2`, 0.994 for `a = 3`, 1.002 for `a = 4`, a bias `docs/fvr.md` measures).
+    Lanczos2,
+    /// Lanczos-3, 6 taps per axis.
+    Lanczos3,
+    /// Lanczos-4, 8 taps per axis.
+    Lanczos4,
+    /// The exact trigonometric interpolation of the DFT: the spectrum of the padded
+    /// grid evaluated directly at the wanted frequency, `Σ_r f(r) e^{−2πi κ·r/M}`.
+    /// `O(N³)` per sample: only for small volumes.
+    Dirichlet,
+}
+
+impl Kernel {
+    /// The kernel's name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kernel::Nearest => "nearest",
+            Kernel::Trilinear => "trilinear",
+            Kernel::Lanczos2 => "lanczos2",
+            Kernel::Lanczos3 => "lanczos3",
+            Kernel::Lanczos4 => "lanczos4",
+            Kernel::Dirichlet => "dirichlet",
+        }
+    }
+
+    /// The windowed-sinc order `a` of a Lanczos kernel.
+    fn lanczos_order(self) -> Option<usize> {
+        match self {
+            Kernel::Lanczos2 => Some(2),
+            Kernel::Lanczos3 => Some(3),
+            Kernel::Lanczos4 => Some(4),
+            _ => None,
+        }
+    }
+
+    /// The kernel's weight at offset `x` (frequency bins) along one axis.
+    pub fn weight(self, x: f64) -> f64 {
+        match self {
+            Kernel::Nearest => {
+                if x.abs() < 0.5 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Kernel::Trilinear => weight_tent(x),
+            Kernel::Lanczos2 | Kernel::Lanczos3 | Kernel::Lanczos4 => {
+                weight_lanczos(x, self.lanczos_order().expect("a Lanczos kernel"))
+            }
+            Kernel::Dirichlet => panic!("the Dirichlet kernel is evaluated in closed form"),
+        }
+    }
+
+    /// The kernel's spatial transfer at position `x` (voxels from the origin) of an
+    /// `M`-periodic grid: `ŵ(x/M) = ∫ w(κ) e^{2πi κ x/M} dκ`. Interpolating the spectrum
+    /// with `w` multiplies the volume by `ŵ` (separably); de-apodisation divides by it.
+    pub fn transfer(self, x: f64, m: usize) -> f64 {
+        let xi = x / m as f64;
+        match self {
+            Kernel::Nearest => sinc(xi),
+            Kernel::Trilinear => sinc(xi) * sinc(xi),
+            Kernel::Dirichlet => 1.0,
+            _ => {
+                // Simpson's rule over [−a, a] (the kernel is smooth inside), divided by
+                // the kernel's integral: the slice's weights are normalised to sum to 1.
+                let a = self.lanczos_order().expect("a Lanczos kernel") as f64;
+                let n = 256 * a as usize;
+                let h = 2.0 * a / n as f64;
+                let (mut s, mut s0) = (0.0, 0.0);
+                for i in 0..=n {
+                    let k = -a + i as f64 * h;
+                    let c = if i == 0 || i == n {
+                        1.0
+                    } else if i % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
+                    s += c * self.weight(k) * (2.0 * PI * k * xi).cos();
+                    s0 += c * self.weight(k);
+                }
+                s / s0
+            }
+        }
+    }
+}
+
+/// A view of an [`FvrSpectrum`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FvrView {
+    /// Along an index axis, laid out like [`Camera::axis_view`].
+    Axis(AxisView),
+    /// The orthographic orbit camera of [`Camera::orbit`] (world frame, +z up).
+    Orbit {
+        azimuth_deg: f64,
+        elevation_deg: f64,
+    },
+    /// Explicit unit vectors in the volume's index frame: rays go along `forward`,
+    /// pixel x along `right`, pixel y along `−up`. Orthonormalised on use.
+    Basis {
+        forward: DVec3,
+        right: DVec3,
+        up: DVec3,
+    },
+}
+
+/// A view resolved against a volume: the orthonormal image frame in index space and
+/// the image size. Pixel `(col, row)` is the ray through index point
+/// `center + right·(col + ½ − W/2) − up·(row + ½ − H/2)` along `forward`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FvrGeometry {
+    pub center: DVec3,
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+    pub width: usize,
+    pub height: usize,
+    /// The volume's voxel-to-world affine.
+    pub affine: DMat4,
+}
+
+impl FvrGeometry {
+    /// The index-space point on pixel `(col, row)`'s ray through the volume centre's plane.
+    pub fn pixel_point(&self, col: usize, row: usize) -> DVec3 {
+        self.center + self.right * (col as f64 + 0.5 - self.width as f64 * 0.5)
+            - self.up * (row as f64 + 0.5 - self.height as f64 * 0.5)
+    }
+
+    /// Pixel `(col, row)`'s ray in world coordinates: an origin and a unit direction.
+    pub fn pixel_ray_world(&self, col: usize, row: usize) -> (DVec3, DVec3) {
+        let o = self.affine.transform_point3(self.pixel_point(col, row));
+        let d = self.affine.transform_vector3(self.forward).normalize();
+        (o, d)
+    }
+
+    /// The orthographic camera whose pixel rays are these (for the ray caster).
+    pub fn camera(&self) -> Result<Camera> {
+        let lin = DMat3::from_mat4(self.affine);
+        let s = lin.col(0).length();
+        let c = self.affine.transform_point3(self.center);
+        let forward = (lin * self.forward).normalize();
+        let extent = (self.width.max(self.height) as f64) * s * 2.0;
+        Ok(Camera {
+            eye: c - forward * extent,
+            forward,
+            right: (lin * self.right).normalize(),
+            up: (lin * self.up).normalize(),
+            projection: Projection::Orthographic {
+                width_mm: self.width as f64 * s,
+                height_mm: self.height as f64 * s,
+            },
+            width: self.width,
+            height: self.height,
+        })
+    }
+}
+
+/// The centred 3-D spectrum of a zero-padded volume, ready for many views.
+#[derive(Clone, Debug)]
+pub struct FvrSpectrum {
+    /// The cube side `M`.
+    m: usize,
+    /// `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
+    spectrum: Vec<Complex<f64>>,
+    /// The original volume in f64 (for the Dirichlet kernel), `[z][y][x]`.
+    values: Vec<f64>,
+    dims: [usize; 3],
+    /// The integer placement offset of the volume in the cube.
+    offset: [usize; 3],
+    spacing: f64,
+    affine: DMat4,
+}
+
+/// The most multiply-adds a Dirichlet slice may take (`N³·M²`).
+pub const MAX_DIRICHLET_WORK: f64 = 4e9;
+
+/// The cube side for `dims` and `padding`: `padding · max(dims)` rounded up to even.
+pub fn padded_side(dims: [usize; 3], padding: usize) -> Result<usize> {
+    if padding == 0 || padding > 16 {
+        return Err(Error::invalid(
+            "padding",
+            format!("{padding}: the oversampling factor must lie in 1 … 16"),
+        ));
+    }
+    let n = *dims.iter().max().expect("three axes");
+    let m = n
+        .checked_mul(padding)
+        .and_then(|m| m.checked_add(m % 2))
+        .ok_or_else(|| Error::too_large("padded FVR cube", format!("{n}·{padding}")))?;
+    check_dims([m, m, m]).map_err(|_| {
+        Error::too_large(
+            "padded FVR cube",
+            format!(
+                "{m}³ voxels exceed the limit of {} (use a smaller --padding or volume)",
+                crate::volume::max_voxels()
+            ),
+        )
+    })?;
+    Ok(m)
+}
+
+/// `fftshift` of an `M³` cube of even side `M`, in place: the shift by `M/2` on every
+/// axis pairs element `(z, y, x)` with `(z + M/2, y + M/2, x + M/2) mod M`, so it is a
+/// set of swaps (and its own inverse). Saves the copy
+/// [`crate::cpu::dft::fftshift`] would make.
+pub fn fftshift_cube_in_place<T: Send>(data: &mut [T], m: usize) {
+    assert!(
+        m % 2 == 0 && data.len() == m * m * m,
+        "an M³ cube of even side"
+    );
+    let h = m / 2;
+    let (lower, upper) = data.split_at_mut(h * m * m);
+    lower
+        .par_chunks_mut(m * m)
+        .zip(upper.par_chunks_mut(m * m))
+        .for_each(|(a, b)| {
+            for y in 0..m {
+                for x in 0..m {
+                    std::mem::swap(&mut a[y * m + x], &mut b[((y + h) % m) * m + (x + h) % m]);
+                }
+            }
+        });
+}
+
+/// The voxel size of an isotropic, unsheared affine, or an error.
+fn isotropic_spacing(affine: DMat4) -> Result<f64> {
+    let lin = DMat3::from_mat4(affine);
+    let c = [lin.col(0), lin.col(1), lin.col(2)];
+    let s = c[0].length();
+    let tol = 1e-6 * s;
+    let iso = c.iter().all(|v| (v.length() - s).abs() <= tol);
+    let ortho = c[0].dot(c[1]).abs() <= tol * s
+        && c[0].dot(c[2]).abs() <= tol * s
+        && c[1].dot(c[2]).abs() <= tol * s;
+    if !(iso && ortho && s > 0.0 && s.is_finite()) {
+        return Err(Error::invalid(
+            "volume for Fourier volume rendering",
+            format!(
+                "voxel sizes {:.6}, {:.6}, {:.6} mm: only isotropic, unsheared voxels are \
+                 supported (resample the volume first)",
+                c[0].length(),
+                c[1].length(),
+                c[2].length()
+            ),
+        ));
+    }
+    Ok(s)
+}
+
+impl FvrSpectrum {
+    /// Zero-pads `volume` into an `M³` cube (see [`padded_side`]), centres it, and keeps
+    /// its centred 3-D spectrum (f64). `padding` is the oversampling factor (2 is the
+    /// usual choice; 1 pads only to an even cube).
+    pub fn new(volume: &Volume<f32>, padding: usize) -> Result<Self> {
+        let dims = volume.dims();
+        let spacing = isotropic_spacing(volume.affine())?;
+        volume.check_finite("volume for Fourier volume rendering")?;
+        let m = padded_side(dims, padding)?;
+        let offset = dims.map(|n| (m - n) / 2);
+        let half = m / 2;
+        let values: Vec<f64> = volume.data().iter().map(|&v| v as f64).collect();
+        let mut cube = vec![Complex::new(0.0, 0.0); m * m * m];
+        // ifftshift of the padded cube: position r = n + o − M/2 lands at r mod M.
+        let wrap = |n: usize, a: usize| (n + offset[a] + m - half) % m;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let v = values[(k * dims[1] + j) * dims[0] + i];
+                    cube[(wrap(k, 2) * m + wrap(j, 1)) * m + wrap(i, 0)] = Complex::new(v, 0.0);
+                }
+            }
+        }
+        fft_nd(
+            &mut cube,
+            &[m, m, m],
+            Direction::Forward,
+            Normalization::Unnormalized,
+        );
+        fftshift_cube_in_place(&mut cube, m);
+        Ok(FvrSpectrum {
+            m,
+            spectrum: cube,
+            values,
+            dims,
+            offset,
+            spacing,
+            affine: volume.affine(),
+        })
+    }
+
+    /// The cube side `M`.
+    pub fn side(&self) -> usize {
+        self.m
+    }
+
+    /// The volume's voxel size (mm).
+    pub fn spacing(&self) -> f64 {
+        self.spacing
+    }
+
+    /// The centred spectrum, `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
+    pub fn spectrum(&self) -> &[Complex<f64>] {
+        &self.spectrum
+    }
+
+    /// Resolves a view: its orthonormal image frame in index space and image size.
+    pub fn geometry(&self, view: FvrView) -> Result<FvrGeometry> {
+        let dims = self.dims;
+        let center = DVec3::from_array(dims.map(|n| (n as f64 - 1.0) * 0.5));
+        let n = *dims.iter().max().expect("three axes");
+        let unit = |a: usize| DVec3::from_array(std::array::from_fn(|i| (i == a) as u8 as f64));
+        let (forward, right, up, width, height) = match view {
+            FvrView::Axis(v) => {
+                let (a, sign) = v.axis();
+                let (ca, ra) = v.image_axes();
+                (unit(a) * sign, unit(ca), -unit(ra), dims[ca], dims[ra])
+            }
+            FvrView::Orbit {
+                azimuth_deg,
+                elevation_deg,
+            } => {
+                let s = self.spacing;
+                let extent = dims.map(|d| d as f64 * s);
+                let cam = Camera::orbit(
+                    self.affine.transform_point3(center),
+                    extent,
+                    Orbit {
+                        azimuth_deg,
+                        elevation_deg,
+                        distance_mm: None,
+                    },
+                    Projection::Orthographic {
+                        width_mm: 0.0,
+                        height_mm: 0.0,
+                    },
+                    1,
+                    1,
+                )?;
+                let inv = DMat3::from_mat4(self.affine).inverse();
+                let to_index = |v: DVec3| (inv * v).normalize();
+                (
+                    to_index(cam.forward),
+                    to_index(cam.right),
+                    to_index(cam.up),
+                    n,
+                    n,
+                )
+            }
+            FvrView::Basis { forward, right, up } => {
+                let f = forward.normalize();
+                let r = (right - f * right.dot(f)).normalize();
+                let u = f.cross(r);
+                let u = if u.dot(up) < 0.0 { -u } else { u };
+                if !(f.is_finite() && r.is_finite() && u.is_finite()) {
+                    return Err(Error::invalid(
+                        "view basis",
+                        "forward and right must be finite, non-zero and not parallel",
+                    ));
+                }
+                (f, r, u, n, n)
+            }
+        };
+        Ok(FvrGeometry {
+            center,
+            forward,
+            right,
+            up,
+            width,
+            height,
+            affine: self.affine,
+        })
+    }
+
+    /// Interpolates the centred spectrum at frequency `kappa` (bins, `[x, y, z]`).
+    pub fn sample(&self, kernel: Kernel, kappa: DVec3) -> Complex<f64> {
+        let m = self.m as i64;
+        let half = (self.m / 2) as f64;
+        let g = [kappa.x + half, kappa.y + half, kappa.z + half];
+        let wrap = |i: i64| i.rem_euclid(m) as usize;
+        if kernel == Kernel::Nearest {
+            let i = g.map(|v| wrap(v.round() as i64));
+            return self.spectrum[(i[2] * self.m + i[1]) * self.m + i[0]];
+        }
+        let r: i64 = match kernel {
+            Kernel::Trilinear => 1,
+            k => k.lanczos_order().expect("a truncated kernel") as i64,
+        };
+        let mut idx = [[0usize; 8]; 3];
+        let mut w = [[0.0f64; 8]; 3];
+        let taps = (2 * r) as usize;
+        for a in 0..3 {
+            let first = g[a].floor() as i64 - r + 1;
+            for t in 0..taps {
+                let j = first + t as i64;
+                idx[a][t] = wrap(j);
+                w[a][t] = kernel.weight(g[a] - j as f64);
+            }
+            let sum: f64 = w[a][..taps].iter().sum();
+            for x in &mut w[a][..taps] {
+                *x /= sum;
+            }
+        }
+        let mut acc = Complex::new(0.0, 0.0);
+        for tz in 0..taps {
+            let mut az = Complex::new(0.0, 0.0);
+            for ty in 0..taps {
+                let row = (idx[2][tz] * self.m + idx[1][ty]) * self.m;
+                let mut ax = Complex::new(0.0, 0.0);
+                for tx in 0..taps {
+                    ax += self.spectrum[row + idx[0][tx]] * w[0][tx];
+                }
+                az += ax * w[1][ty];
+            }
+            acc += az * w[2][tz];
+        }
+        acc
+    }
+
+    /// The spectrum of the padded grid evaluated exactly at `kappa` (the Dirichlet
+    /// kernel): `Σ_r f(r) e^{−2πi κ·r/M}`, `r = n + o − M/2`.
+    pub fn sample_exact(&self, kappa: DVec3) -> Complex<f64> {
+        let m = self.m as f64;
+        let half = (self.m / 2) as f64;
+        let phases = |a: usize, k: f64| -> Vec<Complex<f64>> {
+            (0..self.dims[a])
+                .map(|n| {
+                    let r = (n + self.offset[a]) as f64 - half;
+                    Complex::from_polar(1.0, -2.0 * PI * k * r / m)
+                })
+                .collect()
+        };
+        let (px, py, pz) = (phases(0, kappa.x), phases(1, kappa.y), phases(2, kappa.z));
+        let [nx, ny, _] = self.dims;
+        let mut acc = Complex::new(0.0, 0.0);
+        for (k, ez) in pz.iter().enumerate() {
+            let mut az = Complex::new(0.0, 0.0);
+            for (j, ey) in py.iter().enumerate() {
+                let row = &self.values[(k * ny + j) * nx..(k * ny + j + 1) * nx];
+                let mut ax = Complex::new(0.0, 0.0);
+                for (v, ex) in row.iter().zip(&px) {
+                    ax += ex * *v;
+                }
+                az += ax * ey;
+            }
+            acc += az * ez;
+        }
+        acc
+    }
+
+    /// The in-plane coordinates (voxels, relative to the cube origin) of pixel
+    /// `(0, 0)`'s ray: pixel `(col, row)` sits at `(c_r + col, c_u − row)`.
+    fn pixel_origin(&self, g: &FvrGeometry) -> (f64, f64) {
+        let half = (self.m / 2) as f64;
+        let rel = g.center + DVec3::from_array(self.offset.map(|o| o as f64)) - DVec3::splat(half);
+        let cr = rel.dot(g.right) + 0.5 - g.width as f64 * 0.5;
+        let cu = rel.dot(g.up) - 0.5 + g.height as f64 * 0.5;
+        (cr, cu)
+    }
+}
+
+/// Rounds `c` to an integer when it is within `1e-9` of one (axis views), else returns
+/// its nearest integer and the remainder.
+fn split(c: f64) -> (i64, f64) {
+    let n = c.round();
+    let d = c - n;
+    (n as i64, if d.abs() < 1e-9 { 0.0 } else { d })
+}
+
+/// The X-ray projection (value × mm) of the spectrum's volume for `view`: one slice
+/// of the spectrum sampled with `kernel`, one inverse 2-D FFT. With `deapodize`, the
+/// image is divided by the kernel's spatial transfer in both image axes.
+pub fn fvr_project(
+    spectrum: &FvrSpectrum,
+    view: FvrView,
+    kernel: Kernel,
+    deapodize: bool,
+) -> Result<Frame> {
+    let g = spectrum.geometry(view)?;
+    let m = spectrum.m;
+    if g.width > m || g.height > m {
+        return Err(Error::invalid(
+            "FVR image size",
+            format!("{}×{} exceeds the padded cube side {m}", g.width, g.height),
+        ));
+    }
+    if kernel == Kernel::Dirichlet {
+        let n: usize = spectrum.dims.iter().product();
+        let work = n as f64 * (m * m) as f64;
+        if work > MAX_DIRICHLET_WORK {
+            return Err(Error::too_large(
+                "Dirichlet slice",
+                format!(
+                    "{n} voxels × {m}² samples = {work:.1e} operations (limit \
+                     {MAX_DIRICHLET_WORK:.0e}); the exact kernel is for small volumes"
+                ),
+            ));
+        }
+    }
+    let (cr, cu) = spectrum.pixel_origin(&g);
+    let ((nr, dr), (nu, du)) = (split(cr), split(cu));
+    let half = (m / 2) as i64;
+    // The slice in DC-at-0 order ([k_u][k_r], each k at k mod M): the ifftshift of
+    // the centred slice.
+    let mut slice = vec![Complex::new(0.0, 0.0); m * m];
+    slice.par_chunks_mut(m).enumerate().for_each(|(ju, line)| {
+        for (ir, out) in line.iter_mut().enumerate() {
+            let ku = (ju as i64 + half).rem_euclid(m as i64) - half;
+            let kr = (ir as i64 + half).rem_euclid(m as i64) - half;
+            let kappa = g.right * kr as f64 + g.up * ku as f64;
+            let mut s = match kernel {
+                Kernel::Dirichlet => spectrum.sample_exact(kappa),
+                k => spectrum.sample(k, kappa),
+            };
+            if dr != 0.0 || du != 0.0 {
+                let phase = 2.0 * PI * (kr as f64 * dr + ku as f64 * du) / m as f64;
+                s *= Complex::from_polar(1.0, phase);
+            }
+            *out = s;
+        }
+    });
+    fft_nd(
+        &mut slice,
+        &[m, m],
+        Direction::Inverse,
+        Normalization::Unnormalized,
+    );
+    let mut frame = Frame::new(g.width, g.height, 1);
+    let s = spectrum.spacing;
+    frame
+        .data
+        .par_chunks_mut(g.width)
+        .enumerate()
+        .for_each(|(row, line)| {
+            let yu = (nu - row as i64).rem_euclid(m as i64) as usize;
+            for (col, px) in line.iter_mut().enumerate() {
+                let xr = (nr + col as i64).rem_euclid(m as i64) as usize;
+                let mut v = slice[yu * m + xr].re * s;
+                if deapodize {
+                    let x = cr + col as f64;
+                    let y = cu - row as f64;
+                    let t = kernel.transfer(x, m) * kernel.transfer(y, m);
+                    v /= t.max(1e-3);
+                }
+                *px = v;
+            }
+        });
+    Ok(frame)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu::dft::fftshift;
+
+    #[test]
+    fn padded_side_rounds_to_even_and_refuses_absurd_sizes() {
+        assert_eq!(padded_side([5, 3, 4], 1).unwrap(), 6);
+        assert_eq!(padded_side([5, 3, 4], 2).unwrap(), 10);
+        assert_eq!(padded_side([7, 7, 7], 3).unwrap(), 22);
+        assert!(padded_side([4, 4, 4], 0).is_err());
+        let e = padded_side([100_000, 1, 1], 2).unwrap_err();
+        assert!(e.to_string().contains("too large"), "{e}");
+    }
+
+    #[test]
+    fn kernel_transfer_is_one_at_the_origin_and_matches_closed_forms() {
+        for k in [
+            Kernel::Nearest,
+            Kernel::Trilinear,
+            Kernel::Lanczos2,
+            Kernel::Lanczos3,
+            Kernel::Lanczos4,
+        ] {
+            assert!((k.transfer(0.0, 64) - 1.0).abs() < 1e-12, "{k:?}");
+        }
+        // The closed form of the tent's transfer, sinc², against the quadrature's
+        // accuracy on a smooth kernel: the Lanczos transfer at the cube's edge.
+        assert!((Kernel::Trilinear.transfer(16.0, 64) - 0.8105694691387022).abs() < 1e-12);
+        // The Lanczos transfer is flat in the middle and falls off near ±M/2.
+        let t = Kernel::Lanczos3.transfer(16.0, 64);
+        assert!(t > 0.95 && t < 1.05, "{t}");
+        assert!(Kernel::Trilinear.transfer(32.0, 64) < 0.41);
+    }
+
+    #[test]
+    fn the_in_place_cube_shift_is_fftshift() {
+        for m in [2, 4, 6] {
+            let data: Vec<u32> = (0..(m * m * m) as u32).collect();
+            let want = fftshift(&data, &[m, m, m]);
+            let mut got = data.clone();
+            fftshift_cube_in_place(&mut got, m);
+            assert_eq!(got, want, "M = {m}");
+        }
+    }
+
+    #[test]
+    fn anisotropic_volumes_are_refused() {
+        let v = Volume::new([4, 4, 4], [1.0, 1.0, 2.0], vec![0.0f32; 64]).unwrap();
+        let e = FvrSpectrum::new(&v, 2).unwrap_err();
+        assert!(e.to_string().contains("isotropic"), "{e}");
+    }
+}
