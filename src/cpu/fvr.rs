@@ -85,7 +85,7 @@ impl Kernel {
     }
 
     /// The windowed-sinc order `a` of a Lanczos kernel.
-    fn lanczos_order(self) -> Option<usize> {
+    pub(crate) fn lanczos_order(self) -> Option<usize> {
         match self {
             Kernel::Lanczos2 => Some(2),
             Kernel::Lanczos3 => Some(3),
@@ -433,6 +433,8 @@ impl FvrSpectrum {
     }
 
     /// Interpolates the centred spectrum at frequency `kappa` (bins, `[x, y, z]`).
+    /// Mirrored by `shaders/fvr_slice.wgsl: sample` (same taps, weights normalised to
+    /// sum to 1 per axis, `round` half away from zero for the nearest kernel).
     pub fn sample(&self, kernel: Kernel, kappa: DVec3) -> Complex<f64> {
         let m = self.m as i64;
         let half = (self.m / 2) as f64;
@@ -536,14 +538,9 @@ pub fn fvr_project(
     kernel: Kernel,
     deapodize: bool,
 ) -> Result<Frame> {
-    let g = spectrum.geometry(view)?;
+    let plan = SlicePlan::new(spectrum, view)?;
+    let g = &plan.geometry;
     let m = spectrum.m;
-    if g.width > m || g.height > m {
-        return Err(Error::invalid(
-            "FVR image size",
-            format!("{}×{} exceeds the padded cube side {m}", g.width, g.height),
-        ));
-    }
     if kernel == Kernel::Dirichlet {
         let n: usize = spectrum.dims.iter().product();
         let work = n as f64 * (m * m) as f64;
@@ -557,11 +554,11 @@ pub fn fvr_project(
             ));
         }
     }
-    let (cr, cu) = spectrum.pixel_origin(&g);
-    let ((nr, dr), (nu, du)) = (split(cr), split(cu));
+    let (dr, du) = (plan.dr, plan.du);
     let half = (m / 2) as i64;
     // The slice in DC-at-0 order ([k_u][k_r], each k at k mod M): the ifftshift of
-    // the centred slice.
+    // the centred slice. Mirrored per sample by `shaders/fvr_slice.wgsl: extract_slice`
+    // (src/gpu/fvr.rs).
     let mut slice = vec![Complex::new(0.0, 0.0); m * m];
     slice.par_chunks_mut(m).enumerate().for_each(|(ju, line)| {
         for (ir, out) in line.iter_mut().enumerate() {
@@ -585,27 +582,82 @@ pub fn fvr_project(
         Direction::Inverse,
         Normalization::Unnormalized,
     );
-    let mut frame = Frame::new(g.width, g.height, 1);
-    let s = spectrum.spacing;
-    frame
-        .data
-        .par_chunks_mut(g.width)
-        .enumerate()
-        .for_each(|(row, line)| {
-            let yu = (nu - row as i64).rem_euclid(m as i64) as usize;
-            for (col, px) in line.iter_mut().enumerate() {
-                let xr = (nr + col as i64).rem_euclid(m as i64) as usize;
-                let mut v = slice[yu * m + xr].re * s;
-                if deapodize {
-                    let x = cr + col as f64;
-                    let y = cu - row as f64;
-                    let t = kernel.transfer(x, m) * kernel.transfer(y, m);
-                    v /= t.max(1e-3);
+    Ok(plan.crop(spectrum, kernel, deapodize, |i| slice[i].re))
+}
+
+/// A view resolved for slicing: its geometry, the in-plane position `(c_r, c_u)` of
+/// pixel `(0, 0)`, and that position split into whole voxels `n` and the sub-voxel
+/// offsets `δ` the phase ramp applies. Shared by [`fvr_project`] and
+/// `gpu::fvr::fvr_project` so that both crop and scale alike.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SlicePlan {
+    pub geometry: FvrGeometry,
+    pub cr: f64,
+    pub cu: f64,
+    pub nr: i64,
+    pub nu: i64,
+    pub dr: f64,
+    pub du: f64,
+}
+
+impl SlicePlan {
+    /// Resolves `view`; refuses an image wider than the padded cube.
+    pub fn new(spectrum: &FvrSpectrum, view: FvrView) -> Result<Self> {
+        let g = spectrum.geometry(view)?;
+        let m = spectrum.m;
+        if g.width > m || g.height > m {
+            return Err(Error::invalid(
+                "FVR image size",
+                format!("{}×{} exceeds the padded cube side {m}", g.width, g.height),
+            ));
+        }
+        let (cr, cu) = spectrum.pixel_origin(&g);
+        let ((nr, dr), (nu, du)) = (split(cr), split(cu));
+        Ok(SlicePlan {
+            geometry: g,
+            cr,
+            cu,
+            nr,
+            nu,
+            dr,
+            du,
+        })
+    }
+
+    /// The image from the inverse-transformed slice (`re(i)`: the real part of its
+    /// element `i`, `[y][x]`, DC at 0): crop with wrap-around, scale by the voxel size,
+    /// optionally de-apodise.
+    pub fn crop(
+        &self,
+        spectrum: &FvrSpectrum,
+        kernel: Kernel,
+        deapodize: bool,
+        re: impl Fn(usize) -> f64 + Sync,
+    ) -> Frame {
+        let g = &self.geometry;
+        let m = spectrum.m;
+        let mut frame = Frame::new(g.width, g.height, 1);
+        let s = spectrum.spacing;
+        frame
+            .data
+            .par_chunks_mut(g.width)
+            .enumerate()
+            .for_each(|(row, line)| {
+                let yu = (self.nu - row as i64).rem_euclid(m as i64) as usize;
+                for (col, px) in line.iter_mut().enumerate() {
+                    let xr = (self.nr + col as i64).rem_euclid(m as i64) as usize;
+                    let mut v = re(yu * m + xr) * s;
+                    if deapodize {
+                        let x = self.cr + col as f64;
+                        let y = self.cu - row as f64;
+                        let t = kernel.transfer(x, m) * kernel.transfer(y, m);
+                        v /= t.max(1e-3);
+                    }
+                    *px = v;
                 }
-                *px = v;
-            }
-        });
-    Ok(frame)
+            });
+        frame
+    }
 }
 
 #[cfg(test)]
