@@ -4,10 +4,12 @@
 //! `context` finds an adapter, opens a device with the adapter's own limits, and turns
 //! every failure into a typed [`crate::Error`]. `probe` is the smallest end-to-end
 //! check that a device really computes: upload, dispatch, read back, compare. `fft`
-//! is the power-of-two FFT (split-stream and Stockham variants).
+//! is the power-of-two FFT (split-stream and Stockham variants); `fvr` the Fourier
+//! volume rendering slice and its inverse FFT.
 
 pub mod context;
 pub mod fft;
+pub mod fvr;
 pub mod probe;
 pub mod raycast;
 

@@ -1,0 +1,115 @@
+// Fourier volume rendering: the central slice of the centred 3-D spectrum, one
+// invocation per output frequency sample. Mirrors src/cpu/fvr.rs: fvr_project (the
+// per-sample closure) and FvrSpectrum::sample; the host side is src/gpu/fvr.rs.
+// Prepended: shaders/shared/fvr_params.wgsl.
+
+@group(0) @binding(0) var<uniform> p: FvrParams;
+// [z][y][x], frequency κ at index M/2 + κ: (re, im).
+@group(0) @binding(1) var<storage, read> spectrum: array<vec2<f32>>;
+// [k_u][k_r], each k at k mod M (DC at 0): (re, im).
+@group(0) @binding(2) var<storage, read_write> slice: array<vec2<f32>>;
+
+const WORKGROUP: u32 = 64u;
+const PI: f32 = 3.14159265358979;
+
+// src/cpu/filter.rs: sinc.
+fn sinc(x: f32) -> f32 {
+    if x == 0.0 {
+        return 1.0;
+    }
+    return sin(PI * x) / (PI * x);
+}
+
+// src/cpu/fvr.rs: Kernel::weight (trilinear and Lanczos; nearest is handled apart).
+fn kernel_weight(x: f32) -> f32 {
+    if p.kernel == 1u {
+        return max(1.0 - abs(x), 0.0);
+    }
+    let a = f32(p.radius);
+    if abs(x) >= a {
+        return 0.0;
+    }
+    return sinc(x) * sinc(x / a);
+}
+
+// i.rem_euclid(M).
+fn wrap(i: i32) -> u32 {
+    let m = i32(p.m);
+    return u32(((i % m) + m) % m);
+}
+
+fn at(ix: u32, iy: u32, iz: u32) -> vec2<f32> {
+    return spectrum[(iz * p.m + iy) * p.m + ix];
+}
+
+// src/cpu/fvr.rs: FvrSpectrum::sample — the centred spectrum at frequency kappa (bins,
+// [x, y, z]), weights normalised to sum to 1 per axis.
+fn sample(kappa: vec3<f32>) -> vec2<f32> {
+    let half = f32(p.m / 2u);
+    var g = kappa + vec3<f32>(half);
+    if p.kernel == 0u {
+        // f64::round: half away from zero.
+        let r = sign(g) * floor(abs(g) + 0.5);
+        return at(wrap(i32(r.x)), wrap(i32(r.y)), wrap(i32(r.z)));
+    }
+    let r = i32(p.radius);
+    let taps = 2u * p.radius;
+    var idx: array<array<u32, 8>, 3>;
+    var w: array<array<f32, 8>, 3>;
+    for (var a = 0u; a < 3u; a++) {
+        let first = i32(floor(g[a])) - r + 1;
+        var sum = 0.0;
+        for (var t = 0u; t < taps; t++) {
+            let j = first + i32(t);
+            idx[a][t] = wrap(j);
+            let wt = kernel_weight(g[a] - f32(j));
+            w[a][t] = wt;
+            sum += wt;
+        }
+        for (var t = 0u; t < taps; t++) {
+            w[a][t] = w[a][t] / sum;
+        }
+    }
+    var acc = vec2<f32>(0.0);
+    for (var tz = 0u; tz < taps; tz++) {
+        var az = vec2<f32>(0.0);
+        for (var ty = 0u; ty < taps; ty++) {
+            var ax = vec2<f32>(0.0);
+            for (var tx = 0u; tx < taps; tx++) {
+                ax += at(idx[0][tx], idx[1][ty], idx[2][tz]) * w[0][tx];
+            }
+            az += ax * w[1][ty];
+        }
+        acc += az * w[2][tz];
+    }
+    return acc;
+}
+
+// src/cpu/fvr.rs: fvr_project, the per-sample closure: S(k_r, k_u) = F(k_r·r + k_u·u)
+// times the phase ramp e^{2πi(k_r δ_r + k_u δ_u)/M}.
+@compute @workgroup_size(64)
+fn extract_slice(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = gid.x + gid.y * groups.x * WORKGROUP;
+    if id >= p.m * p.m {
+        return;
+    }
+    let m = i32(p.m);
+    let half = m / 2;
+    let ju = i32(id / p.m);
+    let ir = i32(id % p.m);
+    let ku = ((ju + half) % m) - half;
+    let kr = ((ir + half) % m) - half;
+    let right = vec3<f32>(p.right_x, p.right_y, p.right_z);
+    let up = vec3<f32>(p.up_x, p.up_y, p.up_z);
+    let kappa = right * f32(kr) + up * f32(ku);
+    var s = sample(kappa);
+    if p.dr != 0.0 || p.du != 0.0 {
+        let phase = 2.0 * PI * (f32(kr) * p.dr + f32(ku) * p.du) / f32(p.m);
+        let c = vec2<f32>(cos(phase), sin(phase));
+        s = vec2<f32>(s.x * c.x - s.y * c.y, s.x * c.y + s.y * c.x);
+    }
+    slice[id] = s;
+}
