@@ -331,7 +331,7 @@ fn shepp_logan_128_lanczos3_reaches_the_sampled_volumes_floor() {
 }
 
 #[test]
-fn cli_writes_an_fvr_image_and_refuses_the_gpu() {
+fn cli_writes_an_fvr_image_and_refuses_other_backends() {
     let dir = scratch("cli");
     let out = dir.join("p.npy");
     let o = voxlab(&[
@@ -373,7 +373,7 @@ fn cli_writes_an_fvr_image_and_refuses_the_gpu() {
         "fvr",
         "phantom:sphere:16",
         "--backend",
-        "gpu",
+        "auto",
         "--out",
         s(&png),
     ]);

@@ -220,3 +220,43 @@ fn the_gpu_refuses_dirichlet_and_non_power_of_two_cubes() {
     assert!(e.to_string().contains("power of two"), "{e}");
     assert!(e.to_string().contains("--padding"), "{e}");
 }
+
+#[test]
+fn cli_backend_gpu_matches_backend_cpu() {
+    if common::gpu("cli_backend_gpu_matches_backend_cpu").is_none() {
+        return;
+    }
+    let dir = common::scratch("cli");
+    let mut images = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let out = dir.join(format!("{backend}.npy"));
+        let o = common::voxlab(&[
+            "fvr",
+            "phantom:shepp-logan:16",
+            "--kernel",
+            "trilinear",
+            "--backend",
+            backend,
+            "--out",
+            common::s(&out),
+        ]);
+        assert!(o.status.success(), "{}", common::stderr(&o));
+        if backend == "gpu" {
+            assert!(
+                common::stderr(&o).contains("GPU ("),
+                "{}",
+                common::stderr(&o)
+            );
+        }
+        images.push(voxlab::io::npy::read_npy_f32(&out).unwrap());
+    }
+    assert_eq!(images[0].0, images[1].0, "shape");
+    let peak = images[0].1.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
+    let worst = images[0]
+        .1
+        .iter()
+        .zip(&images[1].1)
+        .map(|(a, b)| (a - b).abs() as f64)
+        .fold(0.0, f64::max);
+    assert!(worst / peak <= TOL_MAX_REL, "max/peak {:.2e}", worst / peak);
+}

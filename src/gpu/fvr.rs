@@ -180,7 +180,7 @@ pub fn fvr_project_timed(
             "FVR cube side",
             format!(
                 "{m} is not a power of two, which the GPU FFT needs: choose --padding and \
-                 the volume size so that padding × max(dims) is one (e.g. 64³ with padding 2), \
+                 the volume size so that padding × max(dims) is one (e.g. a 32³ volume with padding 2: 64), \
                  or use --backend cpu"
             ),
         ));
