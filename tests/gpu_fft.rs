@@ -479,3 +479,33 @@ fn round_trip_restores_the_input() {
         }
     }
 }
+
+#[test]
+fn a_device_buffer_transforms_like_host_data() {
+    let Some(ctx) = common::gpu("a_device_buffer_transforms_like_host_data") else {
+        return;
+    };
+    use wgpu::util::DeviceExt;
+    let mut rng = common::Rng(0xb0ff);
+    let shape = [8, 16];
+    let x: Vec<Complex<f32>> = random_complex(&mut rng, 128)
+        .iter()
+        .map(|v| Complex::new(v.re as f32, v.im as f32))
+        .collect();
+    let (dir, norm) = (Direction::Inverse, Normalization::Unnormalized);
+    let variant = GpuFftVariant::Stockham;
+    let want = fft::fft_nd(&ctx, &x, &shape, dir, norm, variant).unwrap();
+    let host: Vec<[f32; 2]> = x.iter().map(|v| [v.re, v.im]).collect();
+    let buffer = ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("input"),
+            contents: bytemuck::cast_slice(&host),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        });
+    let got = fft::fft_nd_buffer_timed(&ctx, &buffer, &shape, dir, norm, variant).unwrap();
+    assert_eq!(got.data, want, "the same passes give the same bits");
+    assert_eq!(got.timings.upload, 0.0);
+    let e = fft::fft_nd_buffer_timed(&ctx, &buffer, &[8, 8], dir, norm, variant).unwrap_err();
+    assert!(e.to_string().contains("do not hold"), "{e}");
+}

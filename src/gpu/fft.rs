@@ -538,7 +538,54 @@ pub fn fft_nd_timed(
     variant: GpuFftVariant,
 ) -> Result<GpuFftOutput> {
     let axes: Vec<usize> = (0..shape.len()).collect();
-    transform(ctx, data, shape, &axes, dir, norm, variant)
+    transform(ctx, Input::Host(data), shape, &axes, dir, norm, variant)
+}
+
+/// [`fft_nd_timed`] of complex f32 values (`[re, im]` pairs) already on the device:
+/// `buffer` holds exactly the array (its size is `8 ·` the product of `shape`) and needs
+/// `STORAGE | COPY_SRC`; it is overwritten. The result is read back as usual; no upload
+/// (`upload` is 0).
+///
+/// # Errors
+/// As [`fft_nd`]; also when the buffer's size is not the array's.
+pub fn fft_nd_buffer_timed(
+    ctx: &GpuContext,
+    buffer: &wgpu::Buffer,
+    shape: &[usize],
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+) -> Result<GpuFftOutput> {
+    let len = shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n));
+    if len.map(|l| l as u64 * 8) != Some(buffer.size()) {
+        return Err(Error::invalid(
+            "fft buffer",
+            format!(
+                "{} bytes do not hold an array of shape {shape:?}",
+                buffer.size()
+            ),
+        ));
+    }
+    let axes: Vec<usize> = (0..shape.len()).collect();
+    let input = Input::Device(buffer, len.unwrap_or(0));
+    transform(ctx, input, shape, &axes, dir, norm, variant)
+}
+
+/// Where a transform's input is.
+#[derive(Clone, Copy)]
+enum Input<'a> {
+    Host(&'a [Complex<f32>]),
+    /// A buffer of this many complex values.
+    Device(&'a wgpu::Buffer, usize),
+}
+
+impl Input<'_> {
+    fn len(self) -> usize {
+        match self {
+            Input::Host(d) => d.len(),
+            Input::Device(_, n) => n,
+        }
+    }
 }
 
 /// A batch of 1-D FFTs of length `n` of the contiguous lines of `data` (the last axis
@@ -560,7 +607,8 @@ pub fn fft_lines(
             format!("{n} does not divide the {} values", data.len()),
         ));
     }
-    Ok(transform(ctx, data, &[data.len() / n, n], &[1], dir, norm, variant)?.data)
+    let input = Input::Host(data);
+    Ok(transform(ctx, input, &[data.len() / n, n], &[1], dir, norm, variant)?.data)
 }
 
 /// Checks the input and refuses what the GPU FFT cannot do.
@@ -611,7 +659,7 @@ fn workgroups(ctx: &GpuContext, invocations: u32) -> (u32, u32) {
 
 fn transform(
     ctx: &GpuContext,
-    data: &[Complex<f32>],
+    input: Input<'_>,
     shape: &[usize],
     axes: &[usize],
     dir: Direction,
@@ -628,11 +676,11 @@ fn transform(
             },
         })
     };
-    validate(ctx, data.len(), shape, axes)?;
-    if data.is_empty() {
+    validate(ctx, input.len(), shape, axes)?;
+    if input.len() == 0 {
         return done(Vec::new(), FftTimings::default());
     }
-    let total = data.len();
+    let total = input.len();
     let transformed: usize = axes.iter().map(|&a| shape[a]).product();
     let factor = norm.apply(1.0, transformed, dir) as f32;
     // (axis, pass) for every pass of the whole transform.
@@ -646,6 +694,10 @@ fn transform(
         .collect();
     if passes.is_empty() {
         // Every transformed axis has length 1: the transform is the identity.
+        let data = match input {
+            Input::Host(d) => d.to_vec(),
+            Input::Device(b, n) => read_complex(ctx, b, n)?,
+        };
         return done(
             data.iter().map(|v| v * factor).collect(),
             FftTimings::default(),
@@ -732,15 +784,21 @@ fn transform(
     let setup = t_start.elapsed().as_secs_f64();
 
     let t_up = Instant::now();
-    let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
-    let ping = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("fft data a"),
-        contents: bytemuck::cast_slice(&host),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-    });
-    ctx.wait()?;
-    let upload = t_up.elapsed().as_secs_f64();
-    let bufs = [&ping, &pong];
+    let uploaded;
+    let (ping, upload) = match input {
+        Input::Host(data) => {
+            let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
+            uploaded = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("fft data a"),
+                contents: bytemuck::cast_slice(&host),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            });
+            ctx.wait()?;
+            (&uploaded, t_up.elapsed().as_secs_f64())
+        }
+        Input::Device(b, _) => (b, 0.0),
+    };
+    let bufs = [ping, &pong];
 
     let t_k = Instant::now();
     let mut enc = dev.create_command_encoder(&Default::default());
@@ -809,12 +867,7 @@ fn transform(
         None => t_k.elapsed().as_secs_f64(),
     };
     let t_r = Instant::now();
-    let out = ctx.read_buffer(bufs[passes.len() % 2], bytes)?;
-    // (A byte vector need not be aligned for f32: copy rather than cast in place.)
-    let result = bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&out)
-        .iter()
-        .map(|v| Complex::new(v[0], v[1]))
-        .collect();
+    let result = read_complex(ctx, bufs[passes.len() % 2], total)?;
     let readback = t_r.elapsed().as_secs_f64();
     done(
         result,
@@ -827,4 +880,14 @@ fn transform(
             total: 0.0,
         },
     )
+}
+
+/// Reads `n` complex f32 values back from `buffer`.
+fn read_complex(ctx: &GpuContext, buffer: &wgpu::Buffer, n: usize) -> Result<Vec<Complex<f32>>> {
+    let out = ctx.read_buffer(buffer, (n * 8) as u64)?;
+    // (A byte vector need not be aligned for f32: copy rather than cast in place.)
+    Ok(bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&out)
+        .iter()
+        .map(|v| Complex::new(v[0], v[1]))
+        .collect())
 }
