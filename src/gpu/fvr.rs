@@ -6,21 +6,20 @@
 //! 1. `shaders/fvr_slice.wgsl: extract_slice` interpolates the central slice, one
 //!    invocation per frequency sample (nearest, trilinear, Lanczos-2/3/4; the same taps,
 //!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure);
-//! 2. the slice (`M²` complex f32) is read back and its inverse 2-D FFT runs on the GPU
-//!    with [`super::fft::fft_nd`] (Stockham; `M` must be a power of two) — a host round
-//!    trip of `M²` values, since the FFT takes host data;
+//! 2. the inverse 2-D FFT of the slice, in place in the slice's buffer (no host round
+//!    trip), with [`super::fft::fft_nd_buffer_timed`] (Stockham; `M` must be a power of
+//!    two), and the readback of the `M²` result;
 //! 3. the host crops, scales and optionally de-apodises exactly as the CPU does
 //!    (the shared `SlicePlan::crop`, in f64).
 //!
 //! The Dirichlet kernel stays on the CPU (refused here with a clear error).
 
 use super::context::GpuContext;
-use super::fft::{fft_nd_timed, GpuFftVariant};
+use super::fft::{fft_nd_buffer_timed, GpuFftVariant};
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fvr::{FvrSpectrum, FvrView, Kernel, SlicePlan};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use rustfft::num_complex::Complex;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -134,9 +133,7 @@ pub struct FvrTimings {
     pub setup: f64,
     /// The slice extraction dispatch.
     pub slice: f64,
-    /// Reading the slice back.
-    pub readback: f64,
-    /// The inverse 2-D FFT, end to end (upload, passes, readback).
+    /// The inverse 2-D FFT on the slice's buffer (set-up, passes, readback).
     pub fft: f64,
     /// Crop and scale on the host.
     pub crop: f64,
@@ -251,17 +248,9 @@ pub fn fvr_project_timed(
     let slice_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let raw = ctx.read_buffer(&out, bytes)?;
-    let slice: Vec<Complex<f32>> = bytemuck::pod_collect_to_vec::<u8, [f32; 2]>(&raw)
-        .iter()
-        .map(|v| Complex::new(v[0], v[1]))
-        .collect();
-    let readback = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let image = fft_nd_timed(
+    let image = fft_nd_buffer_timed(
         ctx,
-        &slice,
+        &out,
         &[m, m],
         Direction::Inverse,
         Normalization::Unnormalized,
@@ -278,7 +267,6 @@ pub fn fvr_project_timed(
         FvrTimings {
             setup,
             slice: slice_s,
-            readback,
             fft,
             crop,
             total: t0.elapsed().as_secs_f64(),
