@@ -75,10 +75,12 @@ fn kernel_code(kernel: Kernel) -> Result<(u32, u32)> {
     }
 }
 
-/// A spectrum uploaded once (complex f32, `M³`), reused by every view.
+/// A spectrum uploaded once (complex f32, `M³`), with the slice pipeline compiled
+/// once, reused by every view.
 pub struct GpuFvrSpectrum<'a> {
     cpu: &'a FvrSpectrum,
     buffer: wgpu::Buffer,
+    pipeline: wgpu::ComputePipeline,
 }
 
 impl<'a> GpuFvrSpectrum<'a> {
@@ -113,10 +115,22 @@ impl<'a> GpuFvrSpectrum<'a> {
                 contents: bytemuck::cast_slice(&host),
                 usage: wgpu::BufferUsages::STORAGE,
             });
+        let module = ctx.shader("fvr_slice.wgsl", &shader_source())?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("extract_slice"),
+                layout: None,
+                module: &module,
+                entry_point: Some("extract_slice"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
         ctx.wait()?;
         Ok(GpuFvrSpectrum {
             cpu: spectrum,
             buffer,
+            pipeline,
         })
     }
 
@@ -129,7 +143,7 @@ impl<'a> GpuFvrSpectrum<'a> {
 /// Where the time of one GPU view went, in seconds (wall clock, each step waited for).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FvrTimings {
-    /// Shader, pipeline and buffers.
+    /// Parameters, buffers and bind group (the pipeline is compiled at upload).
     pub setup: f64,
     /// The slice extraction dispatch.
     pub slice: f64,
@@ -200,15 +214,7 @@ pub fn fvr_project_timed(
     };
 
     let dev = &ctx.device;
-    let module = ctx.shader("fvr_slice.wgsl", &shader_source())?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("extract_slice"),
-        layout: None,
-        module: &module,
-        entry_point: Some("extract_slice"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let pipeline = &spectrum.pipeline;
     let layout = pipeline.get_bind_group_layout(0);
     let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("fvr params"),
@@ -239,7 +245,7 @@ pub fn fvr_project_timed(
             label: Some("extract_slice"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &bind, &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
