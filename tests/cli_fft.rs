@@ -71,3 +71,67 @@ fn fft_refuses_bad_shapes_and_backends() {
         assert!(stderr(&o).contains("invalid"), "{args:?}: {}", stderr(&o));
     }
 }
+
+fn report(args: &[&str], name: &str) -> serde_json::Value {
+    let json = scratch(name).join("fft.json");
+    let mut all = args.to_vec();
+    all.extend(["--json", s(&json)]);
+    let o = voxlab(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+/// Above N·ΣN = 1e9 the reference is the CPU f64 FFT, and the report says so.
+#[test]
+fn fft_falls_back_to_the_f64_fft_as_reference_for_large_shapes() {
+    let r = report(
+        &["fft", "32768", "--backend", "cpu", "--runs", "1"],
+        "cli-fft-large",
+    );
+    let cases = r["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    for c in cases {
+        assert_eq!(c["reference"], "cpu-f64-fft", "{c}");
+        assert_eq!(c["passed"], true, "{c}");
+    }
+    assert_eq!(cases[0]["rel_l2"], 0.0);
+}
+
+/// Both GPU variants, checked against the exact DFT; a non-power-of-two shape is
+/// skipped on the GPU, not failed.
+#[test]
+fn fft_checks_the_gpu_variants() {
+    if common::gpu("fft_checks_the_gpu_variants").is_none() {
+        return;
+    }
+    let r = report(
+        &["fft", "8x16", "12", "--backend", "gpu", "--runs", "1"],
+        "cli-fft-gpu",
+    );
+    assert!(r["adapter"].is_string());
+    let cases = r["cases"].as_array().unwrap();
+    let names: Vec<&str> = cases
+        .iter()
+        .map(|c| c["backend"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "gpu-stockham",
+            "gpu-split-stream",
+            "gpu-stockham",
+            "gpu-split-stream"
+        ]
+    );
+    for c in &cases[..2] {
+        assert_eq!(c["reference"], "exact-dft");
+        assert!(c["rel_l2"].as_f64().unwrap() < 1e-6, "{c}");
+        assert!(c["kernel_median_s"].as_f64().unwrap() > 0.0, "{c}");
+    }
+    for c in &cases[2..] {
+        assert!(
+            c["skipped"].as_str().unwrap().contains("power of two"),
+            "{c}"
+        );
+    }
+}
