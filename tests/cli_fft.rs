@@ -135,3 +135,48 @@ fn fft_checks_the_gpu_variants() {
         );
     }
 }
+
+/// Without a usable adapter, `--backend all` says so and runs the CPU; `--backend gpu`
+/// fails naming the problem.
+#[test]
+fn fft_without_an_adapter_runs_the_cpu_or_fails_clearly() {
+    let o = common::voxlab_command(&["fft", "16", "--runs", "1"])
+        .env("VOXLAB_ADAPTER", "no-such-adapter")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("GPU: none available"), "{out}");
+    assert!(out.contains("cpu-f32") && !out.contains("gpu-"), "{out}");
+    let o = common::voxlab_command(&["fft", "16", "--backend", "gpu"])
+        .env("VOXLAB_ADAPTER", "no-such-adapter")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no GPU adapter"), "{}", stderr(&o));
+}
+
+/// The library side: shapes, tolerances, and the report of a CPU run.
+#[test]
+fn fft_check_library_parses_shapes_and_sets_tolerances() {
+    use voxlab::fft_check::{parse_shape, run, tolerance, Backends};
+    assert_eq!(parse_shape("64x64x64").unwrap(), vec![64, 64, 64]);
+    assert_eq!(parse_shape("1024").unwrap(), vec![1024]);
+    assert!(parse_shape("4x").is_err() && parse_shape("0").is_err());
+    assert!(matches!(
+        parse_shape("65536x65536"),
+        Err(voxlab::Error::TooLarge { .. })
+    ));
+    assert!((tolerance(1024, true) - 1e-5).abs() < 1e-20);
+    assert_eq!(tolerance(1, true), 1e-6);
+    assert_eq!(tolerance(1024, false), 1e-12);
+    let backends = Backends {
+        cpu: true,
+        gpu: false,
+    };
+    let mut lines = 0;
+    let r = run(&[vec![3, 5]], backends, 1, None, &mut |_| lines += 1).unwrap();
+    assert_eq!((lines, r.cases.len()), (2, 2));
+    assert!(r.passed && r.adapter.is_none());
+    assert!(run(&[vec![3]], backends, 0, None, &mut |_| {}).is_err());
+}
