@@ -46,6 +46,7 @@ pub mod camera;
 pub mod cpu;
 pub mod demo;
 pub mod error;
+pub mod fft_check;
 pub mod frame;
 pub mod gpu;
 pub mod io;

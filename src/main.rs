@@ -89,11 +89,35 @@ enum Command {
     /// Fourier volume rendering: an X-ray projection (value × mm) from one slice of the
     /// volume's 3-D spectrum (projection-slice theorem), written as .png or .npy.
     Fvr(Box<FvrArgs>),
+    /// Check and time the FFTs on random complex data: CPU f64, CPU f32 and the GPU
+    /// (Stockham and split-stream), each validated against the exact DFT (when
+    /// N·ΣN_axis ≤ 1e9, else the CPU f64 FFT). Prints the relative L2 error, the median
+    /// time after a warm-up, GFLOP/s (5·N·log2 N / t) and GB/s (one read and one write
+    /// of the array). Exit status 3 when an error exceeds 1e-12 (f64) or 1e-6·log2 N
+    /// (f32).
+    Fft(FftArgs),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
         name: Option<String>,
     },
+}
+
+/// Arguments of `voxlab fft`.
+#[derive(Args)]
+struct FftArgs {
+    /// Shapes, row-major with the last axis fastest: 1024, 256x256, 64x64x64, …
+    #[arg(required = true)]
+    shapes: Vec<String>,
+    /// cpu, gpu or all. Without a GPU adapter, `all` says so and runs the CPU.
+    #[arg(long, default_value = "all")]
+    backend: String,
+    /// Timed runs per case (after one warm-up run, which is the one checked).
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+    /// Also write every number to this JSON file.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 /// What to render and how: shared by `render` and `compare`.
@@ -416,6 +440,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if let Command::Compare(args) = cli.command {
         return compare(*args);
     }
+    if let Command::Fft(args) = cli.command {
+        return fft(args);
+    }
     run_other(cli.command).map(|()| ExitCode::SUCCESS)
 }
 
@@ -423,7 +450,7 @@ fn run_other(command: Command) -> Result<()> {
     match command {
         Command::Demo { out } => demo(&out),
         Command::Render(args) => render(*args),
-        Command::Compare(_) => unreachable!("handled in run"),
+        Command::Compare(_) | Command::Fft(_) => unreachable!("handled in run"),
         Command::Phantom { spec, out } => {
             let spec = spec.strip_prefix("phantom:").unwrap_or(&spec);
             let (phantom, dims) = voxlab::phantom::parse_spec(spec, 128)?;
@@ -771,6 +798,74 @@ fn compare(c: CompareArgs) -> Result<ExitCode> {
 }
 
 /// Fails early (before a long render) if the output cannot be written.
+fn fft(a: FftArgs) -> Result<ExitCode> {
+    use voxlab::fft_check::{self, Backends};
+    let backends = match a.backend.as_str() {
+        "cpu" => Backends {
+            cpu: true,
+            gpu: false,
+        },
+        "gpu" => Backends {
+            cpu: false,
+            gpu: true,
+        },
+        "all" => Backends {
+            cpu: true,
+            gpu: true,
+        },
+        other => {
+            return Err(Error::invalid(
+                "--backend",
+                format!("'{other}' is not cpu, gpu or all"),
+            ))
+        }
+    };
+    if a.runs == 0 {
+        return Err(Error::invalid("--runs", "must be at least 1"));
+    }
+    let shapes = a
+        .shapes
+        .iter()
+        .map(|s| fft_check::parse_shape(s))
+        .collect::<Result<Vec<_>>>()?;
+    let ctx = if backends.gpu {
+        match voxlab::gpu::GpuContext::new() {
+            Ok(c) => {
+                println!("GPU: {}", c.describe());
+                Some(c)
+            }
+            Err(e) if backends.cpu => {
+                println!("GPU: none available ({e}); running the CPU only");
+                None
+            }
+            Err(e) => return Err(e),
+        }
+    } else {
+        None
+    };
+    println!(
+        "forward, unnormalised; {} timed run(s) after 1 warm-up; {} CPU threads",
+        a.runs,
+        rayon::current_num_threads()
+    );
+    println!("{}", fft_check::TABLE_HEADER);
+    let report = fft_check::run(&shapes, backends, a.runs, ctx.as_ref(), &mut |c| {
+        println!("{}", fft_check::format_case(c))
+    })?;
+    if let Some(path) = &a.json {
+        let text = serde_json::to_string_pretty(&report)
+            .map_err(|e| Error::invalid("FFT report", e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))?;
+    }
+    if report.passed {
+        println!("all within tolerance");
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!("voxlab: an FFT error exceeds its tolerance");
+        Ok(ExitCode::from(3))
+    }
+}
+
 fn check_output(path: &Path) -> Result<()> {
     let ext = path
         .extension()

@@ -7,7 +7,7 @@ use voxlab::cpu::dft::{
     dft_1d, dft_1d_centered, dft_nd, dft_nd_centered, fftshift, ifftshift, twiddle, Direction,
     Normalization,
 };
-use voxlab::cpu::fft::{fft_nd, irfft_nd, rfft_1d, rfft_nd, rfft_shape};
+use voxlab::cpu::fft::{fft_nd, irfft_nd, rfft_1d, rfft_nd, rfft_shape, two_real_ffts};
 
 type C = Complex<f64>;
 
@@ -624,4 +624,39 @@ fn degenerate_shapes() {
     let x = Rng(43).complex(6);
     let got = dft_nd(&x, &[1, 6, 1], f, Normalization::None);
     assert!(rel_l2(&got, &dft_1d(&x, f, Normalization::None)) < 1e-15);
+}
+
+/// Two real lines through one complex FFT equal two separate FFTs and the exact DFT.
+#[test]
+fn two_real_ffts_match_two_separate_transforms() {
+    let mut rng = Rng(97);
+    for n in [1usize, 2, 3, 8, 17, 64, 1000] {
+        let a: Vec<f64> = (0..n).map(|_| rng.signed()).collect();
+        let b: Vec<f64> = (0..n).map(|_| rng.signed()).collect();
+        let (fa, fb) = two_real_ffts(&a, &b);
+        assert_eq!((fa.len(), fb.len()), (n, n));
+        for (x, got) in [(&a, &fa), (&b, &fb)] {
+            let mut sep: Vec<C> = x.iter().map(|&v| C::new(v, 0.0)).collect();
+            fft_nd(
+                &mut sep,
+                &[n],
+                Direction::Forward,
+                Normalization::Unnormalized,
+            );
+            let exact = dft_1d(
+                &sep_input(x),
+                Direction::Forward,
+                Normalization::Unnormalized,
+            );
+            let (e_fft, e_dft) = (rel_l2(got, &sep), rel_l2(got, &exact));
+            assert!(e_fft < 1e-14, "n = {n}: {e_fft:e} against a separate FFT");
+            assert!(e_dft < 1e-14, "n = {n}: {e_dft:e} against the DFT");
+        }
+    }
+    let (ea, eb) = two_real_ffts(&[], &[]);
+    assert!(ea.is_empty() && eb.is_empty());
+}
+
+fn sep_input(x: &[f64]) -> Vec<C> {
+    x.iter().map(|&v| C::new(v, 0.0)).collect()
 }

@@ -242,3 +242,36 @@ pub fn irfft_nd<T: FftNum>(input: &[Complex<T>], shape: &[usize], norm: Normaliz
     );
     out
 }
+
+/// The unscaled forward FFTs of two real lines of the same length through one complex
+/// FFT: `z = a + i·b` is transformed once and split by symmetry,
+/// `A_k = (Z_k + conj(Z_{N−k})) / 2` and `B_k = (Z_k − conj(Z_{N−k})) / (2i)`
+/// (indices mod `N`). All `N` bins of each spectrum are returned.
+///
+/// # Panics
+/// If `a` and `b` differ in length.
+pub fn two_real_ffts(a: &[f64], b: &[f64]) -> (Vec<Complex<f64>>, Vec<Complex<f64>>) {
+    assert!(
+        a.len() == b.len(),
+        "two_real_ffts: lines of {} and {} samples",
+        a.len(),
+        b.len()
+    );
+    let n = a.len();
+    let mut z: Vec<Complex<f64>> = a.iter().zip(b).map(|(&x, &y)| Complex::new(x, y)).collect();
+    fft_nd(
+        &mut z,
+        &[n],
+        Direction::Forward,
+        Normalization::Unnormalized,
+    );
+    (0..n)
+        .map(|k| {
+            let zk = z[k];
+            let zc = z[(n - k) % n].conj();
+            // (zk − zc) / (2i) = −i·(zk − zc) / 2.
+            let d = zk - zc;
+            ((zk + zc) * 0.5, Complex::new(d.im, -d.re) * 0.5)
+        })
+        .unzip()
+}

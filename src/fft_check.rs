@@ -1,0 +1,345 @@
+//! `voxlab fft`: checks and times the Fourier transforms on random complex data.
+//!
+//! For each shape, one array of random complex values (uniform in `[−1, 1)` in both
+//! parts, fixed seed) is transformed forward, unnormalised, by the CPU f64 FFT, the
+//! CPU f32 FFT ([`crate::cpu::fft::fft_nd`]) and, when asked and an adapter exists,
+//! the GPU ([`crate::gpu::fft`], Stockham and split-stream). Each result is compared
+//! with a reference: the exact DFT ([`crate::cpu::dft::dft_nd`]) when its cost
+//! `N·ΣN_axis` is at most [`EXACT_WORK_LIMIT`], else the CPU f64 FFT. The error is
+//! the relative L2 norm `‖x − ref‖ / ‖ref‖`; it must stay within `1e-12` (f64) or
+//! `1e-6·log2 N` (f32, `N` the total size, at least 1).
+//!
+//! Timings: one warm-up run (the one checked), then the median of `runs` runs. CPU
+//! times cover the transform only (the copy of the input is outside). GPU times are
+//! end to end without set-up (upload, passes, readback), and the pass time (from
+//! timestamp queries when the adapter has them) is reported apart. GFLOP/s is the
+//! conventional `5·N·log2 N / t`; GB/s counts one read and one write of the array,
+//! `2·N·sizeof(complex) / t`.
+
+use crate::cpu::dft::{dft_nd, Direction, Normalization};
+use crate::error::{Error, Result};
+use crate::gpu::fft::{fft_nd_timed, GpuFftVariant};
+use crate::gpu::GpuContext;
+use rustfft::num_complex::Complex;
+use std::time::Instant;
+
+/// Largest `N·ΣN_axis` for which the exact DFT is the reference.
+pub const EXACT_WORK_LIMIT: f64 = 1e9;
+
+/// Largest total size accepted (2²⁷ complex values, 2 GiB in f64).
+pub const MAX_TOTAL: usize = 1 << 27;
+
+/// Parses a shape such as `1024`, `256x256` or `64x64x64` (row-major, last axis
+/// fastest).
+///
+/// # Errors
+/// [`Error::Invalid`] when an axis is not a positive whole number;
+/// [`Error::TooLarge`] above [`MAX_TOTAL`] values.
+pub fn parse_shape(s: &str) -> Result<Vec<usize>> {
+    let shape = s
+        .split(['x', 'X', '×'])
+        .map(|a| a.trim().parse::<usize>().ok().filter(|&n| n > 0))
+        .collect::<Option<Vec<usize>>>()
+        .ok_or_else(|| {
+            Error::invalid(
+                "FFT shape",
+                format!("'{s}' is not like 1024, 256x256 or 64x64x64 (positive axes)"),
+            )
+        })?;
+    let total = shape
+        .iter()
+        .try_fold(1usize, |a, &n| a.checked_mul(n))
+        .filter(|&t| t <= MAX_TOTAL);
+    if total.is_none() {
+        return Err(Error::too_large(
+            "FFT shape",
+            format!("'{s}' has more than {MAX_TOTAL} values"),
+        ));
+    }
+    Ok(shape)
+}
+
+/// `n` random complex values, uniform in `[−1, 1)` in both parts (xorshift64*,
+/// deterministic for a given `seed`).
+pub fn random_complex(n: usize, seed: u64) -> Vec<Complex<f64>> {
+    let mut s = seed.max(1);
+    let mut next = || {
+        s ^= s >> 12;
+        s ^= s << 25;
+        s ^= s >> 27;
+        let u = (s.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64;
+        2.0 * u - 1.0
+    };
+    (0..n).map(|_| Complex::new(next(), next())).collect()
+}
+
+/// Relative L2 error `‖a − b‖ / ‖b‖` in f64 (`‖a − b‖` when `b` is zero).
+pub fn rel_l2<T: Into<f64> + Copy>(a: &[Complex<T>], b: &[Complex<f64>]) -> f64 {
+    let mut d = 0.0;
+    let mut r = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        let x = Complex::new(x.re.into(), x.im.into());
+        d += (x - y).norm_sqr();
+        r += y.norm_sqr();
+    }
+    if r == 0.0 {
+        d.sqrt()
+    } else {
+        (d / r).sqrt()
+    }
+}
+
+/// The error allowed for a transform of `total` values in f32 (`single`) or f64.
+pub fn tolerance(total: usize, single: bool) -> f64 {
+    if single {
+        1e-6 * (total as f64).log2().max(1.0)
+    } else {
+        1e-12
+    }
+}
+
+/// Which implementations to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Backends {
+    pub cpu: bool,
+    pub gpu: bool,
+}
+
+/// One implementation on one shape.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CaseResult {
+    pub shape: Vec<usize>,
+    /// `cpu-f64`, `cpu-f32`, `gpu-stockham` or `gpu-split-stream`.
+    pub backend: String,
+    /// `exact-dft` or `cpu-f64-fft`.
+    pub reference: String,
+    pub rel_l2: f64,
+    pub tolerance: f64,
+    pub passed: bool,
+    /// Median seconds (GPU: end to end without set-up).
+    pub median_s: f64,
+    /// GPU only: median seconds of the passes.
+    pub kernel_median_s: Option<f64>,
+    /// GPU only: whether the pass time comes from timestamp queries.
+    pub kernel_from_timestamps: Option<bool>,
+    /// `5·N·log2 N / median_s`, in 1e9 per second.
+    pub gflops: f64,
+    /// `2·N·sizeof(complex) / median_s`, in 1e9 bytes per second.
+    pub gbps: f64,
+    /// Why the case was not run (then the numbers are meaningless and it passes).
+    pub skipped: Option<String>,
+}
+
+/// Everything `voxlab fft` measured.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    pub runs: usize,
+    pub threads: usize,
+    /// The GPU adapter, when one was used.
+    pub adapter: Option<String>,
+    pub cases: Vec<CaseResult>,
+    pub passed: bool,
+}
+
+/// The median, NaN when there is nothing to take it of.
+fn median(mut t: Vec<f64>) -> f64 {
+    t.sort_by(|a, b| a.total_cmp(b));
+    t.get(t.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn flops(total: usize) -> f64 {
+    5.0 * total as f64 * (total as f64).log2().max(0.0)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn case(
+    shape: &[usize],
+    backend: &str,
+    reference: &str,
+    err: f64,
+    single: bool,
+    median_s: f64,
+    kernel: Option<(f64, bool)>,
+    bytes_per_value: usize,
+) -> CaseResult {
+    let total: usize = shape.iter().product();
+    let tol = tolerance(total, single);
+    CaseResult {
+        shape: shape.to_vec(),
+        backend: backend.into(),
+        reference: reference.into(),
+        rel_l2: err,
+        tolerance: tol,
+        passed: err <= tol,
+        median_s,
+        kernel_median_s: kernel.map(|k| k.0),
+        kernel_from_timestamps: kernel.map(|k| k.1),
+        gflops: flops(total) / median_s / 1e9,
+        gbps: (2 * total * bytes_per_value) as f64 / median_s / 1e9,
+        skipped: None,
+    }
+}
+
+/// Times the forward FFT on a fresh copy of `x`: one warm-up (its result returned),
+/// then the median of `runs` runs (NaN when `runs` is 0).
+fn time_cpu<T: rustfft::FftNum>(
+    x: &[Complex<T>],
+    shape: &[usize],
+    runs: usize,
+) -> (Vec<Complex<T>>, f64) {
+    let go = |d: &mut [Complex<T>]| {
+        crate::cpu::fft::fft_nd(d, shape, Direction::Forward, Normalization::Unnormalized)
+    };
+    let mut first = x.to_vec();
+    go(&mut first);
+    let mut t = Vec::with_capacity(runs);
+    for _ in 0..runs {
+        let mut d = x.to_vec();
+        let start = Instant::now();
+        go(&mut d);
+        t.push(start.elapsed().as_secs_f64());
+    }
+    (first, median(t))
+}
+
+/// Checks and times every shape on the chosen backends. `gpu` is the opened adapter
+/// (`None` runs the CPU only). `log` receives one line per finished case.
+///
+/// # Errors
+/// [`Error::Invalid`] when `runs` is 0.
+pub fn run(
+    shapes: &[Vec<usize>],
+    backends: Backends,
+    runs: usize,
+    gpu: Option<&GpuContext>,
+    log: &mut dyn FnMut(&CaseResult),
+) -> Result<Report> {
+    if runs == 0 {
+        return Err(Error::invalid("--runs", "must be at least 1"));
+    }
+    let mut cases = Vec::new();
+    let mut push = |c: CaseResult, cases: &mut Vec<CaseResult>| {
+        log(&c);
+        cases.push(c);
+    };
+    for (i, shape) in shapes.iter().enumerate() {
+        let total: usize = shape.iter().product();
+        let x = random_complex(total, 0x5eed_0000 + i as u64);
+        let x32: Vec<Complex<f32>> = x
+            .iter()
+            .map(|v| Complex::new(v.re as f32, v.im as f32))
+            .collect();
+        let work = total as f64 * shape.iter().sum::<usize>() as f64;
+        let exact = work <= EXACT_WORK_LIMIT;
+        // The f64 FFT is always run (it may be the reference), timed only for the CPU.
+        let (f64_out, f64_t) = time_cpu(&x, shape, if backends.cpu { runs } else { 0 });
+        let (reference, ref_name) = if exact {
+            (
+                dft_nd(&x, shape, Direction::Forward, Normalization::Unnormalized),
+                "exact-dft",
+            )
+        } else {
+            (f64_out.clone(), "cpu-f64-fft")
+        };
+        if backends.cpu {
+            let err = rel_l2(&f64_out, &reference);
+            let c = case(shape, "cpu-f64", ref_name, err, false, f64_t, None, 16);
+            push(c, &mut cases);
+            let (out, t) = time_cpu(&x32, shape, runs);
+            let err = rel_l2(&out, &reference);
+            push(
+                case(shape, "cpu-f32", ref_name, err, true, t, None, 8),
+                &mut cases,
+            );
+        }
+        let Some(ctx) = gpu.filter(|_| backends.gpu) else {
+            continue;
+        };
+        for (variant, name) in [
+            (GpuFftVariant::Stockham, "gpu-stockham"),
+            (GpuFftVariant::SplitStream, "gpu-split-stream"),
+        ] {
+            let go = || {
+                fft_nd_timed(
+                    ctx,
+                    &x32,
+                    shape,
+                    Direction::Forward,
+                    Normalization::Unnormalized,
+                    variant,
+                )
+            };
+            let first = match go() {
+                Ok(o) => o,
+                Err(e @ (Error::Invalid { .. } | Error::TooLarge { .. })) => {
+                    let mut c = case(shape, name, ref_name, 0.0, true, f64::NAN, None, 8);
+                    c.skipped = Some(e.to_string());
+                    push(c, &mut cases);
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            let err = rel_l2(&first.data, &reference);
+            let (mut e2e, mut kern) = (Vec::new(), Vec::new());
+            for _ in 0..runs {
+                let o = go()?;
+                e2e.push(o.timings.total - o.timings.setup);
+                kern.push(o.timings.kernel);
+            }
+            let stamps = first.timings.kernel_from_timestamps;
+            let c = case(
+                shape,
+                name,
+                ref_name,
+                err,
+                true,
+                median(e2e),
+                Some((median(kern), stamps)),
+                8,
+            );
+            push(c, &mut cases);
+        }
+    }
+    let passed = cases.iter().all(|c| c.passed);
+    Ok(Report {
+        runs,
+        threads: rayon::current_num_threads(),
+        adapter: gpu.filter(|_| backends.gpu).map(|g| {
+            let s = &g.summary;
+            format!("{} ({}, {})", s.name, s.backend, s.driver_info)
+        }),
+        cases,
+        passed,
+    })
+}
+
+/// One line of the text table (see [`TABLE_HEADER`]).
+pub fn format_case(c: &CaseResult) -> String {
+    let shape = c
+        .shape
+        .iter()
+        .map(|n| n.to_string())
+        .collect::<Vec<_>>()
+        .join("x");
+    if let Some(why) = &c.skipped {
+        return format!("{shape:<14} {:<17} skipped: {why}", c.backend);
+    }
+    let kernel = c
+        .kernel_median_s
+        .map_or("-".to_string(), |k| format!("{:.3}", k * 1e3));
+    format!(
+        "{shape:<14} {:<17} {:<12} {:>10.2e} {:>9.1e} {:<4} {:>10.3} {:>10} {:>8.3} {:>7.3}",
+        c.backend,
+        c.reference,
+        c.rel_l2,
+        c.tolerance,
+        if c.passed { "ok" } else { "FAIL" },
+        c.median_s * 1e3,
+        kernel,
+        c.gflops,
+        c.gbps
+    )
+}
+
+/// The header of the text table.
+pub const TABLE_HEADER: &str = "shape          backend           reference        rel L2       tol ok    median ms  kernel ms  GFLOP/s    GB/s";

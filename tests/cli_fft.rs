@@ -1,0 +1,182 @@
+//! `voxlab fft`: the transforms checked against the exact DFT from the command line.
+
+mod common;
+
+use common::{s, scratch, stderr, voxlab};
+
+#[test]
+fn fft_checks_cpu_shapes_and_writes_json() {
+    let d = scratch("cli-fft");
+    let json = d.join("fft.json");
+    let o = voxlab(&[
+        "fft",
+        "64",
+        "16x8",
+        "4x4x4",
+        "--backend",
+        "cpu",
+        "--runs",
+        "2",
+        "--json",
+        s(&json),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("all within tolerance"), "{out}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(r["runs"], 2);
+    assert_eq!(r["passed"], true);
+    assert!(r["adapter"].is_null());
+    let cases = r["cases"].as_array().unwrap();
+    // Three shapes, CPU f64 and f32 each.
+    assert_eq!(cases.len(), 6);
+    let shapes: Vec<Vec<u64>> = vec![vec![64], vec![16, 8], vec![4, 4, 4]];
+    for (i, c) in cases.iter().enumerate() {
+        let shape: Vec<u64> = c["shape"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(shape, shapes[i / 2]);
+        assert_eq!(c["backend"], ["cpu-f64", "cpu-f32"][i % 2]);
+        // Small shapes are checked against the exact DFT.
+        assert_eq!(c["reference"], "exact-dft");
+        let (err, tol) = (
+            c["rel_l2"].as_f64().unwrap(),
+            c["tolerance"].as_f64().unwrap(),
+        );
+        let bound = if i % 2 == 0 { 1e-14 } else { 1e-6 };
+        assert!(err < bound && err <= tol, "{c}");
+        assert_eq!(c["passed"], true);
+        for k in ["median_s", "gflops", "gbps"] {
+            let v = c[k].as_f64().unwrap();
+            assert!(v.is_finite() && v >= 0.0, "{k}: {c}");
+        }
+        assert!(c["kernel_median_s"].is_null() && c["skipped"].is_null());
+    }
+}
+
+#[test]
+fn fft_refuses_bad_shapes_and_backends() {
+    for args in [
+        &["fft", "16x0"][..],
+        &["fft", "abc"],
+        &["fft", "16", "--backend", "tpu"],
+        &["fft", "16", "--runs", "0"],
+    ] {
+        let o = voxlab(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        assert!(stderr(&o).contains("invalid"), "{args:?}: {}", stderr(&o));
+    }
+}
+
+fn report(args: &[&str], name: &str) -> serde_json::Value {
+    let json = scratch(name).join("fft.json");
+    let mut all = args.to_vec();
+    all.extend(["--json", s(&json)]);
+    let o = voxlab(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+/// Above N·ΣN = 1e9 the reference is the CPU f64 FFT, and the report says so.
+#[test]
+fn fft_falls_back_to_the_f64_fft_as_reference_for_large_shapes() {
+    let r = report(
+        &["fft", "32768", "--backend", "cpu", "--runs", "1"],
+        "cli-fft-large",
+    );
+    let cases = r["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    for c in cases {
+        assert_eq!(c["reference"], "cpu-f64-fft", "{c}");
+        assert_eq!(c["passed"], true, "{c}");
+    }
+    assert_eq!(cases[0]["rel_l2"], 0.0);
+}
+
+/// Both GPU variants, checked against the exact DFT; a non-power-of-two shape is
+/// skipped on the GPU, not failed.
+#[test]
+fn fft_checks_the_gpu_variants() {
+    if common::gpu("fft_checks_the_gpu_variants").is_none() {
+        return;
+    }
+    let r = report(
+        &["fft", "8x16", "12", "--backend", "gpu", "--runs", "1"],
+        "cli-fft-gpu",
+    );
+    assert!(r["adapter"].is_string());
+    let cases = r["cases"].as_array().unwrap();
+    let names: Vec<&str> = cases
+        .iter()
+        .map(|c| c["backend"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "gpu-stockham",
+            "gpu-split-stream",
+            "gpu-stockham",
+            "gpu-split-stream"
+        ]
+    );
+    for c in &cases[..2] {
+        assert_eq!(c["reference"], "exact-dft");
+        assert!(c["rel_l2"].as_f64().unwrap() < 1e-6, "{c}");
+        assert!(c["kernel_median_s"].as_f64().unwrap() > 0.0, "{c}");
+    }
+    for c in &cases[2..] {
+        assert!(
+            c["skipped"].as_str().unwrap().contains("power of two"),
+            "{c}"
+        );
+    }
+}
+
+/// Without a usable adapter, `--backend all` says so and runs the CPU; `--backend gpu`
+/// fails naming the problem.
+#[test]
+fn fft_without_an_adapter_runs_the_cpu_or_fails_clearly() {
+    let o = common::voxlab_command(&["fft", "16", "--runs", "1"])
+        .env("VOXLAB_ADAPTER", "no-such-adapter")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("GPU: none available"), "{out}");
+    assert!(out.contains("cpu-f32") && !out.contains("gpu-"), "{out}");
+    let o = common::voxlab_command(&["fft", "16", "--backend", "gpu"])
+        .env("VOXLAB_ADAPTER", "no-such-adapter")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no GPU adapter"), "{}", stderr(&o));
+}
+
+/// The library side: shapes, tolerances, and the report of a CPU run.
+#[test]
+fn fft_check_library_parses_shapes_and_sets_tolerances() {
+    use voxlab::fft_check::{parse_shape, run, tolerance, Backends};
+    assert_eq!(parse_shape("64x64x64").unwrap(), vec![64, 64, 64]);
+    assert_eq!(parse_shape("1024").unwrap(), vec![1024]);
+    assert!(parse_shape("4x").is_err() && parse_shape("0").is_err());
+    assert!(matches!(
+        parse_shape("65536x65536"),
+        Err(voxlab::Error::TooLarge { .. })
+    ));
+    assert!((tolerance(1024, true) - 1e-5).abs() < 1e-20);
+    assert_eq!(tolerance(1, true), 1e-6);
+    assert_eq!(tolerance(1024, false), 1e-12);
+    let backends = Backends {
+        cpu: true,
+        gpu: false,
+    };
+    let mut lines = 0;
+    let r = run(&[vec![3, 5]], backends, 1, None, &mut |_| lines += 1).unwrap();
+    assert_eq!((lines, r.cases.len()), (2, 2));
+    assert!(r.passed && r.adapter.is_none());
+    assert!(run(&[vec![3]], backends, 0, None, &mut |_| {}).is_err());
+}
