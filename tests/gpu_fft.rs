@@ -13,6 +13,8 @@
 
 mod common;
 
+use common::wgsl_struct_layout;
+
 use rustfft::num_complex::Complex;
 use std::mem::{offset_of, size_of};
 use voxlab::cpu::dft::{dft_1d, dft_nd, Direction, Normalization};
@@ -128,24 +130,6 @@ fn pass_plans_have_the_promised_lengths() {
         assert_eq!(ss(l).len() as u32, l - 1, "split stream, log2 N = {l}");
         assert_eq!(st(l).len() as u32, l.div_ceil(2), "Stockham, log2 N = {l}");
     }
-}
-
-fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
-    let module = naga::front::wgsl::parse_str(src).expect("the shared WGSL parses");
-    for (_, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                return (
-                    *span,
-                    members
-                        .iter()
-                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                        .collect(),
-                );
-            }
-        }
-    }
-    panic!("struct {name} not found in the WGSL");
 }
 
 #[test]

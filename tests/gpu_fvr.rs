@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::wgsl_struct_layout;
+
 use glam::DVec3;
 use std::mem::{offset_of, size_of};
 use std::time::Instant;
@@ -24,24 +26,6 @@ const TOL_REL_L2: f64 = 5e-6;
 /// Largest `max |gpu − cpu| / max |cpu|` allowed. Measured on lavapipe: 7.6e-8 …
 /// 5.8e-7 (worst: Shepp–Logan 32³, orbit view, Lanczos-3).
 const TOL_MAX_REL: f64 = 5e-6;
-
-fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
-    let module = naga::front::wgsl::parse_str(src).expect("the shared WGSL parses");
-    for (_, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                return (
-                    *span,
-                    members
-                        .iter()
-                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                        .collect(),
-                );
-            }
-        }
-    }
-    panic!("struct {name} not found in the WGSL");
-}
 
 #[test]
 fn fvr_params_layout_agrees() {

@@ -2,27 +2,13 @@
 //! the WGSL struct equal Rust's `offset_of!` for every member, and the sizes agree.
 //! Needs no GPU. Also checks that every generated shader variant validates.
 
+mod common;
+
+use common::wgsl_struct_layout;
+
 use std::mem::{offset_of, size_of};
 use voxlab::gpu::raycast::{RaycastParams, PARAMS_WGSL};
 use wgpu::naga;
-
-fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
-    let module = naga::front::wgsl::parse_str(src).expect("the shared WGSL parses");
-    for (_, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                return (
-                    *span,
-                    members
-                        .iter()
-                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                        .collect(),
-                );
-            }
-        }
-    }
-    panic!("struct {name} not found in the WGSL");
-}
 
 #[test]
 fn raycast_params_layout_agrees() {

@@ -230,3 +230,24 @@ pub fn assert_parity(
     assert!(report.passed, "{}", report.message);
     report.stats
 }
+
+/// The size and member offsets of WGSL struct `name` as naga lays it out, for the
+/// layout tests that hold a `#[repr(C)]` parameter struct against its WGSL copy.
+pub fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
+    use wgpu::naga;
+    let module = naga::front::wgsl::parse_str(src).expect("the shared WGSL parses");
+    for (_, ty) in module.types.iter() {
+        if ty.name.as_deref() == Some(name) {
+            if let naga::TypeInner::Struct { members, span } = &ty.inner {
+                return (
+                    *span,
+                    members
+                        .iter()
+                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                        .collect(),
+                );
+            }
+        }
+    }
+    panic!("struct {name} not found in the WGSL");
+}
