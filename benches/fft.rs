@@ -15,6 +15,9 @@
 //! only matching cases: `cargo bench --bench fft -- 3d`. Under `cargo test` (no
 //! `--bench` argument) each case runs once on a tiny input, as a smoke test.
 
+mod common;
+use common::median_min_max;
+
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use std::time::Instant;
@@ -28,9 +31,8 @@ const FWD: Direction = Direction::Forward;
 const INV: Direction = Direction::Inverse;
 const NORM: Normalization = Normalization::Unnormalized;
 
-fn median(mut t: Vec<f64>) -> f64 {
-    t.sort_by(|a, b| a.total_cmp(b));
-    t[t.len() / 2]
+fn median(t: Vec<f64>) -> f64 {
+    median_min_max(t).0
 }
 
 /// The Gaussian low-pass `exp(−|f|² / (2σ²))`, `f` in cycles per sample (numpy's
@@ -84,16 +86,8 @@ fn gpu_run(
 }
 
 fn main() {
-    let filter_arg = std::env::args().skip(1).find(|a| !a.starts_with('-'));
-    let smoke = !std::env::args().any(|a| a == "--bench");
-    let runs: usize = if smoke {
-        1
-    } else {
-        std::env::var("VOXLAB_BENCH_RUNS")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(5)
-    };
+    let args = common::BenchArgs::from_env();
+    let (smoke, runs) = (args.smoke, args.runs);
     let large = std::env::var("VOXLAB_BENCH_LARGE").is_ok_and(|v| v == "1");
     // (name, shape, low-pass task?)
     let mut cases: Vec<(String, Vec<usize>, bool)> = Vec::new();
@@ -133,7 +127,7 @@ fn main() {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, shape, task) in cases {
-        if filter_arg.as_deref().is_some_and(|f| !name.contains(f)) {
+        if !args.wants(&name) {
             continue;
         }
         let total: usize = shape.iter().product();

@@ -10,6 +10,9 @@
 //! Under `cargo test` (no `--bench` argument) each case runs once on a tiny input, as
 //! a smoke test of the benchmark code.
 
+mod common;
+use common::median_min_max;
+
 use std::time::Instant;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::raycast::render;
@@ -18,22 +21,9 @@ use voxlab::settings::{Filter, Mode, RenderSettings};
 use voxlab::transfer::TransferFunction;
 use voxlab::AnyVolume;
 
-fn median_min_max(mut t: Vec<f64>) -> (f64, f64, f64) {
-    t.sort_by(|a, b| a.total_cmp(b));
-    (t[t.len() / 2], t[0], t[t.len() - 1])
-}
-
 fn main() {
-    let filter_arg = std::env::args().skip(1).find(|a| !a.starts_with('-'));
-    let smoke = !std::env::args().any(|a| a == "--bench");
-    let runs: usize = if smoke {
-        1
-    } else {
-        std::env::var("VOXLAB_BENCH_RUNS")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(5)
-    };
+    let args = common::BenchArgs::from_env();
+    let (smoke, runs) = (args.smoke, args.runs);
     let (n, size) = if smoke { (16, 16) } else { (128, 256) };
     let vol: AnyVolume = Phantom::shepp_logan_modified()
         .sample([n; 3])
@@ -103,7 +93,7 @@ fn main() {
         "f32/e2e"
     );
     for (name, s) in cases {
-        if filter_arg.as_deref().is_some_and(|f| !name.contains(f)) {
+        if !args.wants(name) {
             continue;
         }
         let mut samples = 0;
