@@ -145,18 +145,8 @@ struct SceneArgs {
     /// Window centre (level) in raw data units. Needs --window.
     #[arg(long, requires = "window", allow_negative_numbers = true)]
     level: Option<f64>,
-    /// Axis-aligned orthographic view: +x, -x, +y, -y, +z, -z (rays along that index
-    /// axis). The image is laid out like NumPy's reduction over that axis of the
-    /// (nz, ny, nx) array; its default size is the volume's cross-section, so every pixel
-    /// centre lies on a ray through voxel centres.
-    #[arg(long, allow_hyphen_values = true)]
-    view: Option<String>,
-    /// Orbit camera: rotation about world +z in degrees (0 looks along +y).
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
-    azimuth: f64,
-    /// Orbit camera: degrees above the xy-plane.
-    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
-    elevation: f64,
+    #[command(flatten)]
+    view: ViewArgs,
     /// Orbit camera: distance from the volume centre in mm (default: fit the volume).
     #[arg(long)]
     distance: Option<f64>,
@@ -210,6 +200,24 @@ struct SceneArgs {
     /// interpolation (real GPUs quantise its weights to about 8 bits).
     #[arg(long)]
     hardware_filtering: bool,
+}
+
+/// Where the camera looks from: an axis view, or an orbit around the volume.
+#[derive(Args, Clone)]
+struct ViewArgs {
+    /// Axis-aligned orthographic view: +x, -x, +y, -y, +z, -z (rays along that index
+    /// axis). The image is laid out like NumPy's reduction over that axis of the
+    /// (nz, ny, nx) array (`vol.sum(axis=…)` for X-ray); its default size is the
+    /// volume's cross-section, so every pixel centre lies on a ray through voxel
+    /// centres. Without it, the orbit view below.
+    #[arg(long = "view", allow_hyphen_values = true)]
+    axis: Option<String>,
+    /// Orbit view: rotation about world +z in degrees (0 looks along +y).
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    azimuth: f64,
+    /// Orbit view: degrees above the xy-plane.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    elevation: f64,
 }
 
 /// How to load INPUT: phantom size, raw layout, and what to do with NaN/Inf voxels.
@@ -315,16 +323,8 @@ struct FvrArgs {
     /// Output image: .png (gray) or .npy (float32, value × mm).
     #[arg(long)]
     out: PathBuf,
-    /// Axis-aligned view: +x, -x, +y, -y, +z, -z, laid out like `render --view`
-    /// (and NumPy's `vol.sum(axis=…)`). Without it, the orthographic orbit view.
-    #[arg(long, allow_hyphen_values = true)]
-    view: Option<String>,
-    /// Orbit view: rotation about world +z in degrees (0 looks along +y).
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
-    azimuth: f64,
-    /// Orbit view: degrees above the xy-plane.
-    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
-    elevation: f64,
+    #[command(flatten)]
+    view: ViewArgs,
     /// How the spectrum is sampled on the slice (dirichlet: exact, small volumes only).
     #[arg(long, value_enum, default_value = "lanczos3")]
     kernel: voxlab::cpu::fvr::Kernel,
@@ -603,7 +603,7 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
         tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
     }
     let dims = volume.dims();
-    let camera = match &a.view {
+    let camera = match &a.view.axis {
         Some(v) => {
             let view: AxisView = v.parse()?;
             let (ca, ra) = view.image_axes();
@@ -633,8 +633,8 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
                 Projection::Perspective { fov_y_deg: a.fov }
             };
             let orbit = Orbit {
-                azimuth_deg: a.azimuth,
-                elevation_deg: a.elevation,
+                azimuth_deg: a.view.azimuth,
+                elevation_deg: a.view.elevation,
                 distance_mm: a.distance,
             };
             Camera::orbit(
@@ -1031,11 +1031,11 @@ fn fvr(a: FvrArgs) -> Result<()> {
         }
     };
     check_output(&a.out)?;
-    let view = match &a.view {
+    let view = match &a.view.axis {
         Some(v) => FvrView::Axis(v.parse()?),
         None => FvrView::Orbit {
-            azimuth_deg: a.azimuth,
-            elevation_deg: a.elevation,
+            azimuth_deg: a.view.azimuth,
+            elevation_deg: a.view.elevation,
         },
     };
     let vol = load_input(&a.input, &a.load)?.to_f32();
