@@ -44,6 +44,7 @@
 
 pub mod camera;
 pub mod cpu;
+pub mod ct;
 pub mod demo;
 pub mod error;
 pub mod fft_check;

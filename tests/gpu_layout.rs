@@ -95,3 +95,11 @@ fn every_generated_shader_validates() {
     .unwrap();
     assert_eq!(n, 48);
 }
+
+#[test]
+fn ct_view_layout_agrees() {
+    let (span, members) = wgsl_struct_layout(voxlab::ct::GEOMETRY_WGSL, "CtView");
+    assert_eq!(span as usize, size_of::<voxlab::ct::ViewMatrix<f32>>());
+    let offs: Vec<u32> = members.iter().map(|m| m.1).collect();
+    assert_eq!(offs, vec![0, 16, 32, 48]);
+}

@@ -9,4 +9,5 @@ pub mod fft;
 pub mod filter;
 pub mod fvr;
 pub mod gradient;
+pub mod project;
 pub mod raycast;

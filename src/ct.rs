@@ -1,0 +1,520 @@
+//! CT acquisition geometry and projection stacks, shared by every CT algorithm
+//! (forward projection, ramp filtering, FBP, FDK and D²VR) on both backends.
+//!
+//! # The world frame (RTK's)
+//! Millimetres. The object turns about the **+y axis**. At gantry angle `a` the unit
+//! vectors of the view are
+//! - `e_u = ( cos a, 0, −sin a)` — the detector's column direction,
+//! - `e_v = ( 0,     1,  0    )` — the detector's row direction (the rotation axis),
+//! - `e_w = ( sin a, 0,  cos a)` — from the isocentre towards the source.
+//!
+//! **Cone beam** (RTK's circular geometry): the source sits at `SID·e_w`, the flat
+//! detector is perpendicular to `e_w` at distance `SDD` from the source. A point `P`
+//! at depth `w = P·e_w` is magnified by `m = SDD / (SID − w)` and lands on the detector
+//! at `(u, v) = m·(P·e_u, P·e_v)` mm.
+//!
+//! **Parallel beam**: rays travel along `−e_w`; `P` lands at `(u, v) = (P·e_u, P·e_v)`.
+//! In scikit-image's terms (`radon`/`iradon`), a 2-D image with `x = col − n//2` to the
+//! right and `y = n//2 − row` up lies in the world's xz-plane as `X = x`, `Z = −y`; then
+//! `u = X cos a − Z sin a = x cos θ + y sin θ` with `θ = a`, exactly scikit-image's `s`.
+//!
+//! # Detector pixels
+//! Detector pixel `(col, row)` has its centre at
+//! `u = (col − cu)·du`, `v = (row − cv)·dv`; `cu`, `cv` are the (possibly fractional)
+//! index of the pixel the central ray hits. scikit-image puts it at `n//2`
+//! ([`Geometry::parallel_skimage`]); RTK centres the detector, `(n − 1)/2`
+//! ([`Geometry::cone_rtk`]).
+//!
+//! # Projection stacks
+//! [`Projections`] stores `angles × rows × cols` values with the column fastest: the
+//! layout of a NumPy array of shape `(angle, row, col)` — RTK's projection stack, and
+//! the 3-D parallel stack of the command line. A scikit-image sinogram of shape
+//! `(detector, angle)` is its transpose with one row (`crate::io` converts).
+//!
+//! # One backprojected point
+//! Every reconstruction in voxlab (FBP, FDK, D²VR) sums, over the views, a weight times
+//! the zero-padded bilinear interpolation of a (filtered) projection at the point's
+//! detector position: [`ViewMatrix::project`] and [`bilinear_zero`] are that per-element
+//! work, mirrored by `shaders/shared/ct_geometry.wgsl`.
+
+use crate::error::{Error, Result};
+use crate::real::Real;
+use glam::DVec3;
+
+/// Parallel or circular cone-beam rays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Beam {
+    /// Parallel rays along `−e_w`.
+    Parallel,
+    /// A point source on a circle of radius `sid` (source–isocentre distance, mm) and a
+    /// flat detector `sdd` mm from the source (source–detector distance).
+    Cone { sid: f64, sdd: f64 },
+}
+
+/// Everything needed to map a world point to its detector position in every view.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geometry {
+    pub beam: Beam,
+    /// Gantry angles in degrees, one per projection.
+    pub angles_deg: Vec<f64>,
+    /// Detector columns (along `e_u`) and rows (along `e_v`).
+    pub cols: usize,
+    pub rows: usize,
+    /// Detector pixel spacing in mm along columns (`du`) and rows (`dv`).
+    pub du: f64,
+    pub dv: f64,
+    /// Index of the detector pixel the central ray hits (fractional allowed).
+    pub cu: f64,
+    pub cv: f64,
+}
+
+/// WGSL twin of [`ViewMatrix`] and [`ViewMatrix::project`]; GPU CT shaders are
+/// compiled with this text prepended.
+pub const GEOMETRY_WGSL: &str = include_str!("../shaders/shared/ct_geometry.wgsl");
+
+/// The largest number of projections or detector pixels per axis accepted (a lying
+/// header or a typo must not allocate terabytes).
+pub const MAX_DETECTOR: usize = 1 << 16;
+
+impl Geometry {
+    /// scikit-image's parallel-beam 2-D geometry: `cols` detector bins of 1 (pixel)
+    /// unit, the rotation centre at bin `cols / 2` (integer division), one row.
+    pub fn parallel_skimage(cols: usize, angles_deg: Vec<f64>) -> Result<Self> {
+        let g = Geometry {
+            beam: Beam::Parallel,
+            angles_deg,
+            cols,
+            rows: 1,
+            du: 1.0,
+            dv: 1.0,
+            cu: (cols / 2) as f64,
+            cv: 0.0,
+        };
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// A 3-D parallel stack: each detector row is a scikit-image sinogram; rows are
+    /// `dv` apart along the rotation axis and centred like RTK's, `cv = (rows − 1)/2`.
+    pub fn parallel_stack(
+        cols: usize,
+        rows: usize,
+        du: f64,
+        dv: f64,
+        angles_deg: Vec<f64>,
+    ) -> Result<Self> {
+        let g = Geometry {
+            beam: Beam::Parallel,
+            angles_deg,
+            cols,
+            rows,
+            du,
+            dv,
+            cu: (cols / 2) as f64,
+            cv: (rows as f64 - 1.0) / 2.0,
+        };
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// RTK's circular cone-beam geometry with a centred flat detector.
+    pub fn cone_rtk(
+        sid: f64,
+        sdd: f64,
+        cols: usize,
+        rows: usize,
+        du: f64,
+        dv: f64,
+        angles_deg: Vec<f64>,
+    ) -> Result<Self> {
+        let g = Geometry {
+            beam: Beam::Cone { sid, sdd },
+            angles_deg,
+            cols,
+            rows,
+            du,
+            dv,
+            cu: (cols as f64 - 1.0) / 2.0,
+            cv: (rows as f64 - 1.0) / 2.0,
+        };
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// `n` angles evenly spread over `[0, range_deg)` (`range_deg = 180` for a parallel
+    /// scan, `360` for a full cone-beam circle).
+    pub fn even_angles(n: usize, range_deg: f64) -> Vec<f64> {
+        (0..n).map(|k| k as f64 * range_deg / n as f64).collect()
+    }
+
+    /// Checks every field: a clear error instead of NaNs or absurd allocations later.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::invalid("CT geometry", m));
+        if self.angles_deg.is_empty() {
+            return bad("no projection angles".into());
+        }
+        if self.angles_deg.len() > MAX_DETECTOR {
+            return Err(Error::too_large(
+                "CT geometry",
+                format!("{} angles (at most {MAX_DETECTOR})", self.angles_deg.len()),
+            ));
+        }
+        if let Some(k) = self.angles_deg.iter().position(|a| !a.is_finite()) {
+            return bad(format!("angle {k} is not finite"));
+        }
+        for (name, n) in [
+            ("detector columns", self.cols),
+            ("detector rows", self.rows),
+        ] {
+            if n == 0 {
+                return bad(format!("{name} must be at least 1"));
+            }
+            if n > MAX_DETECTOR {
+                return Err(Error::too_large(
+                    "CT geometry",
+                    format!("{n} {name} (at most {MAX_DETECTOR})"),
+                ));
+            }
+        }
+        for (name, s) in [("du", self.du), ("dv", self.dv)] {
+            if !(s.is_finite() && s > 0.0) {
+                return bad(format!(
+                    "detector spacing {name} = {s} must be finite and > 0"
+                ));
+            }
+        }
+        for (name, c) in [("cu", self.cu), ("cv", self.cv)] {
+            if !c.is_finite() {
+                return bad(format!("detector centre {name} is not finite"));
+            }
+        }
+        if let Beam::Cone { sid, sdd } = self.beam {
+            if !(sid.is_finite() && sid > 0.0 && sdd.is_finite() && sdd > 0.0) {
+                return bad(format!(
+                    "SID = {sid} and SDD = {sdd} must be finite and > 0"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of projections.
+    pub fn n_angles(&self) -> usize {
+        self.angles_deg.len()
+    }
+
+    /// The view unit vectors `(e_u, e_v, e_w)` at projection `k`.
+    pub fn axes(&self, k: usize) -> (DVec3, DVec3, DVec3) {
+        let a = self.angles_deg[k].to_radians();
+        let (s, c) = a.sin_cos();
+        (DVec3::new(c, 0.0, -s), DVec3::Y, DVec3::new(s, 0.0, c))
+    }
+
+    /// The world position of the centre of detector pixel `(col, row)` of view `k`
+    /// (continuous indices allowed).
+    pub fn detector_point(&self, k: usize, col: f64, row: f64) -> DVec3 {
+        let (eu, ev, ew) = self.axes(k);
+        let (u, v) = ((col - self.cu) * self.du, (row - self.cv) * self.dv);
+        match self.beam {
+            // The detector plane of a parallel beam is taken through the isocentre.
+            Beam::Parallel => eu * u + ev * v,
+            Beam::Cone { sid, sdd } => ew * (sid - sdd) + eu * u + ev * v,
+        }
+    }
+
+    /// The ray through detector pixel `(col, row)` of view `k`: origin, unit direction
+    /// (towards the detector) and the smallest ray parameter that is part of the beam.
+    /// A parallel ray is the whole line through the pixel's point on the isocentre
+    /// plane (`t ≥ −∞`; keeping the origin there keeps chord computations exact); a
+    /// cone ray starts at the source (`t ≥ 0`).
+    pub fn ray(&self, k: usize, col: f64, row: f64) -> (DVec3, DVec3, f64) {
+        let (_, _, ew) = self.axes(k);
+        let det = self.detector_point(k, col, row);
+        match self.beam {
+            Beam::Parallel => (det, -ew, f64::NEG_INFINITY),
+            Beam::Cone { sid, .. } => {
+                let src = ew * sid;
+                (src, (det - src).normalize(), 0.0)
+            }
+        }
+    }
+
+    /// The projective map of view `k` in precision `R`.
+    pub fn view_matrix<R: Real>(&self, k: usize) -> ViewMatrix<R> {
+        ViewMatrix::from_f64(&self.view_matrix_f64(k))
+    }
+
+    fn view_matrix_f64(&self, k: usize) -> [[f64; 4]; 4] {
+        let (eu, ev, ew) = self.axes(k);
+        // Rows: numerator of the column index, of the row index, the denominator, and
+        // the weight's numerator (see `ViewMatrix`).
+        match self.beam {
+            Beam::Parallel => [
+                [eu.x / self.du, eu.y / self.du, eu.z / self.du, self.cu],
+                [ev.x / self.dv, ev.y / self.dv, ev.z / self.dv, self.cv],
+                [0.0, 0.0, 0.0, 1.0],
+                [1.0, 0.0, 0.0, 0.0],
+            ],
+            Beam::Cone { sid, sdd } => {
+                // col = cu + (SDD/du)·(P·e_u)/(SID − P·e_w); multiply through by the
+                // denominator so one division serves both indices.
+                let den = [-ew.x, -ew.y, -ew.z, sid];
+                let row = |e: DVec3, d: f64, c: f64| {
+                    [
+                        sdd / d * e.x + c * den[0],
+                        sdd / d * e.y + c * den[1],
+                        sdd / d * e.z + c * den[2],
+                        c * den[3],
+                    ]
+                };
+                [
+                    row(eu, self.du, self.cu),
+                    row(ev, self.dv, self.cv),
+                    den,
+                    [sid, 0.0, 0.0, 0.0],
+                ]
+            }
+        }
+    }
+
+    /// Every view's projective map, for upload to the GPU (`ViewMatrix<f32>` is `Pod`).
+    pub fn view_matrices<R: Real>(&self) -> Vec<ViewMatrix<R>> {
+        (0..self.n_angles()).map(|k| self.view_matrix(k)).collect()
+    }
+}
+
+/// The projective map of one view: world point `P` (mm) → continuous detector indices
+/// `(col, row)` and the FDK distance weight.
+///
+/// With `P̃ = (P, 1)`: `den = r2·P̃`, `col = (r0·P̃)/den`, `row = (r1·P̃)/den`, and the
+/// weight is `(r3[0]/den)²` — `(SID/(SID − w))²` for a cone beam, 1 for a parallel beam.
+/// Layout: four rows of four numbers, the same bytes as WGSL's `CtView` in
+/// `shaders/shared/ct_geometry.wgsl` (64 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ViewMatrix<R> {
+    pub rows: [[R; 4]; 4],
+}
+
+// SAFETY-free Pod: only the f32 instance is uploaded.
+unsafe impl bytemuck::Zeroable for ViewMatrix<f32> {}
+unsafe impl bytemuck::Pod for ViewMatrix<f32> {}
+
+impl<R: Real> ViewMatrix<R> {
+    fn from_f64(m: &[[f64; 4]; 4]) -> Self {
+        ViewMatrix {
+            rows: m.map(|r| r.map(R::of)),
+        }
+    }
+
+    /// Detector indices `(col, row)` of world point `p` and the distance weight.
+    /// Returns `None` behind a cone-beam source (`den ≤ 0`), where nothing projects.
+    ///
+    /// mirrors shaders/shared/ct_geometry.wgsl: project_point
+    #[inline(always)]
+    pub fn project(&self, p: [R; 3]) -> Option<(R, R, R)> {
+        let dot = |r: &[R; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
+        let den = dot(&self.rows[2]);
+        if den <= R::zero() {
+            return None;
+        }
+        let inv = R::one() / den;
+        let w = self.rows[3][0] * inv;
+        Some((dot(&self.rows[0]) * inv, dot(&self.rows[1]) * inv, w * w))
+    }
+}
+
+/// Bilinear interpolation of a `cols × rows` image (column fastest) at continuous
+/// indices `(x, y)`, with the image continued by **zeros**: each of the four taps
+/// outside the image contributes nothing. Inside the node range this is plain bilinear
+/// interpolation; within one pixel outside it ramps to zero; beyond, it is 0. (NumPy's
+/// `np.interp(..., left=0, right=0)`, which scikit-image's `iradon` uses, jumps to zero
+/// at the last node instead; the two differ only in that one-pixel margin.)
+///
+/// mirrors shaders/shared/ct_geometry.wgsl: bilinear_zero
+#[inline(always)]
+pub fn bilinear_zero<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -> R {
+    let (fx, fy) = (x.floor(), y.floor());
+    // Far outside (or NaN): nothing to interpolate. Also keeps the casts below in range.
+    if !(fx >= -R::one() && fx < R::of(cols as f64) && fy >= -R::one() && fy < R::of(rows as f64)) {
+        return R::zero();
+    }
+    let (tx, ty) = (x - fx, y - fy);
+    let (ix, iy) = (fx.to_i64().unwrap_or(-2), fy.to_i64().unwrap_or(-2));
+    let at = |i: i64, j: i64| -> R {
+        if i < 0 || j < 0 || i >= cols as i64 || j >= rows as i64 {
+            R::zero()
+        } else {
+            img[j as usize * cols + i as usize]
+        }
+    };
+    let top = at(ix, iy) * (R::one() - tx) + at(ix + 1, iy) * tx;
+    let bottom = at(ix, iy + 1) * (R::one() - tx) + at(ix + 1, iy + 1) * tx;
+    top * (R::one() - ty) + bottom * ty
+}
+
+/// A stack of projections: `angles × rows × cols` values, column fastest (NumPy shape
+/// `(angle, row, col)`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Projections<T> {
+    pub angles: usize,
+    pub rows: usize,
+    pub cols: usize,
+    pub data: Vec<T>,
+}
+
+impl<T: Copy + Default> Projections<T> {
+    /// A zero-filled stack shaped for `g`.
+    pub fn zeros(g: &Geometry) -> Result<Self> {
+        Self::new(
+            g.n_angles(),
+            g.rows,
+            g.cols,
+            vec![T::default(); g.n_angles() * g.rows * g.cols],
+        )
+    }
+
+    /// Wraps `data`, checking its length.
+    pub fn new(angles: usize, rows: usize, cols: usize, data: Vec<T>) -> Result<Self> {
+        let n = angles
+            .checked_mul(rows)
+            .and_then(|n| n.checked_mul(cols))
+            .ok_or_else(|| {
+                Error::too_large("projection stack", format!("{angles}×{rows}×{cols}"))
+            })?;
+        if data.len() != n {
+            return Err(Error::invalid(
+                "projection stack",
+                format!("{} values for {angles}×{rows}×{cols}", data.len()),
+            ));
+        }
+        Ok(Projections {
+            angles,
+            rows,
+            cols,
+            data,
+        })
+    }
+
+    /// Checks that the stack has the shape `g` describes.
+    pub fn check_against(&self, g: &Geometry) -> Result<()> {
+        if (self.angles, self.rows, self.cols) != (g.n_angles(), g.rows, g.cols) {
+            return Err(Error::invalid(
+                "projections",
+                format!(
+                    "stack is {}×{}×{} (angles×rows×cols) but the geometry describes {}×{}×{}",
+                    self.angles,
+                    self.rows,
+                    self.cols,
+                    g.n_angles(),
+                    g.rows,
+                    g.cols
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The image of projection `k` (`rows × cols`, column fastest).
+    pub fn view(&self, k: usize) -> &[T] {
+        let n = self.rows * self.cols;
+        &self.data[k * n..(k + 1) * n]
+    }
+
+    /// Mutable image of projection `k`.
+    pub fn view_mut(&mut self, k: usize) -> &mut [T] {
+        let n = self.rows * self.cols;
+        &mut self.data[k * n..(k + 1) * n]
+    }
+}
+
+/// The rotation that places a [`crate::phantom::Phantom`] in the CT frame:
+/// phantom `(x, y, z)` → CT `(X, Y, Z) = (x, z, −y)`. The phantom's z axis (head–foot)
+/// becomes the rotation axis, and its axial slice `z = 0` lies in the plane `Y = 0`
+/// with phantom `y` up in scikit-image's image (`y = −Z`), as a CT scanner sees it.
+pub fn phantom_to_ct(p: DVec3) -> DVec3 {
+    DVec3::new(p.x, p.z, -p.y)
+}
+
+/// The inverse of [`phantom_to_ct`].
+pub fn ct_to_phantom(p: DVec3) -> DVec3 {
+    DVec3::new(p.x, -p.z, p.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cone_projection_matches_the_ray_construction() {
+        let g = Geometry::cone_rtk(
+            1000.0,
+            1500.0,
+            64,
+            48,
+            1.5,
+            2.0,
+            Geometry::even_angles(7, 360.0),
+        )
+        .unwrap();
+        for k in 0..7 {
+            let m = g.view_matrix::<f64>(k);
+            for &(c, r) in &[(0.0, 0.0), (10.3, 40.7), (63.0, 47.0), (31.5, 23.5)] {
+                let (o, d, _) = g.ray(k, c, r);
+                // Any point on the ray projects back onto (c, r).
+                for t in [700.0, 1000.0, 1300.0] {
+                    let p = o + d * t;
+                    let (pc, pr, w) = m.project(p.to_array()).unwrap();
+                    assert!(
+                        (pc - c).abs() < 1e-9 && (pr - r).abs() < 1e-9,
+                        "{k} {c} {r}: {pc} {pr}"
+                    );
+                    let (_, _, ew) = g.axes(k);
+                    let expect = (1000.0 / (1000.0 - p.dot(ew))).powi(2);
+                    assert!((w - expect).abs() < 1e-12 * expect);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_projection_is_skimage_s() {
+        // s = x cos θ + y sin θ with the image in the xz-plane, y = −Z.
+        let g = Geometry::parallel_skimage(65, vec![0.0, 30.0, 90.0, 137.0]).unwrap();
+        for k in 0..4 {
+            let th = g.angles_deg[k].to_radians();
+            let (x, y) = (7.25, -3.5);
+            let (c, r, w) = g.view_matrix::<f64>(k).project([x, 0.0, -y]).unwrap();
+            let s = x * th.cos() + y * th.sin();
+            assert!((c - (s + 32.0)).abs() < 1e-12 && r == 0.0 && w == 1.0);
+        }
+    }
+
+    #[test]
+    fn bilinear_zero_interpolates_and_pads_with_zeros() {
+        let img = [1.0f64, 2.0, 3.0, 4.0, 5.0, 6.0]; // 3 cols × 2 rows
+        assert_eq!(bilinear_zero(&img, 3, 2, 1.0, 1.0), 5.0);
+        assert!((bilinear_zero(&img, 3, 2, 0.5, 0.5) - 3.0).abs() < 1e-15);
+        assert_eq!(bilinear_zero(&img, 3, 2, -0.5, 0.0), 0.5);
+        assert_eq!(bilinear_zero(&img, 3, 2, 2.5, 1.0), 3.0);
+        assert_eq!(bilinear_zero(&img, 3, 2, 3.0, 0.0), 0.0);
+        assert_eq!(bilinear_zero(&img, 3, 2, f64::NAN, 0.0), 0.0);
+        assert_eq!(bilinear_zero(&img, 3, 2, 1e30, 0.0), 0.0);
+    }
+
+    #[test]
+    fn bad_geometry_is_refused() {
+        assert!(Geometry::parallel_skimage(0, vec![0.0]).is_err());
+        assert!(Geometry::parallel_skimage(8, vec![]).is_err());
+        assert!(Geometry::parallel_skimage(8, vec![f64::NAN]).is_err());
+        assert!(Geometry::cone_rtk(-1.0, 1500.0, 8, 8, 1.0, 1.0, vec![0.0]).is_err());
+        assert!(Geometry::cone_rtk(1000.0, 1500.0, 8, 8, 0.0, 1.0, vec![0.0]).is_err());
+    }
+
+    #[test]
+    fn phantom_rotation_round_trips() {
+        let p = DVec3::new(0.1, -0.7, 0.3);
+        assert_eq!(ct_to_phantom(phantom_to_ct(p)), p);
+        assert_eq!(phantom_to_ct(DVec3::Z), DVec3::Y);
+    }
+}
