@@ -450,6 +450,7 @@ impl<'a, R: Real> ProjectionField<'a, R> {
             let wt = s * s;
             let [q, qx, qy] = bilinear_zero_grad(self.q.view(k), cols, rows, col, row);
             let two = R::of(2.0);
+            #[allow(clippy::needless_range_loop)] // three rows indexed by one axis
             for a in 0..3 {
                 let dcol = (r[0][a] - col * r[2][a]) * inv;
                 let drow = (r[1][a] - row * r[2][a]) * inv;

@@ -8,6 +8,7 @@
 //! volume rendering slice and its inverse FFT.
 
 pub mod context;
+pub mod d2vr;
 pub mod fft;
 pub mod fvr;
 pub mod probe;
