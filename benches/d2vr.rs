@@ -4,8 +4,10 @@
 //! ("half": 64 × 64², 64³, 128²), shaded DVR of the modified Shepp–Logan head, with the
 //! paper's columns: GFS (density only, gradients by central differences), GFR
 //! (density + gradient from the projections), +B (bounding cylinder), +B+OC (plus early
-//! ray termination at 0.95), and the fraction of samples reconstructed. Each GPU image
-//! is checked against the CPU f32 image first (max relative difference printed). Each
+//! ray termination at 0.95), and the fraction of samples reconstructed. The projections
+//! are exact (`project_phantom`), FDK-filtered by `cpu::ramp` (Ram-Lak, FFT path, f32).
+//! Each GPU image is checked against the CPU f32 image first (max relative difference
+//! printed). Each
 //! case: one warm-up run, then `VOXLAB_BENCH_RUNS` (default 5) timed runs; medians in
 //! seconds. Under `cargo test` each case runs once on a tiny input (smoke test).
 
@@ -17,51 +19,13 @@ use std::time::Instant;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::d2vr::{render_d2vr, D2vrGradient, D2vrGrid, D2vrOptions};
 use voxlab::cpu::project::project_phantom;
-use voxlab::ct::{Beam, Geometry, Projections};
+use voxlab::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
+use voxlab::ct::{Geometry, Projections};
 use voxlab::gpu::d2vr::{self as gd2vr, ProjStorage};
 use voxlab::gpu::GpuContext;
 use voxlab::phantom::Phantom;
 use voxlab::settings::{Mode, RenderSettings};
 use voxlab::transfer::{ControlPoint, TransferFunction, WindowMap};
-
-/// FDK pre-weighting and Ram-Lak filtering per detector row (Kak & Slaney eq. 61).
-fn fdk_filter(p: &Projections<f64>, g: &Geometry) -> Projections<f32> {
-    let Beam::Cone { sid, sdd } = g.beam else {
-        unreachable!("the benchmark scans a cone beam")
-    };
-    let k = sid / sdd;
-    let tau = g.du * k;
-    let h = |d: i64| -> f64 {
-        if d == 0 {
-            1.0 / (4.0 * tau * tau)
-        } else if d % 2 == 0 {
-            0.0
-        } else {
-            -1.0 / ((d * d) as f64 * std::f64::consts::PI.powi(2) * tau * tau)
-        }
-    };
-    let mut out = vec![0f32; p.data.len()];
-    for a in 0..p.angles {
-        for r in 0..p.rows {
-            let v = (r as f64 - g.cv) * g.dv * k;
-            let row: Vec<f64> = (0..p.cols)
-                .map(|c| {
-                    let u = (c as f64 - g.cu) * g.du * k;
-                    p.view(a)[r * p.cols + c] * sid / (sid * sid + u * u + v * v).sqrt()
-                })
-                .collect();
-            for c in 0..p.cols {
-                let s: f64 = row
-                    .iter()
-                    .enumerate()
-                    .map(|(m, x)| h(c as i64 - m as i64) * x)
-                    .sum();
-                out[(a * p.rows + r) * p.cols + c] = (tau * s) as f32;
-            }
-        }
-    }
-    Projections::new(p.angles, p.rows, p.cols, out).unwrap()
-}
 
 fn tf() -> TransferFunction {
     let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
@@ -111,7 +75,15 @@ fn main() {
         )
         .unwrap();
         let ph = Phantom::shepp_logan_modified();
-        let q = fdk_filter(&project_phantom(&ph, &g).unwrap(), &g);
+        let raw = project_phantom(&ph, &g).unwrap();
+        let raw = Projections::new(
+            raw.angles,
+            raw.rows,
+            raw.cols,
+            raw.data.iter().map(|&v| v as f32).collect(),
+        )
+        .unwrap();
+        let q = filter_projections(&raw, &g, RampFilter::RamLak, FilterMethod::Fft).unwrap();
         let grid = D2vrGrid::centred([n; 3], 256.0 / n as f64).unwrap();
         let cam = Camera::orbit(
             DVec3::ZERO,

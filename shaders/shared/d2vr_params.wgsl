@@ -11,7 +11,7 @@ struct D2vrParams {
     jt_0: vec4<f32>,
     jt_1: vec4<f32>,
     jt_2: vec4<f32>,
-    // Effective cylinder: radius², y_lo, y_hi; w = the backprojection scale π/A.
+    // Effective cylinder: radius², y_lo, y_hi; w = the backprojection scale π/(2A).
     cylinder: vec4<f32>,
     // Detector columns, rows, number of views, storage (0 f32, 1 f16 pairs).
     det: vec4<u32>,

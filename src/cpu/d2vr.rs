@@ -7,14 +7,15 @@
 //! the fly from all `A` filtered projections `q_k`:
 //!
 //! ```text
-//! s(P) = (π/A) · Σ_k w_k(P) · bilinear_zero(q_k, col_k(P), row_k(P))
+//! s(P) = π/(2A) · Σ_k w_k(P) · bilinear_zero(q_k, col_k(P), row_k(P))
 //! ```
 //!
 //! with `(col_k, row_k, w_k)` from [`crate::ct::ViewMatrix::project`] (`w = (SID/(SID −
 //! w·e_w))²` for a cone beam, 1 for a parallel beam). This is the FBP/FDK
-//! backprojection evaluated at one point: with ramp-filtered (and, for a cone beam,
-//! cosine-weighted) projections it is the reconstruction; with raw projections it is
-//! an unnormalised backprojection. Classification, shading, compositing, early ray
+//! backprojection evaluated at one point: with projections filtered by
+//! [`crate::cpu::ramp::filter_projections`] (whose ramp is `≈ 2|f|`, hence `π/(2A)`,
+//! scikit-image's constant; cosine-weighted for a cone beam) it is the FBP/FDK
+//! reconstruction; with raw projections it is an unnormalised backprojection. Classification, shading, compositing, early ray
 //! termination and every render mode are the ray caster's, so a D²VR image equals the
 //! ray-cast image of the field `s` by construction.
 //!
@@ -263,6 +264,12 @@ impl OccupancyMask {
     }
 }
 
+/// The backprojection constant `π/(2A)` for `A` views (the ramp of
+/// [`crate::cpu::ramp`] is `≈ 2|f|`; the continuous inversion's `π/A` halves).
+pub fn backprojection_scale(n_angles: usize) -> f64 {
+    std::f64::consts::PI / (2.0 * n_angles as f64)
+}
+
 /// Work counters of one D²VR render.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct D2vrStats {
@@ -377,7 +384,7 @@ impl<'a, R: Real> ProjectionField<'a, R> {
             lin: M3::from_dmat3(lin),
             shift: V3::from_dvec(t),
             lin_t: M3::from_dmat3(lin.transpose()),
-            scale: R::of(std::f64::consts::PI / g.n_angles() as f64),
+            scale: R::of(backprojection_scale(g.n_angles())),
             cylinder: options.cylinder.then(|| {
                 (
                     R::of(cyl.radius * cyl.radius),

@@ -63,7 +63,7 @@ pub struct D2vrParams {
     pub jt_0: [f32; 4],
     pub jt_1: [f32; 4],
     pub jt_2: [f32; 4],
-    /// radius², y_lo, y_hi, π/A.
+    /// radius², y_lo, y_hi, π/(2A).
     pub cylinder: [f32; 4],
     /// cols, rows, views, storage (0 f32, 1 f16).
     pub det: [u32; 4],
@@ -223,7 +223,7 @@ pub fn render_d2vr(
             (cyl.radius * cyl.radius) as f32,
             cyl.y_lo as f32,
             cyl.y_hi as f32,
-            (std::f64::consts::PI / geometry.n_angles() as f64) as f32,
+            crate::cpu::d2vr::backprojection_scale(geometry.n_angles()) as f32,
         ],
         det: [
             geometry.cols as u32,

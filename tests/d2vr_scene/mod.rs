@@ -1,13 +1,14 @@
 //! The small D²VR scenes `tests/d2vr.rs` and `tests/gpu_d2vr.rs` share: two spheres,
-//! exact projections, a Ram-Lak filter (parallel) or FDK pre-weighting + Ram-Lak
-//! (cone), a 48³ virtual grid and a 48² orbit camera.
+//! exact projections, `cpu::ramp`'s Ram-Lak filter (with FDK pre-weighting for the
+//! cone), a 48³ virtual grid and a 48² orbit camera.
 #![allow(dead_code)]
 
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::d2vr::D2vrGrid;
 use voxlab::cpu::project::project_phantom;
-use voxlab::ct::{Beam, Geometry, Projections};
+use voxlab::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
+use voxlab::ct::{Geometry, Projections};
 use voxlab::phantom::{Phantom, Primitive};
 use voxlab::transfer::{ControlPoint, TransferFunction, WindowMap};
 
@@ -52,54 +53,11 @@ pub fn cone() -> Geometry {
     .unwrap()
 }
 
-/// Ram-Lak filtered projections (Kak & Slaney eq. 61, spatial kernel, per detector
-/// row); for a cone beam first weighted by `SID/√(SID² + u² + v²)` with the detector
-/// demagnified to the isocentre (FDK). With the `π/A` of the backprojection this is
-/// FBP (parallel, 180°) or FDK (cone, 360°).
+/// Ram-Lak filtered projections (`cpu::ramp`, the direct f64 oracle; FDK cosine
+/// pre-weighting for a cone beam). With D²VR's `π/(2A)` this is FBP (parallel, 180°) or
+/// FDK (cone, 360°).
 pub fn ramp(p: &Projections<f64>, g: &Geometry) -> Projections<f64> {
-    let (tau, pre): (f64, Box<dyn Fn(usize, usize) -> f64>) = match g.beam {
-        Beam::Parallel => (g.du, Box::new(|_, _| 1.0)),
-        Beam::Cone { sid, sdd } => {
-            let k = sid / sdd;
-            let g = g.clone();
-            (
-                g.du * k,
-                Box::new(move |c, r| {
-                    let u = (c as f64 - g.cu) * g.du * k;
-                    let v = (r as f64 - g.cv) * g.dv * k;
-                    sid / (sid * sid + u * u + v * v).sqrt()
-                }),
-            )
-        }
-    };
-    let n = p.cols as i64;
-    let h = |k: i64| -> f64 {
-        if k == 0 {
-            1.0 / (4.0 * tau * tau)
-        } else if k % 2 == 0 {
-            0.0
-        } else {
-            -1.0 / ((k * k) as f64 * std::f64::consts::PI.powi(2) * tau * tau)
-        }
-    };
-    let mut out = p.clone();
-    for a in 0..p.angles {
-        for r in 0..p.rows {
-            let src: Vec<f64> = (0..p.cols)
-                .map(|c| p.view(a)[r * p.cols + c] * pre(c, r))
-                .collect();
-            let dst = &mut out.view_mut(a)[r * p.cols..(r + 1) * p.cols];
-            for (c, d) in dst.iter_mut().enumerate() {
-                let mut s = 0.0;
-                for (m, v) in src.iter().enumerate() {
-                    s += h(c as i64 - m as i64) * v;
-                }
-                *d = tau * s;
-            }
-            let _ = n;
-        }
-    }
-    out
+    filter_projections(p, g, RampFilter::RamLak, FilterMethod::Direct).unwrap()
 }
 
 /// Exact projections of `ph`, filtered.
