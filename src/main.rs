@@ -1,5 +1,7 @@
 //! The `voxlab` command line: a thin layer over the library.
 
+mod cli_d2vr;
+
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -89,6 +91,10 @@ enum Command {
     /// Fourier volume rendering: an X-ray projection (value × mm) from one slice of the
     /// volume's 3-D spectrum (projection-slice theorem), written as .png or .npy.
     Fvr(Box<FvrArgs>),
+    /// D²VR: render straight from X-ray projections (a stack + geometry JSON, or an
+    /// exactly projected phantom) without reconstructing a volume: each sample is
+    /// backprojected from the ramp-filtered projections on the fly.
+    D2vr(Box<cli_d2vr::D2vrArgs>),
     /// Check and time the FFTs on random complex data: CPU f64, CPU f32 and the GPU
     /// (Stockham and split-stream), each validated against the exact DFT (when
     /// N·ΣN_axis ≤ 1e9, else the CPU f64 FFT). Prints the relative L2 error, the median
@@ -470,6 +476,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::Convert(args) => convert(*args),
         Command::Slice(args) => slice(*args),
         Command::Fvr(args) => fvr(*args),
+        Command::D2vr(args) => cli_d2vr::run(*args),
         Command::Info {
             input,
             load,
