@@ -563,8 +563,20 @@ pub fn box_samples(dims: [usize; 3], affine: DMat4, camera: &Camera, step: f64) 
 }
 
 /// Checks the inputs D²VR shares between backends.
-pub(crate) fn check_inputs(settings: &RenderSettings, options: &D2vrOptions) -> Result<()> {
+pub(crate) fn check_inputs(
+    settings: &RenderSettings,
+    options: &D2vrOptions,
+    grid: &D2vrGrid,
+) -> Result<()> {
     settings.validate()?;
+    let d = grid.dims.map(|n| n as f64);
+    let per_ray = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / settings.step;
+    if per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
+        return Err(Error::too_large(
+            "D²VR",
+            format!("step {} gives up to {per_ray:.0} samples per ray", settings.step),
+        ));
+    }
     if settings.mode == Mode::Dvr && settings.classification == Classification::Pre {
         return Err(Error::invalid(
             "classification",
@@ -597,7 +609,7 @@ pub fn render_d2vr<R: Real>(
     occupancy: Option<&OccupancyMask>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<D2vrOutput> {
-    check_inputs(settings, options)?;
+    check_inputs(settings, options, grid)?;
     let field = ProjectionField::new(filtered, geometry, grid, options, occupancy)?;
     let render = render_field(&field, grid.affine, tf, camera, settings, progress)?;
     let (values, gradients) = field.counts();

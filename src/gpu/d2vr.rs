@@ -167,7 +167,7 @@ pub fn render_d2vr(
     storage: ProjStorage,
 ) -> Result<GpuD2vrOutput> {
     let t0 = Instant::now();
-    check_inputs(settings, options)?;
+    check_inputs(settings, options, grid)?;
     tf.validate()?;
     geometry.validate()?;
     filtered.check_against(geometry)?;
