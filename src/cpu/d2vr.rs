@@ -574,7 +574,10 @@ pub(crate) fn check_inputs(
     if per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
         return Err(Error::too_large(
             "D²VR",
-            format!("step {} gives up to {per_ray:.0} samples per ray", settings.step),
+            format!(
+                "step {} gives up to {per_ray:.0} samples per ray",
+                settings.step
+            ),
         ));
     }
     if settings.mode == Mode::Dvr && settings.classification == Classification::Pre {
