@@ -105,7 +105,8 @@ fn cone_joseph_on_cpu_and_gpu_agree_with_the_analytic_centre() {
         // than a voxel; measured −2.31 mm.
         let j = cpu.view(k)[centre];
         if k % 3 == 0 {
-            assert!((j - 28.0 * 256.0 / 48.0).abs() < 1e-9, "{k}: {j}");
+            // (read from the float32 NRRD: rounded to f32)
+            assert!((j - 28.0 * 256.0 / 48.0).abs() < 2e-5, "{k}: {j}");
         }
         assert!((j - SPHERE_CHORD).abs() < 256.0 / 48.0, "{k}: {j}");
         // Measured: 1.5e-5 (the f32 file's rounding of ~150).
