@@ -10,4 +10,5 @@ pub mod filter;
 pub mod fvr;
 pub mod gradient;
 pub mod project;
+pub mod ramp;
 pub mod raycast;
