@@ -152,3 +152,94 @@ fn f32_follows_f64() {
         assert!(w / peak < 5e-5, "{name}: {w} / {peak}");
     }
 }
+
+// ---------------------------------------------------------------------------------
+// Peers: scikit-image's radon and RTK's Joseph projector (tests/data/ct/README.md)
+// ---------------------------------------------------------------------------------
+
+fn peer(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/ct")
+        .join(name)
+}
+
+/// Max |a − b| / max |b| and the RMS difference / max |b|.
+fn rel_max_rms(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let peak = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let (mut w, mut sq) = (0.0f64, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        w = w.max((x - y).abs());
+        sq += (x - y) * (x - y);
+    }
+    (w / peak, (sq / a.len() as f64).sqrt() / peak)
+}
+
+#[test]
+fn rtk_joseph_projections_agree() {
+    use voxlab::io::npy::read_npy_f64;
+    // The volume in RTK's frame (= the CT frame): voxel i at (i − 15.5)·2 mm.
+    let (shape, vol, _) = read_npy_f64(&peer("rtk_volume32.npy")).unwrap();
+    assert_eq!(shape, vec![32, 32, 32]);
+    let affine =
+        DMat4::from_scale(DVec3::splat(2.0)) * DMat4::from_translation(DVec3::splat(-15.5));
+    let grid = Grid::new([32; 3], affine, vol).unwrap();
+    // The peer's geometry file (with its extra sections) is the RTK geometry.
+    let g = voxlab::io::projections::read_geometry(&peer("rtk_geometry.json")).unwrap();
+    assert_eq!(
+        g,
+        Geometry::cone_rtk(
+            1000.0,
+            1500.0,
+            48,
+            40,
+            3.0,
+            3.0,
+            Geometry::even_angles(60, 360.0)
+        )
+        .unwrap()
+    );
+    let rtk = voxlab::io::projections::read_projections_for::<f64>(&peer("rtk_joseph32.npy"), &g)
+        .unwrap();
+    let ours = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
+    let (max, rms) = rel_max_rms(&ours.data, &rtk.data);
+    eprintln!("RTK Joseph: max rel {max:.3e}, rms rel {rms:.3e}");
+    // The same method on the same grid: only RTK's float32 arithmetic and storage
+    // differ. Measured: max 1.4e-7, RMS 1.3e-8 (of the peak).
+    assert!(max < 1e-6 && rms < 1e-7, "{max} {rms}");
+}
+
+#[test]
+fn skimage_radon_sinograms_agree() {
+    use voxlab::io::npy::read_npy_f64;
+    let theta = voxlab::io::projections::read_angles_txt(&peer("skimage_theta.txt")).unwrap();
+    for n in [64usize, 63] {
+        let (shape, img, _) = read_npy_f64(&peer(&format!("skimage_image{n}.npy"))).unwrap();
+        assert_eq!(shape, vec![n, n]);
+        // The image in the plane Y = 0: X = col − n//2, Z = row − n//2 (1 mm pixels);
+        // grid axes (col, row, 1) → (X, Z, Y).
+        let c = (n / 2) as f64;
+        let affine = DMat4::from_cols(
+            glam::DVec4::new(1.0, 0.0, 0.0, 0.0),
+            glam::DVec4::new(0.0, 0.0, 1.0, 0.0),
+            glam::DVec4::new(0.0, 1.0, 0.0, 0.0),
+            glam::DVec4::new(-c, 0.0, -c, 1.0),
+        );
+        let grid = Grid::new([n, n, 1], affine, img).unwrap();
+        let g = Geometry::parallel_skimage(n, theta.clone()).unwrap();
+        let radon = voxlab::io::projections::read_projections_for::<f64>(
+            &peer(&format!("skimage_radon{n}.npy")),
+            &g,
+        )
+        .unwrap();
+        let ours = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
+        let (max, rms) = rel_max_rms(&ours.data, &radon.data);
+        eprintln!("skimage radon {n}: max rel {max:.3e}, rms rel {rms:.3e}");
+        // Not the same discretisation: radon rotates the image (bilinear warp onto the
+        // pixel grid) and sums its columns — samples 1 pixel apart along the ray,
+        // interpolated in 2-D — while Joseph samples once per plane, 1/|cos| apart,
+        // interpolated in 1-D. Both converge to the line integral; they differ by
+        // O(h) at edges. Measured (n = 64 / 63): max 3.4e-2 / 3.8e-2, RMS 3.2e-3 /
+        // 3.5e-3 of the peak.
+        assert!(max < 0.08 && rms < 0.008, "{n}: {max} {rms}");
+    }
+}
