@@ -72,6 +72,14 @@ fn ms(t: f64) -> String {
     }
 }
 
+fn ratio(a: f64, b: f64) -> String {
+    if (a / b).is_finite() {
+        format!("{:.1}×", a / b)
+    } else {
+        "—".into()
+    }
+}
+
 fn main() {
     let args = common::BenchArgs::from_env();
     let (smoke, runs) = (args.smoke, args.runs);
@@ -169,7 +177,7 @@ fn main() {
                 }
             };
             println!(
-                "| {name} | {m} | {} | {up_col} | {} | {} | {} | {} | {} | {} | {:.1}× | {:.1}× | {:.1}× | {err:.2e} |",
+                "| {name} | {m} | {} | {up_col} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {err:.2e} |",
                 ms(pre),
                 kernel.name(),
                 ms(fvr_cpu),
@@ -177,9 +185,9 @@ fn main() {
                 ms(rc_cpu),
                 ms(rc_cpu_big),
                 ms(rc_gpu),
-                rc_cpu / fvr_cpu,
-                rc_cpu_big / fvr_cpu,
-                rc_gpu / fvr_gpu,
+                ratio(rc_cpu, fvr_cpu),
+                ratio(rc_cpu_big, fvr_cpu),
+                ratio(rc_gpu, fvr_gpu),
             );
         }
     }

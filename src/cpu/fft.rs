@@ -14,9 +14,11 @@
 //! - along the last axis the lines are contiguous: they are transformed in place, in
 //!   parallel, each rayon worker holding its own scratch buffer;
 //! - along any other axis a line is strided. Its elements are gathered into a contiguous
-//!   line of a transposed buffer (`[line][N]`), transformed there, and scattered back
-//!   (one row of the array at a time), each step parallel over lines or rows. This costs
-//!   one extra array of memory and keeps the code free of `unsafe`.
+//!   line of a transposed buffer (`[line][N]`), transformed there, and scattered back,
+//!   each step parallel over blocks of 16 lines or rows: neighbouring lines are
+//!   neighbours in memory, so a block is read and written in runs of 16 values (a
+//!   cache-friendly transpose) and RustFFT transforms the block's lines in one call.
+//!   This costs one extra array of memory and keeps the code free of `unsafe`.
 //!
 //! The scale of the whole transform (the product of the per-axis scales) is applied once
 //! at the end. The f32 instance's error against the f64 oracle is stated in `docs/fft.md`
@@ -87,29 +89,52 @@ fn fft_axis<T: FftNum>(
         return;
     }
     // Gather every strided line into a row of `t` ([line][n], line = outer·inner + c)
-    // and transform it there.
+    // and transform it there. Lines are taken BLOCK at a time: neighbouring lines are
+    // neighbours in memory, so one row `j` of a block is a contiguous read of BLOCK
+    // values instead of BLOCK reads `inner` apart (a cache-friendly transpose).
     let mut t = vec![zero::<T>(); data.len()];
     {
         let src: &[Complex<T>] = data;
-        t.par_chunks_mut(n).enumerate().for_each_init(
+        t.par_chunks_mut(BLOCK * n).enumerate().for_each_init(
             || vec![zero::<T>(); scratch_len],
-            |scratch, (l, line)| {
-                let base = (l / inner) * n * inner + l % inner;
-                for (j, v) in line.iter_mut().enumerate() {
-                    *v = src[base + j * inner];
+            |scratch, (b, block)| {
+                let first = b * BLOCK;
+                let lines = block.len() / n;
+                let base: Vec<usize> = (first..first + lines)
+                    .map(|l| (l / inner) * n * inner + l % inner)
+                    .collect();
+                for j in 0..n {
+                    let off = j * inner;
+                    for (li, &bl) in base.iter().enumerate() {
+                        block[li * n + j] = src[bl + off];
+                    }
                 }
-                fft.process_with_scratch(line, scratch);
+                // RustFFT transforms every length-n chunk of the block in one call.
+                fft.process_with_scratch(block, scratch);
             },
         );
     }
-    // Scatter back: row r = outer·n + j of the array holds t[(outer·inner + c)·n + j].
-    data.par_chunks_mut(inner).enumerate().for_each(|(r, row)| {
-        let (o, j) = (r / n, r % n);
-        for (c, v) in row.iter_mut().enumerate() {
-            *v = t[(o * inner + c) * n + j];
-        }
-    });
+    // Scatter back, BLOCK rows at a time: row r = outer·n + j of the array holds
+    // t[(outer·inner + c)·n + j]; for one c the rows of a block read neighbours in t.
+    data.par_chunks_mut(BLOCK * inner)
+        .enumerate()
+        .for_each(|(b, rows)| {
+            let first = b * BLOCK;
+            let count = rows.len() / inner;
+            let src: Vec<usize> = (first..first + count)
+                .map(|r| (r / n) * inner * n + r % n)
+                .collect();
+            for c in 0..inner {
+                let off = c * n;
+                for (ri, &s0) in src.iter().enumerate() {
+                    rows[ri * inner + c] = t[s0 + off];
+                }
+            }
+        });
 }
+
+/// Lines gathered (and rows scattered) together along a strided axis.
+const BLOCK: usize = 16;
 
 /// Multiplies every element by `factor` (skipped when it is 1).
 fn scale<T: FftNum>(data: &mut [Complex<T>], factor: f64) {
@@ -266,12 +291,17 @@ pub fn two_real_ffts(a: &[f64], b: &[f64]) -> (Vec<Complex<f64>>, Vec<Complex<f6
         Normalization::Unnormalized,
     );
     (0..n)
-        .map(|k| {
-            let zk = z[k];
-            let zc = z[(n - k) % n].conj();
-            // (zk − zc) / (2i) = −i·(zk − zc) / 2.
-            let d = zk - zc;
-            ((zk + zc) * 0.5, Complex::new(d.im, -d.re) * 0.5)
-        })
+        .map(|k| split_two_real(z[k], z[(n - k) % n]))
         .unzip()
+}
+
+/// One bin of both real spectra from the complex spectrum `Z` of `a + i·b`:
+/// `zk = Z_k`, `zm = Z_{(N−k) mod N}`; returns
+/// `(A_k, B_k) = ((Z_k + conj(Z_{N−k})) / 2, (Z_k − conj(Z_{N−k})) / (2i))`.
+// mirrors shaders/fft_two_real.wgsl: split_two_real
+pub fn split_two_real(zk: Complex<f64>, zm: Complex<f64>) -> (Complex<f64>, Complex<f64>) {
+    let zc = zm.conj();
+    // (zk − zc) / (2i) = −i·(zk − zc) / 2.
+    let d = zk - zc;
+    ((zk + zc) * 0.5, Complex::new(d.im, -d.re) * 0.5)
 }

@@ -83,6 +83,8 @@ pub const COMMON_WGSL: &str = include_str!("../../shaders/fft_common.wgsl");
 pub const SPLIT_STREAM_WGSL: &str = include_str!("../../shaders/fft_split_stream.wgsl");
 /// `shaders/fft_stockham.wgsl`.
 pub const STOCKHAM_WGSL: &str = include_str!("../../shaders/fft_stockham.wgsl");
+/// `shaders/fft_two_real.wgsl`: the split of [`two_real_ffts`].
+pub const TWO_REAL_WGSL: &str = include_str!("../../shaders/fft_two_real.wgsl");
 
 /// Invocations per workgroup (`WORKGROUP` in `shaders/fft_common.wgsl`).
 const WORKGROUP: u32 = 64;
@@ -689,6 +691,8 @@ pub struct GpuFftPlan {
     /// `(axis, pass)` for every pass of the whole transform.
     passes: Vec<(usize, FftPass)>,
     layout: wgpu::BindGroupLayout,
+    /// `layout` as a pipeline layout (also used by the two-real split).
+    pipeline_layout: wgpu::PipelineLayout,
     pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
     /// One uniform buffer of [`FftParams`] per pass.
     uniforms: Vec<wgpu::Buffer>,
@@ -776,6 +780,11 @@ impl GpuFftPlan {
                 storage(true, 3),
             ],
         });
+        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("fft"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
         let mut pipelines: Vec<(&'static str, wgpu::ComputePipeline)> = Vec::new();
         let mut uniforms = Vec::with_capacity(passes.len());
         let mut table_of_pass = Vec::with_capacity(passes.len());
@@ -791,11 +800,6 @@ impl GpuFftPlan {
                 },
                 &variant.shader_source(),
             )?;
-            let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("fft"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
             for (_, p) in &passes {
                 let entry = p.entry_point();
                 if !pipelines.iter().any(|(e, _)| *e == entry) {
@@ -856,6 +860,7 @@ impl GpuFftPlan {
             factor,
             passes,
             layout,
+            pipeline_layout,
             pipelines,
             uniforms,
             table_of_pass,
@@ -886,53 +891,23 @@ impl GpuFftPlan {
         self.execute(ctx, Input::Device(buffer, self.total))
     }
 
-    fn execute(&self, ctx: &GpuContext, input: Input<'_>) -> Result<GpuFftOutput> {
-        let t_start = Instant::now();
-        let done = |data: Vec<Complex<f32>>, timings: FftTimings| {
-            Ok(GpuFftOutput {
-                data,
-                timings: FftTimings {
-                    total: t_start.elapsed().as_secs_f64(),
-                    ..timings
-                },
-            })
+    /// Records every pass on the array in `ping` (which it may overwrite) into `enc`,
+    /// with the timestamp writes and their resolve when the adapter has them, and
+    /// returns the buffer that will hold the result: `ping` or the plan's own second
+    /// buffer. With no pass (all axes of length 1) nothing is recorded and the result
+    /// is `ping` unscaled.
+    fn encode<'a>(
+        &'a self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        ping: &'a wgpu::Buffer,
+    ) -> &'a wgpu::Buffer {
+        let Some(pong) = &self.pong else {
+            return ping;
         };
-        if input.len() == 0 {
-            return done(Vec::new(), FftTimings::default());
-        }
-        let factor = self.factor;
-        let (passes, Some(pong)) = (&self.passes, &self.pong) else {
-            // Every transformed axis has length 1: the transform is the identity.
-            let data = match input {
-                Input::Host(d) => d.to_vec(),
-                Input::Device(b, n) => read_complex(ctx, b, n)?,
-            };
-            return done(
-                data.iter().map(|v| v * factor).collect(),
-                FftTimings::default(),
-            );
-        };
-        let dev = &ctx.device;
-        let t_up = Instant::now();
-        let uploaded;
-        let (ping, upload) = match input {
-            Input::Host(data) => {
-                let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
-                uploaded = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("fft data a"),
-                    contents: bytemuck::cast_slice(&host),
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                });
-                ctx.wait()?;
-                (&uploaded, t_up.elapsed().as_secs_f64())
-            }
-            Input::Device(b, _) => (b, 0.0),
-        };
+        let passes = &self.passes;
         let bufs = [ping, pong];
         let query = self.query.as_ref();
-
-        let t_k = Instant::now();
-        let mut enc = dev.create_command_encoder(&Default::default());
         let last = passes.len() - 1;
         for (i, &(axis, pass)) in passes.iter().enumerate() {
             let n = self.shape[axis];
@@ -954,27 +929,74 @@ impl GpuFftPlan {
                 .1;
             let batch = (self.total / n) as u32;
             let (x, y) = workgroups(ctx, pass.items_per_line(n as u32) * batch);
-            {
-                let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some(pass.entry_point()),
-                    // The first pass writes the start, the last the end (a pass must
-                    // write at least one, so the middle ones write none).
-                    timestamp_writes: query.filter(|_| i == 0 || i == last).map(|q| {
-                        wgpu::ComputePassTimestampWrites {
-                            query_set: &q.set,
-                            beginning_of_pass_write_index: (i == 0).then_some(0),
-                            end_of_pass_write_index: (i == last).then_some(1),
-                        }
-                    }),
-                });
-                cpass.set_pipeline(pipeline);
-                cpass.set_bind_group(0, &bind, &[]);
-                cpass.dispatch_workgroups(x, y, 1);
-            }
+            let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(pass.entry_point()),
+                // The first pass writes the start, the last the end (a pass must
+                // write at least one, so the middle ones write none).
+                timestamp_writes: query.filter(|_| i == 0 || i == last).map(|q| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: &q.set,
+                        beginning_of_pass_write_index: (i == 0).then_some(0),
+                        end_of_pass_write_index: (i == last).then_some(1),
+                    }
+                }),
+            });
+            cpass.set_pipeline(pipeline);
+            cpass.set_bind_group(0, &bind, &[]);
+            cpass.dispatch_workgroups(x, y, 1);
         }
         if let Some(q) = query {
-            q.resolve(&mut enc);
+            q.resolve(enc);
         }
+        bufs[passes.len() % 2]
+    }
+
+    fn execute(&self, ctx: &GpuContext, input: Input<'_>) -> Result<GpuFftOutput> {
+        let t_start = Instant::now();
+        let done = |data: Vec<Complex<f32>>, timings: FftTimings| {
+            Ok(GpuFftOutput {
+                data,
+                timings: FftTimings {
+                    total: t_start.elapsed().as_secs_f64(),
+                    ..timings
+                },
+            })
+        };
+        if input.len() == 0 {
+            return done(Vec::new(), FftTimings::default());
+        }
+        let factor = self.factor;
+        if self.pong.is_none() {
+            // Every transformed axis has length 1: the transform is the identity.
+            let data = match input {
+                Input::Host(d) => d.to_vec(),
+                Input::Device(b, n) => read_complex(ctx, b, n)?,
+            };
+            return done(
+                data.iter().map(|v| v * factor).collect(),
+                FftTimings::default(),
+            );
+        }
+        let dev = &ctx.device;
+        let t_up = Instant::now();
+        let uploaded;
+        let (ping, upload) = match input {
+            Input::Host(data) => {
+                let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
+                uploaded = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft data a"),
+                    contents: bytemuck::cast_slice(&host),
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                });
+                ctx.wait()?;
+                (&uploaded, t_up.elapsed().as_secs_f64())
+            }
+            Input::Device(b, _) => (b, 0.0),
+        };
+        let query = self.query.as_ref();
+        let t_k = Instant::now();
+        let mut enc = dev.create_command_encoder(&Default::default());
+        let result = self.encode(ctx, &mut enc, ping);
         ctx.queue.submit([enc.finish()]);
         ctx.wait()?;
         let kernel = match query {
@@ -982,7 +1004,7 @@ impl GpuFftPlan {
             None => t_k.elapsed().as_secs_f64(),
         };
         let t_r = Instant::now();
-        let result = read_complex(ctx, bufs[passes.len() % 2], self.total)?;
+        let result = read_complex(ctx, result, self.total)?;
         let readback = t_r.elapsed().as_secs_f64();
         done(
             result,
@@ -996,6 +1018,105 @@ impl GpuFftPlan {
             },
         )
     }
+}
+
+/// The unscaled forward FFTs of two real lines of the same power-of-two length through
+/// one complex GPU FFT: the port of [`crate::cpu::fft::two_real_ffts`]. `z = a + i·b` is
+/// uploaded, transformed once (Stockham) and split on the device by the Hermitian
+/// symmetry of real-input spectra, `A_k = (Z_k + conj(Z_{N−k})) / 2` and
+/// `B_k = (Z_k − conj(Z_{N−k})) / (2i)` (`shaders/fft_two_real.wgsl: split_two_real`,
+/// one invocation per `k`); both full spectra (`N` bins each) are read back. This is
+/// how Jansen et al. (§3) transform real data at the cost of half a complex transform
+/// each.
+///
+/// # Errors
+/// [`Error::Invalid`] when the lengths differ or are not a power of two;
+/// [`Error::TooLarge`] when the `2N` outputs exceed one storage binding;
+/// [`Error::Gpu`] on device failure.
+pub fn two_real_ffts(
+    ctx: &GpuContext,
+    a: &[f32],
+    b: &[f32],
+) -> Result<(Vec<Complex<f32>>, Vec<Complex<f32>>)> {
+    if a.len() != b.len() {
+        return Err(Error::invalid(
+            "two_real_ffts",
+            format!("lines of {} and {} samples", a.len(), b.len()),
+        ));
+    }
+    let n = a.len();
+    if n == 0 {
+        return Ok((Vec::new(), Vec::new()));
+    }
+    validate(ctx, 2 * n, &[2 * n], &[])?;
+    let plan = GpuFftPlan::new(
+        ctx,
+        &[n],
+        Direction::Forward,
+        Normalization::Unnormalized,
+        GpuFftVariant::Stockham,
+    )?;
+    let dev = &ctx.device;
+    let module = ctx.shader(
+        "fft_two_real.wgsl",
+        &format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{TWO_REAL_WGSL}"),
+    )?;
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("two_real_split"),
+        layout: Some(&plan.pipeline_layout),
+        module: &module,
+        entry_point: Some("two_real_split"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let z: Vec<[f32; 2]> = a.iter().zip(b).map(|(&x, &y)| [x, y]).collect();
+    let zbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("two real z"),
+        contents: bytemuck::cast_slice(&z),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    let params = FftParams {
+        n: n as u32,
+        log2n: n.trailing_zeros(),
+        stride: 1,
+        batch: 1,
+        scale: 1.0,
+        ..FftParams::default()
+    };
+    let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("two real params"),
+        contents: bytemuck::bytes_of(&params),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let out = ctx.storage_buffer("two real spectra", (2 * n * 8) as u64)?;
+    let mut enc = dev.create_command_encoder(&Default::default());
+    let spectrum = plan.encode(ctx, &mut enc, &zbuf);
+    // Binding 3 (twiddles) is unused by the split; it is bound to the input again.
+    let bind = ctx.bind_group(
+        "two real split",
+        &plan.layout,
+        &[
+            ubuf.as_entire_binding(),
+            spectrum.as_entire_binding(),
+            out.as_entire_binding(),
+            spectrum.as_entire_binding(),
+        ],
+    );
+    let (x, y) = workgroups(ctx, n as u32);
+    {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("two_real_split"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait()?;
+    let mut both = read_complex(ctx, &out, 2 * n)?;
+    let second = both.split_off(n);
+    Ok((both, second))
 }
 
 /// Reads `n` complex f32 values back from `buffer`.
