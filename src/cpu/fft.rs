@@ -13,12 +13,13 @@
 //! algorithm, so every size costs `O(N log N)`, primes included):
 //! - along the last axis the lines are contiguous: they are transformed in place, in
 //!   parallel, each rayon worker holding its own scratch buffer;
-//! - along any other axis a line is strided. Its elements are gathered into a contiguous
-//!   line of a transposed buffer (`[line][N]`), transformed there, and scattered back,
-//!   each step parallel over blocks of 16 lines or rows: neighbouring lines are
-//!   neighbours in memory, so a block is read and written in runs of 16 values (a
-//!   cache-friendly transpose) and RustFFT transforms the block's lines in one call.
-//!   This costs one extra array of memory and keeps the code free of `unsafe`.
+//! - along any other axis a line is strided. Lines are taken 32 at a time: neighbouring
+//!   lines are neighbours in memory, so a block of 32 is, in every row, one contiguous
+//!   run of 32 values. The runs are gathered into a small contiguous buffer
+//!   (`[line][N]`, a cache-friendly transpose), RustFFT transforms the 32 lines in one
+//!   call, and the runs are written back in place; parallel over blocks. One read and
+//!   one write of the array per axis, no full-size copy, and no `unsafe` (each block
+//!   borrows its own disjoint runs).
 //!
 //! The scale of the whole transform (the product of the per-axis scales) is applied once
 //! at the end. The f32 instance's error against the f64 oracle is stated in `docs/fft.md`
@@ -47,10 +48,36 @@ use crate::cpu::dft::{Direction, Normalization};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftDirection, FftNum, FftPlanner};
-use std::sync::Arc;
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 fn zero<T: FftNum>() -> Complex<T> {
     Complex::new(T::zero(), T::zero())
+}
+
+/// The RustFFT plan of length `n`, made once per element type, length and direction
+/// and shared by every later call (planning allocates twiddles and, for some lengths,
+/// chooses among algorithms: a view of Fourier volume rendering or a small transform
+/// must not pay for it every time).
+fn cached_plan<T: FftNum>(n: usize, dir: FftDirection) -> Arc<dyn Fft<T>> {
+    type Plans = HashMap<(TypeId, usize, bool), Box<dyn Any + Send + Sync>>;
+    static PLANS: OnceLock<Mutex<Plans>> = OnceLock::new();
+    let key = (TypeId::of::<T>(), n, dir == FftDirection::Forward);
+    let mut plans = PLANS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = plans.get(&key).and_then(|b| b.downcast_ref::<Arc<dyn Fft<T>>>()) {
+        return Arc::clone(p);
+    }
+    // Bounded: a program that cycles through many lengths replans now and then.
+    if plans.len() >= 256 {
+        plans.clear();
+    }
+    let p = FftPlanner::<T>::new().plan_fft(n, dir);
+    plans.insert(key, Box::new(Arc::clone(&p)));
+    p
 }
 
 fn fft_direction(dir: Direction) -> FftDirection {
@@ -88,52 +115,54 @@ fn fft_axis<T: FftNum>(
         );
         return;
     }
-    // Gather every strided line into a row of `t` ([line][n], line = outer·inner + c)
-    // and transform it there. Lines are taken BLOCK at a time: neighbouring lines are
-    // neighbours in memory, so one row `j` of a block is a contiguous read of BLOCK
-    // values instead of BLOCK reads `inner` apart (a cache-friendly transpose).
-    let mut t = vec![zero::<T>(); data.len()];
-    {
-        let src: &[Complex<T>] = data;
-        t.par_chunks_mut(BLOCK * n).enumerate().for_each_init(
-            || vec![zero::<T>(); scratch_len],
-            |scratch, (b, block)| {
-                let first = b * BLOCK;
-                let lines = block.len() / n;
-                let base: Vec<usize> = (first..first + lines)
-                    .map(|l| (l / inner) * n * inner + l % inner)
-                    .collect();
-                for j in 0..n {
-                    let off = j * inner;
-                    for (li, &bl) in base.iter().enumerate() {
-                        block[li * n + j] = src[bl + off];
-                    }
-                }
-                // RustFFT transforms every length-n chunk of the block in one call.
-                fft.process_with_scratch(block, scratch);
-            },
-        );
+    // Lines along a strided axis, BLOCK neighbouring lines at a time: neighbouring
+    // lines are neighbours in memory, so row `j` of a block is one contiguous run of
+    // BLOCK values. Each block's runs are borrowed (disjoint `&mut` slices, one per
+    // row), gathered into a small contiguous buffer `[line][n]` that stays in cache,
+    // transformed there by one RustFFT call, and written back: one read and one write
+    // of the array per axis, no full-size copy, no `unsafe`.
+    let per_slab = inner.div_ceil(BLOCK);
+    let mut blocks: Vec<Vec<&mut [Complex<T>]>> = Vec::with_capacity(data.len() / (n * inner) * per_slab);
+    for slab in data.chunks_mut(n * inner) {
+        let start = blocks.len();
+        blocks.extend((0..per_slab).map(|_| Vec::with_capacity(n)));
+        for row in slab.chunks_mut(inner) {
+            for (k, run) in row.chunks_mut(BLOCK).enumerate() {
+                blocks[start + k].push(run);
+            }
+        }
     }
-    // Scatter back, BLOCK rows at a time: row r = outer·n + j of the array holds
-    // t[(outer·inner + c)·n + j]; for one c the rows of a block read neighbours in t.
-    data.par_chunks_mut(BLOCK * inner)
-        .enumerate()
-        .for_each(|(b, rows)| {
-            let first = b * BLOCK;
-            let count = rows.len() / inner;
-            let src: Vec<usize> = (first..first + count)
-                .map(|r| (r / n) * inner * n + r % n)
-                .collect();
-            for c in 0..inner {
-                let off = c * n;
-                for (ri, &s0) in src.iter().enumerate() {
-                    rows[ri * inner + c] = t[s0 + off];
+    let scratch_len = fft.get_outofplace_scratch_len();
+    blocks.into_par_iter().for_each_init(
+        || {
+            (
+                vec![zero::<T>(); BLOCK * n],
+                vec![zero::<T>(); BLOCK * n],
+                vec![zero::<T>(); scratch_len],
+            )
+        },
+        |(a, b, scratch), mut rows| {
+            let lines = rows[0].len();
+            let (a, b) = (&mut a[..lines * n], &mut b[..lines * n]);
+            for (j, run) in rows.iter().enumerate() {
+                for (l, v) in run.iter().enumerate() {
+                    a[l * n + j] = *v;
                 }
             }
-        });
+            // RustFFT transforms every length-n chunk in one call (out of place: its
+            // in-place transform would copy through its scratch anyway).
+            fft.process_outofplace_with_scratch(a, b, scratch);
+            for (j, run) in rows.iter_mut().enumerate() {
+                for (l, v) in run.iter_mut().enumerate() {
+                    *v = b[l * n + j];
+                }
+            }
+        },
+    );
 }
 
-/// Lines gathered (and rows scattered) together along a strided axis.
+/// Neighbouring lines transformed together along a strided axis (32 complex values are
+/// 256 bytes in f32, four cache lines).
 const BLOCK: usize = 16;
 
 /// Multiplies every element by `factor` (skipped when it is 1).
@@ -160,9 +189,8 @@ pub fn fft_nd<T: FftNum>(
     if data.is_empty() {
         return;
     }
-    let mut planner = FftPlanner::<T>::new();
     for axis in 0..shape.len() {
-        let fft = planner.plan_fft(shape[axis], fft_direction(dir));
+        let fft = cached_plan::<T>(shape[axis], fft_direction(dir));
         fft_axis(data, shape, axis, &fft);
     }
     scale(data, norm.factor(shape, dir));
