@@ -189,11 +189,77 @@ pub fn fft_nd<T: FftNum>(
     if data.is_empty() {
         return;
     }
-    for axis in 0..shape.len() {
-        let fft = cached_plan::<T>(shape[axis], fft_direction(dir));
-        fft_axis(data, shape, axis, &fft);
+    let d = shape.len();
+    let plans: Vec<Arc<dyn Fft<T>>> = shape
+        .iter()
+        .map(|&n| cached_plan::<T>(n, fft_direction(dir)))
+        .collect();
+    // With three axes or more, the last two are transformed slab by slab while a slab
+    // is in cache (one read and one write of the array for both axes instead of two).
+    let mut separate = d;
+    if d >= 3 {
+        let (ny, nx) = (shape[d - 2], shape[d - 1]);
+        if ny * nx * std::mem::size_of::<Complex<T>>() <= SLAB_BYTES {
+            slab_2d(data, ny, nx, &plans[d - 2], &plans[d - 1]);
+            separate = d - 2;
+        }
+    }
+    for axis in 0..separate {
+        fft_axis(data, shape, axis, &plans[axis]);
     }
     scale(data, norm.factor(shape, dir));
+}
+
+/// Largest `[ny][nx]` slab transformed in one piece by [`slab_2d`] (a typical L2).
+const SLAB_BYTES: usize = 1 << 20;
+
+/// The 2-D FFT of every contiguous `[ny][nx]` slab of `data`, one slab per task: the
+/// rows in place, then the columns BLOCK at a time through a small transposed buffer.
+fn slab_2d<T: FftNum>(
+    data: &mut [Complex<T>],
+    ny: usize,
+    nx: usize,
+    fy: &Arc<dyn Fft<T>>,
+    fx: &Arc<dyn Fft<T>>,
+) {
+    let scratch_len = fx
+        .get_inplace_scratch_len()
+        .max(fy.get_outofplace_scratch_len());
+    data.par_chunks_mut(ny * nx).for_each_init(
+        || {
+            (
+                vec![zero::<T>(); BLOCK * ny],
+                vec![zero::<T>(); BLOCK * ny],
+                vec![zero::<T>(); scratch_len],
+            )
+        },
+        |(a, b, scratch), slab| {
+            if nx > 1 {
+                fx.process_with_scratch(slab, &mut scratch[..fx.get_inplace_scratch_len()]);
+            }
+            if ny <= 1 {
+                return;
+            }
+            let oop = fy.get_outofplace_scratch_len();
+            for c0 in (0..nx).step_by(BLOCK) {
+                let lines = BLOCK.min(nx - c0);
+                let (a, b) = (&mut a[..lines * ny], &mut b[..lines * ny]);
+                for j in 0..ny {
+                    let run = &slab[j * nx + c0..j * nx + c0 + lines];
+                    for (l, v) in run.iter().enumerate() {
+                        a[l * ny + j] = *v;
+                    }
+                }
+                fy.process_outofplace_with_scratch(a, b, &mut scratch[..oop]);
+                for j in 0..ny {
+                    let run = &mut slab[j * nx + c0..j * nx + c0 + lines];
+                    for (l, v) in run.iter_mut().enumerate() {
+                        *v = b[l * ny + j];
+                    }
+                }
+            }
+        },
+    );
 }
 
 /// The forward FFT of a real line: the `N/2 + 1` non-negative frequencies.
