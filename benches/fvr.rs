@@ -142,7 +142,9 @@ fn main() {
         let render = |r: &Renderer, s: &Scene| r.render(s, &settings, &|_, _| {}).expect("render");
         let (rc, rc_cpu) = timed(runs, || render(&cpu, &scene_n));
         let (_, rc_cpu_big) = timed(runs, || render(&cpu, &scene_big));
-        let rc_gpu = gpu.as_ref().map_or(f64::NAN, |r| timed(runs, || render(r, &scene_n)).1);
+        let rc_gpu = gpu
+            .as_ref()
+            .map_or(f64::NAN, |r| timed(runs, || render(r, &scene_n)).1);
         let reference = rc.output.image.data;
 
         let uploaded = gpu.as_ref().and_then(|r| r.gpu()).map(|ctx| {

@@ -538,7 +538,9 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
         let (ca, cb) = voxlab::cpu::fft::two_real_ffts(&a64, &b64);
         let tol = REL_L2_PER_STAGE * (n as f64).log2().max(1.0);
         let (ea, eb) = (rel_l2(&ga, &ca), rel_l2(&gb, &cb));
-        eprintln!("gpu two_real_ffts N={n:<6} vs cpu f64: rel L2 {ea:.2e}, {eb:.2e} (bound {tol:.1e})");
+        eprintln!(
+            "gpu two_real_ffts N={n:<6} vs cpu f64: rel L2 {ea:.2e}, {eb:.2e} (bound {tol:.1e})"
+        );
         assert!(ea <= tol && eb <= tol, "N={n}: {ea:e}, {eb:e} > {tol:e}");
         if n <= EXACT_DFT_MAX_LINE {
             let dft = |x: &[f64]| {

@@ -68,7 +68,10 @@ fn cached_plan<T: FftNum>(n: usize, dir: FftDirection) -> Arc<dyn Fft<T>> {
         .get_or_init(Default::default)
         .lock()
         .unwrap_or_else(|e| e.into_inner());
-    if let Some(p) = plans.get(&key).and_then(|b| b.downcast_ref::<Arc<dyn Fft<T>>>()) {
+    if let Some(p) = plans
+        .get(&key)
+        .and_then(|b| b.downcast_ref::<Arc<dyn Fft<T>>>())
+    {
         return Arc::clone(p);
     }
     // Bounded: a program that cycles through many lengths replans now and then.
@@ -122,7 +125,8 @@ fn fft_axis<T: FftNum>(
     // transformed there by one RustFFT call, and written back: one read and one write
     // of the array per axis, no full-size copy, no `unsafe`.
     let per_slab = inner.div_ceil(BLOCK);
-    let mut blocks: Vec<Vec<&mut [Complex<T>]>> = Vec::with_capacity(data.len() / (n * inner) * per_slab);
+    let mut blocks: Vec<Vec<&mut [Complex<T>]>> =
+        Vec::with_capacity(data.len() / (n * inner) * per_slab);
     for slab in data.chunks_mut(n * inner) {
         let start = blocks.len();
         blocks.extend((0..per_slab).map(|_| Vec::with_capacity(n)));
@@ -204,8 +208,8 @@ pub fn fft_nd<T: FftNum>(
             separate = d - 2;
         }
     }
-    for axis in 0..separate {
-        fft_axis(data, shape, axis, &plans[axis]);
+    for (axis, plan) in plans.iter().enumerate().take(separate) {
+        fft_axis(data, shape, axis, plan);
     }
     scale(data, norm.factor(shape, dir));
 }
@@ -384,9 +388,7 @@ pub fn two_real_ffts(a: &[f64], b: &[f64]) -> (Vec<Complex<f64>>, Vec<Complex<f6
         Direction::Forward,
         Normalization::Unnormalized,
     );
-    (0..n)
-        .map(|k| split_two_real(z[k], z[(n - k) % n]))
-        .unzip()
+    (0..n).map(|k| split_two_real(z[k], z[(n - k) % n])).unzip()
 }
 
 /// One bin of both real spectra from the complex spectrum `Z` of `a + i·b`:

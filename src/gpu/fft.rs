@@ -794,9 +794,7 @@ impl GpuFftPlan {
             let module = ctx.shader(
                 match variant {
                     GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
-                    GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => {
-                        "fft_stockham.wgsl"
-                    }
+                    GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
                 },
                 &variant.shader_source(),
             )?;
@@ -842,13 +840,11 @@ impl GpuFftPlan {
                     span: pass.span(),
                     scale: if i == last { factor } else { 1.0 },
                 };
-                uniforms.push(
-                    dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("fft params"),
-                        contents: bytemuck::bytes_of(&params),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    }),
-                );
+                uniforms.push(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                }));
                 table_of_pass.push(axes.iter().position(|&a| a == axis).unwrap_or(0));
             }
             pong = Some(ctx.storage_buffer("fft data b", (total * 8) as u64)?);
@@ -1020,6 +1016,9 @@ impl GpuFftPlan {
     }
 }
 
+/// The two spectra `(A, B)` of [`two_real_ffts`].
+pub type TwoSpectra = (Vec<Complex<f32>>, Vec<Complex<f32>>);
+
 /// The unscaled forward FFTs of two real lines of the same power-of-two length through
 /// one complex GPU FFT: the port of [`crate::cpu::fft::two_real_ffts`]. `z = a + i·b` is
 /// uploaded, transformed once (Stockham) and split on the device by the Hermitian
@@ -1033,11 +1032,7 @@ impl GpuFftPlan {
 /// [`Error::Invalid`] when the lengths differ or are not a power of two;
 /// [`Error::TooLarge`] when the `2N` outputs exceed one storage binding;
 /// [`Error::Gpu`] on device failure.
-pub fn two_real_ffts(
-    ctx: &GpuContext,
-    a: &[f32],
-    b: &[f32],
-) -> Result<(Vec<Complex<f32>>, Vec<Complex<f32>>)> {
+pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectra> {
     if a.len() != b.len() {
         return Err(Error::invalid(
             "two_real_ffts",

@@ -257,7 +257,10 @@ pub fn fvr_project_timed(
     };
 
     let Some(fft_plan) = &spectrum.fft else {
-        return Err(Error::invalid("FVR cube side", format!("{m} is not a power of two")));
+        return Err(Error::invalid(
+            "FVR cube side",
+            format!("{m} is not a power of two"),
+        ));
     };
     let dev = &ctx.device;
     ctx.queue
