@@ -83,8 +83,8 @@ fn ratio(a: f64, b: f64) -> String {
 fn main() {
     let args = common::BenchArgs::from_env();
     let (smoke, runs) = (args.smoke, args.runs);
-    let sizes: Vec<usize> = if smoke { vec![16] } else { vec![64, 128, 256] };
-    let big_image = if smoke { 32 } else { 512 };
+    let sizes: Vec<usize> = if smoke { vec![32] } else { vec![64, 128, 256] };
+    let big_image = if smoke { 64 } else { 512 };
     let view = FvrView::Orbit {
         azimuth_deg: 30.0,
         elevation_deg: 20.0,
