@@ -82,6 +82,8 @@ fn kernel_code(kernel: Kernel) -> Result<(u32, u32)> {
 
 /// A spectrum uploaded once (complex f32, `M³`), with the slice pipeline, the slice
 /// and parameter buffers, and the inverse 2-D FFT plan made once, reused by every view.
+/// Views share the slice and parameter buffers: render the views of one
+/// `GpuFvrSpectrum` one after another, not from several threads at once.
 pub struct GpuFvrSpectrum<'a> {
     cpu: &'a FvrSpectrum,
     pipeline: wgpu::ComputePipeline,
