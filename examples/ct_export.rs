@@ -16,6 +16,8 @@
 //!   centre bin 128); `theta2d.txt`: the 402 angles in degrees.
 //! - `truth2d.npy` — `(256, 256)` float64 in scikit-image orientation: pixel `(row, col)` is
 //!   the phantom's value at CT world `X = col − 128`, `Y = 0`, `Z = row − 128` mm.
+//! - `brain2d.npy` — `(256, 256)` `|u1`: 1 where that pixel centre lies inside the
+//!   phantom's primitive 1 (the brain ellipsoid inside the skull).
 //! - `cone_proj.npy` — `(180, 160, 160)` float64, `(angle, row, col)`: the projections of
 //!   `Geometry::cone_rtk(1000, 1500, 160, 160, 3, 3, even_angles(180, 360))`.
 //! - `truth3d.npy` — `(128, 128, 128)` float64, NumPy order `(z, y, x)` = CT `(Z, Y, X)`,
@@ -86,15 +88,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     write_f64(&out.join("sino2d.npy"), &[n2, na], &sino)?;
     let theta_txt: String = theta.iter().map(|t| format!("{t:?}\n")).collect();
     std::fs::write(out.join("theta2d.txt"), theta_txt)?;
+    let brain = match &phantom.kind {
+        PhantomKind::Primitives(prims) => prims[1].clone(),
+        _ => unreachable!("Shepp–Logan is made of primitives"),
+    };
+    let in_brain = |p: DVec3| brain.contains(ct_to_phantom(p) / phantom.half_extent_mm);
     let h = (n2 / 2) as f64;
     let mut truth2 = vec![0.0; n2 * n2];
+    let mut mask2 = vec![0u8; n2 * n2];
     for row in 0..n2 {
         for col in 0..n2 {
             let p = DVec3::new(col as f64 - h, 0.0, row as f64 - h);
             truth2[row * n2 + col] = phantom.value_world(ct_to_phantom(p));
+            mask2[row * n2 + col] = in_brain(p) as u8;
         }
     }
     write_f64(&out.join("truth2d.npy"), &[n2, n2], &truth2)?;
+    write_npy(&out.join("brain2d.npy"), "|u1", &[n2, n2], &mask2)?;
     eprintln!("2-D: {:.1} s", t0.elapsed().as_secs_f64());
 
     // 3-D circular cone beam, RTK's geometry.
@@ -113,23 +123,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     eprintln!("cone projections: {:.1} s", t0.elapsed().as_secs_f64());
 
     let (n3, sp) = (128usize, 2.0);
-    let brain = match &phantom.kind {
-        PhantomKind::Primitives(prims) => prims[1].clone(),
-        _ => unreachable!("Shepp–Logan is made of primitives"),
-    };
     let axis = |i: usize| (i as f64 - (n3 as f64 - 1.0) / 2.0) * sp;
     let mut truth3 = vec![0.0; n3 * n3 * n3];
     let mut mask = vec![0u8; n3 * n3 * n3];
-    let mut in_brain = 0usize;
+    let mut brain_voxels = 0usize;
     for z in 0..n3 {
         for y in 0..n3 {
             for x in 0..n3 {
                 let p = DVec3::new(axis(x), axis(y), axis(z));
                 let i = (z * n3 + y) * n3 + x;
                 truth3[i] = phantom.value_world(ct_to_phantom(p));
-                if brain.contains(ct_to_phantom(p) / phantom.half_extent_mm) {
+                if in_brain(p) {
                     mask[i] = 1;
-                    in_brain += 1;
+                    brain_voxels += 1;
                 }
             }
         }
@@ -151,7 +157,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "volume": {
             "shape_zyx": [n3, n3, n3], "spacing_mm": sp,
             "origin_mm": -(n3 as f64 - 1.0) / 2.0 * sp,
-            "brain_voxels": in_brain,
+            "brain_voxels": brain_voxels,
         },
     });
     std::fs::write(
@@ -159,7 +165,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         serde_json::to_string_pretty(&meta)? + "\n",
     )?;
     eprintln!(
-        "wrote {} in {:.1} s ({in_brain} brain voxels)",
+        "wrote {} in {:.1} s ({brain_voxels} brain voxels)",
         out.display(),
         t0.elapsed().as_secs_f64()
     );
