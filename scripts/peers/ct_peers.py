@@ -68,7 +68,13 @@ def main():
     ap.add_argument("inputs", nargs="?", default="/tmp/ct-peers")
     ap.add_argument("--out", default="docs/bench")
     ap.add_argument("--no-big", action="store_true", help="skip the 512² / 256³ timings")
+    ap.add_argument("--md-only", action="store_true",
+                    help="rewrite ct-peers.md from an existing ct-peers.json")
     args = ap.parse_args()
+    if args.md_only:
+        res = json.load(open(os.path.join(args.out, "ct-peers.json")))
+        write_md(res, os.path.join(args.out, "ct-peers.md"))
+        return
     d = args.inputs
     meta = json.load(open(os.path.join(d, "export.json")))
     res = {"inputs": meta, "versions": versions(), "machine": machine()}
@@ -248,7 +254,28 @@ def write_md(res, path):
         t = rt["timing_256"]
         lines += ["", f"RTK FDK (CPU) 256³ from 180 × 256² projections: "
                       f"{t['seconds_median']:.1f} s (median of {len(t['seconds'])})."]
-    lines += ["", "Raw numbers: `docs/bench/ct-peers.json`.", ""]
+    lines += [
+        "",
+        "## Reading the numbers",
+        "",
+        "- The target metrics (circle, brain) are dominated by the one pixel/voxel layer next",
+        "  to the skull (density 1 against the brain's 0.02): the reconstruction blurs that edge",
+        "  over about a pixel, so the RMS drops twenty-fold once the mask is eroded by one",
+        "  pixel/voxel. The target metrics therefore mostly measure how the edge is blurred",
+        "  (filter window, interpolation); the eroded columns measure the interior accuracy and",
+        "  the low-contrast detail. Smoother windows (Hann, Hamming) lose at the edge and gain",
+        "  little inside.",
+        "- Geometry check: reconstructing the cone projections with RTK's angles negated",
+        "  gives a brain RMS of 0.142 instead of 0.054 (ramp), and scikit-image's `radon` of",
+        "  the 2-D truth matches the exported sinogram to 4% relative RMS (pixelisation at the",
+        "  skull), against 51% with the image flipped upside down: both peers see voxlab's",
+        "  inputs in the intended orientation.",
+        "- RTK's FDK scale needs no correction: on the small fixture (tests/data/ct) its",
+        "  mean over the eroded unit-density region is 0.9997.",
+        "",
+        "Raw numbers: `docs/bench/ct-peers.json`.",
+        "",
+    ]
     with open(path, "w") as fh:
         fh.write("\n".join(lines))
 
