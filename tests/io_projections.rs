@@ -135,6 +135,14 @@ fn geometry_json_round_trips_and_fills_conventional_defaults() {
     )
     .unwrap();
     assert_eq!(g, Geometry::parallel_skimage(9, vec![0.0, 45.0]).unwrap());
+    // Extra sections (objects, arrays) are metadata.
+    let g = geometry_from_json(
+        r#"{"beam": "parallel", "cols": 9, "rows": 1, "angles_deg": [0, 45],
+            "volume": {"dims": [32, 32, 32]}, "notes": ["made by a script"]}"#,
+        p,
+    )
+    .unwrap();
+    assert_eq!(g, Geometry::parallel_skimage(9, vec![0.0, 45.0]).unwrap());
 }
 
 #[test]
@@ -160,6 +168,10 @@ fn bad_geometry_json_is_a_clear_error() {
         (
             r#"{"beam": "parallel", "cols": 8, "rows": 1, "angles_deg": [0], "angels": 3}"#,
             "unknown field",
+        ),
+        (
+            r#"{"beam": "parallel", "cols": 8, "rows": 1, "angles_deg": [0], "sdd": {"a": 1}}"#,
+            "expected f64",
         ),
         (
             r#"{"beam": "parallel", "cols": 0, "rows": 1, "angles_deg": [0]}"#,

@@ -47,8 +47,9 @@
 //! refused for parallel). The angles are either a list `angles_deg` or an even spread
 //! `"angles": {"count": 360, "range_deg": 360}` ([`Geometry::even_angles`]). `cu`, `cv`
 //! default to the convention of the beam (`cols/2` and `(rows−1)/2` for parallel,
-//! `(n−1)/2` for cone), `du`, `dv` to 1. Unknown fields are refused, so a typo is an
-//! error and not a silent default.
+//! `(n−1)/2` for cone), `du`, `dv` to 1. Extra sections whose values are objects or
+//! arrays (a description of the volume, versions, …) are ignored; an unknown field with
+//! a plain value is refused, so a typo is an error and not a silent default.
 //!
 //! # Angle lists
 //!
@@ -262,6 +263,21 @@ struct GeometryJson {
     angles: Option<EvenAngles>,
 }
 
+/// The fields of [`GeometryJson`].
+const KNOWN_FIELDS: &[&str] = &[
+    "beam",
+    "sid",
+    "sdd",
+    "cols",
+    "rows",
+    "du",
+    "dv",
+    "cu",
+    "cv",
+    "angles_deg",
+    "angles",
+];
+
 fn one() -> f64 {
     1.0
 }
@@ -305,7 +321,14 @@ pub fn geometry_to_json(g: &Geometry) -> String {
 /// Parses geometry JSON text (`path` only names it in errors) and validates it.
 pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
     let bad = |m: String| Error::format(path, "geometry", m);
-    let j: GeometryJson = serde_json::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let mut value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| bad(e.to_string()))?;
+    // Extra sections (objects, arrays) are metadata and ignored; an unknown scalar is
+    // refused below as a likely typo.
+    if let Some(map) = value.as_object_mut() {
+        map.retain(|k, v| KNOWN_FIELDS.contains(&k.as_str()) || !(v.is_object() || v.is_array()));
+    }
+    let j: GeometryJson = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
     let beam = match (j.beam, j.sid, j.sdd) {
         (BeamName::Parallel, None, None) => Beam::Parallel,
         (BeamName::Parallel, _, _) => {
