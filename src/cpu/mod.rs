@@ -5,6 +5,7 @@
 //! thread count); the f32 instance is the fair baseline for speed comparisons.
 
 pub mod dft;
+pub mod fbp;
 pub mod fft;
 pub mod filter;
 pub mod fvr;
