@@ -1,5 +1,7 @@
 //! The `voxlab` command line: a thin layer over the library.
 
+mod cli_project;
+
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -96,6 +98,10 @@ enum Command {
     /// of the array). Exit status 3 when an error exceeds 1e-12 (f64) or 1e-6·log2 N
     /// (f32).
     Fft(FftArgs),
+    /// CT forward projection: exact line integrals of a phantom, or Joseph's method on
+    /// a volume (CPU f64/f32 or GPU), in a parallel or cone-beam geometry; writes a
+    /// projection stack (.npy, .nrrd) and its geometry JSON.
+    Project(Box<cli_project::ProjectArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -470,6 +476,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::Convert(args) => convert(*args),
         Command::Slice(args) => slice(*args),
         Command::Fvr(args) => fvr(*args),
+        Command::Project(args) => cli_project::project(*args),
         Command::Info {
             input,
             load,

@@ -103,3 +103,47 @@ fn ct_view_layout_agrees() {
     let offs: Vec<u32> = members.iter().map(|m| m.1).collect();
     assert_eq!(offs, vec![0, 16, 32, 48]);
 }
+
+#[test]
+fn project_params_and_joseph_view_layouts_agree() {
+    use voxlab::cpu::project::JosephView;
+    use voxlab::gpu::project::{ProjectParams, PARAMS_WGSL as PROJECT_WGSL};
+    let (span, members) = wgsl_struct_layout(PROJECT_WGSL, "ProjectParams");
+    assert_eq!(span as usize, size_of::<ProjectParams>());
+    let rust = [
+        ("nx", offset_of!(ProjectParams, nx)),
+        ("ny", offset_of!(ProjectParams, ny)),
+        ("nz", offset_of!(ProjectParams, nz)),
+        ("cols", offset_of!(ProjectParams, cols)),
+        ("rows", offset_of!(ProjectParams, rows)),
+        ("view_offset", offset_of!(ProjectParams, view_offset)),
+        ("n_views", offset_of!(ProjectParams, n_views)),
+        ("row_stride", offset_of!(ProjectParams, row_stride)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+    // JosephView: nine vec4<f32> rows, in the order of `JosephView::rows`.
+    let (span, members) = wgsl_struct_layout(PROJECT_WGSL, "JosephView");
+    assert_eq!(span as usize, size_of::<JosephView<f32>>());
+    let names = ["a0", "a_u", "a_v", "d0", "d_u", "d_v", "w0", "w_u", "w_v"];
+    assert_eq!(members.len(), names.len());
+    for (i, ((wname, woff), rname)) in members.iter().zip(names).enumerate() {
+        assert_eq!(wname, rname);
+        assert_eq!(*woff as usize, i * 16);
+    }
+}
+
+#[test]
+fn project_shader_validates() {
+    let src = voxlab::gpu::project::shader_source();
+    let module = naga::front::wgsl::parse_str(&src).expect("project.wgsl parses");
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .expect("project.wgsl validates");
+}

@@ -13,10 +13,13 @@
 //! algorithm, so every size costs `O(N log N)`, primes included):
 //! - along the last axis the lines are contiguous: they are transformed in place, in
 //!   parallel, each rayon worker holding its own scratch buffer;
-//! - along any other axis a line is strided. Its elements are gathered into a contiguous
-//!   line of a transposed buffer (`[line][N]`), transformed there, and scattered back
-//!   (one row of the array at a time), each step parallel over lines or rows. This costs
-//!   one extra array of memory and keeps the code free of `unsafe`.
+//! - along any other axis a line is strided. Lines are taken 32 at a time: neighbouring
+//!   lines are neighbours in memory, so a block of 32 is, in every row, one contiguous
+//!   run of 32 values. The runs are gathered into a small contiguous buffer
+//!   (`[line][N]`, a cache-friendly transpose), RustFFT transforms the 32 lines in one
+//!   call, and the runs are written back in place; parallel over blocks. One read and
+//!   one write of the array per axis, no full-size copy, and no `unsafe` (each block
+//!   borrows its own disjoint runs).
 //!
 //! The scale of the whole transform (the product of the per-axis scales) is applied once
 //! at the end. The f32 instance's error against the f64 oracle is stated in `docs/fft.md`
@@ -45,10 +48,39 @@ use crate::cpu::dft::{Direction, Normalization};
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftDirection, FftNum, FftPlanner};
-use std::sync::Arc;
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 fn zero<T: FftNum>() -> Complex<T> {
     Complex::new(T::zero(), T::zero())
+}
+
+/// The RustFFT plan of length `n`, made once per element type, length and direction
+/// and shared by every later call (planning allocates twiddles and, for some lengths,
+/// chooses among algorithms: a view of Fourier volume rendering or a small transform
+/// must not pay for it every time).
+fn cached_plan<T: FftNum>(n: usize, dir: FftDirection) -> Arc<dyn Fft<T>> {
+    type Plans = HashMap<(TypeId, usize, bool), Box<dyn Any + Send + Sync>>;
+    static PLANS: OnceLock<Mutex<Plans>> = OnceLock::new();
+    let key = (TypeId::of::<T>(), n, dir == FftDirection::Forward);
+    let mut plans = PLANS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = plans
+        .get(&key)
+        .and_then(|b| b.downcast_ref::<Arc<dyn Fft<T>>>())
+    {
+        return Arc::clone(p);
+    }
+    // Bounded: a program that cycles through many lengths replans now and then.
+    if plans.len() >= 256 {
+        plans.clear();
+    }
+    let p = FftPlanner::<T>::new().plan_fft(n, dir);
+    plans.insert(key, Box::new(Arc::clone(&p)));
+    p
 }
 
 fn fft_direction(dir: Direction) -> FftDirection {
@@ -86,30 +118,56 @@ fn fft_axis<T: FftNum>(
         );
         return;
     }
-    // Gather every strided line into a row of `t` ([line][n], line = outer·inner + c)
-    // and transform it there.
-    let mut t = vec![zero::<T>(); data.len()];
-    {
-        let src: &[Complex<T>] = data;
-        t.par_chunks_mut(n).enumerate().for_each_init(
-            || vec![zero::<T>(); scratch_len],
-            |scratch, (l, line)| {
-                let base = (l / inner) * n * inner + l % inner;
-                for (j, v) in line.iter_mut().enumerate() {
-                    *v = src[base + j * inner];
-                }
-                fft.process_with_scratch(line, scratch);
-            },
-        );
-    }
-    // Scatter back: row r = outer·n + j of the array holds t[(outer·inner + c)·n + j].
-    data.par_chunks_mut(inner).enumerate().for_each(|(r, row)| {
-        let (o, j) = (r / n, r % n);
-        for (c, v) in row.iter_mut().enumerate() {
-            *v = t[(o * inner + c) * n + j];
+    // Lines along a strided axis, BLOCK neighbouring lines at a time: neighbouring
+    // lines are neighbours in memory, so row `j` of a block is one contiguous run of
+    // BLOCK values. Each block's runs are borrowed (disjoint `&mut` slices, one per
+    // row), gathered into a small contiguous buffer `[line][n]` that stays in cache,
+    // transformed there by one RustFFT call, and written back: one read and one write
+    // of the array per axis, no full-size copy, no `unsafe`.
+    let per_slab = inner.div_ceil(BLOCK);
+    let mut blocks: Vec<Vec<&mut [Complex<T>]>> =
+        Vec::with_capacity(data.len() / (n * inner) * per_slab);
+    for slab in data.chunks_mut(n * inner) {
+        let start = blocks.len();
+        blocks.extend((0..per_slab).map(|_| Vec::with_capacity(n)));
+        for row in slab.chunks_mut(inner) {
+            for (k, run) in row.chunks_mut(BLOCK).enumerate() {
+                blocks[start + k].push(run);
+            }
         }
-    });
+    }
+    let scratch_len = fft.get_outofplace_scratch_len();
+    blocks.into_par_iter().for_each_init(
+        || {
+            (
+                vec![zero::<T>(); BLOCK * n],
+                vec![zero::<T>(); BLOCK * n],
+                vec![zero::<T>(); scratch_len],
+            )
+        },
+        |(a, b, scratch), mut rows| {
+            let lines = rows[0].len();
+            let (a, b) = (&mut a[..lines * n], &mut b[..lines * n]);
+            for (j, run) in rows.iter().enumerate() {
+                for (l, v) in run.iter().enumerate() {
+                    a[l * n + j] = *v;
+                }
+            }
+            // RustFFT transforms every length-n chunk in one call (out of place: its
+            // in-place transform would copy through its scratch anyway).
+            fft.process_outofplace_with_scratch(a, b, scratch);
+            for (j, run) in rows.iter_mut().enumerate() {
+                for (l, v) in run.iter_mut().enumerate() {
+                    *v = b[l * n + j];
+                }
+            }
+        },
+    );
 }
+
+/// Neighbouring lines transformed together along a strided axis (32 complex values are
+/// 256 bytes in f32, four cache lines).
+const BLOCK: usize = 16;
 
 /// Multiplies every element by `factor` (skipped when it is 1).
 fn scale<T: FftNum>(data: &mut [Complex<T>], factor: f64) {
@@ -135,12 +193,77 @@ pub fn fft_nd<T: FftNum>(
     if data.is_empty() {
         return;
     }
-    let mut planner = FftPlanner::<T>::new();
-    for axis in 0..shape.len() {
-        let fft = planner.plan_fft(shape[axis], fft_direction(dir));
-        fft_axis(data, shape, axis, &fft);
+    let d = shape.len();
+    let plans: Vec<Arc<dyn Fft<T>>> = shape
+        .iter()
+        .map(|&n| cached_plan::<T>(n, fft_direction(dir)))
+        .collect();
+    // With three axes or more, the last two are transformed slab by slab while a slab
+    // is in cache (one read and one write of the array for both axes instead of two).
+    let mut separate = d;
+    if d >= 3 {
+        let (ny, nx) = (shape[d - 2], shape[d - 1]);
+        if ny * nx * std::mem::size_of::<Complex<T>>() <= SLAB_BYTES {
+            slab_2d(data, ny, nx, &plans[d - 2], &plans[d - 1]);
+            separate = d - 2;
+        }
+    }
+    for (axis, plan) in plans.iter().enumerate().take(separate) {
+        fft_axis(data, shape, axis, plan);
     }
     scale(data, norm.factor(shape, dir));
+}
+
+/// Largest `[ny][nx]` slab transformed in one piece by [`slab_2d`] (a typical L2).
+const SLAB_BYTES: usize = 1 << 20;
+
+/// The 2-D FFT of every contiguous `[ny][nx]` slab of `data`, one slab per task: the
+/// rows in place, then the columns BLOCK at a time through a small transposed buffer.
+fn slab_2d<T: FftNum>(
+    data: &mut [Complex<T>],
+    ny: usize,
+    nx: usize,
+    fy: &Arc<dyn Fft<T>>,
+    fx: &Arc<dyn Fft<T>>,
+) {
+    let scratch_len = fx
+        .get_inplace_scratch_len()
+        .max(fy.get_outofplace_scratch_len());
+    data.par_chunks_mut(ny * nx).for_each_init(
+        || {
+            (
+                vec![zero::<T>(); BLOCK * ny],
+                vec![zero::<T>(); BLOCK * ny],
+                vec![zero::<T>(); scratch_len],
+            )
+        },
+        |(a, b, scratch), slab| {
+            if nx > 1 {
+                fx.process_with_scratch(slab, &mut scratch[..fx.get_inplace_scratch_len()]);
+            }
+            if ny <= 1 {
+                return;
+            }
+            let oop = fy.get_outofplace_scratch_len();
+            for c0 in (0..nx).step_by(BLOCK) {
+                let lines = BLOCK.min(nx - c0);
+                let (a, b) = (&mut a[..lines * ny], &mut b[..lines * ny]);
+                for j in 0..ny {
+                    let run = &slab[j * nx + c0..j * nx + c0 + lines];
+                    for (l, v) in run.iter().enumerate() {
+                        a[l * ny + j] = *v;
+                    }
+                }
+                fy.process_outofplace_with_scratch(a, b, &mut scratch[..oop]);
+                for j in 0..ny {
+                    let run = &mut slab[j * nx + c0..j * nx + c0 + lines];
+                    for (l, v) in run.iter_mut().enumerate() {
+                        *v = b[l * ny + j];
+                    }
+                }
+            }
+        },
+    );
 }
 
 /// The forward FFT of a real line: the `N/2 + 1` non-negative frequencies.
@@ -265,13 +388,16 @@ pub fn two_real_ffts(a: &[f64], b: &[f64]) -> (Vec<Complex<f64>>, Vec<Complex<f6
         Direction::Forward,
         Normalization::Unnormalized,
     );
-    (0..n)
-        .map(|k| {
-            let zk = z[k];
-            let zc = z[(n - k) % n].conj();
-            // (zk − zc) / (2i) = −i·(zk − zc) / 2.
-            let d = zk - zc;
-            ((zk + zc) * 0.5, Complex::new(d.im, -d.re) * 0.5)
-        })
-        .unzip()
+    (0..n).map(|k| split_two_real(z[k], z[(n - k) % n])).unzip()
+}
+
+/// One bin of both real spectra from the complex spectrum `Z` of `a + i·b`:
+/// `zk = Z_k`, `zm = Z_{(N−k) mod N}`; returns
+/// `(A_k, B_k) = ((Z_k + conj(Z_{N−k})) / 2, (Z_k − conj(Z_{N−k})) / (2i))`.
+// mirrors shaders/fft_two_real.wgsl: split_two_real
+pub fn split_two_real(zk: Complex<f64>, zm: Complex<f64>) -> (Complex<f64>, Complex<f64>) {
+    let zc = zm.conj();
+    // (zk − zc) / (2i) = −i·(zk − zc) / 2.
+    let d = zk - zc;
+    ((zk + zc) * 0.5, Complex::new(d.im, -d.re) * 0.5)
 }

@@ -638,6 +638,22 @@ impl SlicePlan {
         let m = spectrum.m;
         let mut frame = Frame::new(g.width, g.height, 1);
         let s = spectrum.spacing;
+        // The transfer is separable: one factor per column and one per row, computed
+        // once (for Lanczos kernels each is a numerical integral).
+        let (tx, ty): (Vec<f64>, Vec<f64>) = if deapodize {
+            (
+                (0..g.width)
+                    .into_par_iter()
+                    .map(|col| kernel.transfer(self.cr + col as f64, m))
+                    .collect(),
+                (0..g.height)
+                    .into_par_iter()
+                    .map(|row| kernel.transfer(self.cu - row as f64, m))
+                    .collect(),
+            )
+        } else {
+            (Vec::new(), Vec::new())
+        };
         frame
             .data
             .par_chunks_mut(g.width)
@@ -648,9 +664,7 @@ impl SlicePlan {
                     let xr = (self.nr + col as i64).rem_euclid(m as i64) as usize;
                     let mut v = re(yu * m + xr) * s;
                     if deapodize {
-                        let x = self.cr + col as f64;
-                        let y = self.cu - row as f64;
-                        let t = kernel.transfer(x, m) * kernel.transfer(y, m);
+                        let t = tx[col] * ty[row];
                         v /= t.max(1e-3);
                     }
                     *px = v;

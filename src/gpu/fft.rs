@@ -83,6 +83,8 @@ pub const COMMON_WGSL: &str = include_str!("../../shaders/fft_common.wgsl");
 pub const SPLIT_STREAM_WGSL: &str = include_str!("../../shaders/fft_split_stream.wgsl");
 /// `shaders/fft_stockham.wgsl`.
 pub const STOCKHAM_WGSL: &str = include_str!("../../shaders/fft_stockham.wgsl");
+/// `shaders/fft_two_real.wgsl`: the split of [`two_real_ffts`].
+pub const TWO_REAL_WGSL: &str = include_str!("../../shaders/fft_two_real.wgsl");
 
 /// Invocations per workgroup (`WORKGROUP` in `shaders/fft_common.wgsl`).
 const WORKGROUP: u32 = 64;
@@ -667,183 +669,267 @@ fn transform(
     variant: GpuFftVariant,
 ) -> Result<GpuFftOutput> {
     let t_start = Instant::now();
-    let done = |data: Vec<Complex<f32>>, timings: FftTimings| {
-        Ok(GpuFftOutput {
-            data,
-            timings: FftTimings {
-                total: t_start.elapsed().as_secs_f64(),
-                ..timings
-            },
-        })
-    };
     validate(ctx, input.len(), shape, axes)?;
-    if input.len() == 0 {
-        return done(Vec::new(), FftTimings::default());
-    }
-    let total = input.len();
-    let transformed: usize = axes.iter().map(|&a| shape[a]).product();
-    let factor = norm.apply(1.0, transformed, dir) as f32;
-    // (axis, pass) for every pass of the whole transform.
-    let passes: Vec<(usize, FftPass)> = axes
-        .iter()
-        .flat_map(|&axis| {
-            plan(variant, shape[axis].trailing_zeros())
-                .into_iter()
-                .map(move |p| (axis, p))
-        })
-        .collect();
-    if passes.is_empty() {
-        // Every transformed axis has length 1: the transform is the identity.
-        let data = match input {
-            Input::Host(d) => d.to_vec(),
-            Input::Device(b, n) => read_complex(ctx, b, n)?,
-        };
-        return done(
-            data.iter().map(|v| v * factor).collect(),
-            FftTimings::default(),
-        );
-    }
-
-    let dev = &ctx.device;
-    let module = ctx.shader(
-        match variant {
-            GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
-            GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
-        },
-        &variant.shader_source(),
-    )?;
-    let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("fft"),
-        entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-            storage(true, 1),
-            storage(false, 2),
-            storage(true, 3),
-        ],
-    });
-    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("fft"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipeline = |entry: &str| {
-        dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let mut pipelines: Vec<(&'static str, wgpu::ComputePipeline)> = Vec::new();
-    for (_, p) in &passes {
-        if !pipelines.iter().any(|(e, _)| *e == p.entry_point()) {
-            pipelines.push((p.entry_point(), pipeline(p.entry_point())));
-        }
-    }
-
-    let bytes = (total * 8) as u64;
-    let pong = ctx.storage_buffer("fft data b", bytes)?;
-    // One twiddle table per transformed axis.
-    let tables: Vec<wgpu::Buffer> = axes
-        .iter()
-        .map(|&axis| {
-            let t: Vec<[f32; 2]> = twiddle_table(shape[axis], dir)
-                .iter()
-                .map(|w| [w.re as f32, w.im as f32])
-                .collect();
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("fft twiddles"),
-                contents: bytemuck::cast_slice(&t),
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        })
-        .collect();
-    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
-    let query = timestamps.then(|| ctx.timestamp_pair());
+    let plan = GpuFftPlan::with_axes(ctx, shape, axes, dir, norm, variant)?;
     let setup = t_start.elapsed().as_secs_f64();
+    let mut out = plan.execute(ctx, input)?;
+    out.timings.setup = setup;
+    out.timings.total = t_start.elapsed().as_secs_f64();
+    Ok(out)
+}
 
-    let t_up = Instant::now();
-    let uploaded;
-    let (ping, upload) = match input {
-        Input::Host(data) => {
-            let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
-            uploaded = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("fft data a"),
-                contents: bytemuck::cast_slice(&host),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            });
-            ctx.wait()?;
-            (&uploaded, t_up.elapsed().as_secs_f64())
-        }
-        Input::Device(b, _) => (b, 0.0),
-    };
-    let bufs = [ping, &pong];
+/// A GPU FFT made ready once for one shape, direction, normalisation and variant: the
+/// shader module, the pipelines, the twiddle tables, the per-pass parameters and the
+/// second ping-pong buffer are built by [`GpuFftPlan::new`] and reused by every
+/// [`GpuFftPlan::execute_buffer`] (only the bind groups are made per call, which is
+/// cheap). Use it when the same transform runs many times, as the inverse 2-D FFT of
+/// every Fourier-volume-rendering view does ([`crate::gpu::fvr`]).
+pub struct GpuFftPlan {
+    shape: Vec<usize>,
+    total: usize,
+    factor: f32,
+    /// `(axis, pass)` for every pass of the whole transform.
+    passes: Vec<(usize, FftPass)>,
+    layout: wgpu::BindGroupLayout,
+    /// `layout` as a pipeline layout (also used by the two-real split).
+    pipeline_layout: wgpu::PipelineLayout,
+    pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
+    /// One uniform buffer of [`FftParams`] per pass.
+    uniforms: Vec<wgpu::Buffer>,
+    /// The twiddle table of each pass's axis, as an index into `tables`.
+    table_of_pass: Vec<usize>,
+    tables: Vec<wgpu::Buffer>,
+    /// The second ping-pong buffer (`None` when there is no pass).
+    pong: Option<wgpu::Buffer>,
+    query: Option<super::context::TimestampPair>,
+}
 
-    let t_k = Instant::now();
-    let mut enc = dev.create_command_encoder(&Default::default());
-    let last = passes.len() - 1;
-    let mut uniforms = Vec::with_capacity(passes.len());
-    for (i, &(axis, pass)) in passes.iter().enumerate() {
-        let n = shape[axis];
-        let params = FftParams {
-            n: n as u32,
-            log2n: n.trailing_zeros(),
-            stride: shape[axis + 1..].iter().product::<usize>() as u32,
-            batch: (total / n) as u32,
-            stage: pass.stage(),
-            direction: (dir == Direction::Inverse) as u32,
-            span: pass.span(),
-            scale: if i == last { factor } else { 1.0 },
-        };
-        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("fft params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let table = &tables[axes.iter().position(|&a| a == axis).unwrap_or(0)];
-        let bind = ctx.bind_group(
-            "fft pass",
-            &layout,
-            &[
-                ubuf.as_entire_binding(),
-                bufs[i % 2].as_entire_binding(),
-                bufs[(i + 1) % 2].as_entire_binding(),
-                table.as_entire_binding(),
-            ],
-        );
-        let pipeline = &pipelines
+impl GpuFftPlan {
+    /// Prepares the N-D transform of every axis of an array of `shape`.
+    ///
+    /// # Errors
+    /// As [`fft_nd`] (power-of-two axes, one storage binding), [`Error::Gpu`] when a
+    /// shader fails to compile.
+    pub fn new(
+        ctx: &GpuContext,
+        shape: &[usize],
+        dir: Direction,
+        norm: Normalization,
+        variant: GpuFftVariant,
+    ) -> Result<Self> {
+        let axes: Vec<usize> = (0..shape.len()).collect();
+        let total = shape
             .iter()
-            .find(|(e, _)| *e == pass.entry_point())
-            .expect("every entry point has a pipeline")
-            .1;
-        let (x, y) = workgroups(ctx, pass.items_per_line(n as u32) * params.batch);
-        {
+            .try_fold(1usize, |a, &n| a.checked_mul(n))
+            .ok_or_else(|| Error::too_large("fft shape", format!("{shape:?} overflows")))?;
+        validate(ctx, total, shape, &axes)?;
+        Self::with_axes(ctx, shape, &axes, dir, norm, variant)
+    }
+
+    /// The shape this plan transforms.
+    pub fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+
+    /// The plan for the already validated `shape` along `axes`.
+    fn with_axes(
+        ctx: &GpuContext,
+        shape: &[usize],
+        axes: &[usize],
+        dir: Direction,
+        norm: Normalization,
+        variant: GpuFftVariant,
+    ) -> Result<Self> {
+        let total: usize = shape.iter().product();
+        let transformed: usize = axes.iter().map(|&a| shape[a]).product();
+        let factor = norm.apply(1.0, transformed, dir) as f32;
+        let passes: Vec<(usize, FftPass)> = axes
+            .iter()
+            .flat_map(|&axis| {
+                plan(variant, shape[axis].trailing_zeros())
+                    .into_iter()
+                    .map(move |p| (axis, p))
+            })
+            .collect();
+        let dev = &ctx.device;
+        let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("fft"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(true, 1),
+                storage(false, 2),
+                storage(true, 3),
+            ],
+        });
+        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("fft"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let mut pipelines: Vec<(&'static str, wgpu::ComputePipeline)> = Vec::new();
+        let mut uniforms = Vec::with_capacity(passes.len());
+        let mut table_of_pass = Vec::with_capacity(passes.len());
+        let mut tables = Vec::new();
+        let mut pong = None;
+        if total > 0 && !passes.is_empty() {
+            let module = ctx.shader(
+                match variant {
+                    GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
+                    GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
+                },
+                &variant.shader_source(),
+            )?;
+            for (_, p) in &passes {
+                let entry = p.entry_point();
+                if !pipelines.iter().any(|(e, _)| *e == entry) {
+                    let pl = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&pipeline_layout),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    });
+                    pipelines.push((entry, pl));
+                }
+            }
+            // One twiddle table per transformed axis.
+            tables = axes
+                .iter()
+                .map(|&axis| {
+                    let t: Vec<[f32; 2]> = twiddle_table(shape[axis], dir)
+                        .iter()
+                        .map(|w| [w.re as f32, w.im as f32])
+                        .collect();
+                    dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("fft twiddles"),
+                        contents: bytemuck::cast_slice(&t),
+                        usage: wgpu::BufferUsages::STORAGE,
+                    })
+                })
+                .collect();
+            let last = passes.len() - 1;
+            for (i, &(axis, pass)) in passes.iter().enumerate() {
+                let n = shape[axis];
+                let params = FftParams {
+                    n: n as u32,
+                    log2n: n.trailing_zeros(),
+                    stride: shape[axis + 1..].iter().product::<usize>() as u32,
+                    batch: (total / n) as u32,
+                    stage: pass.stage(),
+                    direction: (dir == Direction::Inverse) as u32,
+                    span: pass.span(),
+                    scale: if i == last { factor } else { 1.0 },
+                };
+                uniforms.push(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                }));
+                table_of_pass.push(axes.iter().position(|&a| a == axis).unwrap_or(0));
+            }
+            pong = Some(ctx.storage_buffer("fft data b", (total * 8) as u64)?);
+        }
+        let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        Ok(GpuFftPlan {
+            shape: shape.to_vec(),
+            total,
+            factor,
+            passes,
+            layout,
+            pipeline_layout,
+            pipelines,
+            uniforms,
+            table_of_pass,
+            tables,
+            pong,
+            query: timestamps.then(|| ctx.timestamp_pair()),
+        })
+    }
+
+    /// Runs the plan on complex f32 values already on the device (`[re, im]` pairs,
+    /// `STORAGE | COPY_SRC`, exactly the array's size; overwritten) and reads the
+    /// result back. `setup` in the timings is 0 (the plan was built before).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when the buffer's size is not the array's; [`Error::Gpu`] on
+    /// device failure.
+    pub fn execute_buffer(&self, ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<GpuFftOutput> {
+        if self.total as u64 * 8 != buffer.size() {
+            return Err(Error::invalid(
+                "fft buffer",
+                format!(
+                    "{} bytes do not hold an array of shape {:?}",
+                    buffer.size(),
+                    self.shape
+                ),
+            ));
+        }
+        self.execute(ctx, Input::Device(buffer, self.total))
+    }
+
+    /// Records every pass on the array in `ping` (which it may overwrite) into `enc`,
+    /// with the timestamp writes and their resolve when the adapter has them, and
+    /// returns the buffer that will hold the result: `ping` or the plan's own second
+    /// buffer. With no pass (all axes of length 1) nothing is recorded and the result
+    /// is `ping` unscaled.
+    fn encode<'a>(
+        &'a self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        ping: &'a wgpu::Buffer,
+    ) -> &'a wgpu::Buffer {
+        let Some(pong) = &self.pong else {
+            return ping;
+        };
+        let passes = &self.passes;
+        let bufs = [ping, pong];
+        let query = self.query.as_ref();
+        let last = passes.len() - 1;
+        for (i, &(axis, pass)) in passes.iter().enumerate() {
+            let n = self.shape[axis];
+            let bind = ctx.bind_group(
+                "fft pass",
+                &self.layout,
+                &[
+                    self.uniforms[i].as_entire_binding(),
+                    bufs[i % 2].as_entire_binding(),
+                    bufs[(i + 1) % 2].as_entire_binding(),
+                    self.tables[self.table_of_pass[i]].as_entire_binding(),
+                ],
+            );
+            let pipeline = &self
+                .pipelines
+                .iter()
+                .find(|(e, _)| *e == pass.entry_point())
+                .expect("every entry point has a pipeline")
+                .1;
+            let batch = (self.total / n) as u32;
+            let (x, y) = workgroups(ctx, pass.items_per_line(n as u32) * batch);
             let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(pass.entry_point()),
                 // The first pass writes the start, the last the end (a pass must
                 // write at least one, so the middle ones write none).
-                timestamp_writes: query.as_ref().filter(|_| i == 0 || i == last).map(|q| {
+                timestamp_writes: query.filter(|_| i == 0 || i == last).map(|q| {
                     wgpu::ComputePassTimestampWrites {
                         query_set: &q.set,
                         beginning_of_pass_write_index: (i == 0).then_some(0),
@@ -855,31 +941,177 @@ fn transform(
             cpass.set_bind_group(0, &bind, &[]);
             cpass.dispatch_workgroups(x, y, 1);
         }
-        uniforms.push(ubuf);
+        if let Some(q) = query {
+            q.resolve(enc);
+        }
+        bufs[passes.len() % 2]
     }
-    if let Some(q) = &query {
-        q.resolve(&mut enc);
+
+    fn execute(&self, ctx: &GpuContext, input: Input<'_>) -> Result<GpuFftOutput> {
+        let t_start = Instant::now();
+        let done = |data: Vec<Complex<f32>>, timings: FftTimings| {
+            Ok(GpuFftOutput {
+                data,
+                timings: FftTimings {
+                    total: t_start.elapsed().as_secs_f64(),
+                    ..timings
+                },
+            })
+        };
+        if input.len() == 0 {
+            return done(Vec::new(), FftTimings::default());
+        }
+        let factor = self.factor;
+        if self.pong.is_none() {
+            // Every transformed axis has length 1: the transform is the identity.
+            let data = match input {
+                Input::Host(d) => d.to_vec(),
+                Input::Device(b, n) => read_complex(ctx, b, n)?,
+            };
+            return done(
+                data.iter().map(|v| v * factor).collect(),
+                FftTimings::default(),
+            );
+        }
+        let dev = &ctx.device;
+        let t_up = Instant::now();
+        let uploaded;
+        let (ping, upload) = match input {
+            Input::Host(data) => {
+                let host: Vec<[f32; 2]> = data.iter().map(|v| [v.re, v.im]).collect();
+                uploaded = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft data a"),
+                    contents: bytemuck::cast_slice(&host),
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                });
+                ctx.wait()?;
+                (&uploaded, t_up.elapsed().as_secs_f64())
+            }
+            Input::Device(b, _) => (b, 0.0),
+        };
+        let query = self.query.as_ref();
+        let t_k = Instant::now();
+        let mut enc = dev.create_command_encoder(&Default::default());
+        let result = self.encode(ctx, &mut enc, ping);
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        let kernel = match query {
+            Some(q) => q.seconds(ctx)?,
+            None => t_k.elapsed().as_secs_f64(),
+        };
+        let t_r = Instant::now();
+        let result = read_complex(ctx, result, self.total)?;
+        let readback = t_r.elapsed().as_secs_f64();
+        done(
+            result,
+            FftTimings {
+                setup: 0.0,
+                upload,
+                kernel,
+                kernel_from_timestamps: query.is_some(),
+                readback,
+                total: 0.0,
+            },
+        )
+    }
+}
+
+/// The two spectra `(A, B)` of [`two_real_ffts`].
+pub type TwoSpectra = (Vec<Complex<f32>>, Vec<Complex<f32>>);
+
+/// The unscaled forward FFTs of two real lines of the same power-of-two length through
+/// one complex GPU FFT: the port of [`crate::cpu::fft::two_real_ffts`]. `z = a + i·b` is
+/// uploaded, transformed once (Stockham) and split on the device by the Hermitian
+/// symmetry of real-input spectra, `A_k = (Z_k + conj(Z_{N−k})) / 2` and
+/// `B_k = (Z_k − conj(Z_{N−k})) / (2i)` (`shaders/fft_two_real.wgsl: split_two_real`,
+/// one invocation per `k`); both full spectra (`N` bins each) are read back. This is
+/// how Jansen et al. (§3) transform real data at the cost of half a complex transform
+/// each.
+///
+/// # Errors
+/// [`Error::Invalid`] when the lengths differ or are not a power of two;
+/// [`Error::TooLarge`] when the `2N` outputs exceed one storage binding;
+/// [`Error::Gpu`] on device failure.
+pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectra> {
+    if a.len() != b.len() {
+        return Err(Error::invalid(
+            "two_real_ffts",
+            format!("lines of {} and {} samples", a.len(), b.len()),
+        ));
+    }
+    let n = a.len();
+    if n == 0 {
+        return Ok((Vec::new(), Vec::new()));
+    }
+    validate(ctx, 2 * n, &[2 * n], &[])?;
+    let plan = GpuFftPlan::new(
+        ctx,
+        &[n],
+        Direction::Forward,
+        Normalization::Unnormalized,
+        GpuFftVariant::Stockham,
+    )?;
+    let dev = &ctx.device;
+    let module = ctx.shader(
+        "fft_two_real.wgsl",
+        &format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{TWO_REAL_WGSL}"),
+    )?;
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("two_real_split"),
+        layout: Some(&plan.pipeline_layout),
+        module: &module,
+        entry_point: Some("two_real_split"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let z: Vec<[f32; 2]> = a.iter().zip(b).map(|(&x, &y)| [x, y]).collect();
+    let zbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("two real z"),
+        contents: bytemuck::cast_slice(&z),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    let params = FftParams {
+        n: n as u32,
+        log2n: n.trailing_zeros(),
+        stride: 1,
+        batch: 1,
+        scale: 1.0,
+        ..FftParams::default()
+    };
+    let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("two real params"),
+        contents: bytemuck::bytes_of(&params),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let out = ctx.storage_buffer("two real spectra", (2 * n * 8) as u64)?;
+    let mut enc = dev.create_command_encoder(&Default::default());
+    let spectrum = plan.encode(ctx, &mut enc, &zbuf);
+    // Binding 3 (twiddles) is unused by the split; it is bound to the input again.
+    let bind = ctx.bind_group(
+        "two real split",
+        &plan.layout,
+        &[
+            ubuf.as_entire_binding(),
+            spectrum.as_entire_binding(),
+            out.as_entire_binding(),
+            spectrum.as_entire_binding(),
+        ],
+    );
+    let (x, y) = workgroups(ctx, n as u32);
+    {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("two_real_split"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(x, y, 1);
     }
     ctx.queue.submit([enc.finish()]);
     ctx.wait()?;
-    let kernel = match &query {
-        Some(q) => q.seconds(ctx)?,
-        None => t_k.elapsed().as_secs_f64(),
-    };
-    let t_r = Instant::now();
-    let result = read_complex(ctx, bufs[passes.len() % 2], total)?;
-    let readback = t_r.elapsed().as_secs_f64();
-    done(
-        result,
-        FftTimings {
-            setup,
-            upload,
-            kernel,
-            kernel_from_timestamps: timestamps,
-            readback,
-            total: 0.0,
-        },
-    )
+    let mut both = read_complex(ctx, &out, 2 * n)?;
+    let second = both.split_off(n);
+    Ok((both, second))
 }
 
 /// Reads `n` complex f32 values back from `buffer`.

@@ -7,15 +7,20 @@
 //!    invocation per frequency sample (nearest, trilinear, Lanczos-2/3/4; the same taps,
 //!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure);
 //! 2. the inverse 2-D FFT of the slice, in place in the slice's buffer (no host round
-//!    trip), with [`super::fft::fft_nd_buffer_timed`] (Stockham; `M` must be a power of
-//!    two), and the readback of the `M²` result;
+//!    trip), with a [`GpuFftPlan`] made once at upload (Stockham; `M` must be a power
+//!    of two), and the readback of the `M²` result;
 //! 3. the host crops, scales and optionally de-apodises exactly as the CPU does
 //!    (the shared `SlicePlan::crop`, in f64).
 //!
 //! The Dirichlet kernel stays on the CPU (refused here with a clear error).
+//!
+//! Everything that does not depend on the view (the slice pipeline, the slice buffer,
+//! the parameter buffer and bind group, the inverse FFT's pipelines, twiddle tables and
+//! ping-pong buffer) is built once by [`GpuFvrSpectrum::upload`]; a view only writes
+//! 48 bytes of parameters and records the dispatches.
 
 use super::context::GpuContext;
-use super::fft::{fft_nd_buffer_timed, GpuFftVariant};
+use super::fft::{GpuFftPlan, GpuFftVariant};
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fvr::{FvrSpectrum, FvrView, Kernel, SlicePlan};
 use crate::error::{Error, Result};
@@ -75,12 +80,20 @@ fn kernel_code(kernel: Kernel) -> Result<(u32, u32)> {
     }
 }
 
-/// A spectrum uploaded once (complex f32, `M³`), with the slice pipeline compiled
-/// once, reused by every view.
+/// A spectrum uploaded once (complex f32, `M³`), with the slice pipeline, the slice
+/// and parameter buffers, and the inverse 2-D FFT plan made once, reused by every view.
+/// Views share the slice and parameter buffers: render the views of one
+/// `GpuFvrSpectrum` one after another, not from several threads at once.
 pub struct GpuFvrSpectrum<'a> {
     cpu: &'a FvrSpectrum,
-    buffer: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
+    /// [`FvrParams`], rewritten per view.
+    params: wgpu::Buffer,
+    /// The `M²` slice, transformed in place.
+    slice: wgpu::Buffer,
+    bind: wgpu::BindGroup,
+    /// The inverse `M × M` FFT (`None` when `M` is not a power of two).
+    fft: Option<GpuFftPlan>,
 }
 
 impl<'a> GpuFvrSpectrum<'a> {
@@ -126,11 +139,42 @@ impl<'a> GpuFvrSpectrum<'a> {
                 compilation_options: Default::default(),
                 cache: None,
             });
+        let m = spectrum.side();
+        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("fvr params"),
+            size: std::mem::size_of::<FvrParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let slice = ctx.storage_buffer("fvr slice", (m * m * 8) as u64)?;
+        let bind = ctx.bind_group(
+            "fvr slice",
+            &pipeline.get_bind_group_layout(0),
+            &[
+                params.as_entire_binding(),
+                buffer.as_entire_binding(),
+                slice.as_entire_binding(),
+            ],
+        );
+        let fft = if m.is_power_of_two() {
+            Some(GpuFftPlan::new(
+                ctx,
+                &[m, m],
+                Direction::Inverse,
+                Normalization::Unnormalized,
+                GpuFftVariant::Stockham,
+            )?)
+        } else {
+            None
+        };
         ctx.wait()?;
         Ok(GpuFvrSpectrum {
             cpu: spectrum,
-            buffer,
             pipeline,
+            params,
+            slice,
+            bind,
+            fft,
         })
     }
 
@@ -143,7 +187,8 @@ impl<'a> GpuFvrSpectrum<'a> {
 /// Where the time of one GPU view went, in seconds (wall clock, each step waited for).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FvrTimings {
-    /// Parameters, buffers and bind group (the pipeline is compiled at upload).
+    /// Resolving the view and writing its parameters (pipelines, buffers and the FFT
+    /// plan are made at upload).
     pub setup: f64,
     /// The slice extraction dispatch.
     pub slice: f64,
@@ -213,25 +258,15 @@ pub fn fvr_project_timed(
         du: plan.du as f32,
     };
 
+    let Some(fft_plan) = &spectrum.fft else {
+        return Err(Error::invalid(
+            "FVR cube side",
+            format!("{m} is not a power of two"),
+        ));
+    };
     let dev = &ctx.device;
-    let pipeline = &spectrum.pipeline;
-    let layout = pipeline.get_bind_group_layout(0);
-    let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("fvr params"),
-        contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let bytes = (m * m * 8) as u64;
-    let out = ctx.storage_buffer("fvr slice", bytes)?;
-    let bind = ctx.bind_group(
-        "fvr slice",
-        &layout,
-        &[
-            ubuf.as_entire_binding(),
-            spectrum.buffer.as_entire_binding(),
-            out.as_entire_binding(),
-        ],
-    );
+    ctx.queue
+        .write_buffer(&spectrum.params, 0, bytemuck::bytes_of(&params));
     let invocations = (m * m) as u32;
     let groups = invocations.div_ceil(WORKGROUP).max(1);
     let x = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
@@ -245,8 +280,8 @@ pub fn fvr_project_timed(
             label: Some("extract_slice"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, &bind, &[]);
+        pass.set_pipeline(&spectrum.pipeline);
+        pass.set_bind_group(0, &spectrum.bind, &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
     ctx.queue.submit([enc.finish()]);
@@ -254,15 +289,7 @@ pub fn fvr_project_timed(
     let slice_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let image = fft_nd_buffer_timed(
-        ctx,
-        &out,
-        &[m, m],
-        Direction::Inverse,
-        Normalization::Unnormalized,
-        GpuFftVariant::Stockham,
-    )?
-    .data;
+    let image = fft_plan.execute_buffer(ctx, &spectrum.slice)?.data;
     let fft = t.elapsed().as_secs_f64();
 
     let t = Instant::now();

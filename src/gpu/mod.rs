@@ -5,12 +5,13 @@
 //! every failure into a typed [`crate::Error`]. `probe` is the smallest end-to-end
 //! check that a device really computes: upload, dispatch, read back, compare. `fft`
 //! is the power-of-two FFT (split-stream and Stockham variants); `fvr` the Fourier
-//! volume rendering slice and its inverse FFT.
+//! volume rendering slice and its inverse FFT; `project` Joseph's CT forward projector.
 
 pub mod context;
 pub mod fft;
 pub mod fvr;
 pub mod probe;
+pub mod project;
 pub mod raycast;
 
 pub use context::{AdapterSummary, GpuContext};

@@ -35,6 +35,7 @@ pub mod dicom;
 pub mod nifti;
 pub mod npy;
 pub mod nrrd;
+pub mod projections;
 pub mod pvm;
 pub mod raw;
 pub mod tiff;

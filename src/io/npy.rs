@@ -117,6 +117,86 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     })
 }
 
+/// Reads an array of any number of dimensions whose dtype is `f4` or `f8` (either
+/// byte order) **without rounding**: its shape, its values in C order as f64 (an `f4`
+/// file widens exactly), and whether the file stored `f8`.
+pub fn read_npy_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>, bool)> {
+    let (file, len) = open(path)?;
+    let reader = &mut BufReader::new(file);
+    let h = read_header(reader, len, path, FLOAT_TYPES, FLOAT_TYPES_TEXT)?;
+    let size = h.stored.size();
+    let expected = h.count as u64 * size as u64;
+    let available = len.saturating_sub(h.data_offset);
+    if available < expected {
+        return Err(too_short(path, expected, available));
+    }
+    let mut bytes = super::reserve::<u8>(h.count * size, path)?;
+    bytes.resize(h.count * size, 0);
+    reader
+        .read_exact(&mut bytes)
+        .map_err(|e| super::read_error(path, e))?;
+    let big = h.endian == Endian::Big;
+    let values: Vec<f64> = if size == 8 {
+        bytes
+            .chunks_exact(8)
+            .map(|c| {
+                let a: [u8; 8] = c.try_into().expect("8-byte chunk");
+                if big {
+                    f64::from_be_bytes(a)
+                } else {
+                    f64::from_le_bytes(a)
+                }
+            })
+            .collect()
+    } else {
+        bytes
+            .chunks_exact(4)
+            .map(|c| {
+                let a: [u8; 4] = c.try_into().expect("4-byte chunk");
+                f64::from(if big {
+                    f32::from_be_bytes(a)
+                } else {
+                    f32::from_le_bytes(a)
+                })
+            })
+            .collect()
+    };
+    let values = if h.fortran_order {
+        reorder(values, &h.shape)
+    } else {
+        values
+    };
+    Ok((h.shape, values, size == 8))
+}
+
+/// Writes `data` as a little-endian float64 array of the given shape in C order,
+/// atomically (the f64 twin of [`write_npy_f32`]).
+pub fn write_npy_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<()> {
+    let n = shape.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
+    if n != Some(data.len()) {
+        return Err(Error::invalid(
+            "array shape",
+            format!(
+                "{}: shape {shape:?} does not hold the {} values given",
+                path.display(),
+                data.len()
+            ),
+        ));
+    }
+    let header = header_bytes("<f8", shape);
+    write_atomic(path, |w| {
+        w.write_all(&header)
+            .and_then(|()| {
+                for chunk in data.chunks(1 << 16) {
+                    let bytes: Vec<u8> = chunk.iter().flat_map(|v| v.to_le_bytes()).collect();
+                    w.write_all(&bytes)?;
+                }
+                Ok(())
+            })
+            .map_err(|e| Error::io(path, e))
+    })
+}
+
 // ---------------------------------------------------------------------------------
 // Reading
 // ---------------------------------------------------------------------------------
@@ -393,33 +473,35 @@ fn parse_descr(s: &str) -> std::result::Result<(Stored, Endian), String> {
     Ok((stored, endian))
 }
 
+/// Reorders values from Fortran order to C order (see [`fortran_to_c`]).
+fn reorder<T: Copy>(v: Vec<T>, shape: &[usize]) -> Vec<T> {
+    // In Fortran order, axis a advances by the product of the axes before it.
+    let mut strides = vec![1usize; shape.len()];
+    for a in 1..shape.len() {
+        strides[a] = strides[a - 1] * shape[a - 1];
+    }
+    // Walk the array in C order with an odometer, tracking the Fortran offset.
+    let mut out = Vec::with_capacity(v.len());
+    let mut index = vec![0usize; shape.len()];
+    let mut offset = 0usize;
+    for _ in 0..v.len() {
+        out.push(v[offset]);
+        for a in (0..shape.len()).rev() {
+            index[a] += 1;
+            offset += strides[a];
+            if index[a] < shape[a] {
+                break;
+            }
+            offset -= strides[a] * shape[a];
+            index[a] = 0;
+        }
+    }
+    out
+}
+
 /// Reorders samples from Fortran order (first axis fastest) to C order (last axis
 /// fastest); `shape` is the array's shape as the header states it.
 fn fortran_to_c(samples: Samples, shape: &[usize]) -> Samples {
-    fn reorder<T: Copy>(v: Vec<T>, shape: &[usize]) -> Vec<T> {
-        // In Fortran order, axis a advances by the product of the axes before it.
-        let mut strides = vec![1usize; shape.len()];
-        for a in 1..shape.len() {
-            strides[a] = strides[a - 1] * shape[a - 1];
-        }
-        // Walk the array in C order with an odometer, tracking the Fortran offset.
-        let mut out = Vec::with_capacity(v.len());
-        let mut index = vec![0usize; shape.len()];
-        let mut offset = 0usize;
-        for _ in 0..v.len() {
-            out.push(v[offset]);
-            for a in (0..shape.len()).rev() {
-                index[a] += 1;
-                offset += strides[a];
-                if index[a] < shape[a] {
-                    break;
-                }
-                offset -= strides[a] * shape[a];
-                index[a] = 0;
-            }
-        }
-        out
-    }
     match samples {
         Samples::U8(v) => Samples::U8(reorder(v, shape)),
         Samples::U16(v) => Samples::U16(reorder(v, shape)),

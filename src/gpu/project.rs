@@ -1,0 +1,212 @@
+//! Joseph forward projection on the GPU: the port of
+//! [`crate::cpu::project::project_volume`].
+//!
+//! The grid is uploaded once as f32 into a storage buffer (read with manual bilinear
+//! interpolation: the exact path, the same taps and zero rule as the CPU's
+//! [`crate::cpu::project::slice_bilinear`]); every view's rays go up as
+//! [`JosephView<f32>`] (built by the same code as the CPU's, in f64, then rounded).
+//! `shaders/project.wgsl: project` runs one invocation per detector pixel —
+//! `pixel_ray`, then `joseph_ray` — over as many views per dispatch as keep one
+//! dispatch near [`SAMPLES_PER_DISPATCH`] bilinear samples (a slow software device
+//! must never run one dispatch for many seconds); each chunk is read back as it
+//! finishes.
+
+use super::context::GpuContext;
+use crate::cpu::project::{joseph_views, Grid, JosephView, ProjectOptions};
+use crate::ct::{Geometry, Projections};
+use crate::error::{Error, Result};
+use crate::real::Real;
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+/// `shaders/shared/project_params.wgsl`: the WGSL twins of [`ProjectParams`] and
+/// [`JosephView`].
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/project_params.wgsl");
+/// `shaders/project.wgsl`.
+pub const PROJECT_WGSL: &str = include_str!("../../shaders/project.wgsl");
+
+/// Invocations per workgroup (`WORKGROUP` in `shaders/project.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// The bilinear samples one dispatch may take at most (about a second on lavapipe).
+pub const SAMPLES_PER_DISPATCH: usize = 1 << 25;
+
+/// The complete WGSL module.
+pub fn shader_source() -> String {
+    format!("{PARAMS_WGSL}\n{PROJECT_WGSL}")
+}
+
+/// Parameters of one dispatch, shared with
+/// `shaders/shared/project_params.wgsl: ProjectParams` (eight u32, 32 bytes;
+/// `tests/gpu_layout.rs` checks the layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ProjectParams {
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub cols: u32,
+    pub rows: u32,
+    pub view_offset: u32,
+    pub n_views: u32,
+    pub row_stride: u32,
+}
+
+/// Where the time of a GPU projection went, in seconds (wall clock).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProjectTimings {
+    /// Shader compilation, uploads, buffers.
+    pub setup: f64,
+    /// Dispatches and readbacks.
+    pub project: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// [`crate::cpu::project::project_volume`] on the GPU, in f32: the same projections
+/// within the tolerance `tests/gpu_ct_project.rs` states.
+///
+/// # Errors
+/// [`Error::Invalid`] for an invalid geometry; [`Error::TooLarge`] when the grid does
+/// not fit one storage binding; [`Error::Gpu`] on device failure.
+pub fn project_volume<R: Real>(
+    ctx: &GpuContext,
+    grid: &Grid<R>,
+    g: &Geometry,
+    options: &ProjectOptions,
+) -> Result<Projections<f32>> {
+    Ok(project_volume_timed(ctx, grid, g, options)?.0)
+}
+
+/// [`project_volume`] with timings.
+///
+/// # Errors
+/// As [`project_volume`].
+pub fn project_volume_timed<R: Real>(
+    ctx: &GpuContext,
+    grid: &Grid<R>,
+    g: &Geometry,
+    options: &ProjectOptions,
+) -> Result<(Projections<f32>, ProjectTimings)> {
+    let t0 = Instant::now();
+    g.validate()?;
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    let vol_bytes = (grid.data.len() as u64).saturating_mul(4);
+    if vol_bytes > limit || grid.data.len() > u32::MAX as usize {
+        return Err(Error::too_large(
+            "GPU projection grid",
+            format!(
+                "{:?} f32 voxels ({vol_bytes} bytes) exceed the adapter's storage-binding \
+                 limit of {limit} bytes: use a smaller volume or --backend cpu",
+                grid.dims
+            ),
+        ));
+    }
+    let dev = &ctx.device;
+    let vol = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("projection grid"),
+        contents: bytemuck::cast_slice(&grid.to_f32()),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let views: Vec<JosephView<f32>> = joseph_views(g, grid.affine);
+    let vbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("joseph views"),
+        contents: bytemuck::cast_slice(&views),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let module = ctx.shader("project.wgsl", &shader_source())?;
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("project"),
+        layout: None,
+        module: &module,
+        entry_point: Some("project"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let layout = pipeline.get_bind_group_layout(0);
+
+    // Views per dispatch: bounded by the sample budget and the output binding.
+    let per_view = g.rows * g.cols;
+    let longest = grid.dims.iter().copied().max().unwrap_or(1);
+    let by_work = SAMPLES_PER_DISPATCH / (per_view * longest).max(1);
+    let by_bytes = (limit / (per_view as u64 * 4).max(1)) as usize;
+    let chunk = by_work.min(by_bytes).clamp(1, g.n_angles());
+    if per_view as u64 * 4 > limit {
+        return Err(Error::too_large(
+            "GPU projection",
+            format!(
+                "one {}×{} projection exceeds the adapter's storage-binding limit",
+                g.cols, g.rows
+            ),
+        ));
+    }
+    let out = ctx.storage_buffer("projections", (chunk * per_view * 4) as u64)?;
+    let mut result = Projections::<f32>::zeros(g)?;
+    let setup = t0.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
+    let mut k0 = 0;
+    while k0 < g.n_angles() {
+        let n = chunk.min(g.n_angles() - k0);
+        let invocations = (n * per_view) as u32;
+        let groups = invocations.div_ceil(WORKGROUP).max(1);
+        let x = groups.min(max_x);
+        let y = groups.div_ceil(x);
+        let params = ProjectParams {
+            nx: grid.dims[0] as u32,
+            ny: grid.dims[1] as u32,
+            nz: grid.dims[2] as u32,
+            cols: g.cols as u32,
+            rows: g.rows as u32,
+            view_offset: k0 as u32,
+            n_views: n as u32,
+            row_stride: x * WORKGROUP,
+        };
+        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("project params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind = ctx.bind_group(
+            "project",
+            &layout,
+            &[
+                ubuf.as_entire_binding(),
+                vbuf.as_entire_binding(),
+                vol.as_entire_binding(),
+                out.as_entire_binding(),
+            ],
+        );
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("project"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        ctx.queue.submit([enc.finish()]);
+        let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
+        result.data[k0 * per_view..(k0 + n) * per_view]
+            .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
+        if let Some(f) = options.on_view {
+            (0..n).for_each(|_| f());
+        }
+        k0 += n;
+    }
+    let project = t.elapsed().as_secs_f64();
+    Ok((
+        result,
+        ProjectTimings {
+            setup,
+            project,
+            total: t0.elapsed().as_secs_f64(),
+        },
+    ))
+}
