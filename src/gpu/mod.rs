@@ -8,6 +8,7 @@
 //! volume rendering slice and its inverse FFT; `project` Joseph's CT forward projector.
 
 pub mod context;
+pub mod fbp;
 pub mod fft;
 pub mod fvr;
 pub mod probe;
