@@ -279,16 +279,18 @@ fn to_r<R: Real>(v: DVec3) -> [R; 3] {
 /// column `c`) at `c = a + i·b``, zero outside `[−1, cols)` as [`bilinear_zero`].
 #[inline(always)]
 fn interp_line<R: Real>(out: &mut [R], line: &[R], cols: usize, a: R, b: R) {
-    let lim = R::of(cols as f64);
+    let lim = R::of(cols as f64 + 1.0);
     let mut fi = R::zero();
     for acc in out.iter_mut() {
         let c = a + fi * b;
         fi = fi + R::one();
-        let fx = c.floor();
-        if fx >= -R::one() && fx < lim {
-            let t = c - fx;
-            // fx + 1 ∈ [0, cols]: both taps lie in the bordered line.
-            let ix = (fx + R::one()).to_usize().unwrap_or(0);
+        // s = c + 1 ≥ 0 inside, so truncation is the floor (no libm call). The
+        // condition is bilinear_zero's ⌊c⌋ ∈ [−1, cols).
+        let s = c + R::one();
+        if s >= R::zero() && s < lim {
+            let ix = s.to_usize().unwrap_or(0);
+            let t = s - R::of(ix as f64);
+            // ix ∈ [0, cols]: both taps lie in the bordered line.
             *acc = *acc + line[ix] * (R::one() - t) + line[ix + 1] * t;
         }
     }
