@@ -147,3 +147,23 @@ fn project_shader_validates() {
     .validate(&module)
     .expect("project.wgsl validates");
 }
+
+#[test]
+fn fbp_params_layout_agrees() {
+    use voxlab::gpu::fbp::{shader_source, FbpParams};
+    let (span, members) = wgsl_struct_layout(&shader_source(), "FbpParams");
+    assert_eq!(span as usize, size_of::<FbpParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("origin", offset_of!(FbpParams, origin)),
+        ("step_i", offset_of!(FbpParams, step_i)),
+        ("step_j", offset_of!(FbpParams, step_j)),
+        ("step_k", offset_of!(FbpParams, step_k)),
+        ("dims", offset_of!(FbpParams, dims)),
+        ("det", offset_of!(FbpParams, det)),
+        ("scale", offset_of!(FbpParams, scale)),
+    ];
+    for ((name, off), (wname, woff)) in rust.iter().zip(&members) {
+        assert_eq!((*name, *off as u32), (wname.as_str(), *woff));
+    }
+    assert_eq!(members.len(), rust.len());
+}

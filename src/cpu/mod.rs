@@ -6,6 +6,7 @@
 
 pub mod d2vr;
 pub mod dft;
+pub mod fbp;
 pub mod fft;
 pub mod filter;
 pub mod fvr;

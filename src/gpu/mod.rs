@@ -9,6 +9,7 @@
 
 pub mod context;
 pub mod d2vr;
+pub mod fbp;
 pub mod fft;
 pub mod fvr;
 pub mod probe;
