@@ -2,6 +2,7 @@
 
 mod cli_d2vr;
 mod cli_project;
+mod cli_reconstruct;
 
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
@@ -107,6 +108,10 @@ enum Command {
     /// a volume (CPU f64/f32 or GPU), in a parallel or cone-beam geometry; writes a
     /// projection stack (.npy, .nrrd) and its geometry JSON.
     Project(Box<cli_project::ProjectArgs>),
+    /// CT reconstruction by filtered backprojection: FBP of a scikit-image sinogram or a
+    /// parallel stack (as iradon), FDK of a cone-beam stack (on RTK's grid); CPU f64/f32
+    /// or GPU; writes .npy (float32), .nrrd or .png.
+    Reconstruct(Box<cli_reconstruct::ReconstructArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -483,6 +488,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::Fvr(args) => fvr(*args),
         Command::D2vr(args) => cli_d2vr::run(*args),
         Command::Project(args) => cli_project::project(*args),
+        Command::Reconstruct(args) => cli_reconstruct::run(*args),
         Command::Info {
             input,
             load,
