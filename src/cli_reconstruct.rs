@@ -97,7 +97,11 @@ fn check_out(what: &str, path: &Path, allowed: &[&str]) -> Result<()> {
     if !parent.is_dir() {
         return Err(Error::invalid(
             what,
-            format!("{}: the folder {} does not exist", path.display(), parent.display()),
+            format!(
+                "{}: the folder {} does not exist",
+                path.display(),
+                parent.display()
+            ),
         ));
     }
     Ok(())
@@ -217,16 +221,19 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     }
     let truth = match &a.truth {
         Some(t) => {
-            let spec = t.strip_prefix("phantom:").ok_or_else(|| {
-                Error::invalid("--truth", format!("'{t}': give phantom:NAME"))
-            })?;
+            let spec = t
+                .strip_prefix("phantom:")
+                .ok_or_else(|| Error::invalid("--truth", format!("'{t}': give phantom:NAME")))?;
             Some(voxlab::phantom::parse_spec(spec, 64)?.0)
         }
         None => None,
     };
     if let Some(s) = a.spacing {
         if !(s.is_finite() && s > 0.0) {
-            return Err(Error::invalid("--spacing", "must be a positive number of mm"));
+            return Err(Error::invalid(
+                "--spacing",
+                "must be a positive number of mm",
+            ));
         }
     }
     let p = read_projections::<f64>(&a.input)?;
@@ -339,7 +346,9 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let (lo, hi) = rec
         .data
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
     println!(
         "wrote {} ({} {}, {} filter, {what}; values {lo:.4} … {hi:.4})",
         a.out.display(),
@@ -362,7 +371,10 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
                     ..Default::default()
                 },
             )?;
-            println!("wrote {} (|error| of slice {k}, white = {hi:.4})", path.display());
+            println!(
+                "wrote {} (|error| of slice {k}, white = {hi:.4})",
+                path.display()
+            );
         }
     }
     Ok(())
