@@ -58,6 +58,54 @@ fn the_skimage_example_equals_iradon() {
     }
 }
 
+/// The f32 backends on the same example, from one case list: (backend, bound on the
+/// worst relative difference from iradon inside the circle minus 1 px).
+const BACKENDS: [(&str, f64); 2] = [
+    // Measured: 2.6e-6 (cpu-f32), 1.8e-6 (gpu on lavapipe): f32 filtering and
+    // backprojection (tests/ct_fbp.rs quotes 1.8e-6 for the backprojection alone).
+    ("cpu-f32", 1e-5),
+    ("gpu", 1e-5),
+];
+
+#[test]
+fn f32_backends_equal_iradon() {
+    let d = scratch("recon-backends");
+    let (_, want, _) =
+        read_npy_f64(&root().join("tests/data/ct/skimage_iradon64_ramp.npy")).unwrap();
+    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (backend, bound) in BACKENDS {
+        if backend == "gpu" && common::gpu("cli_ct_reconstruct gpu").is_none() {
+            continue;
+        }
+        let out = d.join(format!("{backend}.npy"));
+        let o = voxlab(&[
+            "reconstruct",
+            &ct("skimage_radon64.npy"),
+            "--geometry",
+            "parallel",
+            "--angles",
+            &ct("skimage_theta.txt"),
+            "--backend",
+            backend,
+            "--out",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{backend}: {}", stderr(&o));
+        let (shape, got, _) = read_npy_f64(&out).unwrap();
+        assert_eq!(shape, [64, 64]);
+        let mut worst = 0.0f64;
+        for j in 0..64i64 {
+            for i in 0..64i64 {
+                if (i - 32).pow(2) + (j - 32).pow(2) <= 31 * 31 {
+                    let k = (j * 64 + i) as usize;
+                    worst = worst.max((got[k] - want[k]).abs());
+                }
+            }
+        }
+        assert!(worst < bound * scale, "{backend}: {worst:e}");
+    }
+}
+
 /// RMS of a reconstruction against phantom:sphere (a unit-density ball of radius
 /// 0.6 × 128 mm) at the voxel centres `world(i, j, k)`.
 fn rms_vs_sphere(
