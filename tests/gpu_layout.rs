@@ -167,3 +167,20 @@ fn fbp_params_layout_agrees() {
     }
     assert_eq!(members.len(), rust.len());
 }
+
+#[test]
+fn ramp_params_layout_agrees() {
+    use voxlab::gpu::ramp::{shader_source, RampParams};
+    let (span, members) = wgsl_struct_layout(&shader_source(), "RampParams");
+    assert_eq!(span as usize, size_of::<RampParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("dims", offset_of!(RampParams, dims)),
+        ("work", offset_of!(RampParams, work)),
+        ("detector", offset_of!(RampParams, detector)),
+        ("cone", offset_of!(RampParams, cone)),
+    ];
+    for ((name, off), (wname, woff)) in rust.iter().zip(&members) {
+        assert_eq!((*name, *off as u32), (wname.as_str(), *woff));
+    }
+    assert_eq!(members.len(), rust.len());
+}

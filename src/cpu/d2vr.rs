@@ -47,7 +47,7 @@
 
 use super::raycast::{render_field, Field, RenderOutput};
 use crate::camera::Camera;
-use crate::ct::{bilinear_zero, Beam, Geometry, Projections, ViewMatrix};
+use crate::ct::{Beam, Geometry, Projections, ViewMatrix};
 use crate::error::{Error, Result};
 use crate::real::{Real, M3, V3};
 use crate::settings::{Classification, Mode, RenderSettings};
@@ -264,11 +264,8 @@ impl OccupancyMask {
     }
 }
 
-/// The backprojection constant `π/(2A)` for `A` views (the ramp of
-/// [`crate::cpu::ramp`] is `≈ 2|f|`; the continuous inversion's `π/A` halves).
-pub fn backprojection_scale(n_angles: usize) -> f64 {
-    std::f64::consts::PI / (2.0 * n_angles as f64)
-}
+/// The backprojection constant `π/(2A)`: FBP's, shared (see [`crate::cpu::fbp`]).
+pub use crate::cpu::fbp::backprojection_scale;
 
 /// Work counters of one D²VR render.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -427,14 +424,8 @@ impl<'a, R: Real> ProjectionField<'a, R> {
     /// mirrors shaders/d2vr.wgsl: reconstruct_sample
     #[inline]
     pub fn reconstruct_sample(&self, w: V3<R>) -> R {
-        let (cols, rows) = (self.q.cols, self.q.rows);
-        let mut sum = R::zero();
-        for (k, m) in self.views.iter().enumerate() {
-            if let Some((c, r, wt)) = m.project(w.0) {
-                sum = sum + wt * bilinear_zero(self.q.view(k), cols, rows, c, r);
-            }
-        }
-        sum * self.scale
+        // FBP's own per-point backprojection (same views, same constant π/(2A)).
+        crate::cpu::fbp::backproject_point(self.q, &self.views, w.0)
     }
 
     /// `∇_P s(P)` at world point `w` (GFR), world units.

@@ -3,11 +3,12 @@
 //! chunk of views (several dispatches keep each one short on software drivers).
 //!
 //! The view matrices are uploaded as `ViewMatrix<f32>` (WGSL `CtView`), the filtered
-//! projections as one f32 storage buffer. Ramp filtering runs on the CPU in f32
-//! (`crate::cpu::ramp`, rustfft): a GPU ramp filter is not part of this module yet.
+//! projections as one f32 storage buffer. [`fbp`] runs the whole reconstruction on
+//! the GPU: ramp filtering with [`crate::gpu::ramp::filter_projections`] (cosine
+//! pre-weighting, batched FFTs, the response, cropping), then [`backproject`].
 
 use crate::cpu::fbp::{backprojection_scale, Grid, Reconstruction};
-use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
+use crate::cpu::ramp::RampFilter;
 use crate::ct::{Geometry, Projections, GEOMETRY_WGSL};
 use crate::error::{Error, Result};
 use crate::gpu::GpuContext;
@@ -140,7 +141,8 @@ pub fn backproject(
     })
 }
 
-/// FBP/FDK: ramp filtering on the CPU in f32, backprojection on the GPU.
+/// FBP/FDK on the GPU in f32: [`crate::gpu::ramp::filter_projections`], then
+/// [`backproject`]; the same reconstruction as `cpu::fbp::fbp`.
 pub fn fbp(
     ctx: &GpuContext,
     projections: &Projections<f32>,
@@ -148,6 +150,6 @@ pub fn fbp(
     filter: RampFilter,
     grid: &Grid,
 ) -> Result<Reconstruction<f32>> {
-    let q = filter_projections(projections, g, filter, FilterMethod::Fft)?;
+    let q = crate::gpu::ramp::filter_projections(ctx, projections, g, filter)?;
     backproject(ctx, &q, g, grid)
 }

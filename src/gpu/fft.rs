@@ -726,6 +726,41 @@ impl GpuFftPlan {
         Self::with_axes(ctx, shape, &axes, dir, norm, variant)
     }
 
+    /// Prepares a batch of `lines` 1-D transforms of length `n` (the last axis of the
+    /// array `[lines, n]`), each scaled by `norm` for length `n`: the plan of
+    /// [`fft_lines`], kept for reuse with [`GpuFftPlan::encode_in_place`].
+    ///
+    /// # Errors
+    /// As [`fft_lines`].
+    pub fn lines(
+        ctx: &GpuContext,
+        lines: usize,
+        n: usize,
+        dir: Direction,
+        norm: Normalization,
+        variant: GpuFftVariant,
+    ) -> Result<Self> {
+        let shape = [lines, n];
+        let total = lines
+            .checked_mul(n)
+            .ok_or_else(|| Error::too_large("fft shape", format!("{shape:?} overflows")))?;
+        validate(ctx, total, &shape, &[1])?;
+        Self::with_axes(ctx, &shape, &[1], dir, norm, variant)
+    }
+
+    /// Records the whole transform of the array in `buffer` (`[re, im]` f32 pairs,
+    /// exactly the array's size, `STORAGE`; it may be overwritten) into `enc`, with no
+    /// readback, and returns the buffer that will hold the result (`buffer` or the
+    /// plan's own second buffer, valid until the plan records again).
+    pub fn encode_in_place<'a>(
+        &'a self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        buffer: &'a wgpu::Buffer,
+    ) -> &'a wgpu::Buffer {
+        self.encode(ctx, enc, buffer)
+    }
+
     /// The shape this plan transforms.
     pub fn shape(&self) -> &[usize] {
         &self.shape

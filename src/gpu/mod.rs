@@ -14,6 +14,7 @@ pub mod fft;
 pub mod fvr;
 pub mod probe;
 pub mod project;
+pub mod ramp;
 pub mod raycast;
 
 pub use context::{AdapterSummary, GpuContext};
