@@ -75,6 +75,8 @@ pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/raycast_params.
 pub const CLASSIFY_WGSL: &str = include_str!("../../shaders/shared/classify.wgsl");
 /// The ray-casting shader (without the shared parts).
 pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
+/// Rays, boxes, steps and Phong shading, shared with D²VR (`shaders/shared/rays.wgsl`).
+pub const RAYS_WGSL: &str = include_str!("../../shaders/shared/rays.wgsl");
 /// The set-up shader (without the shared struct).
 pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
 
@@ -247,7 +249,7 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
     let on_the_fly =
         settings.mode == Mode::Dvr && settings.shading.enabled && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
-    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{RAYS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
 }
 
 /// The complete set-up shader: the shared struct and lookup, and the passes.
