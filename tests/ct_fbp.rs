@@ -199,7 +199,7 @@ fn bad_input_is_refused() {
 use glam::DVec3;
 use voxlab::cpu::fbp::{
     apply_circle_mask, backproject, fbp, parallel_stack_grid, reconstruct_points, rtk_grid,
-    skimage_grid, Grid,
+    skimage_grid,
 };
 use voxlab::cpu::project::project_phantom;
 use voxlab::ct::{ct_to_phantom, phantom_to_ct};
@@ -207,31 +207,9 @@ use voxlab::phantom::{Phantom, Primitive, Shape};
 
 fn none(_: usize, _: usize) {}
 
-/// (name, geometry, grid) — small cases shared by the parity tests.
-fn small_cases() -> Vec<(&'static str, Geometry, Grid)> {
-    let par = Geometry::parallel_skimage(41, Geometry::even_angles(23, 180.0)).unwrap();
-    let stack =
-        Geometry::parallel_stack(36, 5, 1.5, 1.25, Geometry::even_angles(17, 180.0)).unwrap();
-    let cone = Geometry::cone_rtk(
-        300.0,
-        450.0,
-        40,
-        30,
-        1.0,
-        1.0,
-        Geometry::even_angles(19, 360.0),
-    )
-    .unwrap();
-    vec![
-        ("parallel", par, skimage_grid(41)),
-        ("stack", stack.clone(), parallel_stack_grid(30, &stack)),
-        ("cone", cone, rtk_grid([21, 15, 18], [1.1, 1.3, 0.9])),
-    ]
-}
-
 #[test]
 fn grid_backprojection_equals_the_per_point_sum() {
-    for (name, g, grid) in small_cases() {
+    for (name, g, grid) in common::ct_cases(23, 19) {
         let q = random_projections(&g, 3);
         let vol = backproject(&q, &g, &grid, &none).unwrap();
         let pts: Vec<[f64; 3]> = (0..grid.dims[2])

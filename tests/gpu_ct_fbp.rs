@@ -2,38 +2,17 @@
 
 mod common;
 
-use voxlab::cpu::fbp::{backproject, parallel_stack_grid, rtk_grid, skimage_grid, Grid};
+use voxlab::cpu::fbp::{backproject, parallel_stack_grid, rtk_grid};
 use voxlab::ct::{Geometry, Projections};
 
 fn none(_: usize, _: usize) {}
-
-fn cases() -> Vec<(&'static str, Geometry, Grid)> {
-    let par = Geometry::parallel_skimage(41, Geometry::even_angles(45, 180.0)).unwrap();
-    let stack =
-        Geometry::parallel_stack(36, 5, 1.5, 1.25, Geometry::even_angles(17, 180.0)).unwrap();
-    let cone = Geometry::cone_rtk(
-        300.0,
-        450.0,
-        40,
-        30,
-        1.0,
-        1.0,
-        Geometry::even_angles(37, 360.0),
-    )
-    .unwrap();
-    vec![
-        ("parallel", par, skimage_grid(41)),
-        ("stack", stack.clone(), parallel_stack_grid(30, &stack)),
-        ("cone", cone, rtk_grid([21, 15, 18], [1.1, 1.3, 0.9])),
-    ]
-}
 
 #[test]
 fn gpu_backprojection_matches_the_f64_oracle() {
     let Some(ctx) = common::gpu("gpu_backprojection_matches_the_f64_oracle") else {
         return;
     };
-    for (name, g, grid) in cases() {
+    for (name, g, grid) in common::ct_cases(45, 37) {
         let mut rng = common::Rng(7);
         let mut q = Projections::<f64>::zeros(&g).unwrap();
         for v in &mut q.data {

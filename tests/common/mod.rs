@@ -251,3 +251,37 @@ pub fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
     }
     panic!("struct {name} not found in the WGSL");
 }
+
+// ---------------------------------------------------------------------------------
+// CT
+// ---------------------------------------------------------------------------------
+
+/// Small CT cases shared by the CPU and GPU reconstruction tests: (name, geometry,
+/// reconstruction grid) for a scikit-image parallel beam, a 3-D parallel stack and an
+/// RTK cone beam with `parallel_angles` / `cone_angles` views.
+pub fn ct_cases(
+    parallel_angles: usize,
+    cone_angles: usize,
+) -> Vec<(&'static str, voxlab::ct::Geometry, voxlab::cpu::fbp::Grid)> {
+    use voxlab::cpu::fbp::{parallel_stack_grid, rtk_grid, skimage_grid};
+    use voxlab::ct::Geometry;
+    let par =
+        Geometry::parallel_skimage(41, Geometry::even_angles(parallel_angles, 180.0)).unwrap();
+    let stack =
+        Geometry::parallel_stack(36, 5, 1.5, 1.25, Geometry::even_angles(17, 180.0)).unwrap();
+    let cone = Geometry::cone_rtk(
+        300.0,
+        450.0,
+        40,
+        30,
+        1.0,
+        1.0,
+        Geometry::even_angles(cone_angles, 360.0),
+    )
+    .unwrap();
+    vec![
+        ("parallel", par, skimage_grid(41)),
+        ("stack", stack.clone(), parallel_stack_grid(30, &stack)),
+        ("cone", cone, rtk_grid([21, 15, 18], [1.1, 1.3, 0.9])),
+    ]
+}
