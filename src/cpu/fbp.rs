@@ -354,8 +354,11 @@ fn interp_line<R: Real>(out: &mut [R], line: &[R], cols: usize, a: R, b: R) {
     // s ∈ [0, cols + 1) on lo..hi: truncation is the floor, ix ∈ [0, cols], and both
     // taps lie in the bordered line (length cols + 2).
     let line = &line[..cols + 2];
-    for (i, acc) in out[lo..hi].iter_mut().enumerate() {
-        let s = s_at(lo + i);
+    // fi counts exactly (integers below 2^24), so s equals s_at(i) bit for bit.
+    let mut fi = R::of(lo as f64);
+    for acc in out[lo..hi].iter_mut() {
+        let s = a1 + fi * b;
+        fi = fi + R::one();
         let ix = (s.f64() as usize).min(cols);
         let t = s - R::of(ix as f64);
         *acc = *acc + line[ix] * (R::one() - t) + line[ix + 1] * t;
