@@ -253,10 +253,26 @@ pub fn backproject<R: Real>(
                             None => continue,
                         }
                     } else {
-                        for (c, b) in blend.iter_mut().enumerate() {
-                            let t0 = row_of(iy).map_or(R::zero(), |l| l[c]);
-                            let t1 = row_of(iy + 1).map_or(R::zero(), |l| l[c]);
-                            *b = t0 * (R::one() - ty) + t1 * ty;
+                        // The two rows are looked up once per view, not per column; a
+                        // missing row is a zero tap (the same sums as bilinear_zero).
+                        let (u, w) = (R::one() - ty, ty);
+                        match (row_of(iy), row_of(iy + 1)) {
+                            (Some(l0), Some(l1)) => {
+                                for ((b, &t0), &t1) in blend.iter_mut().zip(l0).zip(l1) {
+                                    *b = t0 * u + t1 * w;
+                                }
+                            }
+                            (Some(l0), None) => {
+                                for (b, &t0) in blend.iter_mut().zip(l0) {
+                                    *b = t0 * u + R::zero() * w;
+                                }
+                            }
+                            (None, Some(l1)) => {
+                                for (b, &t1) in blend.iter_mut().zip(l1) {
+                                    *b = R::zero() * u + t1 * w;
+                                }
+                            }
+                            (None, None) => continue,
                         }
                         blend
                     };
