@@ -198,6 +198,22 @@ pub fn backproject<R: Real>(
         .zip(filtered.data.par_chunks(cols))
         .for_each(|(d, s)| d[1..=cols].copy_from_slice(s));
     let parallel = matches!(g.beam, Beam::Parallel);
+    // Cone beam: zero-bordered copies of every view, (rows + 2) × (cols + 2), so the
+    // four bilinear taps need no per-tap bounds test.
+    let (pcol, prow) = (cols + 2, rows + 2);
+    let padded2 = if parallel {
+        Vec::new()
+    } else {
+        let mut p2 = vec![R::zero(); g.n_angles() * prow * pcol];
+        p2.par_chunks_mut(prow * pcol)
+            .zip(filtered.data.par_chunks(rows * cols))
+            .for_each(|(d, s)| {
+                for (r, src) in s.chunks(cols).enumerate() {
+                    d[(r + 1) * pcol + 1..(r + 1) * pcol + 1 + cols].copy_from_slice(src);
+                }
+            });
+        p2
+    };
     let a = grid.affine;
     let step = a.x_axis.truncate();
     let nx = grid.dims[0];
@@ -237,29 +253,41 @@ pub fn backproject<R: Real>(
                             None => continue,
                         }
                     } else {
-                        for (c, b) in blend.iter_mut().enumerate() {
-                            let t0 = row_of(iy).map_or(R::zero(), |l| l[c]);
-                            let t1 = row_of(iy + 1).map_or(R::zero(), |l| l[c]);
-                            *b = t0 * (R::one() - ty) + t1 * ty;
+                        // The two rows are looked up once per view, not per column; a
+                        // missing row is a zero tap (the same sums as bilinear_zero).
+                        let (u, w) = (R::one() - ty, ty);
+                        match (row_of(iy), row_of(iy + 1)) {
+                            (Some(l0), Some(l1)) => {
+                                for ((b, &t0), &t1) in blend.iter_mut().zip(l0).zip(l1) {
+                                    *b = t0 * u + t1 * w;
+                                }
+                            }
+                            (Some(l0), None) => {
+                                for (b, &t0) in blend.iter_mut().zip(l0) {
+                                    *b = t0 * u + R::zero() * w;
+                                }
+                            }
+                            (None, Some(l1)) => {
+                                for (b, &t1) in blend.iter_mut().zip(l1) {
+                                    *b = R::zero() * u + t1 * w;
+                                }
+                            }
+                            (None, None) => continue,
                         }
                         blend
                     };
                     interp_line(out, line_ref, cols, a0, b0);
                 } else {
-                    let img = filtered.view(v);
-                    let r30 = m.rows[3][0];
-                    let mut fi = R::zero();
-                    for acc in out.iter_mut() {
-                        let den = a2 + fi * b2;
-                        if den > R::zero() {
-                            let inv = R::one() / den;
-                            let c = (a0 + fi * b0) * inv;
-                            let r = (a1 + fi * b1) * inv;
-                            let w = r30 * inv;
-                            *acc = *acc + w * w * bilinear_zero(img, cols, rows, c, r);
-                        }
-                        fi = fi + R::one();
-                    }
+                    let img = &padded2[v * prow * pcol..(v + 1) * prow * pcol];
+                    cone_line(
+                        out,
+                        img,
+                        pcol,
+                        [cols, rows],
+                        [a0, a1, a2],
+                        [b0, b1, b2],
+                        m.rows[3][0],
+                    );
                 }
             }
             for acc in out.iter_mut() {
@@ -277,21 +305,117 @@ fn to_r<R: Real>(v: DVec3) -> [R; 3] {
 
 /// `out[i] += linear interpolation of the zero-bordered line (`line[c + 1]` = detector
 /// column `c`) at `c = a + i·b``, zero outside `[−1, cols)` as [`bilinear_zero`].
+///
+/// `s_i = (a + 1) + i·b` is monotone in `i` (each rounding is monotone), so the voxels
+/// with `s_i ∈ [0, cols + 1)` form one run: its ends are found analytically and then
+/// corrected by testing, and the inner loop has no branch.
 #[inline(always)]
 fn interp_line<R: Real>(out: &mut [R], line: &[R], cols: usize, a: R, b: R) {
     let lim = R::of(cols as f64 + 1.0);
+    let a1 = a + R::one();
+    let n = out.len();
+    let s_at = |i: usize| a1 + R::of(i as f64) * b;
+    let inside = |i: usize| {
+        let s = s_at(i);
+        s >= R::zero() && s < lim
+    };
+    // Analytic estimate of the run, in f64.
+    let (af, bf, lf) = (a1.f64(), b.f64(), lim.f64());
+    let (lo_f, hi_f) = if bf > 0.0 {
+        ((0.0 - af) / bf, (lf - af) / bf)
+    } else if bf < 0.0 {
+        ((lf - af) / bf, (0.0 - af) / bf)
+    } else if inside(0) {
+        (0.0, n as f64)
+    } else {
+        return;
+    };
+    let clampi = |x: f64| {
+        if x.is_nan() {
+            0
+        } else {
+            x.clamp(0.0, n as f64) as usize
+        }
+    };
+    let mut lo = clampi(lo_f.ceil());
+    let mut hi = clampi(hi_f.ceil());
+    if lo >= hi {
+        // Maybe an empty run, maybe rounding: test the neighbourhood.
+        lo = lo.min(hi).saturating_sub(1);
+        hi = (lo + 3).min(n);
+        while lo < hi && !inside(lo) {
+            lo += 1;
+        }
+        hi = lo;
+        while hi < n && inside(hi) {
+            hi += 1;
+        }
+    } else {
+        while lo > 0 && inside(lo - 1) {
+            lo -= 1;
+        }
+        while lo < hi && !inside(lo) {
+            lo += 1;
+        }
+        while hi < n && inside(hi) {
+            hi += 1;
+        }
+        while hi > lo && !inside(hi - 1) {
+            hi -= 1;
+        }
+    }
+    if lo >= hi {
+        return;
+    }
+    // s ∈ [0, cols + 1) on lo..hi: truncation is the floor, ix ∈ [0, cols], and both
+    // taps lie in the bordered line (length cols + 2).
+    let line = &line[..cols + 2];
+    // fi counts exactly (integers below 2^24), so s equals s_at(i) bit for bit.
+    let mut fi = R::of(lo as f64);
+    for acc in out[lo..hi].iter_mut() {
+        let s = a1 + fi * b;
+        fi = fi + R::one();
+        let ix = (s.f64() as usize).min(cols);
+        let t = s - R::of(ix as f64);
+        *acc = *acc + line[ix] * (R::one() - t) + line[ix + 1] * t;
+    }
+}
+
+/// `out[i] += w_i² · bilinear_zero(view, c_i, r_i)` along one voxel line of a cone
+/// beam, with `(c, r, den) = (a + i·b) / den` and `w = r30 / den`; `img` is the view
+/// zero-bordered to `(rows + 2) × pcol`. Same arithmetic as [`backproject_point`].
+#[inline(always)]
+fn cone_line<R: Real>(
+    out: &mut [R],
+    img: &[R],
+    pcol: usize,
+    [cols, rows]: [usize; 2],
+    a: [R; 3],
+    b: [R; 3],
+    r30: R,
+) {
+    let (limc, limr) = (R::of(cols as f64 + 1.0), R::of(rows as f64 + 1.0));
     let mut fi = R::zero();
     for acc in out.iter_mut() {
-        let c = a + fi * b;
+        let den = a[2] + fi * b[2];
+        let (num0, num1) = (a[0] + fi * b[0], a[1] + fi * b[1]);
         fi = fi + R::one();
-        // s = c + 1 ≥ 0 inside, so truncation is the floor (no libm call). The
-        // condition is bilinear_zero's ⌊c⌋ ∈ [−1, cols).
-        let s = c + R::one();
-        if s >= R::zero() && s < lim {
-            let ix = s.to_usize().unwrap_or(0);
-            let t = s - R::of(ix as f64);
-            // ix ∈ [0, cols]: both taps lie in the bordered line.
-            *acc = *acc + line[ix] * (R::one() - t) + line[ix + 1] * t;
+        if den > R::zero() {
+            let inv = R::one() / den;
+            let c = num0 * inv;
+            let r = num1 * inv;
+            // bilinear_zero's ⌊c⌋ ∈ [−1, cols) and ⌊r⌋ ∈ [−1, rows), shifted by one
+            // into the bordered image, where truncation is the floor.
+            let (s, t) = (c + R::one(), r + R::one());
+            if s >= R::zero() && s < limc && t >= R::zero() && t < limr {
+                let w = r30 * inv;
+                let (ix, iy) = (s.f64() as usize, t.f64() as usize);
+                let (tx, ty) = (s - R::of(ix as f64), t - R::of(iy as f64));
+                let p = iy * pcol + ix;
+                let top = img[p] * (R::one() - tx) + img[p + 1] * tx;
+                let bottom = img[p + pcol] * (R::one() - tx) + img[p + pcol + 1] * tx;
+                *acc = *acc + w * w * (top * (R::one() - ty) + bottom * ty);
+            }
         }
     }
 }
