@@ -2,20 +2,7 @@
 // Rust twin: src/gpu/fbp.rs (dispatch), src/cpu/fbp.rs (the oracle). Compiled with
 // shaders/shared/ct_geometry.wgsl (CtView, project_point) prepended.
 
-// Grid: voxel (i, j, k) sits at origin + i·step_i + j·step_j + k·step_k (CT world mm).
-// mirrors src/gpu/fbp.rs: FbpParams
-struct FbpParams {
-    origin: vec4<f32>,
-    step_i: vec4<f32>,
-    step_j: vec4<f32>,
-    step_k: vec4<f32>,
-    // nx, ny, nz, invocations per row of workgroups (x extent of the dispatch)
-    dims: vec4<u32>,
-    // detector cols, rows, first view, number of views in this dispatch
-    det: vec4<u32>,
-    // x: the backprojection constant π/(2A)
-    scale: vec4<f32>,
-}
+// FbpParams is declared in shaders/shared/fbp_params.wgsl (prepended at load time).
 
 @group(0) @binding(0) var<uniform> params: FbpParams;
 @group(0) @binding(1) var<storage, read> views: array<CtView>;

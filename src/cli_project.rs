@@ -189,15 +189,7 @@ pub fn project(a: ProjectArgs) -> Result<()> {
         MethodArg::Joseph
     });
 
-    let pb = indicatif::ProgressBar::new(g.n_angles() as u64);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg} [{bar:40}] {pos}/{len} views, {elapsed} (eta {eta})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    pb.set_message("projecting");
+    let pb = crate::progress_bar(g.n_angles() as u64, "projecting", "views");
     let tick = || pb.inc(1);
     let options = ProjectOptions {
         on_view: Some(&tick),

@@ -77,36 +77,6 @@ fn extension(p: &Path) -> Option<String> {
         .map(str::to_ascii_lowercase)
 }
 
-/// Fails early on an output that cannot be written (bad extension, missing folder).
-fn check_out(what: &str, path: &Path, allowed: &[&str]) -> Result<()> {
-    let ext = extension(path);
-    if !ext.as_deref().is_some_and(|e| allowed.contains(&e)) {
-        return Err(Error::invalid(
-            what,
-            format!(
-                "{}: the extension must be one of .{}",
-                path.display(),
-                allowed.join(", .")
-            ),
-        ));
-    }
-    let parent = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if !parent.is_dir() {
-        return Err(Error::invalid(
-            what,
-            format!(
-                "{}: the folder {} does not exist",
-                path.display(),
-                parent.display()
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// `--angles`: a count (evenly over 180°) or a file.
 fn parse_angles(s: &str) -> Result<Vec<f64>> {
     if let Ok(n) = s.trim().parse::<usize>() {
@@ -215,9 +185,9 @@ fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64
 
 /// Runs `voxlab reconstruct`.
 pub fn run(a: ReconstructArgs) -> Result<()> {
-    check_out("--out", &a.out, &["npy", "nrrd", "nhdr", "png"])?;
+    crate::check_output_as("--out", &a.out, &["npy", "nrrd", "nhdr", "png"])?;
     if let Some(e) = &a.error_map {
-        check_out("--error-map", e, &["png"])?;
+        crate::check_output_as("--error-map", e, &["png"])?;
     }
     let truth = match &a.truth {
         Some(t) => {
@@ -294,7 +264,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         ));
     }
 
-    let pb = crate::progress_bar(0, "reconstructing");
+    let pb = crate::progress_bar(0, "reconstructing", "voxel lines");
     let progress = |done: usize, total: usize| {
         pb.set_length(total as u64);
         pb.set_position(done as u64);

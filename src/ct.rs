@@ -334,12 +334,31 @@ impl<R: Real> ViewMatrix<R> {
 /// mirrors shaders/shared/ct_geometry.wgsl: bilinear_zero
 #[inline(always)]
 pub fn bilinear_zero<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -> R {
+    let Some(([a, b, c, d], tx, ty)) = bilinear_taps(img, cols, rows, x, y) else {
+        return R::zero();
+    };
+    let top = a * (R::one() - tx) + b * tx;
+    let bottom = c * (R::one() - tx) + d * tx;
+    top * (R::one() - ty) + bottom * ty
+}
+
+/// The four taps of [`bilinear_zero`] at `(x, y)` — `[(i, j), (i+1, j), (i, j+1),
+/// (i+1, j+1)]` with `(i, j)` the floor, zero outside the image — and the fractions
+/// `(tx, ty)`; `None` far outside (or for NaN), where every tap is zero. Shared by the
+/// value and by D²VR's gradient (`cpu::d2vr::bilinear_zero_grad`).
+#[inline(always)]
+pub fn bilinear_taps<R: Real>(
+    img: &[R],
+    cols: usize,
+    rows: usize,
+    x: R,
+    y: R,
+) -> Option<([R; 4], R, R)> {
     let (fx, fy) = (x.floor(), y.floor());
     // Far outside (or NaN): nothing to interpolate. Also keeps the casts below in range.
     if !(fx >= -R::one() && fx < R::of(cols as f64) && fy >= -R::one() && fy < R::of(rows as f64)) {
-        return R::zero();
+        return None;
     }
-    let (tx, ty) = (x - fx, y - fy);
     let (ix, iy) = (fx.to_i64().unwrap_or(-2), fy.to_i64().unwrap_or(-2));
     let at = |i: i64, j: i64| -> R {
         if i < 0 || j < 0 || i >= cols as i64 || j >= rows as i64 {
@@ -348,9 +367,13 @@ pub fn bilinear_zero<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -
             img[j as usize * cols + i as usize]
         }
     };
-    let top = at(ix, iy) * (R::one() - tx) + at(ix + 1, iy) * tx;
-    let bottom = at(ix, iy + 1) * (R::one() - tx) + at(ix + 1, iy + 1) * tx;
-    top * (R::one() - ty) + bottom * ty
+    let taps = [
+        at(ix, iy),
+        at(ix + 1, iy),
+        at(ix, iy + 1),
+        at(ix + 1, iy + 1),
+    ];
+    Some((taps, x - fx, y - fy))
 }
 
 /// A stack of projections: `angles × rows × cols` values, column fastest (NumPy shape

@@ -592,12 +592,12 @@ fn load_raw_input(input: &str, load: &LoadArgs) -> Result<AnyVolume> {
     }
 }
 
-fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+fn progress_bar(len: u64, what: &str, unit: &str) -> indicatif::ProgressBar {
     let pb = indicatif::ProgressBar::new(len);
     pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg} [{bar:40}] {pos}/{len} rows, {elapsed} (eta {eta})",
-        )
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{msg}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{elapsed}} (eta {{eta}})"
+        ))
         .expect("valid template")
         .progress_chars("=> "),
     );
@@ -715,7 +715,11 @@ fn render(r: RenderArgs) -> Result<()> {
         eprintln!("voxlab: not using a GPU: {why}; rendering with the CPU oracle");
     }
     let who = renderer.describe();
-    let pb = progress_bar(scene.camera.height as u64, &format!("rendering ({who})"));
+    let pb = progress_bar(
+        scene.camera.height as u64,
+        &format!("rendering ({who})"),
+        "rows",
+    );
     let t = std::time::Instant::now();
     let out = renderer
         .render(&scene, &settings, &|done, _| pb.set_position(done as u64))?
@@ -747,7 +751,7 @@ fn render(r: RenderArgs) -> Result<()> {
 fn compare(c: CompareArgs) -> Result<ExitCode> {
     let (scene, settings) = build_scene(&c.scene, true)?;
     let gpu = Renderer::new(Backend::Gpu)?;
-    let pb = progress_bar(scene.camera.height as u64, "cpu (f64 oracle)");
+    let pb = progress_bar(scene.camera.height as u64, "cpu (f64 oracle)", "rows");
     let t = std::time::Instant::now();
     let cpu_out = Renderer::new(Backend::Cpu)?
         .render(&scene, &settings, &|d, _| pb.set_position(d as u64))?
@@ -886,14 +890,33 @@ fn fft(a: FftArgs) -> Result<ExitCode> {
 }
 
 fn check_output(path: &Path) -> Result<()> {
+    check_output_as("output file", path, &["png", "npy"])
+}
+
+/// `.a`, `.a or .b`, `.a, .b or .c`.
+fn extension_list(allowed: &[&str]) -> String {
+    let dotted: Vec<String> = allowed.iter().map(|e| format!(".{e}")).collect();
+    match dotted.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => dotted.concat(),
+    }
+}
+
+/// Fails early on an output `what` that cannot be written: an extension not in
+/// `allowed`, or a folder that does not exist.
+fn check_output_as(what: &str, path: &Path, allowed: &[&str]) -> Result<()> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase());
-    if !matches!(ext.as_deref(), Some("png") | Some("npy")) {
+    if !ext.as_deref().is_some_and(|e| allowed.contains(&e)) {
         return Err(Error::invalid(
-            "output file",
-            format!("{}: the extension must be .png or .npy", path.display()),
+            what,
+            format!(
+                "{}: the extension must be {}",
+                path.display(),
+                extension_list(allowed)
+            ),
         ));
     }
     let parent = path
@@ -902,7 +925,7 @@ fn check_output(path: &Path) -> Result<()> {
         .unwrap_or(Path::new("."));
     if !parent.is_dir() {
         return Err(Error::invalid(
-            "output file",
+            what,
             format!(
                 "{}: folder {} does not exist",
                 path.display(),

@@ -302,25 +302,9 @@ pub struct D2vrOutput {
 /// mirrors shaders/d2vr.wgsl: bilinear_zero_grad
 #[inline(always)]
 pub fn bilinear_zero_grad<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -> [R; 3] {
-    let (fx, fy) = (x.floor(), y.floor());
-    if !(fx >= -R::one() && fx < R::of(cols as f64) && fy >= -R::one() && fy < R::of(rows as f64)) {
+    let Some(([a, b, c, d], tx, ty)) = crate::ct::bilinear_taps(img, cols, rows, x, y) else {
         return [R::zero(); 3];
-    }
-    let (tx, ty) = (x - fx, y - fy);
-    let (ix, iy) = (fx.to_i64().unwrap_or(-2), fy.to_i64().unwrap_or(-2));
-    let at = |i: i64, j: i64| -> R {
-        if i < 0 || j < 0 || i >= cols as i64 || j >= rows as i64 {
-            R::zero()
-        } else {
-            img[j as usize * cols + i as usize]
-        }
     };
-    let (a, b, c, d) = (
-        at(ix, iy),
-        at(ix + 1, iy),
-        at(ix, iy + 1),
-        at(ix + 1, iy + 1),
-    );
     let top = a * (R::one() - tx) + b * tx;
     let bottom = c * (R::one() - tx) + d * tx;
     [

@@ -17,7 +17,7 @@ use wgpu::util::DeviceExt;
 
 /// The shader's uniform block.
 ///
-/// mirrors shaders/fbp_backproject.wgsl: FbpParams
+/// WGSL twin: shaders/shared/fbp_params.wgsl: FbpParams
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct FbpParams {
@@ -37,7 +37,8 @@ const VIEWS_PER_DISPATCH: usize = 32;
 /// The shader source: the shared CT geometry, then the backprojector.
 pub fn shader_source() -> String {
     format!(
-        "{GEOMETRY_WGSL}\n{}",
+        "{GEOMETRY_WGSL}\n{}\n{}",
+        include_str!("../../shaders/shared/fbp_params.wgsl"),
         include_str!("../../shaders/fbp_backproject.wgsl")
     )
 }

@@ -141,16 +141,7 @@ pub fn filter_projections(
     });
     let module = ctx.shader("ramp_filter.wgsl", &shader_source())?;
     // One explicit layout for the three entry points (each uses only some bindings).
-    let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
+    let entry = super::context::buffer_entry;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("ramp"),

@@ -27,7 +27,7 @@
 //!   (`cpu::filter::prepare`), together with the pre-classified and gradient volumes it
 //!   would have to prefilter.
 
-use super::context::GpuContext;
+use super::context::{buffer_entry, GpuContext};
 use crate::camera::{Camera, Projection};
 use crate::cpu::filter::{prepare, Grid};
 use crate::cpu::raycast::RenderOutput;
@@ -654,20 +654,6 @@ fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>
             ]
         })
         .collect()
-}
-
-/// A compute-stage buffer binding.
-fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 /// A compute-stage 3D float texture binding.

@@ -41,7 +41,7 @@ pub mod raw;
 pub mod tiff;
 
 use crate::error::{Error, Result};
-use crate::volume::{AnyVolume, Volume, Voxel};
+use crate::volume::{AnyVolume, Volume};
 use glam::DMat4;
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
@@ -664,7 +664,7 @@ pub(crate) fn write_samples_le(w: &mut dyn Write, vol: &AnyVolume) -> io::Result
 }
 
 /// Writes values little-endian, whatever the machine's byte order.
-pub(crate) fn write_le<T: Voxel>(w: &mut dyn Write, data: &[T]) -> io::Result<()> {
+pub(crate) fn write_le<T: bytemuck::Pod>(w: &mut dyn Write, data: &[T]) -> io::Result<()> {
     let size = std::mem::size_of::<T>();
     for chunk in data.chunks(CHUNK_BYTES / size.max(1)) {
         let bytes: &[u8] = bytemuck::cast_slice(chunk);

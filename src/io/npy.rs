@@ -98,6 +98,17 @@ pub fn write_npy_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
 /// `(h, w, 4)`. Fails with [`Error::Invalid`] when the shape does not hold exactly
 /// `data.len()` values.
 pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
+    write_npy_array(path, "<f4", shape, data)
+}
+
+/// Writes `data` little-endian under the dtype `descr`, checking that `shape` holds
+/// exactly `data.len()` values.
+fn write_npy_array<T: bytemuck::Pod>(
+    path: &Path,
+    descr: &str,
+    shape: &[usize],
+    data: &[T],
+) -> Result<()> {
     let n = shape.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
     if n != Some(data.len()) {
         return Err(Error::invalid(
@@ -109,7 +120,7 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
             ),
         ));
     }
-    let header = header_bytes("<f4", shape);
+    let header = header_bytes(descr, shape);
     write_atomic(path, |w| {
         w.write_all(&header)
             .and_then(|()| write_le(w, data))
@@ -172,29 +183,7 @@ pub fn read_npy_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>, bool)> {
 /// Writes `data` as a little-endian float64 array of the given shape in C order,
 /// atomically (the f64 twin of [`write_npy_f32`]).
 pub fn write_npy_f64(path: &Path, shape: &[usize], data: &[f64]) -> Result<()> {
-    let n = shape.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
-    if n != Some(data.len()) {
-        return Err(Error::invalid(
-            "array shape",
-            format!(
-                "{}: shape {shape:?} does not hold the {} values given",
-                path.display(),
-                data.len()
-            ),
-        ));
-    }
-    let header = header_bytes("<f8", shape);
-    write_atomic(path, |w| {
-        w.write_all(&header)
-            .and_then(|()| {
-                for chunk in data.chunks(1 << 16) {
-                    let bytes: Vec<u8> = chunk.iter().flat_map(|v| v.to_le_bytes()).collect();
-                    w.write_all(&bytes)?;
-                }
-                Ok(())
-            })
-            .map_err(|e| Error::io(path, e))
-    })
+    write_npy_array(path, "<f8", shape, data)
 }
 
 // ---------------------------------------------------------------------------------

@@ -1,0 +1,17 @@
+// Parameters of one backprojection dispatch.
+// Rust twin: src/gpu/fbp.rs: FbpParams (#[repr(C)], bytemuck); tests/gpu_layout.rs
+// checks the offsets with naga.
+
+// Grid: voxel (i, j, k) sits at origin + i·step_i + j·step_j + k·step_k (CT world mm).
+struct FbpParams {
+    origin: vec4<f32>,
+    step_i: vec4<f32>,
+    step_j: vec4<f32>,
+    step_k: vec4<f32>,
+    // nx, ny, nz, invocations per row of workgroups (x extent of the dispatch)
+    dims: vec4<u32>,
+    // detector cols, rows, first view, number of views in this dispatch
+    det: vec4<u32>,
+    // x: the backprojection constant π/(2A)
+    scale: vec4<f32>,
+}
