@@ -88,7 +88,7 @@ fn time_gpu(
 }
 
 fn main() {
-    let gpu = voxlab::gpu::GpuContext::new().ok();
+    let gpu = voxlab::gpu::GpuContext::shared().ok();
     let args = BenchArgs::from_env();
     let ph = Phantom::shepp_logan();
     let large = std::env::var("VOXLAB_BENCH_LARGE").is_ok_and(|v| v == "1");

@@ -109,7 +109,7 @@ fn main() {
     for n in lp {
         cases.push((format!("low-pass {n}²"), vec![n, n], true));
     }
-    let gpu = GpuContext::new().ok();
+    let gpu = GpuContext::shared().ok();
     println!(
         "FFT, forward unnormalised complex, {} threads, {runs} runs after 1 warm-up; medians in ms",
         rayon::current_num_threads()

@@ -78,7 +78,7 @@ fn main() {
         cases.push((format!("cone {n}³ → {views}×{n}²"), n, cone));
         cases.push((format!("parallel {n}³ → {views}×{n}²"), n, par));
     }
-    let ctx = GpuContext::new().ok();
+    let ctx = GpuContext::shared().ok();
     if let Some(c) = &ctx {
         println!("GPU: {}", c.describe());
     } else {

@@ -71,7 +71,7 @@ fn main() {
         "ray caster, Shepp–Logan {n}³, {size}×{size} image, step 0.5, {} threads, {runs} runs after 1 warm-up",
         rayon::current_num_threads()
     );
-    let gpu = voxlab::gpu::GpuContext::new().ok();
+    let gpu = voxlab::gpu::GpuContext::shared().ok();
     match &gpu {
         Some(ctx) => println!(
             "GPU: {} ({}, {})",

@@ -120,7 +120,7 @@ fn cone_joseph_on_cpu_and_gpu_agree_with_the_analytic_centre() {
             sdd: 1500.0
         }
     );
-    if voxlab::gpu::GpuContext::new().is_ok() {
+    if voxlab::gpu::GpuContext::shared().is_ok() {
         let gpu = run(
             &d.join("gpu.npy"),
             &["--method", "joseph", "--backend", "gpu"],

@@ -153,15 +153,20 @@ const EXACT_SCALAR: Tolerance = Tolerance {
 };
 
 /// The hardware trilinear path. Real GPUs compute the sampler's interpolation weights
-/// with 8 fractional bits, so a filtered value may be off by up to 1/256 of the largest
-/// difference between neighbouring voxels (≤ the data range, 1 here); on scalar images
-/// that is the bound. DVR maps values through opacity bands of slope up to 12 per unit,
-/// compounding along a ray: the bound there is 12× larger and the RMSE a quarter of
-/// it. lavapipe filters in full f32 and meets the exact bounds; only a real GPU tests
-/// these.
+/// with a few fractional bits (`subTexelPrecisionBits`: 8 on NVIDIA, 4 is the Vulkan
+/// minimum we do not expect to meet), so each of the three 1-D weights may be off by up
+/// to 2⁻⁸. Trilinear interpolation is three nested lerps, so a filtered value may be off
+/// by up to 3 × 2⁻⁸ × the largest difference between neighbouring voxels (≤ the data
+/// range, 1 here); on scalar images that is the bound, and the RMSE bound is a quarter
+/// of it. On an NVIDIA H200 (driver 580.159) the MIP case measured max |Δ| 6.4e-3
+/// (1.6 × 2⁻⁸) and RMSE 1.4e-3: the weights' errors add up across the axes, so the
+/// single-axis bound of 2⁻⁸ first written here was too tight. DVR maps values through
+/// opacity bands of slope up to 12 per unit, compounding along a ray: its bound is
+/// 12 × 2⁻⁸ (it measured within that on the H200) and the RMSE a quarter of it.
+/// lavapipe filters in full f32 and meets the exact bounds; only a real GPU tests these.
 const HARDWARE_SCALAR: Tolerance = Tolerance {
-    max_abs: 1.0 / 256.0,
-    rmse: 1.0 / 1024.0,
+    max_abs: 3.0 / 256.0,
+    rmse: 3.0 / 1024.0,
 };
 const HARDWARE_DVR: Tolerance = Tolerance {
     max_abs: 12.0 / 256.0,

@@ -12,6 +12,7 @@
 //! - No adapter ⇒ [`Error::NoAdapter`] whose message says how to get one.
 
 use crate::error::{Error, Result};
+use std::sync::OnceLock;
 
 /// The backends voxlab uses.
 pub const BACKENDS: wgpu::Backends = wgpu::Backends::VULKAN
@@ -64,10 +65,16 @@ pub struct GpuContext {
     pub features: wgpu::Features,
 }
 
-fn instance() -> wgpu::Instance {
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = BACKENDS;
-    wgpu::Instance::new(desc)
+/// The process's one wgpu instance. It is created once and never dropped: on NVIDIA's
+/// Vulkan driver, destroying an instance on one thread while another thread opens or
+/// uses a device crashed the process (the driver library was unloaded under it).
+fn instance() -> &'static wgpu::Instance {
+    static INSTANCE: OnceLock<wgpu::Instance> = OnceLock::new();
+    INSTANCE.get_or_init(|| {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = BACKENDS;
+        wgpu::Instance::new(desc)
+    })
 }
 
 fn type_rank(t: wgpu::DeviceType) -> u8 {
@@ -91,6 +98,20 @@ pub fn list_adapters() -> Vec<AdapterSummary> {
 }
 
 impl GpuContext {
+    /// The process-wide context: opened on first use, then shared by every caller and
+    /// never closed. Prefer it to [`GpuContext::new`] where many computations run in
+    /// one process (tests, benchmarks): drivers cap how many devices a process may
+    /// open, and NVIDIA's refused new ones after a few dozen had been opened and
+    /// closed.
+    pub fn shared() -> Result<&'static GpuContext> {
+        static SHARED: OnceLock<std::result::Result<GpuContext, Error>> = OnceLock::new();
+        match SHARED.get_or_init(GpuContext::new) {
+            Ok(ctx) => Ok(ctx),
+            Err(Error::NoAdapter(m)) => Err(Error::NoAdapter(m.clone())),
+            Err(e) => Err(Error::Gpu(e.to_string())),
+        }
+    }
+
     /// Opens the best adapter (or the one `VOXLAB_ADAPTER` names).
     pub fn new() -> Result<Self> {
         let wanted = std::env::var("VOXLAB_ADAPTER")

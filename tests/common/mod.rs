@@ -186,8 +186,8 @@ impl XorShift {
 /// `VOXLAB_ALLOW_NO_GPU=1`, in which case the skip is announced loudly (straight to the
 /// terminal, past the test harness's output capture) and recorded in
 /// `target/gpu-tests-skipped.txt`, which the test script reports at the end.
-pub fn gpu(test: &str) -> Option<GpuContext> {
-    match GpuContext::new() {
+pub fn gpu(test: &str) -> Option<&'static GpuContext> {
+    match GpuContext::shared() {
         Ok(ctx) => Some(ctx),
         Err(e) => {
             if std::env::var("VOXLAB_ALLOW_NO_GPU").as_deref() == Ok("1") {
