@@ -66,7 +66,10 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
         opts.runs = n;
     }
     if !(a.budget.is_finite() && a.budget > 0.0) {
-        return Err(Error::invalid("--budget", "must be a positive number of seconds"));
+        return Err(Error::invalid(
+            "--budget",
+            "must be a positive number of seconds",
+        ));
     }
     opts.warmup = a.warmup;
     opts.budget_seconds = a.budget;
@@ -103,7 +106,10 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
         Err("not requested (--backends cpu)".to_string())
     };
     match &ctx {
-        Ok(c) => eprintln!("GPU: {} ({}, {})", c.summary.name, c.summary.backend, c.summary.device_type),
+        Ok(c) => eprintln!(
+            "GPU: {} ({}, {})",
+            c.summary.name, c.summary.backend, c.summary.device_type
+        ),
         Err(why) => eprintln!("GPU: none ({why})"),
     }
     eprintln!(
@@ -122,7 +128,12 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
             pb.inc(1);
         }
     };
-    let report = bench::run_suite(cases, &opts, ctx.as_deref().map_err(String::as_str), &progress);
+    let report = bench::run_suite(
+        cases,
+        &opts,
+        ctx.as_deref().map_err(String::as_str),
+        &progress,
+    );
     pb.finish_and_clear();
     let slug = a.name.clone().unwrap_or_else(|| report.default_slug());
     let paths = report.write(&a.out, &slug)?;

@@ -230,7 +230,10 @@ impl BackendReport {
         if self.status != Status::Passed {
             return None;
         }
-        self.seconds.as_ref().or(self.kernel.as_ref()).map(|s| s.median)
+        self.seconds
+            .as_ref()
+            .or(self.kernel.as_ref())
+            .map(|s| s.median)
     }
 }
 
@@ -374,7 +377,11 @@ impl Report {
             Some(a) => {
                 // "llvmpipe (LLVM 15.0.6, 256 bits)" → "llvmpipe".
                 let base = a.name.split('(').next().unwrap_or("");
-                let s = slugify(if base.trim().is_empty() { &a.name } else { base });
+                let s = slugify(if base.trim().is_empty() {
+                    &a.name
+                } else {
+                    base
+                });
                 if s.is_empty() {
                     "gpu".to_string()
                 } else {
@@ -642,11 +649,7 @@ fn markdown(r: &Report) -> String {
         "| software | voxlab {}, wgpu {}, {} |",
         m.voxlab_version, m.wgpu_version, m.rustc_version
     );
-    let _ = writeln!(
-        s,
-        "| command | `{}` |",
-        m.command_line.replace('|', "\\|")
-    );
+    let _ = writeln!(s, "| command | `{}` |", m.command_line.replace('|', "\\|"));
     let _ = writeln!(s, "| total time | {} |\n", fmt_seconds(r.seconds));
     let _ = writeln!(s, "## Method\n");
     let _ = writeln!(
@@ -673,10 +676,7 @@ fn markdown(r: &Report) -> String {
             s,
             "| case | size | CPU f64 | CPU f32 | f64/f32 | GPU kernel | GPU end to end | GPU set-up | f32/kernel | f32/e2e | throughput (f64 / f32 / GPU) | parity f32 | parity GPU |"
         );
-        let _ = writeln!(
-            s,
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for c in &cases {
             if let Some(e) = &c.error {
                 let _ = writeln!(
@@ -702,7 +702,11 @@ fn markdown(r: &Report) -> String {
                 time_cell(&c.cpu_f32, c.cpu_f32.seconds.as_ref()),
                 fmt_ratio(c.speedups.f64_over_f32),
                 time_cell(&c.gpu, c.gpu.kernel.as_ref()),
-                if c.gpu.status == Status::Passed { k } else { "" },
+                if c.gpu.status == Status::Passed {
+                    k
+                } else {
+                    ""
+                },
                 time_cell(&c.gpu, c.gpu.end_to_end.as_ref()),
                 c.gpu
                     .setup
@@ -790,16 +794,8 @@ fn svg(r: &Report) -> String {
         .flatten()
         .filter(|v| v.is_finite() && *v > 0.0)
         .collect();
-    let lo = ratios
-        .iter()
-        .fold(0.1f64, |a, &v| a.min(v))
-        .log10()
-        .floor();
-    let hi = ratios
-        .iter()
-        .fold(10.0f64, |a, &v| a.max(v))
-        .log10()
-        .ceil();
+    let lo = ratios.iter().fold(0.1f64, |a, &v| a.min(v)).log10().floor();
+    let hi = ratios.iter().fold(10.0f64, |a, &v| a.max(v)).log10().ceil();
     let x = |v: f64| LEFT + (v.log10() - lo) / (hi - lo) * PLOT_W;
     let mut rows = 0.0;
     let mut families = 0.0;
