@@ -664,7 +664,10 @@ fn markdown(r: &Report) -> String {
          compute passes alone; end to end = upload + passes + readback; set-up (shaders, \
          pipelines) is apart. Speedups are quoted against CPU f32, the fair baseline: the \
          f64 oracle is slow by design. Throughput columns are CPU f64 / CPU f32 / GPU kernel.\n",
-        r.warmup, r.runs, r.min_runs, r.budget_seconds
+        r.warmup,
+        r.runs,
+        r.min_runs.min(r.runs),
+        r.budget_seconds
     );
     for fam in FAMILIES {
         let cases: Vec<&CaseReport> = r.cases.iter().filter(|c| c.family == fam).collect();
