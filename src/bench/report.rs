@@ -184,7 +184,7 @@ pub struct BackendReport {
     pub message: Option<String>,
     /// Against the oracle (None for the oracle itself and for skipped backends).
     pub parity: Option<Parity>,
-    /// The warm-up runs (seconds; for the GPU, end to end).
+    /// The warm-up runs (seconds; for the GPU, set-up + end to end).
     pub warmup_seconds: Vec<f64>,
     /// Timed runs done (fewer than asked when the time budget ran out).
     pub runs: usize,
@@ -542,6 +542,7 @@ fn sig3_seconds_bare(v: f64, reference: f64) -> String {
 
 fn parity_cell(b: &BackendReport) -> String {
     match (&b.status, &b.parity) {
+        (Status::Passed, Some(p)) if p.rel_l2 == 0.0 => "0 (exact)".to_string(),
         (Status::Passed, Some(p)) => format!("{:.1e}", p.rel_l2),
         (Status::Failed, Some(p)) => format!(
             "**FAILED** (rel L2 {:.2e}, max {:.2e}{})",
@@ -727,9 +728,6 @@ fn markdown(r: &Report) -> String {
             .iter()
             .filter_map(|c| {
                 let mut bits = Vec::new();
-                if !c.note.is_empty() {
-                    bits.push(c.note.clone());
-                }
                 if let Some(p) = c.prepare_seconds {
                     bits.push(format!("prep {}", fmt_seconds(p)));
                 }
@@ -740,7 +738,14 @@ fn markdown(r: &Report) -> String {
                         }
                     }
                 }
-                (!bits.is_empty()).then(|| format!("- {} {}: {}", c.name, c.size, bits.join("; ")))
+                let note = c.note.trim();
+                let bits = bits.join("; ");
+                match (note.is_empty(), bits.is_empty()) {
+                    (true, true) => None,
+                    (false, true) => Some(format!("- {} {}: {note}", c.name, c.size)),
+                    (true, false) => Some(format!("- {} {}: {bits}", c.name, c.size)),
+                    (false, false) => Some(format!("- {} {}: {note} ({bits})", c.name, c.size)),
+                }
             })
             .collect();
         if !notes.is_empty() {
@@ -775,9 +780,9 @@ fn xml_escape(s: &str) -> String {
 /// Horizontal bars of f32/GPU-kernel and f32/GPU-end-to-end per case, on a log axis,
 /// grouped by family.
 fn svg(r: &Report) -> String {
-    const LEFT: f64 = 300.0;
+    const LEFT: f64 = 340.0;
     const PLOT_W: f64 = 560.0;
-    const RIGHT: f64 = 40.0;
+    const RIGHT: f64 = 60.0;
     const TOP: f64 = 70.0;
     const BAR: f64 = 9.0;
     const CASE_H: f64 = 26.0;
@@ -859,7 +864,7 @@ fn svg(r: &Report) -> String {
             r#"<line x1="{xv:.1}" y1="{TOP}" x2="{xv:.1}" y2="{bottom}" stroke="{stroke}" stroke-width="{w}"/>"#
         );
         let label = if d < 0.0 {
-            format!("{}×", sig3(v))
+            format!("{:.*}×", (-d) as usize, v)
         } else {
             format!("{v:.0}×")
         };
