@@ -1,5 +1,6 @@
 //! The `voxlab` command line: a thin layer over the library.
 
+mod cli_bench;
 mod cli_d2vr;
 mod cli_project;
 mod cli_reconstruct;
@@ -112,6 +113,11 @@ enum Command {
     /// parallel stack (as iradon), FDK of a cone-beam stack (on RTK's grid); CPU f64/f32
     /// or GPU; writes .npy (float32), .nrrd or .png.
     Reconstruct(Box<cli_reconstruct::ReconstructArgs>),
+    /// Benchmark every algorithm on the CPU f64 oracle, CPU f32 and the GPU: warm-up,
+    /// timed runs (median, min, max), each result checked against the oracle first;
+    /// writes a JSON, Markdown and SVG report (see docs/benchmarking.md). Exit status 3
+    /// when a result fails its parity check or a case errors.
+    Bench(Box<cli_bench::BenchArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -459,6 +465,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if let Command::Fft(args) = cli.command {
         return fft(args);
     }
+    if let Command::Bench(args) = cli.command {
+        return cli_bench::run(*args);
+    }
     run_other(cli.command).map(|()| ExitCode::SUCCESS)
 }
 
@@ -466,7 +475,9 @@ fn run_other(command: Command) -> Result<()> {
     match command {
         Command::Demo { out } => demo(&out),
         Command::Render(args) => render(*args),
-        Command::Compare(_) | Command::Fft(_) => unreachable!("handled in run"),
+        Command::Compare(_) | Command::Fft(_) | Command::Bench(_) => {
+            unreachable!("handled in run")
+        }
         Command::Phantom { spec, out } => {
             let spec = spec.strip_prefix("phantom:").unwrap_or(&spec);
             let (phantom, dims) = voxlab::phantom::parse_spec(spec, 128)?;

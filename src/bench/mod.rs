@@ -8,9 +8,12 @@
 pub mod case;
 pub mod ct;
 pub mod fourier;
+pub mod machine;
 pub mod raycast;
+pub mod report;
 
 pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+pub use report::Report;
 
 /// The algorithm families, in report order (`--only` takes a comma-separated subset).
 pub const FAMILIES: [&str; 8] = [
@@ -24,4 +27,472 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     all.extend(fourier::cases(suite));
     all.extend(ct::cases(suite));
     all
+}
+
+use crate::error::{Error, Result};
+use crate::gpu::GpuContext;
+use machine::Machine;
+use report::{parity, throughput, BackendReport, CaseReport, Speedups, Stats, Status};
+use std::time::Instant;
+
+/// Which backends run. The CPU f64 oracle always runs once, as the reference; with
+/// `Gpu` it is not timed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backends {
+    Cpu,
+    Gpu,
+    All,
+}
+
+impl Backends {
+    /// `cpu`, `gpu` or `all`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "cpu" => Ok(Backends::Cpu),
+            "gpu" => Ok(Backends::Gpu),
+            "all" => Ok(Backends::All),
+            other => Err(Error::invalid(
+                "--backends",
+                format!("'{other}' is not cpu, gpu or all"),
+            )),
+        }
+    }
+    pub fn cpu(self) -> bool {
+        self != Backends::Gpu
+    }
+    pub fn gpu(self) -> bool {
+        self != Backends::Cpu
+    }
+}
+
+/// How a suite is run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    pub suite: Suite,
+    /// Timed runs per backend (at least 1).
+    pub runs: usize,
+    /// Untimed runs before them; the first result of all is the one checked.
+    pub warmup: usize,
+    pub backends: Backends,
+    /// Per backend and case: once `min_runs` timed runs are done and this many seconds
+    /// are spent on timed runs, no more are added (a slow backend at a huge size).
+    pub budget_seconds: f64,
+    pub min_runs: usize,
+}
+
+impl Options {
+    /// The defaults: 5 timed runs for the full suite, 3 for the quick one; 1 warm-up;
+    /// every backend; a 30 s budget after 3 runs.
+    pub fn new(suite: Suite) -> Self {
+        Options {
+            suite,
+            runs: match suite {
+                Suite::Quick => 3,
+                Suite::Full => 5,
+            },
+            warmup: 1,
+            backends: Backends::All,
+            budget_seconds: 30.0,
+            min_runs: 3,
+        }
+    }
+}
+
+/// `raycast,fft` → the families, each checked against [`FAMILIES`].
+pub fn parse_families(list: &str) -> Result<Vec<&'static str>> {
+    let mut out = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let fam = FAMILIES
+            .iter()
+            .find(|f| f.eq_ignore_ascii_case(name))
+            .ok_or_else(|| {
+                Error::invalid(
+                    "--only",
+                    format!(
+                        "'{name}' is not a benchmark family; the families are {}",
+                        FAMILIES.join(", ")
+                    ),
+                )
+            })?;
+        if !out.contains(fam) {
+            out.push(*fam);
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::invalid(
+            "--only",
+            format!("name at least one of {}", FAMILIES.join(", ")),
+        ));
+    }
+    Ok(out)
+}
+
+/// The cases of the given families (all of them for None), in report order.
+pub fn select(cases: Vec<Case>, only: Option<&[&str]>) -> Vec<Case> {
+    match only {
+        None => cases,
+        Some(f) => cases
+            .into_iter()
+            .filter(|c| f.contains(&c.family))
+            .collect(),
+    }
+}
+
+/// What the runner is doing, for a progress display.
+pub enum Event<'a> {
+    /// A case begins (`index` counts from 0).
+    Started {
+        index: usize,
+        total: usize,
+        id: &'a str,
+    },
+    /// A stage within the case: `prepare`, `CPU f64`, `CPU f32`, `GPU`.
+    Stage { id: &'a str, stage: &'a str },
+    /// A case is done.
+    Finished {
+        index: usize,
+        total: usize,
+        report: &'a CaseReport,
+    },
+}
+
+/// One run's time and output, whichever backend made it.
+trait Sample {
+    /// The seconds that count against the time budget.
+    fn seconds(&self) -> f64;
+    fn take_output(&mut self) -> Vec<f64>;
+}
+
+impl Sample for Run {
+    fn seconds(&self) -> f64 {
+        self.seconds
+    }
+    fn take_output(&mut self) -> Vec<f64> {
+        std::mem::take(&mut self.output)
+    }
+}
+
+impl Sample for GpuRun {
+    fn seconds(&self) -> f64 {
+        self.end_to_end + self.setup
+    }
+    fn take_output(&mut self) -> Vec<f64> {
+        std::mem::take(&mut self.output)
+    }
+}
+
+/// What measuring one backend gave.
+enum Measured<T> {
+    Done {
+        warmups: Vec<f64>,
+        timed: Vec<T>,
+        parity: Option<report::Parity>,
+    },
+    Failed(report::Parity),
+    Errored(String),
+}
+
+/// Warm-ups, then timed runs (stopping early on the budget). The first result of all
+/// goes to `first`: the oracle keeps it as the reference; the others are checked, and
+/// a failed check ends the backend before any timed run.
+fn measure<T: Sample>(
+    opts: &Options,
+    warmup: usize,
+    runs: usize,
+    mut call: impl FnMut() -> Result<T>,
+    mut first: impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>>,
+) -> Measured<T> {
+    let mut warmups = Vec::new();
+    let mut timed = Vec::new();
+    let mut parity = None;
+    let mut checked = false;
+    let mut spent = 0.0;
+    for i in 0.. {
+        let warm = i < warmup;
+        if !warm
+            && (timed.len() >= runs
+                || (timed.len() >= opts.min_runs.min(runs) && spent >= opts.budget_seconds))
+        {
+            break;
+        }
+        let start = Instant::now();
+        let mut r = match call() {
+            Ok(r) => r,
+            Err(e) => return Measured::Errored(e.to_string()),
+        };
+        let wall = start.elapsed().as_secs_f64();
+        let out = r.take_output();
+        if !checked {
+            checked = true;
+            match first(out) {
+                Ok(p) => parity = p,
+                Err(m) => return m,
+            }
+        }
+        if warm {
+            warmups.push(r.seconds());
+        } else {
+            spent += wall.max(r.seconds());
+            timed.push(r);
+        }
+    }
+    Measured::Done {
+        warmups,
+        timed,
+        parity,
+    }
+}
+
+fn checker<T>(
+    reference: &[f64],
+    tol: Tol,
+) -> impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>> + '_ {
+    move |out| {
+        let p = parity(reference, &out, tol);
+        if p.passed {
+            Ok(Some(p))
+        } else {
+            Err(Measured::Failed(p))
+        }
+    }
+}
+
+fn cpu_report(m: Measured<Run>, work: &[Work]) -> BackendReport {
+    match m {
+        Measured::Done {
+            warmups,
+            timed,
+            parity,
+        } => {
+            let secs: Vec<f64> = timed.iter().map(|r| r.seconds).collect();
+            let stats = Stats::of(&secs);
+            BackendReport {
+                status: Status::Passed,
+                message: stats
+                    .is_none()
+                    .then(|| "reference only (not timed)".to_string()),
+                parity,
+                warmup_seconds: warmups,
+                runs: timed.len(),
+                throughput: stats
+                    .as_ref()
+                    .map_or(Vec::new(), |s| throughput(work, s.median, None)),
+                seconds: stats,
+                ..BackendReport::skipped("")
+            }
+        }
+        Measured::Failed(p) => failed(p),
+        Measured::Errored(e) => BackendReport::errored(e),
+    }
+}
+
+fn failed(p: report::Parity) -> BackendReport {
+    BackendReport {
+        status: Status::Failed,
+        message: Some(p.message.clone()),
+        parity: Some(p),
+        ..BackendReport::skipped("")
+    }
+}
+
+fn gpu_report(m: Measured<GpuRun>, work: &[Work]) -> BackendReport {
+    match m {
+        Measured::Done {
+            warmups,
+            timed,
+            parity,
+        } => {
+            let col = |f: fn(&GpuRun) -> f64| Stats::of(&timed.iter().map(f).collect::<Vec<_>>());
+            let kernel = col(|r| r.kernel);
+            let end_to_end = col(|r| r.end_to_end);
+            let throughput = match (&kernel, &end_to_end) {
+                (Some(k), Some(e)) => throughput(work, k.median, Some(e.median)),
+                _ => Vec::new(),
+            };
+            BackendReport {
+                status: Status::Passed,
+                message: None,
+                parity,
+                warmup_seconds: warmups,
+                runs: timed.len(),
+                seconds: None,
+                setup: col(|r| r.setup),
+                kernel_from_timestamps: Some(
+                    !timed.is_empty() && timed.iter().all(|r| r.kernel_from_timestamps),
+                ),
+                kernel,
+                end_to_end,
+                throughput,
+            }
+        }
+        Measured::Failed(p) => failed(p),
+        Measured::Errored(e) => BackendReport::errored(e),
+    }
+}
+
+/// Runs one case on every backend `opts` asks for.
+pub fn run_case(
+    case: &Case,
+    opts: &Options,
+    gpu: std::result::Result<&GpuContext, &str>,
+    progress: &dyn Fn(Event),
+) -> CaseReport {
+    let id = case.id();
+    let stage = |s: &str| progress(Event::Stage { id: &id, stage: s });
+    let mut report = CaseReport {
+        family: case.family.to_string(),
+        name: case.name.clone(),
+        size: case.size.clone(),
+        note: String::new(),
+        prepare_seconds: None,
+        error: None,
+        work: Vec::new(),
+        cpu_f64: BackendReport::skipped("not run"),
+        cpu_f32: BackendReport::skipped("not run"),
+        gpu: BackendReport::skipped("not run"),
+        speedups: Speedups::default(),
+    };
+    stage("prepare");
+    let t = Instant::now();
+    let prepared = (case.prepare)();
+    report.prepare_seconds = Some(t.elapsed().as_secs_f64());
+    let mut p = match prepared {
+        Ok(p) => p,
+        Err(e) => {
+            report.error = Some(e.to_string());
+            return report;
+        }
+    };
+    report.note = p.note.clone();
+    report.work = p.work.clone();
+    let runs = opts.runs.max(1);
+
+    // The oracle: its first result is the reference.
+    stage("CPU f64");
+    let mut reference = Vec::new();
+    let (w, n) = if opts.backends.cpu() {
+        (opts.warmup, runs)
+    } else {
+        (1, 0)
+    };
+    let m = measure(opts, w, n, &mut p.cpu_f64, |out: Vec<f64>| {
+        let bad = out.iter().filter(|v| !v.is_finite()).count();
+        if bad > 0 {
+            return Err(Measured::Errored(format!(
+                "the oracle's result holds {bad} non-finite value(s)"
+            )));
+        }
+        reference = out;
+        Ok(None)
+    });
+    report.cpu_f64 = cpu_report(m, &p.work);
+    if report.cpu_f64.status != Status::Passed {
+        let why = "not run: the oracle has no result";
+        report.cpu_f32 = BackendReport::skipped(why);
+        report.gpu = BackendReport::skipped(why);
+        return report;
+    }
+
+    report.cpu_f32 = match (&mut p.cpu_f32, opts.backends.cpu()) {
+        (None, _) => BackendReport::skipped("no f32 CPU path"),
+        (Some(_), false) => BackendReport::skipped("not requested (--backends gpu)"),
+        (Some(f), true) => {
+            stage("CPU f32");
+            let m = measure(opts, opts.warmup, runs, f, checker(&reference, p.tol_f32));
+            cpu_report(m, &p.work)
+        }
+    };
+
+    report.gpu = match (&mut p.gpu, gpu) {
+        (None, _) => BackendReport::skipped("no GPU port"),
+        (Some(_), Err(why)) => BackendReport::skipped(why),
+        (Some(f), Ok(ctx)) => {
+            stage("GPU");
+            let m = measure(
+                opts,
+                opts.warmup,
+                runs,
+                || f(ctx),
+                checker(&reference, p.tol_gpu),
+            );
+            gpu_report(m, &p.work)
+        }
+    };
+    report.compute_speedups();
+    report
+}
+
+/// Runs every case (preparing each just before it runs, and dropping its inputs right
+/// after), and describes the machine. `gpu` is the adapter to use, or why there is
+/// none (the GPU columns then say so and the run still succeeds).
+pub fn run_suite(
+    cases: Vec<Case>,
+    opts: &Options,
+    gpu: std::result::Result<&GpuContext, &str>,
+    progress: &dyn Fn(Event),
+) -> report::Report {
+    let machine = Machine::current(gpu);
+    let start = Instant::now();
+    let total = cases.len();
+    let mut reports = Vec::with_capacity(total);
+    for (index, case) in cases.iter().enumerate() {
+        let id = case.id();
+        progress(Event::Started {
+            index,
+            total,
+            id: &id,
+        });
+        let r = run_case(case, opts, gpu, progress);
+        progress(Event::Finished {
+            index,
+            total,
+            report: &r,
+        });
+        reports.push(r);
+    }
+    report::Report {
+        machine,
+        suite: opts.suite,
+        runs: opts.runs.max(1),
+        warmup: opts.warmup,
+        backends: opts.backends,
+        budget_seconds: opts.budget_seconds,
+        min_runs: opts.min_runs,
+        cases: reports,
+        seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+/// One line for a finished case: its status and headline figures.
+pub fn summary_line(r: &CaseReport) -> String {
+    use report::fmt_seconds;
+    let t = |b: &BackendReport, s: Option<&Stats>| match b.status {
+        Status::Passed => s.map_or("ref".to_string(), |s| fmt_seconds(s.median)),
+        Status::Failed => "FAILED".to_string(),
+        Status::Errored => "ERROR".to_string(),
+        Status::Skipped => "—".to_string(),
+    };
+    let status = match r.status() {
+        Status::Passed => "ok",
+        Status::Failed => "FAILED",
+        Status::Errored => "ERROR",
+        Status::Skipped => "skipped",
+    };
+    let mut line = format!(
+        "{status:6} {}: f64 {}, f32 {}, GPU kernel {} / e2e {}",
+        r.id(),
+        t(&r.cpu_f64, r.cpu_f64.seconds.as_ref()),
+        t(&r.cpu_f32, r.cpu_f32.seconds.as_ref()),
+        t(&r.gpu, r.gpu.kernel.as_ref()),
+        t(&r.gpu, r.gpu.end_to_end.as_ref()),
+    );
+    if let Some(s) = r.speedups.f32_over_gpu_kernel {
+        let _ = std::fmt::Write::write_fmt(&mut line, format_args!(", f32/kernel {s:.2}×"));
+    }
+    for p in r.problems() {
+        line.push_str("\n       ");
+        line.push_str(&p);
+    }
+    line
 }
