@@ -4,8 +4,10 @@
 //! ("half": 64 × 64², 64³, 128²), shaded DVR of the modified Shepp–Logan head, with the
 //! paper's columns: GFS (density only, gradients by central differences), GFR
 //! (density + gradient from the projections), +B (bounding cylinder), +B+OC (plus early
-//! ray termination at 0.95), and the fraction of samples reconstructed. The projections
-//! are exact (`project_phantom`), FDK-filtered by `cpu::ramp` (Ram-Lak, FFT path, f32).
+//! ray termination at 0.95), +M (the occupancy mask), and the fraction of samples
+//! reconstructed. The scenes and variants are `voxlab::bench::d2vr`'s: exact projections
+//! (`project_phantom`), FDK-filtered by `cpu::ramp` (Ram-Lak, FFT path, f64, rendered
+//! from their f32 rounding).
 //! Each GPU image is checked against the CPU f32 image first (max relative difference
 //! printed). Each
 //! case: one warm-up run, then `VOXLAB_BENCH_RUNS` (default 5) timed runs; medians in
@@ -14,127 +16,57 @@
 mod common;
 use common::median_min_max;
 
-use glam::DVec3;
 use std::time::Instant;
-use voxlab::camera::{Camera, Orbit, Projection};
-use voxlab::cpu::d2vr::{render_d2vr, D2vrGradient, D2vrGrid, D2vrOptions};
-use voxlab::cpu::project::project_phantom;
-use voxlab::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
-use voxlab::ct::{Geometry, Projections};
+use voxlab::bench::d2vr::{
+    d2vr_mask, d2vr_scene, d2vr_settings, d2vr_variants, D2vrConfig, HALF, TABLE1, TINY,
+};
+use voxlab::cpu::d2vr::render_d2vr;
 use voxlab::gpu::d2vr::{self as gd2vr, ProjStorage};
 use voxlab::gpu::GpuContext;
-use voxlab::phantom::Phantom;
-use voxlab::settings::{Mode, RenderSettings};
-use voxlab::transfer::{ControlPoint, TransferFunction, WindowMap};
-
-fn tf() -> TransferFunction {
-    let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "head".into(),
-        domain: [0.0, 1.2],
-        points: vec![
-            p(0.15, [0.0, 0.0, 0.0, 0.0]),
-            p(0.3, [0.8, 0.5, 0.4, 0.05]),
-            p(0.5, [0.8, 0.5, 0.4, 0.05]),
-            p(0.8, [1.0, 1.0, 0.9, 0.6]),
-        ],
-        window: WindowMap::default(),
-    }
-}
 
 fn main() {
     let args = common::BenchArgs::from_env();
-    let ctx = match GpuContext::new() {
+    let ctx = match GpuContext::shared() {
         Ok(c) => Some(c),
         Err(e) => {
             eprintln!("no GPU: {e}; CPU figures only");
             None
         }
     };
-    let cases: &[(&str, usize, usize, usize, usize)] = if args.smoke {
-        &[("smoke", 16, 16, 16, 16)]
+    let configs = if args.smoke {
+        vec![D2vrConfig {
+            name: "smoke",
+            ..TINY
+        }]
     } else {
-        // name, projections, detector side, grid side, image side
-        &[("half", 64, 64, 64, 128), ("table1", 128, 128, 128, 256)]
+        vec![HALF, TABLE1]
     };
     println!("| case | variant | CPU f32 (s) | GPU f32 (s) | GPU f16 (s) | reconstructed | GPU vs CPU (f32 / f16) |");
     println!("|---|---|---|---|---|---|---|");
-    for &(name, na, det, n, img) in cases {
-        if !args.wants(name) {
+    for c in configs {
+        if !args.wants(c.name) {
             continue;
         }
-        // 256 mm field: the detector covers it at the isocentre (magnification 1.5).
-        let g = Geometry::cone_rtk(
-            600.0,
-            900.0,
-            det,
-            det,
-            384.0 / det as f64,
-            384.0 / det as f64,
-            Geometry::even_angles(na, 360.0),
-        )
-        .unwrap();
-        let ph = Phantom::shepp_logan_modified();
-        let raw = project_phantom(&ph, &g).unwrap();
-        let raw = Projections::new(
-            raw.angles,
-            raw.rows,
-            raw.cols,
-            raw.data.iter().map(|&v| v as f32).collect(),
-        )
-        .unwrap();
-        let q = filter_projections(&raw, &g, RampFilter::RamLak, FilterMethod::Fft).unwrap();
-        let grid = D2vrGrid::centred([n; 3], 256.0 / n as f64).unwrap();
-        let cam = Camera::orbit(
-            DVec3::ZERO,
-            [256.0; 3],
-            Orbit {
-                azimuth_deg: 30.0,
-                elevation_deg: 20.0,
-                distance_mm: None,
-            },
-            Projection::Orthographic {
-                width_mm: 0.0,
-                height_mm: 0.0,
-            },
-            img,
-            img,
-        )
-        .unwrap();
-        let tf = tf();
-        let variants = [
-            ("GFS", D2vrGradient::Gfs, false, 1.0),
-            ("GFR", D2vrGradient::Gfr, false, 1.0),
-            ("GFS+B", D2vrGradient::Gfs, true, 1.0),
-            ("GFS+B+OC", D2vrGradient::Gfs, true, 0.95),
-            ("GFR+B+OC", D2vrGradient::Gfr, true, 0.95),
-        ];
-        for (vname, gradient, cylinder, ert) in variants {
-            let s = RenderSettings {
-                mode: Mode::Dvr,
-                step: 1.0,
-                ert_threshold: ert,
-                ..RenderSettings::default()
-            };
-            let o = D2vrOptions {
-                gradient,
-                cylinder,
-                value_range: (0.0, 1.0),
-            };
+        let sc = d2vr_scene(&c).unwrap();
+        let q = &sc.filtered_f32;
+        let (g, grid, tf, cam) = (&sc.geometry, &sc.grid, &sc.tf, &sc.camera);
+        let mask = d2vr_mask(&sc).unwrap();
+        for v in d2vr_variants() {
+            let (s, o) = d2vr_settings(&v);
+            let m = v.mask.then_some(&mask);
             let cpu_run = || {
                 let t = Instant::now();
-                let out = render_d2vr(&q, &g, &grid, &tf, &cam, &s, &o, None, &|_, _| {}).unwrap();
+                let out = render_d2vr(q, g, grid, tf, cam, &s, &o, m, &|_, _| {}).unwrap();
                 (t.elapsed().as_secs_f64(), out)
             };
             let (_, cpu_out) = cpu_run();
             let cpu_t = median_min_max((0..args.runs).map(|_| cpu_run().0).collect()).0;
             let mut gpu_t = [f64::NAN; 2];
             let mut gpu_err = [f64::NAN; 2];
-            if let Some(ctx) = &ctx {
+            if let Some(ctx) = ctx {
                 for (i, st) in [ProjStorage::F32, ProjStorage::F16].into_iter().enumerate() {
-                    let run = || {
-                        gd2vr::render_d2vr(ctx, &q, &g, &grid, &tf, &cam, &s, &o, None, st).unwrap()
-                    };
+                    let run =
+                        || gd2vr::render_d2vr(ctx, q, g, grid, tf, cam, &s, &o, m, st).unwrap();
                     let first = run();
                     let a = &cpu_out.render.image.data;
                     let peak = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -149,7 +81,13 @@ fn main() {
                 }
             }
             println!(
-                "| {name} ({na}×{det}², {n}³, {img}²) | {vname} | {cpu_t:.3} | {:.3} | {:.3} | {:.1} % | {:.1e} / {:.1e} |",
+                "| {} ({}×{}², {}³, {}²) | {} | {cpu_t:.3} | {:.3} | {:.3} | {:.1} % | {:.1e} / {:.1e} |",
+                c.name,
+                c.views,
+                c.detector,
+                c.grid,
+                c.image,
+                v.name,
                 gpu_t[0],
                 gpu_t[1],
                 100.0 * cpu_out.stats.fraction(),

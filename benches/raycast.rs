@@ -2,8 +2,9 @@
 //! baseline and the GPU, on the same inputs. GPU figures: kernel time from timestamp
 //! queries, and end to end (upload, set-up passes, kernel, readback; shader compilation
 //! and pipeline creation reported apart as set-up). Speedups are quoted against f32.
-//! Each GPU result is checked against the f64 oracle first (a fast wrong answer does
-//! not count). Each case: one warm-up run, then `VOXLAB_BENCH_RUNS`
+//! The scene and the variants are `voxlab::bench::raycast`'s (`raycast_scene`,
+//! `raycast_variants`). Each GPU result is checked against the f64 oracle first, to the
+//! case's max-difference bound (a fast wrong answer does not count). Each case: one warm-up run, then `VOXLAB_BENCH_RUNS`
 //! (default 5) timed runs; the median, minimum and maximum are printed with the
 //! f64/f32 ratio of medians. Set-up (phantom sampling) is outside the timed region.
 //! Pass a substring to run only matching cases: `cargo bench --bench raycast -- mip`.
@@ -14,59 +15,15 @@ mod common;
 use common::median_min_max;
 
 use std::time::Instant;
-use voxlab::camera::{Camera, Orbit, Projection};
+use voxlab::bench::raycast::{raycast_scene, raycast_tolerances, raycast_variants};
 use voxlab::cpu::raycast::render;
-use voxlab::phantom::Phantom;
-use voxlab::settings::{Filter, Mode, RenderSettings};
-use voxlab::transfer::TransferFunction;
-use voxlab::AnyVolume;
 
 fn main() {
     let args = common::BenchArgs::from_env();
     let (smoke, runs) = (args.smoke, args.runs);
     let (n, size) = if smoke { (16, 16) } else { (128, 256) };
-    let vol: AnyVolume = Phantom::shepp_logan_modified()
-        .sample([n; 3])
-        .unwrap()
-        .into();
-    let tf = TransferFunction::preset("phantom").unwrap();
-    let cam = Camera::orbit(
-        glam::DVec3::ZERO,
-        [256.0; 3],
-        Orbit {
-            azimuth_deg: 30.0,
-            elevation_deg: 20.0,
-            distance_mm: Some(540.0),
-        },
-        Projection::Perspective { fov_y_deg: 30.0 },
-        size,
-        size,
-    )
-    .unwrap();
-    let cases: Vec<(&str, RenderSettings)> = vec![
-        ("dvr-shaded-trilinear", RenderSettings::default()),
-        (
-            "dvr-shaded-catmull-rom",
-            RenderSettings {
-                filter: Filter::CatmullRom,
-                ..RenderSettings::default()
-            },
-        ),
-        (
-            "mip-trilinear",
-            RenderSettings {
-                mode: Mode::Mip,
-                ..RenderSettings::default()
-            },
-        ),
-        (
-            "xray-trilinear",
-            RenderSettings {
-                mode: Mode::Xray,
-                ..RenderSettings::default()
-            },
-        ),
-    ];
+    let (vol, tf, cam) = raycast_scene(n, size).unwrap();
+    let cases = raycast_variants();
     println!(
         "ray caster, Shepp–Logan {n}³, {size}×{size} image, step 0.5, {} threads, {runs} runs after 1 warm-up",
         rayon::current_num_threads()
@@ -128,11 +85,8 @@ fn main() {
                         &oracle.image,
                         &g.output.image,
                         voxlab::metrics::Tolerance {
-                            max_abs: 1e-3
-                                * oracle
-                                    .image
-                                    .finite_range()
-                                    .map_or(1.0, |r| r.1.abs().max(1.0)),
+                            max_abs: raycast_tolerances(&s).1.max_abs_rel
+                                * oracle.image.data.iter().fold(0.0f64, |m, v| m.max(v.abs())),
                             rmse: f64::INFINITY,
                         },
                         None,

@@ -7,6 +7,7 @@
 
 pub mod case;
 pub mod ct;
+pub mod d2vr;
 pub mod fourier;
 pub mod machine;
 pub mod raycast;
@@ -26,6 +27,7 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     all.extend(raycast::cases(suite));
     all.extend(fourier::cases(suite));
     all.extend(ct::cases(suite));
+    all.extend(d2vr::cases(suite));
     all
 }
 

@@ -1,6 +1,291 @@
-//! Benchmark cases (being written).
-use super::{Case, Suite};
+//! Benchmark cases of the ray caster (family `raycast`) and of the precomputed gradient
+//! volume (family `gradient`).
+//!
+//! **raycast.** The modified Shepp–Logan head sampled on an `n³` grid
+//! ([`raycast_scene`]), seen by a perspective orbit camera (azimuth 30°, elevation 20°,
+//! 540 mm from the centre, 30° field of view) at `size × size` pixels, the `phantom`
+//! transfer function, step ½ voxel. The variants ([`raycast_variants`]): shaded DVR with
+//! trilinear and Catmull–Rom reconstruction, shaded DVR through the GPU's texture
+//! filtering unit (`hardware_filtering`), MIP, MinIP and X-ray. One run is
+//! `cpu::raycast::render::<R>` or `gpu::raycast::render` end to end (the volume's
+//! conversion to the working precision included, as a caller would see it). Work: rays
+//! (= pixels) and samples (the oracle's `total_samples`, counted by one untimed f64
+//! render while the case is prepared).
+//!
+//! **gradient.** `cpu::gradient::precompute_gradients` with central differences
+//! `(f(x+1) − f(x−1))/2` on every voxel of the same phantom, the set-up pass of a
+//! ray caster that interpolates gradients instead of differencing on the fly. The GPU
+//! computes the same volume in a set-up pass of `gpu::raycast::render`, into a texture
+//! that is never read back, so it has no standalone entry point: the family times the
+//! CPU alone. Work: voxel updates (one gradient per voxel) and bytes (one f32 read and
+//! three f32 writes per voxel, 16 B, whatever the backend's precision).
 
-pub fn cases(_suite: Suite) -> Vec<Case> {
-    Vec::new()
+use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use crate::camera::{Camera, Orbit, Projection};
+use crate::cpu::filter::Grid;
+use crate::error::Result;
+use crate::phantom::Phantom;
+use crate::settings::{Filter, GradientMethod, Mode, RenderSettings};
+use crate::transfer::TransferFunction;
+use crate::AnyVolume;
+use std::rc::Rc;
+use std::time::Instant;
+
+/// The benchmark scene: the modified Shepp–Logan head on an `n³` grid, the `phantom`
+/// transfer function, and the perspective orbit camera at `size × size` pixels.
+pub fn raycast_scene(n: usize, size: usize) -> Result<(AnyVolume, TransferFunction, Camera)> {
+    let vol: AnyVolume = Phantom::shepp_logan_modified().sample([n; 3])?.into();
+    let tf = TransferFunction::preset("phantom")?;
+    let cam = Camera::orbit(
+        glam::DVec3::ZERO,
+        [256.0; 3],
+        Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance_mm: Some(540.0),
+        },
+        Projection::Perspective { fov_y_deg: 30.0 },
+        size,
+        size,
+    )?;
+    Ok((vol, tf, cam))
+}
+
+/// The ray caster's benchmark variants, by name: the settings of each.
+pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
+    let with = |f: &dyn Fn(&mut RenderSettings)| {
+        let mut s = RenderSettings::default();
+        f(&mut s);
+        s
+    };
+    vec![
+        ("dvr-shaded-trilinear", RenderSettings::default()),
+        (
+            "dvr-shaded-catmull-rom",
+            with(&|s| s.filter = Filter::CatmullRom),
+        ),
+        (
+            "dvr-shaded-hardware-trilinear",
+            with(&|s| s.hardware_filtering = true),
+        ),
+        ("mip-trilinear", with(&|s| s.mode = Mode::Mip)),
+        ("minip-trilinear", with(&|s| s.mode = Mode::Minip)),
+        ("xray-trilinear", with(&|s| s.mode = Mode::Xray)),
+    ]
+}
+
+/// The f32 CPU path against the f64 oracle, DVR (RGBA in [0, 1]; the peak is an opaque
+/// pixel's 1). Measured on this scene (lavapipe machine, the CPU is the same
+/// everywhere): see the `MEASURED` notes at [`cases`].
+const DVR_F32: Tol = Tol {
+    max_abs_rel: 2e-3,
+    rel_l2: 1e-4,
+};
+/// The GPU's exact (shader-interpolated) path against the oracle, DVR.
+/// `tests/gpu_raycast.rs` EXACT_DVR (max |Δ| 1e-3, 4× its worst at 32³ → 48²); at the
+/// benchmark sizes the worst pixel of many more grows a little: see [`cases`].
+const DVR_GPU: Tol = Tol {
+    max_abs_rel: 2e-3,
+    rel_l2: 1e-4,
+};
+/// The hardware-filtered path: `tests/gpu_raycast.rs` HARDWARE_DVR, the derived bound
+/// for 8-bit sampler weights (12 × 2⁻⁸ max, a quarter of that as RMS; relative to the
+/// image's RMS of about 0.3 that is ≈ 4e-2 rel L2). lavapipe filters in full f32 and
+/// meets the exact bound.
+const HARDWARE_DVR_GPU: Tol = Tol {
+    max_abs_rel: 12.0 / 256.0,
+    rel_l2: 4e-2,
+};
+/// MIP, MinIP and X-ray, both the f32 CPU and the GPU: `tests/gpu_raycast.rs`
+/// EXACT_SCALAR (5e-5 of the data scale, 4× its worst).
+const SCALAR: Tol = Tol {
+    max_abs_rel: 5e-5,
+    rel_l2: 1e-5,
+};
+/// Central differences in f32 against f64 from the same f32 voxels: one rounding of the
+/// difference (2⁻²⁴ relative to the larger neighbour), so ≤ 6e-8 of the peak.
+const GRADIENT_F32: Tol = Tol {
+    max_abs_rel: 1e-6,
+    rel_l2: 1e-6,
+};
+
+/// (variant, volume side, image side) of every raycast case of a suite.
+fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
+    match suite {
+        Suite::Quick => vec![
+            ("dvr-shaded-trilinear", 32, 48),
+            ("dvr-shaded-catmull-rom", 24, 32),
+            ("dvr-shaded-hardware-trilinear", 24, 32),
+            ("mip-trilinear", 24, 32),
+            ("minip-trilinear", 24, 32),
+            ("xray-trilinear", 24, 32),
+        ],
+        // The f64 oracle dominates: on 16 cores about 0.1 s at 128³ → 256² (shaded DVR,
+        // trilinear), ×8 per doubling of both sides (×4 rays, ×2 samples per ray).
+        Suite::Full => vec![
+            ("dvr-shaded-trilinear", 64, 256),
+            ("dvr-shaded-trilinear", 128, 256),
+            ("dvr-shaded-trilinear", 256, 512),
+            ("dvr-shaded-trilinear", 512, 1024),
+            ("dvr-shaded-catmull-rom", 256, 512),
+            ("dvr-shaded-hardware-trilinear", 256, 512),
+            ("mip-trilinear", 256, 512),
+            ("minip-trilinear", 256, 512),
+            ("xray-trilinear", 256, 512),
+        ],
+    }
+}
+
+/// Every raycast and gradient case of a suite.
+pub fn cases(suite: Suite) -> Vec<Case> {
+    let variants = raycast_variants();
+    let mut out = Vec::new();
+    for (name, n, size) in raycast_grid(suite) {
+        let settings = variants
+            .iter()
+            .find(|(v, _)| *v == name)
+            .map(|(_, s)| s.clone())
+            .unwrap_or_default();
+        out.push(Case::new(
+            "raycast",
+            name,
+            format!("{n}³ → {size}²"),
+            move || prepare_raycast(n, size, settings.clone()),
+        ));
+    }
+    let sides: &[usize] = match suite {
+        Suite::Quick => &[32],
+        // 512³ would hold 3 × 512³ f64 gradient components per backend for the parity
+        // check (3.2 GB each): left out.
+        Suite::Full => &[128, 256],
+    };
+    for &n in sides {
+        out.push(Case::new(
+            "gradient",
+            "central-differences",
+            format!("{n}³"),
+            move || prepare_gradient(n),
+        ));
+    }
+    out
+}
+
+/// The tolerances of a ray-caster variant: (f32 CPU, GPU).
+pub fn raycast_tolerances(settings: &RenderSettings) -> (Tol, Tol) {
+    match settings.mode {
+        Mode::Dvr if settings.hardware_filtering => (DVR_F32, HARDWARE_DVR_GPU),
+        Mode::Dvr => (DVR_F32, DVR_GPU),
+        _ => (SCALAR, SCALAR),
+    }
+}
+
+fn prepare_raycast(n: usize, size: usize, settings: RenderSettings) -> Result<Prepared> {
+    let (vol, tf, cam) = raycast_scene(n, size)?;
+    let scene = Rc::new((vol, tf, cam, settings));
+    let oracle =
+        crate::cpu::raycast::render::<f64>(&scene.0, &scene.1, &scene.2, &scene.3, &|_, _| {})?;
+    let (tol_f32, tol_gpu) = raycast_tolerances(&scene.3);
+    let cpu = |s: Rc<(AnyVolume, TransferFunction, Camera, RenderSettings)>, f64_path: bool| {
+        Box::new(move || {
+            let t = Instant::now();
+            let out = if f64_path {
+                crate::cpu::raycast::render::<f64>(&s.0, &s.1, &s.2, &s.3, &|_, _| {})?
+            } else {
+                crate::cpu::raycast::render::<f32>(&s.0, &s.1, &s.2, &s.3, &|_, _| {})?
+            };
+            let seconds = t.elapsed().as_secs_f64();
+            Ok(Run {
+                seconds,
+                output: out.image.data,
+            })
+        }) as super::CpuFn
+    };
+    let g = scene.clone();
+    let gpu = Box::new(move |ctx: &crate::gpu::GpuContext| {
+        let r = crate::gpu::raycast::render(ctx, &g.0, &g.1, &g.2, &g.3, &|_, _| {})?;
+        let t = r.timings;
+        Ok(GpuRun {
+            output: r.output.image.data,
+            kernel: t.kernel,
+            kernel_from_timestamps: t.kernel_from_timestamps,
+            end_to_end: t.total - t.setup,
+            setup: t.setup,
+        })
+    }) as super::GpuFn;
+    let mut note = String::from(
+        "Shepp–Logan (modified), perspective orbit camera, step 0.5 voxel, `phantom` TF; \
+         end to end per backend (volume conversion included; GPU end to end = upload, \
+         set-up passes, ray casting, readback). Samples: the f64 oracle's count.",
+    );
+    if scene.3.hardware_filtering {
+        note.push_str(
+            " GPU samples through the texture unit (8-bit weights on NVIDIA): held to the \
+             derived hardware bound, not the exact one.",
+        );
+    }
+    Ok(Prepared {
+        cpu_f64: cpu(scene.clone(), true),
+        cpu_f32: Some(cpu(scene.clone(), false)),
+        gpu: Some(gpu),
+        tol_f32,
+        tol_gpu,
+        work: vec![
+            Work {
+                amount: (size * size) as f64,
+                unit: Unit::Rays,
+            },
+            Work {
+                amount: oracle.total_samples as f64,
+                unit: Unit::Samples,
+            },
+        ],
+        note,
+    })
+}
+
+/// The gradient family's input: the head's f32 voxels.
+pub fn gradient_volume(n: usize) -> Result<Grid<f32>> {
+    let v = Phantom::shepp_logan_modified().sample([n; 3])?;
+    Ok(Grid::from_volume(&v))
+}
+
+fn prepare_gradient(n: usize) -> Result<Prepared> {
+    let g32 = Rc::new(gradient_volume(n)?);
+    let g64 = Rc::new(Grid::<f64> {
+        dims: g32.dims,
+        data: g32.data.iter().map(|&v| v as f64).collect(),
+    });
+    fn run<R: crate::real::Real>(g: &Grid<R>) -> Run {
+        let t = Instant::now();
+        let [gx, gy, gz] = crate::cpu::gradient::precompute_gradients(g, GradientMethod::Central);
+        let seconds = t.elapsed().as_secs_f64();
+        let output = [gx, gy, gz]
+            .iter()
+            .flat_map(|c| c.data.iter().map(|v| v.f64()))
+            .collect();
+        Run { seconds, output }
+    }
+    let voxels = (n * n * n) as f64;
+    Ok(Prepared {
+        cpu_f64: Box::new(move || Ok(run(&g64))),
+        cpu_f32: Some(Box::new(move || Ok(run(&g32)))),
+        gpu: None,
+        tol_f32: GRADIENT_F32,
+        tol_gpu: GRADIENT_F32,
+        work: vec![
+            Work {
+                amount: voxels,
+                unit: Unit::VoxelUpdates,
+            },
+            Work {
+                amount: 16.0 * voxels,
+                unit: Unit::Bytes,
+            },
+        ],
+        note: "CPU only: the GPU computes this volume inside gpu::raycast::render's set-up \
+               pass and never reads it back, so it has no standalone GPU entry point. \
+               Output: the x, y and z components, one after the other. Work: one voxel \
+               update per gradient; bytes = 16 per voxel (one f32 read, three f32 writes)."
+            .into(),
+    })
 }
