@@ -1,6 +1,7 @@
 //! The `voxlab` command line: a thin layer over the library.
 
 mod cli_d2vr;
+mod cli_process;
 mod cli_project;
 mod cli_reconstruct;
 
@@ -112,6 +113,11 @@ enum Command {
     /// parallel stack (as iradon), FDK of a cone-beam stack (on RTK's grid); CPU f64/f32
     /// or GPU; writes .npy (float32), .nrrd or .png.
     Reconstruct(Box<cli_reconstruct::ReconstructArgs>),
+    /// Volume processing: resample a box to other dimensions or spacing (any
+    /// reconstruction filter), Gaussian smoothing, 3-D median filter, or the
+    /// gradient-magnitude field (value per mm); CPU f64/f32 or GPU; writes a float32
+    /// volume (.nrrd, .nhdr, .npy, .nii, .nii.gz).
+    Process(Box<cli_process::ProcessArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -489,6 +495,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::D2vr(args) => cli_d2vr::run(*args),
         Command::Project(args) => cli_project::project(*args),
         Command::Reconstruct(args) => cli_reconstruct::run(*args),
+        Command::Process(args) => cli_process::run(*args),
         Command::Info {
             input,
             load,
