@@ -156,10 +156,7 @@ pub fn run(a: ProcessArgs) -> Result<()> {
     let sigma = match (&a.sigma, a.op) {
         (Some(s), _) => Some(three(s, "--sigma")?),
         (None, Op::Gaussian) => {
-            return Err(Error::invalid(
-                "--sigma",
-                "gaussian needs --sigma (voxels)",
-            ))
+            return Err(Error::invalid("--sigma", "gaussian needs --sigma (voxels)"))
         }
         (None, _) => None,
     };

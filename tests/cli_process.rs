@@ -103,7 +103,14 @@ fn process_refuses_bad_options_and_leaves_no_file() {
         (&["--op", "median", "--size", "4"], "window"),
         (&["--op", "resample"], "--dims"),
         (
-            &["--op", "resample", "--dims", "4,4,4", "--box", "0,0,0,4,0,4"],
+            &[
+                "--op",
+                "resample",
+                "--dims",
+                "4,4,4",
+                "--box",
+                "0,0,0,4,0,4",
+            ],
             "box",
         ),
         (

@@ -11,11 +11,14 @@ use voxlab::phantom::Phantom;
 use voxlab::settings::Filter;
 use voxlab::{Error, Volume};
 
-/// Largest `max |gpu − cpu| / max |cpu|` allowed for the interpolating and smoothing
-/// operations (f32 input values, weights and sums against f64). Measured on lavapipe
-/// over the cases below: worst 5.3e-7 (resample, Lanczos-4, world box). The bound leaves
-/// a factor of about 10.
-const TOL_MAX_REL: f64 = 5e-6;
+/// Largest `max |gpu − cpu| / max |cpu|` allowed for resampling, the Gaussian and the
+/// gradient magnitude (f32 sample coordinates, weights and sums against f64). Measured
+/// on lavapipe over the cases below: resampling of the whole volume and index boxes
+/// 6.8e-7 … 1.7e-6, world boxes 2.4e-6 … 3.1e-6 (worst: Catmull–Rom; the f32 sample
+/// position is off by ~1e-6 voxel, which the phantom's unit steps turn into value
+/// error), Gaussian 1.9e-7 … 3.1e-7, gradient magnitude 1.7e-7. The bound leaves a
+/// factor of about 6 over the worst.
+const TOL_MAX_REL: f64 = 2e-5;
 
 /// The input: Shepp–Logan 20×18×16 (edges) plus a smooth ramp and deterministic
 /// noise, with an oblique affine so that world boxes and world gradients are exercised.
@@ -45,7 +48,10 @@ fn cases(v: &Volume<f32>) -> Vec<(String, Case)> {
             format!("resample whole {filter:?}"),
             Case::Resample(ResampleSpec {
                 region: Region::Whole,
-                dims: [27, 13, 21],
+                // No output voxel centre falls on a tie of the nearest rule (a
+                // midpoint between input voxels), where f32 and f64 may round apart:
+                // 2·dims is not a divisor of (2i + 1)·n for dims (28, 14, 32), n (20, 18, 16).
+                dims: [28, 14, 32],
                 filter,
             }),
         ));
@@ -157,10 +163,7 @@ fn gpu_refusals_are_clear_errors() {
         Err(Error::Invalid { what, .. }) => what,
         other => panic!("expected an Invalid error, got {other:?}"),
     };
-    assert_eq!(
-        invalid(gp::resample(ctx, &v, &sinc)),
-        "resampling filter"
-    );
+    assert_eq!(invalid(gp::resample(ctx, &v, &sinc)), "resampling filter");
     assert_eq!(invalid(gp::median(ctx, &v, 7)), "median window size");
     assert_eq!(invalid(gp::median(ctx, &v, 4)), "median window size");
     assert_eq!(

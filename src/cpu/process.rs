@@ -333,10 +333,7 @@ pub fn gradient_magnitude<R: Real, T: Voxel>(vol: &Volume<T>) -> Result<Field<R>
         .map(|n| world_gradient_length(&rows, V3::new(gx.data[n], gy.data[n], gz.data[n])))
         .collect();
     Ok(Field {
-        grid: Grid {
-            dims: g.dims,
-            data,
-        },
+        grid: Grid { dims: g.dims, data },
         affine: vol.affine(),
     })
 }

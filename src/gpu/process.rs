@@ -23,8 +23,8 @@
 use super::context::GpuContext;
 use crate::cpu::filter::{prepare, Grid};
 use crate::cpu::process::{
-    check_median_size, check_sigma, gaussian_weights, resample_plan, world_gradient_matrix,
-    Field, ResampleSpec,
+    check_median_size, check_sigma, gaussian_weights, resample_plan, world_gradient_matrix, Field,
+    ResampleSpec,
 };
 use crate::error::{Error, Result};
 use crate::settings::Filter;
@@ -178,7 +178,8 @@ impl Op {
             let mut p = base;
             p.out_dims[3] = first as u32;
             p.op[3] = count as u32;
-            ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
+            ctx.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
             let groups = count.div_ceil(WORKGROUP);
             let x = groups.min(max_x);
             let y = groups.div_ceil(x);
