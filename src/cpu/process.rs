@@ -36,6 +36,22 @@
 //! one-voxel stencil is the same as `reflect` (index −1 reads voxel 0), so the border
 //! voxels hold half the one-sided difference. For an axis-aligned volume this is
 //! `sqrt(Σ_a (correlate1d(f, [−½, 0, ½], axis=a, mode='reflect') / s_a)²)` in scipy.
+//!
+//! ```
+//! use voxlab::cpu::process::{gaussian, median, resample, Region, ResampleSpec};
+//! use voxlab::settings::Filter;
+//! let vol = voxlab::phantom::Phantom::shepp_logan().sample([16, 16, 16])?;
+//! let smooth = gaussian::<f64, f32>(&vol, [1.0, 1.0, 2.0])?; // σ in voxels
+//! let denoised = median::<f64, f32>(&vol, 3)?;
+//! let fine = resample::<f64, f32>(
+//!     &vol,
+//!     &ResampleSpec { region: Region::Whole, dims: [32, 32, 32], filter: Filter::CatmullRom },
+//! )?;
+//! assert_eq!(fine.grid.dims, [32, 32, 32]);
+//! let written: voxlab::Volume<f32> = smooth.to_volume()?; // with the same affine
+//! # let _ = (denoised, written);
+//! # Ok::<(), voxlab::Error>(())
+//! ```
 
 use super::filter::{prepare, sample, Grid};
 use super::gradient::precompute_gradients;
@@ -151,7 +167,7 @@ pub fn resample<R: Real, T: Voxel>(vol: &Volume<T>, spec: &ResampleSpec) -> Resu
 
 /// scipy's `reflect` rule: index `i` of a line of `n` mirrored about the end edges
 /// (`d c b a | a b c d | d c b a`, period `2n`). Mirrors
-/// `shaders/process_gaussian.wgsl: reflect_index`.
+/// `shaders/shared/process_params.wgsl: reflect_index`.
 #[inline(always)]
 pub fn reflect_index(i: isize, n: usize) -> usize {
     let p = 2 * n as isize;
