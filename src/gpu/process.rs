@@ -9,7 +9,10 @@
 //! rasteriser (lavapipe can lose the device past ~10 s).
 //!
 //! What runs where:
-//! - resampling: nearest, trilinear, cubic B-spline, interpolating B-spline (its
+//! - resampling: `shaders/process_resample.wgsl` ports `cpu::filter::axis_taps` and
+//!   `apply_taps` as loops over a storage buffer (the ray caster's generated
+//!   `accumulate_taps` reads a texture and the ray caster's parameters, so it is not
+//!   shared); nearest, trilinear, cubic B-spline, interpolating B-spline (its
 //!   coefficients are solved on the host in f64, `cpu::filter::prepare`, then rounded),
 //!   Catmull–Rom, Lanczos-2/3/4; the full sinc is CPU-only (a clear error here);
 //! - Gaussian: three separable passes (x, y, z) ping-ponging two buffers, weights from
