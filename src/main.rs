@@ -2,6 +2,7 @@
 
 mod cli_bench;
 mod cli_d2vr;
+mod cli_process;
 mod cli_project;
 mod cli_reconstruct;
 
@@ -118,6 +119,11 @@ enum Command {
     /// writes a JSON, Markdown and SVG report (see docs/benchmarking.md). Exit status 3
     /// when a result fails its parity check or a case errors.
     Bench(Box<cli_bench::BenchArgs>),
+    /// Volume processing: resample a box to other dimensions or spacing (any
+    /// reconstruction filter), Gaussian smoothing, 3-D median filter, or the
+    /// gradient-magnitude field (value per mm); CPU f64/f32 or GPU; writes a float32
+    /// volume (.nrrd, .nhdr, .npy, .nii, .nii.gz).
+    Process(Box<cli_process::ProcessArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -500,6 +506,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::D2vr(args) => cli_d2vr::run(*args),
         Command::Project(args) => cli_project::project(*args),
         Command::Reconstruct(args) => cli_reconstruct::run(*args),
+        Command::Process(args) => cli_process::run(*args),
         Command::Info {
             input,
             load,

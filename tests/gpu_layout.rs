@@ -184,3 +184,40 @@ fn ramp_params_layout_agrees() {
     }
     assert_eq!(members.len(), rust.len());
 }
+
+#[test]
+fn process_params_layout_agrees() {
+    use voxlab::gpu::process::{ProcessParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "ProcessParams");
+    assert_eq!(span as usize, size_of::<ProcessParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("in_dims", offset_of!(ProcessParams, in_dims)),
+        ("out_dims", offset_of!(ProcessParams, out_dims)),
+        ("op", offset_of!(ProcessParams, op)),
+        ("m0", offset_of!(ProcessParams, m0)),
+        ("m1", offset_of!(ProcessParams, m1)),
+        ("m2", offset_of!(ProcessParams, m2)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
+/// Every processing shader parses and validates.
+#[test]
+fn process_shaders_validate() {
+    use voxlab::gpu::process::*;
+    for body in [RESAMPLE_WGSL, GAUSSIAN_WGSL, MEDIAN_WGSL, GRADIENT_WGSL] {
+        let src = shader_source(body);
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    }
+}

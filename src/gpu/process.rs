@@ -1,0 +1,351 @@
+//! Volume processing on the GPU: the port of [`crate::cpu::process`] — resampling,
+//! Gaussian smoothing, median filtering and the gradient-magnitude field.
+//!
+//! The input is uploaded once as an f32 storage buffer; each operation runs one compute
+//! shader (`shaders/process_*.wgsl`, with `shaders/shared/process_params.wgsl`
+//! prepended), one invocation per output voxel, and reads the result back. The work is
+//! split into several dispatches of at most [`WORK_PER_DISPATCH`] kernel taps each,
+//! each submitted and waited for, so that no single dispatch runs long on a software
+//! rasteriser (lavapipe can lose the device past ~10 s).
+//!
+//! What runs where:
+//! - resampling: `shaders/process_resample.wgsl` ports `cpu::filter::axis_taps` and
+//!   `apply_taps` as loops over a storage buffer (the ray caster's generated
+//!   `accumulate_taps` reads a texture and the ray caster's parameters, so it is not
+//!   shared); nearest, trilinear, cubic B-spline, interpolating B-spline (its
+//!   coefficients are solved on the host in f64, `cpu::filter::prepare`, then rounded),
+//!   Catmull–Rom, Lanczos-2/3/4; the full sinc is CPU-only (a clear error here);
+//! - Gaussian: three separable passes (x, y, z) ping-ponging two buffers, weights from
+//!   the host in f64 rounded to f32;
+//! - median: windows up to `k = 5` (125 values per voxel, held in registers);
+//! - gradient magnitude: the clamped central differences and `L⁻ᵀ`.
+//!
+//! Volumes are limited by the adapter's storage-binding size
+//! (`max_storage_buffer_binding_size`, 128 MiB = 32 Mi voxels on lavapipe).
+
+use super::context::GpuContext;
+use crate::cpu::filter::{prepare, Grid};
+use crate::cpu::process::{
+    check_median_size, check_sigma, gaussian_weights, resample_plan, world_gradient_matrix, Field,
+    ResampleSpec,
+};
+use crate::error::{Error, Result};
+use crate::settings::Filter;
+use crate::volume::Volume;
+use glam::DMat4;
+use wgpu::util::DeviceExt;
+
+/// `shaders/shared/process_params.wgsl`: the WGSL twin of [`ProcessParams`] and the
+/// bindings and helpers every processing shader shares.
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/process_params.wgsl");
+/// `shaders/process_resample.wgsl`.
+pub const RESAMPLE_WGSL: &str = include_str!("../../shaders/process_resample.wgsl");
+/// `shaders/process_gaussian.wgsl`.
+pub const GAUSSIAN_WGSL: &str = include_str!("../../shaders/process_gaussian.wgsl");
+/// `shaders/process_median.wgsl`.
+pub const MEDIAN_WGSL: &str = include_str!("../../shaders/process_median.wgsl");
+/// `shaders/process_gradient.wgsl`.
+pub const GRADIENT_WGSL: &str = include_str!("../../shaders/process_gradient.wgsl");
+
+/// The largest median window side on the GPU (`5³ = 125` values per voxel).
+pub const MAX_MEDIAN_SIZE_GPU: usize = 5;
+
+/// The most kernel taps (voxel reads) one dispatch may perform.
+pub const WORK_PER_DISPATCH: u64 = 1 << 26;
+
+/// Invocations per workgroup (`WORKGROUP` in `shaders/shared/process_params.wgsl`).
+const WORKGROUP: u64 = 64;
+
+/// Parameters of one processing dispatch, shared with
+/// `shaders/shared/process_params.wgsl: ProcessParams` (96 bytes, six 16-byte vectors;
+/// `tests/gpu_layout.rs` checks the layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ProcessParams {
+    /// Input grid nx, ny, nz, 0.
+    pub in_dims: [u32; 4],
+    /// Output grid nx, ny, nz, and the first output voxel of this dispatch.
+    pub out_dims: [u32; 4],
+    /// Filter code or window side; radius; axis; voxels in this dispatch.
+    pub op: [u32; 4],
+    /// Rows of the output → input index map, or of `L⁻ᵀ`.
+    pub m0: [f32; 4],
+    pub m1: [f32; 4],
+    pub m2: [f32; 4],
+}
+
+/// The complete WGSL module of one operation (`body` is one of the `*_WGSL` shaders).
+pub fn shader_source(body: &str) -> String {
+    format!("{PARAMS_WGSL}\n{body}")
+}
+
+fn u32_dims(d: [usize; 3]) -> [u32; 4] {
+    [d[0] as u32, d[1] as u32, d[2] as u32, 0]
+}
+
+fn rows(m: DMat4) -> [[f32; 4]; 3] {
+    [0, 1, 2].map(|r| m.row(r).to_array().map(|x| x as f32))
+}
+
+/// Checks that `voxels` f32 values fit one storage binding.
+fn check_binding(ctx: &GpuContext, what: &str, voxels: usize) -> Result<u64> {
+    let bytes = (voxels as u64).saturating_mul(4);
+    let limit = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size);
+    if bytes > limit {
+        return Err(Error::too_large(
+            what,
+            format!(
+                "{voxels} f32 voxels ({bytes} bytes) exceed the adapter's storage-binding \
+                 limit of {limit} bytes: use --backend cpu or a smaller volume"
+            ),
+        ));
+    }
+    Ok(bytes)
+}
+
+fn upload(ctx: &GpuContext, label: &str, data: &[f32]) -> Result<wgpu::Buffer> {
+    check_binding(ctx, label, data.len())?;
+    Ok(ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::cast_slice(data),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        }))
+}
+
+/// One compiled operation.
+struct Op {
+    pipeline: wgpu::ComputePipeline,
+    params: wgpu::Buffer,
+}
+
+impl Op {
+    fn new(ctx: &GpuContext, body: &str, entry: &str) -> Result<Self> {
+        let module = ctx.shader(entry, &shader_source(body))?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("process params"),
+            size: std::mem::size_of::<ProcessParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(Op { pipeline, params })
+    }
+
+    /// Runs over every output voxel of `base.out_dims`, in dispatches of at most
+    /// [`WORK_PER_DISPATCH`] taps (`taps` per voxel), each waited for.
+    fn run(
+        &self,
+        ctx: &GpuContext,
+        base: ProcessParams,
+        src: &wgpu::Buffer,
+        dst: &wgpu::Buffer,
+        extra: Option<&wgpu::Buffer>,
+        taps: u64,
+    ) -> Result<()> {
+        let [nx, ny, nz, _] = base.out_dims.map(|x| x as u64);
+        let total = nx * ny * nz;
+        let per = (WORK_PER_DISPATCH / taps.max(1)).clamp(WORKGROUP, 1 << 24);
+        let mut resources = vec![
+            self.params.as_entire_binding(),
+            src.as_entire_binding(),
+            dst.as_entire_binding(),
+        ];
+        if let Some(e) = extra {
+            resources.push(e.as_entire_binding());
+        }
+        let bind = ctx.bind_group(
+            "process",
+            &self.pipeline.get_bind_group_layout(0),
+            &resources,
+        );
+        let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1) as u64;
+        let mut first = 0u64;
+        while first < total {
+            let count = per.min(total - first);
+            let mut p = base;
+            p.out_dims[3] = first as u32;
+            p.op[3] = count as u32;
+            ctx.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
+            let groups = count.div_ceil(WORKGROUP);
+            let x = groups.min(max_x);
+            let y = groups.div_ceil(x);
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("process"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(x as u32, y as u32, 1);
+            }
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait()?;
+            first += count;
+        }
+        Ok(())
+    }
+}
+
+fn read_f32(ctx: &GpuContext, buf: &wgpu::Buffer, n: usize) -> Result<Vec<f32>> {
+    let bytes = ctx.read_buffer(buf, (n * 4) as u64)?;
+    Ok(bytemuck::cast_slice(&bytes).to_vec())
+}
+
+fn field(dims: [usize; 3], data: Vec<f32>, affine: DMat4) -> Field<f32> {
+    Field {
+        grid: Grid { dims, data },
+        affine,
+    }
+}
+
+/// The filter code of `shaders/process_resample.wgsl` and the taps per voxel.
+fn filter_code(filter: Filter) -> Result<(u32, u32, u64)> {
+    Ok(match filter {
+        Filter::Nearest => (0, 0, 1),
+        Filter::Trilinear => (1, 1, 8),
+        Filter::Bspline | Filter::BsplineInterp => (2, 2, 64),
+        Filter::CatmullRom => (3, 2, 64),
+        Filter::Lanczos2 | Filter::Lanczos3 | Filter::Lanczos4 => {
+            let n = filter.radius() as u32;
+            (4, n, 8 * (n as u64).pow(3))
+        }
+        Filter::Sinc => {
+            return Err(Error::invalid(
+                "resampling filter",
+                "the full sinc runs on the CPU only (use --backend cpu, or lanczos4 on the GPU)",
+            ))
+        }
+    })
+}
+
+/// [`crate::cpu::process::resample`] on the GPU (f32).
+///
+/// # Errors
+/// As the CPU version; also [`Error::Invalid`] for the full sinc,
+/// [`Error::TooLarge`] past the storage-binding limit, [`Error::Gpu`] on device failure.
+pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Result<Field<f32>> {
+    let (code, radius, taps) = filter_code(spec.filter)?;
+    let (to_in, affine) = resample_plan(vol.dims(), vol.affine(), spec)?;
+    let n_out = spec.dims.iter().product::<usize>();
+    let out_bytes = check_binding(ctx, "resampled volume", n_out)?;
+    let host: Vec<f32> = if spec.filter == Filter::BsplineInterp {
+        prepare(&Grid::<f64>::from_volume(vol), spec.filter)
+            .data
+            .iter()
+            .map(|&x| x as f32)
+            .collect()
+    } else {
+        vol.data().to_vec()
+    };
+    let src = upload(ctx, "volume", &host)?;
+    let dst = ctx.storage_buffer("resampled volume", out_bytes)?;
+    let [m0, m1, m2] = rows(to_in);
+    let p = ProcessParams {
+        in_dims: u32_dims(vol.dims()),
+        out_dims: u32_dims(spec.dims),
+        op: [code, radius, 0, 0],
+        m0,
+        m1,
+        m2,
+    };
+    Op::new(ctx, RESAMPLE_WGSL, "resample")?.run(ctx, p, &src, &dst, None, taps)?;
+    Ok(field(spec.dims, read_f32(ctx, &dst, n_out)?, affine))
+}
+
+/// [`crate::cpu::process::gaussian`] on the GPU (f32): three separable passes.
+///
+/// # Errors
+/// As the CPU version; also [`Error::TooLarge`] past the storage-binding limit,
+/// [`Error::Gpu`] on device failure.
+pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
+    check_sigma(sigma)?;
+    let dims = vol.dims();
+    let n = vol.len();
+    let mut a = upload(ctx, "volume", vol.data())?;
+    let mut b = ctx.storage_buffer("gaussian pass", check_binding(ctx, "volume", n)?)?;
+    let op = Op::new(ctx, GAUSSIAN_WGSL, "gaussian_pass")?;
+    for (axis, &s) in sigma.iter().enumerate() {
+        let w: Vec<f32> = gaussian_weights(s).iter().map(|&x| x as f32).collect();
+        let wbuf = upload(ctx, "gaussian weights", &w)?;
+        let p = ProcessParams {
+            in_dims: u32_dims(dims),
+            out_dims: u32_dims(dims),
+            op: [0, (w.len() / 2) as u32, axis as u32, 0],
+            ..Default::default()
+        };
+        op.run(ctx, p, &a, &b, Some(&wbuf), w.len() as u64)?;
+        std::mem::swap(&mut a, &mut b);
+    }
+    Ok(field(dims, read_f32(ctx, &a, n)?, vol.affine()))
+}
+
+/// [`crate::cpu::process::median`] on the GPU (f32), windows up to
+/// [`MAX_MEDIAN_SIZE_GPU`].
+///
+/// # Errors
+/// [`Error::Invalid`] for an even `k` or `k` > 5; [`Error::TooLarge`] past the
+/// storage-binding limit; [`Error::Gpu`] on device failure.
+pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
+    check_median_size(k, MAX_MEDIAN_SIZE_GPU).map_err(|_| {
+        Error::invalid(
+            "median window size",
+            format!(
+                "{k}: on the GPU the window side must be odd, from 1 to {MAX_MEDIAN_SIZE_GPU} \
+                 (125 values per voxel); use --backend cpu for larger windows"
+            ),
+        )
+    })?;
+    let dims = vol.dims();
+    let n = vol.len();
+    let src = upload(ctx, "volume", vol.data())?;
+    let dst = ctx.storage_buffer("median", check_binding(ctx, "volume", n)?)?;
+    let k3 = (k * k * k) as u64;
+    let p = ProcessParams {
+        in_dims: u32_dims(dims),
+        out_dims: u32_dims(dims),
+        op: [k as u32, 0, 0, 0],
+        ..Default::default()
+    };
+    Op::new(ctx, MEDIAN_WGSL, "median")?.run(ctx, p, &src, &dst, None, k3 * (k3 / 2 + 1))?;
+    Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
+}
+
+/// [`crate::cpu::process::gradient_magnitude`] on the GPU (f32).
+///
+/// # Errors
+/// [`Error::TooLarge`] past the storage-binding limit; [`Error::Gpu`] on device failure.
+pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
+    let dims = vol.dims();
+    let n = vol.len();
+    let src = upload(ctx, "volume", vol.data())?;
+    let dst = ctx.storage_buffer("gradient magnitude", check_binding(ctx, "volume", n)?)?;
+    let [m0, m1, m2] = rows(DMat4::from_mat3(world_gradient_matrix(vol.affine())));
+    let p = ProcessParams {
+        in_dims: u32_dims(dims),
+        out_dims: u32_dims(dims),
+        op: [0; 4],
+        m0,
+        m1,
+        m2,
+    };
+    Op::new(ctx, GRADIENT_WGSL, "gradient_magnitude")?.run(ctx, p, &src, &dst, None, 7)?;
+    Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
+}
