@@ -161,16 +161,17 @@ const EXACT_SCALAR: Tolerance = Tolerance {
 /// of it. On an NVIDIA H200 (driver 580.159) the MIP case measured max |Δ| 6.4e-3
 /// (1.6 × 2⁻⁸) and RMSE 1.4e-3: the weights' errors add up across the axes, so the
 /// single-axis bound of 2⁻⁸ first written here was too tight. DVR maps values through
-/// opacity bands of slope up to 12 per unit, compounding along a ray: its bound is
-/// 12 × 2⁻⁸ (it measured within that on the H200) and the RMSE a quarter of it.
+/// opacity bands of slope up to 12 per unit: its bound is 12 × 3 × 2⁻⁸ and the RMSE a
+/// quarter of it (the benchmark's 256³ → 512² case measured 5.2e-2 on the H200, above
+/// 12 × 2⁻⁸).
 /// lavapipe filters in full f32 and meets the exact bounds; only a real GPU tests these.
 const HARDWARE_SCALAR: Tolerance = Tolerance {
     max_abs: 3.0 / 256.0,
     rmse: 3.0 / 1024.0,
 };
 const HARDWARE_DVR: Tolerance = Tolerance {
-    max_abs: 12.0 / 256.0,
-    rmse: 3.0 / 256.0,
+    max_abs: 36.0 / 256.0,
+    rmse: 9.0 / 256.0,
 };
 
 /// Renders a case on the oracle and the GPU and checks parity of the image and of the

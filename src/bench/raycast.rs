@@ -93,12 +93,16 @@ const DVR_F32: Tol = Tol {
 /// 32³ → 48² to 1e-3, where no ray sits at the threshold).
 const DVR_GPU: Tol = DVR_F32;
 /// The hardware-filtered path: `tests/gpu_raycast.rs` HARDWARE_DVR, the derived bound
-/// for 8-bit sampler weights (12 × 2⁻⁸ max, a quarter of that as RMS; relative to the
-/// oracle image's RMS, 0.51–0.52 measured at 24³ → 32² and 64³ → 256², that is
-/// 2.3e-2 rel L2). lavapipe filters in full f32 and meets the exact bound (measured
-/// 6.9e-5 max, 1.1e-5 rel L2 at 24³ → 32²).
+/// for 8-bit sampler weights: each of the three 1-D weights may be off by 2⁻⁸, so a
+/// filtered value by 3 × 2⁻⁸ of the data range, and the `phantom` preset's opacity
+/// bands (slope up to 12 per unit) make that 36 × 2⁻⁸ on a pixel. The RMS bound is a
+/// quarter of the largest error per sample, relative to the oracle image's RMS
+/// (0.51–0.52, measured at 24³ → 32² and 64³ → 256²): 2.3e-2 rel L2. Measured on an
+/// NVIDIA H200 at 256³ → 512²: max 5.2e-2 (above the single-axis 12 × 2⁻⁸ first
+/// written here); lavapipe filters in full f32 and meets the exact bound (6.9e-5 max,
+/// 1.1e-5 rel L2 at 24³ → 32²).
 const HARDWARE_DVR_GPU: Tol = Tol {
-    max_abs_rel: 12.0 / 256.0,
+    max_abs_rel: 36.0 / 256.0,
     rel_l2: 2.5e-2,
 };
 /// X-ray, both the f32 CPU and the GPU: `tests/gpu_raycast.rs` EXACT_SCALAR (5e-5 of
