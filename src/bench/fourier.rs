@@ -232,7 +232,7 @@ fn prepare_fft(shape: &[usize]) -> Result<Prepared> {
 }
 
 fn fvr_case(n: usize, kernel: Kernel) -> Case {
-    let name = format!("{}", kernel.name());
+    let name = kernel.name();
     let m = FVR_PADDING * n;
     Case::new(
         "fvr",
