@@ -36,11 +36,6 @@ fn check(case: &str, backend: &str, got: &[f64], want: &[f64], tol: Tol) {
     );
 }
 
-/// One test at a time on the shared device: wgpu 30 panics with "Mismatched
-/// pop_error_scope call" when threads compile shaders (`GpuContext::shader`'s error
-/// scope) concurrently — `tests/gpu_ct_fbp.rs` shows it too, about one run in two.
-static GPU: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
 /// Prepares and runs every quick case of `family` on every backend.
 fn run_family(test: &str, family: &str) {
     let cases: Vec<Case> = fourier::cases(Suite::Quick)
@@ -63,7 +58,6 @@ fn run_family(test: &str, family: &str) {
             check(&id, "CPU f32", &r.output, &oracle.output, p.tol_f32);
         }
         if let (Some(gpu), Some(ctx)) = (p.gpu.as_mut(), ctx) {
-            let _one_at_a_time = GPU.lock().unwrap_or_else(|e| e.into_inner());
             // Twice: the second run reuses what the first made (plans, buffers).
             for run in 0..2 {
                 let r = gpu(ctx).unwrap_or_else(|e| panic!("{id}: GPU: {e}"));
