@@ -1,5 +1,6 @@
 //! `cargo bench --bench ct`: CPU FBP and FDK (ramp filter + backprojection) in f32 and
-//! f64, on exact Shepp–Logan projections (`cpu::project::project_phantom`).
+//! f64, on exact Shepp–Logan projections (`cpu::project::project_phantom`): the scenes of
+//! `voxlab bench`'s fbp and fdk cases (`voxlab::bench::ct::{fbp_scene, fdk_scene}`).
 //!
 //! Cases: parallel FBP of an `n²` image from 402 views over 180° (`n` = 512, detector
 //! `n` bins), and FDK of a `n³` volume from 180 cone-beam views over 360° of `n²`
@@ -14,11 +15,10 @@ mod common;
 use common::{median_min_max, BenchArgs};
 
 use std::time::Instant;
-use voxlab::cpu::fbp::{fbp, rtk_grid, skimage_grid, Grid};
-use voxlab::cpu::project::project_phantom;
+use voxlab::bench::ct::{fbp_scene, fdk_scene};
+use voxlab::cpu::fbp::{fbp, Grid};
 use voxlab::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
 use voxlab::ct::{Geometry, Projections};
-use voxlab::phantom::Phantom;
 
 fn none(_: usize, _: usize) {}
 
@@ -90,19 +90,13 @@ fn time_gpu(
 fn main() {
     let gpu = voxlab::gpu::GpuContext::shared().ok();
     let args = BenchArgs::from_env();
-    let ph = Phantom::shepp_logan();
     let large = std::env::var("VOXLAB_BENCH_LARGE").is_ok_and(|v| v == "1");
     println!("| case | precision | median ms | min | max |\n|---|---|---|---|---|");
     let fbp_n = if args.smoke { 32 } else { 512 };
     let views = if args.smoke { 20 } else { 402 };
     let name = format!("fbp {fbp_n}² from {views} views");
     if args.wants(&name) {
-        let g = Geometry::parallel_skimage(fbp_n, Geometry::even_angles(views, 180.0)).unwrap();
-        // Scale the phantom so it fills the image (1 mm bins).
-        let mut ph2 = ph.clone();
-        ph2.half_extent_mm = fbp_n as f64 / 2.0;
-        let p = project_phantom(&ph2, &g).unwrap();
-        let grid = skimage_grid(fbp_n);
+        let (p, g, grid) = fbp_scene(fbp_n, views).unwrap();
         for (prec, r) in [
             ("f32", time::<f32>(&args, &p, &g, &grid)),
             ("f64", time::<f64>(&args, &p, &g, &grid)),
@@ -130,19 +124,7 @@ fn main() {
         if !args.wants(&name) {
             continue;
         }
-        let d = 512.0 / n as f64;
-        let g = Geometry::cone_rtk(
-            1000.0,
-            1500.0,
-            n,
-            n,
-            d,
-            d,
-            Geometry::even_angles(views, 360.0),
-        )
-        .unwrap();
-        let p = project_phantom(&ph, &g).unwrap();
-        let grid = rtk_grid([n; 3], [256.0 / n as f64; 3]);
+        let (p, g, grid) = fdk_scene(n, views).unwrap();
         for (prec, r) in [
             ("f32", time::<f32>(&args, &p, &g, &grid)),
             ("f64", time::<f64>(&args, &p, &g, &grid)),

@@ -21,9 +21,10 @@ use common::median_min_max;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use std::time::Instant;
+use voxlab::bench::fourier::fft_input;
 use voxlab::cpu::dft::{Direction, Normalization};
 use voxlab::cpu::fft::fft_nd;
-use voxlab::fft_check::{random_complex, rel_l2};
+use voxlab::fft_check::rel_l2;
 use voxlab::gpu::fft::{fft_nd_timed, GpuFftVariant};
 use voxlab::gpu::GpuContext;
 
@@ -131,7 +132,7 @@ fn main() {
             continue;
         }
         let total: usize = shape.iter().product();
-        let x = random_complex(total, 0x5eed);
+        let x = fft_input(&shape);
         let x32: Vec<Complex<f32>> = x
             .iter()
             .map(|v| Complex::new(v.re as f32, v.im as f32))

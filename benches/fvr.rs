@@ -3,7 +3,8 @@
 //! of one projection.
 //!
 //! For each cube side `n` (64, 128, 256) the modified Shepp–Logan phantom is sampled
-//! on `n³` voxels and padded by 2 (`M = 2n`). Reported, in milliseconds:
+//! on `n³` voxels and padded by 2 (`M = 2n`): the volume and view of `voxlab bench`'s
+//! fvr cases (`voxlab::bench::fourier`). Reported, in milliseconds:
 //! - **pre-processing** (once per volume, not per view): pad, centre and the f64 3-D
 //!   FFT of the `M³` cube (`FvrSpectrum::new`, all rayon threads), and the upload of the
 //!   spectrum to the GPU (complex f32, with the slice pipeline and inverse FFT plan made
@@ -33,9 +34,9 @@ mod common;
 use common::median_min_max;
 
 use std::time::Instant;
+use voxlab::bench::fourier::{fvr_volume, FVR_PADDING, FVR_VIEW};
 use voxlab::camera::Camera;
-use voxlab::cpu::fvr::{fvr_project, FvrSpectrum, FvrView, Kernel};
-use voxlab::phantom::Phantom;
+use voxlab::cpu::fvr::{fvr_project, FvrSpectrum, Kernel};
 use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::{Filter, Mode, RenderSettings};
 use voxlab::transfer::TransferFunction;
@@ -85,10 +86,7 @@ fn main() {
     let (smoke, runs) = (args.smoke, args.runs);
     let sizes: Vec<usize> = if smoke { vec![32] } else { vec![64, 128, 256] };
     let big_image = if smoke { 64 } else { 512 };
-    let view = FvrView::Orbit {
-        azimuth_deg: 30.0,
-        elevation_deg: 20.0,
-    };
+    let view = FVR_VIEW;
     let settings = RenderSettings {
         mode: Mode::Xray,
         filter: Filter::Trilinear,
@@ -119,11 +117,9 @@ fn main() {
         if !args.wants(&name) {
             continue;
         }
-        let vol = Phantom::shepp_logan_modified()
-            .sample([n; 3])
-            .expect("the phantom volume");
+        let vol = fvr_volume(n).expect("the phantom volume");
         let t = Instant::now();
-        let spectrum = FvrSpectrum::new(&vol, 2).expect("the spectrum");
+        let spectrum = FvrSpectrum::new(&vol, FVR_PADDING).expect("the spectrum");
         let pre = t.elapsed().as_secs_f64();
         let m = spectrum.side();
         let g = spectrum.geometry(view).expect("the view");
