@@ -193,6 +193,9 @@ enum Measured<T> {
     },
     Failed(report::Parity),
     Errored(String),
+    /// The backend refused the size ([`Error::TooLarge`], e.g. a GPU's storage-binding
+    /// limit): not a wrong answer, so the case still passes, and the report says why.
+    TooLarge(String),
 }
 
 /// Warm-ups, then timed runs (stopping early on the budget). The first result of all
@@ -221,6 +224,7 @@ fn measure<T: Sample>(
         let start = Instant::now();
         let mut r = match call() {
             Ok(r) => r,
+            Err(e @ Error::TooLarge { .. }) => return Measured::TooLarge(e.to_string()),
             Err(e) => return Measured::Errored(e.to_string()),
         };
         let wall = start.elapsed().as_secs_f64();
@@ -286,6 +290,7 @@ fn cpu_report(m: Measured<Run>, work: &[Work]) -> BackendReport {
         }
         Measured::Failed(p) => failed(p),
         Measured::Errored(e) => BackendReport::errored(e),
+        Measured::TooLarge(e) => BackendReport::skipped(format!("too large here: {e}")),
     }
 }
 
@@ -330,6 +335,7 @@ fn gpu_report(m: Measured<GpuRun>, work: &[Work]) -> BackendReport {
         }
         Measured::Failed(p) => failed(p),
         Measured::Errored(e) => BackendReport::errored(e),
+        Measured::TooLarge(e) => BackendReport::skipped(format!("too large here: {e}")),
     }
 }
 
