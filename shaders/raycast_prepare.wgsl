@@ -1,7 +1,8 @@
 // Set-up passes of the GPU ray caster, one invocation per voxel, written to
 // rgba32float storage textures that the ray caster then samples like the data.
-// Mirrors src/cpu/raycast.rs: preclassify and src/cpu/gradient.rs: gradient_at_voxel.
-// Prepended at load time: shaders/shared/raycast_params.wgsl and classify.wgsl.
+// Mirrors src/cpu/raycast.rs: preclassify and src/cpu/gradient.rs: precompute_gradients.
+// Joined at load time with shaders/shared/raycast_params.wgsl, classify.wgsl and
+// gradient_voxel.wgsl.
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var volume: texture_3d<f32>;
@@ -30,45 +31,13 @@ fn preclassify(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(target_tex, vec3<i32>(id), vec4<f32>(c.xyz * c.w, c.w));
 }
 
-fn unit(a: u32, s: i32) -> vec3<i32> {
-    var v = vec3<i32>(0);
-    v[a] = s;
-    return v;
-}
-
-// mirrors src/cpu/gradient.rs: gradient_at_voxel (clamped neighbours)
+// mirrors src/cpu/gradient.rs: precompute_gradients (clamped neighbours);
+// gradient_at_voxel: shaders/shared/gradient_voxel.wgsl
 @compute @workgroup_size(4, 4, 4)
 fn precompute_gradients(@builtin(global_invocation_id) id: vec3<u32>) {
     if (!inside(id)) {
         return;
     }
     let p = vec3<i32>(id);
-    let method = params.flags2.x;
-    var g = vec3<f32>(0.0);
-    if (method == 0u) {
-        for (var a = 0u; a < 3u; a++) {
-            g[a] = (voxel(p + unit(a, 1)) - voxel(p + unit(a, -1))) * 0.5;
-        }
-    } else if (method == 1u) {
-        let f0 = voxel(p);
-        for (var a = 0u; a < 3u; a++) {
-            g[a] = voxel(p + unit(a, 1)) - f0;
-        }
-    } else {
-        let sobel_w = array<f32, 3>(0.25, 0.5, 0.25);
-        for (var a = 0u; a < 3u; a++) {
-            let b = (a + 1u) % 3u;
-            let c = (a + 2u) % 3u;
-            var acc = 0.0;
-            for (var ob = 0u; ob < 3u; ob++) {
-                for (var oc = 0u; oc < 3u; oc++) {
-                    let q = p + unit(b, i32(ob) - 1) + unit(c, i32(oc) - 1);
-                    let d = voxel(q + unit(a, 1)) - voxel(q + unit(a, -1));
-                    acc = acc + (sobel_w[ob] * sobel_w[oc]) * d;
-                }
-            }
-            g[a] = acc * 0.5;
-        }
-    }
-    textureStore(target_tex, p, vec4<f32>(g, 0.0));
+    textureStore(target_tex, p, vec4<f32>(gradient_at_voxel(p, params.flags2.x), 0.0));
 }

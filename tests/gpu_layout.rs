@@ -205,6 +205,36 @@ fn process_params_layout_agrees() {
     }
 }
 
+#[test]
+fn gradient_params_layout_agrees() {
+    use voxlab::gpu::gradient::{GradientParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "GradientParams");
+    assert_eq!(span as usize, size_of::<GradientParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("dims", offset_of!(GradientParams, dims)),
+        ("slab", offset_of!(GradientParams, slab)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
+/// The gradient-volume shader parses and validates.
+#[test]
+fn gradient_shader_validates() {
+    let src = voxlab::gpu::gradient::shader_source();
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+}
+
 /// Every processing shader parses and validates.
 #[test]
 fn process_shaders_validate() {

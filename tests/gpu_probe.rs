@@ -14,7 +14,7 @@ fn adapter_opens_and_computes() {
         ctx.device.limits().max_storage_buffer_binding_size,
         ctx.adapter.limits().max_storage_buffer_binding_size
     );
-    let n = voxlab::gpu::probe::self_test(&ctx).expect("the device computes a·x + b like the CPU");
+    let n = voxlab::gpu::probe::self_test(ctx).expect("the device computes a·x + b like the CPU");
     assert!(n > 4096);
 }
 
@@ -25,14 +25,14 @@ fn probe_matches_cpu_on_awkward_sizes() {
     };
     for len in [1usize, 63, 64, 65, 1000] {
         let x: Vec<f32> = (0..len).map(|i| (i as f32).sin() * 1e3).collect();
-        let y = voxlab::gpu::probe::saxpy_gpu(&ctx, -2.5, 0.125, &x).unwrap();
+        let y = voxlab::gpu::probe::saxpy_gpu(ctx, -2.5, 0.125, &x).unwrap();
         assert_eq!(y.len(), len);
         for (xi, yi) in x.iter().zip(&y) {
             let want = voxlab::gpu::probe::saxpy_cpu(-2.5, *xi, 0.125);
             assert!((yi - want).abs() <= want.abs() * 2.0 * f32::EPSILON);
         }
     }
-    assert!(voxlab::gpu::probe::saxpy_gpu(&ctx, 1.0, 0.0, &[])
+    assert!(voxlab::gpu::probe::saxpy_gpu(ctx, 1.0, 0.0, &[])
         .unwrap()
         .is_empty());
 }

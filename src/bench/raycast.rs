@@ -14,11 +14,11 @@
 //!
 //! **gradient.** `cpu::gradient::precompute_gradients` with central differences
 //! `(f(x+1) − f(x−1))/2` on every voxel of the same phantom, the set-up pass of a
-//! ray caster that interpolates gradients instead of differencing on the fly. The GPU
-//! computes the same volume in a set-up pass of `gpu::raycast::render`, into a texture
-//! that is never read back, so it has no standalone entry point: the family times the
-//! CPU alone. Work: voxel updates (one gradient per voxel) and bytes (one f32 read and
-//! three f32 writes per voxel, 16 B, whatever the backend's precision).
+//! ray caster that interpolates gradients instead of differencing on the fly, and its
+//! GPU port `gpu::gradient::precompute_gradients` (kernel = the slab dispatches; end to
+//! end = upload, dispatches and the readback of the three components). Work: voxel
+//! updates (one gradient per voxel) and bytes (one f32 read and three f32 writes per
+//! voxel, 16 B, whatever the backend's precision).
 
 use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
 use crate::camera::{Camera, Orbit, Projection};
@@ -287,10 +287,30 @@ fn prepare_gradient(n: usize) -> Result<Prepared> {
         Run { seconds, output }
     }
     let voxels = (n * n * n) as f64;
+    let gpu_grid = Rc::clone(&g32);
+    let gpu = Box::new(move |ctx: &crate::gpu::GpuContext| {
+        let r = crate::gpu::gradient::precompute_gradients_timed(
+            ctx,
+            &gpu_grid,
+            GradientMethod::Central,
+        )?;
+        let t = r.timings;
+        Ok(GpuRun {
+            output: r
+                .components
+                .iter()
+                .flat_map(|c| c.data.iter().map(|&v| v as f64))
+                .collect(),
+            kernel: t.kernel,
+            kernel_from_timestamps: t.kernel_from_timestamps,
+            end_to_end: t.total - t.setup,
+            setup: t.setup,
+        })
+    }) as super::GpuFn;
     Ok(Prepared {
         cpu_f64: Box::new(move || Ok(run(&g64))),
         cpu_f32: Some(Box::new(move || Ok(run(&g32)))),
-        gpu: None,
+        gpu: Some(gpu),
         tol_f32: GRADIENT_F32,
         tol_gpu: GRADIENT_F32,
         work: vec![
@@ -303,10 +323,10 @@ fn prepare_gradient(n: usize) -> Result<Prepared> {
                 unit: Unit::Bytes,
             },
         ],
-        note: "CPU only: the GPU computes this volume inside gpu::raycast::render's set-up \
-               pass and never reads it back, so it has no standalone GPU entry point. \
-               Output: the x, y and z components, one after the other. Work: one voxel \
-               update per gradient; bytes = 16 per voxel (one f32 read, three f32 writes)."
+        note: "Output: the x, y and z components, one after the other. GPU: the same \
+               stencil in f32 (shaders/shared/gradient_voxel.wgsl), read back in slabs. \
+               Work: one voxel update per gradient; bytes = 16 per voxel (one f32 read, \
+               three f32 writes)."
             .into(),
     })
 }

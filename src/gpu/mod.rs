@@ -12,6 +12,7 @@ pub mod d2vr;
 pub mod fbp;
 pub mod fft;
 pub mod fvr;
+pub mod gradient;
 pub mod probe;
 pub mod process;
 pub mod project;

@@ -79,6 +79,9 @@ pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
 pub const RAYS_WGSL: &str = include_str!("../../shaders/shared/rays.wgsl");
 /// The set-up shader (without the shared struct).
 pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
+/// The gradient stencil at a voxel, shared with `gpu::gradient`
+/// (`shaders/shared/gradient_voxel.wgsl`).
+pub const GRADIENT_VOXEL_WGSL: &str = include_str!("../../shaders/shared/gradient_voxel.wgsl");
 
 /// Where the time of a GPU render went, in seconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -254,10 +257,19 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
 
 /// The complete set-up shader: the shared struct and lookup, and the passes.
 pub fn prepare_shader() -> String {
-    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{PREPARE_WGSL}")
+    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{PREPARE_WGSL}\n{GRADIENT_VOXEL_WGSL}")
 }
 
 const STUB_TAPS: &str = "// Unreachable for this filter.\nfn accumulate_taps(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {\n    return vec4<f32>(0.0);\n}\n";
+
+/// The WGSL code of a gradient method (`shaders/shared/gradient_voxel.wgsl`).
+pub(crate) fn gradient_method_id(m: GradientMethod) -> u32 {
+    match m {
+        GradientMethod::Central => 0,
+        GradientMethod::Forward => 1,
+        GradientMethod::Sobel => 2,
+    }
+}
 
 fn filter_id(f: Filter) -> Result<u32> {
     Ok(match f {
@@ -332,11 +344,7 @@ pub fn raycast_params(
             ),
         ));
     }
-    let gradient = match settings.gradient {
-        GradientMethod::Central => 0,
-        GradientMethod::Forward => 1,
-        GradientMethod::Sobel => 2,
-    };
+    let gradient = gradient_method_id(settings.gradient);
     Ok(RaycastParams {
         eye: v4(camera.eye, eye_w),
         forward: v4(camera.forward, fwd_w),

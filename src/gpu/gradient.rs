@@ -1,0 +1,264 @@
+//! The precomputed gradient volume on the GPU: the port of
+//! [`cpu::gradient::precompute_gradients`](crate::cpu::gradient::precompute_gradients).
+//!
+//! Each voxel's index-space gradient by central differences, forward differences or the
+//! 3D Sobel stencil, with clamped neighbours at the border, exactly as the CPU defines
+//! it (`shaders/shared/gradient_voxel.wgsl: gradient_at_voxel`, the stencil the ray
+//! caster's set-up pass uses too). The volume goes up once as an `R32Float` 3D texture;
+//! the gradients come back in slabs of z-slices small enough for one storage binding
+//! (`shaders/gradient.wgsl`, one invocation per voxel, component-planar output), so any
+//! volume the texture holds can be processed, also on adapters whose storage bindings
+//! stop at 128 MiB.
+//!
+//! Parity: every tap is one f32 subtraction of two voxel values and a multiplication by
+//! a power of two (or, for Sobel, nine weighted terms), so the GPU result equals the
+//! CPU's f32 result up to the order of the Sobel sums (`tests/gpu_gradient.rs`).
+
+use super::context::{buffer_entry, GpuContext};
+use crate::cpu::filter::Grid;
+use crate::error::{Error, Result};
+use crate::settings::GradientMethod;
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+/// The shader (without the shared parts).
+pub const GRADIENT_WGSL: &str = include_str!("../../shaders/gradient.wgsl");
+/// The parameter struct's WGSL twin.
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/gradient_params.wgsl");
+
+/// Parameters of one slab dispatch; twin of `shaders/shared/gradient_params.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GradientParams {
+    /// nx, ny, nz; w = gradient method (0 central, 1 forward, 2 Sobel).
+    pub dims: [u32; 4],
+    /// First z-slice of the slab, slices in the slab.
+    pub slab: [u32; 4],
+}
+
+/// The complete shader source.
+pub fn shader_source() -> String {
+    format!(
+        "{PARAMS_WGSL}\n{}\n{GRADIENT_WGSL}",
+        super::raycast::GRADIENT_VOXEL_WGSL
+    )
+}
+
+/// Where the time went, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GradientTimings {
+    /// Shader and pipeline creation.
+    pub setup: f64,
+    /// The volume's upload (waited for).
+    pub upload: f64,
+    /// The slab dispatches alone: summed timestamp-query intervals when the adapter
+    /// has them (`kernel_from_timestamps`), else waited wall time of the submissions.
+    pub kernel: f64,
+    pub kernel_from_timestamps: bool,
+    /// Copies back to the host.
+    pub readback: f64,
+    /// Everything, set-up included.
+    pub total: f64,
+}
+
+/// The three gradient components and the timings.
+pub struct GpuGradients {
+    pub components: [Grid<f32>; 3],
+    pub timings: GradientTimings,
+}
+
+/// The gradient volume of `grid`: the x, y and z components (index space, value per
+/// voxel). See [`precompute_gradients_timed`].
+///
+/// # Errors
+/// As [`precompute_gradients_timed`].
+pub fn precompute_gradients(
+    ctx: &GpuContext,
+    grid: &Grid<f32>,
+    method: GradientMethod,
+) -> Result<[Grid<f32>; 3]> {
+    Ok(precompute_gradients_timed(ctx, grid, method)?.components)
+}
+
+/// [`precompute_gradients`] with the time of each stage.
+///
+/// # Errors
+/// [`Error::Invalid`] when the grid's data do not fill its dimensions;
+/// [`Error::TooLarge`] when the volume exceeds the adapter's 3D texture size or one
+/// slice's three components exceed a storage binding; [`Error::Gpu`] on device failure.
+pub fn precompute_gradients_timed(
+    ctx: &GpuContext,
+    grid: &Grid<f32>,
+    method: GradientMethod,
+) -> Result<GpuGradients> {
+    precompute_gradients_in_slabs(ctx, grid, method, u64::MAX)
+}
+
+/// [`precompute_gradients_timed`] with each slab's output held to at most
+/// `max_slab_bytes` (besides the adapter's storage-binding limit): bounds the device
+/// memory used, and lets a small volume exercise the many-slab path.
+///
+/// # Errors
+/// As [`precompute_gradients_timed`]; [`Error::TooLarge`] also when one slice's three
+/// components exceed `max_slab_bytes`.
+pub fn precompute_gradients_in_slabs(
+    ctx: &GpuContext,
+    grid: &Grid<f32>,
+    method: GradientMethod,
+    max_slab_bytes: u64,
+) -> Result<GpuGradients> {
+    let t0 = Instant::now();
+    let [nx, ny, nz] = grid.dims;
+    let voxels = nx * ny * nz;
+    if grid.data.len() != voxels || voxels == 0 {
+        return Err(Error::invalid(
+            "gradient volume",
+            format!("{} values for dimensions {:?}", grid.data.len(), grid.dims),
+        ));
+    }
+    // Slices per slab: three f32 components of a slab must fit one storage binding.
+    let slice_bytes = (3 * 4 * nx * ny) as u64;
+    let binding = ctx
+        .limits
+        .max_storage_buffer_binding_size
+        .min(ctx.limits.max_buffer_size)
+        .min(max_slab_bytes);
+    let per_slab = (binding / slice_bytes).min(nz as u64) as usize;
+    if per_slab == 0 {
+        return Err(Error::too_large(
+            "gradient volume",
+            format!(
+                "one {nx} × {ny} slice's three components ({slice_bytes} bytes) exceed the \
+                 storage-binding limit of {binding} bytes"
+            ),
+        ));
+    }
+    let dev = &ctx.device;
+    let module = ctx.shader("gradient.wgsl", &shader_source())?;
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("gradient"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D3,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
+        ],
+    });
+    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("gradient"),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("gradient_slab"),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("gradient_slab"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let out = ctx.storage_buffer("gradient slab", per_slab as u64 * slice_bytes)?;
+    let query = ctx
+        .device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.timestamp_pair());
+    ctx.wait()?;
+    let setup = t0.elapsed().as_secs_f64();
+
+    let t_up = Instant::now();
+    let volume = ctx.upload_volume_r32(grid.dims, &grid.data)?;
+    ctx.wait()?;
+    let upload = t_up.elapsed().as_secs_f64();
+    let view = volume.create_view(&Default::default());
+
+    let mut comps: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(voxels));
+    let (mut kernel, mut readback) = (0.0, 0.0);
+    let mut z0 = 0;
+    while z0 < nz {
+        let slices = per_slab.min(nz - z0);
+        let params = GradientParams {
+            dims: [
+                nx as u32,
+                ny as u32,
+                nz as u32,
+                super::raycast::gradient_method_id(method),
+            ],
+            slab: [z0 as u32, slices as u32, 0, 0],
+        };
+        let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("gradient params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind = ctx.bind_group(
+            "gradient",
+            &layout,
+            &[
+                pbuf.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&view),
+                out.as_entire_binding(),
+            ],
+        );
+        let t_k = Instant::now();
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("gradient_slab"),
+                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(
+                (nx as u32).div_ceil(4),
+                (ny as u32).div_ceil(4),
+                (slices as u32).div_ceil(4),
+            );
+        }
+        if let Some(q) = &query {
+            q.resolve(&mut enc);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        kernel += match &query {
+            Some(q) => q.seconds(ctx)?,
+            None => t_k.elapsed().as_secs_f64(),
+        };
+        let t_r = Instant::now();
+        let n = slices * nx * ny;
+        let bytes = ctx.read_buffer(&out, (3 * n * 4) as u64)?;
+        let vals: &[f32] = bytemuck::cast_slice(&bytes);
+        for (c, comp) in comps.iter_mut().enumerate() {
+            comp.extend_from_slice(&vals[c * n..(c + 1) * n]);
+        }
+        readback += t_r.elapsed().as_secs_f64();
+        z0 += slices;
+    }
+    let components = comps.map(|data| Grid {
+        dims: grid.dims,
+        data,
+    });
+    Ok(GpuGradients {
+        components,
+        timings: GradientTimings {
+            setup,
+            upload,
+            kernel,
+            kernel_from_timestamps: query.is_some(),
+            readback,
+            total: t0.elapsed().as_secs_f64(),
+        },
+    })
+}
