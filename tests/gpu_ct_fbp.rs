@@ -26,7 +26,7 @@ fn gpu_backprojection_matches_the_f64_oracle() {
             q.data.iter().map(|&v| v as f32).collect(),
         )
         .unwrap();
-        let got = voxlab::gpu::fbp::backproject(&ctx, &q32, &g, &grid).unwrap();
+        let got = voxlab::gpu::fbp::backproject(ctx, &q32, &g, &grid).unwrap();
         let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let worst = want
             .data
@@ -79,7 +79,7 @@ fn gpu_fbp_of_shepp_logan_matches_the_cpu() {
             p.data.iter().map(|&v| v as f32).collect(),
         )
         .unwrap();
-        let got = voxlab::gpu::fbp::fbp(&ctx, &p32, &g, RampFilter::Hann, &grid).unwrap();
+        let got = voxlab::gpu::fbp::fbp(ctx, &p32, &g, RampFilter::Hann, &grid).unwrap();
         let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let worst = want
             .data
@@ -134,7 +134,7 @@ fn gpu_ramp_filter_matches_the_f64_oracle() {
                 p.data.iter().map(|&v| v as f32).collect(),
             )
             .unwrap();
-            let got = voxlab::gpu::ramp::filter_projections(&ctx, &p32, g, filter).unwrap();
+            let got = voxlab::gpu::ramp::filter_projections(ctx, &p32, g, filter).unwrap();
             let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let worst = want
                 .data

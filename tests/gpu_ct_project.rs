@@ -118,7 +118,7 @@ fn gpu_matches_the_f64_oracle() {
         let grid = (case.grid)();
         let g = (case.geometry)();
         let cpu = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
-        let gpu = gproject::project_volume(&ctx, &grid, &g, &ProjectOptions::default()).unwrap();
+        let gpu = gproject::project_volume(ctx, &grid, &g, &ProjectOptions::default()).unwrap();
         assert_eq!(
             (gpu.angles, gpu.rows, gpu.cols),
             (cpu.angles, cpu.rows, cpu.cols)
@@ -157,7 +157,7 @@ fn many_views_are_split_into_dispatches_and_agree() {
     let grid = Grid::<f64>::phantom(&Phantom::shepp_logan_modified(), [64; 3]).unwrap();
     let g = Geometry::parallel_stack(64, 64, 4.5, 4.5, Geometry::even_angles(300, 180.0)).unwrap();
     let cpu = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
-    let gpu = gproject::project_volume(&ctx, &grid, &g, &ProjectOptions::default()).unwrap();
+    let gpu = gproject::project_volume(ctx, &grid, &g, &ProjectOptions::default()).unwrap();
     let peak = cpu.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let max_d = cpu
         .data
@@ -181,6 +181,6 @@ fn a_grid_past_the_storage_limit_is_refused() {
     }
     let grid = Grid::<f32>::new([side; 3], DMat4::IDENTITY, vec![0.0; side.pow(3)]).unwrap();
     let g = Geometry::parallel_skimage(8, vec![0.0]).unwrap();
-    let e = gproject::project_volume(&ctx, &grid, &g, &ProjectOptions::default()).unwrap_err();
+    let e = gproject::project_volume(ctx, &grid, &g, &ProjectOptions::default()).unwrap_err();
     assert!(e.to_string().contains("storage-binding"), "{e}");
 }

@@ -141,7 +141,7 @@ fn gpu_matches_the_cpu_oracle() {
             .unwrap();
         for storage in [ProjStorage::F32, ProjStorage::F16] {
             let gpu = gd2vr::render_d2vr(
-                &ctx,
+                ctx,
                 &q32,
                 &g,
                 &grid,
@@ -195,7 +195,7 @@ fn gpu_refuses_back_to_front() {
     s.compositing = Compositing::BackToFront;
     let o = D2vrOptions::default();
     let r = gd2vr::render_d2vr(
-        &ctx,
+        ctx,
         &q,
         &g,
         &sc::grid(),

@@ -214,8 +214,8 @@ fn parity(name: &str, case: Case, variant: GpuFftVariant) {
     for norm in [Normalization::Unitary, Normalization::Unnormalized] {
         for dir in [Direction::Forward, Direction::Inverse] {
             let got = match case {
-                Case::Lines { n, .. } => fft::fft_lines(&ctx, &x32, n, dir, norm, variant),
-                Case::Nd(shape) => fft::fft_nd(&ctx, &x32, shape, dir, norm, variant),
+                Case::Lines { n, .. } => fft::fft_lines(ctx, &x32, n, dir, norm, variant),
+                Case::Nd(shape) => fft::fft_nd(ctx, &x32, shape, dir, norm, variant),
             }
             .unwrap_or_else(|e| panic!("{test}: {e}"));
             let want = oracle(&case, &x, dir, norm);
@@ -286,7 +286,7 @@ fn delta_transforms_to_a_constant() {
                 (Normalization::Unnormalized, Direction::Forward),
                 (Normalization::Unitary, Direction::Inverse),
             ] {
-                let y = fft::fft_nd(&ctx, &x, shape, dir, norm, variant).unwrap();
+                let y = fft::fft_nd(ctx, &x, shape, dir, norm, variant).unwrap();
                 let c = norm.factor(shape, dir) as f32;
                 assert!(
                     y.iter().all(|&v| v == Complex::new(c, 0.0)),
@@ -306,7 +306,7 @@ fn non_power_of_two_is_refused() {
     let x = vec![Complex::new(1.0f32, 0.0); 24];
     for variant in GpuFftVariant::ALL {
         let e = fft::fft_nd(
-            &ctx,
+            ctx,
             &x,
             &[3, 8],
             Direction::Forward,
@@ -322,7 +322,7 @@ fn non_power_of_two_is_refused() {
         );
         assert!(msg.contains("cpu::fft::fft_nd"), "{msg}");
         let e = fft::fft_lines(
-            &ctx,
+            ctx,
             &x,
             12,
             Direction::Forward,
@@ -332,7 +332,7 @@ fn non_power_of_two_is_refused() {
         .expect_err("12 is not a power of two");
         assert!(e.to_string().contains("axis 1"), "{e}");
         let e = fft::fft_nd(
-            &ctx,
+            ctx,
             &x,
             &[4, 8],
             Direction::Forward,
@@ -362,7 +362,7 @@ fn oversized_data_is_refused() {
     let len = (limit / 8 + 1) as usize;
     let x = vec![Complex::new(0.0f32, 0.0); len];
     let e = fft::fft_nd(
-        &ctx,
+        ctx,
         &x,
         &[len],
         Direction::Forward,
@@ -390,7 +390,7 @@ fn workgroup_memory_path_equals_the_global_passes() {
         let x = to_f32(&random_complex(&mut rng, total));
         for dir in [Direction::Forward, Direction::Inverse] {
             let run = |variant| {
-                fft::fft_nd(&ctx, &x, shape, dir, Normalization::Unitary, variant).unwrap()
+                fft::fft_nd(ctx, &x, shape, dir, Normalization::Unitary, variant).unwrap()
             };
             let local = run(GpuFftVariant::Stockham);
             let global = run(GpuFftVariant::StockhamGlobal);
@@ -414,7 +414,7 @@ fn timings_are_reported() {
     let x = to_f32(&random_complex(&mut common::Rng(0x7133), 256 * 128));
     for variant in GpuFftVariant::ALL {
         let (dir, norm) = (Direction::Forward, Normalization::Unitary);
-        let out = fft::fft_nd_timed(&ctx, &x, &shape, dir, norm, variant).unwrap();
+        let out = fft::fft_nd_timed(ctx, &x, &shape, dir, norm, variant).unwrap();
         let t = out.timings;
         eprintln!(
             "gpu fft timings 256x128 {variant:<14?} setup {:.2} ms, upload {:.2} ms, \
@@ -436,7 +436,7 @@ fn timings_are_reported() {
             t.kernel > 0.0 && t.total >= t.setup + t.upload + t.readback,
             "{t:?}"
         );
-        let plain = fft::fft_nd(&ctx, &x, &shape, dir, norm, variant).unwrap();
+        let plain = fft::fft_nd(ctx, &x, &shape, dir, norm, variant).unwrap();
         assert_eq!(out.data, plain);
     }
 }
@@ -451,8 +451,8 @@ fn round_trip_restores_the_input() {
     let x = to_f32(&random_complex(&mut common::Rng(0x4242), 8 * 16 * 32));
     for variant in GpuFftVariant::ALL {
         for norm in [Normalization::Unitary, Normalization::Unnormalized] {
-            let y = fft::fft_nd(&ctx, &x, &shape, Direction::Forward, norm, variant).unwrap();
-            let z = fft::fft_nd(&ctx, &y, &shape, Direction::Inverse, norm, variant).unwrap();
+            let y = fft::fft_nd(ctx, &x, &shape, Direction::Forward, norm, variant).unwrap();
+            let z = fft::fft_nd(ctx, &y, &shape, Direction::Inverse, norm, variant).unwrap();
             let e = rel_l2(&z, &to_f64(&x));
             eprintln!("gpu fft round trip 8x16x32 {variant:<14?} {norm:<12?} rel L2 {e:.2e}");
             // Two transforms, each within the parity bound.
@@ -478,7 +478,7 @@ fn a_device_buffer_transforms_like_host_data() {
         .collect();
     let (dir, norm) = (Direction::Inverse, Normalization::Unnormalized);
     let variant = GpuFftVariant::Stockham;
-    let want = fft::fft_nd(&ctx, &x, &shape, dir, norm, variant).unwrap();
+    let want = fft::fft_nd(ctx, &x, &shape, dir, norm, variant).unwrap();
     let host: Vec<[f32; 2]> = x.iter().map(|v| [v.re, v.im]).collect();
     let buffer = ctx
         .device
@@ -487,10 +487,10 @@ fn a_device_buffer_transforms_like_host_data() {
             contents: bytemuck::cast_slice(&host),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         });
-    let got = fft::fft_nd_buffer_timed(&ctx, &buffer, &shape, dir, norm, variant).unwrap();
+    let got = fft::fft_nd_buffer_timed(ctx, &buffer, &shape, dir, norm, variant).unwrap();
     assert_eq!(got.data, want, "the same passes give the same bits");
     assert_eq!(got.timings.upload, 0.0);
-    let e = fft::fft_nd_buffer_timed(&ctx, &buffer, &[8, 8], dir, norm, variant).unwrap_err();
+    let e = fft::fft_nd_buffer_timed(ctx, &buffer, &[8, 8], dir, norm, variant).unwrap_err();
     assert!(e.to_string().contains("do not hold"), "{e}");
 }
 
@@ -534,7 +534,7 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
             a.iter().map(|&v| v as f64).collect(),
             b.iter().map(|&v| v as f64).collect(),
         );
-        let (ga, gb) = fft::two_real_ffts(&ctx, &a, &b).unwrap();
+        let (ga, gb) = fft::two_real_ffts(ctx, &a, &b).unwrap();
         let (ca, cb) = voxlab::cpu::fft::two_real_ffts(&a64, &b64);
         let tol = REL_L2_PER_STAGE * (n as f64).log2().max(1.0);
         let (ea, eb) = (rel_l2(&ga, &ca), rel_l2(&gb, &cb));
@@ -552,9 +552,9 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
             assert!(da <= tol && db <= tol, "N={n}: {da:e}, {db:e} > {tol:e}");
         }
     }
-    let e = fft::two_real_ffts(&ctx, &[1.0; 4], &[1.0; 8]).unwrap_err();
+    let e = fft::two_real_ffts(ctx, &[1.0; 4], &[1.0; 8]).unwrap_err();
     assert!(e.to_string().contains("4 and 8"), "{e}");
-    let e = fft::two_real_ffts(&ctx, &[1.0; 6], &[1.0; 6]).unwrap_err();
+    let e = fft::two_real_ffts(ctx, &[1.0; 6], &[1.0; 6]).unwrap_err();
     assert!(e.to_string().contains("power of two"), "{e}");
 }
 
@@ -581,7 +581,7 @@ fn large_parity(shape: &[usize], variant: GpuFftVariant) {
     let (dir, norm) = (Direction::Forward, Normalization::Unnormalized);
     voxlab::cpu::fft::fft_nd(&mut want, shape, dir, norm);
     let start = std::time::Instant::now();
-    let got = fft::fft_nd_timed(&ctx, &x32, shape, dir, norm, variant)
+    let got = fft::fft_nd_timed(ctx, &x32, shape, dir, norm, variant)
         .unwrap_or_else(|e| panic!("{test}: {e}"));
     let e = rel_l2(&got.data, &want);
     eprintln!(

@@ -166,7 +166,7 @@ fn gpu_fvr_matches_the_cpu_oracle() {
         .collect();
     let uploaded: Vec<GpuFvrSpectrum> = spectra
         .iter()
-        .map(|(_, s)| GpuFvrSpectrum::upload(&ctx, s).unwrap())
+        .map(|(_, s)| GpuFvrSpectrum::upload(ctx, s).unwrap())
         .collect();
     let mut failures = Vec::new();
     let (mut worst_l2, mut worst_max) = (0.0f64, 0.0f64);
@@ -181,7 +181,7 @@ fn gpu_fvr_matches_the_cpu_oracle() {
         let oracle =
             fvr::fvr_project(cpu_spectrum, case.view, case.kernel, case.deapodize).unwrap();
         let port = gfvr::fvr_project(
-            &ctx,
+            ctx,
             &uploaded[case.volume],
             case.view,
             case.kernel,
@@ -209,13 +209,13 @@ fn the_gpu_refuses_dirichlet_and_non_power_of_two_cubes() {
         return;
     };
     let s = FvrSpectrum::new(&random_volume(8, 1), 2).unwrap();
-    let g = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
-    let e = gfvr::fvr_project(&ctx, &g, ORBIT, Kernel::Dirichlet, false).unwrap_err();
+    let g = GpuFvrSpectrum::upload(ctx, &s).unwrap();
+    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false).unwrap_err();
     assert!(e.to_string().contains("CPU only"), "{e}");
     // 6 · 2 = 12 is no power of two.
     let s = FvrSpectrum::new(&random_volume(6, 2), 2).unwrap();
-    let g = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
-    let e = gfvr::fvr_project(&ctx, &g, ORBIT, Kernel::Trilinear, false).unwrap_err();
+    let g = GpuFvrSpectrum::upload(ctx, &s).unwrap();
+    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Trilinear, false).unwrap_err();
     assert!(e.to_string().contains("power of two"), "{e}");
     assert!(e.to_string().contains("--padding"), "{e}");
 }

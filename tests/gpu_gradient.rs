@@ -50,9 +50,9 @@ fn check(method: GradientMethod, max_slab_bytes: u64, label: &str) {
         .flat_map(|c| c.data.iter())
         .fold(0.0f64, |m, v| m.max(v.abs()));
     let mut worst = 0.0f64;
-    for c in 0..3 {
-        assert_eq!(gpu.components[c].dims, g32.dims);
-        for (a, b) in gpu.components[c].data.iter().zip(&oracle[c].data) {
+    for (g, o) in gpu.components.iter().zip(&oracle) {
+        assert_eq!(g.dims, g32.dims);
+        for (a, b) in g.data.iter().zip(&o.data) {
             assert!(a.is_finite(), "{label}: non-finite gradient");
             worst = worst.max((*a as f64 - b).abs() / scale);
         }
@@ -63,9 +63,9 @@ fn check(method: GradientMethod, max_slab_bytes: u64, label: &str) {
         "{label}: {worst:.2e} > {TOL_MAX_REL:.1e}"
     );
     if method != GradientMethod::Sobel {
-        for c in 0..3 {
+        for (c, (g, f)) in gpu.components.iter().zip(&cpu32).enumerate() {
             assert_eq!(
-                gpu.components[c].data, cpu32[c].data,
+                g.data, f.data,
                 "{label}: component {c} differs from the CPU's f32 result"
             );
         }
@@ -106,7 +106,6 @@ fn refusals_are_clear() {
         data: vec![0.0; 63],
     };
     let e = gg::precompute_gradients(ctx, &bad, GradientMethod::Central)
-        .err()
-        .expect("a grid whose data do not fill it is refused");
+        .expect_err("a grid whose data do not fill it is refused");
     assert!(matches!(e, Error::Invalid { .. }), "{e}");
 }

@@ -123,7 +123,7 @@ fn run(
     let ctx = common::gpu(name)?;
     let (vol, tf, cam, s) = scene(&case, n, size);
     let cpu = voxlab::cpu::raycast::render::<f64>(&vol, &tf, &cam, &s, &|_, _| {}).unwrap();
-    let gpu = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {})
+    let gpu = voxlab::gpu::raycast::render(ctx, &vol, &tf, &cam, &s, &|_, _| {})
         .unwrap()
         .output;
     Some((
@@ -279,7 +279,7 @@ fn unsupported_gpu_options_are_refused() {
         8,
         8,
     );
-    let e = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
+    let e = voxlab::gpu::raycast::render(ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
     assert!(e.to_string().contains("CPU only"), "{e}");
     let (vol, tf, cam, s) = scene(
         &Case {
@@ -290,7 +290,7 @@ fn unsupported_gpu_options_are_refused() {
         8,
         8,
     );
-    let e = voxlab::gpu::raycast::render(&ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
+    let e = voxlab::gpu::raycast::render(ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap_err();
     assert!(e.to_string().contains("trilinear"), "{e}");
 }
 
