@@ -46,6 +46,10 @@ pub struct ReconstructArgs {
     /// iradon's circle=True.
     #[arg(long)]
     no_circle: bool,
+    /// Cone beam over less than a full turn (at least 180° + the fan angle): weigh the
+    /// projections with Parker's short-scan weights before filtering (docs/ct.md).
+    #[arg(long)]
+    short_scan: bool,
     /// Who computes: cpu (f64), cpu-f32, or gpu (f32 backprojection).
     #[arg(long, value_enum, default_value = "cpu")]
     backend: BackendArg,
@@ -269,10 +273,24 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
     };
+    if a.short_scan {
+        // Checked before any work: a clear error for a parallel beam or a wrong span.
+        voxlab::cpu::parker::short_scan(&g)?;
+    }
     let (mut rec, what): (Reconstruction<f64>, String) = match a.backend {
-        BackendArg::Cpu => (fbp(&p, &g, a.filter, &grid, &progress)?, "cpu f64".into()),
+        BackendArg::Cpu => {
+            let p = if a.short_scan {
+                voxlab::cpu::parker::weigh(&p, &g)?
+            } else {
+                p
+            };
+            (fbp(&p, &g, a.filter, &grid, &progress)?, "cpu f64".into())
+        }
         BackendArg::CpuF32 => {
-            let p32 = narrow(&p)?;
+            let mut p32 = narrow(&p)?;
+            if a.short_scan {
+                p32 = voxlab::cpu::parker::weigh(&p32, &g)?;
+            }
             (
                 widen(fbp(&p32, &g, a.filter, &grid, &progress)?),
                 "cpu f32".into(),
@@ -280,7 +298,10 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         }
         BackendArg::Gpu => {
             let ctx = voxlab::gpu::GpuContext::new()?;
-            let p32 = narrow(&p)?;
+            let mut p32 = narrow(&p)?;
+            if a.short_scan {
+                p32 = voxlab::gpu::parker::weigh(&ctx, &p32, &g)?;
+            }
             let r = voxlab::gpu::fbp::fbp(&ctx, &p32, &g, a.filter, &grid)?;
             (widen(r), format!("gpu ({})", ctx.summary.name))
         }

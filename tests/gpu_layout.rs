@@ -221,6 +221,38 @@ fn gradient_params_layout_agrees() {
     }
 }
 
+#[test]
+fn parker_params_layout_agrees() {
+    use voxlab::gpu::parker::{ParkerParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "ParkerParams");
+    assert_eq!(span as usize, size_of::<ParkerParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("dims", offset_of!(ParkerParams, dims)),
+        ("detector", offset_of!(ParkerParams, detector)),
+        ("scan", offset_of!(ParkerParams, scan)),
+        ("work", offset_of!(ParkerParams, work)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
+/// The Parker shader parses and validates.
+#[test]
+fn parker_shader_validates() {
+    let src = voxlab::gpu::parker::shader_source();
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+}
+
 /// The gradient-volume shader parses and validates.
 #[test]
 fn gradient_shader_validates() {

@@ -18,7 +18,7 @@ const SDD: f64 = 1500.0;
 
 /// A short scan of `n` views over `180° + 2·fan half angle + extra_deg`.
 fn short_geometry(cols: usize, rows: usize, du: f64, n: usize, extra_deg: f64) -> Geometry {
-    let fan = ((cols as f64 - 1.0) / 2.0 * du / SDD).atan().to_degrees();
+    let fan = (cols as f64 / 2.0 * du / SDD).atan().to_degrees();
     let span = 180.0 + 2.0 * fan + extra_deg;
     let angles = (0..n)
         .map(|k| 17.0 + span * k as f64 / (n - 1) as f64)

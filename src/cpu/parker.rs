@@ -41,7 +41,8 @@ pub struct ShortScan {
     pub first_deg: f64,
     /// `δ = (B − π)/2`, radians, with `B` the span from the first to the last view.
     pub delta: f64,
-    /// The fan's half angle `atan(max |u| / SDD)`, radians (`δ` is at least this).
+    /// The fan's half angle `atan(max |u| / SDD)` to the detector's outer edge, radians
+    /// (`δ` is at least this).
     pub fan_half_angle: f64,
     /// `A·Δβ/π`: the factor that turns the full-scan backprojection constant into the
     /// short scan's.
@@ -78,7 +79,10 @@ pub fn short_scan(g: &Geometry) -> Result<ShortScan> {
     }
     let span = (a[a.len() - 1] - a[0]).to_radians();
     let step = span / (a.len() - 1) as f64;
-    let umax = ((g.cols as f64 - 1.0 - g.cu).abs()).max(g.cu.abs()) * g.du;
+    // The fan reaches the detector's outer edges, half a pixel beyond the last centres:
+    // every pixel centre then has |γ| < δ by a margin, which keeps the weights
+    // well-conditioned where the ramps meet (see `parker_weight`).
+    let umax = (g.cols as f64 - 0.5 - g.cu).abs().max((g.cu + 0.5).abs()) * g.du;
     let fan_half_angle = (umax / sdd).atan();
     let need = PI + 2.0 * fan_half_angle;
     // Half a step of slack: a scan sampled at even angles may end just short of B.
@@ -110,6 +114,10 @@ pub fn short_scan(g: &Geometry) -> Result<ShortScan> {
 /// Parker's weight of the ray at gantry angle `beta` (from the first view) and fan
 /// angle `gamma`, for the half over-scan `delta` (all radians). 0 outside `[0, π + 2δ]`.
 ///
+/// The ramps have slope up to `(π/4)/(δ − |γ|)` in `β`: an error `ε` in `β` (f32 on
+/// the GPU) moves the weight by up to `ε·(π/4)/(δ − |γ|)`, which is why the fan angle
+/// is taken to the detector's edge (`δ − |γ| ≥` half a pixel's angle).
+///
 /// mirrors shaders/parker.wgsl: parker_weight
 #[inline]
 pub fn parker_weight(beta: f64, gamma: f64, delta: f64) -> f64 {
@@ -128,9 +136,8 @@ pub fn parker_weight(beta: f64, gamma: f64, delta: f64) -> f64 {
 }
 
 /// The fan angle `γ = −atan(u / SDD)` of detector column `col` (see the module docs for
-/// the sign).
+/// the sign). `gpu::parker` uploads these per column, computed here in f64.
 ///
-/// mirrors shaders/parker.wgsl: fan_angle
 #[inline]
 pub fn fan_angle(g: &Geometry, sdd: f64, col: f64) -> f64 {
     -(((col - g.cu) * g.du) / sdd).atan()

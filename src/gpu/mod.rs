@@ -13,6 +13,7 @@ pub mod fbp;
 pub mod fft;
 pub mod fvr;
 pub mod gradient;
+pub mod parker;
 pub mod probe;
 pub mod process;
 pub mod project;
