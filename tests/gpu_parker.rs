@@ -97,9 +97,7 @@ fn gpu_refuses_what_the_cpu_refuses() {
     )
     .unwrap();
     let p = Projections::<f32>::zeros(&full).unwrap();
-    let e = voxlab::gpu::parker::weigh(ctx, &p, &full)
-        .err()
-        .expect("refused");
+    let e = voxlab::gpu::parker::weigh(ctx, &p, &full).expect_err("refused");
     assert!(e.to_string().contains("full turn"), "{e}");
     let g = short(8, 1, 40, 0.0, 0.0);
     let mut p = Projections::<f32>::zeros(&g).unwrap();

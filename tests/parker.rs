@@ -161,7 +161,7 @@ fn scans_that_are_not_short_scans_are_refused() {
         (&parallel, "cone beam"),
         (&backwards, "must increase"),
     ] {
-        let e = short_scan(g).err().expect("refused");
+        let e = short_scan(g).expect_err("refused");
         assert!(matches!(e, Error::Invalid { .. }), "{e}");
         assert!(e.to_string().contains(words), "{e}");
     }
