@@ -755,8 +755,15 @@ mod tests {
             let (x, w) = gauss_legendre_rule(n);
             for deg in 0..2 * n {
                 let got: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(deg as i32)).sum();
-                let want = if deg % 2 == 0 { 2.0 / (deg as f64 + 1.0) } else { 0.0 };
-                assert!((got - want).abs() < 1e-13, "n {n} degree {deg}: {got} vs {want}");
+                let want = if deg % 2 == 0 {
+                    2.0 / (deg as f64 + 1.0)
+                } else {
+                    0.0
+                };
+                assert!(
+                    (got - want).abs() < 1e-13,
+                    "n {n} degree {deg}: {got} vs {want}"
+                );
             }
         }
     }
@@ -772,7 +779,11 @@ mod tests {
                 euler_zxz(30.0, 20.0, 10.0),
             ),
             Primitive::sphere(-0.5, DVec3::new(-0.4, 0.3, 0.0), 0.07),
-            Primitive::cuboid(0.25, DVec3::new(-0.3, -0.61, -0.2), DVec3::new(0.1, -0.3, 0.33)),
+            Primitive::cuboid(
+                0.25,
+                DVec3::new(-0.3, -0.61, -0.2),
+                DVec3::new(0.1, -0.3, 0.33),
+            ),
         ];
         let want = 4.0 / 3.0 * std::f64::consts::PI * (0.5 * 0.3 * 0.2 - 0.5 * 0.07f64.powi(3))
             + 0.25 * 0.4 * 0.31 * 0.53;
@@ -783,11 +794,22 @@ mod tests {
         let got: f64 = v.data().iter().map(|&x| x as f64).sum::<f64>() * cell;
         assert!((got - want).abs() < 2e-5 * want, "{got} vs {want}");
         // Point sampling is much further off at this size.
-        let pt: f64 = p.sample([n; 3]).unwrap().data().iter().map(|&x| x as f64).sum();
+        let pt: f64 = p
+            .sample([n; 3])
+            .unwrap()
+            .data()
+            .iter()
+            .map(|&x| x as f64)
+            .sum();
         assert!((pt * cell - want).abs() > 10.0 * (got - want).abs());
         // Cells wholly inside or outside hold the point value.
         let pv = p.sample([n; 3]).unwrap();
-        let same = v.data().iter().zip(pv.data()).filter(|(a, b)| a == b).count();
+        let same = v
+            .data()
+            .iter()
+            .zip(pv.data())
+            .filter(|(a, b)| a == b)
+            .count();
         assert!(same > n * n * n * 9 / 10, "{same}");
     }
 

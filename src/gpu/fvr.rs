@@ -85,10 +85,7 @@ pub fn slab_bindings_wgsl(slabs: usize) -> String {
 
 /// The complete WGSL module of the slice extraction for a spectrum in `slabs` z-slabs.
 pub fn shader_source(slabs: usize) -> String {
-    format!(
-        "{PARAMS_WGSL}\n{}\n{SLICE_WGSL}",
-        slab_bindings_wgsl(slabs)
-    )
+    format!("{PARAMS_WGSL}\n{}\n{SLICE_WGSL}", slab_bindings_wgsl(slabs))
 }
 
 /// Parameters of one slice extraction, shared with
@@ -185,7 +182,11 @@ impl<'a> GpuFvrSpectrum<'a> {
         let max_slabs = MAX_SLABS
             .min((ctx.limits.max_storage_buffers_per_shader_stage as usize).saturating_sub(1));
         let depth = (limit / plane).min(m as u64) as usize;
-        let slabs = if depth == 0 { usize::MAX } else { m.div_ceil(depth) };
+        let slabs = if depth == 0 {
+            usize::MAX
+        } else {
+            m.div_ceil(depth)
+        };
         if slabs > max_slabs {
             let bytes = (data.len() as u64).saturating_mul(8);
             return Err(Error::too_large(
