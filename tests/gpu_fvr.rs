@@ -174,10 +174,10 @@ fn gpu_fvr_matches_the_cpu_oracle() {
         .iter()
         .map(|(_, s, planes)| {
             let m = s.side() as u64;
-            let one = GpuFvrSpectrum::upload(&ctx, s).unwrap();
+            let one = GpuFvrSpectrum::upload(ctx, s).unwrap();
             assert_eq!(one.slab_count(), 1);
             let split =
-                GpuFvrSpectrum::upload_in_slabs(&ctx, s, *planes as u64 * m * m * 8).unwrap();
+                GpuFvrSpectrum::upload_in_slabs(ctx, s, *planes as u64 * m * m * 8).unwrap();
             assert_eq!(split.slab_depth(), *planes);
             assert_eq!(split.slab_count(), s.side().div_ceil(*planes));
             assert!(split.slab_count() >= 4, "{}", split.slab_count());
@@ -199,7 +199,7 @@ fn gpu_fvr_matches_the_cpu_oracle() {
                 case.kernel.name(),
                 if case.deapodize { ", deapodized" } else { "" }
             );
-            let port = gfvr::fvr_project(&ctx, up, case.view, case.kernel, case.deapodize)
+            let port = gfvr::fvr_project(ctx, up, case.view, case.kernel, case.deapodize)
                 .unwrap_or_else(|e| panic!("{label}: {e}"));
             let (l2, max) = errors(&oracle, &port);
             eprintln!("{label}: rel L2 {l2:.2e}, max/peak {max:.2e}");
@@ -234,13 +234,13 @@ fn the_gpu_refuses_dirichlet_and_non_power_of_two_cubes() {
         return;
     };
     let s = FvrSpectrum::new(&random_volume(8, 1), 2).unwrap();
-    let g = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
-    let e = gfvr::fvr_project(&ctx, &g, ORBIT, Kernel::Dirichlet, false).unwrap_err();
+    let g = GpuFvrSpectrum::upload(ctx, &s).unwrap();
+    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false).unwrap_err();
     assert!(e.to_string().contains("CPU only"), "{e}");
     // 6 · 2 = 12 is no power of two.
     let s = FvrSpectrum::new(&random_volume(6, 2), 2).unwrap();
-    let g = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
-    let e = gfvr::fvr_project(&ctx, &g, ORBIT, Kernel::Trilinear, false).unwrap_err();
+    let g = GpuFvrSpectrum::upload(ctx, &s).unwrap();
+    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Trilinear, false).unwrap_err();
     assert!(e.to_string().contains("power of two"), "{e}");
     assert!(e.to_string().contains("--padding"), "{e}");
 }
@@ -253,21 +253,21 @@ fn a_spectrum_needing_too_many_slabs_is_refused() {
     // M = 32: 4 planes per slab is 8 slabs (the most), 3 planes would be 11.
     let s = FvrSpectrum::new(&random_volume(16, 3), 2).unwrap();
     let plane = 32 * 32 * 8;
-    let g = GpuFvrSpectrum::upload_in_slabs(&ctx, &s, 4 * plane).unwrap();
+    let g = GpuFvrSpectrum::upload_in_slabs(ctx, &s, 4 * plane).unwrap();
     assert_eq!(g.slab_count(), gfvr::MAX_SLABS);
-    let e = GpuFvrSpectrum::upload_in_slabs(&ctx, &s, 3 * plane)
+    let e = GpuFvrSpectrum::upload_in_slabs(ctx, &s, 3 * plane)
         .err()
         .expect("11 slabs must be refused");
     assert!(e.to_string().contains("storage bindings"), "{e}");
     // Less than one plane per slab.
-    let e = GpuFvrSpectrum::upload_in_slabs(&ctx, &s, plane - 8)
+    let e = GpuFvrSpectrum::upload_in_slabs(ctx, &s, plane - 8)
         .err()
         .expect("a slab smaller than a plane must be refused");
     assert!(e.to_string().contains("storage bindings"), "{e}");
     // Eight slabs render the same image as one.
-    let one = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
-    let a = gfvr::fvr_project(&ctx, &one, ORBIT, Kernel::Lanczos3, false).unwrap();
-    let b = gfvr::fvr_project(&ctx, &g, ORBIT, Kernel::Lanczos3, false).unwrap();
+    let one = GpuFvrSpectrum::upload(ctx, &s).unwrap();
+    let a = gfvr::fvr_project(ctx, &one, ORBIT, Kernel::Lanczos3, false).unwrap();
+    let b = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Lanczos3, false).unwrap();
     assert_eq!(a.data, b.data);
 }
 
@@ -327,12 +327,12 @@ fn a_1_gib_spectrum_renders_from_slabs() {
     let s = FvrSpectrum::new(&shepp_logan(256), 2).unwrap();
     let pre = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let g = GpuFvrSpectrum::upload(&ctx, &s).unwrap();
+    let g = GpuFvrSpectrum::upload(ctx, &s).unwrap();
     let up = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let oracle = fvr::fvr_project(&s, ORBIT, Kernel::Lanczos3, false).unwrap();
     let cpu = t.elapsed().as_secs_f64();
-    let (port, times) = gfvr::fvr_project_timed(&ctx, &g, ORBIT, Kernel::Lanczos3, false).unwrap();
+    let (port, times) = gfvr::fvr_project_timed(ctx, &g, ORBIT, Kernel::Lanczos3, false).unwrap();
     let (l2, max) = errors(&oracle, &port);
     let tol = voxlab::bench::fourier::fvr_gpu_tol(s.side());
     eprintln!(
