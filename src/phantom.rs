@@ -792,7 +792,12 @@ mod tests {
         let v = p.sample_cell_average([n; 3], 12).unwrap();
         let cell = (2.0 / n as f64).powi(3);
         let got: f64 = v.data().iter().map(|&x| x as f64).sum::<f64>() * cell;
-        assert!((got - want).abs() < 2e-5 * want, "{got} vs {want}");
+        eprintln!(
+            "cell averages: relative error {:.1e}",
+            (got - want).abs() / want
+        );
+        // Measured 4.4e-9 (order 12; f32 voxels).
+        assert!((got - want).abs() < 5e-8 * want, "{got} vs {want}");
         // Point sampling is much further off at this size.
         let pt: f64 = p
             .sample([n; 3])
