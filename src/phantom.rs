@@ -203,6 +203,133 @@ impl Primitive {
     }
 }
 
+impl Primitive {
+    /// The fraction of the axis-aligned cell `[c0, c0 + h]` (phantom coordinates) inside
+    /// this primitive; `unit` is a quadrature rule on `[0, 1]` (nodes, weights). See
+    /// [`Phantom::sample_cell_average`].
+    pub fn cell_fraction(&self, c0: DVec3, h: DVec3, unit: &[(f64, f64)]) -> f64 {
+        match &self.shape {
+            Shape::Box { min, max } => (0..3)
+                .map(|a| ((max[a].min(c0[a] + h[a]) - min[a].max(c0[a])) / h[a]).max(0.0))
+                .product(),
+            Shape::Ellipsoid {
+                center,
+                semi_axes,
+                rot,
+            } => {
+                // The smallest radius of curvature of the surface: cells are split until
+                // they are small against it, so that the normal hardly turns inside one.
+                let curv = semi_axes.min_element().powi(2) / semi_axes.max_element();
+                self.ellipsoid_fraction(c0, h, unit, (*center, *semi_axes, *rot), curv, 0)
+            }
+        }
+    }
+
+    /// [`Primitive::cell_fraction`] of an ellipsoid, by recursive subdivision.
+    fn ellipsoid_fraction(
+        &self,
+        c0: DVec3,
+        h: DVec3,
+        unit: &[(f64, f64)],
+        (center, semi_axes, rot): (DVec3, DVec3, DMat3),
+        curv: f64,
+        depth: usize,
+    ) -> f64 {
+        // The cell's bounding sphere, mapped into the unit sphere's frame, lies within
+        // r' = ρ / min(semi-axes) of the mapped centre.
+        let mid = c0 + 0.5 * h;
+        let o = (rot * (mid - center)) / semi_axes;
+        let rho = 0.5 * h.length();
+        let r = rho / semi_axes.min_element();
+        let d = o.length();
+        if d >= 1.0 + r {
+            return 0.0;
+        }
+        if d + r <= 1.0 {
+            return 1.0;
+        }
+        if rho > 0.1 * curv && depth < 4 {
+            let hh = 0.5 * h;
+            let mut acc = 0.0;
+            for k in 0..8 {
+                let off = DVec3::new((k & 1) as f64, ((k >> 1) & 1) as f64, (k >> 2) as f64);
+                acc += self.ellipsoid_fraction(
+                    c0 + off * hh,
+                    hh,
+                    unit,
+                    (center, semi_axes, rot),
+                    curv,
+                    depth + 1,
+                );
+            }
+            return 0.125 * acc;
+        }
+        // Integrate the exact chord along the axis `a` closest to the surface normal at
+        // the cell centre: no ray along it is tangent to the surface inside the cell, so
+        // the clipped chord is continuous over the face (with kinks where the surface
+        // crosses the cell's faces) and the face rule converges.
+        let n = rot.transpose() * (o / semi_axes);
+        let n = n.abs();
+        let a = if n.x >= n.y && n.x >= n.z {
+            0
+        } else if n.y >= n.z {
+            1
+        } else {
+            2
+        };
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let mut dir = DVec3::ZERO;
+        dir[a] = 1.0;
+        let mut acc = 0.0;
+        for &(v, wv) in unit {
+            for &(u, wu) in unit {
+                let mut p = c0;
+                p[b] += u * h[b];
+                p[c] += v * h[c];
+                if let Some((t0, t1)) = self.chord(p, dir) {
+                    let len = t1.min(h[a]) - t0.max(0.0);
+                    if len > 0.0 {
+                        acc += wu * wv * len;
+                    }
+                }
+            }
+        }
+        acc / h[a]
+    }
+}
+
+/// The `n`-point Gauss–Legendre rule on `[−1, 1]`: nodes (ascending) and weights,
+/// exact for polynomials of degree `2n − 1`. Newton's iteration on the three-term
+/// recurrence `k P_k = (2k − 1) x P_{k−1} − (k − 1) P_{k−2}`.
+pub fn gauss_legendre_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut nodes = vec![0.0; n];
+    let mut weights = vec![0.0; n];
+    for i in 0..n {
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 0.0;
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            if n == 1 {
+                p0 = 1.0;
+            }
+            dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            let dx = p1 / dp;
+            x -= dx;
+            if dx.abs() < 1e-16 {
+                break;
+            }
+        }
+        nodes[n - 1 - i] = x;
+        weights[n - 1 - i] = 2.0 / ((1.0 - x * x) * dp * dp);
+    }
+    (nodes, weights)
+}
+
 /// Ray–box intersection by the slab method: the parameter interval inside
 /// `[min, max]`, or `None` when the ray misses (or only grazes) the box.
 pub fn slab_interval(o: DVec3, d: DVec3, min: DVec3, max: DVec3) -> Option<(f64, f64)> {
@@ -382,6 +509,78 @@ impl Phantom {
         Ok(v)
     }
 
+    /// Cell-averages the phantom over the voxels of the grid [`Phantom::sample`] uses:
+    /// voxel `(i, j, k)` holds `(1/|C|) ∫_C f`, the mean of the phantom over its cell `C`
+    /// (the box-filtered phantom `f * box` sampled at the voxel centres), not the point
+    /// value at the centre. For a sum of primitives the mean is `Σ density × (the
+    /// fraction of C inside the primitive)`, computed per primitive:
+    /// - a box: exactly, the product of the per-axis overlaps;
+    /// - an ellipsoid: 0 or 1 when the cell's bounding sphere lies wholly outside or
+    ///   inside it (tested in the ellipsoid's unit-sphere frame); otherwise the cell is
+    ///   split in octants (at most 4 levels) until it is small against the surface's
+    ///   smallest radius of curvature, and then the fraction is
+    ///   `(1/(h_b h_c)) ∫∫ L(u, v) du dv / h_a`, with `L` the exact chord of the line
+    ///   along axis `a` through the ellipsoid, clipped to the cell, and `a` the axis
+    ///   closest to the surface normal (so that no such line touches the surface
+    ///   tangentially inside the cell and `L` is continuous), integrated by an
+    ///   `order × order` Gauss–Legendre rule over the cell's `b–c` face.
+    ///
+    /// Marschner–Lobb (smooth) is averaged by an `order³` Gauss–Legendre rule.
+    ///
+    /// Why: the line integral of the cell averages along a grid axis, `Σ_k v_ijk · s`, is
+    /// exactly the analytic projection averaged over the detector pixel `(i, j)`'s
+    /// `s × s` footprint; point samples have no such identity, and a feature thinner
+    /// than a voxel (the Shepp–Logan skull) is hit or missed whole.
+    pub fn sample_cell_average(&self, dims: [usize; 3], order: usize) -> Result<Volume<f32>> {
+        if !(1..=64).contains(&order) {
+            return Err(Error::invalid(
+                "cell-average order",
+                format!("{order}: the quadrature order must lie in 1 … 64"),
+            ));
+        }
+        let (nodes, weights) = gauss_legendre_rule(order);
+        // The rule on [0, 1].
+        let unit: Vec<(f64, f64)> = nodes
+            .iter()
+            .zip(&weights)
+            .map(|(&x, &w)| (0.5 * (x + 1.0), 0.5 * w))
+            .collect();
+        let h = DVec3::new(
+            2.0 / dims[0] as f64,
+            2.0 / dims[1] as f64,
+            2.0 / dims[2] as f64,
+        );
+        let lo = |i: usize, j: usize, k: usize| {
+            DVec3::new(i as f64, j as f64, k as f64) * h - DVec3::ONE
+        };
+        let mut v = match &self.kind {
+            PhantomKind::Primitives(prims) => Volume::from_fn(dims, [1.0; 3], |i, j, k| {
+                let c0 = lo(i, j, k);
+                prims
+                    .iter()
+                    .map(|pr| pr.density * pr.cell_fraction(c0, h, &unit))
+                    .sum::<f64>() as f32
+            })?,
+            PhantomKind::MarschnerLobb { alpha, f_m } => {
+                Volume::from_fn(dims, [1.0; 3], |i, j, k| {
+                    let c0 = lo(i, j, k);
+                    let mut acc = 0.0;
+                    for &(z, wz) in &unit {
+                        for &(y, wy) in &unit {
+                            for &(x, wx) in &unit {
+                                let p = c0 + DVec3::new(x, y, z) * h;
+                                acc += wx * wy * wz * marschner_lobb(p, *alpha, *f_m);
+                            }
+                        }
+                    }
+                    acc as f32
+                })?
+            }
+        };
+        v.set_affine(self.grid_affine(dims))?;
+        Ok(v)
+    }
+
     /// The index-to-world affine of the grid [`Phantom::sample`] produces:
     /// `world = spacing · (i − (n − 1)/2)`, `spacing = 2 · half_extent_mm / n`.
     pub fn grid_affine(&self, dims: [usize; 3]) -> glam::DMat4 {
@@ -548,6 +747,75 @@ mod tests {
         let v = gauss_legendre(|x| x.powi(15) + 3.0 * x * x, -1.0, 2.0, 1);
         let exact = (2f64.powi(16) - 1.0) / 16.0 + (8.0 + 1.0);
         assert!((v - exact).abs() < 1e-9 * exact);
+    }
+
+    #[test]
+    fn gauss_legendre_rule_is_exact_to_degree_2n_minus_1() {
+        for n in [1, 2, 3, 8, 16] {
+            let (x, w) = gauss_legendre_rule(n);
+            for deg in 0..2 * n {
+                let got: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(deg as i32)).sum();
+                let want = if deg % 2 == 0 {
+                    2.0 / (deg as f64 + 1.0)
+                } else {
+                    0.0
+                };
+                assert!(
+                    (got - want).abs() < 1e-13,
+                    "n {n} degree {deg}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn cell_averages_integrate_to_the_primitives_volumes() {
+        // Σ voxel × cell volume = Σ density × primitive volume (4π/3·abc; boxes exact).
+        let prims = vec![
+            Primitive::ellipsoid_phantom3d(
+                1.0,
+                DVec3::new(0.5, 0.3, 0.2),
+                DVec3::new(0.1, -0.1, 0.05),
+                euler_zxz(30.0, 20.0, 10.0),
+            ),
+            Primitive::sphere(-0.5, DVec3::new(-0.4, 0.3, 0.0), 0.07),
+            Primitive::cuboid(
+                0.25,
+                DVec3::new(-0.3, -0.61, -0.2),
+                DVec3::new(0.1, -0.3, 0.33),
+            ),
+        ];
+        let want = 4.0 / 3.0 * std::f64::consts::PI * (0.5 * 0.3 * 0.2 - 0.5 * 0.07f64.powi(3))
+            + 0.25 * 0.4 * 0.31 * 0.53;
+        let p = Phantom::from_primitives("t", prims);
+        let n = 24;
+        let v = p.sample_cell_average([n; 3], 12).unwrap();
+        let cell = (2.0 / n as f64).powi(3);
+        let got: f64 = v.data().iter().map(|&x| x as f64).sum::<f64>() * cell;
+        eprintln!(
+            "cell averages: relative error {:.1e}",
+            (got - want).abs() / want
+        );
+        // Measured 4.4e-9 (order 12; f32 voxels).
+        assert!((got - want).abs() < 5e-8 * want, "{got} vs {want}");
+        // Point sampling is much further off at this size.
+        let pt: f64 = p
+            .sample([n; 3])
+            .unwrap()
+            .data()
+            .iter()
+            .map(|&x| x as f64)
+            .sum();
+        assert!((pt * cell - want).abs() > 10.0 * (got - want).abs());
+        // Cells wholly inside or outside hold the point value.
+        let pv = p.sample([n; 3]).unwrap();
+        let same = v
+            .data()
+            .iter()
+            .zip(pv.data())
+            .filter(|(a, b)| a == b)
+            .count();
+        assert!(same > n * n * n * 9 / 10, "{same}");
     }
 
     #[test]

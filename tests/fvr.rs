@@ -7,6 +7,7 @@ mod common;
 
 use common::{s, scratch, stderr, voxlab, Rng};
 use glam::DVec3;
+use rayon::prelude::*;
 use std::f64::consts::PI;
 use voxlab::camera::AxisView;
 use voxlab::cpu::fvr::{fvr_project, FvrGeometry, FvrSpectrum, FvrView, Kernel};
@@ -491,5 +492,222 @@ fn docs_figures() {
                 img.save(&dir.join(&file), png).unwrap();
             }
         }
+    }
+    // The cell-averaged phantom against the pixel-averaged truth, same scale.
+    let v = phantom.sample_cell_average([128; 3], 8).unwrap();
+    let spec = FvrSpectrum::new(&v, 2).unwrap();
+    let g = spec.geometry(oblique()).unwrap();
+    let truth = analytic_pixel_average(&phantom, &g, 16);
+    let img = fvr_project(&spec, oblique(), Kernel::Lanczos3, false).unwrap();
+    let mut err = Frame::new(g.width, g.height, 1);
+    for (e, (a, b)) in err.data.iter_mut().zip(img.data.iter().zip(&truth)) {
+        *e = (a - b).abs();
+    }
+    let png = PngOptions {
+        sixteen_bit: false,
+        range: Some((0.0, 20.0)),
+    };
+    err.save(&dir.join("fvr-oblique-lanczos3-pad2-cell-error.png"), png)
+        .unwrap();
+    eprintln!(
+        "cell-averaged, Lanczos-3, padding 2, oblique: {:.4} against the pixel-averaged truth",
+        rel_rmse(&img.data, &truth)
+    );
+}
+
+/// The analytic X-ray of `phantom` averaged over each pixel's `s × s` footprint in the
+/// image plane (`order²` Gauss–Legendre rays per pixel): what a detector with square
+/// pixels of the voxel size measures.
+fn analytic_pixel_average(phantom: &Phantom, g: &FvrGeometry, order: usize) -> Vec<f64> {
+    let (x, w) = voxlab::phantom::gauss_legendre_rule(order);
+    let rule: Vec<(f64, f64)> = x
+        .iter()
+        .zip(&w)
+        .map(|(&x, &w)| (0.5 * x, 0.5 * w))
+        .collect();
+    let d = g.affine.transform_vector3(g.forward).normalize();
+    (0..g.width * g.height)
+        .into_par_iter()
+        .map(|i| {
+            let p = g.pixel_point(i % g.width, i / g.width);
+            let mut acc = 0.0;
+            for &(b, wb) in &rule {
+                for &(a, wa) in &rule {
+                    let o = g.affine.transform_point3(p + g.right * a + g.up * b);
+                    acc += wa
+                        * wb
+                        * phantom.line_integral_world(o, d, f64::NEG_INFINITY, f64::INFINITY);
+                }
+            }
+            acc
+        })
+        .collect()
+}
+
+/// The analytic X-ray of the cell-averaged phantom `f * box` (box = one voxel cube):
+/// the analytic X-ray averaged over the cube's shadow on the image plane
+/// (`order³` Gauss–Legendre rays per pixel). For an axis view the shadow is the
+/// pixel's square and this equals [`analytic_pixel_average`].
+fn analytic_voxel_shadow(phantom: &Phantom, g: &FvrGeometry, order: usize) -> Vec<f64> {
+    let (x, w) = voxlab::phantom::gauss_legendre_rule(order);
+    let rule: Vec<(f64, f64)> = x
+        .iter()
+        .zip(&w)
+        .map(|(&x, &w)| (0.5 * x, 0.5 * w))
+        .collect();
+    let d = g.affine.transform_vector3(g.forward).normalize();
+    (0..g.width * g.height)
+        .into_par_iter()
+        .map(|i| {
+            let p = g.pixel_point(i % g.width, i / g.width);
+            let mut acc = 0.0;
+            for &(c, wc) in &rule {
+                for &(b, wb) in &rule {
+                    for &(a, wa) in &rule {
+                        let o = g.affine.transform_point3(p + DVec3::new(a, b, c));
+                        acc += wa
+                            * wb
+                            * wc
+                            * phantom.line_integral_world(o, d, f64::NEG_INFINITY, f64::INFINITY);
+                    }
+                }
+            }
+            acc
+        })
+        .collect()
+}
+
+#[test]
+#[ignore = "prints the accuracy table of docs/fvr.md; run by hand"]
+fn shepp_logan_accuracy_table() {
+    let n: usize = std::env::var("FVR_N")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(128);
+    for phantom in [Phantom::shepp_logan(), Phantom::shepp_logan_modified()] {
+        let t = std::time::Instant::now();
+        let point = phantom.sample([n; 3]).unwrap();
+        let cell = phantom.sample_cell_average([n; 3], 8).unwrap();
+        let cell16 = phantom.sample_cell_average([n; 3], 16).unwrap();
+        let dd: f64 = cell
+            .data()
+            .iter()
+            .zip(cell16.data())
+            .map(|(a, b)| ((a - b) as f64).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "{} {n}³: voxelised in {:.1} s; cell order 8 vs 16 max diff {dd:.2e}",
+            phantom.name,
+            t.elapsed().as_secs_f64()
+        );
+        for (vname, view) in [
+            ("+y", FvrView::Axis(AxisView::PlusY)),
+            ("oblique", oblique()),
+        ] {
+            let g0 = FvrSpectrum::new(&random_volume([n; 3], 1.0, 1), 1)
+                .unwrap()
+                .geometry(view)
+                .unwrap();
+            let _ = g0;
+            let mut truths = None;
+            for (volname, v) in [("point", &point), ("cell", &cell)] {
+                for padding in [1, 2] {
+                    let spec = FvrSpectrum::new(v, padding).unwrap();
+                    let g = spec.geometry(view).unwrap();
+                    if truths.is_none() {
+                        let t = std::time::Instant::now();
+                        let tc = analytic(&phantom, &g);
+                        let tp = analytic_pixel_average(&phantom, &g, 8);
+                        let ts = analytic_voxel_shadow(&phantom, &g, 6);
+                        let tp16 = analytic_pixel_average(&phantom, &g, 16);
+                        eprintln!("  truths in {:.1} s; pixel avg 8 vs 16: {:.2e}; centre vs pixel avg {:.4}; pixel avg vs shadow {:.4}",
+                            t.elapsed().as_secs_f64(), rel_rmse(&tp, &tp16), rel_rmse(&tc, &tp16), rel_rmse(&ts, &tp16));
+                        truths = Some((tc, tp16, ts));
+                    }
+                    let (tc, tp, ts) = truths.as_ref().unwrap();
+                    let rc = raycast(v, &g, 0.1);
+                    eprintln!(
+                        "  {vname:7} {volname:5} pad {padding} raycaster      centre {:.4} pixel {:.4} shadow {:.4}",
+                        rel_rmse(&rc, tc), rel_rmse(&rc, tp), rel_rmse(&rc, ts)
+                    );
+                    for k in KERNELS {
+                        let img = fvr_project(&spec, view, k, false).unwrap();
+                        eprintln!(
+                            "  {vname:7} {volname:5} pad {padding} {:14} centre {:.4} pixel {:.4} shadow {:.4}",
+                            k.name(), rel_rmse(&img.data, tc), rel_rmse(&img.data, tp), rel_rmse(&img.data, ts)
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The 1 % target, stated precisely. The volume is the Shepp–Logan phantom *cell-averaged*
+/// at 128³ (`Phantom::sample_cell_average`: each voxel the mean of the phantom over its
+/// cell), and the truth is the analytic line integral *averaged over each detector
+/// pixel's s × s footprint* (16² Gauss–Legendre rays per pixel): for an axis view the
+/// sum of the cell averages is exactly that average, so it is the projection a sampled
+/// volume can be held to. Lanczos-3, ×2 padding:
+/// - `+y`: measured 0.00030 (1 % met); bound 0.001;
+/// - oblique (azimuth 30°, elevation 20°): measured 0.0248 (1 % not met: the cell
+///   averages are not band-limited, and an oblique slice interpolates their aliased
+///   spectrum); bound 0.03.
+///
+/// Against the pixel-centre truth the same images measure 0.0529 and 0.0596: a pixel
+/// average and a pixel-centre value differ by 4.9–5.3 % RMS on this phantom's
+/// sub-voxel skull (printed below), whatever renders the volume.
+#[test]
+fn shepp_logan_128_cell_averaged_lanczos3_against_the_pixel_averaged_projection() {
+    let phantom = Phantom::shepp_logan();
+    let v = phantom.sample_cell_average([128; 3], 8).unwrap();
+    let spec = FvrSpectrum::new(&v, 2).unwrap();
+    for (name, view, bound) in [
+        ("+y", FvrView::Axis(AxisView::PlusY), 0.001),
+        ("oblique", oblique(), 0.03),
+    ] {
+        let g = spec.geometry(view).unwrap();
+        let centre = analytic(&phantom, &g);
+        let pixel = analytic_pixel_average(&phantom, &g, 16);
+        let img = fvr_project(&spec, view, Kernel::Lanczos3, false).unwrap();
+        let (ep, ec) = (rel_rmse(&img.data, &pixel), rel_rmse(&img.data, &centre));
+        eprintln!(
+            "cell-averaged Shepp–Logan 128³ {name}, Lanczos-3, padding 2: vs pixel-averaged \
+             {ep:.4}, vs pixel-centre {ec:.4} (centre vs averaged truth {:.4})",
+            rel_rmse(&centre, &pixel)
+        );
+        assert!(ep < bound, "{name}: {ep:.4} ≥ {bound}");
+    }
+}
+
+/// One number of `docs/fvr.md`'s scaling remarks: the cell-averaged Shepp–Logan at
+/// `FVR_N`³ (default 128), oblique, Lanczos-3, with padding `FVR_PADDING` (default 2),
+/// against the pixel-averaged and pixel-centre truths.
+#[test]
+#[ignore = "a by-hand measurement for docs/fvr.md"]
+fn shepp_logan_cell_averaged_oblique_one_point() {
+    let env = |k: &str, d: usize| {
+        std::env::var(k)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(d)
+    };
+    let (n, padding) = (env("FVR_N", 128), env("FVR_PADDING", 2));
+    let phantom = Phantom::shepp_logan();
+    let t = std::time::Instant::now();
+    let v = phantom.sample_cell_average([n; 3], 8).unwrap();
+    let spec = FvrSpectrum::new(&v, padding).unwrap();
+    let g = spec.geometry(oblique()).unwrap();
+    let pixel = analytic_pixel_average(&phantom, &g, 16);
+    let centre = analytic(&phantom, &g);
+    for k in [Kernel::Lanczos3, Kernel::Lanczos4] {
+        let img = fvr_project(&spec, oblique(), k, false).unwrap();
+        eprintln!(
+            "{n}³ padding {padding} {}: vs pixel-averaged {:.4}, vs pixel-centre {:.4} ({:.0} s)",
+            k.name(),
+            rel_rmse(&img.data, &pixel),
+            rel_rmse(&img.data, &centre),
+            t.elapsed().as_secs_f64()
+        );
     }
 }

@@ -9,8 +9,8 @@ struct FvrParams {
     kernel: u32,
     // Taps per axis / 2: 1 for trilinear, a for Lanczos-a (unused for nearest).
     radius: u32,
-    // Always 0 (keeps the size a multiple of 16 bytes).
-    pad: u32,
+    // The M × M planes per z-slab of the spectrum (M when it is one slab).
+    slab_depth: u32,
     // The in-plane unit axes `r` and `u` of the view, index frame [x, y, z].
     right_x: f32,
     right_y: f32,
