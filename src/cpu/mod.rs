@@ -4,6 +4,7 @@
 //! functions by name. The f64 instance is the oracle (its output never depends on the
 //! thread count); the f32 instance is the fair baseline for speed comparisons.
 
+pub mod adaptive;
 pub mod d2vr;
 pub mod dft;
 pub mod fbp;
@@ -13,5 +14,6 @@ pub mod fvr;
 pub mod gradient;
 pub mod process;
 pub mod project;
+pub mod preintegrate;
 pub mod ramp;
 pub mod raycast;

@@ -7,11 +7,13 @@
 //! is the power-of-two FFT (split-stream and Stockham variants); `fvr` the Fourier
 //! volume rendering slice and its inverse FFT; `project` Joseph's CT forward projector.
 
+pub mod adaptive;
 pub mod context;
 pub mod d2vr;
 pub mod fbp;
 pub mod fft;
 pub mod fvr;
+pub mod preintegrate;
 pub mod probe;
 pub mod process;
 pub mod project;

@@ -1,0 +1,55 @@
+//! `voxlab adaptive` end to end on a small phantom: the table, the JSON and the images.
+
+mod common;
+
+use common::{s, scratch, voxlab};
+
+#[test]
+fn adaptive_writes_table_json_and_images() {
+    let dir = scratch("cli_adaptive");
+    let out = voxlab(&[
+        "adaptive",
+        "phantom:shepp-logan-modified:32",
+        "--out",
+        s(&dir),
+        "--size",
+        "32",
+        "--runs",
+        "1",
+        "--backend",
+        "cpu",
+        "--shift",
+        "0.05",
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    for f in [
+        "table.md",
+        "table.json",
+        "regular.png",
+        "direct.png",
+        "adaptive.png",
+        "samples-regular.png",
+        "samples-direct.png",
+        "samples-adaptive.png",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("table.json")).unwrap()).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    let spp = |i: usize| rows[i]["samples_per_pixel"].as_f64().unwrap();
+    // Regular, direct, adaptive: both adaptive schemes take fewer samples.
+    assert!(spp(1) < spp(0) && spp(2) < spp(0), "{rows:?}");
+    assert!(rows[2]["psnr_db"].as_f64().unwrap() > 40.0, "{rows:?}");
+    let md = std::fs::read_to_string(dir.join("table.md")).unwrap();
+    assert!(md.contains("| adaptive |"), "{md}");
+}
+
+#[test]
+fn adaptive_refuses_bad_options() {
+    let dir = scratch("cli_adaptive_bad");
+    let out = voxlab(&["adaptive", "--out", s(&dir), "--t-max", "0.1"]);
+    assert!(!out.status.success());
+    assert!(common::stderr(&out).contains("t-max"), "{}", common::stderr(&out));
+}
