@@ -284,7 +284,10 @@ pub fn run(a: AdaptiveArgs) -> Result<()> {
     let over_direct = ada.samples_per_pixel / dir.samples_per_pixel.max(1e-300);
     let goals = vec![
         (
-            format!("adaptive takes ≥ 50 % fewer samples than regular: {:.1} %", 100.0 * reduction),
+            format!(
+                "adaptive takes ≥ 50 % fewer samples than regular: {:.1} %",
+                100.0 * reduction
+            ),
             reduction >= 0.5,
         ),
         (
@@ -373,9 +376,21 @@ pub fn markdown(r: &Report) -> String {
             row.samples_per_pixel,
             row.seconds_per_frame,
             row.prepare_seconds,
-            if reference { "—".into() } else { format!("{:.2e}", row.max_abs) },
-            if reference { "—".into() } else { format!("{:.2e}", row.rmse) },
-            if reference { "—".into() } else { format!("{:.1}", row.psnr_db) },
+            if reference {
+                "—".into()
+            } else {
+                format!("{:.2e}", row.max_abs)
+            },
+            if reference {
+                "—".into()
+            } else {
+                format!("{:.2e}", row.rmse)
+            },
+            if reference {
+                "—".into()
+            } else {
+                format!("{:.1}", row.psnr_db)
+            },
         );
     }
     s += "\nSamples per pixel: mean over the pixels whose ray meets the volume. Errors: RGBA \

@@ -1,8 +1,8 @@
 //! The `voxlab` command line: a thin layer over the library.
 
+mod cli_adaptive;
 mod cli_bench;
 mod cli_d2vr;
-mod cli_adaptive;
 mod cli_process;
 mod cli_project;
 mod cli_reconstruct;
@@ -739,7 +739,15 @@ fn render(r: RenderArgs) -> Result<()> {
     }
     let (scene, settings) = build_scene(&r.scene, r.samples.is_some())?;
     if let Some(sampling) = r.sampling {
-        return cli_adaptive::render_sampling(&scene, &settings, sampling, r.backend, &r.out, r.samples.as_deref(), r.sixteen_bit);
+        return cli_adaptive::render_sampling(
+            &scene,
+            &settings,
+            sampling,
+            r.backend,
+            &r.out,
+            r.samples.as_deref(),
+            r.sixteen_bit,
+        );
     }
     let a = &r;
     let renderer = Renderer::new(a.backend)?;

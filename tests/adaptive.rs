@@ -114,10 +114,16 @@ fn preintegrated_steps_match_fine_reference() {
     // length correction itself is exact for opacity); colour 5.7e-2 over all lengths
     // (C·α'/α ignores how self-attenuation inside the step grows with its length: a long
     // step across the ramp), much less for short steps.
-    assert!(worst_a_ref < 1e-3, "opacity error at the reference step {worst_a_ref}");
+    assert!(
+        worst_a_ref < 1e-3,
+        "opacity error at the reference step {worst_a_ref}"
+    );
     assert!(worst_a < 4e-3, "opacity error {worst_a}");
     assert!(worst_c < 0.1, "colour error {worst_c}");
-    assert!(worst_c_short < 0.03, "colour error, short steps {worst_c_short}");
+    assert!(
+        worst_c_short < 0.03,
+        "colour error, short steps {worst_c_short}"
+    );
 }
 
 #[test]
@@ -152,8 +158,14 @@ fn spectral_table_sees_the_ramp_only() {
     // The cut-off does not depend on the amplitude, only on the shape: a ramp 0.05
     // wide in an interval of 3/32 has 99 % of its energy at k ≤ 2 (ν = 2/(2L) = 10.7);
     // the slow linear rise over 12/32 at k ≤ 3 (ν = 3/(2L) = 4).
-    assert!((ramp - 2.0 / (2.0 * 3.0 / 32.0)).abs() < 1e-9, "ramp {ramp}");
-    assert!((slow - 3.0 / (2.0 * 12.0 / 32.0)).abs() < 1e-9, "slow {slow}");
+    assert!(
+        (ramp - 2.0 / (2.0 * 3.0 / 32.0)).abs() < 1e-9,
+        "ramp {ramp}"
+    );
+    assert!(
+        (slow - 3.0 / (2.0 * 12.0 / 32.0)).abs() < 1e-9,
+        "slow {slow}"
+    );
     // The window map does not enter the table.
     let mut tf2 = tf.clone();
     tf2.window = WindowMap { a: 3.0, b: -0.7 };
@@ -162,7 +174,9 @@ fn spectral_table_sees_the_ramp_only() {
 
 fn random_grid(dims: [usize; 3], seed: u64) -> Grid<f64> {
     let mut rng = Rng(seed);
-    let noise: Vec<f64> = (0..dims[0] * dims[1] * dims[2]).map(|_| rng.unit()).collect();
+    let noise: Vec<f64> = (0..dims[0] * dims[1] * dims[2])
+        .map(|_| rng.unit())
+        .collect();
     Grid::from_fn(dims, |i, j, k| {
         let n = noise[i + dims[0] * (j + dims[1] * k)];
         (0.3 * i as f64).sin() + 0.2 * (0.5 * j as f64 + 0.1 * k as f64).cos() + 0.1 * n
@@ -188,7 +202,11 @@ fn importance_matches_brute_force_and_bounds_the_field() {
                                 let q = [i as isize + dx, j as isize + dy, k as isize + dz];
                                 if (0..3).all(|a| q[a] >= 0 && q[a] < dims[a] as isize) {
                                     m = m.max(adaptive::axis_difference(
-                                        &g, q[0] as usize, q[1] as usize, q[2] as usize, axis,
+                                        &g,
+                                        q[0] as usize,
+                                        q[1] as usize,
+                                        q[2] as usize,
+                                        axis,
                                     ));
                                 }
                             }
@@ -210,10 +228,13 @@ fn importance_matches_brute_force_and_bounds_the_field() {
         );
         let d = DVec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).normalize();
         let d = V3::new(d.x, d.y, d.z);
-        let v: [usize; 3] =
-            std::array::from_fn(|a| ((p.0[a] + 0.5).floor() as isize).clamp(0, dims[a] as isize - 1) as usize);
+        let v: [usize; 3] = std::array::from_fn(|a| {
+            ((p.0[a] + 0.5).floor() as isize).clamp(0, dims[a] as isize - 1) as usize
+        });
         let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
-        let gd = d.x().abs() * imp[0].data[vi] + d.y().abs() * imp[1].data[vi] + d.z().abs() * imp[2].data[vi];
+        let gd = d.x().abs() * imp[0].data[vi]
+            + d.y().abs() * imp[1].data[vi]
+            + d.z().abs() * imp[2].data[vi];
         let s = rng.unit() * t_max;
         let f0 = sample(&g, Filter::Trilinear, p);
         let f1 = sample(&g, Filter::Trilinear, p + d * s);
@@ -234,7 +255,12 @@ fn block_spectrum_fft_matches_dft() {
     let m = 2 * n;
     let exact = dft_nd(&z, &[m, m, m], Direction::Forward, Normalization::None);
     let mut fast = z.clone();
-    voxlab::cpu::fft::fft_nd(&mut fast, &[m, m, m], Direction::Forward, Normalization::None);
+    voxlab::cpu::fft::fft_nd(
+        &mut fast,
+        &[m, m, m],
+        Direction::Forward,
+        Normalization::None,
+    );
     let worst = exact
         .iter()
         .zip(&fast)
@@ -243,7 +269,10 @@ fn block_spectrum_fft_matches_dft() {
     // Measured 1.8e-14 (sums of 512 terms of size ≤ 1).
     assert!(worst < 1e-11, "{worst}");
     for e in [0.5, 0.9, 0.99, 0.999] {
-        assert_eq!(radial_cutoff(&exact, m, 0.5, e), radial_cutoff(&fast, m, 0.5, e));
+        assert_eq!(
+            radial_cutoff(&exact, m, 0.5, e),
+            radial_cutoff(&fast, m, 0.5, e)
+        );
     }
     // A plane wave cos(2π·0.25·x) on a half-voxel grid: a single radial frequency.
     let w: Vec<f64> = (0..n * n * n)
@@ -256,7 +285,14 @@ fn block_spectrum_fft_matches_dft() {
 }
 
 fn axis_camera(dims: [usize; 3], affine: glam::DMat4) -> Camera {
-    Camera::axis_view(dims, affine, voxlab::camera::AxisView::PlusZ, dims[0], dims[1]).unwrap()
+    Camera::axis_view(
+        dims,
+        affine,
+        voxlab::camera::AxisView::PlusZ,
+        dims[0],
+        dims[1],
+    )
+    .unwrap()
 }
 
 #[test]
@@ -285,7 +321,11 @@ fn uniform_volume_gives_beer_lambert_in_every_sampling() {
             // Nothing varies: both take T_max = 8 voxels, 2 steps.
             _ => 3.0,
         };
-        assert!(counts.data.iter().all(|&c| c == want), "{sampling:?}: {:?}", &counts.data[..4]);
+        assert!(
+            counts.data.iter().all(|&c| c == want),
+            "{sampling:?}: {:?}",
+            &counts.data[..4]
+        );
     }
 }
 
@@ -353,7 +393,10 @@ fn f32_matches_the_f64_oracle() {
         let ca = a.samples.unwrap();
         let cb = b.samples.unwrap();
         let differ = ca.data.iter().zip(&cb.data).filter(|(x, y)| x != y).count();
-        eprintln!("{sampling:?}: f32 max abs {:.3e}, {differ} rays with other counts", e.max_abs);
+        eprintln!(
+            "{sampling:?}: f32 max abs {:.3e}, {differ} rays with other counts",
+            e.max_abs
+        );
         // Measured (two balls in 64³, 32²): 0 rays with other counts, max abs 2.6e-6 for
         // all three. A
         // step decided the other way by rounding would move a sample and change a pixel

@@ -54,5 +54,9 @@ fn adaptive_refuses_bad_options() {
     let dir = scratch("cli_adaptive_bad");
     let out = voxlab(&["adaptive", "--out", s(&dir), "--t-max", "0.1"]);
     assert!(!out.status.success());
-    assert!(common::stderr(&out).contains("t-max"), "{}", common::stderr(&out));
+    assert!(
+        common::stderr(&out).contains("t-max"),
+        "{}",
+        common::stderr(&out)
+    );
 }

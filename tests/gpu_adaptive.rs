@@ -14,10 +14,14 @@ use voxlab::AnyVolume;
 use wgpu::naga;
 
 fn validate(src: &str) {
-    let module = naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(src)));
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{e:?}"));
+    let module =
+        naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{e:?}"));
 }
 
 #[test]
@@ -97,10 +101,15 @@ fn parity(sampling: Sampling) {
         sampling,
         ..Default::default()
     };
-    let gpu = voxlab::gpu::adaptive::render(ctx, &av, &tf, &cam, &s).unwrap().output;
+    let gpu = voxlab::gpu::adaptive::render(ctx, &av, &tf, &cam, &s)
+        .unwrap()
+        .output;
     let f32o = adaptive::render::<f32>(&av, &tf, &cam, &s).unwrap();
     let f64o = adaptive::render::<f64>(&av, &tf, &cam, &s).unwrap();
-    let (cg, cc) = (gpu.samples.as_ref().unwrap(), f32o.samples.as_ref().unwrap());
+    let (cg, cc) = (
+        gpu.samples.as_ref().unwrap(),
+        f32o.samples.as_ref().unwrap(),
+    );
     let differ = cg.data.iter().zip(&cc.data).filter(|(a, b)| a != b).count();
     let e32 = error_stats(&f32o.image.data, &gpu.image.data, 1.0);
     let e64 = error_stats(&f64o.image.data, &gpu.image.data, 1.0);

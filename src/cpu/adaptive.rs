@@ -57,8 +57,8 @@ use crate::settings::Filter;
 use crate::transfer::{LutR, TransferFunction};
 use crate::volume::AnyVolume;
 use glam::DMat4;
-use rustfft::num_complex::Complex;
 use rayon::prelude::*;
+use rustfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
 /// Where the samples of a ray go.
@@ -154,7 +154,10 @@ impl AdaptiveSettings {
             return Err(Error::invalid("spectrum bins", "must lie in 2..=1024"));
         }
         if !(2..=1024).contains(&self.preint_size) {
-            return Err(Error::invalid("pre-integration size", "must lie in 2..=1024"));
+            return Err(Error::invalid(
+                "pre-integration size",
+                "must lie in 2..=1024",
+            ));
         }
         if !(2..=64).contains(&self.block) {
             return Err(Error::invalid("block", "must lie in 2..=64 voxels"));
@@ -175,8 +178,7 @@ impl AdaptiveSettings {
 /// energy of bins `1..` (bin 0, DC, excluded); 0 when that energy vanishes.
 pub fn cutoff_bin(bin_energy: &[f64], energy: f64) -> usize {
     let total: f64 = bin_energy.iter().skip(1).sum();
-    if total <= 1e-24 * bin_energy.first().copied().unwrap_or(0.0).max(1e-300) || total <= 0.0
-    {
+    if total <= 1e-24 * bin_energy.first().copied().unwrap_or(0.0).max(1e-300) || total <= 0.0 {
         return 0;
     }
     let target = energy * total;
@@ -397,7 +399,12 @@ pub struct DirectSteps {
 
 /// The classified opacity `α(Ψ(f))` of block `b` sampled at half-voxel spacing:
 /// `(2B)³` points `x = b·B − ½ + (q + ½)/2`.
-pub fn block_samples<R: Real>(grid: &Grid<R>, lut: &LutR<R>, block: usize, b: [usize; 3]) -> Vec<f64> {
+pub fn block_samples<R: Real>(
+    grid: &Grid<R>,
+    lut: &LutR<R>,
+    block: usize,
+    b: [usize; 3],
+) -> Vec<f64> {
     let n = 2 * block;
     let mut out = Vec::with_capacity(n * n * n);
     let c = |bb: usize, q: usize| R::of((bb * block) as f64 - 0.5 + (q as f64 + 0.5) * 0.5);
@@ -433,7 +440,9 @@ pub fn direct_steps<R: Real>(
             let s = block_samples(grid, &lut, bsz, b);
             let (lo, hi) = s
                 .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                    (l.min(v), h.max(v))
+                });
             if hi - lo <= 1e-12 {
                 return 0.0;
             }
@@ -619,7 +628,11 @@ pub fn render_prepared<R: Real>(
     if diag / settings.step > crate::settings::MAX_SAMPLES_PER_RAY {
         return Err(Error::too_large(
             "adaptive render",
-            format!("step {} gives up to {:.0} samples per ray", settings.step, diag / settings.step),
+            format!(
+                "step {} gives up to {:.0} samples per ray",
+                settings.step,
+                diag / settings.step
+            ),
         ));
     }
     let to_index = scene.affine.inverse();
@@ -643,7 +656,11 @@ pub fn render_prepared<R: Real>(
                 row_counts[col] = n;
             }
         });
-    Ok(RenderOutput::from_counts(image, &counts, settings.sample_count))
+    Ok(RenderOutput::from_counts(
+        image,
+        &counts,
+        settings.sample_count,
+    ))
 }
 
 /// One ray from index-space origin `o` along `d` (per unit of `t`): the pixel and the

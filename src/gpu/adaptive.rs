@@ -16,7 +16,9 @@
 
 use super::context::{buffer_entry, GpuContext};
 use crate::camera::Camera;
-use crate::cpu::adaptive::{direct_steps, importance_radius, spectral_table, AdaptiveSettings, Sampling};
+use crate::cpu::adaptive::{
+    direct_steps, importance_radius, spectral_table, AdaptiveSettings, Sampling,
+};
 use crate::cpu::filter::Grid;
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
@@ -106,7 +108,12 @@ pub(crate) fn compute_pipeline(
     }
 }
 
-fn init_buffer(ctx: &GpuContext, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
+fn init_buffer(
+    ctx: &GpuContext,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer> {
     if bytes.len() as u64 > ctx.limits.max_storage_buffer_binding_size {
         return Err(Error::too_large(
             label,
@@ -124,11 +131,13 @@ fn init_buffer(ctx: &GpuContext, label: &str, bytes: &[u8], usage: wgpu::BufferU
     } else {
         bytes
     };
-    Ok(ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some(label),
-        contents,
-        usage,
-    }))
+    Ok(ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        }))
 }
 
 /// The importance volume on the device from a volume buffer (f32 voxels): one
@@ -179,7 +188,12 @@ pub fn importance_buffer(
             extra: [0, 0, axis, r],
             ..Default::default()
         };
-        let pbuf = init_buffer(ctx, "importance params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM)?;
+        let pbuf = init_buffer(
+            ctx,
+            "importance params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        )?;
         let bind = ctx.bind_group(
             "importance",
             &layout,
@@ -205,7 +219,12 @@ pub fn importance_buffer(
 /// The importance volume of `grid` computed on the device and read back (the same
 /// three grids as `cpu::adaptive::importance_volume`).
 pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Result<[Grid<f32>; 3]> {
-    let vol = init_buffer(ctx, "volume", bytemuck::cast_slice(&grid.data), wgpu::BufferUsages::STORAGE)?;
+    let vol = init_buffer(
+        ctx,
+        "volume",
+        bytemuck::cast_slice(&grid.data),
+        wgpu::BufferUsages::STORAGE,
+    )?;
     let buf = importance_buffer(ctx, &vol, grid.dims, t_max)?;
     let bytes = ctx.read_buffer(&buf, (grid.data.len() * 16) as u64)?;
     let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -229,7 +248,9 @@ pub fn render(
     volume.check_finite("volume")?;
     let dims = volume.dims();
     let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-    if ctx.summary.is_cpu() && diag / settings.step + 2.0 > (super::raycast::LLVMPIPE_LOOP_LIMIT - 16) as f64 {
+    if ctx.summary.is_cpu()
+        && diag / settings.step + 2.0 > (super::raycast::LLVMPIPE_LOOP_LIMIT - 16) as f64
+    {
         return Err(Error::invalid(
             "step",
             "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
@@ -273,7 +294,12 @@ pub fn render(
             let r = camera.ray(col, row);
             let o = to_index.transform_point3(r.origin);
             let d = to_index.transform_vector3(r.dir);
-            rays.push([o.x as f32, o.y as f32, o.z as f32, r.t_min.max(-1e30) as f32]);
+            rays.push([
+                o.x as f32,
+                o.y as f32,
+                o.z as f32,
+                r.t_min.max(-1e30) as f32,
+            ]);
             rays.push([d.x as f32, d.y as f32, d.z as f32, 0.0]);
         }
     }
@@ -302,7 +328,12 @@ pub fn render(
     let direct_data: Vec<f32> = ds
         .as_ref()
         .map_or(vec![0.0], |d| d.step.iter().map(|&v| v as f32).collect());
-    let direct_buf = init_buffer(ctx, "direct steps", bytemuck::cast_slice(&direct_data), storage)?;
+    let direct_buf = init_buffer(
+        ctx,
+        "direct steps",
+        bytemuck::cast_slice(&direct_data),
+        storage,
+    )?;
     ctx.wait()?;
     let prepare = t_prep.elapsed().as_secs_f64();
 
@@ -316,8 +347,18 @@ pub fn render(
             (2.0 * settings.oversampling) as f32,
             settings.ert_threshold as f32,
         ],
-        window: [tf.window.a as f32, tf.window.b as f32, lut.scale, lut.offset],
-        spectrum: [d0 as f32, (bins as f64 / (d1 - d0)) as f32, bins as f32, 0.0],
+        window: [
+            tf.window.a as f32,
+            tf.window.b as f32,
+            lut.scale,
+            lut.offset,
+        ],
+        spectrum: [
+            d0 as f32,
+            (bins as f64 / (d1 - d0)) as f32,
+            bins as f32,
+            0.0,
+        ],
         background: settings.background.map(|c| c as f32),
         dims: [
             dims[0] as u32,
@@ -330,7 +371,12 @@ pub fn render(
             },
         ],
         image: [w as u32, h as u32, 0, 0],
-        table: [n as u32, bins as u32, settings.block as u32, blocks[0] as u32],
+        table: [
+            n as u32,
+            bins as u32,
+            settings.block as u32,
+            blocks[0] as u32,
+        ],
         extra: [blocks[1] as u32, blocks[2] as u32, 0, 0],
     };
 
@@ -345,7 +391,12 @@ pub fn render(
         let rows = rows_per_band.min(h - row0);
         params.image[2] = row0 as u32;
         params.image[3] = rows as u32;
-        let pbuf = init_buffer(ctx, "adaptive params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM)?;
+        let pbuf = init_buffer(
+            ctx,
+            "adaptive params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        )?;
         let pix_bytes = (rows * w * 16) as u64;
         let cnt_bytes = (rows * w * 4) as u64;
         let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
@@ -391,7 +442,8 @@ pub fn render(
             None => t_k.elapsed().as_secs_f64(),
         };
         let t_r = Instant::now();
-        let px: Vec<[f32; 4]> = bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
+        let px: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
         let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
         readback += t_r.elapsed().as_secs_f64();
         for (i, p) in px.iter().enumerate() {

@@ -13,10 +13,17 @@ pub const PREINTEGRATE_WGSL: &str = include_str!("../../shaders/preintegrate.wgs
 
 /// Builds the table on the device: `n × n` entries `(C_r, C_g, C_b, α)`, front value
 /// along the fast axis, in a storage buffer (`STORAGE | COPY_SRC`).
-pub fn preintegrate_buffer(ctx: &GpuContext, tf: &TransferFunction, n: usize) -> Result<wgpu::Buffer> {
+pub fn preintegrate_buffer(
+    ctx: &GpuContext,
+    tf: &TransferFunction,
+    n: usize,
+) -> Result<wgpu::Buffer> {
     tf.validate()?;
     if !(2..=1024).contains(&n) {
-        return Err(Error::invalid("pre-integration size", "must lie in 2..=1024"));
+        return Err(Error::invalid(
+            "pre-integration size",
+            "must lie in 2..=1024",
+        ));
     }
     let lut = tf.lut(n).to_real::<f32>();
     let dev = &ctx.device;
