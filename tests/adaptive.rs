@@ -191,7 +191,7 @@ fn importance_matches_brute_force_and_bounds_the_field() {
     let imp = importance_volume(&g, t_max);
     let r = importance_radius(t_max) as isize;
     assert_eq!(r, 4);
-    for axis in 0..3 {
+    for (axis, g_axis) in imp.iter().enumerate() {
         for k in 0..dims[2] {
             for j in 0..dims[1] {
                 for i in 0..dims[0] {
@@ -212,7 +212,7 @@ fn importance_matches_brute_force_and_bounds_the_field() {
                             }
                         }
                     }
-                    assert_eq!(imp[axis].data[i + dims[0] * (j + dims[1] * k)], m);
+                    assert_eq!(g_axis.data[i + dims[0] * (j + dims[1] * k)], m);
                 }
             }
         }

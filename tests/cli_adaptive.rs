@@ -60,3 +60,39 @@ fn adaptive_refuses_bad_options() {
         common::stderr(&out)
     );
 }
+
+#[test]
+fn render_takes_a_sampling() {
+    let dir = scratch("cli_render_sampling");
+    let (img, counts) = (dir.join("a.png"), dir.join("n.png"));
+    let out = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:32",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--sampling",
+        "adaptive",
+        "--out",
+        s(&img),
+        "--samples",
+        s(&counts),
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(img.is_file() && counts.is_file());
+    assert!(common::stderr(&out).contains("adaptive sampling"));
+    // DVR only.
+    let out = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:32",
+        "--mode",
+        "mip",
+        "--sampling",
+        "direct",
+        "--out",
+        s(&img),
+    ]);
+    assert!(!out.status.success());
+    assert!(common::stderr(&out).contains("DVR only"), "{}", common::stderr(&out));
+}

@@ -312,7 +312,7 @@ pub fn axis_difference<R: Real>(grid: &Grid<R>, i: usize, j: usize, k: usize, ax
 
 /// The maximum of `g` over a window of half-width `r` along `axis` (clamped).
 pub fn max_filter_axis<R: Real>(g: &Grid<R>, axis: usize, r: usize) -> Grid<R> {
-    let [nx, ny, nz] = g.dims;
+    let [nx, ny, _] = g.dims;
     let n = g.dims[axis];
     let data = (0..g.data.len())
         .into_par_iter()
@@ -329,7 +329,6 @@ pub fn max_filter_axis<R: Real>(g: &Grid<R>, axis: usize, r: usize) -> Grid<R> {
             m
         })
         .collect();
-    let _ = nz;
     Grid { dims: g.dims, data }
 }
 
