@@ -94,5 +94,9 @@ fn render_takes_a_sampling() {
         s(&img),
     ]);
     assert!(!out.status.success());
-    assert!(common::stderr(&out).contains("DVR only"), "{}", common::stderr(&out));
+    assert!(
+        common::stderr(&out).contains("DVR only"),
+        "{}",
+        common::stderr(&out)
+    );
 }
