@@ -1,5 +1,6 @@
 //! The `voxlab` command line: a thin layer over the library.
 
+mod cli_adaptive;
 mod cli_bench;
 mod cli_d2vr;
 mod cli_process;
@@ -124,6 +125,10 @@ enum Command {
     /// gradient-magnitude field (value per mm); CPU f64/f32 or GPU; writes a float32
     /// volume (.nrrd, .nhdr, .npy, .nii, .nii.gz).
     Process(Box<cli_process::ProcessArgs>),
+    /// Regular, direct and spectral adaptive sampling of one scene side by side: samples
+    /// per pixel, time per frame and image error against regular sampling (Markdown and
+    /// JSON), the images and the samples-per-ray images.
+    Adaptive(Box<cli_adaptive::AdaptiveArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf {
         /// Preset to print as JSON (omit to list them).
@@ -393,6 +398,11 @@ struct RenderArgs {
     /// Also write the samples-per-ray image to this file (.png or .npy).
     #[arg(long)]
     samples: Option<PathBuf>,
+    /// Render with the pre-integrated DVR caster of docs/adaptive-sampling.md, its
+    /// samples placed regularly, adaptively (spectral analysis of the transfer function)
+    /// or directly (spectra of the classified volume). DVR only, no shading.
+    #[arg(long, value_enum)]
+    sampling: Option<voxlab::cpu::adaptive::Sampling>,
 }
 
 #[derive(Args)]
@@ -507,6 +517,7 @@ fn run_other(command: Command) -> Result<()> {
         Command::Project(args) => cli_project::project(*args),
         Command::Reconstruct(args) => cli_reconstruct::run(*args),
         Command::Process(args) => cli_process::run(*args),
+        Command::Adaptive(args) => cli_adaptive::run(*args),
         Command::Info {
             input,
             load,
@@ -727,6 +738,17 @@ fn render(r: RenderArgs) -> Result<()> {
         check_output(s)?;
     }
     let (scene, settings) = build_scene(&r.scene, r.samples.is_some())?;
+    if let Some(sampling) = r.sampling {
+        return cli_adaptive::render_sampling(
+            &scene,
+            &settings,
+            sampling,
+            r.backend,
+            &r.out,
+            r.samples.as_deref(),
+            r.sixteen_bit,
+        );
+    }
     let a = &r;
     let renderer = Renderer::new(a.backend)?;
     if let Some(why) = &renderer.fallback_reason {

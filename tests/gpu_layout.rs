@@ -283,3 +283,25 @@ fn process_shaders_validate() {
         .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
     }
 }
+
+#[test]
+fn adaptive_params_layout_agrees() {
+    use voxlab::gpu::adaptive::{AdaptiveParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "AdaptiveParams");
+    assert_eq!(span as usize, size_of::<AdaptiveParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("steps", offset_of!(AdaptiveParams, steps)),
+        ("window", offset_of!(AdaptiveParams, window)),
+        ("spectrum", offset_of!(AdaptiveParams, spectrum)),
+        ("background", offset_of!(AdaptiveParams, background)),
+        ("dims", offset_of!(AdaptiveParams, dims)),
+        ("image", offset_of!(AdaptiveParams, image)),
+        ("table", offset_of!(AdaptiveParams, table)),
+        ("extra", offset_of!(AdaptiveParams, extra)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}

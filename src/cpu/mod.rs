@@ -4,6 +4,7 @@
 //! functions by name. The f64 instance is the oracle (its output never depends on the
 //! thread count); the f32 instance is the fair baseline for speed comparisons.
 
+pub mod adaptive;
 pub mod d2vr;
 pub mod dft;
 pub mod fbp;
@@ -12,6 +13,7 @@ pub mod filter;
 pub mod fvr;
 pub mod gradient;
 pub mod parker;
+pub mod preintegrate;
 pub mod process;
 pub mod project;
 pub mod ramp;

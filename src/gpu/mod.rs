@@ -7,6 +7,7 @@
 //! is the power-of-two FFT (split-stream and Stockham variants); `fvr` the Fourier
 //! volume rendering slice and its inverse FFT; `project` Joseph's CT forward projector.
 
+pub mod adaptive;
 pub mod context;
 pub mod d2vr;
 pub mod fbp;
@@ -14,6 +15,7 @@ pub mod fft;
 pub mod fvr;
 pub mod gradient;
 pub mod parker;
+pub mod preintegrate;
 pub mod probe;
 pub mod process;
 pub mod project;

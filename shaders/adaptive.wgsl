@@ -1,0 +1,236 @@
+// The adaptive ray caster: one invocation per pixel; DVR through the pre-integrated
+// transfer function, front to back, trilinear, no shading. Regular, adaptive or direct
+// steps (params.dims.w). Every helper mirrors its Rust twin in src/cpu/adaptive.rs or
+// src/cpu/preintegrate.rs by name. Prepended: shaders/shared/adaptive_params.wgsl.
+//
+// Rays come from the host (origin and direction in index space, computed in f64 and
+// rounded to f32 exactly as the CPU's f32 path rounds them), so both start from the
+// same numbers.
+
+@group(0) @binding(0) var<uniform> params: AdaptiveParams;
+@group(0) @binding(1) var<storage, read> volume: array<f32>;
+@group(0) @binding(2) var<storage, read> preint: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> spectrum: array<f32>;
+@group(0) @binding(4) var<storage, read> importance: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> direct: array<f32>;
+@group(0) @binding(6) var<storage, read> rays: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> pixels: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read_write> counts: array<u32>;
+
+const BIG: f32 = 3.0e38;
+
+fn voxel(i: i32, j: i32, k: i32) -> f32 {
+    let n = vec3<i32>(params.dims.xyz);
+    let c = clamp(vec3<i32>(i, j, k), vec3<i32>(0), n - vec3<i32>(1));
+    return volume[u32(c.x) + params.dims.x * (u32(c.y) + params.dims.y * u32(c.z))];
+}
+
+// mirrors src/cpu/filter.rs: sample (trilinear; apply_taps' order, x innermost)
+fn sample_trilinear(p: vec3<f32>) -> f32 {
+    let fl = floor(p);
+    let f = p - fl;
+    let i = vec3<i32>(fl);
+    let wx0 = 1.0 - f.x;
+    let wy0 = 1.0 - f.y;
+    let wz0 = 1.0 - f.z;
+    let x00 = 0.0 + wx0 * voxel(i.x, i.y, i.z) + f.x * voxel(i.x + 1, i.y, i.z);
+    let x10 = 0.0 + wx0 * voxel(i.x, i.y + 1, i.z) + f.x * voxel(i.x + 1, i.y + 1, i.z);
+    let x01 = 0.0 + wx0 * voxel(i.x, i.y, i.z + 1) + f.x * voxel(i.x + 1, i.y, i.z + 1);
+    let x11 = 0.0 + wx0 * voxel(i.x, i.y + 1, i.z + 1) + f.x * voxel(i.x + 1, i.y + 1, i.z + 1);
+    let y0 = 0.0 + wy0 * x00 + f.y * x10;
+    let y1 = 0.0 + wy0 * x01 + f.y * x11;
+    return 0.0 + wz0 * y0 + f.z * y1;
+}
+
+struct Hit {
+    ok: bool,
+    t0: f32,
+    t1: f32,
+}
+
+// mirrors src/cpu/raycast.rs: intersect_box
+fn intersect_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> Hit {
+    var t0 = -BIG;
+    var t1 = BIG;
+    for (var a = 0u; a < 3u; a++) {
+        if (d[a] == 0.0) {
+            if (o[a] < lo[a] || o[a] > hi[a]) {
+                return Hit(false, 0.0, 0.0);
+            }
+        } else {
+            let inv = 1.0 / d[a];
+            let ta = (lo[a] - o[a]) * inv;
+            let tb = (hi[a] - o[a]) * inv;
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
+        }
+    }
+    return Hit(t1 > t0, t0, t1);
+}
+
+// mirrors src/cpu/preintegrate.rs: PreintTable::coord
+fn preint_coord(t: f32) -> f32 {
+    return min(max(params.window.z * t + params.window.w, 0.0), f32(params.table.x - 1u));
+}
+
+// mirrors src/cpu/preintegrate.rs: PreintTable::lookup
+fn preint_lookup(front: f32, back: f32) -> vec4<f32> {
+    let n = params.table.x;
+    let x = preint_coord(front);
+    let y = preint_coord(back);
+    let x0f = floor(x);
+    let y0f = floor(y);
+    let fx = x - x0f;
+    let fy = y - y0f;
+    let x0 = min(u32(x0f), n - 1u);
+    let y0 = min(u32(y0f), n - 1u);
+    let x1 = min(x0 + 1u, n - 1u);
+    let y1 = min(y0 + 1u, n - 1u);
+    let a = preint[y0 * n + x0];
+    let b = preint[y0 * n + x1];
+    let c = preint[y1 * n + x0];
+    let d = preint[y1 * n + x1];
+    let lo = a + fx * (b - a);
+    let hi = c + fx * (d - c);
+    return lo + fy * (hi - lo);
+}
+
+// mirrors src/cpu/preintegrate.rs: preint_step
+fn preint_step(e: vec4<f32>, len: f32) -> vec4<f32> {
+    let a = min(max(e.w, 0.0), 1.0);
+    if (a <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let a2 = 1.0 - pow(1.0 - a, len);
+    let k = a2 / a;
+    return vec4<f32>(e.x * k, e.y * k, e.z * k, a2);
+}
+
+// mirrors src/cpu/adaptive.rs: nearest_voxel (as a linear index)
+fn nearest_voxel(p: vec3<f32>) -> vec3<u32> {
+    let n = vec3<i32>(params.dims.xyz);
+    let v = clamp(vec3<i32>(floor(p + vec3<f32>(0.5))), vec3<i32>(0), n - vec3<i32>(1));
+    return vec3<u32>(v);
+}
+
+// mirrors src/cpu/adaptive.rs: SpectralTable::bins_of and lookup
+fn spectrum_lookup(lo: f32, hi: f32) -> f32 {
+    let m = u32(params.spectrum.z);
+    let top = params.spectrum.z;
+    let d0 = params.spectrum.x;
+    let inv = params.spectrum.y;
+    var i = u32(min(max(floor((lo - d0) * inv), 0.0), top));
+    var j = u32(min(max(ceil((hi - d0) * inv), 0.0), top));
+    if (j <= i) {
+        if (i >= m) {
+            i = m - 1u;
+        }
+        j = i + 1u;
+    }
+    return spectrum[i * (m + 1u) + j];
+}
+
+// mirrors src/cpu/adaptive.rs: adaptive_step
+fn adaptive_step(p: vec3<f32>, f0: f32, d: vec3<f32>) -> f32 {
+    let t_max = params.steps.y;
+    let v = nearest_voxel(p);
+    let g = importance[v.x + params.dims.x * (v.y + params.dims.y * v.z)];
+    let gd = abs(d.x) * g.x + abs(d.y) * g.y + abs(d.z) * g.z;
+    if (gd <= 0.0) {
+        return t_max;
+    }
+    let a = params.window.x;
+    let b = params.window.y;
+    let s_min = f0 - gd * t_max;
+    let s_max = f0 + gd * t_max;
+    let u0 = a * s_min + b;
+    let u1 = a * s_max + b;
+    let nu = spectrum_lookup(min(u0, u1), max(u0, u1));
+    let denom = params.steps.z * nu * abs(a) * gd;
+    var t = t_max;
+    if (denom > 0.0) {
+        t = 1.0 / denom;
+    }
+    return min(max(t, params.steps.x), t_max);
+}
+
+// mirrors src/cpu/adaptive.rs: direct_step
+fn direct_step(p: vec3<f32>) -> f32 {
+    let v = nearest_voxel(p);
+    let bs = params.table.z;
+    let b = v / vec3<u32>(bs);
+    return direct[b.x + params.table.w * (b.y + params.extra.x * b.z)];
+}
+
+struct RayOut {
+    px: vec4<f32>,
+    n: u32,
+}
+
+// mirrors src/cpu/adaptive.rs: cast_ray
+fn cast_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32) -> RayOut {
+    let bg = params.background;
+    let miss = vec4<f32>(bg.x * bg.w, bg.y * bg.w, bg.z * bg.w, bg.w);
+    let hi = vec3<f32>(f32(params.dims.x) - 0.5, f32(params.dims.y) - 0.5, f32(params.dims.z) - 0.5);
+    let hit = intersect_box(o, d, vec3<f32>(-0.5), hi);
+    if (!hit.ok) {
+        return RayOut(miss, 0u);
+    }
+    let t_in = max(hit.t0, t_min);
+    let t_out = hit.t1;
+    if (t_out <= t_in) {
+        return RayOut(miss, 0u);
+    }
+    let speed = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+    let dir = d * (1.0 / speed);
+    let len = (t_out - t_in) * speed;
+    let p0 = o + d * t_in;
+    let step = params.steps.x;
+    let ert = params.steps.w;
+    let sampling = params.dims.w;
+    var f0 = sample_trilinear(p0);
+    var taken = 1u;
+    var s = 0.0;
+    var k = 0u;
+    var c = vec3<f32>(0.0);
+    var a = 0.0;
+    while (s < len) {
+        let p = p0 + dir * s;
+        var s1 = f32(k + 1u) * step;
+        if (sampling == 1u) {
+            s1 = s + adaptive_step(p, f0, dir);
+        } else if (sampling == 2u) {
+            s1 = s + direct_step(p);
+        }
+        s1 = min(s1, len);
+        let f1 = sample_trilinear(p0 + dir * s1);
+        taken += 1u;
+        let e = preint_step(preint_lookup(f0, f1), s1 - s);
+        let w = 1.0 - a;
+        c = c + w * e.xyz;
+        a = a + w * e.w;
+        if (a >= ert) {
+            break;
+        }
+        s = s1;
+        f0 = f1;
+        k += 1u;
+    }
+    let t = 1.0 - a;
+    return RayOut(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn adaptive(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let w = params.image.x;
+    if (gid.x >= w || gid.y >= params.image.w) {
+        return;
+    }
+    let local = gid.y * w + gid.x;
+    let pix = (params.image.z + gid.y) * w + gid.x;
+    let ro = rays[2u * pix];
+    let rd = rays[2u * pix + 1u];
+    let r = cast_ray(ro.xyz, rd.xyz, ro.w);
+    pixels[local] = r.px;
+    counts[local] = r.n;
+}

@@ -1,0 +1,468 @@
+//! The adaptive ray caster on the GPU, mirroring `cpu::adaptive` (see its docs for the
+//! method): regular, spectral adaptive and direct sampling, pre-integrated DVR, front
+//! to back, trilinear, no shading.
+//!
+//! On the device: the pre-integrated table (`gpu::preintegrate`), the importance volume
+//! (`shaders/adaptive_importance.wgsl`: differences, then one max-filter pass per axis)
+//! and the ray march (`shaders/adaptive.wgsl`, one invocation per pixel). The volume and
+//! every table live in storage buffers and are read with manual interpolation, in the
+//! CPU's order of operations.
+//!
+//! On the host, and why: the spectral table `ν_g(I)` and direct sampling's block
+//! spectra are FFTs of a transfer function or of blocks, computed once per transfer
+//! function (`cpu::adaptive::spectral_table`, `direct_steps` in f32) and uploaded; the
+//! rays' index-space origins and directions are computed in f64 and rounded to f32,
+//! exactly as the CPU f32 path rounds them, so both march from the same numbers.
+
+use super::context::{buffer_entry, GpuContext};
+use crate::camera::Camera;
+use crate::cpu::adaptive::{
+    direct_steps, importance_radius, spectral_table, AdaptiveSettings, Sampling,
+};
+use crate::cpu::filter::Grid;
+use crate::cpu::raycast::RenderOutput;
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::transfer::TransferFunction;
+use crate::volume::AnyVolume;
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+/// Parameters of the adaptive passes; twin of `shaders/shared/adaptive_params.wgsl`
+/// (`tests/gpu_layout.rs` checks that the two layouts agree).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct AdaptiveParams {
+    /// step (T_min), T_max, 2·oversampling, early-termination opacity.
+    pub steps: [f32; 4],
+    /// Window map a, b; pre-integration coordinate scale, offset.
+    pub window: [f32; 4],
+    /// Spectral table: d0, bins/(d1 − d0), bins, 0.
+    pub spectrum: [f32; 4],
+    pub background: [f32; 4],
+    /// nx, ny, nz, sampling (0 regular, 1 adaptive, 2 direct).
+    pub dims: [u32; 4],
+    /// Width, height, first row, rows.
+    pub image: [u32; 4],
+    /// Pre-integration n, spectral bins, block edge, blocks along x.
+    pub table: [u32; 4],
+    /// Blocks along y, z; importance passes: axis, radius.
+    pub extra: [u32; 4],
+}
+
+/// The shared struct.
+pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/adaptive_params.wgsl");
+/// The ray caster (without the shared struct).
+pub const ADAPTIVE_WGSL: &str = include_str!("../../shaders/adaptive.wgsl");
+/// The importance-volume passes (without the shared struct).
+pub const IMPORTANCE_WGSL: &str = include_str!("../../shaders/adaptive_importance.wgsl");
+
+/// Where the time of a GPU adaptive render went, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct AdaptiveTimings {
+    /// Shader compilation and pipelines.
+    pub setup: f64,
+    /// Uploads of the volume, rays and tables.
+    pub upload: f64,
+    /// Pre-integration and importance volume on the device, spectra on the host.
+    pub prepare: f64,
+    /// The ray-casting passes (timestamps when available, else wall clock).
+    pub kernel: f64,
+    pub kernel_from_timestamps: bool,
+    pub readback: f64,
+    pub total: f64,
+}
+
+/// What a GPU adaptive render returns.
+#[derive(Clone, Debug)]
+pub struct GpuAdaptiveOutput {
+    pub output: RenderOutput,
+    pub timings: AdaptiveTimings,
+}
+
+pub(crate) fn compute_pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> Result<wgpu::ComputePipeline> {
+    let dev = &ctx.device;
+    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pl),
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    match pollster::block_on(scope.pop()) {
+        None => Ok(pipeline),
+        Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
+    }
+}
+
+fn init_buffer(
+    ctx: &GpuContext,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer> {
+    if bytes.len() as u64 > ctx.limits.max_storage_buffer_binding_size {
+        return Err(Error::too_large(
+            label,
+            format!(
+                "{} bytes exceed the adapter's storage-binding limit of {} bytes",
+                bytes.len(),
+                ctx.limits.max_storage_buffer_binding_size
+            ),
+        ));
+    }
+    let pad;
+    let contents = if bytes.is_empty() {
+        pad = [0u8; 16];
+        &pad[..]
+    } else {
+        bytes
+    };
+    Ok(ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        }))
+}
+
+/// The importance volume on the device from a volume buffer (f32 voxels): one
+/// `vec4` per voxel, `(G_x, G_y, G_z, 0)`.
+pub fn importance_buffer(
+    ctx: &GpuContext,
+    volume: &wgpu::Buffer,
+    dims: [usize; 3],
+    t_max: f64,
+) -> Result<wgpu::Buffer> {
+    let dev = &ctx.device;
+    let module = ctx.shader(
+        "adaptive_importance.wgsl",
+        &format!("{PARAMS_WGSL}\n{IMPORTANCE_WGSL}"),
+    )?;
+    let ro = wgpu::BufferBindingType::Storage { read_only: true };
+    let rw = wgpu::BufferBindingType::Storage { read_only: false };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("importance"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            buffer_entry(1, ro),
+            buffer_entry(2, ro),
+            buffer_entry(3, rw),
+        ],
+    });
+    let diff = compute_pipeline(ctx, "differences", &module, "differences", &layout)?;
+    let maxf = compute_pipeline(ctx, "max_filter", &module, "max_filter", &layout)?;
+    let voxels = dims[0] * dims[1] * dims[2];
+    let bytes = (voxels * 16) as u64;
+    let a = ctx.storage_buffer("importance a", bytes)?;
+    let b = ctx.storage_buffer("importance b", bytes)?;
+    let dummy = ctx.storage_buffer("dummy", 16)?;
+    let r = importance_radius(t_max) as u32;
+    let groups = dims.map(|n| (n as u32).div_ceil(4));
+    let mut enc = dev.create_command_encoder(&Default::default());
+    // Pass 0: differences into a; passes 1–3: x, y, z max filters, a → b → a → b.
+    let passes: [(&wgpu::ComputePipeline, &wgpu::Buffer, &wgpu::Buffer, u32); 4] = [
+        (&diff, &dummy, &a, 0),
+        (&maxf, &a, &b, 0),
+        (&maxf, &b, &a, 1),
+        (&maxf, &a, &b, 2),
+    ];
+    let mut keep = Vec::new();
+    for (pipeline, src, dst, axis) in passes {
+        let params = AdaptiveParams {
+            dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0],
+            extra: [0, 0, axis, r],
+            ..Default::default()
+        };
+        let pbuf = init_buffer(
+            ctx,
+            "importance params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        )?;
+        let bind = ctx.bind_group(
+            "importance",
+            &layout,
+            &[
+                pbuf.as_entire_binding(),
+                volume.as_entire_binding(),
+                src.as_entire_binding(),
+                dst.as_entire_binding(),
+            ],
+        );
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        }
+        keep.push(pbuf);
+    }
+    ctx.queue.submit([enc.finish()]);
+    Ok(b)
+}
+
+/// The importance volume of `grid` computed on the device and read back (the same
+/// three grids as `cpu::adaptive::importance_volume`).
+pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Result<[Grid<f32>; 3]> {
+    let vol = init_buffer(
+        ctx,
+        "volume",
+        bytemuck::cast_slice(&grid.data),
+        wgpu::BufferUsages::STORAGE,
+    )?;
+    let buf = importance_buffer(ctx, &vol, grid.dims, t_max)?;
+    let bytes = ctx.read_buffer(&buf, (grid.data.len() * 16) as u64)?;
+    let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    Ok(std::array::from_fn(|a| Grid {
+        dims: grid.dims,
+        data: texels.iter().map(|t| t[a]).collect(),
+    }))
+}
+
+/// Renders on the GPU. Same inputs and outputs as `cpu::adaptive::render`.
+pub fn render(
+    ctx: &GpuContext,
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &AdaptiveSettings,
+) -> Result<GpuAdaptiveOutput> {
+    let t_start = Instant::now();
+    settings.validate()?;
+    tf.validate()?;
+    volume.check_finite("volume")?;
+    let dims = volume.dims();
+    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    if ctx.summary.is_cpu()
+        && diag / settings.step + 2.0 > (super::raycast::LLVMPIPE_LOOP_LIMIT - 16) as f64
+    {
+        return Err(Error::invalid(
+            "step",
+            "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
+        ));
+    }
+    let values = volume.to_f32();
+    let grid = Grid::<f32> {
+        dims,
+        data: values.data().to_vec(),
+    };
+    let dev = &ctx.device;
+    let module = ctx.shader("adaptive.wgsl", &format!("{PARAMS_WGSL}\n{ADAPTIVE_WGSL}"))?;
+    let ro = wgpu::BufferBindingType::Storage { read_only: true };
+    let rw = wgpu::BufferBindingType::Storage { read_only: false };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("adaptive"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            buffer_entry(1, ro),
+            buffer_entry(2, ro),
+            buffer_entry(3, ro),
+            buffer_entry(4, ro),
+            buffer_entry(5, ro),
+            buffer_entry(6, ro),
+            buffer_entry(7, rw),
+            buffer_entry(8, rw),
+        ],
+    });
+    let pipeline = compute_pipeline(ctx, "adaptive", &module, "adaptive", &layout)?;
+    let t_setup = t_start.elapsed().as_secs_f64();
+
+    // Uploads: volume and rays.
+    let t_up = Instant::now();
+    let storage = wgpu::BufferUsages::STORAGE;
+    let vol_buf = init_buffer(ctx, "volume", bytemuck::cast_slice(&grid.data), storage)?;
+    let (w, h) = (camera.width, camera.height);
+    let to_index = volume.affine().inverse();
+    let mut rays = Vec::with_capacity(2 * w * h);
+    for row in 0..h {
+        for col in 0..w {
+            let r = camera.ray(col, row);
+            let o = to_index.transform_point3(r.origin);
+            let d = to_index.transform_vector3(r.dir);
+            rays.push([
+                o.x as f32,
+                o.y as f32,
+                o.z as f32,
+                r.t_min.max(-1e30) as f32,
+            ]);
+            rays.push([d.x as f32, d.y as f32, d.z as f32, 0.0]);
+        }
+    }
+    let ray_buf = init_buffer(ctx, "rays", bytemuck::cast_slice(&rays), storage)?;
+    ctx.wait()?;
+    let upload = t_up.elapsed().as_secs_f64();
+
+    // Set-up: tables on the device, spectra on the host.
+    let t_prep = Instant::now();
+    let n = settings.preint_size;
+    let preint = super::preintegrate::preintegrate_buffer(ctx, tf, n)?;
+    let lut = tf.lut(n).to_real::<f32>();
+    let adaptive = settings.sampling == Sampling::Adaptive;
+    let direct = settings.sampling == Sampling::Direct;
+    let spec = adaptive.then(|| spectral_table(tf, settings.spectrum_bins, settings.energy));
+    let spec_data: Vec<f32> = spec
+        .as_ref()
+        .map_or(vec![0.0], |s| s.nu.iter().map(|&v| v as f32).collect());
+    let spec_buf = init_buffer(ctx, "spectrum", bytemuck::cast_slice(&spec_data), storage)?;
+    let importance = if adaptive {
+        importance_buffer(ctx, &vol_buf, dims, settings.t_max)?
+    } else {
+        ctx.storage_buffer("no importance", 16)?
+    };
+    let ds = direct.then(|| direct_steps(&grid, tf, settings));
+    let direct_data: Vec<f32> = ds
+        .as_ref()
+        .map_or(vec![0.0], |d| d.step.iter().map(|&v| v as f32).collect());
+    let direct_buf = init_buffer(
+        ctx,
+        "direct steps",
+        bytemuck::cast_slice(&direct_data),
+        storage,
+    )?;
+    ctx.wait()?;
+    let prepare = t_prep.elapsed().as_secs_f64();
+
+    let blocks = ds.as_ref().map_or([1, 1, 1], |d| d.blocks);
+    let (d0, d1) = (tf.domain[0], tf.domain[1]);
+    let bins = settings.spectrum_bins;
+    let mut params = AdaptiveParams {
+        steps: [
+            settings.step as f32,
+            settings.t_max as f32,
+            (2.0 * settings.oversampling) as f32,
+            settings.ert_threshold as f32,
+        ],
+        window: [
+            tf.window.a as f32,
+            tf.window.b as f32,
+            lut.scale,
+            lut.offset,
+        ],
+        spectrum: [
+            d0 as f32,
+            (bins as f64 / (d1 - d0)) as f32,
+            bins as f32,
+            0.0,
+        ],
+        background: settings.background.map(|c| c as f32),
+        dims: [
+            dims[0] as u32,
+            dims[1] as u32,
+            dims[2] as u32,
+            match settings.sampling {
+                Sampling::Regular => 0,
+                Sampling::Adaptive => 1,
+                Sampling::Direct => 2,
+            },
+        ],
+        image: [w as u32, h as u32, 0, 0],
+        table: [
+            n as u32,
+            bins as u32,
+            settings.block as u32,
+            blocks[0] as u32,
+        ],
+        extra: [blocks[1] as u32, blocks[2] as u32, 0, 0],
+    };
+
+    // Bands of rows: bounded work per dispatch.
+    let rows_per_band = (65536 / w.max(1)).clamp(1, h.max(1));
+    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    let mut image = Frame::new(w, h, 4);
+    let mut counts = vec![0u32; w * h];
+    let (mut kernel, mut readback) = (0.0, 0.0);
+    let mut row0 = 0;
+    while row0 < h {
+        let rows = rows_per_band.min(h - row0);
+        params.image[2] = row0 as u32;
+        params.image[3] = rows as u32;
+        let pbuf = init_buffer(
+            ctx,
+            "adaptive params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        )?;
+        let pix_bytes = (rows * w * 16) as u64;
+        let cnt_bytes = (rows * w * 4) as u64;
+        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
+        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
+        let bind = ctx.bind_group(
+            "adaptive",
+            &layout,
+            &[
+                pbuf.as_entire_binding(),
+                vol_buf.as_entire_binding(),
+                preint.as_entire_binding(),
+                spec_buf.as_entire_binding(),
+                importance.as_entire_binding(),
+                direct_buf.as_entire_binding(),
+                ray_buf.as_entire_binding(),
+                out_buf.as_entire_binding(),
+                cnt_buf.as_entire_binding(),
+            ],
+        );
+        let t_k = Instant::now();
+        let query = timestamps.then(|| ctx.timestamp_pair());
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("adaptive"),
+                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
+        }
+        if let Some(q) = &query {
+            q.resolve(&mut enc);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        kernel += match &query {
+            Some(q) => q.seconds(ctx)?,
+            None => t_k.elapsed().as_secs_f64(),
+        };
+        let t_r = Instant::now();
+        let px: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
+        let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
+        readback += t_r.elapsed().as_secs_f64();
+        for (i, p) in px.iter().enumerate() {
+            let dst = (row0 * w + i) * 4;
+            image.data[dst..dst + 4].copy_from_slice(&p.map(|v| v as f64));
+        }
+        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+        row0 += rows;
+    }
+    Ok(GpuAdaptiveOutput {
+        output: RenderOutput::from_counts(image, &counts, settings.sample_count),
+        timings: AdaptiveTimings {
+            setup: t_setup,
+            upload,
+            prepare,
+            kernel,
+            kernel_from_timestamps: timestamps,
+            readback,
+            total: t_start.elapsed().as_secs_f64(),
+        },
+    })
+}

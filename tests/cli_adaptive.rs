@@ -1,0 +1,102 @@
+//! `voxlab adaptive` end to end on a small phantom: the table, the JSON and the images.
+
+mod common;
+
+use common::{s, scratch, voxlab};
+
+#[test]
+fn adaptive_writes_table_json_and_images() {
+    let dir = scratch("cli_adaptive");
+    let out = voxlab(&[
+        "adaptive",
+        "phantom:shepp-logan-modified:32",
+        "--out",
+        s(&dir),
+        "--size",
+        "32",
+        "--runs",
+        "1",
+        "--backend",
+        "cpu",
+        "--shift",
+        "0.05",
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    for f in [
+        "table.md",
+        "table.json",
+        "regular.png",
+        "direct.png",
+        "adaptive.png",
+        "samples-regular.png",
+        "samples-direct.png",
+        "samples-adaptive.png",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("table.json")).unwrap()).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    let spp = |i: usize| rows[i]["samples_per_pixel"].as_f64().unwrap();
+    // Regular, direct, adaptive: neither takes more samples than regular (at 32³ the
+    // importance volume's 10-voxel max filter reaches nearly everywhere).
+    assert!(spp(1) <= spp(0) && spp(2) <= spp(0), "{rows:?}");
+    // PSNR is null in JSON when the images are identical (infinite).
+    let psnr = rows[2]["psnr_db"].as_f64().unwrap_or(f64::INFINITY);
+    assert!(psnr > 40.0, "{rows:?}");
+    let md = std::fs::read_to_string(dir.join("table.md")).unwrap();
+    assert!(md.contains("| adaptive |"), "{md}");
+}
+
+#[test]
+fn adaptive_refuses_bad_options() {
+    let dir = scratch("cli_adaptive_bad");
+    let out = voxlab(&["adaptive", "--out", s(&dir), "--t-max", "0.1"]);
+    assert!(!out.status.success());
+    assert!(
+        common::stderr(&out).contains("t-max"),
+        "{}",
+        common::stderr(&out)
+    );
+}
+
+#[test]
+fn render_takes_a_sampling() {
+    let dir = scratch("cli_render_sampling");
+    let (img, counts) = (dir.join("a.png"), dir.join("n.png"));
+    let out = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:32",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--sampling",
+        "adaptive",
+        "--out",
+        s(&img),
+        "--samples",
+        s(&counts),
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    assert!(img.is_file() && counts.is_file());
+    assert!(common::stderr(&out).contains("adaptive sampling"));
+    // DVR only.
+    let out = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:32",
+        "--mode",
+        "mip",
+        "--sampling",
+        "direct",
+        "--out",
+        s(&img),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        common::stderr(&out).contains("DVR only"),
+        "{}",
+        common::stderr(&out)
+    );
+}
