@@ -106,14 +106,15 @@ fn scene() -> (AnyVolume, TransferFunction, Camera) {
     (vol, TransferFunction::preset("phantom").unwrap(), cam)
 }
 
-/// 2D classification, lavapipe, Shepp–Logan 24×27×22 at 40×30: worst measured max |Δ|
-/// TBD. The differences are f32 rounding of the sample positions and of the gradient
+/// 2D classification, lavapipe (Mesa 22.3.6), Shepp–Logan 24×27×22 at 40×30: measured
+/// max |Δ| 4.4e-5 (linear axis, unshaded), 2.9e-4 (log axis, shaded), 7.3e-5 (log,
+/// precomputed gradients, faux shading); RMSE ≤ 5.5e-6. The differences are f32 rounding of the sample positions and of the gradient
 /// (a difference of two interpolated values, then |J⁻ᵀ ∇f|), amplified by the widgets'
 /// soft edges (slope up to 1/(0.5·0.15) per unit value and 1/(0.5·0.01) per unit
-/// gradient).
+/// gradient). Bound: about 3.5× the worst.
 const DVR_2D: Tolerance = Tolerance {
-    max_abs: 2e-3,
-    rmse: 2e-4,
+    max_abs: 1e-3,
+    rmse: 2e-5,
 };
 
 #[test]
