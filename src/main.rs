@@ -664,11 +664,16 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
         TransferFunction::preset_or_file(&a.tf)?
     };
     let mut tf2d = match &a.tf2d {
-        Some(spec) => Some(voxlab::transfer2d::TransferFunction2D::preset_or_file(spec)?),
+        Some(spec) => Some(voxlab::transfer2d::TransferFunction2D::preset_or_file(
+            spec,
+        )?),
         None => None,
     };
     if let Some(name) = &a.tf_preset {
-        if voxlab::transfer2d::PRESETS_2D.iter().any(|(n, _)| n == name) {
+        if voxlab::transfer2d::PRESETS_2D
+            .iter()
+            .any(|(n, _)| n == name)
+        {
             tf2d = Some(voxlab::transfer2d::TransferFunction2D::preset(name)?);
         } else {
             tf = TransferFunction::preset(name).map_err(|_| {

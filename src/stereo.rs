@@ -37,7 +37,9 @@ use crate::render::{Renderer, Scene};
 use crate::settings::RenderSettings;
 
 /// How the two views are combined.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum StereoLayout {
     /// Left | right.
@@ -211,7 +213,10 @@ pub fn combine(left: &Frame, right: &Frame, layout: StereoLayout) -> Result<Fram
                 _ => (0.0, 1.0),
             };
             for i in 0..w * h {
-                let (l, r) = (&left.data[i * ch..(i + 1) * ch], &right.data[i * ch..(i + 1) * ch]);
+                let (l, r) = (
+                    &left.data[i * ch..(i + 1) * ch],
+                    &right.data[i * ch..(i + 1) * ch],
+                );
                 let o = &mut out.data[i * 4..(i + 1) * 4];
                 if ch == 1 {
                     let (l, r) = ((l[0] - lo) * scale, (r[0] - lo) * scale);

@@ -194,7 +194,12 @@ impl Widget {
     }
 
     fn validate(&self, i: usize) -> Result<()> {
-        let bad = |why: String| Err(Error::invalid("2D transfer function", format!("widget {i}: {why}")));
+        let bad = |why: String| {
+            Err(Error::invalid(
+                "2D transfer function",
+                format!("widget {i}: {why}"),
+            ))
+        };
         if self.rgba.iter().any(|c| !(0.0..=1.0).contains(c)) {
             return bad(format!("rgba {:?} must lie in [0, 1]", self.rgba));
         }
@@ -295,7 +300,7 @@ pub const PRESETS_2D: &[(&str, &str)] = &[
         "ct-soft-tissue-2d",
         include_str!("../data/tf/ct-soft-tissue-2d.json"),
     ),
-    ("ct-blood-2d", include_str!("../data/tf/ct-blood-2d.json"),),
+    ("ct-blood-2d", include_str!("../data/tf/ct-blood-2d.json")),
     ("ct-bone-2d", include_str!("../data/tf/ct-bone-2d.json")),
     (
         "microct-bone-2d",
@@ -337,7 +342,9 @@ impl TransferFunction2D {
         }
         if let Some(k) = self.faux_shading {
             if !(k.is_finite() && k > 0.0) {
-                return inv(format!("faux shading exponent {k} must be finite and positive"));
+                return inv(format!(
+                    "faux shading exponent {k} must be finite and positive"
+                ));
             }
         }
         if !(self.window.a.is_finite() && self.window.b.is_finite() && self.window.a != 0.0) {
@@ -447,7 +454,10 @@ impl TransferFunction2D {
 
     /// The largest opacity any widget reaches (faux shading's `α_max`).
     pub fn alpha_max(&self) -> f64 {
-        self.widgets.iter().map(Widget::alpha_max).fold(0.0, f64::max)
+        self.widgets
+            .iter()
+            .map(Widget::alpha_max)
+            .fold(0.0, f64::max)
     }
 
     /// The composited RGBA at mapped value `u` and gradient magnitude `g`, without
@@ -495,15 +505,12 @@ impl TransferFunction2D {
         let [nv, ng] = self.lut_size;
         let [d0, d1] = self.domain;
         let mut entries = vec![[0.0; 4]; nv * ng];
-        entries
-            .par_chunks_mut(nv)
-            .enumerate()
-            .for_each(|(j, row)| {
-                let g = self.gradient_at_axis(j as f64 / (ng - 1) as f64);
-                for (i, e) in row.iter_mut().enumerate() {
-                    *e = self.eval_shaded(d0 + (d1 - d0) * i as f64 / (nv - 1) as f64, g);
-                }
-            });
+        entries.par_chunks_mut(nv).enumerate().for_each(|(j, row)| {
+            let g = self.gradient_at_axis(j as f64 / (ng - 1) as f64);
+            for (i, e) in row.iter_mut().enumerate() {
+                *e = self.eval_shaded(d0 + (d1 - d0) * i as f64 / (nv - 1) as f64, g);
+            }
+        });
         Lut2 {
             domain: self.domain,
             window: self.window,

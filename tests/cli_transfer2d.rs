@@ -41,8 +41,18 @@ fn render_with_a_2d_widget_file_presets_and_faux_shading() {
     .unwrap();
     let out = d.join("a.npy");
     let o = voxlab(&[
-        "render", PHANTOM, "--tf2d", s(&tf), "--gradient-axis", "log", "--width", "20",
-        "--height", "16", "--out", s(&out),
+        "render",
+        PHANTOM,
+        "--tf2d",
+        s(&tf),
+        "--gradient-axis",
+        "log",
+        "--width",
+        "20",
+        "--height",
+        "16",
+        "--out",
+        s(&out),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, px) = npy_f32(&out);
@@ -51,8 +61,18 @@ fn render_with_a_2d_widget_file_presets_and_faux_shading() {
     for preset in ["ct-bone", "ct-bone-2d"] {
         let out = d.join(format!("{preset}.png"));
         let o = voxlab(&[
-            "render", PHANTOM, "--tf-preset", preset, "--faux-shading", "2", "--width",
-            "12", "--height", "12", "--out", s(&out),
+            "render",
+            PHANTOM,
+            "--tf-preset",
+            preset,
+            "--faux-shading",
+            "2",
+            "--width",
+            "12",
+            "--height",
+            "12",
+            "--out",
+            s(&out),
         ]);
         assert!(o.status.success(), "{preset}: {}", stderr(&o));
         assert!(out.exists());
@@ -65,8 +85,18 @@ fn stereo_layouts_have_their_sizes() {
     for (layout, w) in [("anaglyph", 20), ("side-by-side", 40), ("interlaced", 20)] {
         let out = d.join(format!("{layout}.npy"));
         let o = voxlab(&[
-            "render", PHANTOM, "--stereo", layout, "--eye-separation", "60", "--width", "20",
-            "--height", "14", "--out", s(&out),
+            "render",
+            PHANTOM,
+            "--stereo",
+            layout,
+            "--eye-separation",
+            "60",
+            "--width",
+            "20",
+            "--height",
+            "14",
+            "--out",
+            s(&out),
         ]);
         assert!(o.status.success(), "{layout}: {}", stderr(&o));
         assert!(stderr(&o).contains("frustum shift"), "{}", stderr(&o));
@@ -82,7 +112,10 @@ fn bad_2d_json_and_options_are_clear_errors() {
     let bad = d.join("bad.json");
     for (text, words) in [
         ("{ not json", "JSON"),
-        (r#"{"domain":[0,1],"gradient_max":0,"widgets":[]}"#, "gradient_max"),
+        (
+            r#"{"domain":[0,1],"gradient_max":0,"widgets":[]}"#,
+            "gradient_max",
+        ),
         (
             r#"{"domain":[0,1],"gradient_max":1,"widgets":[{"shape":{"type":"star"}}]}"#,
             "star",
@@ -98,15 +131,30 @@ fn bad_2d_json_and_options_are_clear_errors() {
         (vec!["--gradient-axis", "log"], "2D transfer function"),
         (vec!["--tf-preset", "ct-nothing"], "ct-nothing"),
         (vec!["--faux-shading", "-1"], "faux shading"),
-        (vec!["--tf2d", "ct-bone-2d", "--classification", "pre"], "post-classification"),
+        (
+            vec!["--tf2d", "ct-bone-2d", "--classification", "pre"],
+            "post-classification",
+        ),
         (vec!["--stereo", "anaglyph", "--ortho"], "orthographic"),
     ] {
-        let mut a = vec!["render", PHANTOM, "--width", "8", "--height", "8", "--out", s(&out)];
+        let mut a = vec![
+            "render",
+            PHANTOM,
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--out",
+            s(&out),
+        ];
         a.extend(args.iter().copied());
         let o = voxlab(&a);
         assert!(!o.status.success(), "{args:?}");
         let e = stderr(&o);
-        assert!(e.contains(words) && !e.contains("panicked"), "{args:?}: {e}");
+        assert!(
+            e.contains(words) && !e.contains("panicked"),
+            "{args:?}: {e}"
+        );
     }
     assert!(!out.exists());
 }

@@ -179,7 +179,10 @@ fn gpu_converted_1d_transfer_function_renders_like_the_1d_one() {
             .zip(&two.image.data)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        eprintln!("GPU 1D vs converted 2D ({:?}): max |Δ| {d:e}", tf.interpolation);
+        eprintln!(
+            "GPU 1D vs converted 2D ({:?}): max |Δ| {d:e}",
+            tf.interpolation
+        );
         assert!(d <= 1e-6, "{d:e}");
     }
 }

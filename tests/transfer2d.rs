@@ -168,7 +168,10 @@ fn the_table_holds_the_function_at_nodes_and_is_bilinear_between() {
         for j in 0..17 {
             // The axis map inverts its inverse.
             let g = t.gradient_at_axis(j as f64 / 16.0);
-            assert!((r.gradient_coordinate(g) - j as f64).abs() < 1e-9, "{axis:?} row {j}");
+            assert!(
+                (r.gradient_coordinate(g) - j as f64).abs() < 1e-9,
+                "{axis:?} row {j}"
+            );
             for i in 0..33 {
                 let (u, g, want) = node(i, j);
                 let got = r.classify2d(u, g);
@@ -186,7 +189,12 @@ fn the_table_holds_the_function_at_nodes_and_is_bilinear_between() {
             let u = (i as f64 + fx) / 32.0;
             let y = j as f64 + fy;
             let g = t.gradient_at_axis(y / 16.0);
-            let (a, b, c, d) = (node(i, j).2, node(i + 1, j).2, node(i, j + 1).2, node(i + 1, j + 1).2);
+            let (a, b, c, d) = (
+                node(i, j).2,
+                node(i + 1, j).2,
+                node(i, j + 1).2,
+                node(i + 1, j + 1).2,
+            );
             let got = r.classify2d(u, g);
             for k in 0..4 {
                 let r0 = a[k] + fx * (b[k] - a[k]);
@@ -202,7 +210,11 @@ fn the_table_holds_the_function_at_nodes_and_is_bilinear_between() {
 fn json_round_trips_and_bad_json_is_a_clear_error() {
     for (name, _) in PRESETS_2D {
         let t = TransferFunction2D::preset(name).unwrap();
-        assert_eq!(TransferFunction2D::from_json(&t.to_json()).unwrap(), t, "{name}");
+        assert_eq!(
+            TransferFunction2D::from_json(&t.to_json()).unwrap(),
+            t,
+            "{name}"
+        );
     }
     let t = tf2d(phantom_widgets(), GradientAxis::Log, [16, 8]);
     assert_eq!(TransferFunction2D::from_json(&t.to_json()).unwrap(), t);
@@ -211,13 +223,25 @@ fn json_round_trips_and_bad_json_is_a_clear_error() {
     assert_eq!(t.lut_size, voxlab::transfer2d::DEFAULT_LUT_SIZE_2D);
     for (bad, words) in [
         ("{", "EOF"),
-        (&ok.replace("\"gradient_max\":1", "\"gradient_max\":-1"), "gradient_max"),
+        (
+            &ok.replace("\"gradient_max\":1", "\"gradient_max\":-1"),
+            "gradient_max",
+        ),
         (&ok.replace("ellipse", "hexagon"), "hexagon"),
         (&ok.replace("[0.1,0.2]", "[0.1,0]"), "radii"),
         (&ok.replace("[1,1,1,0.5]", "[1,1,2,0.5]"), "rgba"),
         (&ok.replace("\"rgba\"", "\"border\":3,\"rgba\""), "border"),
-        (r#"{"domain":[0,1],"gradient_max":1,"widgets":[]}"#, "widget"),
-        (&ok.replace("\"gradient_max\":1", "\"gradient_max\":1,\"lut_size\":[1,4]"), "lut_size"),
+        (
+            r#"{"domain":[0,1],"gradient_max":1,"widgets":[]}"#,
+            "widget",
+        ),
+        (
+            &ok.replace(
+                "\"gradient_max\":1",
+                "\"gradient_max\":1,\"lut_size\":[1,4]",
+            ),
+            "lut_size",
+        ),
     ] {
         let e = TransferFunction2D::from_json(bad).unwrap_err().to_string();
         assert!(e.contains(words), "{bad}: {e}");
@@ -250,7 +274,10 @@ fn scene(n: usize, w: usize, h: usize) -> Scene {
 }
 
 fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!((a.width, a.height, a.channels), (b.width, b.height, b.channels));
+    assert_eq!(
+        (a.width, a.height, a.channels),
+        (b.width, b.height, b.channels)
+    );
     a.data
         .iter()
         .zip(&b.data)
@@ -278,7 +305,10 @@ fn a_converted_1d_transfer_function_renders_like_the_1d_one() {
         s.transfer_2d = Some(TransferFunction2D::from_1d(tf, s.lut_size, 0.1));
         let two = render::<f64>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
         let two32 = render::<f32>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
-        let (d, d32) = (max_diff(&one.image, &two.image), max_diff(&one32.image, &two32.image));
+        let (d, d32) = (
+            max_diff(&one.image, &two.image),
+            max_diff(&one32.image, &two32.image),
+        );
         eprintln!("1D vs converted 2D, shading {shading}: f64 {d:e}, f32 {d32:e}");
         assert!(d <= 1e-12 && d32 <= 1e-6, "{d:e} {d32:e}");
         assert!(one.image.data.iter().any(|&v| v > 0.05));
@@ -316,7 +346,9 @@ fn gradient_magnitude_in_world_units_selects_what_is_seen() {
     .unwrap();
     let mut s = RenderSettings::default();
     s.shading.enabled = false;
-    let want = render::<f64>(&vol, &constant, &cam, &s, none()).unwrap().image;
+    let want = render::<f64>(&vol, &constant, &cam, &s, none())
+        .unwrap()
+        .image;
     let band = |g: [f64; 2]| TransferFunction2D {
         name: String::new(),
         domain: [-1.0, 20.0],
@@ -336,11 +368,15 @@ fn gradient_magnitude_in_world_units_selects_what_is_seen() {
         faux_shading: None,
     };
     s.transfer_2d = Some(band([0.0, 2.5]));
-    let got = render::<f64>(&vol, &constant, &cam, &s, none()).unwrap().image;
+    let got = render::<f64>(&vol, &constant, &cam, &s, none())
+        .unwrap()
+        .image;
     let d = max_diff(&want, &got);
     assert!(d < 1e-12, "{d:e}");
     s.transfer_2d = Some(band([2.5, 8.0]));
-    let got = render::<f64>(&vol, &constant, &cam, &s, none()).unwrap().image;
+    let got = render::<f64>(&vol, &constant, &cam, &s, none())
+        .unwrap()
+        .image;
     for px in got.data.chunks(4) {
         assert_eq!(px, &[0.0, 0.0, 0.0, 1.0]);
     }
@@ -388,7 +424,7 @@ fn bezier_curves_match_the_bernstein_formula() {
             let u = s as f64 / 20.0;
             let x = v[i] + u * h;
             let got = tf.eval(x);
-            for c in 0..4 {
+            for (c, got_c) in got.iter().enumerate() {
                 let b = [
                     pts[i].rgba[c],
                     pts[i].rgba[c] + h * slope(i, c) / 3.0,
@@ -401,7 +437,7 @@ fn bezier_curves_match_the_bernstein_formula() {
                     want += binom * u.powi(k as i32) * (1.0 - u).powi(3 - k as i32) * b[k];
                 }
                 let want = want.clamp(0.0, 1.0);
-                max_err = max_err.max((got[c] - want).abs());
+                max_err = max_err.max((got_c - want).abs());
             }
         }
     }
@@ -435,7 +471,10 @@ fn faux_shading_darkens_colour_by_relative_opacity() {
         }
         assert_eq!(e[3], r[3]);
     }
-    assert_eq!(faux_shade([0.8, 0.4, 0.2, 0.25], 0.5, 1.0), [0.4, 0.2, 0.1, 0.25]);
+    assert_eq!(
+        faux_shade([0.8, 0.4, 0.2, 0.25], 0.5, 1.0),
+        [0.4, 0.2, 0.1, 0.25]
+    );
     let back = TransferFunction::from_json(&tf.to_json()).unwrap();
     assert_eq!(back.faux_shading, Some(2.0));
     tf.faux_shading = Some(-1.0);
@@ -458,7 +497,10 @@ fn hounsfield_presets_exist_in_1d_and_2d_and_round_trip() {
         ("ct-blood", 66.0),
         ("ct-bone", 1000.0),
     ] {
-        assert!(TransferFunction::preset(name).unwrap().eval(hu)[3] > 0.0, "{name}");
+        assert!(
+            TransferFunction::preset(name).unwrap().eval(hu)[3] > 0.0,
+            "{name}"
+        );
     }
 }
 
@@ -487,11 +529,18 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
     let pair = voxlab::stereo::render_pair(&r, &sc, &s, 65.0, 540.0, none()).unwrap();
     // s = e·H/(4 D tan 15°) = 65·18/(4·540·0.268) = 2.02 → 2 px.
     assert_eq!(pair.cameras.shift_px, 2);
-    assert!(max_diff(&pair.left, &pair.right) > 0.01, "the eyes see differently");
+    assert!(
+        max_diff(&pair.left, &pair.right) > 0.01,
+        "the eyes see differently"
+    );
     let (l, rt) = (&pair.left, &pair.right);
     let ana = combine(l, rt, StereoLayout::Anaglyph).unwrap();
     for i in 0..l.width * l.height {
-        let (a, p, q) = (&ana.data[i * 4..i * 4 + 4], &l.data[i * 4..], &rt.data[i * 4..]);
+        let (a, p, q) = (
+            &ana.data[i * 4..i * 4 + 4],
+            &l.data[i * 4..],
+            &rt.data[i * 4..],
+        );
         assert_eq!(a[0], p[0]);
         assert_eq!(a[1], q[1]);
         assert_eq!(a[2], q[2]);

@@ -554,7 +554,9 @@ fn classify_sample<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>) -> (
         None => {
             let c = match &s.lut2 {
                 // The world-space gradient magnitude, as the shading sees it.
-                Some(l2) => l2.classify2d(field.value(p), s.normal.mul_vec(field.gradient(p)).length()),
+                Some(l2) => {
+                    l2.classify2d(field.value(p), s.normal.mul_vec(field.gradient(p)).length())
+                }
                 None => s.lut.classify(field.value(p)),
             };
             ([c[0], c[1], c[2]], c[3])
