@@ -34,6 +34,8 @@ const PI: f32 = 3.14159265358979323846;
 @group(0) @binding(5) var<storage, read> lut: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> out_pixels: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> out_samples: array<u32>;
+// The 2D transfer function's table (one dummy entry when it is off).
+@group(0) @binding(8) var<storage, read> lut2d: array<vec4<f32>>;
 
 // ---------------------------------------------------------------- kernels
 // mirrors src/cpu/filter.rs: weight_tent
@@ -186,6 +188,12 @@ fn field_gradient(p: vec3<f32>) -> vec3<f32> {
 // mirrors src/cpu/raycast.rs: classify_sample; returns (rgb, alpha per reference step)
 fn classify_sample(p: vec3<f32>) -> vec4<f32> {
     if (params.flags.x == 0u) {
+        if (params.tf2d_b.w == 1.0) {
+            // The world-space gradient magnitude, as shade_sample sees it.
+            let g = field_gradient(p);
+            let gw = vec3<f32>(dot(params.normal_0.xyz, g), dot(params.normal_1.xyz, g), dot(params.normal_2.xyz, g));
+            return classify2d(sample_value(p), length(gw));
+        }
         return classify(sample_value(p));
     }
     let s = sample_tex(preclassified, p);

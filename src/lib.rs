@@ -57,7 +57,9 @@ pub mod phantom;
 pub mod real;
 pub mod render;
 pub mod settings;
+pub mod stereo;
 pub mod transfer;
+pub mod transfer2d;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -233,6 +233,21 @@ struct SceneArgs {
     /// interpolation (real GPUs quantise its weights to about 8 bits).
     #[arg(long)]
     hardware_filtering: bool,
+    /// 2D transfer function over (value, gradient magnitude): a JSON file of widgets
+    /// or a 2D preset name (ct-bone-2d, …); DVR with post-classification.
+    #[arg(long)]
+    tf2d: Option<String>,
+    /// Gradient-magnitude axis of the 2D transfer function: linear (g/g_max) or log
+    /// (ln(1 + g/g0)/ln(1 + g_max/g0)); overrides the JSON's.
+    #[arg(long, value_enum)]
+    gradient_axis: Option<voxlab::transfer2d::GradientAxis>,
+    /// A named preset: a 1D one (ct-air, ct-fat, ct-water, ct-soft-tissue, ct-blood,
+    /// ct-bone, … as for --tf) or a 2D one (ct-bone-2d, …, microct-bone-2d).
+    #[arg(long)]
+    tf_preset: Option<String>,
+    /// Faux shading (limb darkening) exponent k: colours become c·(α/α_max)^k.
+    #[arg(long, allow_negative_numbers = true)]
+    faux_shading: Option<f64>,
 }
 
 /// Where the camera looks from: an axis view, or an orbit around the volume.
@@ -403,6 +418,18 @@ struct RenderArgs {
     /// or directly (spectra of the classified volume). DVR only, no shading.
     #[arg(long, value_enum)]
     sampling: Option<voxlab::cpu::adaptive::Sampling>,
+    /// Render a stereo pair (parallel eyes, off-axis frusta) laid out as anaglyph
+    /// (red = left, green/blue = right), side-by-side (left | right) or interlaced
+    /// (even rows left, odd rows right).
+    #[arg(long, value_enum)]
+    stereo: Option<voxlab::stereo::StereoLayout>,
+    /// Stereo: distance between the eyes in mm.
+    #[arg(long, default_value_t = 65.0)]
+    eye_separation: f64,
+    /// Stereo: distance of the zero-parallax plane in mm (default: the eye's distance
+    /// to the volume centre).
+    #[arg(long)]
+    convergence: Option<f64>,
 }
 
 #[derive(Args)]
@@ -647,8 +674,53 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };
+    let mut tf2d = match &a.tf2d {
+        Some(spec) => Some(voxlab::transfer2d::TransferFunction2D::preset_or_file(
+            spec,
+        )?),
+        None => None,
+    };
+    if let Some(name) = &a.tf_preset {
+        if voxlab::transfer2d::PRESETS_2D
+            .iter()
+            .any(|(n, _)| n == name)
+        {
+            tf2d = Some(voxlab::transfer2d::TransferFunction2D::preset(name)?);
+        } else {
+            tf = TransferFunction::preset(name).map_err(|_| {
+                let mut names: Vec<&str> =
+                    voxlab::transfer::PRESETS.iter().map(|(n, _)| *n).collect();
+                names.extend(voxlab::transfer2d::PRESETS_2D.iter().map(|(n, _)| *n));
+                Error::invalid(
+                    "--tf-preset",
+                    format!("'{name}' is not one of {}", names.join(", ")),
+                )
+            })?;
+        }
+    }
+    if let Some(axis) = a.gradient_axis {
+        match tf2d.as_mut() {
+            Some(t) => t.gradient_axis = axis,
+            None => {
+                return Err(Error::invalid(
+                    "--gradient-axis",
+                    "needs a 2D transfer function (--tf2d or a 2D --tf-preset)",
+                ))
+            }
+        }
+    }
+    if let Some(k) = a.faux_shading {
+        tf.faux_shading = Some(k);
+        if let Some(t) = tf2d.as_mut() {
+            t.faux_shading = Some(k);
+        }
+        tf.validate()?;
+    }
     if let (Some(w), Some(l)) = (a.window, a.level) {
         tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
+        if let Some(t) = tf2d.as_mut() {
+            t.window = WindowMap::from_window_level(w, l, t.domain)?;
+        }
     }
     let dims = volume.dims();
     let camera = match &a.view.axis {
@@ -723,6 +795,10 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
             s
         }
     };
+    let mut settings = settings;
+    if tf2d.is_some() {
+        settings.transfer_2d = tf2d;
+    }
     settings.validate()?;
     let scene = Scene {
         volume,
@@ -761,6 +837,43 @@ fn render(r: RenderArgs) -> Result<()> {
         "rows",
     );
     let t = std::time::Instant::now();
+    if let Some(layout) = a.stereo {
+        let v = &scene.volume;
+        let d = v.dims().map(|n| (n as f64 - 1.0) * 0.5);
+        let center = v.affine().transform_point3(glam::DVec3::from_array(d));
+        let conv = a
+            .convergence
+            .unwrap_or_else(|| (center - scene.camera.eye).dot(scene.camera.forward));
+        pb.set_length(2 * scene.camera.height as u64);
+        let pair = voxlab::stereo::render_pair(
+            &renderer,
+            &scene,
+            &settings,
+            a.eye_separation,
+            conv,
+            &|done, _| pb.set_position(done as u64),
+        )?;
+        pb.finish_and_clear();
+        let img = voxlab::stereo::combine(&pair.left, &pair.right, layout)?;
+        let png = PngOptions {
+            sixteen_bit: a.sixteen_bit,
+            range: None,
+        };
+        img.save(&a.out, png)?;
+        eprintln!(
+            "wrote {} ({}×{}, stereo {:?}, eyes {} mm apart, frustum shift {} px, zero parallax at {:.1} mm, {:.2} s on {})",
+            a.out.display(),
+            img.width,
+            img.height,
+            layout,
+            a.eye_separation,
+            pair.cameras.shift_px,
+            pair.cameras.convergence_mm,
+            t.elapsed().as_secs_f64(),
+            who
+        );
+        return Ok(());
+    }
     let out = renderer
         .render(&scene, &settings, &|done, _| pb.set_position(done as u64))?
         .output;

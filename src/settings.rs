@@ -190,6 +190,11 @@ pub struct RenderSettings {
     /// instead of the exact manual interpolation (trilinear filter only; the CPU has
     /// one trilinear path and ignores this).
     pub hardware_filtering: bool,
+    /// DVR with post-classification only: classify samples by (value, gradient
+    /// magnitude) through this 2D transfer function instead of the scene's 1D one
+    /// (`transfer2d`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transfer_2d: Option<crate::transfer2d::TransferFunction2D>,
 }
 
 impl Default for RenderSettings {
@@ -210,6 +215,7 @@ impl Default for RenderSettings {
             lut_size: crate::transfer::DEFAULT_LUT_SIZE,
             sample_count: false,
             hardware_filtering: false,
+            transfer_2d: None,
         }
     }
 }
@@ -278,6 +284,16 @@ impl RenderSettings {
         }
         if !self.miss_value.is_finite() {
             return Err(Error::invalid("miss value", "must be finite"));
+        }
+        if let Some(t) = &self.transfer_2d {
+            t.validate()?;
+            if self.mode == Mode::Dvr && self.classification == Classification::Pre {
+                return Err(Error::invalid(
+                    "classification",
+                    "a 2D transfer function classifies interpolated samples by their \
+                     gradient magnitude: it needs post-classification",
+                ));
+            }
         }
         Ok(())
     }

@@ -71,6 +71,104 @@ pub struct TransferFunction {
     /// The window map from raw data values into the domain.
     #[serde(default)]
     pub window: WindowMap,
+    /// How colour and opacity run between control points (piecewise linear unless
+    /// the JSON says `"interpolation": "bezier"`).
+    #[serde(default, skip_serializing_if = "Interpolation::is_linear")]
+    pub interpolation: Interpolation,
+    /// Faux shading (limb darkening) exponent `k`: colours become
+    /// `c·(α/α_max)^k` in the lookup table (see [`faux_shade`]); absent = off.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub faux_shading: Option<f64>,
+}
+
+/// How a transfer function runs between its control points, per channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interpolation {
+    /// Straight lines between control points.
+    #[default]
+    Linear,
+    /// One cubic Bézier segment per pair of neighbouring control points and channel,
+    /// passing through the control points (Fluør 2006 §5.1.2). On `[v_i, v_{i+1}]`,
+    /// `h = v_{i+1} − v_i`, `u = (v − v_i)/h`:
+    /// `y(u) = Σ_k C(3,k) u^k (1−u)^(3−k) b_k` with `b_0 = y_i`, `b_3 = y_{i+1}`,
+    /// `b_1 = y_i + h m_i/3`, `b_2 = y_{i+1} − h m_{i+1}/3`. The inner control points sit
+    /// at abscissae `v_i + h/3` and `v_i + 2h/3`, so the curve is a function of the value
+    /// (a C¹ cubic Hermite spline in Bézier form). Slopes `m_i` are Catmull–Rom:
+    /// `(y_{i+1} − y_{i−1})/(v_{i+1} − v_{i−1})`, one-sided at the ends, 0 across
+    /// coincident values. Results are clamped to [0, 1] (the curve may overshoot).
+    Bezier,
+}
+
+impl Interpolation {
+    pub fn is_linear(&self) -> bool {
+        *self == Interpolation::Linear
+    }
+}
+
+/// The cubic Bernstein polynomials `B_k(u) = C(3,k) u^k (1−u)^(3−k)`.
+#[inline]
+pub fn bernstein3(u: f64) -> [f64; 4] {
+    let v = 1.0 - u;
+    [v * v * v, 3.0 * u * v * v, 3.0 * u * u * v, u * u * u]
+}
+
+/// Faux shading (limb darkening, Fluør 2006 §2.5.3 after Helgeland & Andreassen 2004):
+/// the colour is ramped to black as the opacity ramps to zero,
+/// `c' = c·(α/α_max)^k`, where `α_max` is the transfer function's largest opacity and
+/// `k > 0` sets how fast (k = 1: proportionally). Opacity is unchanged. Applied to the
+/// lookup table once, so rendering costs nothing extra.
+#[inline]
+pub fn faux_shade(rgba: [f64; 4], alpha_max: f64, k: f64) -> [f64; 4] {
+    if alpha_max <= 0.0 {
+        return [0.0, 0.0, 0.0, rgba[3]];
+    }
+    let f = (rgba[3] / alpha_max).clamp(0.0, 1.0).powf(k);
+    [rgba[0] * f, rgba[1] * f, rgba[2] * f, rgba[3]]
+}
+
+/// Evaluates control points at `u` with the given interpolation (exact, no table);
+/// constant beyond the first and last point.
+pub fn eval_points(pts: &[ControlPoint], interpolation: Interpolation, u: f64) -> [f64; 4] {
+    if u <= pts[0].value {
+        return pts[0].rgba;
+    }
+    let last = pts[pts.len() - 1];
+    if u >= last.value {
+        return last.rgba;
+    }
+    // First point strictly greater than u.
+    let i = pts.partition_point(|p| p.value <= u);
+    let (p0, p1) = (pts[i - 1], pts[i]);
+    let h = p1.value - p0.value;
+    let w = (u - p0.value) / h;
+    match interpolation {
+        Interpolation::Linear => {
+            std::array::from_fn(|c| p0.rgba[c] + w * (p1.rgba[c] - p0.rgba[c]))
+        }
+        Interpolation::Bezier => {
+            let b = bernstein3(w);
+            let (m0, m1) = (bezier_slope(pts, i - 1), bezier_slope(pts, i));
+            std::array::from_fn(|c| {
+                let y0 = p0.rgba[c];
+                let y1 = p1.rgba[c];
+                let c1 = y0 + h * m0[c] / 3.0;
+                let c2 = y1 - h * m1[c] / 3.0;
+                (b[0] * y0 + b[1] * c1 + b[2] * c2 + b[3] * y1).clamp(0.0, 1.0)
+            })
+        }
+    }
+}
+
+/// The Catmull–Rom slope of every channel at control point `i` (see
+/// [`Interpolation::Bezier`]).
+pub fn bezier_slope(pts: &[ControlPoint], i: usize) -> [f64; 4] {
+    let (a, b) = (i.saturating_sub(1), (i + 1).min(pts.len() - 1));
+    let dv = pts[b].value - pts[a].value;
+    if dv <= 0.0 {
+        return [0.0; 4];
+    }
+    std::array::from_fn(|c| (pts[b].rgba[c] - pts[a].rgba[c]) / dv)
 }
 
 /// Built-in presets: (name, JSON).
@@ -89,6 +187,22 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../data/tf/marschner-lobb.json"),
     ),
     ("grayscale", include_str!("../data/tf/grayscale.json")),
+    // Hounsfield-range presets (Fluør 2006 Table 3.1); see docs/transfer-functions-2d.md.
+    ("ct-air", include_str!("../data/tf/ct-air.json")),
+    ("ct-fat", include_str!("../data/tf/ct-fat.json")),
+    ("ct-water", include_str!("../data/tf/ct-water.json")),
+    ("ct-blood", include_str!("../data/tf/ct-blood.json")),
+];
+
+/// The Hounsfield-range CT presets, by tissue (each also exists as a 2D transfer
+/// function named `NAME-2d`, see `transfer2d::PRESETS_2D`).
+pub const HU_PRESETS: &[&str] = &[
+    "ct-air",
+    "ct-fat",
+    "ct-water",
+    "ct-soft-tissue",
+    "ct-blood",
+    "ct-bone",
 ];
 
 impl TransferFunction {
@@ -124,6 +238,14 @@ impl TransferFunction {
                 return Err(Error::invalid(
                     "transfer function",
                     format!("point {i} is out of order (values must not decrease)"),
+                ));
+            }
+        }
+        if let Some(k) = self.faux_shading {
+            if !(k.is_finite() && k > 0.0) {
+                return Err(Error::invalid(
+                    "faux shading",
+                    format!("exponent {k} must be finite and positive"),
                 ));
             }
         }
@@ -214,24 +336,32 @@ impl TransferFunction {
                 },
             ],
             window: WindowMap::default(),
+            interpolation: Interpolation::Linear,
+            faux_shading: None,
         }
     }
 
-    /// Piecewise-linear evaluation at mapped value `u` (exact, no table).
+    /// Evaluation at mapped value `u` (exact, no table), piecewise linear or Bézier
+    /// per [`Interpolation`]; without faux shading.
     pub fn eval(&self, u: f64) -> [f64; 4] {
-        let pts = &self.points;
-        if u <= pts[0].value {
-            return pts[0].rgba;
+        eval_points(&self.points, self.interpolation, u)
+    }
+
+    /// The largest opacity of the control points (faux shading's `α_max`; Bézier
+    /// overshoot is clamped to [0, 1] and may exceed it slightly, which the clamp in
+    /// [`faux_shade`] absorbs).
+    pub fn alpha_max(&self) -> f64 {
+        self.points.iter().map(|p| p.rgba[3]).fold(0.0, f64::max)
+    }
+
+    /// [`eval`](Self::eval) followed by faux shading when it is on: what the lookup
+    /// table holds.
+    pub fn eval_shaded(&self, u: f64) -> [f64; 4] {
+        let c = self.eval(u);
+        match self.faux_shading {
+            Some(k) => faux_shade(c, self.alpha_max(), k),
+            None => c,
         }
-        let last = pts[pts.len() - 1];
-        if u >= last.value {
-            return last.rgba;
-        }
-        // First point strictly greater than u.
-        let i = pts.partition_point(|p| p.value <= u);
-        let (p0, p1) = (pts[i - 1], pts[i]);
-        let w = (u - p0.value) / (p1.value - p0.value);
-        std::array::from_fn(|c| p0.rgba[c] + w * (p1.rgba[c] - p0.rgba[c]))
     }
 
     /// The lookup table of `n ≥ 2` entries over the domain.
@@ -239,7 +369,7 @@ impl TransferFunction {
         let n = n.max(2);
         let [d0, d1] = self.domain;
         let entries = (0..n)
-            .map(|k| self.eval(d0 + (d1 - d0) * k as f64 / (n - 1) as f64))
+            .map(|k| self.eval_shaded(d0 + (d1 - d0) * k as f64 / (n - 1) as f64))
             .collect();
         Lut {
             domain: self.domain,
@@ -343,6 +473,8 @@ mod tests {
                 },
             ],
             window: WindowMap { a: 2.0, b: -0.5 },
+            interpolation: Interpolation::Linear,
+            faux_shading: None,
         };
         tf.validate().unwrap();
         // 5 entries at 0, .25, .5, .75, 1: the TF is linear between entries, so the

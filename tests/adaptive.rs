@@ -29,6 +29,8 @@ fn constant_tf(rgba: [f64; 4]) -> TransferFunction {
         domain: [0.0, 1.0],
         points: vec![ControlPoint { value: 0.0, rgba }],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }
 

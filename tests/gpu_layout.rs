@@ -37,6 +37,8 @@ fn raycast_params_layout_agrees() {
         ("image", offset_of!(RaycastParams, image)),
         ("flags", offset_of!(RaycastParams, flags)),
         ("flags2", offset_of!(RaycastParams, flags2)),
+        ("tf2d_a", offset_of!(RaycastParams, tf2d_a)),
+        ("tf2d_b", offset_of!(RaycastParams, tf2d_b)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

@@ -220,6 +220,8 @@ fn dvr_through_a_homogeneous_slab_is_beer_lambert() {
             rgba: [rgb[0], rgb[1], rgb[2], alpha0],
         }],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     };
     let tau = -(1.0f64 - alpha0).ln();
     let cams = [
@@ -300,6 +302,8 @@ fn early_ray_termination_stops_at_the_threshold() {
             rgba: [1.0, 1.0, 1.0, 0.1],
         }],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     };
     let cam = Camera::axis_view(dims, v.affine(), AxisView::PlusZ, 4, 4).unwrap();
     let base = RenderSettings {
@@ -535,6 +539,8 @@ fn preclassification_composites_classified_voxels_on_axis_views() {
             },
         ],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     };
     let lut = tf.lut(4096).to_real::<f64>();
     let cam = Camera::axis_view(dims, v.affine(), AxisView::PlusZ, dims[0], dims[1]).unwrap();

@@ -39,4 +39,8 @@ struct RaycastParams {
     flags: vec4<u32>,
     // gradient method, hardware trilinear, first row of this tile, rows in this tile.
     flags2: vec4<u32>,
+    // 2D transfer function: value scale, value offset, nv − 1, ng − 1 (classify2d.wgsl).
+    tf2d_a: vec4<f32>,
+    // gradient scale, 1/g0, log axis (1/0), 2D transfer function on (1/0).
+    tf2d_b: vec4<f32>,
 }

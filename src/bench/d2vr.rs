@@ -120,6 +120,8 @@ pub fn d2vr_tf() -> TransferFunction {
             p(0.8, [1.0, 1.0, 0.9, 0.6]),
         ],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }
 

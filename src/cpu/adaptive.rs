@@ -751,5 +751,7 @@ pub fn medical_tf(lo: f64, hi: f64, threshold: f64, width: f64) -> TransferFunct
             p(hi, [1.0, 1.0, 0.95, 0.5]),
         ],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }

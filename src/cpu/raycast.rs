@@ -15,6 +15,8 @@
 //!   every voxel and interpolates opacity-weighted colours `(αr, αg, αb, α)`.
 //!   Phong shading with the normal `n = −∇f/|∇f|` (two-sided):
 //!   `c' = c (k_a + k_d |n·L|) + k_s |n·H|^s`.
+//!   With a 2D transfer function (`RenderSettings::transfer_2d`, see `transfer2d`)
+//!   post-classification reads the table at (value, |world-space gradient|).
 //! - **MIP / MinIP**: the maximum / minimum sample.
 //! - **X-ray**: `Σ f(p_k) Δℓ_k`, the line integral in value × mm.
 //!
@@ -244,6 +246,8 @@ struct Setup<R> {
     step: R,
     ref_step: R,
     lut: LutR<R>,
+    /// The 2D transfer function's table (DVR, post-classification), if any.
+    lut2: Option<crate::transfer2d::Lut2R<R>>,
     pre: Option<[Grid<R>; 4]>,
     filter: Filter,
     k: ShadingR<R>,
@@ -354,6 +358,10 @@ pub fn render_field<R: Real, F: Field<R>>(
         step: R::of(settings.step),
         ref_step: R::of(settings.reference_step),
         lut,
+        lut2: match (&settings.transfer_2d, settings.mode) {
+            (Some(t2), Mode::Dvr) => Some(t2.lut().to_real::<R>()),
+            _ => None,
+        },
         pre,
         filter: settings.filter,
         k: ShadingR {
@@ -544,7 +552,13 @@ fn cast_ray<R: Real, F: Field<R>>(
 fn classify_sample<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>) -> ([R; 3], R) {
     match &s.pre {
         None => {
-            let c = s.lut.classify(field.value(p));
+            let c = match &s.lut2 {
+                // The world-space gradient magnitude, as the shading sees it.
+                Some(l2) => {
+                    l2.classify2d(field.value(p), s.normal.mul_vec(field.gradient(p)).length())
+                }
+                None => s.lut.classify(field.value(p)),
+            };
             ([c[0], c[1], c[2]], c[3])
         }
         Some(g) => {

@@ -67,12 +67,18 @@ pub struct RaycastParams {
     pub image: [u32; 4],
     pub flags: [u32; 4],
     pub flags2: [u32; 4],
+    /// 2D transfer function: value scale, value offset, nv − 1, ng − 1.
+    pub tf2d_a: [f32; 4],
+    /// 2D transfer function: gradient scale, 1/g0, log axis, on.
+    pub tf2d_b: [f32; 4],
 }
 
 /// The WGSL struct shared by both shaders.
 pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/raycast_params.wgsl");
 /// The transfer-function lookup shared by both shaders.
 pub const CLASSIFY_WGSL: &str = include_str!("../../shaders/shared/classify.wgsl");
+/// The 2D transfer-function lookup (`transfer2d`), used by the ray caster.
+pub const CLASSIFY2D_WGSL: &str = include_str!("../../shaders/shared/classify2d.wgsl");
 /// The ray-casting shader (without the shared parts).
 pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
 /// Rays, boxes, steps and Phong shading, shared with D²VR (`shaders/shared/rays.wgsl`).
@@ -249,10 +255,11 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
         Filter::Trilinear if settings.hardware_filtering => STUB_TAPS.to_string(),
         f => accumulate_taps_wgsl(f),
     };
-    let on_the_fly =
-        settings.mode == Mode::Dvr && settings.shading.enabled && !settings.precompute_gradients;
+    let on_the_fly = settings.mode == Mode::Dvr
+        && (settings.shading.enabled || settings.transfer_2d.is_some())
+        && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
-    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{RAYS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
 }
 
 /// The complete set-up shader: the shared struct and lookup, and the passes.
@@ -344,6 +351,10 @@ pub fn raycast_params(
             ),
         ));
     }
+    let tf2d = match (&settings.transfer_2d, settings.mode) {
+        (Some(t), Mode::Dvr) => t.coordinates().uniforms(),
+        _ => [[0.0; 4]; 2],
+    };
     let gradient = gradient_method_id(settings.gradient);
     Ok(RaycastParams {
         eye: v4(camera.eye, eye_w),
@@ -387,10 +398,14 @@ pub fn raycast_params(
         flags: [
             (settings.mode == Mode::Dvr && settings.classification == Classification::Pre) as u32,
             (settings.mode == Mode::Dvr && s.enabled) as u32,
-            (settings.mode == Mode::Dvr && s.enabled && settings.precompute_gradients) as u32,
+            (settings.mode == Mode::Dvr
+                && (s.enabled || settings.transfer_2d.is_some())
+                && settings.precompute_gradients) as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
         ],
         flags2: [gradient, hardware as u32, 0, camera.height as u32],
+        tf2d_a: tf2d[0],
+        tf2d_b: tf2d[1],
     })
 }
 
@@ -472,6 +487,7 @@ pub fn render(
             buffer_entry(5, storage(true)),
             buffer_entry(6, storage(false)),
             buffer_entry(7, storage(false)),
+            buffer_entry(8, storage(true)),
         ],
     });
     let pipeline = compute_pipeline(ctx, "raycast", &raycast_module, "raycast", &layout)?;
@@ -506,6 +522,15 @@ pub fn render(
     let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("lut"),
         contents: bytemuck::cast_slice(&lut.entries),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let lut2_entries: Vec<[f32; 4]> = match (&settings.transfer_2d, settings.mode) {
+        (Some(t), Mode::Dvr) => t.lut().to_real::<f32>().entries,
+        _ => vec![[0.0; 4]],
+    };
+    let lut2_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("lut2d"),
+        contents: bytemuck::cast_slice(&lut2_entries),
         usage: wgpu::BufferUsages::STORAGE,
     });
     ctx.wait()?;
@@ -595,6 +620,7 @@ pub fn render(
                 lut_buf.as_entire_binding(),
                 out_buf.as_entire_binding(),
                 cnt_buf.as_entire_binding(),
+                lut2_buf.as_entire_binding(),
             ],
         );
         let t_k = Instant::now();

@@ -117,5 +117,7 @@ pub fn tf() -> TransferFunction {
             p(1.5, [1.0, 1.0, 0.9, 0.9]),
         ],
         window: WindowMap::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }
