@@ -37,6 +37,11 @@ fn raycast_params_layout_agrees() {
         ("image", offset_of!(RaycastParams, image)),
         ("flags", offset_of!(RaycastParams, flags)),
         ("flags2", offset_of!(RaycastParams, flags2)),
+        ("accel", offset_of!(RaycastParams, accel)),
+        ("skip_cells", offset_of!(RaycastParams, skip_cells)),
+        ("skip_tf", offset_of!(RaycastParams, skip_tf)),
+        ("clip_lo", offset_of!(RaycastParams, clip_lo)),
+        ("clip_hi", offset_of!(RaycastParams, clip_hi)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

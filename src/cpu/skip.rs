@@ -241,7 +241,7 @@ impl<R: Real> Skipper<R> {
 }
 
 /// An Amanatides–Woo walk through the cells of a grid along `o + d·t`, `t ∈ [t, t_end]`.
-/// Mirrors `shaders/shared/skip.wgsl: CellWalk`.
+/// Mirrors `shaders/shared/skip.wgsl: CellWalk` (walk_new, walk_boundaries, walk_advance).
 #[derive(Clone, Copy, Debug)]
 pub struct CellWalk<R> {
     o: V3<R>,
@@ -288,7 +288,7 @@ impl<R: Real> CellWalk<R> {
     }
 
     /// The parameter at which the walk leaves the current cell along axis `a`.
-    /// Mirrors `skip.wgsl: walk_boundary`.
+    /// Mirrors `skip.wgsl: walk_boundaries`.
     #[inline]
     fn boundary(&self, a: usize) -> R {
         if self.step[a] == 0 {
