@@ -17,8 +17,8 @@ use voxlab::transfer::{ControlPoint, TransferFunction};
 use voxlab::AnyVolume;
 
 /// The ray caster's DVR bound (tests/gpu_raycast.rs: EXACT_DVR, f32 rounding of sample
-/// positions through narrow opacity bands). Measured here: see each case's output;
-/// worst max |Δ| 4.6e-5, RMSE 3.5e-6 on lavapipe.
+/// positions through narrow opacity bands). Measured here on lavapipe: worst max |Δ|
+/// 3.2e-4 (jittered back to front), RMSE 8.8e-6; the other cases 6e-7 … 6e-5.
 const DVR: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
