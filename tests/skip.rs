@@ -551,3 +551,30 @@ fn jitter_offsets_are_uniform_and_reproducible() {
     seen.dedup();
     assert_eq!(seen.len(), 16);
 }
+
+/// Real data: the bundled micro-CT scan (the benchmark's scene) renders identically with
+/// skipping on (8³ cells) and off, f32 and f64. Measured: max |Δ| 0, 0.577 of the
+/// samples taken at 48² pixels.
+#[test]
+fn skipping_leaves_the_micro_ct_unchanged() {
+    let (vol, tf, cam) = voxlab::bench::raycast::microct_scene(48).unwrap();
+    let s = |skip_empty| RenderSettings {
+        skip_empty,
+        block_size: 8,
+        sample_count: true,
+        ..RenderSettings::default()
+    };
+    let off = render::<f32>(&vol, &tf, &cam, &s(false), none()).unwrap();
+    let on = render::<f32>(&vol, &tf, &cam, &s(true), none()).unwrap();
+    assert_eq!(off.image.data, on.image.data);
+    let off64 = render::<f64>(&vol, &tf, &cam, &s(false), none()).unwrap();
+    let on64 = render::<f64>(&vol, &tf, &cam, &s(true), none()).unwrap();
+    assert_eq!(off64.image.data, on64.image.data);
+    assert!(
+        off.image.data.chunks(4).any(|p| p[0] > 0.1),
+        "the bone must show"
+    );
+    let kept = on.total_samples as f64 / off.total_samples as f64;
+    eprintln!("micro-CT: samples kept {kept:.3}");
+    assert!(kept < 0.9);
+}

@@ -79,8 +79,20 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
             "dvr-shaded-trilinear-skip-off",
             with(&|s| s.skip_empty = false),
         ),
+    ]
+}
+
+/// The micro-CT variants ([`microct_scene`]): skipping on and off.
+pub fn microct_variants() -> Vec<(&'static str, RenderSettings)> {
+    vec![
         (MICROCT_SKIP_ON, RenderSettings::default()),
-        (MICROCT_SKIP_OFF, with(&|s| s.skip_empty = false)),
+        (
+            MICROCT_SKIP_OFF,
+            RenderSettings {
+                skip_empty: false,
+                ..RenderSettings::default()
+            },
+        ),
     ]
 }
 
@@ -205,7 +217,8 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
 
 /// Every raycast and gradient case of a suite.
 pub fn cases(suite: Suite) -> Vec<Case> {
-    let variants = raycast_variants();
+    let mut variants = raycast_variants();
+    variants.extend(microct_variants());
     let mut out = Vec::new();
     for (name, n, size) in raycast_grid(suite) {
         let settings = variants
