@@ -8,7 +8,8 @@
 // intersect_box), src/cpu/filter.rs (axis_taps, sample, the kernels) and
 // src/cpu/gradient.rs (gradient_stencil). Each helper names its Rust twin.
 // Prepended at load time: shaders/shared/raycast_params.wgsl, classify.wgsl and
-// rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared with D²VR).
+// rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared with D²VR) and
+// skip.wgsl (empty-space skipping, clipping box, jittered ray starts).
 
 
 const FILTER_NEAREST: u32 = 0u;
@@ -36,6 +37,10 @@ const PI: f32 = 3.14159265358979323846;
 @group(0) @binding(7) var<storage, read_write> out_samples: array<u32>;
 // The 2D transfer function's table (one dummy entry when it is off).
 @group(0) @binding(8) var<storage, read> lut2d: array<vec4<f32>>;
+// Empty-space skipping (shaders/shared/skip.wgsl): [min, max] per cell, and the LUT's
+// prefix count of non-zero opacities.
+@group(0) @binding(9) var<storage, read> skip_minmax: array<vec2<f32>>;
+@group(0) @binding(10) var<storage, read> skip_prefix: array<u32>;
 
 // ---------------------------------------------------------------- kernels
 // mirrors src/cpu/filter.rs: weight_tent
@@ -224,8 +229,8 @@ struct Pixel {
     samples: u32,
 }
 
-// mirrors src/cpu/raycast.rs: cast_ray
-fn cast_ray(ray: Ray) -> Pixel {
+// mirrors src/cpu/raycast.rs: cast_ray; u offsets the steps by u·Δs.
+fn cast_ray(ray: Ray, u: f32) -> Pixel {
     let mode = params.image.z;
     let o = vec3<f32>(
         dot(params.to_index_0, vec4<f32>(ray.origin, 1.0)),
@@ -241,19 +246,28 @@ fn cast_ray(ray: Ray) -> Pixel {
     if (!hit.ok) {
         return Pixel(miss, 0u);
     }
-    let t_in = max(hit.t0, ray.t_min);
-    let t_out = hit.t1;
+    var t_in = max(hit.t0, ray.t_min);
+    var t_out = hit.t1;
+    if (params.accel.w != 0u) {
+        let clip = clip_interval(o, d, ray.origin, ray.dir);
+        if (!clip.ok) {
+            return Pixel(miss, 0u);
+        }
+        t_in = max(t_in, clip.t0);
+        t_out = min(t_out, clip.t1);
+    }
     if (t_out <= t_in) {
         return Pixel(miss, 0u);
     }
     let speed = length(d);
     let dt = params.box_hi.w / speed;
-    let n = u32(max(ceil((t_out - t_in) / dt - 1e-3), 1.0));
+    let t_s = t_in - u * dt;
+    let n = u32(max(ceil((t_out - t_s) / dt - 1e-3), 1.0));
 
     if (mode == MODE_MIP || mode == MODE_MINIP) {
-        var best = sample_value(segment_point(0u, n, t_in, t_out, dt, o, d));
+        var best = sample_value(segment_point(0u, n, t_in, t_s, t_out, dt, o, d));
         for (var k = 1u; k < n; k++) {
-            let v = sample_value(segment_point(k, n, t_in, t_out, dt, o, d));
+            let v = sample_value(segment_point(k, n, t_in, t_s, t_out, dt, o, d));
             if (mode == MODE_MIP) {
                 best = max(best, v);
             } else {
@@ -265,7 +279,7 @@ fn cast_ray(ray: Ray) -> Pixel {
     if (mode == MODE_XRAY) {
         var sum = 0.0;
         for (var k = 0u; k < n; k++) {
-            sum = sum + sample_value(segment_point(k, n, t_in, t_out, dt, o, d)) * segment_length(k, n, t_in, t_out, dt);
+            sum = sum + sample_value(segment_point(k, n, t_in, t_s, t_out, dt, o, d)) * segment_length(k, n, t_in, t_s, t_out, dt);
         }
         return Pixel(vec4<f32>(sum, 0.0, 0.0, 0.0), n);
     }
@@ -281,13 +295,24 @@ fn cast_ray(ray: Ray) -> Pixel {
     var c = vec3<f32>(0.0);
     var a = 0.0;
     var taken = 0u;
-    for (var i = 0u; i < n; i++) {
+    let skip = params.accel.x == 1u;
+    var ranges = ranges_new(skip, t_s, dt, n, back_to_front);
+    var walk = ranges_walk(o, d, t_in, t_out, back_to_front);
+    var terminated = false;
+    loop {
+    let range = ranges_next(&ranges, &walk);
+    if (range.x == 0) {
+        break;
+    }
+    let k_lo = u32(range.y);
+    let k_hi = u32(range.z);
+    for (var i = k_lo; i <= k_hi; i++) {
         var k = i;
         if (back_to_front) {
-            k = n - 1u - i;
+            k = k_lo + k_hi - i;
         }
-        let p = segment_point(k, n, t_in, t_out, dt, o, d);
-        let len = segment_length(k, n, t_in, t_out, dt);
+        let p = segment_point(k, n, t_in, t_s, t_out, dt, o, d);
+        let len = segment_length(k, n, t_in, t_s, t_out, dt);
         taken = taken + 1u;
         let s = classify_sample(p);
         if (s.w <= 0.0) {
@@ -310,22 +335,27 @@ fn cast_ray(ray: Ray) -> Pixel {
             c = c + w * rgb;
             a = a + w;
             if (a >= params.misc.y) {
+                terminated = true;
                 break;
             }
         }
+    }
+    if (terminated) {
+        break;
+    }
     }
     let t = 1.0 - a;
     let bg = params.background;
     return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
 }
 
-fn segment_point(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
-    let b = segment_bounds(k, n, t_in, t_out, dt);
+fn segment_point(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    let b = step_bounds(k, n, t_in, t_s, t_out, dt);
     return o + d * ((b.x + b.y) * 0.5);
 }
 
-fn segment_length(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32) -> f32 {
-    let b = segment_bounds(k, n, t_in, t_out, dt);
+fn segment_length(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32) -> f32 {
+    let b = step_bounds(k, n, t_in, t_s, t_out, dt);
     return b.y - b.x;
 }
 
@@ -337,7 +367,7 @@ fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let row = params.flags2.z + local_row;
-    let px = cast_ray(camera_ray(col, row));
+    let px = cast_ray(camera_ray(col, row), ray_offset(col, row));
     let idx = local_row * params.image.x + col;
     out_pixels[idx] = px.value;
     out_samples[idx] = px.samples;

@@ -42,6 +42,7 @@
 //! # Ok::<(), voxlab::Error>(())
 //! ```
 
+pub mod accumulate;
 pub mod bench;
 pub mod camera;
 pub mod cpu;

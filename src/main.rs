@@ -430,6 +430,95 @@ struct RenderArgs {
     /// to the volume centre).
     #[arg(long)]
     convergence: Option<f64>,
+    #[command(flatten)]
+    accel: AccelArgs,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum OnOff {
+    On,
+    Off,
+}
+
+/// Empty-space skipping, clipping and jittered sampling (docs/acceleration.md).
+#[derive(Args)]
+struct AccelArgs {
+    /// Skip cells the transfer function leaves transparent (DVR; the image does not
+    /// change). Default: on.
+    #[arg(long, value_enum)]
+    skip_empty: Option<OnOff>,
+    /// Edge of one skipping cell in voxels (default 32).
+    #[arg(long)]
+    block_size: Option<usize>,
+    /// Restrict rays to the box X0,Y0,Z0,X1,Y1,Z1 (∩ the volume), in --clip-space.
+    #[arg(long, value_parser = list::<f64, 6>, allow_hyphen_values = true)]
+    clip_box: Option<[f64; 6]>,
+    /// voxel: voxel indices X0..=X1 (index space [X0 − ½, X1 + ½]); world: millimetres.
+    #[arg(long, value_enum, default_value = "voxel")]
+    clip_space: voxlab::settings::ClipSpace,
+    /// Offset every ray's start by a random fraction of a step from this seed.
+    #[arg(long, conflicts_with = "interleaved")]
+    jitter: Option<u32>,
+    /// Average N jittered frames with seeds SEED … SEED + N − 1 (SEED from --jitter,
+    /// default 0).
+    #[arg(long)]
+    accumulate: Option<usize>,
+    /// Offset ray starts by a fixed 4×4 ordered pattern (interleaved sampling).
+    #[arg(long)]
+    interleaved: bool,
+}
+
+impl AccelArgs {
+    /// Writes the flags given into `s`.
+    fn apply(&self, s: &mut RenderSettings) -> Result<()> {
+        if let Some(v) = self.skip_empty {
+            s.skip_empty = v == OnOff::On;
+        }
+        if let Some(b) = self.block_size {
+            s.block_size = b;
+        }
+        if let Some(c) = self.clip_box {
+            s.clip_box = Some(voxlab::settings::ClipBox {
+                lo: [c[0], c[1], c[2]],
+                hi: [c[3], c[4], c[5]],
+                space: self.clip_space,
+            });
+        }
+        if self.jitter.is_some() {
+            s.jitter = self.jitter;
+        }
+        if self.interleaved {
+            s.interleaved = true;
+        }
+        if self.accumulate.is_some() && s.interleaved {
+            return Err(Error::invalid(
+                "--accumulate",
+                "averages jittered frames; it excludes --interleaved",
+            ));
+        }
+        s.validate()
+    }
+
+    /// Renders one frame, or the average of --accumulate jittered frames.
+    fn render(
+        &self,
+        renderer: &Renderer,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<voxlab::render::Rendered> {
+        match self.accumulate {
+            Some(n) => voxlab::accumulate::render_accumulated(
+                renderer,
+                scene,
+                settings,
+                settings.jitter.unwrap_or(0),
+                n,
+                &|_, _| {},
+            ),
+            None => renderer.render(scene, settings, progress),
+        }
+    }
 }
 
 #[derive(Args)]
@@ -445,6 +534,8 @@ struct CompareArgs {
     /// Fail (exit status 3) when the RMS difference exceeds this.
     #[arg(long)]
     rmse: Option<f64>,
+    #[command(flatten)]
+    accel: AccelArgs,
 }
 
 /// Parses exactly `N` comma-separated values, e.g. `1,2,3` for `--light`.
@@ -813,7 +904,8 @@ fn render(r: RenderArgs) -> Result<()> {
     if let Some(s) = &r.samples {
         check_output(s)?;
     }
-    let (scene, settings) = build_scene(&r.scene, r.samples.is_some())?;
+    let (scene, mut settings) = build_scene(&r.scene, r.samples.is_some())?;
+    r.accel.apply(&mut settings)?;
     if let Some(sampling) = r.sampling {
         return cli_adaptive::render_sampling(
             &scene,
@@ -874,8 +966,11 @@ fn render(r: RenderArgs) -> Result<()> {
         );
         return Ok(());
     }
-    let out = renderer
-        .render(&scene, &settings, &|done, _| pb.set_position(done as u64))?
+    let out = a
+        .accel
+        .render(&renderer, &scene, &settings, &|done, _| {
+            pb.set_position(done as u64)
+        })?
         .output;
     pb.finish_and_clear();
     let png = PngOptions {
@@ -902,16 +997,20 @@ fn render(r: RenderArgs) -> Result<()> {
 /// Renders on the oracle and the GPU, writes the evidence, prints the numbers; exit
 /// status 3 when a given tolerance is exceeded.
 fn compare(c: CompareArgs) -> Result<ExitCode> {
-    let (scene, settings) = build_scene(&c.scene, true)?;
+    let (scene, mut settings) = build_scene(&c.scene, true)?;
+    c.accel.apply(&mut settings)?;
     let gpu = Renderer::new(Backend::Gpu)?;
     let pb = progress_bar(scene.camera.height as u64, "cpu (f64 oracle)", "rows");
     let t = std::time::Instant::now();
-    let cpu_out = Renderer::new(Backend::Cpu)?
-        .render(&scene, &settings, &|d, _| pb.set_position(d as u64))?
+    let cpu_out = c
+        .accel
+        .render(&Renderer::new(Backend::Cpu)?, &scene, &settings, &|d, _| {
+            pb.set_position(d as u64)
+        })?
         .output;
     let cpu_time = t.elapsed().as_secs_f64();
     pb.finish_and_clear();
-    let g = gpu.render(&scene, &settings, &|_, _| {})?;
+    let g = c.accel.render(&gpu, &scene, &settings, &|_, _| {})?;
     let timings = g.gpu_timings.unwrap_or_default();
     let tol = voxlab::metrics::Tolerance {
         max_abs: c.max_abs.unwrap_or(f64::INFINITY),

@@ -195,6 +195,37 @@ pub struct RenderSettings {
     /// (`transfer2d`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub transfer_2d: Option<crate::transfer2d::TransferFunction2D>,
+    /// DVR: skip cells of a min/max grid the transfer function leaves fully
+    /// transparent (`cpu::skip`); the image does not change, only the work.
+    pub skip_empty: bool,
+    /// Edge of one empty-space-skipping cell, in voxels.
+    pub block_size: usize,
+    /// Restricts rays to this box (intersected with the volume's).
+    pub clip_box: Option<ClipBox>,
+    /// Per-pixel random ray-start offset in `[0, step)` from this seed (`accumulate`).
+    pub jitter: Option<u32>,
+    /// Per-pixel ray-start offset from a fixed 4×4 ordered pattern (interleaved
+    /// sampling, one frame).
+    pub interleaved: bool,
+}
+
+/// The space a clipping box is given in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ClipSpace {
+    /// Voxel indices: the box covers voxels `lo ..= hi`, i.e. index space
+    /// `[lo − ½, hi + ½]` (fractional indices allowed).
+    Voxel,
+    /// World millimetres: the box `[lo, hi]` in the volume's world frame.
+    World,
+}
+
+/// An axis-aligned clipping box; rays see only box ∩ volume.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClipBox {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+    pub space: ClipSpace,
 }
 
 impl Default for RenderSettings {
@@ -216,6 +247,11 @@ impl Default for RenderSettings {
             sample_count: false,
             hardware_filtering: false,
             transfer_2d: None,
+            skip_empty: true,
+            block_size: 32,
+            clip_box: None,
+            jitter: None,
+            interleaved: false,
         }
     }
 }
@@ -294,6 +330,24 @@ impl RenderSettings {
                      gradient magnitude: it needs post-classification",
                 ));
             }
+        }
+        if !(1..=4096).contains(&self.block_size) {
+            return Err(Error::invalid("block size", "must lie in 1 … 4096 voxels"));
+        }
+        if let Some(c) = &self.clip_box {
+            if !c.lo.iter().chain(&c.hi).all(|x| x.is_finite()) || (0..3).any(|a| c.lo[a] > c.hi[a])
+            {
+                return Err(Error::invalid(
+                    "clip box",
+                    "needs finite corners with lo ≤ hi on every axis",
+                ));
+            }
+        }
+        if self.jitter.is_some() && self.interleaved {
+            return Err(Error::invalid(
+                "jitter",
+                "random jitter and interleaved sampling exclude each other",
+            ));
         }
         Ok(())
     }

@@ -39,6 +39,11 @@ fn raycast_params_layout_agrees() {
         ("flags2", offset_of!(RaycastParams, flags2)),
         ("tf2d_a", offset_of!(RaycastParams, tf2d_a)),
         ("tf2d_b", offset_of!(RaycastParams, tf2d_b)),
+        ("accel", offset_of!(RaycastParams, accel)),
+        ("skip_cells", offset_of!(RaycastParams, skip_cells)),
+        ("skip_tf", offset_of!(RaycastParams, skip_tf)),
+        ("clip_lo", offset_of!(RaycastParams, clip_lo)),
+        ("clip_hi", offset_of!(RaycastParams, clip_hi)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

@@ -43,4 +43,14 @@ struct RaycastParams {
     tf2d_a: vec4<f32>,
     // gradient scale, 1/g0, log axis (1/0), 2D transfer function on (1/0).
     tf2d_b: vec4<f32>,
+    // Empty-space skipping on, jitter mode (0 none, 1 random, 2 interleaved), jitter
+    // seed, clipping box (0 none, 1 index space, 2 world); see shaders/shared/skip.wgsl.
+    accel: vec4<u32>,
+    // Skipping cells per axis, block size in voxels.
+    skip_cells: vec4<u32>,
+    // Skipping: overshoot factor e, relative margin (src/cpu/skip.rs: OpacityPrefix).
+    skip_tf: vec4<f32>,
+    // Clipping box corners (index space or world mm, per accel.w).
+    clip_lo: vec4<f32>,
+    clip_hi: vec4<f32>,
 }

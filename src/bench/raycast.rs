@@ -6,7 +6,10 @@
 //! 540 mm from the centre, 30° field of view) at `size × size` pixels, the `phantom`
 //! transfer function, step ½ voxel. The variants ([`raycast_variants`]): shaded DVR with
 //! trilinear and Catmull–Rom reconstruction, shaded DVR through the GPU's texture
-//! filtering unit (`hardware_filtering`), MIP, MinIP and X-ray. One run is
+//! filtering unit (`hardware_filtering`), MIP, MinIP and X-ray; empty-space skipping
+//! (on in every other variant) switched off (`dvr-shaded-trilinear-skip-off`), and the
+//! bundled micro-CT scan with skipping on and off (`microct-dvr-skip-on|off`, see
+//! [`microct_scene`]). One run is
 //! `cpu::raycast::render::<R>` or `gpu::raycast::render` end to end (the volume's
 //! conversion to the working precision included, as a caller would see it). Work: rays
 //! (= pixels) and samples (the oracle's `total_samples`, counted by one untimed f64
@@ -71,7 +74,60 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
         ("mip-trilinear", with(&|s| s.mode = Mode::Mip)),
         ("minip-trilinear", with(&|s| s.mode = Mode::Minip)),
         ("xray-trilinear", with(&|s| s.mode = Mode::Xray)),
+        // Empty-space skipping (on by default) against none: the same image.
+        (
+            "dvr-shaded-trilinear-skip-off",
+            with(&|s| s.skip_empty = false),
+        ),
     ]
+}
+
+/// The micro-CT variants ([`microct_scene`]): skipping on and off.
+pub fn microct_variants() -> Vec<(&'static str, RenderSettings)> {
+    vec![
+        (MICROCT_SKIP_ON, RenderSettings::default()),
+        (
+            MICROCT_SKIP_OFF,
+            RenderSettings {
+                skip_empty: false,
+                ..RenderSettings::default()
+            },
+        ),
+    ]
+}
+
+/// The real micro-CT scan (`data/microct-bone`, 128³ u8) with the `microct-bone`
+/// preset, which leaves the marrow and the air transparent: skipping on and off.
+const MICROCT_SKIP_ON: &str = "microct-dvr-skip-on";
+const MICROCT_SKIP_OFF: &str = "microct-dvr-skip-off";
+
+/// The micro-CT scene: the bundled scan, the `microct-bone` preset, and the orbit
+/// camera of [`raycast_scene`] aimed at the scan's centre.
+pub fn microct_scene(size: usize) -> Result<(AnyVolume, TransferFunction, Camera)> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/microct-bone/bone_128x128x128.tif");
+    let vol = crate::io::read_volume(&path)?;
+    let tf = TransferFunction::preset("microct-bone")?;
+    let d = vol.dims();
+    let centre = vol.affine().transform_point3(
+        glam::DVec3::new(d[0] as f64 - 1.0, d[1] as f64 - 1.0, d[2] as f64 - 1.0) * 0.5,
+    );
+    let extent =
+        vol.affine()
+            .transform_vector3(glam::DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64));
+    let cam = Camera::orbit(
+        centre,
+        extent.abs().to_array(),
+        Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance_mm: None,
+        },
+        Projection::Perspective { fov_y_deg: 30.0 },
+        size,
+        size,
+    )?;
+    Ok((vol, tf, cam))
 }
 
 /// The f32 CPU path against the f64 oracle, DVR (RGBA in [0, 1]; the peak is an opaque
@@ -152,13 +208,17 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("mip-trilinear", 256, 512),
             ("minip-trilinear", 256, 512),
             ("xray-trilinear", 256, 512),
+            ("dvr-shaded-trilinear-skip-off", 256, 512),
+            (MICROCT_SKIP_ON, 128, 512),
+            (MICROCT_SKIP_OFF, 128, 512),
         ],
     }
 }
 
 /// Every raycast and gradient case of a suite.
 pub fn cases(suite: Suite) -> Vec<Case> {
-    let variants = raycast_variants();
+    let mut variants = raycast_variants();
+    variants.extend(microct_variants());
     let mut out = Vec::new();
     for (name, n, size) in raycast_grid(suite) {
         let settings = variants
@@ -170,7 +230,7 @@ pub fn cases(suite: Suite) -> Vec<Case> {
             "raycast",
             name,
             format!("{n}³ → {size}²"),
-            move || prepare_raycast(n, size, settings.clone()),
+            move || prepare_raycast(name, n, size, settings.clone()),
         ));
     }
     let sides: &[usize] = match suite {
@@ -200,8 +260,17 @@ pub fn raycast_tolerances(settings: &RenderSettings) -> (Tol, Tol) {
     }
 }
 
-fn prepare_raycast(n: usize, size: usize, settings: RenderSettings) -> Result<Prepared> {
-    let (vol, tf, cam) = raycast_scene(n, size)?;
+fn prepare_raycast(
+    name: &str,
+    n: usize,
+    size: usize,
+    settings: RenderSettings,
+) -> Result<Prepared> {
+    let (vol, tf, cam) = if name.starts_with("microct") {
+        microct_scene(size)?
+    } else {
+        raycast_scene(n, size)?
+    };
     let scene = Rc::new((vol, tf, cam, settings));
     let oracle =
         crate::cpu::raycast::render::<f64>(&scene.0, &scene.1, &scene.2, &scene.3, &|_, _| {})?;

@@ -18,3 +18,4 @@ pub mod process;
 pub mod project;
 pub mod ramp;
 pub mod raycast;
+pub mod skip;

@@ -53,6 +53,10 @@ pub trait Field<R: Real>: Sync {
     fn voxel_values(&self) -> Option<&Grid<R>> {
         None
     }
+    /// What the filter samples (B-spline coefficients for `bspline-interp`), if a grid.
+    fn sampled_grid(&self) -> Option<&Grid<R>> {
+        None
+    }
 }
 
 /// A voxel grid reconstructed with a filter; gradients on the fly or precomputed.
@@ -123,6 +127,9 @@ impl<R: Real> Field<R> for GridField<R> {
     }
     fn voxel_values(&self) -> Option<&Grid<R>> {
         Some(self.values())
+    }
+    fn sampled_grid(&self) -> Option<&Grid<R>> {
+        Some(&self.grid)
     }
 }
 
@@ -257,6 +264,9 @@ struct Setup<R> {
     ert: R,
     bg: [R; 4],
     miss: R,
+    /// Empty-space skipping (`cpu::skip`), when it applies.
+    skip: Option<super::skip::Skipper<R>>,
+    clip: Option<super::skip::ClipR<R>>,
 }
 
 /// Renders a volume with precision `R`. `progress(done_rows, total_rows)` is called as
@@ -379,6 +389,17 @@ pub fn render_field<R: Real, F: Field<R>>(
         ert: R::of(settings.ert_threshold),
         bg: settings.background.map(R::of),
         miss: R::of(settings.miss_value),
+        skip: None,
+        clip: settings.clip_box.as_ref().map(super::skip::ClipR::new),
+    };
+    // Post-classification bounds what the filter samples; pre-classification the voxels.
+    let skip_voxels = match settings.classification {
+        Classification::Post => field.sampled_grid(),
+        Classification::Pre => field.voxel_values(),
+    };
+    let setup = Setup {
+        skip: skip_voxels.and_then(|g| super::skip::Skipper::new(g, &setup.lut, settings)),
+        ..setup
     };
 
     let channels = if settings.mode == Mode::Dvr { 4 } else { 1 };
@@ -394,7 +415,8 @@ pub fn render_field<R: Real, F: Field<R>>(
         .for_each(|(row, (pixels, row_counts))| {
             for col in 0..w {
                 let ray = camera.ray(col, row);
-                let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray);
+                let u = R::of(crate::accumulate::ray_offset(settings, col, row));
+                let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray, u);
                 for (c, v) in px.iter().take(channels).enumerate() {
                     pixels[col * channels + c] = v.f64();
                 }
@@ -428,13 +450,15 @@ pub fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
 }
 
 /// Casts one ray; returns the pixel (RGBA, or the scalar in channel 0) and the number
-/// of samples taken. Mirrors `shaders/raycast.wgsl: cast_ray`.
+/// of samples taken; `u` offsets the ray's steps by `u·Δs` (`accumulate`).
+/// Mirrors `shaders/raycast.wgsl: cast_ray`.
 fn cast_ray<R: Real, F: Field<R>>(
     field: &F,
     s: &Setup<R>,
     mode: Mode,
     order: Compositing,
     ray: crate::camera::Ray,
+    u: R,
 ) -> ([R; 4], u32) {
     let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
     let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
@@ -446,21 +470,37 @@ fn cast_ray<R: Real, F: Field<R>>(
     let Some((t_in, t_out)) = intersect_box(o, d, s.lo, s.hi) else {
         return (miss, 0);
     };
-    let t_in = t_in.max(R::of(ray.t_min));
+    let mut t_in = t_in.max(R::of(ray.t_min));
+    let mut t_out = t_out;
+    if let Some(clip) = &s.clip {
+        let (wo, wd) = (V3::from_dvec(ray.origin), V3::from_dvec(ray.dir));
+        let Some((c0, c1)) = clip.interval(o, d, wo, wd) else {
+            return (miss, 0);
+        };
+        t_in = t_in.max(c0);
+        t_out = t_out.min(c1);
+    }
     if t_out <= t_in {
         return (miss, 0);
     }
     let speed = d.length(); // voxels per unit t (t is world mm along a unit direction)
     let dt = s.step / speed;
-    let n = ((t_out - t_in) / dt - R::of(1e-3)).ceil().max(R::one());
+    // The virtual start of the (jittered) step grid; u = 0 gives t_s = t_in.
+    let t_s = t_in - u * dt;
+    let n = ((t_out - t_s) / dt - R::of(1e-3)).ceil().max(R::one());
     let n = n.to_usize().unwrap_or(1);
-    // Step k covers [t_in + k dt, t_in + (k+1) dt], the last one ends at t_out.
+    // Step k covers [t_s + k dt, t_s + (k+1) dt]; the first starts at t_in, the last
+    // ends at t_out.
     let segment = |k: usize| {
-        let ta = t_in + R::of(k as f64) * dt;
+        let ta = if k == 0 {
+            t_in
+        } else {
+            t_s + R::of(k as f64) * dt
+        };
         let tb = if k + 1 == n {
             t_out
         } else {
-            t_in + R::of((k + 1) as f64) * dt
+            t_s + R::of((k + 1) as f64) * dt
         };
         (o + d * ((ta + tb) * R::of(0.5)), tb - ta)
     };
@@ -493,41 +533,43 @@ fn cast_ray<R: Real, F: Field<R>>(
             let mut c = [R::zero(); 3];
             let mut a = R::zero();
             let mut taken = 0u32;
-            for i in 0..n {
-                let k = if order == Compositing::FrontToBack {
-                    i
-                } else {
-                    n - 1 - i
-                };
-                let (p, len) = segment(k);
-                taken += 1;
-                let (rgb, alpha) = classify_sample(field, s, p);
-                if alpha <= R::zero() {
-                    continue;
-                }
-                // Opacity correction for a step of len·speed voxels.
-                let alpha = R::one() - (R::one() - alpha).powf(len * speed / s.ref_step);
-                let rgb = if s.shade {
-                    shade_sample(field, s, p, rgb, light, half)
-                } else {
-                    rgb
-                };
-                match order {
-                    Compositing::FrontToBack => {
-                        let w = (R::one() - a) * alpha;
-                        for ch in 0..3 {
-                            c[ch] = c[ch] + w * rgb[ch];
-                        }
-                        a = a + w;
-                        if a >= s.ert {
-                            break;
-                        }
+            let back = order == Compositing::BackToFront;
+            let skip = s.skip.as_ref();
+            let mut ranges =
+                super::skip::SampleRanges::new(skip, o, d, (t_in, t_out), t_s, dt, n, back);
+            'ray: while let Some((k_lo, k_hi)) = ranges.next(skip) {
+                for i in k_lo..=k_hi {
+                    let k = if back { k_lo + k_hi - i } else { i };
+                    let (p, len) = segment(k);
+                    taken += 1;
+                    let (rgb, alpha) = classify_sample(field, s, p);
+                    if alpha <= R::zero() {
+                        continue;
                     }
-                    Compositing::BackToFront => {
-                        for ch in 0..3 {
-                            c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
+                    // Opacity correction for a step of len·speed voxels.
+                    let alpha = R::one() - (R::one() - alpha).powf(len * speed / s.ref_step);
+                    let rgb = if s.shade {
+                        shade_sample(field, s, p, rgb, light, half)
+                    } else {
+                        rgb
+                    };
+                    match order {
+                        Compositing::FrontToBack => {
+                            let w = (R::one() - a) * alpha;
+                            for ch in 0..3 {
+                                c[ch] = c[ch] + w * rgb[ch];
+                            }
+                            a = a + w;
+                            if a >= s.ert {
+                                break 'ray;
+                            }
                         }
-                        a = alpha + (R::one() - alpha) * a;
+                        Compositing::BackToFront => {
+                            for ch in 0..3 {
+                                c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
+                            }
+                            a = alpha + (R::one() - alpha) * a;
+                        }
                     }
                 }
             }

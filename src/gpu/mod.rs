@@ -21,5 +21,6 @@ pub mod process;
 pub mod project;
 pub mod ramp;
 pub mod raycast;
+pub mod skip;
 
 pub use context::{AdapterSummary, GpuContext};

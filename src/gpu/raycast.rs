@@ -71,6 +71,11 @@ pub struct RaycastParams {
     pub tf2d_a: [f32; 4],
     /// 2D transfer function: gradient scale, 1/g0, log axis, on.
     pub tf2d_b: [f32; 4],
+    pub accel: [u32; 4],
+    pub skip_cells: [u32; 4],
+    pub skip_tf: [f32; 4],
+    pub clip_lo: [f32; 4],
+    pub clip_hi: [f32; 4],
 }
 
 /// The WGSL struct shared by both shaders.
@@ -259,7 +264,10 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
         && (settings.shading.enabled || settings.transfer_2d.is_some())
         && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
-    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}")
+    let skip = super::skip::SKIP_WGSL;
+    format!(
+        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
+    )
 }
 
 /// The complete set-up shader: the shared struct and lookup, and the passes.
@@ -406,7 +414,45 @@ pub fn raycast_params(
         flags2: [gradient, hardware as u32, 0, camera.height as u32],
         tf2d_a: tf2d[0],
         tf2d_b: tf2d[1],
+        ..accel_params(dims, settings)
     })
+}
+
+/// The skipping, jitter and clipping members of the parameter block (`cpu::skip`,
+/// `accumulate`).
+fn accel_params(dims: [usize; 3], settings: &RenderSettings) -> RaycastParams {
+    use crate::cpu::skip::{cell_count, overshoot, skip_radius, ClipR};
+    let cells = cell_count(dims, settings.block_size);
+    let clip = settings.clip_box.as_ref().map(ClipR::<f32>::new);
+    let corner =
+        |v: Option<crate::real::V3<f32>>| v.map_or([0.0; 4], |v| [v.0[0], v.0[1], v.0[2], 0.0]);
+    RaycastParams {
+        accel: [
+            skip_radius(settings).is_some() as u32,
+            match (settings.jitter, settings.interleaved) {
+                (Some(_), _) => 1,
+                (None, true) => 2,
+                _ => 0,
+            },
+            settings.jitter.unwrap_or(0),
+            clip.map_or(0, |c| if c.world { 2 } else { 1 }),
+        ],
+        skip_cells: [
+            cells[0] as u32,
+            cells[1] as u32,
+            cells[2] as u32,
+            settings.block_size as u32,
+        ],
+        skip_tf: [
+            overshoot(settings.filter, settings.classification) as f32,
+            f32::EPSILON * 1024.0,
+            0.0,
+            0.0,
+        ],
+        clip_lo: corner(clip.map(|c| c.lo)),
+        clip_hi: corner(clip.map(|c| c.hi)),
+        ..Default::default()
+    }
 }
 
 /// Renders on the GPU. Same inputs and outputs as `cpu::raycast::render`.
@@ -433,7 +479,9 @@ pub fn render(
     if ctx.summary.is_cpu() {
         // The ray march is the only loop per invocation (plus 3 box-slab iterations).
         let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-        let steps = diag / settings.step + 2.0;
+        // Skipping adds one iteration per cell crossed, twice.
+        let cells = crate::cpu::skip::cell_count(dims, settings.block_size);
+        let steps = diag / settings.step + 2.0 + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
         if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
             return Err(Error::invalid(
                 "step",
@@ -488,6 +536,8 @@ pub fn render(
             buffer_entry(6, storage(false)),
             buffer_entry(7, storage(false)),
             buffer_entry(8, storage(true)),
+            buffer_entry(9, storage(true)),
+            buffer_entry(10, storage(true)),
         ],
     });
     let pipeline = compute_pipeline(ctx, "raycast", &raycast_module, "raycast", &layout)?;
@@ -574,6 +624,34 @@ pub fn render(
             "precompute_gradients",
         )?)
     };
+    // Empty-space skipping: the min/max grid (built on the GPU) and the LUT's prefix
+    // count of non-zero opacities (O(LUT), on the host).
+    let (skip_minmax, skip_prefix) = if params.accel[0] == 1 {
+        let radius = crate::cpu::skip::skip_radius(settings).unwrap_or(1);
+        let sampled = if bspline_interp {
+            prepare(&grid, settings.filter)
+        } else {
+            grid.clone()
+        };
+        let mm =
+            super::skip::min_max_buffer(ctx, &volume_tex, &sampled, settings.block_size, radius)?;
+        let prefix = crate::cpu::skip::opacity_prefix(&lut, 0.0).prefix;
+        let pb = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("skip prefix"),
+            contents: bytemuck::cast_slice(&prefix),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        (mm, pb)
+    } else {
+        let dummy = |label| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &[0u8; 16],
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        (dummy("skip minmax (off)"), dummy("skip prefix (off)"))
+    };
     ctx.wait()?;
     let prepare_time = t_prep.elapsed().as_secs_f64();
 
@@ -621,6 +699,8 @@ pub fn render(
                 out_buf.as_entire_binding(),
                 cnt_buf.as_entire_binding(),
                 lut2_buf.as_entire_binding(),
+                skip_minmax.as_entire_binding(),
+                skip_prefix.as_entire_binding(),
             ],
         );
         let t_k = Instant::now();
@@ -704,7 +784,7 @@ fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-fn compute_pipeline(
+pub(crate) fn compute_pipeline(
     ctx: &GpuContext,
     label: &str,
     module: &wgpu::ShaderModule,

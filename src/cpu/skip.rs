@@ -1,0 +1,491 @@
+//! Empty-space skipping and the clipping box: which parts of a ray can hold a visible
+//! sample, decided without sampling.
+//!
+//! **The min/max grid** (Gavrilov & Turlapov, "acceleration structures"): the volume is
+//! cut into cells of `B³` voxels (`B` = `RenderSettings::block_size`, 32 by default).
+//! Cell `c` covers the index-space region `[cB − ½, (c+1)B − ½)` per axis, and it stores
+//! the minimum and maximum of every voxel the reconstruction filter can read for a
+//! sample in that region: the voxels `cB − r − 1 ..= (c+1)B + r` (filter radius `r`, one
+//! more voxel each side for rounding of the sample position). With post-classification
+//! the voxels are what the filter samples (the B-spline coefficients for
+//! `bspline-interp`); with pre-classification the voxel values themselves.
+//!
+//! **Emptiness in O(1)**: a filter with non-negative weights that sum to one
+//! (nearest, trilinear, both B-splines) interpolates inside `[min, max]`. Filters with
+//! negative lobes (Catmull–Rom, Lanczos) overshoot by at most `e·(max − min)` on each
+//! side, `e = (L³ − 1)/2`, where `L = max_f Σ|w_i(f)|` is the 1D Lebesgue constant (the
+//! positive weights of the 3D product sum to `(L³ + 1)/2`). The LUT classifies value
+//! `t` at table coordinate `x = scale·t + offset` by linear interpolation between
+//! entries `⌊x⌋` and `⌊x⌋ + 1`, so every sample of the cell is transparent when all
+//! entries `⌊x(min)⌋ − 1 ..= ⌊x(max)⌋ + 2` have zero opacity. A prefix count of
+//! non-zero opacities, `P[i] = #{j < i : α_j > 0}`, answers that with one subtraction
+//! and is rebuilt in O(LUT) when the transfer function changes; the grid itself does
+//! not depend on the transfer function.
+//!
+//! **The walk** (Amanatides & Woo 1987): a ray steps from cell to cell through the
+//! grid, always crossing the nearest cell boundary next, and returns the parameter
+//! spans of maximal runs of non-empty cells. The ray caster keeps the sample positions
+//! of the unskipped ray, `t_k` = midpoint of step `k`: a span `[t_a, t_b]` becomes the
+//! sample indices `⌊(t_a − t_s)/Δt − ½⌋ − 1 ..= ⌈(t_b − t_s)/Δt − ½⌉ + 1`, so a skip only
+//! jumps `k` forward. Every skipped sample is transparent and would have been
+//! discarded (`α ≤ 0`) anyway: the image is bit-identical with skipping on or off.
+//! Back-to-front rays walk the reversed ray, `o − d·s` with `s = −t`.
+//!
+//! Skipping is off for MIP, MinIP and X-ray (they never look at the transfer function:
+//! every sample counts), for the full sinc (its footprint is the whole grid), and for
+//! pre-classified `bspline-interp` (the prefiltered opacity volume is non-zero
+//! everywhere).
+//!
+//! **Clipping box**: the ray's parameter interval is intersected with the box, given
+//! in voxel indices (voxels `lo ..= hi`, index space `[lo − ½, hi + ½]`) or in world
+//! millimetres (intersected with the world-space ray directly).
+//!
+//! WGSL twins of the per-ray helpers: `shaders/shared/skip.wgsl`; the grid is built on
+//! the GPU by `shaders/skip_minmax.wgsl` (`gpu::skip`).
+
+use super::filter::{axis_taps, Grid};
+use crate::real::{Real, V3};
+use crate::settings::{Classification, ClipBox, ClipSpace, Filter, Mode, RenderSettings};
+use crate::transfer::LutR;
+use rayon::prelude::*;
+
+/// "No boundary" along an axis the ray does not move on.
+const BIG: f64 = 3.0e38;
+
+/// The filter radius the min/max grid must cover, or `None` when skipping does not
+/// apply to these settings (off, not DVR, full sinc, pre-classified `bspline-interp`,
+/// or a 2D transfer function, whose opacity depends on the gradient too: the 1D
+/// table's emptiness says nothing about it).
+pub fn skip_radius(settings: &RenderSettings) -> Option<usize> {
+    if !settings.skip_empty || settings.mode != Mode::Dvr || settings.transfer_2d.is_some() {
+        return None;
+    }
+    match (settings.filter, settings.classification) {
+        (Filter::Sinc, _) | (Filter::BsplineInterp, Classification::Pre) => None,
+        (f, _) => Some(f.radius()),
+    }
+}
+
+/// The 1D Lebesgue constant `L = max_f Σ|w_i(f)|` of a truncated filter, from 4096
+/// fractional positions and raised by 0.1 % (the maximum lies between samples).
+pub fn lebesgue_1d(filter: Filter) -> f64 {
+    match filter {
+        Filter::Nearest | Filter::Trilinear | Filter::Bspline | Filter::BsplineInterp => 1.0,
+        Filter::Sinc => f64::INFINITY,
+        _ => {
+            let mut l = 1.0f64;
+            for i in 0..=4096 {
+                let t = axis_taps::<f64>(filter, i as f64 / 4096.0);
+                let s: f64 = t.w[..t.count].iter().map(|w| w.abs()).sum();
+                l = l.max(s);
+            }
+            l * 1.001
+        }
+    }
+}
+
+/// The overshoot factor `e = (L³ − 1)/2` of a sample beyond its footprint's
+/// `[min, max]` (zero for pre-classification: voxels are classified exactly, and a
+/// footprint of zero opacities interpolates to zero).
+pub fn overshoot(filter: Filter, classification: Classification) -> f64 {
+    if classification == Classification::Pre {
+        return 0.0;
+    }
+    let l = lebesgue_1d(filter);
+    (l * l * l - 1.0) / 2.0
+}
+
+/// Cells per axis for `dims` voxels and blocks of `block`.
+pub fn cell_count(dims: [usize; 3], block: usize) -> [usize; 3] {
+    dims.map(|n| n.div_ceil(block))
+}
+
+/// The voxels (inclusive, clamped to `0 ..= n − 1`) a sample in cell `c` can read.
+/// Mirrors `shaders/skip_minmax.wgsl: footprint`.
+pub fn footprint(c: usize, n: usize, block: usize, radius: usize) -> (usize, usize) {
+    let lo = (c * block).saturating_sub(radius + 1);
+    let hi = ((c + 1) * block + radius).min(n - 1);
+    (lo, hi)
+}
+
+/// One `[min, max]` per cell, x fastest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MinMaxGrid<R> {
+    pub block: usize,
+    pub radius: usize,
+    pub cells: [usize; 3],
+    pub minmax: Vec<[R; 2]>,
+}
+
+/// Builds the min/max grid of `grid` for cells of `block` voxels and a filter of
+/// `radius` (see the module docs for the footprint).
+pub fn min_max_grid<R: Real>(grid: &Grid<R>, block: usize, radius: usize) -> MinMaxGrid<R> {
+    let dims = grid.dims;
+    let cells = cell_count(dims, block);
+    let minmax = (0..cells[0] * cells[1] * cells[2])
+        .into_par_iter()
+        .map(|c| {
+            let (cx, cy, cz) = (
+                c % cells[0],
+                (c / cells[0]) % cells[1],
+                c / (cells[0] * cells[1]),
+            );
+            let (x0, x1) = footprint(cx, dims[0], block, radius);
+            let (y0, y1) = footprint(cy, dims[1], block, radius);
+            let (z0, z1) = footprint(cz, dims[2], block, radius);
+            let (mut lo, mut hi) = (R::infinity(), R::neg_infinity());
+            for z in z0..=z1 {
+                for y in y0..=y1 {
+                    let row = dims[0] * (y + dims[1] * z);
+                    for &v in &grid.data[row + x0..=row + x1] {
+                        lo = lo.min(v);
+                        hi = hi.max(v);
+                    }
+                }
+            }
+            [lo, hi]
+        })
+        .collect();
+    MinMaxGrid {
+        block,
+        radius,
+        cells,
+        minmax,
+    }
+}
+
+/// The transfer function's opacity as a prefix count, with the LUT's table map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpacityPrefix<R> {
+    /// `prefix[i]` = number of entries `j < i` with `α_j > 0` (`entries + 1` values).
+    pub prefix: Vec<u32>,
+    pub scale: R,
+    pub offset: R,
+    /// Overshoot factor `e` (see [`overshoot`]).
+    pub expand: R,
+    /// Relative widening of `[min, max]` for the rounding of the interpolation
+    /// (1024 ε of the working precision).
+    pub margin: R,
+}
+
+/// The prefix count of `lut`'s opacities; `expand` from [`overshoot`].
+pub fn opacity_prefix<R: Real>(lut: &LutR<R>, expand: f64) -> OpacityPrefix<R> {
+    let mut prefix = Vec::with_capacity(lut.entries.len() + 1);
+    let mut count = 0u32;
+    prefix.push(0);
+    for e in &lut.entries {
+        count += (e[3] > R::zero()) as u32;
+        prefix.push(count);
+    }
+    OpacityPrefix {
+        prefix,
+        scale: lut.scale,
+        offset: lut.offset,
+        expand: R::of(expand),
+        margin: R::epsilon() * R::of(1024.0),
+    }
+}
+
+impl<R: Real> OpacityPrefix<R> {
+    /// Whether every value a sample with footprint range `[lo, hi]` can take is fully
+    /// transparent. Mirrors `shaders/shared/skip.wgsl: range_empty`.
+    pub fn range_empty(&self, lo: R, hi: R) -> bool {
+        let n = self.prefix.len() - 1;
+        let last = R::of((n - 1) as f64);
+        let w = hi - lo;
+        let m = self.margin * lo.abs().max(hi.abs()) + self.margin;
+        let a = lo - self.expand * w - m;
+        let b = hi + self.expand * w + m;
+        let xa = self.scale * a + self.offset;
+        let xb = self.scale * b + self.offset;
+        let x0 = xa.min(xb).max(R::zero()).min(last);
+        let x1 = xa.max(xb).max(R::zero()).min(last);
+        let i0 = x0.floor().to_usize().unwrap_or(0).saturating_sub(1);
+        let i1 = (x1.floor().to_usize().unwrap_or(n - 1) + 2).min(n - 1);
+        self.prefix[i1 + 1] == self.prefix[i0]
+    }
+}
+
+/// What a ray needs to skip: the grid and the transfer function's prefix count.
+#[derive(Clone, Debug)]
+pub struct Skipper<R> {
+    pub grid: MinMaxGrid<R>,
+    pub tf: OpacityPrefix<R>,
+}
+
+impl<R: Real> Skipper<R> {
+    /// Builds the grid over `voxels` (see the module docs for which voxels) and the
+    /// prefix count of `lut` for `settings`; `None` when skipping does not apply.
+    pub fn new(voxels: &Grid<R>, lut: &LutR<R>, settings: &RenderSettings) -> Option<Self> {
+        let radius = skip_radius(settings)?;
+        Some(Skipper {
+            grid: min_max_grid(voxels, settings.block_size, radius),
+            tf: opacity_prefix(lut, overshoot(settings.filter, settings.classification)),
+        })
+    }
+
+    /// Whether cell `c` is transparent. Mirrors `shaders/shared/skip.wgsl: cell_empty`.
+    #[inline]
+    pub fn cell_empty(&self, c: [i32; 3]) -> bool {
+        let n = self.grid.cells;
+        let i = c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize);
+        let [lo, hi] = self.grid.minmax[i];
+        self.tf.range_empty(lo, hi)
+    }
+
+    /// Whether every cell is transparent (nothing to render at all).
+    pub fn all_empty(&self) -> bool {
+        self.grid
+            .minmax
+            .iter()
+            .all(|&[lo, hi]| self.tf.range_empty(lo, hi))
+    }
+}
+
+/// An Amanatides–Woo walk through the cells of a grid along `o + d·t`, `t ∈ [t, t_end]`.
+/// Mirrors `shaders/shared/skip.wgsl: CellWalk` (walk_new, walk_boundaries, walk_advance).
+#[derive(Clone, Copy, Debug)]
+pub struct CellWalk<R> {
+    o: V3<R>,
+    d: V3<R>,
+    cell: [i32; 3],
+    step: [i32; 3],
+    cells: [i32; 3],
+    block: R,
+    t: R,
+    t_end: R,
+}
+
+impl<R: Real> CellWalk<R> {
+    /// Starts at `o + d·t0` (clamped into the grid). Mirrors `skip.wgsl: walk_new`.
+    pub fn new(o: V3<R>, d: V3<R>, t0: R, t1: R, block: usize, cells: [usize; 3]) -> Self {
+        let b = R::of(block as f64);
+        let p = o + d * t0;
+        let mut cell = [0i32; 3];
+        let mut step = [0i32; 3];
+        for a in 0..3 {
+            let c = ((p.0[a] + R::of(0.5)) / b)
+                .floor()
+                .max(R::zero())
+                .min(R::of(cells[a] as f64 - 1.0));
+            cell[a] = c.to_i32().unwrap_or(0);
+            step[a] = if d.0[a] > R::zero() {
+                1
+            } else if d.0[a] < R::zero() {
+                -1
+            } else {
+                0
+            };
+        }
+        CellWalk {
+            o,
+            d,
+            cell,
+            step,
+            cells: cells.map(|c| c as i32),
+            block: b,
+            t: t0,
+            t_end: t1,
+        }
+    }
+
+    /// The parameter at which the walk leaves the current cell along axis `a`.
+    /// Mirrors `skip.wgsl: walk_boundaries`.
+    #[inline]
+    fn boundary(&self, a: usize) -> R {
+        if self.step[a] == 0 {
+            return R::of(BIG);
+        }
+        let edge = self.cell[a] + (self.step[a] > 0) as i32;
+        (R::of(edge as f64) * self.block - R::of(0.5) - self.o.0[a]) / self.d.0[a]
+    }
+
+    /// Crosses the nearest boundary. Mirrors `skip.wgsl: walk_advance`.
+    #[inline]
+    fn advance(&mut self) {
+        let (bx, by, bz) = (self.boundary(0), self.boundary(1), self.boundary(2));
+        let a = if bx <= by && bx <= bz {
+            0
+        } else if by <= bz {
+            1
+        } else {
+            2
+        };
+        self.t = self.t.max([bx, by, bz][a]);
+        self.cell[a] += self.step[a];
+    }
+
+    #[inline]
+    fn active(&self) -> bool {
+        self.t < self.t_end && (0..3).all(|a| self.cell[a] >= 0 && self.cell[a] < self.cells[a])
+    }
+
+    /// The next span `[t_a, t_b]` of consecutive non-empty cells, or `None` when the
+    /// ray has left the grid or its interval. Mirrors `skip.wgsl: walk_next_span`.
+    pub fn next_span(&mut self, empty: impl Fn([i32; 3]) -> bool) -> Option<(R, R)> {
+        while self.active() && empty(self.cell) {
+            self.advance();
+        }
+        if !self.active() {
+            return None;
+        }
+        let start = self.t;
+        loop {
+            self.advance();
+            if !self.active() || empty(self.cell) {
+                break;
+            }
+        }
+        Some((start, self.t.min(self.t_end)))
+    }
+}
+
+/// The sample indices of a ray, in the order they are composited, as inclusive ranges
+/// `[k_lo, k_hi]`: all of `0 .. n` without skipping, only those near non-empty cells
+/// with it. Step `k` covers `[t_s + kΔt, t_s + (k+1)Δt] ∩ [t_in, t_out]`.
+/// Mirrors `shaders/shared/skip.wgsl: SampleRanges`.
+#[derive(Clone, Copy, Debug)]
+pub struct SampleRanges<R> {
+    walk: Option<CellWalk<R>>,
+    backward: bool,
+    t_s: R,
+    dt: R,
+    n: i64,
+    /// Front to back: the first index not yet handed out; back to front: one past the
+    /// last index not yet handed out.
+    next: i64,
+}
+
+impl<R: Real> SampleRanges<R> {
+    /// Ranges for `n` steps from `t_s` of `dt` along `o + d·t`, `t ∈ [t_in, t_out]`;
+    /// `backward` hands them out last first. Mirrors `skip.wgsl: ranges_new`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        skip: Option<&Skipper<R>>,
+        o: V3<R>,
+        d: V3<R>,
+        (t_in, t_out): (R, R),
+        t_s: R,
+        dt: R,
+        n: usize,
+        backward: bool,
+    ) -> Self {
+        let walk = skip.map(|s| {
+            if backward {
+                CellWalk::new(o, -d, -t_out, -t_in, s.grid.block, s.grid.cells)
+            } else {
+                CellWalk::new(o, d, t_in, t_out, s.grid.block, s.grid.cells)
+            }
+        });
+        SampleRanges {
+            walk,
+            backward,
+            t_s,
+            dt,
+            n: n as i64,
+            next: if backward { n as i64 } else { 0 },
+        }
+    }
+
+    /// The next range, or `None` when the ray is done. Mirrors `skip.wgsl: ranges_next`.
+    pub fn next(&mut self, skip: Option<&Skipper<R>>) -> Option<(usize, usize)> {
+        let (Some(walk), Some(skip)) = (self.walk.as_mut(), skip) else {
+            // No skipping: one range, handed out once.
+            if (self.backward && self.next == 0) || (!self.backward && self.next == self.n) {
+                return None;
+            }
+            self.next = if self.backward { 0 } else { self.n };
+            return Some((0, self.n as usize - 1));
+        };
+        loop {
+            let (sa, sb) = walk.next_span(|c| skip.cell_empty(c))?;
+            let (ta, tb) = if self.backward { (-sb, -sa) } else { (sa, sb) };
+            let lim = R::of(self.n as f64 + 2.0);
+            let k = |t: R| ((t - self.t_s) / self.dt - R::of(0.5)).max(-lim).min(lim);
+            let mut lo = k(ta).floor().to_i64().unwrap_or(0) - 1;
+            let mut hi = k(tb).ceil().to_i64().unwrap_or(self.n) + 1;
+            lo = lo.max(0);
+            hi = hi.min(self.n - 1);
+            if self.backward {
+                hi = hi.min(self.next - 1);
+                if lo > hi {
+                    continue;
+                }
+                self.next = lo;
+            } else {
+                lo = lo.max(self.next);
+                if lo > hi {
+                    continue;
+                }
+                self.next = hi + 1;
+            }
+            return Some((lo as usize, hi as usize));
+        }
+    }
+}
+
+/// A clipping box resolved for the ray caster: a box in index space (voxel boxes) or
+/// in world space (world boxes), both cutting the same ray parameter `t`.
+#[derive(Clone, Copy, Debug)]
+pub struct ClipR<R> {
+    pub lo: V3<R>,
+    pub hi: V3<R>,
+    pub world: bool,
+}
+
+impl<R: Real> ClipR<R> {
+    /// Resolves a user clip box (voxel boxes grow by ½ to cover whole voxels).
+    pub fn new(c: &ClipBox) -> Self {
+        let grow = if c.space == ClipSpace::Voxel {
+            0.5
+        } else {
+            0.0
+        };
+        let v = |x: [f64; 3], s: f64| V3::new(R::of(x[0] + s), R::of(x[1] + s), R::of(x[2] + s));
+        ClipR {
+            lo: v(c.lo, -grow),
+            hi: v(c.hi, grow),
+            world: c.space == ClipSpace::World,
+        }
+    }
+
+    /// The parameter interval of the ray inside the box (index-space ray `o + d·t`,
+    /// world-space ray `wo + wd·t`), or `None` if it misses.
+    /// Mirrors `shaders/shared/skip.wgsl: clip_interval`.
+    pub fn interval(&self, o: V3<R>, d: V3<R>, wo: V3<R>, wd: V3<R>) -> Option<(R, R)> {
+        if self.world {
+            super::raycast::intersect_box(wo, wd, self.lo, self.hi)
+        } else {
+            super::raycast::intersect_box(o, d, self.lo, self.hi)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lebesgue_constants() {
+        assert_eq!(lebesgue_1d(Filter::Trilinear), 1.0);
+        // Catmull–Rom at f = ½: |−1/16| + 9/16 + 9/16 + |−1/16| = 5/4.
+        assert!((lebesgue_1d(Filter::CatmullRom) - 1.25 * 1.001).abs() < 1e-9);
+        assert!(lebesgue_1d(Filter::Lanczos3) > 1.0);
+    }
+
+    #[test]
+    fn walk_visits_cells_in_order() {
+        // Along +x through a 4×1×1 grid of 2-voxel cells: one span over everything.
+        let o = V3::new(-5.0, 0.0, 0.0);
+        let d = V3::new(1.0, 0.0, 0.0);
+        let mut w = CellWalk::<f64>::new(o, d, 4.5, 12.5, 2, [4, 1, 1]);
+        assert_eq!(w.next_span(|_| false), Some((4.5, 12.5)));
+        assert_eq!(w.next_span(|_| false), None);
+        // Cells 1 and 2 empty: spans [4.5, 6.5] and [10.5, 12.5].
+        let mut w = CellWalk::<f64>::new(o, d, 4.5, 12.5, 2, [4, 1, 1]);
+        let empty = |c: [i32; 3]| c[0] == 1 || c[0] == 2;
+        assert_eq!(w.next_span(empty), Some((4.5, 6.5)));
+        assert_eq!(w.next_span(empty), Some((10.5, 12.5)));
+        assert_eq!(w.next_span(empty), None);
+    }
+}
