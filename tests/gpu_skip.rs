@@ -40,6 +40,8 @@ fn sparse_tf() -> TransferFunction {
             p(1.0, [0.9, 0.9, 0.9, 0.25]),
         ],
         window: Default::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }
 

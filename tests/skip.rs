@@ -34,6 +34,8 @@ pub fn sparse_tf() -> TransferFunction {
             p(1.0, [0.9, 0.9, 0.9, 0.25]),
         ],
         window: Default::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
     }
 }
 
