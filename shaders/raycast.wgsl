@@ -7,8 +7,9 @@
 // Mirrors src/cpu/raycast.rs (cast_ray, classify_sample, shade_sample, phong,
 // intersect_box), src/cpu/filter.rs (axis_taps, sample, the kernels) and
 // src/cpu/gradient.rs (gradient_stencil). Each helper names its Rust twin.
-// Prepended at load time: shaders/shared/raycast_params.wgsl, classify.wgsl and
-// rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared with D²VR).
+// Prepended at load time: shaders/shared/raycast_params.wgsl, classify.wgsl,
+// rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared with D²VR) and
+// modes.wgsl (MIDA, the grey window, iso-surfaces).
 
 
 const FILTER_NEAREST: u32 = 0u;
@@ -226,7 +227,7 @@ fn cast_ray(ray: Ray) -> Pixel {
     );
     let d = vec3<f32>(dot(params.to_index_0.xyz, ray.dir), dot(params.to_index_1.xyz, ray.dir), dot(params.to_index_2.xyz, ray.dir));
     var miss = vec4<f32>(params.misc.w, 0.0, 0.0, 0.0);
-    if (mode == MODE_DVR) {
+    if (mode == MODE_DVR || mode == MODE_MIDA || mode == MODE_ISO) {
         miss = params.background;
     }
     let hit = intersect_box(o, d, vec3<f32>(-0.5), params.box_hi.xyz);
@@ -242,6 +243,13 @@ fn cast_ray(ray: Ray) -> Pixel {
     let dt = params.box_hi.w / speed;
     let n = u32(max(ceil((t_out - t_in) / dt - 1e-3), 1.0));
 
+    // shaders/shared/modes.wgsl
+    if (mode == MODE_MIDA) {
+        return cast_mida(ray, o, d, t_in, t_out, dt, n, speed);
+    }
+    if (mode == MODE_ISO || (mode == MODE_DVR && params.iso_flags.x > 0u)) {
+        return cast_iso(ray, o, d, t_in, t_out, dt, n, speed, mode == MODE_DVR);
+    }
     if (mode == MODE_MIP || mode == MODE_MINIP) {
         var best = sample_value(segment_point(0u, n, t_in, t_out, dt, o, d));
         for (var k = 1u; k < n; k++) {
@@ -251,6 +259,9 @@ fn cast_ray(ray: Ray) -> Pixel {
             } else {
                 best = min(best, v);
             }
+        }
+        if (params.window.z == 1.0) {
+            best = window_map(best);
         }
         return Pixel(vec4<f32>(best, 0.0, 0.0, 0.0), n);
     }

@@ -39,4 +39,17 @@ struct RaycastParams {
     flags: vec4<u32>,
     // gradient method, hardware trilinear, first row of this tile, rows in this tile.
     flags2: vec4<u32>,
+    // MIDA gamma, lowest value, 1/(value range), unused (shaders/shared/modes.wgsl).
+    mode_params: vec4<f32>,
+    // MIP/MinIP grey window: width, centre, 1 when on, unused.
+    window: vec4<f32>,
+    // Iso-surfaces drawn, opaque, shadows, refine.
+    iso_flags: vec4<u32>,
+    // The iso-values.
+    iso_values: vec4<f32>,
+    // Colour (rgb) and opacity of each iso-surface.
+    iso_color_0: vec4<f32>,
+    iso_color_1: vec4<f32>,
+    iso_color_2: vec4<f32>,
+    iso_color_3: vec4<f32>,
 }

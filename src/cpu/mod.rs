@@ -11,6 +11,7 @@ pub mod fft;
 pub mod filter;
 pub mod fvr;
 pub mod gradient;
+pub mod modes;
 pub mod process;
 pub mod project;
 pub mod ramp;
