@@ -201,7 +201,7 @@ fn windowed_mip_is_the_window_of_the_mip() {
                     *v = window_map(*v, window);
                 }
             }
-            assert!(counts.data.iter().any(|&n| n == 0.0));
+            assert!(counts.data.contains(&0.0));
             let d = max_diff(&w, &mapped);
             eprintln!("{mode:?} window {window:?}: max |Δ| {d:.1e}");
             assert_eq!(d, 0.0);
