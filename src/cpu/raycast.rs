@@ -17,6 +17,8 @@
 //!   `c' = c (k_a + k_d |n·L|) + k_s |n·H|^s`.
 //! - **MIP / MinIP**: the maximum / minimum sample.
 //! - **X-ray**: `Σ f(p_k) Δℓ_k`, the line integral in value × mm.
+//! - **MIDA**, the MIP/MinIP grey window and **iso-surfaces** (alone or with DVR): see
+//!   [`super::modes`].
 //!
 //! Pixels are independent and every sum runs in a fixed order, so the result is
 //! bit-identical for any number of threads. The same code runs in f64 (the oracle) and
