@@ -559,3 +559,83 @@ fn dvr_with_transparent_iso_surfaces_is_dvr() {
     let img = draw::<f64>(&vol, &tf, &cam, &opaque);
     assert!(max_diff(&draw::<f64>(&vol, &tf, &cam, &dvr), &img) > 0.1);
 }
+
+/// The f32 CPU path against the f64 oracle for every mode of this module (Shepp–Logan
+/// 24×27×22 at 40×30, perspective). Measured max |Δ|: MIDA γ = 0 5.9e-5, γ = 0.5
+/// 2.9e-5; windowed MIP (width 0.1) 1.6e-5; iso semi-transparent 5.9e-6, opaque with
+/// shadows 9.3e-6, DVR + iso 1.2e-5. Bound 3e-4, 5× the worst. (MIDA's MIP colour was
+/// once shaded: on a plateau of the maximum f32 and f64 picked different samples and
+/// gradients, 2.6e-3 at γ = 0.5; it is unshaded now.)
+#[test]
+fn f32_cpu_matches_the_f64_oracle() {
+    let (vol, tf, cam) = phantom_scene(24, 40);
+    let isos = vec![
+        IsoSurface {
+            value: 0.5,
+            color: [1.0, 0.9, 0.7],
+            opacity: 0.6,
+        },
+        IsoSurface {
+            value: 0.25,
+            color: [0.2, 0.6, 1.0],
+            opacity: 0.3,
+        },
+    ];
+    let mut shadows = RenderSettings {
+        mode: Mode::Iso,
+        iso_surfaces: isos.clone(),
+        iso_opaque: true,
+        iso_shadows: true,
+        ..RenderSettings::default()
+    };
+    shadows.shading.light = Light::Direction([0.6, -1.0, 0.8]);
+    let cases = [
+        (
+            "mida 0",
+            RenderSettings {
+                mode: Mode::Mida,
+                ..RenderSettings::default()
+            },
+        ),
+        (
+            "mida 0.5",
+            RenderSettings {
+                mode: Mode::Mida,
+                mida_gamma: 0.5,
+                ..RenderSettings::default()
+            },
+        ),
+        (
+            "windowed mip",
+            RenderSettings {
+                mode: Mode::Mip,
+                window: Some([0.1, 0.25]),
+                ..RenderSettings::default()
+            },
+        ),
+        (
+            "iso",
+            RenderSettings {
+                mode: Mode::Iso,
+                iso_surfaces: isos.clone(),
+                ..RenderSettings::default()
+            },
+        ),
+        ("iso opaque shadows", shadows),
+        (
+            "dvr + iso",
+            RenderSettings {
+                iso_surfaces: isos.clone(),
+                ..RenderSettings::default()
+            },
+        ),
+    ];
+    for (name, s) in cases {
+        let d = max_diff(
+            &draw::<f64>(&vol, &tf, &cam, &s),
+            &draw::<f32>(&vol, &tf, &cam, &s),
+        );
+        eprintln!("{name}: f32 vs f64 max |Δ| {d:.2e}");
+        assert!(d < 3e-4, "{name}: {d}");
+    }
+}

@@ -109,12 +109,9 @@ fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f3
         a = beta * a + w;
     }
     if (gamma > 0.0) {
+        // Unshaded, as on the CPU.
         let s = classify_sample(best_p);
-        var rgb = s.xyz;
-        if (params.flags.y == 1u && s.w > 0.0) {
-            rgb = shade_sample(best_p, rgb, light, half_vec);
-        }
-        c = (1.0 - gamma) * c + gamma * s.w * rgb;
+        c = (1.0 - gamma) * c + gamma * s.w * s.xyz;
         a = (1.0 - gamma) * a + gamma * s.w;
     }
     return Pixel(over_background(c, a), n);

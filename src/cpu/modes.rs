@@ -22,7 +22,8 @@
 //! in front of a new maximum fades in proportion to the rise. For `γ ∈ (0, 1]` the
 //! result is blended with MIP, `C = (1 − γ) C_MIDA(0) + γ C_MIP`, where `C_MIP = α c` of
 //! the first sample holding the ray's maximum (its transfer-function colour and
-//! opacity, shaded like DVR). At `γ = 1` it is that MIP colour. Because `A` may fall
+//! opacity, unshaded: which of a plateau's samples holds the maximum is decided by
+//! rounding, while its value is not). At `γ = 1` it is that MIP colour. Because `A` may fall
 //! (β < 1), MIDA never terminates rays early.
 //!
 //! **Window/level** (MIP, MinIP): `g = clamp((v − centre) / width + ½, 0, 1)`, the grey
@@ -365,12 +366,9 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
         a = beta * a + w;
     }
     if m.gamma > R::zero() {
+        // Unshaded: on a plateau of the maximum, rounding picks which sample holds it,
+        // and the gradient there is ill-defined; the value (and so its colour) is not.
         let (rgb, alpha) = classify_sample(field, s, best_p);
-        let rgb = if s.shade && alpha > R::zero() {
-            shade_sample(field, s, best_p, rgb, light, half)
-        } else {
-            rgb
-        };
         let g = m.gamma;
         for ch in 0..3 {
             c[ch] = (R::one() - g) * c[ch] + g * alpha * rgb[ch];
