@@ -7,9 +7,10 @@
 // Mirrors src/cpu/raycast.rs (cast_ray, classify_sample, shade_sample, phong,
 // intersect_box), src/cpu/filter.rs (axis_taps, sample, the kernels) and
 // src/cpu/gradient.rs (gradient_stencil). Each helper names its Rust twin.
-// Prepended at load time: shaders/shared/raycast_params.wgsl, classify.wgsl and
-// rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared with D²VR) and
-// skip.wgsl (empty-space skipping, clipping box, jittered ray starts).
+// Prepended at load time: shaders/shared/raycast_params.wgsl, classify.wgsl,
+// classify2d.wgsl, rays.wgsl (camera_ray, intersect_box, segment_bounds, phong, shared
+// with D²VR), skip.wgsl (empty-space skipping, clipping box, jittered ray starts) and
+// modes.wgsl (MIDA, the grey window, iso-surfaces).
 
 
 const FILTER_NEAREST: u32 = 0u;
@@ -239,7 +240,7 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     );
     let d = vec3<f32>(dot(params.to_index_0.xyz, ray.dir), dot(params.to_index_1.xyz, ray.dir), dot(params.to_index_2.xyz, ray.dir));
     var miss = vec4<f32>(params.misc.w, 0.0, 0.0, 0.0);
-    if (mode == MODE_DVR) {
+    if (mode == MODE_DVR || mode == MODE_MIDA || mode == MODE_ISO) {
         miss = params.background;
     }
     let hit = intersect_box(o, d, vec3<f32>(-0.5), params.box_hi.xyz);
@@ -264,6 +265,14 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     let t_s = t_in - u * dt;
     let n = u32(max(ceil((t_out - t_s) / dt - 1e-3), 1.0));
 
+    // shaders/shared/modes.wgsl: MIDA and iso-surfaces march the unjittered grid.
+    let n0 = u32(max(ceil((t_out - t_in) / dt - 1e-3), 1.0));
+    if (mode == MODE_MIDA) {
+        return cast_mida(ray, o, d, t_in, t_out, dt, n0, speed);
+    }
+    if (mode == MODE_ISO || (mode == MODE_DVR && params.iso_flags.x > 0u)) {
+        return cast_iso(ray, o, d, t_in, t_out, dt, n0, speed, mode == MODE_DVR);
+    }
     if (mode == MODE_MIP || mode == MODE_MINIP) {
         var best = sample_value(segment_point(0u, n, t_in, t_s, t_out, dt, o, d));
         for (var k = 1u; k < n; k++) {
@@ -273,6 +282,9 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
             } else {
                 best = min(best, v);
             }
+        }
+        if (params.window.z == 1.0) {
+            best = window_map(best);
         }
         return Pixel(vec4<f32>(best, 0.0, 0.0, 0.0), n);
     }

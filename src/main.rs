@@ -163,7 +163,8 @@ struct SceneArgs {
     #[command(flatten)]
     load: LoadArgs,
     /// What rays compute: dvr (colour and opacity through the transfer function), mip,
-    /// minip, xray (line integral, value × mm).
+    /// minip, xray (line integral, value × mm), mida (maximum intensity difference
+    /// accumulation, see --mida-gamma), iso (iso-surfaces only, see --iso).
     #[arg(long, value_enum, default_value = "dvr")]
     mode: Mode,
     /// Transfer function: a preset name (see `voxlab tf`), a JSON file, or auto (the
@@ -171,10 +172,33 @@ struct SceneArgs {
     /// value range).
     #[arg(long, default_value = "auto")]
     tf: String,
-    /// Window width in raw data units: maps [level − width/2, level + width/2] onto the
-    /// transfer function's domain (Ψ(t) = a·t + b). Needs --level.
-    #[arg(long, requires = "level", allow_negative_numbers = true)]
-    window: Option<f64>,
+    /// Window in raw data units, as WIDTH (with --level) or WIDTH,CENTRE. MIP and MinIP:
+    /// the grey window, clamp((v − centre)/width + ½, 0, 1). Other modes: maps
+    /// [centre − width/2, centre + width/2] onto the transfer function's domain
+    /// (Ψ(t) = a·t + b).
+    #[arg(long, allow_hyphen_values = true)]
+    window: Option<String>,
+    /// A named CT window in Hounsfield units (brain, subdural, abdomen, liver, lung,
+    /// bone), used like --window WIDTH,CENTRE.
+    #[arg(long, conflicts_with_all = ["window", "level"])]
+    window_preset: Option<String>,
+    /// MIDA's γ in [-1, 1]: -1 is DVR, 0 plain MIDA, 1 MIP (with --mode mida).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    mida_gamma: f64,
+    /// An iso-surface VALUE:COLOUR:OPACITY, e.g. 0.3:#ff0000:0.4 (COLOUR #rrggbb;
+    /// OPACITY in [0, 1]); repeatable, up to 4. Drawn by --mode iso, and with DVR.
+    #[arg(long = "iso", allow_hyphen_values = true)]
+    iso: Vec<String>,
+    /// Opaque iso-surfaces: the first crossing ends the ray.
+    #[arg(long)]
+    iso_opaque: bool,
+    /// Binary shadows on opaque iso-surfaces (with --iso-opaque; use --light).
+    #[arg(long)]
+    shadows: bool,
+    /// Take each iso-surface hit at the first sample past the crossing, instead of
+    /// refining it by linear interpolation between the two samples.
+    #[arg(long)]
+    no_iso_refine: bool,
     /// Window centre (level) in raw data units. Needs --window.
     #[arg(long, requires = "window", allow_negative_numbers = true)]
     level: Option<f64>,
@@ -752,6 +776,80 @@ fn progress_bar(len: u64, what: &str, unit: &str) -> indicatif::ProgressBar {
     pb
 }
 
+/// `--window` (WIDTH with --level, or WIDTH,CENTRE) or `--window-preset`, as
+/// `[width, centre]`.
+fn window_arg(a: &SceneArgs) -> Result<Option<[f64; 2]>> {
+    if let Some(name) = &a.window_preset {
+        return voxlab::cpu::modes::window_preset(name).map(Some);
+    }
+    let Some(text) = &a.window else {
+        if a.level.is_some() {
+            return Err(Error::invalid("--level", "needs --window WIDTH"));
+        }
+        return Ok(None);
+    };
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|_| Error::invalid("--window", format!("'{t}' is not a number")))
+    };
+    let [w, c] = match (text.split_once(','), a.level) {
+        (Some((w, c)), None) => [number(w)?, number(c)?],
+        (Some(_), Some(_)) => {
+            return Err(Error::invalid(
+                "--window",
+                "give WIDTH,CENTRE or WIDTH with --level, not both",
+            ))
+        }
+        (None, Some(l)) => [number(text)?, l],
+        (None, None) => {
+            return Err(Error::invalid(
+                "--window",
+                "needs a centre: --window WIDTH,CENTRE or --window WIDTH --level CENTRE",
+            ))
+        }
+    };
+    if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+        return Err(Error::invalid(
+            "--window",
+            format!("width {w} must be finite and positive, centre {c} finite"),
+        ));
+    }
+    Ok(Some([w, c]))
+}
+
+/// One `--iso VALUE:#RRGGBB:OPACITY`.
+fn iso_arg(text: &str) -> Result<voxlab::settings::IsoSurface> {
+    let bad = |why: String| Error::invalid("--iso", format!("'{text}': {why}"));
+    let parts: Vec<&str> = text.split(':').collect();
+    let [value, color, opacity] = parts[..] else {
+        return Err(bad(
+            "expected VALUE:COLOUR:OPACITY, e.g. 0.3:#ff0000:0.4".into()
+        ));
+    };
+    let num = |t: &str, what: &str| {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(format!("{what} '{t}' is not a finite number")))
+    };
+    let hex = color.trim().strip_prefix('#').unwrap_or(color.trim());
+    if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(bad(format!("colour '{color}' is not #rrggbb")));
+    }
+    let channel = |i: usize| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap() as f64 / 255.0;
+    let opacity = num(opacity, "opacity")?;
+    if !(0.0..=1.0).contains(&opacity) {
+        return Err(bad(format!("opacity {opacity} must lie in [0, 1]")));
+    }
+    Ok(voxlab::settings::IsoSurface {
+        value: num(value, "value")?,
+        color: [channel(0), channel(1), channel(2)],
+        opacity,
+    })
+}
+
 /// Loads the input and builds the camera, transfer function and settings.
 fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettings)> {
     let volume = load_input(&a.input, &a.load)?;
@@ -807,7 +905,9 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
         }
         tf.validate()?;
     }
-    if let (Some(w), Some(l)) = (a.window, a.level) {
+    let window = window_arg(a)?;
+    let grey_window = matches!(a.mode, Mode::Mip | Mode::Minip);
+    if let (Some([w, l]), false) = (window, grey_window) {
         tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
         if let Some(t) = tf2d.as_mut() {
             t.window = WindowMap::from_window_level(w, l, t.domain)?;
@@ -880,6 +980,12 @@ fn build_scene(a: &SceneArgs, sample_count: bool) -> Result<(Scene, RenderSettin
                 ..RenderSettings::default()
             };
             s.shading.enabled = !a.no_shading;
+            s.mida_gamma = a.mida_gamma;
+            s.window = window.filter(|_| grey_window);
+            s.iso_surfaces = a.iso.iter().map(|t| iso_arg(t)).collect::<Result<_>>()?;
+            s.iso_opaque = a.iso_opaque;
+            s.iso_shadows = a.shadows;
+            s.iso_refine = !a.no_iso_refine;
             if let Some(l) = a.light {
                 s.shading.light = Light::Direction(l);
             }

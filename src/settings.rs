@@ -19,7 +19,33 @@ pub enum Mode {
     Minip,
     /// X-ray: the line integral of the raw values, in value × mm (scalar output).
     Xray,
+    /// Maximum intensity difference accumulation (Bruckner & Gröller 2009): DVR whose
+    /// accumulated colour fades where a sample raises the running maximum; `mida_gamma`
+    /// moves it from DVR (−1) to MIP (+1) (RGBA output; see `cpu::modes`).
+    Mida,
+    /// Iso-surfaces only: the `iso_surfaces` composited front to back (RGBA output).
+    /// DVR with iso-surfaces set draws both in one image.
+    Iso,
 }
+
+impl Mode {
+    /// Whether the mode produces RGBA (through a transfer function or iso colours).
+    pub fn rgba(self) -> bool {
+        matches!(self, Mode::Dvr | Mode::Mida | Mode::Iso)
+    }
+}
+
+/// One iso-surface: where the field crosses `value`, a surface of this colour and
+/// opacity (per crossing, not per step).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IsoSurface {
+    pub value: f64,
+    pub color: [f64; 3],
+    pub opacity: f64,
+}
+
+/// The most iso-surfaces one render may draw (the GPU's parameter block holds four).
+pub const MAX_ISO_SURFACES: usize = 4;
 
 /// The reconstruction filter used to sample the volume between voxel centres.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -207,6 +233,22 @@ pub struct RenderSettings {
     /// Per-pixel ray-start offset from a fixed 4×4 ordered pattern (interleaved
     /// sampling, one frame).
     pub interleaved: bool,
+    /// MIDA's γ in [−1, 1]: −1 is DVR, 0 plain MIDA, 1 MIP (see `cpu::modes`).
+    pub mida_gamma: f64,
+    /// MIP/MinIP grey window `[width, centre]` in raw units: the output becomes
+    /// `clamp((v − centre) / width + ½, 0, 1)` (rays that miss keep `miss_value`); `None`
+    /// keeps the raw values.
+    pub window: Option<[f64; 2]>,
+    /// Iso-surfaces (mode `iso`, or together with DVR), at most [`MAX_ISO_SURFACES`].
+    pub iso_surfaces: Vec<IsoSurface>,
+    /// Opaque iso-surfaces: the first crossing ends the ray.
+    pub iso_opaque: bool,
+    /// Binary shadows on opaque iso-surfaces: a ray from the hit toward the light that
+    /// crosses an iso-value again leaves the hit in shadow (ambient light only).
+    pub iso_shadows: bool,
+    /// Refine each crossing by linear interpolation between the two samples around it
+    /// (off: the hit is the first sample past the crossing).
+    pub iso_refine: bool,
 }
 
 /// The space a clipping box is given in.
@@ -252,6 +294,12 @@ impl Default for RenderSettings {
             clip_box: None,
             jitter: None,
             interleaved: false,
+            mida_gamma: 0.0,
+            window: None,
+            iso_surfaces: Vec::new(),
+            iso_opaque: false,
+            iso_shadows: false,
+            iso_refine: true,
         }
     }
 }
@@ -323,7 +371,7 @@ impl RenderSettings {
         }
         if let Some(t) = &self.transfer_2d {
             t.validate()?;
-            if self.mode == Mode::Dvr && self.classification == Classification::Pre {
+            if self.mode.rgba() && self.classification == Classification::Pre {
                 return Err(Error::invalid(
                     "classification",
                     "a 2D transfer function classifies interpolated samples by their \
@@ -349,6 +397,6 @@ impl RenderSettings {
                 "random jitter and interleaved sampling exclude each other",
             ));
         }
-        Ok(())
+        crate::cpu::modes::validate(self)
     }
 }

@@ -44,6 +44,14 @@ fn raycast_params_layout_agrees() {
         ("skip_tf", offset_of!(RaycastParams, skip_tf)),
         ("clip_lo", offset_of!(RaycastParams, clip_lo)),
         ("clip_hi", offset_of!(RaycastParams, clip_hi)),
+        ("mode_params", offset_of!(RaycastParams, mode_params)),
+        ("window", offset_of!(RaycastParams, window)),
+        ("iso_flags", offset_of!(RaycastParams, iso_flags)),
+        ("iso_values", offset_of!(RaycastParams, iso_values)),
+        ("iso_color_0", offset_of!(RaycastParams, iso_color_0)),
+        ("iso_color_1", offset_of!(RaycastParams, iso_color_1)),
+        ("iso_color_2", offset_of!(RaycastParams, iso_color_2)),
+        ("iso_color_3", offset_of!(RaycastParams, iso_color_3)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

@@ -53,4 +53,17 @@ struct RaycastParams {
     // Clipping box corners (index space or world mm, per accel.w).
     clip_lo: vec4<f32>,
     clip_hi: vec4<f32>,
+    // MIDA gamma, lowest value, 1/(value range), unused (shaders/shared/modes.wgsl).
+    mode_params: vec4<f32>,
+    // MIP/MinIP grey window: width, centre, 1 when on, unused.
+    window: vec4<f32>,
+    // Iso-surfaces drawn, opaque, shadows, refine.
+    iso_flags: vec4<u32>,
+    // The iso-values.
+    iso_values: vec4<f32>,
+    // Colour (rgb) and opacity of each iso-surface.
+    iso_color_0: vec4<f32>,
+    iso_color_1: vec4<f32>,
+    iso_color_2: vec4<f32>,
+    iso_color_3: vec4<f32>,
 }

@@ -254,7 +254,7 @@ pub fn cases(suite: Suite) -> Vec<Case> {
 pub fn raycast_tolerances(settings: &RenderSettings) -> (Tol, Tol) {
     match settings.mode {
         Mode::Dvr if settings.hardware_filtering => (DVR_F32, HARDWARE_DVR_GPU),
-        Mode::Dvr => (DVR_F32, DVR_GPU),
+        Mode::Dvr | Mode::Mida | Mode::Iso => (DVR_F32, DVR_GPU),
         Mode::Xray => (XRAY, XRAY),
         Mode::Mip | Mode::Minip => (MIP, MIP),
     }

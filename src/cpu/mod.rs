@@ -14,6 +14,7 @@ pub mod fvr;
 pub mod gradient;
 pub mod parker;
 pub mod preintegrate;
+pub mod modes;
 pub mod process;
 pub mod project;
 pub mod ramp;

@@ -19,6 +19,8 @@
 //!   post-classification reads the table at (value, |world-space gradient|).
 //! - **MIP / MinIP**: the maximum / minimum sample.
 //! - **X-ray**: `Σ f(p_k) Δℓ_k`, the line integral in value × mm.
+//! - **MIDA**, the MIP/MinIP grey window and **iso-surfaces** (alone or with DVR): see
+//!   [`super::modes`].
 //!
 //! Pixels are independent and every sum runs in a fixed order, so the result is
 //! bit-identical for any number of threads. The same code runs in f64 (the oracle) and
@@ -245,28 +247,30 @@ pub struct ShadingR<R> {
 }
 
 /// Everything a ray needs, prepared once per render.
-struct Setup<R> {
-    to_index: DMat4,
+pub(crate) struct Setup<R> {
+    pub(crate) to_index: DMat4,
     normal: M3<R>,
-    lo: V3<R>,
-    hi: V3<R>,
-    step: R,
-    ref_step: R,
+    pub(crate) lo: V3<R>,
+    pub(crate) hi: V3<R>,
+    pub(crate) step: R,
+    pub(crate) ref_step: R,
     lut: LutR<R>,
     /// The 2D transfer function's table (DVR, post-classification), if any.
     lut2: Option<crate::transfer2d::Lut2R<R>>,
     pre: Option<[Grid<R>; 4]>,
     filter: Filter,
-    k: ShadingR<R>,
-    shade: bool,
-    light: Option<V3<R>>,
+    pub(crate) k: ShadingR<R>,
+    pub(crate) shade: bool,
+    pub(crate) light: Option<V3<R>>,
     grad_thr: R,
-    ert: R,
-    bg: [R; 4],
+    pub(crate) ert: R,
+    pub(crate) bg: [R; 4],
     miss: R,
     /// Empty-space skipping (`cpu::skip`), when it applies.
     skip: Option<super::skip::Skipper<R>>,
     clip: Option<super::skip::ClipR<R>>,
+    /// MIDA, window and iso-surface set-up (`cpu::modes`).
+    pub(crate) modes: super::modes::ModeSetup<R>,
 }
 
 /// Renders a volume with precision `R`. `progress(done_rows, total_rows)` is called as
@@ -343,10 +347,10 @@ pub fn render_field<R: Real, F: Field<R>>(
     let normal = M3::from_dmat3(lin.inverse().transpose());
     let lut = tf.lut(settings.lut_size).to_real::<R>();
     let pre = match (settings.mode, settings.classification, field.voxel_values()) {
-        (Mode::Dvr, Classification::Pre, Some(values)) => {
+        (Mode::Dvr | Mode::Mida, Classification::Pre, Some(values)) => {
             Some(preclassify(values, &lut).map(|g| prepare(&g, settings.filter)))
         }
-        (Mode::Dvr, Classification::Pre, None) => {
+        (Mode::Dvr | Mode::Mida, Classification::Pre, None) => {
             return Err(Error::invalid(
                 "classification",
                 "pre-classification needs a voxel grid",
@@ -380,7 +384,7 @@ pub fn render_field<R: Real, F: Field<R>>(
             specular: R::of(s.specular),
             shininess: R::of(s.shininess),
         },
-        shade: s.enabled && settings.mode == Mode::Dvr,
+        shade: s.enabled && settings.mode.rgba(),
         light: match s.light {
             Light::Headlight => None,
             Light::Direction(d) => Some(V3::from_dvec(glam::DVec3::from_array(d).normalize())),
@@ -391,6 +395,7 @@ pub fn render_field<R: Real, F: Field<R>>(
         miss: R::of(settings.miss_value),
         skip: None,
         clip: settings.clip_box.as_ref().map(super::skip::ClipR::new),
+        modes: super::modes::ModeSetup::new(settings, (lo_v, hi_v)),
     };
     // Post-classification bounds what the filter samples; pre-classification the voxels.
     let skip_voxels = match settings.classification {
@@ -402,7 +407,7 @@ pub fn render_field<R: Real, F: Field<R>>(
         ..setup
     };
 
-    let channels = if settings.mode == Mode::Dvr { 4 } else { 1 };
+    let channels = if settings.mode.rgba() { 4 } else { 1 };
     let (w, h) = (camera.width, camera.height);
     let mut image = Frame::new(w, h, channels);
     let mut counts = vec![0u32; w * h];
@@ -462,7 +467,7 @@ fn cast_ray<R: Real, F: Field<R>>(
 ) -> ([R; 4], u32) {
     let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
     let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
-    let miss = if mode == Mode::Dvr {
+    let miss = if mode.rgba() {
         s.bg
     } else {
         [s.miss, R::zero(), R::zero(), R::zero()]
@@ -504,7 +509,26 @@ fn cast_ray<R: Real, F: Field<R>>(
         };
         (o + d * ((ta + tb) * R::of(0.5)), tb - ta)
     };
+    // MIDA and iso-surfaces march the unjittered grid from t_in.
+    let span = super::modes::Span {
+        o,
+        d,
+        t_in,
+        t_out,
+        dt,
+        n: ((t_out - t_in) / dt - R::of(1e-3))
+            .ceil()
+            .max(R::one())
+            .to_usize()
+            .unwrap_or(1),
+        speed,
+    };
     match mode {
+        Mode::Mida => super::modes::cast_mida(field, s, &span, ray.dir),
+        Mode::Iso => super::modes::cast_iso(field, s, &span, ray.dir, false),
+        Mode::Dvr if !s.modes.iso.is_empty() => {
+            super::modes::cast_iso(field, s, &span, ray.dir, true)
+        }
         Mode::Mip | Mode::Minip => {
             let mut best = field.value(segment(0).0);
             for k in 1..n {
@@ -514,6 +538,9 @@ fn cast_ray<R: Real, F: Field<R>>(
                 } else {
                     best.min(v)
                 };
+            }
+            if let Some(window) = s.modes.window {
+                best = super::modes::window_map(best, window);
             }
             ([best, R::zero(), R::zero(), R::zero()], n as u32)
         }
@@ -591,7 +618,11 @@ fn cast_ray<R: Real, F: Field<R>>(
 /// Colour and opacity (per reference step) of the sample at `p`.
 /// Mirrors `shaders/raycast.wgsl: classify_sample`.
 #[inline]
-fn classify_sample<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>) -> ([R; 3], R) {
+pub(crate) fn classify_sample<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    p: V3<R>,
+) -> ([R; 3], R) {
     match &s.pre {
         None => {
             let c = match &s.lut2 {
@@ -621,7 +652,7 @@ fn classify_sample<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>) -> (
 /// Phong-shades a sample, blending in from unshaded where the gradient is tiny.
 /// Mirrors `shaders/raycast.wgsl: shade_sample`.
 #[inline]
-fn shade_sample<R: Real, F: Field<R>>(
+pub(crate) fn shade_sample<R: Real, F: Field<R>>(
     field: &F,
     s: &Setup<R>,
     p: V3<R>,

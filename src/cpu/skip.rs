@@ -54,10 +54,15 @@ const BIG: f64 = 3.0e38;
 
 /// The filter radius the min/max grid must cover, or `None` when skipping does not
 /// apply to these settings (off, not DVR, full sinc, pre-classified `bspline-interp`,
-/// or a 2D transfer function, whose opacity depends on the gradient too: the 1D
-/// table's emptiness says nothing about it).
+/// a 2D transfer function, whose opacity depends on the gradient too: the 1D table's
+/// emptiness says nothing about it, or iso-surfaces, which can lie where the table is
+/// transparent).
 pub fn skip_radius(settings: &RenderSettings) -> Option<usize> {
-    if !settings.skip_empty || settings.mode != Mode::Dvr || settings.transfer_2d.is_some() {
+    if !settings.skip_empty
+        || settings.mode != Mode::Dvr
+        || settings.transfer_2d.is_some()
+        || !settings.iso_surfaces.is_empty()
+    {
         return None;
     }
     match (settings.filter, settings.classification) {

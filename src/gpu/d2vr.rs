@@ -178,6 +178,16 @@ pub fn render_d2vr(
             "GPU D²VR marches image-aligned slices front to back; use front-to-back",
         ));
     }
+    if matches!(settings.mode, Mode::Mida | Mode::Iso)
+        || (settings.mode == Mode::Dvr && !settings.iso_surfaces.is_empty())
+        || settings.window.is_some()
+    {
+        return Err(Error::invalid(
+            "mode",
+            "GPU D²VR renders DVR, MIP, MinIP and X-ray; MIDA, iso-surfaces and the grey \
+             window (docs/modes.md) run on the CPU D²VR",
+        ));
+    }
     if let Some(m) = occupancy {
         if m.dims != grid.dims {
             return Err(Error::invalid(

@@ -76,6 +76,19 @@ pub struct RaycastParams {
     pub skip_tf: [f32; 4],
     pub clip_lo: [f32; 4],
     pub clip_hi: [f32; 4],
+    /// MIDA γ, lowest value, 1/(value range), unused (`cpu::modes`).
+    pub mode_params: [f32; 4],
+    /// MIP/MinIP grey window: width, centre, 1 when on, unused.
+    pub window: [f32; 4],
+    /// Iso-surfaces drawn, opaque, shadows, refine.
+    pub iso_flags: [u32; 4],
+    /// The iso-values.
+    pub iso_values: [f32; 4],
+    /// Colour (rgb) and opacity of each iso-surface.
+    pub iso_color_0: [f32; 4],
+    pub iso_color_1: [f32; 4],
+    pub iso_color_2: [f32; 4],
+    pub iso_color_3: [f32; 4],
 }
 
 /// The WGSL struct shared by both shaders.
@@ -88,6 +101,8 @@ pub const CLASSIFY2D_WGSL: &str = include_str!("../../shaders/shared/classify2d.
 pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
 /// Rays, boxes, steps and Phong shading, shared with D²VR (`shaders/shared/rays.wgsl`).
 pub const RAYS_WGSL: &str = include_str!("../../shaders/shared/rays.wgsl");
+/// MIDA, windowed MIP and iso-surfaces (`shaders/shared/modes.wgsl`).
+pub const MODES_WGSL: &str = include_str!("../../shaders/shared/modes.wgsl");
 /// The set-up shader (without the shared struct).
 pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
 /// The gradient stencil at a voxel, shared with `gpu::gradient`
@@ -260,13 +275,13 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
         Filter::Trilinear if settings.hardware_filtering => STUB_TAPS.to_string(),
         f => accumulate_taps_wgsl(f),
     };
-    let on_the_fly = settings.mode == Mode::Dvr
+    let on_the_fly = settings.mode.rgba()
         && (settings.shading.enabled || settings.transfer_2d.is_some())
         && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
     let skip = super::skip::SKIP_WGSL;
     format!(
-        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
+        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{MODES_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
     )
 }
 
@@ -348,6 +363,8 @@ pub fn raycast_params(
         Mode::Mip => 1,
         Mode::Minip => 2,
         Mode::Xray => 3,
+        Mode::Mida => 4,
+        Mode::Iso => 5,
     };
     let hardware = settings.hardware_filtering;
     if hardware && settings.filter != Filter::Trilinear {
@@ -404,9 +421,10 @@ pub fn raycast_params(
             filter_id(settings.filter)?,
         ],
         flags: [
-            (settings.mode == Mode::Dvr && settings.classification == Classification::Pre) as u32,
-            (settings.mode == Mode::Dvr && s.enabled) as u32,
-            (settings.mode == Mode::Dvr
+            (matches!(settings.mode, Mode::Dvr | Mode::Mida)
+                && settings.classification == Classification::Pre) as u32,
+            (settings.mode.rgba() && s.enabled) as u32,
+            (settings.mode.rgba()
                 && (s.enabled || settings.transfer_2d.is_some())
                 && settings.precompute_gradients) as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
@@ -414,13 +432,13 @@ pub fn raycast_params(
         flags2: [gradient, hardware as u32, 0, camera.height as u32],
         tf2d_a: tf2d[0],
         tf2d_b: tf2d[1],
-        ..accel_params(dims, settings)
+        ..accel_params(dims, settings, modes_params(settings, value_range))
     })
 }
 
 /// The skipping, jitter and clipping members of the parameter block (`cpu::skip`,
 /// `accumulate`).
-fn accel_params(dims: [usize; 3], settings: &RenderSettings) -> RaycastParams {
+fn accel_params(dims: [usize; 3], settings: &RenderSettings, rest: RaycastParams) -> RaycastParams {
     use crate::cpu::skip::{cell_count, overshoot, skip_radius, ClipR};
     let cells = cell_count(dims, settings.block_size);
     let clip = settings.clip_box.as_ref().map(ClipR::<f32>::new);
@@ -451,8 +469,39 @@ fn accel_params(dims: [usize; 3], settings: &RenderSettings) -> RaycastParams {
         ],
         clip_lo: corner(clip.map(|c| c.lo)),
         clip_hi: corner(clip.map(|c| c.hi)),
-        ..Default::default()
+        ..rest
     }
+}
+
+/// The members of the parameter block for MIDA, the grey window and iso-surfaces
+/// (mirrors `cpu::modes::ModeSetup::new`); the rest zero.
+fn modes_params(settings: &RenderSettings, value_range: (f64, f64)) -> RaycastParams {
+    let m = crate::cpu::modes::ModeSetup::<f32>::new(settings, value_range);
+    let mut p = RaycastParams {
+        mode_params: [m.gamma, m.lo, m.inv_range, 0.0],
+        window: match m.window {
+            Some([w, c]) => [w, c, 1.0, 0.0],
+            None => [0.0; 4],
+        },
+        iso_flags: [
+            m.iso.len() as u32,
+            m.opaque as u32,
+            m.shadows as u32,
+            m.refine as u32,
+        ],
+        ..Default::default()
+    };
+    let colors = [
+        &mut p.iso_color_0,
+        &mut p.iso_color_1,
+        &mut p.iso_color_2,
+        &mut p.iso_color_3,
+    ];
+    for ((iso, value), color) in m.iso.iter().zip(&mut p.iso_values).zip(colors) {
+        *value = iso.value;
+        *color = [iso.color[0], iso.color[1], iso.color[2], iso.opacity];
+    }
+    p
 }
 
 /// Renders on the GPU. Same inputs and outputs as `cpu::raycast::render`.
@@ -479,9 +528,20 @@ pub fn render(
     if ctx.summary.is_cpu() {
         // The ray march is the only loop per invocation (plus 3 box-slab iterations).
         let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-        // Skipping adds one iteration per cell crossed, twice.
+        // Skipping adds one iteration per cell crossed, twice; iso-surfaces loop over
+        // the iso-values per step (crossings, their sort) and an opaque surface's shadow
+        // ray marches once more.
         let cells = crate::cpu::skip::cell_count(dims, settings.block_size);
-        let steps = diag / settings.step + 2.0 + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
+        let isos = settings.iso_surfaces.len() as f64;
+        let per_step = 1.0
+            + 2.0 * isos
+            + if settings.iso_shadows {
+                1.0 + isos
+            } else {
+                0.0
+            };
+        let steps = (diag / settings.step + 2.0) * per_step
+            + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
         if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
             return Err(Error::invalid(
                 "step",
@@ -669,7 +729,7 @@ pub fn render(
         view(pre_tex.as_ref().unwrap_or(&dummy)),
         view(grad_tex.as_ref().unwrap_or(&dummy)),
     );
-    let mut image = Frame::new(w, h, if settings.mode == Mode::Dvr { 4 } else { 1 });
+    let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
     let mut counts = vec![0u32; w * h];
     let (mut kernel, mut readback) = (0.0, 0.0);
     let mut row0 = 0;

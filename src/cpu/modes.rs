@@ -1,0 +1,488 @@
+//! Rendering modes beyond DVR/MIP/X-ray: MIDA, windowed MIP/MinIP and iso-surfaces.
+//! The per-ray loops of the CPU oracle; `shaders/shared/modes.wgsl` holds their twins.
+//!
+//! Conventions are the ray caster's (`cpu::raycast`): a ray is cut into `n` steps, step
+//! `k` is represented by its midpoint `t_k`, opacities are corrected for the step
+//! length, `Δs/Δs₀`, and compositing is front to back, `C += (1 − A) α c`,
+//! `A += (1 − A) α`, over the background at the end.
+//!
+//! **MIDA** (Bruckner & Gröller 2009, "Instant volume visualization using maximum
+//! intensity difference accumulation"). With `s_i ∈ [0, 1]` the sample value normalised
+//! by the volume's value range and `m_{i−1} = max_{j<i} s_j`, the growth of the running
+//! maximum is `δ_i = s_i − m_{i−1}` where positive, else 0 (and 0 for the first sample).
+//! For `γ ∈ [−1, 0]` the accumulated colour and opacity are attenuated by
+//! `β_i = 1 − δ_i (1 + γ)`:
+//!
+//! ```text
+//! C_i = β_i C_{i−1} + (1 − β_i A_{i−1}) α_i c_i
+//! A_i = β_i A_{i−1} + (1 − β_i A_{i−1}) α_i
+//! ```
+//!
+//! so at `γ = −1` (β ≡ 1) it is DVR exactly, and at `γ = 0` it is plain MIDA: what lies
+//! in front of a new maximum fades in proportion to the rise. For `γ ∈ (0, 1]` the
+//! result is blended with MIP, `C = (1 − γ) C_MIDA(0) + γ C_MIP`, where `C_MIP = α c` of
+//! the first sample holding the ray's maximum (its transfer-function colour and
+//! opacity, unshaded: which of a plateau's samples holds the maximum is decided by
+//! rounding, while its value is not). At `γ = 1` it is that MIP colour. Because `A` may fall
+//! (β < 1), MIDA never terminates rays early.
+//!
+//! **Window/level** (MIP, MinIP): `g = clamp((v − centre) / width + ½, 0, 1)`, the grey
+//! level the window maps the projected value to. The map is non-decreasing, so it
+//! commutes with max and min: the windowed MIP is the window applied to the MIP.
+//! Presets: [`WINDOW_PRESETS`] (CT, in Hounsfield units).
+//!
+//! **Iso-surfaces.** Up to four iso-values `τ_j`, each with a colour and an opacity. A
+//! ray crosses `τ` between consecutive samples `k − 1` and `k` when `(v_{k−1} ≥ τ) ≠
+//! (v_k ≥ τ)`. The hit is refined by linear interpolation of the two samples,
+//! `t = t_{k−1} + (τ − v_{k−1}) / (v_k − v_{k−1}) (t_k − t_{k−1})` (Fluør 2006 §2.4,
+//! hit-point refinement), or without refinement taken at `t_k`. The hit is shaded at
+//! its point with the DVR's Phong model (normal `−∇f/|∇f|`) and composited with its
+//! opacity, hits of one interval in depth order, before sample `k` itself; with DVR on,
+//! sample `k`'s DVR contribution follows, so surfaces and volume composite in depth
+//! order. Opaque iso-surfaces end the ray at the first hit. Binary shadows (opaque
+//! only): from the hit, samples `q_m = p + (m + 1) Δ L` toward the light `L` (step `Δ`
+//! of the primary ray, in voxels) until the box is left; when any `q_m` lies on another
+//! side of some `τ_j` than `q_0`, the hit is in shadow and keeps only the ambient term,
+//! `c k_a`.
+
+use super::raycast::{classify_sample, intersect_box, shade_sample, Field, Setup};
+use crate::error::{Error, Result};
+use crate::real::{Real, V3};
+use crate::settings::{Compositing, Mode, RenderSettings, MAX_ISO_SURFACES};
+
+/// CT window presets: (name, width, centre) in Hounsfield units, with a description.
+pub const WINDOW_PRESETS: [(&str, f64, f64, &str); 6] = [
+    ("brain", 80.0, 40.0, "brain parenchyma"),
+    ("subdural", 250.0, 75.0, "blood next to bone"),
+    ("abdomen", 400.0, 40.0, "abdominal soft tissue"),
+    ("liver", 150.0, 30.0, "liver lesions"),
+    ("lung", 1500.0, -600.0, "lung parenchyma"),
+    ("bone", 1800.0, 400.0, "cortical and trabecular bone"),
+];
+
+/// The `[width, centre]` of a window preset, by name.
+pub fn window_preset(name: &str) -> Result<[f64; 2]> {
+    WINDOW_PRESETS
+        .iter()
+        .find(|p| p.0 == name)
+        .map(|p| [p.1, p.2])
+        .ok_or_else(|| {
+            let names: Vec<&str> = WINDOW_PRESETS.iter().map(|p| p.0).collect();
+            Error::invalid(
+                "window preset",
+                format!("unknown preset {name:?}; known: {}", names.join(", ")),
+            )
+        })
+}
+
+/// Checks the settings of the modes of this module (called by
+/// `RenderSettings::validate`).
+pub fn validate(s: &RenderSettings) -> Result<()> {
+    if !(s.mida_gamma.is_finite() && (-1.0..=1.0).contains(&s.mida_gamma)) {
+        return Err(Error::invalid(
+            "MIDA gamma",
+            format!("{} must lie in [-1, 1]", s.mida_gamma),
+        ));
+    }
+    if let Some([w, c]) = s.window {
+        if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+            return Err(Error::invalid(
+                "window",
+                format!("width {w} must be finite and positive, centre {c} finite"),
+            ));
+        }
+    }
+    if s.iso_surfaces.len() > MAX_ISO_SURFACES {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            format!("{} given, at most {MAX_ISO_SURFACES}", s.iso_surfaces.len()),
+        ));
+    }
+    for iso in &s.iso_surfaces {
+        if !iso.value.is_finite() {
+            return Err(Error::invalid("iso-value", "must be finite"));
+        }
+        if iso.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(Error::invalid(
+                "iso-surface colour",
+                "components must lie in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&iso.opacity) {
+            return Err(Error::invalid(
+                "iso-surface opacity",
+                format!("{} must lie in [0, 1]", iso.opacity),
+            ));
+        }
+    }
+    if s.mode == Mode::Iso && s.iso_surfaces.is_empty() {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            "mode iso needs at least one iso-surface",
+        ));
+    }
+    let isos = s.mode == Mode::Iso || (s.mode == Mode::Dvr && !s.iso_surfaces.is_empty());
+    if (s.mode == Mode::Mida || isos) && s.compositing == Compositing::BackToFront {
+        return Err(Error::invalid(
+            "compositing",
+            "MIDA and iso-surfaces composite front to back only",
+        ));
+    }
+    if s.iso_shadows && !s.iso_opaque {
+        return Err(Error::invalid(
+            "shadows",
+            "shadow rays are cast from opaque iso-surfaces only (add --iso-opaque)",
+        ));
+    }
+    Ok(())
+}
+
+/// One iso-surface in the working precision.
+#[derive(Clone, Copy, Debug)]
+pub struct IsoR<R> {
+    pub value: R,
+    pub color: [R; 3],
+    pub opacity: R,
+}
+
+/// What the modes of this module need, prepared once per render.
+#[derive(Clone, Debug)]
+pub struct ModeSetup<R> {
+    pub gamma: R,
+    /// The field's lowest value and the reciprocal of its range (MIDA normalisation).
+    pub lo: R,
+    pub inv_range: R,
+    /// `[width, centre]` of the MIP/MinIP grey window.
+    pub window: Option<[R; 2]>,
+    /// The iso-surfaces this render draws (empty unless mode iso, or DVR with some).
+    pub iso: Vec<IsoR<R>>,
+    pub opaque: bool,
+    pub shadows: bool,
+    pub refine: bool,
+}
+
+impl<R: Real> ModeSetup<R> {
+    pub fn new(s: &RenderSettings, value_range: (f64, f64)) -> Self {
+        let (lo, hi) = value_range;
+        let draws_iso = s.mode == Mode::Iso || s.mode == Mode::Dvr;
+        ModeSetup {
+            gamma: R::of(s.mida_gamma),
+            lo: R::of(lo),
+            inv_range: R::of(1.0 / (hi - lo).max(f64::MIN_POSITIVE)),
+            window: s.window.map(|w| w.map(R::of)),
+            iso: if draws_iso {
+                s.iso_surfaces
+                    .iter()
+                    .map(|i| IsoR {
+                        value: R::of(i.value),
+                        color: i.color.map(R::of),
+                        opacity: R::of(i.opacity),
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            opaque: s.iso_opaque,
+            shadows: s.iso_shadows,
+            refine: s.iso_refine,
+        }
+    }
+}
+
+/// A clipped ray in index space, cut into `n` steps of `dt` (the last one ends at
+/// `t_out`), exactly as `cpu::raycast::cast_ray` cuts it.
+#[derive(Clone, Copy, Debug)]
+pub struct Span<R> {
+    pub o: V3<R>,
+    pub d: V3<R>,
+    pub t_in: R,
+    pub t_out: R,
+    pub dt: R,
+    pub n: usize,
+    /// Voxels per unit t.
+    pub speed: R,
+}
+
+impl<R: Real> Span<R> {
+    /// Step k's bounds `(t_a, t_b)`. Mirrors `shaders/shared/rays.wgsl: segment_bounds`.
+    #[inline]
+    pub fn bounds(&self, k: usize) -> (R, R) {
+        let ta = self.t_in + R::of(k as f64) * self.dt;
+        let tb = if k + 1 == self.n {
+            self.t_out
+        } else {
+            self.t_in + R::of((k + 1) as f64) * self.dt
+        };
+        (ta, tb)
+    }
+    /// Step k's midpoint parameter.
+    #[inline]
+    pub fn t_mid(&self, k: usize) -> R {
+        let (a, b) = self.bounds(k);
+        (a + b) * R::of(0.5)
+    }
+    /// Step k's midpoint and length.
+    #[inline]
+    pub fn segment(&self, k: usize) -> (V3<R>, R) {
+        let (a, b) = self.bounds(k);
+        (self.o + self.d * ((a + b) * R::of(0.5)), b - a)
+    }
+}
+
+/// The grey level of `v` under the window `[width, centre]`:
+/// `clamp((v − centre) / width + ½, 0, 1)`. Mirrors `shaders/shared/modes.wgsl:
+/// window_map`.
+#[inline]
+pub fn window_map<R: Real>(v: R, window: [R; 2]) -> R {
+    ((v - window[1]) / window[0] + R::of(0.5))
+        .max(R::zero())
+        .min(R::one())
+}
+
+/// The MIDA attenuation `β = 1 − δ (1 + min(γ, 0))` for a rise `δ ≥ 0` of the running
+/// maximum. Mirrors `shaders/shared/modes.wgsl: mida_beta`.
+#[inline]
+pub fn mida_beta<R: Real>(delta: R, gamma: R) -> R {
+    R::one() - delta * (R::one() + gamma.min(R::zero()))
+}
+
+/// The refined (or not) parameter of a crossing of `tau` between samples `(t0, v0)`
+/// and `(t1, v1)`. Mirrors `shaders/shared/modes.wgsl: iso_hit_t`.
+#[inline]
+pub fn iso_hit_t<R: Real>(t0: R, v0: R, t1: R, v1: R, tau: R, refine: bool) -> R {
+    if refine {
+        t0 + (tau - v0) / (v1 - v0) * (t1 - t0)
+    } else {
+        t1
+    }
+}
+
+/// Whether the field crosses `tau` between two values. Mirrors
+/// `shaders/shared/modes.wgsl: crosses`.
+#[inline]
+pub fn crosses<R: Real>(v0: R, v1: R, tau: R) -> bool {
+    (v0 >= tau) != (v1 >= tau)
+}
+
+/// The first crossing of `tau` along a span: the ray parameter of the hit, refined or
+/// not, as the iso-surface renderer computes it; `None` when the ray never crosses.
+pub fn first_iso_hit<R: Real, F: Field<R>>(
+    field: &F,
+    span: &Span<R>,
+    tau: R,
+    refine: bool,
+) -> Option<R> {
+    let mut t0 = span.t_mid(0);
+    let mut v0 = field.value(span.o + span.d * t0);
+    for k in 1..span.n {
+        let t1 = span.t_mid(k);
+        let v1 = field.value(span.o + span.d * t1);
+        if crosses(v0, v1, tau) {
+            return Some(iso_hit_t(t0, v0, t1, v1, tau, refine));
+        }
+        (t0, v0) = (t1, v1);
+    }
+    None
+}
+
+/// Composites `rgb` with opacity `alpha` behind `(c, a)`, front to back.
+#[inline]
+fn under<R: Real>(c: &mut [R; 3], a: &mut R, rgb: [R; 3], alpha: R) {
+    let w = (R::one() - *a) * alpha;
+    for ch in 0..3 {
+        c[ch] = c[ch] + w * rgb[ch];
+    }
+    *a = *a + w;
+}
+
+/// `(C, A)` over the background. Mirrors the end of `shaders/raycast.wgsl: cast_ray`.
+#[inline]
+fn over_background<R: Real>(s: &Setup<R>, c: [R; 3], a: R) -> [R; 4] {
+    let t = R::one() - a;
+    let bg = s.bg;
+    [
+        c[0] + t * bg[0] * bg[3],
+        c[1] + t * bg[1] * bg[3],
+        c[2] + t * bg[2] * bg[3],
+        a + t * bg[3],
+    ]
+}
+
+/// The light and half vectors of a ray with world direction `dir`.
+fn light_half<R: Real>(s: &Setup<R>, dir: glam::DVec3) -> (V3<R>, V3<R>) {
+    let view = -V3::<R>::from_dvec(dir);
+    let light = s.light.unwrap_or(view);
+    (light, (light + view).normalize_or_zero())
+}
+
+/// MIDA along one ray; returns the RGBA pixel and the samples taken.
+/// Mirrors `shaders/shared/modes.wgsl: cast_mida`.
+pub(crate) fn cast_mida<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    span: &Span<R>,
+    dir: glam::DVec3,
+) -> ([R; 4], u32) {
+    let m = &s.modes;
+    let (light, half) = light_half(s, dir);
+    let mut c = [R::zero(); 3];
+    let mut a = R::zero();
+    let mut running = R::zero();
+    let mut best = R::neg_infinity();
+    let mut best_p = span.o;
+    for k in 0..span.n {
+        let (p, len) = span.segment(k);
+        let v = field.value(p);
+        let sn = (v - m.lo) * m.inv_range;
+        let delta = if k > 0 && sn > running {
+            sn - running
+        } else {
+            R::zero()
+        };
+        running = if k == 0 { sn } else { running.max(sn) };
+        if v > best {
+            best = v;
+            best_p = p;
+        }
+        let beta = mida_beta(delta, m.gamma);
+        let (rgb, alpha) = classify_sample(field, s, p);
+        if alpha <= R::zero() {
+            for ch in c.iter_mut() {
+                *ch = beta * *ch;
+            }
+            a = beta * a;
+            continue;
+        }
+        let alpha = R::one() - (R::one() - alpha).powf(len * span.speed / s.ref_step);
+        let rgb = if s.shade {
+            shade_sample(field, s, p, rgb, light, half)
+        } else {
+            rgb
+        };
+        let w = (R::one() - beta * a) * alpha;
+        for ch in 0..3 {
+            c[ch] = beta * c[ch] + w * rgb[ch];
+        }
+        a = beta * a + w;
+    }
+    if m.gamma > R::zero() {
+        // Unshaded: on a plateau of the maximum, rounding picks which sample holds it,
+        // and the gradient there is ill-defined; the value (and so its colour) is not.
+        let (rgb, alpha) = classify_sample(field, s, best_p);
+        let g = m.gamma;
+        for ch in 0..3 {
+            c[ch] = (R::one() - g) * c[ch] + g * alpha * rgb[ch];
+        }
+        a = (R::one() - g) * a + g * alpha;
+    }
+    (over_background(s, c, a), span.n as u32)
+}
+
+/// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples
+/// `p + (m + 1) Δ L` toward the light until the box is left; in shadow when one lies on
+/// another side of an iso-value than the first. Mirrors
+/// `shaders/shared/modes.wgsl: in_shadow`.
+pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>, l: V3<R>) -> bool {
+    let Some((_, t_exit)) = intersect_box(p, l, s.lo, s.hi) else {
+        return false;
+    };
+    let dt = s.step / l.length();
+    let first = field.value(p + l * dt);
+    let mut k = 2usize;
+    loop {
+        let t = R::of(k as f64) * dt;
+        if t >= t_exit {
+            return false;
+        }
+        let v = field.value(p + l * t);
+        if s.modes.iso.iter().any(|iso| crosses(first, v, iso.value)) {
+            return true;
+        }
+        k += 1;
+    }
+}
+
+/// Iso-surfaces along one ray, with DVR samples in between when `dvr`; returns the
+/// RGBA pixel and the samples taken. Mirrors `shaders/shared/modes.wgsl: cast_iso`.
+pub(crate) fn cast_iso<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    span: &Span<R>,
+    dir: glam::DVec3,
+    dvr: bool,
+) -> ([R; 4], u32) {
+    let m = &s.modes;
+    let (light, half) = light_half(s, dir);
+    // The light in index space, for shadow rays: J⁻¹ L (headlight: back along the ray).
+    let l_index = {
+        let lw = light.to_dvec();
+        V3::<R>::from_dvec(s.to_index.transform_vector3(lw))
+    };
+    let mut c = [R::zero(); 3];
+    let mut a = R::zero();
+    let mut t0 = span.t_mid(0);
+    let mut v0 = field.value(span.o + span.d * t0);
+    let mut taken = 1u32;
+    let dvr_sample = |k: usize, c: &mut [R; 3], a: &mut R| {
+        let (p, len) = span.segment(k);
+        let (rgb, alpha) = classify_sample(field, s, p);
+        if alpha <= R::zero() {
+            return;
+        }
+        let alpha = R::one() - (R::one() - alpha).powf(len * span.speed / s.ref_step);
+        let rgb = if s.shade {
+            shade_sample(field, s, p, rgb, light, half)
+        } else {
+            rgb
+        };
+        under(c, a, rgb, alpha);
+    };
+    if dvr {
+        dvr_sample(0, &mut c, &mut a);
+    }
+    'march: for k in 1..span.n {
+        if a >= s.ert {
+            break;
+        }
+        let t1 = span.t_mid(k);
+        let v1 = field.value(span.o + span.d * t1);
+        taken += 1;
+        // The crossings of this interval, in depth order (ties: in list order).
+        let mut hits: [(R, usize); MAX_ISO_SURFACES] = [(R::zero(), 0); MAX_ISO_SURFACES];
+        let mut nh = 0;
+        for (j, iso) in m.iso.iter().enumerate() {
+            if crosses(v0, v1, iso.value) {
+                let t = iso_hit_t(t0, v0, t1, v1, iso.value, m.refine);
+                let mut q = nh;
+                while q > 0 && hits[q - 1].0 > t {
+                    hits[q] = hits[q - 1];
+                    q -= 1;
+                }
+                hits[q] = (t, j);
+                nh += 1;
+            }
+        }
+        for &(t, j) in &hits[..nh] {
+            let iso = &m.iso[j];
+            let p = span.o + span.d * t;
+            let mut rgb = if s.shade {
+                shade_sample(field, s, p, iso.color, light, half)
+            } else {
+                iso.color
+            };
+            if m.opaque {
+                if m.shadows && in_shadow(field, s, p, l_index) {
+                    rgb = iso.color.map(|x| x * s.k.ambient);
+                }
+                under(&mut c, &mut a, rgb, R::one());
+                break 'march;
+            }
+            under(&mut c, &mut a, rgb, iso.opacity);
+        }
+        if dvr {
+            dvr_sample(k, &mut c, &mut a);
+        }
+        (t0, v0) = (t1, v1);
+    }
+    (over_background(s, c, a), taken)
+}
