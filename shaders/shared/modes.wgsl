@@ -76,7 +76,7 @@ fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f3
     var best_p = o;
     for (var k = 0u; k < n; k++) {
         let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
-        let len = segment_length(k, n, t_in, t_out, dt);
+        let len = segment_length(k, n, t_in, t_in, t_out, dt);
         let v = sample_value(p);
         let sn = (v - params.mode_params.y) * params.mode_params.z;
         var delta = 0.0;
@@ -159,7 +159,7 @@ fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32
         let s = classify_sample(segment_point(0u, n, t_in, t_in, t_out, dt, o, d));
         if (s.w > 0.0) {
             let p = segment_point(0u, n, t_in, t_in, t_out, dt, o, d);
-            let alpha = corrected_alpha(s.w, segment_length(0u, n, t_in, t_out, dt), speed);
+            let alpha = corrected_alpha(s.w, segment_length(0u, n, t_in, t_in, t_out, dt), speed);
             var rgb = s.xyz;
             if (shade) {
                 rgb = shade_sample(p, rgb, light, half_vec);
@@ -224,7 +224,7 @@ fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32
             let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
             let s = classify_sample(p);
             if (s.w > 0.0) {
-                let alpha = corrected_alpha(s.w, segment_length(k, n, t_in, t_out, dt), speed);
+                let alpha = corrected_alpha(s.w, segment_length(k, n, t_in, t_in, t_out, dt), speed);
                 var rgb = s.xyz;
                 if (shade) {
                     rgb = shade_sample(p, rgb, light, half_vec);
