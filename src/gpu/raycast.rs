@@ -280,8 +280,31 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
         && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
     let skip = super::skip::SKIP_WGSL;
+    let modes = modes_wgsl(settings);
     format!(
-        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{MODES_WGSL}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
+        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
+    )
+}
+
+/// `shaders/shared/modes.wgsl` when the settings draw MIDA or iso-surfaces, else only its
+/// small helpers and stubs of `cast_mida`/`cast_iso`: each of those marches inlines the
+/// filter's tap sum many times over (samples, gradients, shadow rays), and with the
+/// 512-tap Lanczos-4 a software driver's compiler (llvmpipe) ran out of memory on
+/// shaders that never take those branches.
+pub fn modes_wgsl(settings: &RenderSettings) -> String {
+    let needed = matches!(settings.mode, Mode::Mida | Mode::Iso)
+        || (settings.mode == Mode::Dvr && !settings.iso_surfaces.is_empty());
+    if needed {
+        return MODES_WGSL.to_string();
+    }
+    let cut = MODES_WGSL
+        .find("fn cast_mida(")
+        .expect("modes.wgsl defines cast_mida");
+    format!(
+        "{}\n// Compiled out for these settings (src/gpu/raycast.rs: modes_wgsl).\n\
+         fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {{\n    var p: Pixel;\n    return p;\n}}\n\
+         fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {{\n    var p: Pixel;\n    return p;\n}}\n",
+        &MODES_WGSL[..cut]
     )
 }
 
@@ -540,8 +563,8 @@ pub fn render(
             } else {
                 0.0
             };
-        let steps = (diag / settings.step + 2.0) * per_step
-            + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
+        let steps =
+            (diag / settings.step + 2.0) * per_step + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
         if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
             return Err(Error::invalid(
                 "step",
