@@ -31,6 +31,12 @@
 //!    caster's X-ray mode. (With the unitary convention, as in the paper, the factor
 //!    would be `s·√M³/M` = `s·√M`.)
 //!
+//! **Precision.** [`FvrSpectrum::new`] always transforms in f64 (the oracle). The
+//! spectrum is generic over its element precision `R`: [`FvrSpectrum::to_f32`] rounds
+//! it to complex f32 once, and [`fvr_project`] then slices, phase-shifts and inverse
+//! transforms in f32 (weights and phases computed in f64 and rounded, as the GPU
+//! port receives them) — the CPU f32 baseline the GPU is timed against.
+//!
 //! Only isotropic voxels are handled (the slice would otherwise have to be taken in a
 //! sheared frequency frame); anisotropic or sheared volumes are refused with a clear
 //! error. The image of an axis view has the layout of [`Camera::axis_view`] (and of
@@ -43,6 +49,7 @@ use crate::cpu::fft::fft_nd;
 use crate::cpu::filter::{sinc, weight_lanczos, weight_tent};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::real::Real;
 use crate::volume::{check_dims, Volume};
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -216,13 +223,15 @@ impl FvrGeometry {
     }
 }
 
-/// The centred 3-D spectrum of a zero-padded volume, ready for many views.
+/// The centred 3-D spectrum of a zero-padded volume, ready for many views, with its
+/// elements in precision `R` (f64, the oracle, unless rounded by
+/// [`FvrSpectrum::to_f32`]).
 #[derive(Clone, Debug)]
-pub struct FvrSpectrum {
+pub struct FvrSpectrum<R = f64> {
     /// The cube side `M`.
     m: usize,
     /// `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
-    spectrum: Vec<Complex<f64>>,
+    spectrum: Vec<Complex<R>>,
     /// The original volume in f64 (for the Dirichlet kernel), `[z][y][x]`.
     values: Vec<f64>,
     dims: [usize; 3],
@@ -308,7 +317,12 @@ fn isotropic_spacing(affine: DMat4) -> Result<f64> {
     Ok(s)
 }
 
-impl FvrSpectrum {
+/// The element types an [`FvrSpectrum`] may hold: f64 (the oracle) and f32.
+pub trait SpectrumReal: Real + rustfft::FftNum + num_traits::NumAssign {}
+impl SpectrumReal for f32 {}
+impl SpectrumReal for f64 {}
+
+impl FvrSpectrum<f64> {
     /// Zero-pads `volume` into an `M³` cube (see [`padded_side`]), centres it, and keeps
     /// its centred 3-D spectrum (f64). `padding` is the oversampling factor (2 is the
     /// usual choice; 1 pads only to an even cube).
@@ -349,6 +363,27 @@ impl FvrSpectrum {
         })
     }
 
+    /// The same spectrum rounded to complex f32 (the CPU f32 path; the GPU port
+    /// uploads the same rounding). The volume's values stay in f64 for the Dirichlet
+    /// kernel.
+    pub fn to_f32(&self) -> FvrSpectrum<f32> {
+        FvrSpectrum {
+            m: self.m,
+            spectrum: self
+                .spectrum
+                .par_iter()
+                .map(|c| Complex::new(c.re as f32, c.im as f32))
+                .collect(),
+            values: self.values.clone(),
+            dims: self.dims,
+            offset: self.offset,
+            spacing: self.spacing,
+            affine: self.affine,
+        }
+    }
+}
+
+impl<R: SpectrumReal> FvrSpectrum<R> {
     /// The cube side `M`.
     pub fn side(&self) -> usize {
         self.m
@@ -360,7 +395,7 @@ impl FvrSpectrum {
     }
 
     /// The centred spectrum, `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
-    pub fn spectrum(&self) -> &[Complex<f64>] {
+    pub fn spectrum(&self) -> &[Complex<R>] {
         &self.spectrum
     }
 
@@ -435,7 +470,8 @@ impl FvrSpectrum {
     /// Interpolates the centred spectrum at frequency `kappa` (bins, `[x, y, z]`).
     /// Mirrored by `shaders/fvr_slice.wgsl: sample` (same taps, weights normalised to
     /// sum to 1 per axis, `round` half away from zero for the nearest kernel).
-    pub fn sample(&self, kernel: Kernel, kappa: DVec3) -> Complex<f64> {
+    /// The weights are computed in f64 and rounded to `R`; the sum runs in `R`.
+    pub fn sample(&self, kernel: Kernel, kappa: DVec3) -> Complex<R> {
         let m = self.m as i64;
         let half = (self.m / 2) as f64;
         let g = [kappa.x + half, kappa.y + half, kappa.z + half];
@@ -449,26 +485,28 @@ impl FvrSpectrum {
             k => k.lanczos_order().expect("a truncated kernel") as i64,
         };
         let mut idx = [[0usize; 8]; 3];
-        let mut w = [[0.0f64; 8]; 3];
+        let mut w = [[R::zero(); 8]; 3];
         let taps = (2 * r) as usize;
         for a in 0..3 {
             let first = g[a].floor() as i64 - r + 1;
-            for t in 0..taps {
+            let mut w64 = [0.0f64; 8];
+            for (t, wt) in w64[..taps].iter_mut().enumerate() {
                 let j = first + t as i64;
                 idx[a][t] = wrap(j);
-                w[a][t] = kernel.weight(g[a] - j as f64);
+                *wt = kernel.weight(g[a] - j as f64);
             }
-            let sum: f64 = w[a][..taps].iter().sum();
-            for x in &mut w[a][..taps] {
-                *x /= sum;
+            let sum: f64 = w64[..taps].iter().sum();
+            for (x, v) in w[a][..taps].iter_mut().zip(&w64) {
+                *x = R::of(v / sum);
             }
         }
-        let mut acc = Complex::new(0.0, 0.0);
+        let zero = Complex::new(R::zero(), R::zero());
+        let mut acc = zero;
         for tz in 0..taps {
-            let mut az = Complex::new(0.0, 0.0);
+            let mut az = zero;
             for ty in 0..taps {
                 let row = (idx[2][tz] * self.m + idx[1][ty]) * self.m;
-                let mut ax = Complex::new(0.0, 0.0);
+                let mut ax = zero;
                 for tx in 0..taps {
                     ax += self.spectrum[row + idx[0][tx]] * w[0][tx];
                 }
@@ -532,8 +570,8 @@ fn split(c: f64) -> (i64, f64) {
 /// The X-ray projection (value × mm) of the spectrum's volume for `view`: one slice
 /// of the spectrum sampled with `kernel`, one inverse 2-D FFT. With `deapodize`, the
 /// image is divided by the kernel's spatial transfer in both image axes.
-pub fn fvr_project(
-    spectrum: &FvrSpectrum,
+pub fn fvr_project<R: SpectrumReal>(
+    spectrum: &FvrSpectrum<R>,
     view: FvrView,
     kernel: Kernel,
     deapodize: bool,
@@ -559,19 +597,22 @@ pub fn fvr_project(
     // The slice in DC-at-0 order ([k_u][k_r], each k at k mod M): the ifftshift of
     // the centred slice. Mirrored per sample by `shaders/fvr_slice.wgsl: extract_slice`
     // (src/gpu/fvr.rs).
-    let mut slice = vec![Complex::new(0.0, 0.0); m * m];
+    let mut slice = vec![Complex::new(R::zero(), R::zero()); m * m];
     slice.par_chunks_mut(m).enumerate().for_each(|(ju, line)| {
         for (ir, out) in line.iter_mut().enumerate() {
             let ku = (ju as i64 + half).rem_euclid(m as i64) - half;
             let kr = (ir as i64 + half).rem_euclid(m as i64) - half;
             let kappa = g.right * kr as f64 + g.up * ku as f64;
             let mut s = match kernel {
-                Kernel::Dirichlet => spectrum.sample_exact(kappa),
+                Kernel::Dirichlet => {
+                    let e = spectrum.sample_exact(kappa);
+                    Complex::new(R::of(e.re), R::of(e.im))
+                }
                 k => spectrum.sample(k, kappa),
             };
             if dr != 0.0 || du != 0.0 {
                 let phase = 2.0 * PI * (kr as f64 * dr + ku as f64 * du) / m as f64;
-                s *= Complex::from_polar(1.0, phase);
+                s *= Complex::new(R::of(phase.cos()), R::of(phase.sin()));
             }
             *out = s;
         }
@@ -582,7 +623,7 @@ pub fn fvr_project(
         Direction::Inverse,
         Normalization::Unnormalized,
     );
-    Ok(plan.crop(spectrum, kernel, deapodize, |i| slice[i].re))
+    Ok(plan.crop(spectrum, kernel, deapodize, |i| slice[i].re.f64()))
 }
 
 /// A view resolved for slicing: its geometry, the in-plane position `(c_r, c_u)` of
@@ -602,7 +643,7 @@ pub(crate) struct SlicePlan {
 
 impl SlicePlan {
     /// Resolves `view`; refuses an image wider than the padded cube.
-    pub fn new(spectrum: &FvrSpectrum, view: FvrView) -> Result<Self> {
+    pub fn new<R: SpectrumReal>(spectrum: &FvrSpectrum<R>, view: FvrView) -> Result<Self> {
         let g = spectrum.geometry(view)?;
         let m = spectrum.m;
         if g.width > m || g.height > m {
@@ -627,9 +668,9 @@ impl SlicePlan {
     /// The image from the inverse-transformed slice (`re(i)`: the real part of its
     /// element `i`, `[y][x]`, DC at 0): crop with wrap-around, scale by the voxel size,
     /// optionally de-apodise.
-    pub fn crop(
+    pub fn crop<R: SpectrumReal>(
         &self,
-        spectrum: &FvrSpectrum,
+        spectrum: &FvrSpectrum<R>,
         kernel: Kernel,
         deapodize: bool,
         re: impl Fn(usize) -> f64 + Sync,
