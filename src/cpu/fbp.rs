@@ -221,7 +221,14 @@ pub fn backproject<R: Real>(
     let done = AtomicUsize::new(0);
     let scale = R::of(backprojection_scale(g.n_angles()));
     let mut data = vec![R::zero(); n];
-    data.par_chunks_mut(nx).enumerate().for_each_init(
+    // Voxel lines at the same height j (along the rotation axis, y) project onto the
+    // same few detector rows in every view. Visiting them one after another (z inside
+    // j, not the memory order) keeps those rows of all views in cache (256³ cone beam,
+    // CPU f32 on 2 cores: 4.4 s → 3.9 s).
+    let ny = grid.dims[1];
+    let mut lines: Vec<(usize, &mut [R])> = data.chunks_mut(nx).enumerate().collect();
+    lines.sort_by_key(|(line, _)| (line % ny, line / ny));
+    lines.into_par_iter().for_each_init(
         || vec![R::zero(); pc],
         |blend, (line, out)| {
             let (j, k) = (line % grid.dims[1], line / grid.dims[1]);
@@ -369,15 +376,100 @@ fn interp_line<R: Real>(out: &mut [R], line: &[R], cols: usize, a: R, b: R) {
     }
     // s ∈ [0, cols + 1) on lo..hi: truncation is the floor, ix ∈ [0, cols], and both
     // taps lie in the bordered line (length cols + 2).
-    let line = &line[..cols + 2];
-    // fi counts exactly (integers below 2^24), so s equals s_at(i) bit for bit.
-    let mut fi = R::of(lo as f64);
-    for acc in out[lo..hi].iter_mut() {
-        let s = a1 + fi * b;
-        fi = fi + R::one();
-        let ix = (s.f64() as usize).min(cols);
-        let t = s - R::of(ix as f64);
-        *acc = *acc + line[ix] * (R::one() - t) + line[ix + 1] * t;
+    accumulate_run(&mut out[lo..hi], &line[..cols + 2], lo, a1, b);
+}
+
+/// The branch-free inner loop of [`interp_line`]: `out[k] += lerp(line, s)` with
+/// `s = a1 + (lo + k)·b`, computed exactly as `s_at` there (so `s ∈ [0, len − 1)`).
+/// On x86-64 CPUs with AVX2 and FMA the same code is also compiled for them and chosen
+/// at run time: the loop then runs 8 (f32) or 4 (f64) voxels per instruction with
+/// gathered taps. The arithmetic is the same either way (no contraction into FMAs), so
+/// the result does not depend on the CPU.
+#[inline]
+fn accumulate_run<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: R) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has the features the function is compiled for.
+            unsafe { accumulate_run_avx2(out, line, lo, a1, b) };
+            return;
+        }
+    }
+    accumulate_run_body(out, line, lo, a1, b);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn accumulate_run_avx2<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: R) {
+    use std::any::TypeId;
+    if TypeId::of::<R>() == TypeId::of::<f32>() {
+        // SAFETY: R is f32 (checked above), so the slices and values have its layout.
+        let (out, line) = unsafe {
+            (
+                &mut *(out as *mut [R] as *mut [f32]),
+                &*(line as *const [R] as *const [f32]),
+            )
+        };
+        let (a1, b) = (a1.f64() as f32, b.f64() as f32);
+        let done = unsafe { accumulate_run_f32x8(out, line, lo, a1, b) };
+        let (out, line) = (&mut out[done..], line);
+        // The tail, with the same arithmetic.
+        accumulate_run_body(out, line, lo + done, a1, b);
+        return;
+    }
+    accumulate_run_body(out, line, lo, a1, b);
+}
+
+/// [`accumulate_run_body`] for f32, eight voxels at a time with AVX2 gathers; the same
+/// operations in the same order, so bit for bit the same sums. Returns how many leading
+/// voxels it did (a multiple of 8); the caller does the rest.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn accumulate_run_f32x8(out: &mut [f32], line: &[f32], lo: usize, a1: f32, b: f32) -> usize {
+    use std::arch::x86_64::*;
+    let n = out.len() / 8 * 8;
+    let last = _mm256_set1_epi32((line.len() - 2) as i32);
+    let zero = _mm256_setzero_si256();
+    let (va1, vb, one) = (_mm256_set1_ps(a1), _mm256_set1_ps(b), _mm256_set1_ps(1.0));
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let base = line.as_ptr();
+    let mut k = 0;
+    while k < n {
+        let i = _mm256_add_epi32(_mm256_set1_epi32((lo + k) as i32), lane);
+        // s = a1 + i·b (no FMA: the scalar loop rounds the product, then the sum).
+        let s = _mm256_add_ps(va1, _mm256_mul_ps(_mm256_cvtepi32_ps(i), vb));
+        let ix = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(s), zero), last);
+        let t = _mm256_sub_ps(s, _mm256_cvtepi32_ps(ix));
+        // SAFETY: 0 ≤ ix ≤ len − 2, so both taps lie in `line`; k + 8 ≤ out.len().
+        unsafe {
+            let l0 = _mm256_i32gather_ps::<4>(base, ix);
+            let l1 = _mm256_i32gather_ps::<4>(base.add(1), ix);
+            let p = out.as_mut_ptr().add(k);
+            let acc = _mm256_loadu_ps(p);
+            let sum = _mm256_add_ps(
+                _mm256_add_ps(acc, _mm256_mul_ps(l0, _mm256_sub_ps(one, t))),
+                _mm256_mul_ps(l1, t),
+            );
+            _mm256_storeu_ps(p, sum);
+        }
+        k += 8;
+    }
+    n
+}
+
+#[inline(always)]
+fn accumulate_run_body<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: R) {
+    let last = line.len() - 2;
+    let (lo, one) = (lo as i32, R::one());
+    for (k, acc) in out.iter_mut().enumerate() {
+        // Integers below 2^24 are exact in f32: the same s as `s_at(lo + k)`.
+        let s = a1 + R::of((lo + k as i32) as f64) * b;
+        // s ≥ 0, so truncation is the floor; the clamp changes nothing but lets the
+        // compiler see both taps in bounds (no check, so the loop vectorises).
+        let ix = ((s.f64() as i32).max(0) as usize).min(last);
+        let t = s - R::of(ix as i32 as f64);
+        *acc = *acc + line[ix] * (one - t) + line[ix + 1] * t;
     }
 }
 
@@ -394,29 +486,174 @@ fn cone_line<R: Real>(
     b: [R; 3],
     r30: R,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has the features the function is compiled for.
+            unsafe { cone_line_avx2(out, img, pcol, [cols, rows], a, b, r30) };
+            return;
+        }
+    }
+    cone_line_from(out, 0, img, pcol, [cols, rows], a, b, r30);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn cone_line_avx2<R: Real>(
+    out: &mut [R],
+    img: &[R],
+    pcol: usize,
+    size: [usize; 2],
+    a: [R; 3],
+    b: [R; 3],
+    r30: R,
+) {
+    use std::any::TypeId;
+    if TypeId::of::<R>() == TypeId::of::<f32>() && img.len() < i32::MAX as usize {
+        // SAFETY: R is f32 (checked above), so the slices and values have its layout.
+        let (out, img) = unsafe {
+            (
+                &mut *(out as *mut [R] as *mut [f32]),
+                &*(img as *const [R] as *const [f32]),
+            )
+        };
+        let f = |v: [R; 3]| v.map(|x| x.f64() as f32);
+        let (a, b, r30) = (f(a), f(b), r30.f64() as f32);
+        let done = unsafe { cone_line_f32x8(out, img, pcol, size, a, b, r30) };
+        // The tail, with the same arithmetic (voxel indices continue at `done`).
+        cone_line_from(out, done, img, pcol, size, a, b, r30);
+        return;
+    }
+    cone_line_from(out, 0, img, pcol, size, a, b, r30);
+}
+
+/// [`cone_line_from`] for f32, eight voxels at a time with AVX2 gathers; the same
+/// operations in the same order (outside voxels masked to weight 0 and clamped taps),
+/// so bit for bit the same sums. Returns how many leading voxels it did (a multiple of
+/// 8); the caller does the rest. Needs `img.len() < 2³¹`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn cone_line_f32x8(
+    out: &mut [f32],
+    img: &[f32],
+    pcol: usize,
+    [cols, rows]: [usize; 2],
+    a: [f32; 3],
+    b: [f32; 3],
+    r30: f32,
+) -> usize {
+    use std::arch::x86_64::*;
+    assert!(img.len() >= (rows + 2) * pcol && pcol >= cols + 2);
+    let n = out.len() / 8 * 8;
+    let set = _mm256_set1_ps;
+    let (one, zero) = (set(1.0), _mm256_setzero_ps());
+    let (limc, limr) = (
+        set((cols as f64 + 1.0) as f32),
+        set((rows as f64 + 1.0) as f32),
+    );
+    let (mc, mr) = (
+        _mm256_set1_epi32(cols as i32),
+        _mm256_set1_epi32(rows as i32),
+    );
+    let (zi, vp) = (_mm256_setzero_si256(), _mm256_set1_epi32(pcol as i32));
+    let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let line = |i: usize, fi: __m256| _mm256_add_ps(set(a[i]), _mm256_mul_ps(fi, set(b[i])));
+    let base = img.as_ptr();
+    let mut k = 0;
+    while k < n {
+        let fi = _mm256_cvtepi32_ps(_mm256_add_epi32(_mm256_set1_epi32(k as i32), lane));
+        let (den, num0, num1) = (line(2, fi), line(0, fi), line(1, fi));
+        let inv = _mm256_div_ps(one, den);
+        let s = _mm256_add_ps(_mm256_mul_ps(num0, inv), one);
+        let t = _mm256_add_ps(_mm256_mul_ps(num1, inv), one);
+        // Ordered comparisons: NaN lanes are outside, as in the scalar test.
+        let inside = _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GT_OQ>(den, zero),
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(s, zero),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(s, limc),
+                ),
+            ),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t, zero),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(t, limr),
+            ),
+        );
+        let s = _mm256_and_ps(inside, s);
+        let t = _mm256_and_ps(inside, t);
+        let w = _mm256_and_ps(inside, _mm256_mul_ps(set(r30), inv));
+        let ix = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(s), zi), mc);
+        let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(t), zi), mr);
+        let tx = _mm256_sub_ps(s, _mm256_cvtepi32_ps(ix));
+        let ty = _mm256_sub_ps(t, _mm256_cvtepi32_ps(iy));
+        let p = _mm256_add_epi32(_mm256_mullo_epi32(iy, vp), ix);
+        // SAFETY: as in cone_line_from, p + pcol + 1 < (rows + 2)·pcol ≤ img.len()
+        // (asserted above, and below 2³¹ so the i32 offsets hold); k + 8 ≤ out.len().
+        unsafe {
+            let g = |off: usize| _mm256_i32gather_ps::<4>(base.add(off), p);
+            let (g00, g01, g10, g11) = (g(0), g(1), g(pcol), g(pcol + 1));
+            let ux = _mm256_sub_ps(one, tx);
+            let top = _mm256_add_ps(_mm256_mul_ps(g00, ux), _mm256_mul_ps(g01, tx));
+            let bottom = _mm256_add_ps(_mm256_mul_ps(g10, ux), _mm256_mul_ps(g11, tx));
+            let v = _mm256_add_ps(
+                _mm256_mul_ps(top, _mm256_sub_ps(one, ty)),
+                _mm256_mul_ps(bottom, ty),
+            );
+            let q = out.as_mut_ptr().add(k);
+            let sum = _mm256_add_ps(_mm256_loadu_ps(q), _mm256_mul_ps(_mm256_mul_ps(w, w), v));
+            _mm256_storeu_ps(q, sum);
+        }
+        k += 8;
+    }
+    n
+}
+
+/// The loop of [`cone_line`] from voxel `start` on, branch-free so that it vectorises: a voxel outside the
+/// detector (or behind the source) gets weight 0 and clamped, in-bounds taps instead
+/// of a skipped iteration — the same sums, since adding `0·tap` leaves a finite sum
+/// unchanged.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn cone_line_from<R: Real>(
+    out: &mut [R],
+    start: usize,
+    img: &[R],
+    pcol: usize,
+    [cols, rows]: [usize; 2],
+    a: [R; 3],
+    b: [R; 3],
+    r30: R,
+) {
     let (limc, limr) = (R::of(cols as f64 + 1.0), R::of(rows as f64 + 1.0));
-    let mut fi = R::zero();
-    for acc in out.iter_mut() {
+    let (zero, one) = (R::zero(), R::one());
+    assert!(img.len() >= (rows + 2) * pcol && pcol >= cols + 2);
+    for (k, acc) in out.iter_mut().enumerate().skip(start) {
+        // Integers below 2^24 are exact in f32.
+        let fi = R::of(k as i32 as f64);
         let den = a[2] + fi * b[2];
         let (num0, num1) = (a[0] + fi * b[0], a[1] + fi * b[1]);
-        fi = fi + R::one();
-        if den > R::zero() {
-            let inv = R::one() / den;
-            let c = num0 * inv;
-            let r = num1 * inv;
-            // bilinear_zero's ⌊c⌋ ∈ [−1, cols) and ⌊r⌋ ∈ [−1, rows), shifted by one
-            // into the bordered image, where truncation is the floor.
-            let (s, t) = (c + R::one(), r + R::one());
-            if s >= R::zero() && s < limc && t >= R::zero() && t < limr {
-                let w = r30 * inv;
-                let (ix, iy) = (s.f64() as usize, t.f64() as usize);
-                let (tx, ty) = (s - R::of(ix as f64), t - R::of(iy as f64));
-                let p = iy * pcol + ix;
-                let top = img[p] * (R::one() - tx) + img[p + 1] * tx;
-                let bottom = img[p + pcol] * (R::one() - tx) + img[p + pcol + 1] * tx;
-                *acc = *acc + w * w * (top * (R::one() - ty) + bottom * ty);
-            }
-        }
+        let inv = one / den;
+        // bilinear_zero's ⌊c⌋ ∈ [−1, cols) and ⌊r⌋ ∈ [−1, rows), shifted by one into
+        // the bordered image, where truncation is the floor.
+        let (s, t) = (num0 * inv + one, num1 * inv + one);
+        let inside = den > zero && s >= zero && s < limc && t >= zero && t < limr;
+        let (s, t, w) = if inside {
+            (s, t, r30 * inv)
+        } else {
+            (zero, zero, zero)
+        };
+        let ix = ((s.f64() as i32).max(0) as usize).min(cols);
+        let iy = ((t.f64() as i32).max(0) as usize).min(rows);
+        let (tx, ty) = (s - R::of(ix as i32 as f64), t - R::of(iy as i32 as f64));
+        let p = iy * pcol + ix;
+        // SAFETY: ix ≤ cols and iy ≤ rows, so p + pcol + 1 ≤ (rows + 1)·pcol + cols + 1
+        // < (rows + 2)·pcol ≤ img.len() (asserted above).
+        let tap = |q: usize| unsafe { *img.get_unchecked(q) };
+        let top = tap(p) * (one - tx) + tap(p + 1) * tx;
+        let bottom = tap(p + pcol) * (one - tx) + tap(p + pcol + 1) * tx;
+        *acc = *acc + w * w * (top * (one - ty) + bottom * ty);
     }
 }
 
@@ -451,4 +688,76 @@ pub fn fbp<R: Real + FftNum>(
 ) -> Result<Reconstruction<R>> {
     let q = filter_projections(projections, g, filter, FilterMethod::Fft)?;
     backproject(&q, g, grid, progress)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic pseudo-random value in [−1, 1).
+    fn noise(i: usize) -> f32 {
+        let x = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40;
+        (x as f32 / (1u64 << 23) as f32) - 1.0
+    }
+
+    /// The vectorised f32 loops give the scalar loops' sums bit for bit, over lines
+    /// that start and end inside, outside and across the detector, with tails.
+    #[test]
+    fn simd_loops_equal_the_scalar_loops_bit_for_bit() {
+        let cols = 37;
+        let line: Vec<f32> = (0..cols + 2)
+            .map(|i| {
+                if i == 0 || i == cols + 1 {
+                    0.0
+                } else {
+                    noise(i)
+                }
+            })
+            .collect();
+        for (n, a, b) in [
+            (61, -3.7f32, 0.71f32),
+            (29, 40.2, -1.3),
+            (8, 0.5, 0.0),
+            (100, -9.1, 0.43),
+        ] {
+            let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 1000)).collect();
+            let mut slow = fast.clone();
+            interp_line(&mut fast, &line, cols, a, b);
+            // The scalar body over the run interp_line chose: recompute it the same way.
+            let mut reference = slow.clone();
+            let s_at = |i: usize| a + 1.0 + i as f32 * b;
+            let inside: Vec<usize> = (0..n)
+                .filter(|&i| s_at(i) >= 0.0 && s_at(i) < cols as f32 + 1.0)
+                .collect();
+            if let (Some(&lo), Some(&hi)) = (inside.first(), inside.last()) {
+                accumulate_run_body(&mut reference[lo..=hi], &line, lo, a + 1.0, b);
+            }
+            slow.copy_from_slice(&reference);
+            assert_eq!(fast, slow, "n {n}, a {a}, b {b}");
+        }
+        // Cone beam: a 23 × 17 view, bordered.
+        let (cols, rows) = (23, 17);
+        let pcol = cols + 2;
+        let img: Vec<f32> = (0..(rows + 2) * pcol)
+            .map(|q| {
+                let (r, c) = (q / pcol, q % pcol);
+                if r == 0 || r == rows + 1 || c == 0 || c == cols + 1 {
+                    0.0
+                } else {
+                    noise(q)
+                }
+            })
+            .collect();
+        for (n, a, b) in [
+            (53, [-5.0f32, 3.0, 1.2], [0.61, 0.2, 0.013]),
+            (19, [30.0, -2.0, 0.9], [-1.7, 0.9, -0.02]),
+            (40, [2.0, 8.0, -0.5], [0.3, 0.1, 0.05]),
+        ] {
+            let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 7)).collect();
+            let mut slow = fast.clone();
+            cone_line(&mut fast, &img, pcol, [cols, rows], a, b, 0.8);
+            cone_line_from(&mut slow, 0, &img, pcol, [cols, rows], a, b, 0.8);
+            assert_eq!(fast, slow, "n {n}");
+        }
+    }
 }
