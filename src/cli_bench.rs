@@ -14,8 +14,9 @@ pub struct BenchArgs {
     /// full: the real sizes.
     #[arg(long, default_value = "full")]
     suite: String,
-    /// Only these families, comma-separated (raycast, gradient, fft, fvr, project, fbp,
-    /// fdk, d2vr).
+    /// Only these, comma-separated: families (raycast, gradient, adaptive, process, fft,
+    /// fvr, project, fbp, fdk, d2vr) or case-id prefixes as --list prints them
+    /// (raycast/mip-trilinear, "fvr/lanczos3 128").
     #[arg(long)]
     only: Option<String>,
     /// Timed runs per backend (default 5 for full, 3 for quick).
@@ -44,6 +45,15 @@ pub struct BenchArgs {
     /// Base name of the report files (default: the adapter's name, e.g. nvidia-h200).
     #[arg(long)]
     name: Option<String>,
+    /// Fold this run into the existing <out>/<name>.json (same machine, adapter and
+    /// suite): its cases replace those with the same id, the others are kept, and the
+    /// report lists the later run. For re-running a few cases of a long suite.
+    #[arg(long, conflicts_with = "rerender")]
+    merge: bool,
+    /// Run nothing: rewrite <out>/<name>.md and .svg from <out>/<name>.json (after an
+    /// upgrade changed the report's layout).
+    #[arg(long)]
+    rerender: bool,
 }
 
 pub fn run(a: BenchArgs) -> Result<ExitCode> {
@@ -57,7 +67,7 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
             ))
         }
     };
-    let only = a.only.as_deref().map(bench::parse_families).transpose()?;
+    let only = a.only.as_deref().map(bench::parse_only).transpose()?;
     let mut opts = Options::new(suite);
     if let Some(n) = a.runs {
         if n == 0 {
@@ -85,7 +95,8 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
             ));
         }
     }
-    let cases = bench::select(bench::cases(suite), only.as_deref());
+    let order: Vec<String> = bench::cases(suite).iter().map(|c| c.id()).collect();
+    let cases = bench::select_picks(bench::cases(suite), only.as_deref())?;
     if a.list {
         for c in &cases {
             println!("{}", c.id());
@@ -95,6 +106,35 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
     }
     // Refuse an unusable output before a long run.
     report::check_out_dir(&a.out)?;
+    let existing = |flag: &str| -> Result<(String, bench::Report)> {
+        let Some(name) = &a.name else {
+            return Err(Error::invalid(
+                flag,
+                "needs --name: the report in --out to read",
+            ));
+        };
+        let path = a.out.join(format!("{name}.json"));
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let r: bench::Report = serde_json::from_str(&text).map_err(|e| {
+            Error::invalid(
+                flag,
+                format!("{} is not a voxlab bench report: {e}", path.display()),
+            )
+        })?;
+        Ok((name.clone(), r))
+    };
+    if a.rerender {
+        let (name, r) = existing("--rerender")?;
+        for p in r.write(&a.out, &name)? {
+            println!("wrote {}", p.display());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let earlier = if a.merge {
+        Some(existing("--merge")?.1)
+    } else {
+        None
+    };
 
     let ctx = if opts.backends.gpu() {
         match voxlab::gpu::GpuContext::shared() {
@@ -136,6 +176,15 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
     );
     pb.finish_and_clear();
     let slug = a.name.clone().unwrap_or_else(|| report.default_slug());
+    let run_cases = report.cases.len();
+    let run_seconds = report.seconds;
+    let report = match earlier {
+        Some(mut e) => {
+            e.merge(report, &order)?;
+            e
+        }
+        None => report,
+    };
     let paths = report.write(&a.out, &slug)?;
     for p in &paths {
         println!("wrote {}", p.display());
@@ -143,9 +192,9 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
     let problems = report.problems();
     if problems.is_empty() {
         println!(
-            "{} case(s) in {:.1} s, all within tolerance",
-            report.cases.len(),
-            report.seconds
+            "{run_cases} case(s) in {run_seconds:.1} s; the report's {} case(s) are all \
+             within tolerance",
+            report.cases.len()
         );
         Ok(ExitCode::SUCCESS)
     } else {

@@ -407,8 +407,9 @@ struct FvrArgs {
     /// Divide the image by the kernel's spatial transfer (undo its apodisation).
     #[arg(long)]
     deapodize: bool,
-    /// Who computes: cpu (f64 throughout), or gpu: the CPU still builds the 3-D
-    /// spectrum in f64, which is then uploaded as f32; the slice (nearest, trilinear,
+    /// Who computes: cpu (f64 throughout), cpu-f32 (the f64 spectrum rounded to
+    /// complex f32, then slice and inverse 2-D FFT in f32), or gpu: the CPU still
+    /// builds the 3-D spectrum in f64, which is then uploaded as f32; the slice (nearest, trilinear,
     /// lanczos2/3/4) and the inverse 2-D FFT run on the GPU. gpu needs the padded
     /// side padding × max(dims) (rounded up to even) to be a power of two.
     #[arg(long, default_value = "cpu")]
@@ -1411,22 +1412,14 @@ fn info(input: &str, load: &LoadArgs, bins: usize, json: bool, plot: Option<&Pat
 
 fn fvr(a: FvrArgs) -> Result<()> {
     use voxlab::cpu::fvr::{fvr_project, padded_side, FvrSpectrum, FvrView};
-    let gpu = match a.backend.as_str() {
-        "cpu" => false,
-        "gpu" => true,
-        "auto" | "cpu-f32" => {
-            return Err(Error::invalid(
-                "--backend",
-                format!(
-                    "'{}': Fourier volume rendering on it is not available yet (use cpu or gpu)",
-                    a.backend
-                ),
-            ))
-        }
+    let (gpu, f32_path) = match a.backend.as_str() {
+        "cpu" => (false, false),
+        "cpu-f32" => (false, true),
+        "gpu" => (true, false),
         other => {
             return Err(Error::invalid(
                 "--backend",
-                format!("'{other}' is not cpu or gpu"),
+                format!("'{other}' is not cpu, cpu-f32 or gpu"),
             ))
         }
     };
@@ -1459,6 +1452,8 @@ fn fvr(a: FvrArgs) -> Result<()> {
             ctx.summary.name, tm.total, tm.setup, tm.slice, tm.fft, tm.crop
         );
         frame
+    } else if f32_path {
+        fvr_project(&spectrum.to_f32(), view, a.kernel, a.deapodize)?
     } else {
         fvr_project(&spectrum, view, a.kernel, a.deapodize)?
     };

@@ -414,3 +414,90 @@ fn families_and_reports_on_disk() {
     assert!(r.write(&file.join("sub"), "x").is_err());
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "keep");
 }
+
+#[test]
+fn only_picks_families_and_case_prefixes() {
+    use voxlab::bench::{parse_only, select_picks, Pick};
+    let picks = parse_only("fft, raycast/mip").unwrap();
+    assert_eq!(
+        picks,
+        [Pick::Family("fft"), Pick::Cases("raycast/mip".to_string())]
+    );
+    let make = || {
+        vec![
+            case("raycast", "mip-trilinear", || {
+                prepared(cpu(&[1.0], &ORACLE, &counter()), None, None)
+            }),
+            case("raycast", "dvr", || {
+                prepared(cpu(&[1.0], &ORACLE, &counter()), None, None)
+            }),
+            case("fft", "2d", || {
+                prepared(cpu(&[1.0], &ORACLE, &counter()), None, None)
+            }),
+        ]
+    };
+    let ids: Vec<String> = select_picks(make(), Some(&picks))
+        .unwrap()
+        .iter()
+        .map(|c| c.id())
+        .collect();
+    assert_eq!(ids, ["raycast/mip-trilinear 4", "fft/2d 4"]);
+    // A prefix that matches nothing is an error, not an empty run.
+    let none = parse_only("raycast/nothing").unwrap();
+    let e = match select_picks(make(), Some(&none)) {
+        Ok(_) => panic!("a prefix matching nothing was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains("no case id starts with 'raycast/nothing'"),
+        "{e}"
+    );
+    // The family part of a prefix is checked.
+    assert!(parse_only("nonsense/x").is_err());
+}
+
+#[test]
+fn merge_replaces_rerun_cases_and_keeps_the_rest_in_suite_order() {
+    let run = |names: &[&'static str], seconds: f64| {
+        let cases = names
+            .iter()
+            .map(|&n| {
+                case("fdk", n, move || {
+                    prepared(cpu(&[seconds], &ORACLE, &counter()), None, None)
+                })
+            })
+            .collect();
+        run_suite(cases, &opts(1), NO_GPU, &|_| {})
+    };
+    let mut old = run(&["a", "b"], 1.0);
+    let newer = run(&["c", "b"], 2.0);
+    let order: Vec<String> = ["a", "b", "c"]
+        .iter()
+        .map(|n| format!("fdk/{n} 4"))
+        .collect();
+    old.merge(newer, &order).unwrap();
+    let got: Vec<(String, f64)> = old
+        .cases
+        .iter()
+        .map(|c| (c.id(), c.cpu_f64.seconds.as_ref().unwrap().median))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("fdk/a 4".to_string(), 1.0),
+            ("fdk/b 4".to_string(), 2.0),
+            ("fdk/c 4".to_string(), 2.0)
+        ]
+    );
+    assert_eq!(old.merged.len(), 1);
+    assert_eq!(old.merged[0].cases, ["fdk/c 4", "fdk/b 4"]);
+    assert!(old.to_markdown().contains("later run, merged"));
+    // The report survives a JSON round trip with its merge history.
+    let back: Report = serde_json::from_str(&old.to_json()).unwrap();
+    assert_eq!(back, old);
+    // Another machine's run is refused.
+    let mut other = run(&["a"], 3.0);
+    other.machine.cpu_model = "another CPU".into();
+    let e = old.merge(other, &order).unwrap_err().to_string();
+    assert!(e.contains("another CPU"), "{e}");
+}

@@ -172,3 +172,61 @@ fn bad_options_are_refused_and_leave_nothing() {
         assert!(stderr(&o).contains(args[0]), "{args:?}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn merge_folds_a_later_run_into_a_report_and_rerender_rewrites_it() {
+    let dir = scratch("merge");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--suite",
+            "quick",
+            "--backends",
+            "cpu",
+            "--runs",
+            "1",
+            "--out",
+        ];
+        args.push(s(&dir));
+        args.extend_from_slice(&["--name", "m"]);
+        args.extend_from_slice(extra);
+        voxlab(&args)
+    };
+    let o = run(&["--only", "fft/2d"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&["--only", "fft/3d,fft/2d", "--merge"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j = report(&dir);
+    let ids: Vec<String> = j["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            format!(
+                "{}/{}",
+                c["family"].as_str().unwrap(),
+                c["name"].as_str().unwrap()
+            )
+        })
+        .collect();
+    assert_eq!(
+        ids,
+        ["fft/2d", "fft/3d"],
+        "replaced, joined, in suite order"
+    );
+    assert_eq!(j["merged"].as_array().unwrap().len(), 1);
+    let md = std::fs::read_to_string(dir.join("m.md")).unwrap();
+    assert!(md.contains("later run, merged"), "{md}");
+    // Re-rendering runs nothing and rewrites the Markdown from the JSON.
+    std::fs::write(dir.join("m.md"), "stale").unwrap();
+    let o = voxlab(&["bench", "--rerender", "--name", "m", "--out", s(&dir)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(dir.join("m.md")).unwrap(), md);
+    // Both need the report's name; a missing report is a clear error.
+    let o = voxlab(&["bench", "--merge", "--out", s(&dir)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("needs --name"), "{}", stderr(&o));
+    let o = voxlab(&["bench", "--rerender", "--name", "nope", "--out", s(&dir)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("nope.json"), "{}", stderr(&o));
+}

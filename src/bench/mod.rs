@@ -5,11 +5,13 @@
 //! The cases live with their families (`raycast`, `fourier`, `ct`); `cargo bench
 //! --bench suite` runs the same list.
 
+pub mod adaptive;
 pub mod case;
 pub mod ct;
 pub mod d2vr;
 pub mod fourier;
 pub mod machine;
+pub mod process;
 pub mod raycast;
 pub mod report;
 
@@ -17,14 +19,16 @@ pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Tol, Unit, Work
 pub use report::Report;
 
 /// The algorithm families, in report order (`--only` takes a comma-separated subset).
-pub const FAMILIES: [&str; 8] = [
-    "raycast", "gradient", "fft", "fvr", "project", "fbp", "fdk", "d2vr",
+pub const FAMILIES: [&str; 10] = [
+    "raycast", "gradient", "adaptive", "process", "fft", "fvr", "project", "fbp", "fdk", "d2vr",
 ];
 
 /// Every case of a suite, in report order.
 pub fn cases(suite: Suite) -> Vec<Case> {
     let mut all = Vec::new();
     all.extend(raycast::cases(suite));
+    all.extend(adaptive::cases(suite));
+    all.extend(process::cases(suite));
     all.extend(fourier::cases(suite));
     all.extend(ct::cases(suite));
     all.extend(d2vr::cases(suite));
@@ -128,6 +132,68 @@ pub fn parse_families(list: &str) -> Result<Vec<&'static str>> {
         ));
     }
     Ok(out)
+}
+
+/// What `--only` picks: a whole family, or the cases whose id starts with a prefix
+/// (`raycast/mip-trilinear`, `fvr/lanczos3 128³`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Pick {
+    Family(&'static str),
+    Cases(String),
+}
+
+/// `raycast,fft/3d` → picks: family names (checked against [`FAMILIES`]) and case-id
+/// prefixes (anything with a `/`, whose family part is checked).
+pub fn parse_only(list: &str) -> Result<Vec<Pick>> {
+    let mut out = Vec::new();
+    for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let pick = match item.split_once('/') {
+            Some((fam, _)) => {
+                parse_families(fam)?;
+                Pick::Cases(item.to_string())
+            }
+            None => Pick::Family(parse_families(item)?[0]),
+        };
+        if !out.contains(&pick) {
+            out.push(pick);
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::invalid(
+            "--only",
+            format!("name at least one of {}", FAMILIES.join(", ")),
+        ));
+    }
+    Ok(out)
+}
+
+/// The cases `picks` select (all for None), in report order.
+///
+/// # Errors
+/// [`Error::Invalid`] when a case-id prefix matches no case.
+pub fn select_picks(cases: Vec<Case>, picks: Option<&[Pick]>) -> Result<Vec<Case>> {
+    let Some(picks) = picks else {
+        return Ok(cases);
+    };
+    for p in picks {
+        if let Pick::Cases(prefix) = p {
+            if !cases.iter().any(|c| c.id().starts_with(prefix.as_str())) {
+                return Err(Error::invalid(
+                    "--only",
+                    format!("no case id starts with '{prefix}' (see --list)"),
+                ));
+            }
+        }
+    }
+    Ok(cases
+        .into_iter()
+        .filter(|c| {
+            picks.iter().any(|p| match p {
+                Pick::Family(f) => c.family == *f,
+                Pick::Cases(prefix) => c.id().starts_with(prefix.as_str()),
+            })
+        })
+        .collect())
 }
 
 /// The cases of the given families (all of them for None), in report order.
@@ -469,6 +535,7 @@ pub fn run_suite(
         min_runs: opts.min_runs,
         cases: reports,
         seconds: start.elapsed().as_secs_f64(),
+        merged: Vec::new(),
     }
 }
 

@@ -357,9 +357,81 @@ pub struct Report {
     pub cases: Vec<CaseReport>,
     /// Wall time of the whole run.
     pub seconds: f64,
+    /// Later runs merged into this report (`voxlab bench --merge`), oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub merged: Vec<MergedRun>,
+}
+
+/// A later run whose cases replaced or joined a report's ([`Report::merge`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MergedRun {
+    pub date_utc: String,
+    pub command_line: String,
+    /// The ids of the cases it measured.
+    pub cases: Vec<String>,
+    pub seconds: f64,
 }
 
 impl Report {
+    /// Folds `newer` (a later run on the same machine and adapter, same suite) into
+    /// this report: its cases replace those with the same id and the others join in
+    /// `order` (the ids of the whole suite, in report order; ids not in it go last).
+    /// The machine description stays this report's, with the later run listed under
+    /// [`Report::merged`]; every case keeps the figures of the run that measured it.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when the suites, CPU models, core counts or adapters differ:
+    /// figures from two machines must not share a table.
+    pub fn merge(&mut self, newer: Report, order: &[String]) -> Result<()> {
+        let (a, b) = (&self.machine, &newer.machine);
+        let adapter = |m: &Machine| {
+            m.adapter
+                .as_ref()
+                .map(|a| (a.name.clone(), a.driver_info.clone()))
+        };
+        let same = self.suite == newer.suite
+            && a.cpu_model == b.cpu_model
+            && a.logical_cores == b.logical_cores
+            && a.rayon_threads == b.rayon_threads
+            && adapter(a) == adapter(b);
+        if !same {
+            return Err(Error::invalid(
+                "--merge",
+                format!(
+                    "the existing report was measured on {} / {} ({} threads, {} suite), \
+                     this run on {} / {} ({} threads, {} suite): write it under another \
+                     --name instead",
+                    a.cpu_model,
+                    a.adapter_name(),
+                    a.rayon_threads,
+                    suite_name(self.suite),
+                    b.cpu_model,
+                    b.adapter_name(),
+                    b.rayon_threads,
+                    suite_name(newer.suite)
+                ),
+            ));
+        }
+        let ids: Vec<String> = newer.cases.iter().map(CaseReport::id).collect();
+        for case in newer.cases {
+            let id = case.id();
+            match self.cases.iter_mut().find(|c| c.id() == id) {
+                Some(old) => *old = case,
+                None => self.cases.push(case),
+            }
+        }
+        let rank = |id: &str| order.iter().position(|o| o == id).unwrap_or(usize::MAX);
+        self.cases.sort_by_key(|c| rank(&c.id()));
+        self.merged.extend(newer.merged);
+        self.merged.push(MergedRun {
+            date_utc: b.date_utc.clone(),
+            command_line: b.command_line.clone(),
+            cases: ids,
+            seconds: newer.seconds,
+        });
+        Ok(())
+    }
+
     /// Every failure and error, one line each.
     pub fn problems(&self) -> Vec<String> {
         self.cases.iter().flat_map(CaseReport::problems).collect()
@@ -433,6 +505,13 @@ impl Report {
             paths.push(path);
         }
         Ok(paths)
+    }
+}
+
+fn suite_name(s: Suite) -> &'static str {
+    match s {
+        Suite::Quick => "quick",
+        Suite::Full => "full",
     }
 }
 
@@ -598,6 +677,15 @@ fn markdown(r: &Report) -> String {
             Suite::Full => "full",
         }
     );
+    if m.adapter.as_ref().is_some_and(|a| a.device_type == "Cpu") {
+        let _ = writeln!(
+            s,
+            "**The adapter here is a CPU emulating a GPU** (a software rasteriser such as \
+             Mesa's lavapipe): its \"GPU\" columns time the WGSL port compiled for the same \
+             CPU cores that run the CPU columns. They show the method and check the port; \
+             they say nothing about GPU speed, and speedups near or below 1× are expected.\n"
+        );
+    }
     let _ = writeln!(s, "## Machine\n");
     let _ = writeln!(s, "| | |\n|---|---|");
     let _ = writeln!(s, "| date (UTC) | {} |", m.date_utc);
@@ -651,7 +739,19 @@ fn markdown(r: &Report) -> String {
         m.voxlab_version, m.wgpu_version, m.rustc_version
     );
     let _ = writeln!(s, "| command | `{}` |", m.command_line.replace('|', "\\|"));
-    let _ = writeln!(s, "| total time | {} |\n", fmt_seconds(r.seconds));
+    let _ = writeln!(s, "| total time | {} |", fmt_seconds(r.seconds));
+    for later in &r.merged {
+        let _ = writeln!(
+            s,
+            "| later run, merged | {} `{}` ({}; {} case(s): {}) |",
+            later.date_utc,
+            later.command_line.replace('|', "\\|"),
+            fmt_seconds(later.seconds),
+            later.cases.len(),
+            later.cases.join(", ")
+        );
+    }
+    let _ = writeln!(s);
     let _ = writeln!(s, "## Method\n");
     let _ = writeln!(
         s,

@@ -1,0 +1,183 @@
+//! Benchmark cases of the volume processing tools (family `process`,
+//! docs/processing.md): resampling with the ray caster's reconstruction filters,
+//! Gaussian smoothing, the 3-D median and the gradient-magnitude field.
+//!
+//! Input: the modified Shepp–Logan head on `n³` voxels. Resampling tiles the whole
+//! volume with twice as many voxels per axis (`n³ → (2n)³`, every output voxel one
+//! interpolation) with trilinear, Catmull–Rom, interpolating cubic B-spline (its
+//! prefilter included in the run) and Lanczos-3; the Gaussian has σ = 2 voxels (radius
+//! 8, three separable passes); the median a 3³ window; the gradient magnitude central
+//! differences. One run is [`crate::cpu::process`]'s function in the working
+//! precision, or [`crate::gpu::process`]'s, which uploads, dispatches and reads back
+//! and makes its pipelines each call: those functions do not time their parts, so
+//! the GPU's kernel column is its whole wall-clock time (no timestamps), the same as
+//! its end-to-end column. Work: voxel updates (output voxels) and, for resampling,
+//! samples (output voxels × taps).
+
+use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use crate::cpu::process::{self as cp, Field, Region, ResampleSpec};
+use crate::error::Result;
+use crate::phantom::Phantom;
+use crate::settings::Filter;
+use crate::volume::Volume;
+use std::rc::Rc;
+use std::time::Instant;
+
+/// The f32 CPU path and the GPU against the f64 oracle, relative to the output's
+/// peak: `tests/gpu_process.rs` TOL_MAX_REL (measured there 1.7e-7 … 3.1e-6 over
+/// resampling, Gaussian and gradient magnitude; f32 sample positions on the phantom's
+/// unit steps are the worst). The median of f32 values is one of them, exact.
+/// rel L2: a third of the max bound. Measured at 128³ (docs/bench/lavapipe.md), CPU
+/// f32 and lavapipe alike: max ≤ 4.0e-7 (Lanczos-3 resampling), rel L2 ≤ 1.4e-7.
+const PROCESS_TOL: Tol = Tol {
+    max_abs_rel: 2e-5,
+    rel_l2: 7e-6,
+};
+
+/// One processing operation.
+#[derive(Clone, Copy, Debug)]
+enum Op {
+    Resample(Filter),
+    Gaussian(f64),
+    Median(usize),
+    GradientMagnitude,
+}
+
+impl Op {
+    fn name(self) -> String {
+        match self {
+            Op::Resample(f) => format!("resample-{}", f.name()),
+            Op::Gaussian(s) => format!("gaussian-sigma{s}"),
+            Op::Median(k) => format!("median-{k}"),
+            Op::GradientMagnitude => "gradient-magnitude".into(),
+        }
+    }
+
+    /// The output side for an input of side `n`.
+    fn out_side(self, n: usize) -> usize {
+        match self {
+            Op::Resample(_) => 2 * n,
+            _ => n,
+        }
+    }
+
+    fn cpu<R: crate::real::Real>(self, v: &Volume<f32>) -> Result<Field<R>> {
+        match self {
+            Op::Resample(filter) => cp::resample(v, &spec(v, filter)),
+            Op::Gaussian(s) => cp::gaussian(v, [s; 3]),
+            Op::Median(k) => cp::median(v, k),
+            Op::GradientMagnitude => cp::gradient_magnitude(v),
+        }
+    }
+
+    fn gpu(self, ctx: &crate::gpu::GpuContext, v: &Volume<f32>) -> Result<Field<f32>> {
+        use crate::gpu::process as gp;
+        match self {
+            Op::Resample(filter) => gp::resample(ctx, v, &spec(v, filter)),
+            Op::Gaussian(s) => gp::gaussian(ctx, v, [s; 3]),
+            Op::Median(k) => gp::median(ctx, v, k),
+            Op::GradientMagnitude => gp::gradient_magnitude(ctx, v),
+        }
+    }
+}
+
+/// The whole volume onto twice as many voxels per axis.
+fn spec(v: &Volume<f32>, filter: Filter) -> ResampleSpec {
+    ResampleSpec {
+        region: Region::Whole,
+        dims: v.dims().map(|n| 2 * n),
+        filter,
+    }
+}
+
+/// (operation, input side) of every case of a suite.
+fn grid(suite: Suite) -> Vec<(Op, usize)> {
+    let ops = [
+        Op::Resample(Filter::Trilinear),
+        Op::Resample(Filter::CatmullRom),
+        Op::Resample(Filter::BsplineInterp),
+        Op::Resample(Filter::Lanczos3),
+        Op::Gaussian(2.0),
+        Op::Median(3),
+        Op::GradientMagnitude,
+    ];
+    let n = match suite {
+        Suite::Quick => 12,
+        Suite::Full => 128,
+    };
+    ops.into_iter().map(|op| (op, n)).collect()
+}
+
+/// Every processing case of a suite.
+pub fn cases(suite: Suite) -> Vec<Case> {
+    grid(suite)
+        .into_iter()
+        .map(|(op, n)| {
+            let m = op.out_side(n);
+            Case::new(
+                "process",
+                op.name(),
+                format!("{n}³ → {m}³"),
+                move || prepare(op, n),
+            )
+        })
+        .collect()
+}
+
+fn flat_field<R: crate::real::Real>(f: &Field<R>) -> Vec<f64> {
+    f.grid.data.iter().map(|v| v.f64()).collect()
+}
+
+fn prepare(op: Op, n: usize) -> Result<Prepared> {
+    let v = Rc::new(Phantom::shepp_logan_modified().sample([n; 3])?);
+    fn cpu<R: crate::real::Real>(op: Op, v: &Volume<f32>) -> Result<Run> {
+        let t = Instant::now();
+        let f = op.cpu::<R>(v)?;
+        let seconds = t.elapsed().as_secs_f64();
+        Ok(Run {
+            seconds,
+            output: flat_field(&f),
+        })
+    }
+    let (v64, v32, vg) = (Rc::clone(&v), Rc::clone(&v), Rc::clone(&v));
+    let gpu = Box::new(move |ctx: &crate::gpu::GpuContext| {
+        let t = Instant::now();
+        let f = op.gpu(ctx, &vg)?;
+        let seconds = t.elapsed().as_secs_f64();
+        Ok(GpuRun {
+            output: flat_field(&f),
+            kernel: seconds,
+            kernel_from_timestamps: false,
+            end_to_end: seconds,
+            setup: 0.0,
+        })
+    }) as super::GpuFn;
+    let m = op.out_side(n);
+    let voxels = (m * m * m) as f64;
+    let mut work = vec![Work {
+        amount: voxels,
+        unit: Unit::VoxelUpdates,
+    }];
+    if let Op::Resample(filter) = op {
+        let taps = ((2 * filter.radius()) as f64).powi(3);
+        work.push(Work {
+            amount: voxels * taps,
+            unit: Unit::Samples,
+        });
+    }
+    Ok(Prepared {
+        cpu_f64: Box::new(move || cpu::<f64>(op, &v64)),
+        cpu_f32: Some(Box::new(move || cpu::<f32>(op, &v32))),
+        gpu: Some(gpu),
+        tol_f32: PROCESS_TOL,
+        tol_gpu: PROCESS_TOL,
+        work,
+        note: format!(
+            "{} of the {n}³ modified Shepp–Logan head (output {m}³). GPU: upload, \
+             pipelines, dispatches and readback in one wall-clock time (no timestamps); \
+             its kernel column is that whole time. Samples (resampling): output voxels \
+             × filter taps.",
+            op.name()
+        ),
+    })
+}
