@@ -103,9 +103,6 @@ pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
 pub const RAYS_WGSL: &str = include_str!("../../shaders/shared/rays.wgsl");
 /// MIDA, windowed MIP and iso-surfaces (`shaders/shared/modes.wgsl`).
 pub const MODES_WGSL: &str = include_str!("../../shaders/shared/modes.wgsl");
-/// The fast tricubic B-spline, 8 trilinear fetches (`shaders/shared/tricubic.wgsl`,
-/// mirrors `cpu::tricubic`).
-pub const TRICUBIC_WGSL: &str = include_str!("../../shaders/shared/tricubic.wgsl");
 /// The set-up shader (without the shared struct).
 pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
 /// The gradient stencil at a voxel, shared with `gpu::gradient`
@@ -290,8 +287,9 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
     let skip = super::skip::SKIP_WGSL;
     let modes = modes_wgsl(settings);
+    let tricubic = super::tricubic::TRICUBIC_WGSL;
     format!(
-        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{taps}\n{gradient}\n{TRICUBIC_WGSL}"
+        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{taps}\n{gradient}\n{tricubic}"
     )
 }
 
