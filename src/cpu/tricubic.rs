@@ -87,9 +87,8 @@ pub fn trilinear_fetch<R: Real>(grid: &Grid<R>, base: [isize; 3], frac: [R; 3]) 
         (one - frac[0]) * grid.at_clamped(base[0], j, k)
             + frac[0] * grid.at_clamped(base[0] + 1, j, k)
     };
-    let lerp_xy = |k: isize| {
-        (one - frac[1]) * lerp_x(base[1], k) + frac[1] * lerp_x(base[1] + 1, k)
-    };
+    let lerp_xy =
+        |k: isize| (one - frac[1]) * lerp_x(base[1], k) + frac[1] * lerp_x(base[1] + 1, k);
     (one - frac[2]) * lerp_xy(base[2]) + frac[2] * lerp_xy(base[2] + 1)
 }
 
@@ -160,7 +159,11 @@ mod tests {
             assert!((a.g[0] * a.frac[0] - t.w[1]).abs() < 1e-15);
             assert!((a.g[1] * a.frac[1] - t.w[3]).abs() < 1e-15);
             assert!((0.5..=1.0).contains(&a.frac[0]), "{x}: {:?}", a.frac);
-            assert!((0.0..=0.2 + 1e-15).contains(&a.frac[1]), "{x}: {:?}", a.frac);
+            assert!(
+                (0.0..=0.2 + 1e-15).contains(&a.frac[1]),
+                "{x}: {:?}",
+                a.frac
+            );
         }
     }
 

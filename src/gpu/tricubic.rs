@@ -40,7 +40,10 @@ pub fn sample_fast(
     hardware: bool,
 ) -> Result<Vec<f32>> {
     if grid.data.is_empty() || grid.data.len() != grid.dims.iter().product::<usize>() {
-        return Err(Error::invalid("grid", "needs dims[0]·dims[1]·dims[2] > 0 values"));
+        return Err(Error::invalid(
+            "grid",
+            "needs dims[0]·dims[1]·dims[2] > 0 values",
+        ));
     }
     if points.is_empty() {
         return Ok(Vec::new());
