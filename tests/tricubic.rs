@@ -108,7 +108,8 @@ fn fast_bspline_in_f32_meets_the_f64_oracle() {
     assert!(worst_taps < 1e-6, "{worst_taps}");
 }
 
-/// The interpolating variant passes through every voxel value.
+/// The interpolating variant passes through every voxel value (measured worst |Δ|
+/// 5.6e-16; bound 1e-12).
 #[test]
 fn fast_interp_passes_through_the_voxels() {
     let dims = [6, 5, 4];
