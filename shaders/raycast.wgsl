@@ -21,6 +21,8 @@ const FILTER_CATMULL_ROM: u32 = 4u;
 const FILTER_LANCZOS2: u32 = 5u;
 const FILTER_LANCZOS3: u32 = 6u;
 const FILTER_LANCZOS4: u32 = 7u;
+const FILTER_BSPLINE_FAST: u32 = 8u;
+const FILTER_BSPLINE_FAST_INTERP: u32 = 9u;
 
 
 const PI: f32 = 3.14159265358979323846;
@@ -154,6 +156,8 @@ fn clamp_index(i: i32, n: u32) -> i32 {
 // by accumulate_taps, which src/gpu/raycast.rs generates for the render's filter as
 // straight-line code in the CPU's order (mirrors src/cpu/filter.rs: apply_taps).
 // Hardware path (trilinear only): one filtered textureSampleLevel.
+// The fast B-splines: 8 trilinear fetches (shaders/shared/tricubic.wgsl), by hand or,
+// on the hardware path, through the sampler.
 fn sample_tex(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {
     let filter_kind = params.image.w;
     let n = params.dims.xyz;
@@ -165,6 +169,12 @@ fn sample_tex(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {
     if (filter_kind == FILTER_TRILINEAR && params.flags2.y == 1u) {
         let uvw = (p + vec3<f32>(0.5)) / vec3<f32>(n);
         return textureSampleLevel(t, linear_clamp, uvw, 0.0);
+    }
+    if (filter_kind == FILTER_BSPLINE_FAST || filter_kind == FILTER_BSPLINE_FAST_INTERP) {
+        if (params.flags2.y == 1u) {
+            return sample_fast_bspline_hw(t, linear_clamp, p, n);
+        }
+        return sample_fast_bspline(t, p, n);
     }
     return accumulate_taps(t, p);
 }

@@ -254,7 +254,8 @@ struct SceneArgs {
     #[arg(long)]
     settings: Option<PathBuf>,
     /// GPU only: trilinear filtering by the texture unit instead of the exact manual
-    /// interpolation (real GPUs quantise its weights to about 8 bits).
+    /// interpolation, for --filter trilinear and the 8 trilinear fetches of
+    /// cubic-bspline-fast(-interp) (real GPUs quantise its weights to about 8 bits).
     #[arg(long)]
     hardware_filtering: bool,
     /// 2D transfer function over (value, gradient magnitude): a JSON file of widgets

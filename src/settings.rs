@@ -72,9 +72,22 @@ pub enum Filter {
     /// The full sinc over the whole grid and the clamp-to-edge extension beyond it (no
     /// window, no normalisation); O(n³) per sample, slow.
     Sinc,
+    /// The cubic B-spline of `bspline`, evaluated with 8 trilinear fetches instead of
+    /// 64 taps (Sigg & Hadwiger 2005, `cpu::tricubic`); the same values to rounding. On
+    /// the GPU with `hardware_filtering` the fetches go through the texture unit.
+    #[value(name = "cubic-bspline-fast", alias = "bspline-fast")]
+    #[serde(rename = "cubic-bspline-fast", alias = "bspline-fast")]
+    BsplineFast,
+    /// The interpolating B-spline of `bspline-interp` (prefiltered coefficients),
+    /// evaluated with 8 trilinear fetches like `cubic-bspline-fast`.
+    #[value(name = "cubic-bspline-fast-interp", alias = "bspline-fast-interp")]
+    #[serde(rename = "cubic-bspline-fast-interp", alias = "bspline-fast-interp")]
+    BsplineFastInterp,
 }
 
 impl Filter {
+    /// The distinct kernels (the two `*-fast` filters evaluate `Bspline`'s and
+    /// `BsplineInterp`'s kernels another way; see [`Filter::FAST`]).
     pub const ALL: [Filter; 9] = [
         Filter::Nearest,
         Filter::Trilinear,
@@ -86,11 +99,32 @@ impl Filter {
         Filter::Lanczos4,
         Filter::Sinc,
     ];
+    /// The B-splines evaluated with 8 trilinear fetches (`cpu::tricubic`).
+    pub const FAST: [Filter; 2] = [Filter::BsplineFast, Filter::BsplineFastInterp];
+    /// The filter evaluating the same kernel tap by tap: `Bspline` for `BsplineFast`,
+    /// `BsplineInterp` for `BsplineFastInterp`, the filter itself otherwise.
+    pub fn exact(self) -> Filter {
+        match self {
+            Filter::BsplineFast => Filter::Bspline,
+            Filter::BsplineFastInterp => Filter::BsplineInterp,
+            f => f,
+        }
+    }
+    /// Whether the filter samples prefiltered B-spline coefficients instead of the
+    /// voxel values (`cpu::filter::prepare`).
+    pub fn prefiltered(self) -> bool {
+        matches!(self, Filter::BsplineInterp | Filter::BsplineFastInterp)
+    }
     /// The kernel's radius in voxels (the grid's half-size for the full sinc).
     pub fn radius(self) -> usize {
         match self {
             Filter::Nearest | Filter::Trilinear => 1,
-            Filter::Bspline | Filter::BsplineInterp | Filter::CatmullRom | Filter::Lanczos2 => 2,
+            Filter::Bspline
+            | Filter::BsplineInterp
+            | Filter::BsplineFast
+            | Filter::BsplineFastInterp
+            | Filter::CatmullRom
+            | Filter::Lanczos2 => 2,
             Filter::Lanczos3 => 3,
             Filter::Lanczos4 => 4,
             Filter::Sinc => usize::MAX,
@@ -107,6 +141,8 @@ impl Filter {
             Filter::Lanczos3 => "lanczos3",
             Filter::Lanczos4 => "lanczos4",
             Filter::Sinc => "sinc",
+            Filter::BsplineFast => "cubic-bspline-fast",
+            Filter::BsplineFastInterp => "cubic-bspline-fast-interp",
         }
     }
 }
@@ -213,8 +249,9 @@ pub struct RenderSettings {
     /// Also return the number of samples each ray took.
     pub sample_count: bool,
     /// GPU only: sample the volume through the texture unit's trilinear filtering
-    /// instead of the exact manual interpolation (trilinear filter only; the CPU has
-    /// one trilinear path and ignores this).
+    /// instead of the exact manual interpolation (the trilinear filter, and the 8
+    /// trilinear fetches of the `cubic-bspline-fast` filters; the CPU has one exact path
+    /// and ignores this).
     pub hardware_filtering: bool,
     /// DVR with post-classification only: classify samples by (value, gradient
     /// magnitude) through this 2D transfer function instead of the scene's 1D one

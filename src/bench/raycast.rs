@@ -6,7 +6,9 @@
 //! 540 mm from the centre, 30° field of view) at `size × size` pixels, the `phantom`
 //! transfer function, step ½ voxel. The variants ([`raycast_variants`]): shaded DVR with
 //! trilinear and Catmull–Rom reconstruction, shaded DVR through the GPU's texture
-//! filtering unit (`hardware_filtering`), MIP, MinIP and X-ray; at 128³ → 256² shaded
+//! filtering unit (`hardware_filtering`), shaded DVR with the cubic B-spline as 64 taps
+//! (`bspline`), as 8 trilinear fetches (`cubic-bspline-fast`) and as 8 texture-unit
+//! fetches (`cubic-bspline-fast-hardware`), MIP, MinIP and X-ray; at 128³ → 256² shaded
 //! DVR with the nearest, interpolating cubic B-spline and Lanczos-3 filters, MIDA
 //! (γ = 0) and two semi-transparent iso-surfaces (0.25 and 0.6); empty-space skipping
 //! (on in every other variant) switched off (`dvr-shaded-trilinear-skip-off`), and the
@@ -72,6 +74,20 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
         (
             "dvr-shaded-hardware-trilinear",
             with(&|s| s.hardware_filtering = true),
+        ),
+        // The cubic B-spline: 64 taps, 8 manual trilinear fetches, 8 texture-unit
+        // fetches (the same image up to the sampler's precision; `cpu::tricubic`).
+        ("dvr-shaded-bspline", with(&|s| s.filter = Filter::Bspline)),
+        (
+            "dvr-shaded-cubic-bspline-fast",
+            with(&|s| s.filter = Filter::BsplineFast),
+        ),
+        (
+            "dvr-shaded-cubic-bspline-fast-hardware",
+            with(&|s| {
+                s.filter = Filter::BsplineFast;
+                s.hardware_filtering = true
+            }),
         ),
         ("mip-trilinear", with(&|s| s.mode = Mode::Mip)),
         ("minip-trilinear", with(&|s| s.mode = Mode::Minip)),
@@ -250,6 +266,9 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-shaded-trilinear", 512, 1024),
             ("dvr-shaded-catmull-rom", 256, 512),
             ("dvr-shaded-hardware-trilinear", 256, 512),
+            ("dvr-shaded-bspline", 256, 512),
+            ("dvr-shaded-cubic-bspline-fast", 256, 512),
+            ("dvr-shaded-cubic-bspline-fast-hardware", 256, 512),
             ("mip-trilinear", 256, 512),
             ("minip-trilinear", 256, 512),
             ("xray-trilinear", 256, 512),

@@ -20,3 +20,4 @@ pub mod project;
 pub mod ramp;
 pub mod raycast;
 pub mod skip;
+pub mod tricubic;

@@ -84,7 +84,7 @@ impl<R: Real> GridField<R> {
             lo = lo.min(v.f64());
             hi = hi.max(v.f64());
         }
-        let (grid, values) = if filter == Filter::BsplineInterp {
+        let (grid, values) = if filter.prefiltered() {
             (prepare(&values, filter), Some(values))
         } else {
             (values, None)

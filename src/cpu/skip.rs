@@ -66,7 +66,8 @@ pub fn skip_radius(settings: &RenderSettings) -> Option<usize> {
         return None;
     }
     match (settings.filter, settings.classification) {
-        (Filter::Sinc, _) | (Filter::BsplineInterp, Classification::Pre) => None,
+        (Filter::Sinc, _) => None,
+        (f, Classification::Pre) if f.prefiltered() => None,
         (f, _) => Some(f.radius()),
     }
 }
@@ -75,7 +76,12 @@ pub fn skip_radius(settings: &RenderSettings) -> Option<usize> {
 /// fractional positions and raised by 0.1 % (the maximum lies between samples).
 pub fn lebesgue_1d(filter: Filter) -> f64 {
     match filter {
-        Filter::Nearest | Filter::Trilinear | Filter::Bspline | Filter::BsplineInterp => 1.0,
+        Filter::Nearest
+        | Filter::Trilinear
+        | Filter::Bspline
+        | Filter::BsplineInterp
+        | Filter::BsplineFast
+        | Filter::BsplineFastInterp => 1.0,
         Filter::Sinc => f64::INFINITY,
         _ => {
             let mut l = 1.0f64;

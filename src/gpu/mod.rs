@@ -22,5 +22,6 @@ pub mod project;
 pub mod ramp;
 pub mod raycast;
 pub mod skip;
+pub mod tricubic;
 
 pub use context::{AdapterSummary, GpuContext};

@@ -218,7 +218,8 @@ fn field(dims: [usize; 3], data: Vec<f32>, affine: DMat4) -> Field<f32> {
 
 /// The filter code of `shaders/process_resample.wgsl` and the taps per voxel.
 fn filter_code(filter: Filter) -> Result<(u32, u32, u64)> {
-    Ok(match filter {
+    // The fast B-splines resample with their kernels' exact 64-tap sums.
+    Ok(match filter.exact() {
         Filter::Nearest => (0, 0, 1),
         Filter::Trilinear => (1, 1, 8),
         Filter::Bspline | Filter::BsplineInterp => (2, 2, 64),
@@ -227,6 +228,7 @@ fn filter_code(filter: Filter) -> Result<(u32, u32, u64)> {
             let n = filter.radius() as u32;
             (4, n, 8 * (n as u64).pow(3))
         }
+        Filter::BsplineFast | Filter::BsplineFastInterp => unreachable!("exact() maps them"),
         Filter::Sinc => {
             return Err(Error::invalid(
                 "resampling filter",
@@ -246,7 +248,7 @@ pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Res
     let (to_in, affine) = resample_plan(vol.dims(), vol.affine(), spec)?;
     let n_out = spec.dims.iter().product::<usize>();
     let out_bytes = check_binding(ctx, "resampled volume", n_out)?;
-    let host: Vec<f32> = if spec.filter == Filter::BsplineInterp {
+    let host: Vec<f32> = if spec.filter.prefiltered() {
         prepare(&Grid::<f64>::from_volume(vol), spec.filter)
             .data
             .iter()

@@ -144,7 +144,11 @@ pub const LLVMPIPE_LOOP_LIMIT: usize = 65535;
 fn tap_layout(f: Filter) -> (i32, usize) {
     match f {
         Filter::Trilinear => (0, 2),
-        Filter::Bspline | Filter::BsplineInterp | Filter::CatmullRom => (-1, 4),
+        Filter::Bspline
+        | Filter::BsplineInterp
+        | Filter::BsplineFast
+        | Filter::BsplineFastInterp
+        | Filter::CatmullRom => (-1, 4),
         Filter::Lanczos2 => (-1, 4),
         Filter::Lanczos3 => (-2, 6),
         Filter::Lanczos4 => (-3, 8),
@@ -270,8 +274,10 @@ pub fn gradient_wgsl(method: Option<GradientMethod>) -> String {
 /// hand-written body, and the generated tap sums and gradient stencil.
 pub fn raycast_shader(settings: &RenderSettings) -> String {
     let taps = match settings.filter {
-        // Nearest and hardware trilinear never reach accumulate_taps.
-        Filter::Nearest | Filter::Sinc => STUB_TAPS.to_string(),
+        // Nearest, hardware trilinear and the fast B-splines never reach accumulate_taps.
+        Filter::Nearest | Filter::Sinc | Filter::BsplineFast | Filter::BsplineFastInterp => {
+            STUB_TAPS.to_string()
+        }
         Filter::Trilinear if settings.hardware_filtering => STUB_TAPS.to_string(),
         f => accumulate_taps_wgsl(f),
     };
@@ -281,8 +287,9 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
     let skip = super::skip::SKIP_WGSL;
     let modes = modes_wgsl(settings);
+    let tricubic = super::tricubic::TRICUBIC_WGSL;
     format!(
-        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{taps}\n{gradient}"
+        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{taps}\n{gradient}\n{tricubic}"
     )
 }
 
@@ -334,6 +341,8 @@ fn filter_id(f: Filter) -> Result<u32> {
         Filter::Lanczos2 => 5,
         Filter::Lanczos3 => 6,
         Filter::Lanczos4 => 7,
+        Filter::BsplineFast => 8,
+        Filter::BsplineFastInterp => 9,
         Filter::Sinc => {
             return Err(Error::invalid(
                 "filter",
@@ -390,11 +399,13 @@ pub fn raycast_params(
         Mode::Iso => 5,
     };
     let hardware = settings.hardware_filtering;
-    if hardware && settings.filter != Filter::Trilinear {
+    let fast = Filter::FAST.contains(&settings.filter);
+    if hardware && settings.filter != Filter::Trilinear && !fast {
         return Err(Error::invalid(
             "hardware filtering",
             format!(
-                "the sampler filters trilinearly only; the {} filter always runs on the exact path",
+                "the sampler filters trilinearly only (and serves the 8 trilinear fetches \
+                 of cubic-bspline-fast); the {} filter always runs on the exact path",
                 settings.filter.name()
             ),
         ));
@@ -642,7 +653,7 @@ pub fn render(
 
     // Uploads: the volume (prefiltered on the CPU for bspline-interp) and the LUT.
     let t_up = Instant::now();
-    let bspline_interp = settings.filter == Filter::BsplineInterp;
+    let bspline_interp = settings.filter.prefiltered();
     let grid = Grid::<f32> {
         dims,
         data: values.data().to_vec(),
