@@ -541,7 +541,13 @@ fn cast_ray<R: Real, F: Field<R>>(
             let (p, len) = segment(k);
             (field.value(p), len)
         };
-        return super::clipmesh::cast_scalar_ranges(mode, &mesh_ranges, miss, s.modes.window, value);
+        return super::clipmesh::cast_scalar_ranges(
+            mode,
+            &mesh_ranges,
+            miss,
+            s.modes.window,
+            value,
+        );
     }
     match mode {
         Mode::Mida => super::modes::cast_mida(field, s, &span, ray.dir),

@@ -100,10 +100,8 @@ impl TriMesh {
             [4, 5, 7, 6], // +z
         ];
         for q in QUADS {
-            self.triangles
-                .push([base + q[0], base + q[1], base + q[2]]);
-            self.triangles
-                .push([base + q[0], base + q[2], base + q[3]]);
+            self.triangles.push([base + q[0], base + q[1], base + q[2]]);
+            self.triangles.push([base + q[0], base + q[2], base + q[3]]);
         }
     }
 
@@ -350,7 +348,11 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<TriMesh> {
         body += 1;
     }
     if bytes.get(body) != Some(&b'\n') {
-        return Err(Error::format(path, "header", "end_header must end its line"));
+        return Err(Error::format(
+            path,
+            "header",
+            "end_header must end its line",
+        ));
     }
     body += 1;
     let header = std::str::from_utf8(&bytes[..end])
