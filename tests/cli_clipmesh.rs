@@ -39,7 +39,14 @@ fn bricks_mesh_keeps_the_image() {
     let (bricks, n_bricks) = render(
         &d,
         "bricks",
-        &["--skip-empty", "off", "--block-size", "8", "--clip-mesh", "bricks"],
+        &[
+            "--skip-empty",
+            "off",
+            "--block-size",
+            "8",
+            "--clip-mesh",
+            "bricks",
+        ],
     );
     assert_eq!(plain, bricks, "the bricks mesh changed the image");
     let (a, b): (f32, f32) = (n_bricks.iter().sum(), n_plain.iter().sum());

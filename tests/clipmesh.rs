@@ -232,8 +232,9 @@ fn cube_mesh_gives_the_clip_box_image() {
             .map(|(x, y)| (x - y).abs())
             .fold(0.0, f64::max);
         eprintln!("{mode:?}: cube mesh vs clip box, max |difference| {err:e}");
-        // Measured: see the report below (printed with --nocapture).
-        assert!(err <= 1e-11, "{mode:?}: {err:e}");
+        // Measured 3.7e-15 (DVR), 3.6e-14 (X-ray), 5.7e-15 (MIP): the clip box and the
+        // mesh reach the same samples through different rounding of t.
+        assert!(err <= 2e-13, "{mode:?}: {err:e}");
     }
 }
 
