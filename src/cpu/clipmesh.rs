@@ -115,7 +115,7 @@ pub fn intersect_triangle(o: [f64; 3], d: [f64; 3], tri: &Triangle) -> Option<f6
     }
     // Edge rule for edge functions exactly zero: U is edge B→C, V is C→A, W is A→B.
     let s = det > 0.0;
-    let owns = |p: [f64; 3], q: [f64; 3]| (lex_less(p, q)) == s;
+    let owns = |p: [f64; 3], q: [f64; 3]| lex_less(p, q) == s;
     if (u == 0.0 && !owns(tri[1], tri[2]))
         || (v == 0.0 && !owns(tri[2], tri[0]))
         || (w == 0.0 && !owns(tri[0], tri[1]))
@@ -163,8 +163,8 @@ pub fn make_segments(t0: f64, behind: usize, forward: &[f64]) -> Segments {
     let mut s = Segments::default();
     let pairs = b.len().div_ceil(2);
     let end = |i: usize| b.get(i).copied().unwrap_or(OPEN_END);
-    for i in 0..pairs.min(MAX_SEGMENTS) {
-        s.seg[i] = [b[2 * i], end(2 * i + 1)];
+    for (i, seg) in s.seg.iter_mut().enumerate().take(pairs) {
+        *seg = [b[2 * i], end(2 * i + 1)];
     }
     s.count = pairs.min(MAX_SEGMENTS);
     if pairs > MAX_SEGMENTS {
@@ -189,6 +189,7 @@ pub struct ClipTriangles {
 
 impl ClipTriangles {
     /// Flattens a (validated) mesh.
+    #[allow(clippy::needless_range_loop)]
     pub fn new(mesh: &TriMesh) -> Self {
         let triangles: Vec<Triangle> = (0..mesh.triangles.len())
             .map(|i| mesh.triangle(i))
@@ -207,6 +208,7 @@ impl ClipTriangles {
     }
 
     /// The inside segments of the ray `origin + dir·t`, `t ≥ t0` (f64, exact test).
+    #[allow(clippy::needless_range_loop)]
     pub fn segments(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
         let (o, d) = (origin.to_array(), dir.to_array());
         // A ray that misses the bounding box hits nothing.

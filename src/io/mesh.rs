@@ -171,8 +171,8 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
 
 /// Fan-triangulates a polygon of resolved vertex indices into `out`.
 fn fan(poly: &[u32], out: &mut Vec<[u32; 3]>) {
-    for k in 1..poly.len() - 1 {
-        out.push([poly[0], poly[k], poly[k + 1]]);
+    for w in poly[1..].windows(2) {
+        out.push([poly[0], w[0], w[1]]);
     }
 }
 
@@ -493,7 +493,7 @@ pub fn parse_ply(bytes: &[u8], path: &Path) -> Result<TriMesh> {
                         poly.clear();
                         for _ in 0..c as usize {
                             let x = r.value(p.ty, &field)?;
-                            if x.fract() != 0.0 || x < 0.0 || x >= n as f64 {
+                            if x.fract() != 0.0 || !(0.0..n as f64).contains(&x) {
                                 return Err(Error::format(
                                     path,
                                     field,
