@@ -492,6 +492,13 @@ struct AccelArgs {
     /// Offset ray starts by a fixed 4×4 ordered pattern (interleaved sampling).
     #[arg(long)]
     interleaved: bool,
+    /// Restrict rays to the inside of a closed triangle mesh (FILE.obj or FILE.ply), or
+    /// `bricks`: the boundary of the non-empty skipping cells (DVR; same image).
+    #[arg(long)]
+    clip_mesh: Option<String>,
+    /// Units of the --clip-mesh file's vertices: world millimetres or voxel indices.
+    #[arg(long, value_enum, default_value = "world")]
+    clip_mesh_units: voxlab::settings::ClipMeshUnits,
 }
 
 impl AccelArgs {
@@ -515,6 +522,16 @@ impl AccelArgs {
         }
         if self.interleaved {
             s.interleaved = true;
+        }
+        if let Some(m) = &self.clip_mesh {
+            s.clip_mesh = Some(if m == "bricks" {
+                voxlab::settings::ClipMesh::Bricks
+            } else {
+                voxlab::settings::ClipMesh::Mesh {
+                    mesh: std::sync::Arc::new(voxlab::io::mesh::read_mesh(Path::new(m))?),
+                    units: self.clip_mesh_units,
+                }
+            });
         }
         if self.accumulate.is_some() && s.interleaved {
             return Err(Error::invalid(

@@ -286,6 +286,33 @@ pub struct RenderSettings {
     /// Refine each crossing by linear interpolation between the two samples around it
     /// (off: the hit is the first sample past the crossing).
     pub iso_refine: bool,
+    /// Restricts rays to the inside of a closed triangle mesh, or of the bricks mesh
+    /// of the skipping grid (`cpu::clipmesh`). Not part of a settings file.
+    #[serde(skip)]
+    pub clip_mesh: Option<ClipMesh>,
+}
+
+/// The units a clipping mesh's vertices are given in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ClipMeshUnits {
+    /// World millimetres (the volume's world frame).
+    #[default]
+    World,
+    /// Voxel indices (carried to world by the volume's affine).
+    Voxel,
+}
+
+/// A clipping mesh (`cpu::clipmesh`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ClipMesh {
+    /// A closed triangle mesh read from a file (`io::mesh`).
+    Mesh {
+        mesh: std::sync::Arc<crate::io::mesh::TriMesh>,
+        units: ClipMeshUnits,
+    },
+    /// The boundary of the non-empty cells of the skipping grid for the current
+    /// transfer function (renders exactly the image without a mesh).
+    Bricks,
 }
 
 /// The space a clipping box is given in.
@@ -337,6 +364,7 @@ impl Default for RenderSettings {
             iso_opaque: false,
             iso_shadows: false,
             iso_refine: true,
+            clip_mesh: None,
         }
     }
 }

@@ -5,6 +5,7 @@
 //! thread count); the f32 instance is the fair baseline for speed comparisons.
 
 pub mod adaptive;
+pub mod clipmesh;
 pub mod d2vr;
 pub mod dft;
 pub mod fbp;

@@ -271,6 +271,8 @@ pub(crate) struct Setup<R> {
     clip: Option<super::skip::ClipR<R>>,
     /// MIDA, window and iso-surface set-up (`cpu::modes`).
     pub(crate) modes: super::modes::ModeSetup<R>,
+    /// The clipping mesh (`cpu::clipmesh`), if any.
+    clip_mesh: Option<std::sync::Arc<super::clipmesh::ClipTriangles>>,
 }
 
 /// Renders a volume with precision `R`. `progress(done_rows, total_rows)` is called as
@@ -396,6 +398,7 @@ pub fn render_field<R: Real, F: Field<R>>(
         skip: None,
         clip: settings.clip_box.as_ref().map(super::skip::ClipR::new),
         modes: super::modes::ModeSetup::new(settings, (lo_v, hi_v)),
+        clip_mesh: None,
     };
     // Post-classification bounds what the filter samples; pre-classification the voxels.
     let skip_voxels = match settings.classification {
@@ -404,6 +407,7 @@ pub fn render_field<R: Real, F: Field<R>>(
     };
     let setup = Setup {
         skip: skip_voxels.and_then(|g| super::skip::Skipper::new(g, &setup.lut, settings)),
+        clip_mesh: super::clipmesh::resolve(settings, affine, dims, skip_voxels, &setup.lut)?,
         ..setup
     };
 
@@ -488,6 +492,10 @@ fn cast_ray<R: Real, F: Field<R>>(
     if t_out <= t_in {
         return (miss, 0);
     }
+    let mesh_segments = s
+        .clip_mesh
+        .as_ref()
+        .map(|m| m.segments(ray.origin, ray.dir, ray.t_min));
     let speed = d.length(); // voxels per unit t (t is world mm along a unit direction)
     let dt = s.step / speed;
     // The virtual start of the (jittered) step grid; u = 0 gives t_s = t_in.
@@ -523,6 +531,24 @@ fn cast_ray<R: Real, F: Field<R>>(
             .unwrap_or(1),
         speed,
     };
+    // The clipping mesh keeps the step grid and takes only the samples inside it.
+    let mesh_ranges = match &mesh_segments {
+        Some(segs) => super::clipmesh::MeshRanges::new(segs, n, t_in, t_out, t_s, dt),
+        None => super::clipmesh::MeshRanges::all(n),
+    };
+    if mesh_segments.is_some() && matches!(mode, Mode::Mip | Mode::Minip | Mode::Xray) {
+        let value = |k: usize| {
+            let (p, len) = segment(k);
+            (field.value(p), len)
+        };
+        return super::clipmesh::cast_scalar_ranges(
+            mode,
+            &mesh_ranges,
+            miss,
+            s.modes.window,
+            value,
+        );
+    }
     match mode {
         Mode::Mida => super::modes::cast_mida(field, s, &span, ray.dir),
         Mode::Iso => super::modes::cast_iso(field, s, &span, ray.dir, false),
@@ -562,8 +588,11 @@ fn cast_ray<R: Real, F: Field<R>>(
             let mut taken = 0u32;
             let back = order == Compositing::BackToFront;
             let skip = s.skip.as_ref();
-            let mut ranges =
-                super::skip::SampleRanges::new(skip, o, d, (t_in, t_out), t_s, dt, n, back);
+            let mut ranges = super::clipmesh::ClippedRanges::new(
+                super::skip::SampleRanges::new(skip, o, d, (t_in, t_out), t_s, dt, n, back),
+                mesh_ranges,
+                back,
+            );
             'ray: while let Some((k_lo, k_hi)) = ranges.next(skip) {
                 for i in k_lo..=k_hi {
                     let k = if back { k_lo + k_hi - i } else { i };

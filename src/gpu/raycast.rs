@@ -551,6 +551,13 @@ pub fn render(
     settings.validate()?;
     tf.validate()?;
     volume.check_finite("volume")?;
+    if settings.clip_mesh.is_some() {
+        // Segments per pixel are computed on the CPU ray caster only (cpu::clipmesh).
+        return Err(Error::invalid(
+            "clip mesh",
+            "not yet available on the GPU backend; render with the CPU backend",
+        ));
+    }
     let dims = volume.dims();
     let max3d = ctx.limits.max_texture_dimension_3d as usize;
     if dims.iter().any(|&n| n > max3d) {

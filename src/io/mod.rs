@@ -32,6 +32,7 @@
 
 pub mod den;
 pub mod dicom;
+pub mod mesh;
 pub mod nifti;
 pub mod npy;
 pub mod nrrd;
