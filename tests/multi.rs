@@ -69,7 +69,7 @@ fn multi(vols: &[MultiVolume], cam: &Camera, s: &RenderSettings) -> Frame {
 
 /// (a) One volume with the identity transform is the single-volume caster: same steps,
 /// same samples, same opacity correction (−expm1(ln1p(−α)·x) against 1 − (1 − α)^x,
-/// equal to rounding). Measured worst |Δ| over the four cases: 0 … 4e-16.
+/// equal to rounding). Measured worst |Δ|: 1.0e-15 (DVR; MIP, MinIP and X-ray are bit-identical).
 #[test]
 fn one_volume_identity_equals_single_volume_caster() {
     let vol: AnyVolume = phantom_volume([24, 27, 22]).into();
@@ -102,7 +102,7 @@ fn one_volume_identity_equals_single_volume_caster() {
 
 /// (c) A volume placed by T through the multi renderer equals the single-volume caster
 /// on the volume whose affine is T·A (a rigid placement, and an anisotropic scale with
-/// shear). Measured worst |Δ|: 4e-16.
+/// shear). Measured worst |Δ|: 9.2e-16 (DVR; X-ray and MIP bit-identical).
 #[test]
 fn transformed_volume_equals_volume_with_that_affine() {
     let v = phantom_volume([20, 23, 18]);
@@ -133,7 +133,7 @@ fn transformed_volume_equals_volume_with_that_affine() {
 /// which is one copy with the reference step halved (twice the optical depth per step,
 /// the same colour). A second volume whose transfer function is transparent changes
 /// nothing (placed over the first, so that the union of the boxes is the same). X-ray of two copies is twice one; MIP of two copies is one.
-/// Measured worst |Δ|: 7e-16.
+/// Measured worst |Δ|: 9.2e-16.
 #[test]
 fn two_copies_double_the_optical_depth() {
     let vol: AnyVolume = phantom_volume([24, 27, 22]).into();
@@ -184,9 +184,11 @@ fn two_copies_double_the_optical_depth() {
 /// (b) Two exact phantoms (no reconstruction filter), the second rotated 90° about z and
 /// shifted, X-ray: the image is the sum of the two phantoms' exact line integrals along
 /// each ray. The only error is the midpoint rule across the ellipsoids' surfaces: at most
-/// (jump × step) per crossing, in density × mm. Step 0.25 voxel of a virtual 64³ grid =
-/// 1 mm; measured worst |Δ| 0.83 density·mm against line integrals up to 340 (RMS 0.14).
-/// Bound: 2 (about 2.5× the worst, below one step's full jump of 2 × 1 mm).
+/// |jump| × Δ/2 per crossing, in density × mm. Step 0.25 voxel of a virtual 64³ grid =
+/// Δ = 1 mm; measured worst |Δ| 1.96 density·mm (RMS 0.32) against line integrals up to
+/// 104. Bound 4: the skull (jump 1.0) and brain (−0.8) surfaces, crossed twice in each
+/// phantom, give 8 crossings and 3.6; the small ellipsoids (jumps ≤ 0.2) add a little
+/// where a ray meets them.
 #[test]
 fn two_placed_phantoms_xray_matches_exact_line_integrals() {
     let ph = Phantom::shepp_logan_modified();
@@ -249,7 +251,8 @@ fn two_placed_phantoms_xray_matches_exact_line_integrals() {
     let rms = (sq / (cam.width * cam.height) as f64).sqrt();
     eprintln!("x-ray of two placed phantoms: max |Δ| {worst:.3}, rms {rms:.3}, largest {top:.1}");
     assert!(top > 100.0, "the rays must cross the phantoms");
-    assert!(worst <= 2.0, "max |Δ| {worst}");
+    assert!(worst <= 4.0, "max |Δ| {worst}");
+    assert!(rms <= 0.6, "rms {rms}");
 }
 
 /// (e) Bad input is refused with a message that says what is wrong.
