@@ -34,7 +34,11 @@ impl MultiArgs {
     }
 
     /// Volume 0 (INPUT) and the extra volumes, checked.
-    pub(crate) fn volumes(&self, scene: &Scene, load: &crate::LoadArgs) -> Result<Vec<MultiVolume>> {
+    pub(crate) fn volumes(
+        &self,
+        scene: &Scene,
+        load: &crate::LoadArgs,
+    ) -> Result<Vec<MultiVolume>> {
         if self.volumes.is_empty() {
             return Err(Error::invalid(
                 "--transform/--volume-tf",
@@ -76,8 +80,9 @@ impl MultiArgs {
                 None => scene.transfer.clone(),
             };
             let transform = match self.transforms.get(i) {
-                Some(t) => parse_transform(t)
-                    .map_err(|e| Error::invalid(format!("--transform of --volume {spec}"), e.to_string()))?,
+                Some(t) => parse_transform(t).map_err(|e| {
+                    Error::invalid(format!("--transform of --volume {spec}"), e.to_string())
+                })?,
                 None => voxlab::multi::IDENTITY,
             };
             out.push(MultiVolume::new(volume, transfer).with_transform(transform));

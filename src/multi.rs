@@ -183,7 +183,10 @@ pub fn validate_settings(settings: &RenderSettings) -> Result<()> {
             format!("{what} is not supported with several volumes"),
         ))
     };
-    if !matches!(settings.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray) {
+    if !matches!(
+        settings.mode,
+        Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray
+    ) {
         return refuse(&format!(
             "mode {:?} (use dvr, mip, minip or xray)",
             settings.mode

@@ -171,16 +171,18 @@ pub fn render_pair_gpu(
 ) -> Result<StereoPair> {
     render_pair_with(
         &|sc, p| {
-            Ok(crate::gpu::raycast::render(
-                ctx,
-                &sc.volume,
-                &sc.transfer,
-                &sc.camera,
-                settings,
-                p,
-            )?
-            .output
-            .image)
+            Ok(
+                crate::gpu::raycast::render(
+                    ctx,
+                    &sc.volume,
+                    &sc.transfer,
+                    &sc.camera,
+                    settings,
+                    p,
+                )?
+                .output
+                .image,
+            )
         },
         scene,
         separation_mm,
@@ -190,8 +192,7 @@ pub fn render_pair_gpu(
 }
 
 /// A view renderer: the image of a scene, with a progress callback.
-type ViewRenderer<'a> =
-    dyn Fn(&Scene, &(dyn Fn(usize, usize) + Sync)) -> Result<Frame> + 'a;
+type ViewRenderer<'a> = dyn Fn(&Scene, &(dyn Fn(usize, usize) + Sync)) -> Result<Frame> + 'a;
 
 fn render_pair_with(
     render_view: &ViewRenderer<'_>,

@@ -63,7 +63,9 @@ fn bad_volume_lists_and_transforms_are_refused_clearly() {
     let out = d.join("x.png");
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
-            vec!["--volume", PHANTOM, "--volume", PHANTOM, "--volume", PHANTOM],
+            vec![
+                "--volume", PHANTOM, "--volume", PHANTOM, "--volume", PHANTOM,
+            ],
             "at most 2 extra volumes",
         ),
         (
@@ -71,11 +73,21 @@ fn bad_volume_lists_and_transforms_are_refused_clearly() {
             "11 values",
         ),
         (
-            vec!["--volume", PHANTOM, "--transform", "1,0,0,0,0,1,0,0,0,0,0,0"],
+            vec![
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "1,0,0,0,0,1,0,0,0,0,0,0",
+            ],
             "singular",
         ),
         (
-            vec!["--volume", PHANTOM, "--transform", "1,0,0,NaN,0,1,0,0,0,0,1,0"],
+            vec![
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "1,0,0,NaN,0,1,0,0,0,0,1,0",
+            ],
             "not finite",
         ),
         (
@@ -98,6 +110,10 @@ fn bad_volume_lists_and_transforms_are_refused_clearly() {
     for (args, words) in cases {
         let o = render(&args, &out);
         assert!(!o.status.success(), "{args:?} succeeded");
-        assert!(stderr(&o).contains(words), "{args:?}: '{words}' not in {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(words),
+            "{args:?}: '{words}' not in {}",
+            stderr(&o)
+        );
     }
 }

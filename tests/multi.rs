@@ -47,7 +47,10 @@ fn settings(mode: Mode) -> RenderSettings {
 }
 
 fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!((a.width, a.height, a.channels), (b.width, b.height, b.channels));
+    assert_eq!(
+        (a.width, a.height, a.channels),
+        (b.width, b.height, b.channels)
+    );
     a.data
         .iter()
         .zip(&b.data)
@@ -163,7 +166,10 @@ fn two_copies_double_the_optical_depth() {
         MultiVolume::new(vol.clone(), clear),
     ];
     let d = max_diff(&single(&vol, &tf, &cam, &s), &multi(&with_clear, &cam, &s));
-    assert!(d <= 1e-12, "a transparent second volume changed the image: {d}");
+    assert!(
+        d <= 1e-12,
+        "a transparent second volume changed the image: {d}"
+    );
 
     let x1 = single(&vol, &tf, &cam, &settings(Mode::Xray));
     let x2 = multi(&copies, &cam, &settings(Mode::Xray));
