@@ -103,7 +103,9 @@ pub fn transform_matrix(t: &[f64; 12]) -> Result<DMat4> {
         .iter()
         .fold(0.0f64, |a, x| a.max(x.abs()));
     let det = lin.determinant();
-    if !(det.abs() > 1e-12 * scale.powi(3)) || scale == 0.0 {
+    if det.abs().partial_cmp(&(1e-12 * scale.powi(3))) != Some(std::cmp::Ordering::Greater)
+        || scale == 0.0
+    {
         return Err(Error::invalid(
             "volume transform",
             format!(

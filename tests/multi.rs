@@ -287,7 +287,7 @@ fn bad_input_is_refused_clearly() {
     let e = err(&[one.clone().with_transform(nan)], &s);
     assert!(e.contains("volume 0") && e.contains("not finite"), "{e}");
     let e = err(
-        &[one.clone()],
+        std::slice::from_ref(&one),
         &RenderSettings {
             mode: Mode::Mida,
             ..s.clone()

@@ -165,7 +165,7 @@ pub fn render_layers<R: Real>(
         .map(|l| (l.field.dims(), l.index_to_world))
         .collect();
     let per_ray = max_samples_per_ray(&boxes, settings.step);
-    if !(per_ray <= crate::settings::MAX_SAMPLES_PER_RAY) {
+    if per_ray.is_nan() || per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
         return Err(Error::too_large(
             "multi-volume render",
             format!(
@@ -308,7 +308,7 @@ fn cast_multi<R: Real>(layers: &[Prepared<'_, R>], c: &Common<R>, ray: Ray) -> (
             }
         }
     }
-    if !(t_out > t_in) {
+    if t_out.partial_cmp(&t_in) != Some(std::cmp::Ordering::Greater) {
         return (miss, 0);
     }
     let spans = &spans[..layers.len()];
