@@ -54,6 +54,7 @@ pub mod frame;
 pub mod gpu;
 pub mod io;
 pub mod metrics;
+pub mod multi;
 pub mod phantom;
 pub mod real;
 pub mod render;

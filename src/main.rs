@@ -3,6 +3,7 @@
 mod cli_adaptive;
 mod cli_bench;
 mod cli_d2vr;
+mod cli_multi;
 mod cli_process;
 mod cli_project;
 mod cli_reconstruct;
@@ -458,6 +459,8 @@ struct RenderArgs {
     convergence: Option<f64>,
     #[command(flatten)]
     accel: AccelArgs,
+    #[command(flatten)]
+    multi: cli_multi::MultiArgs,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -1031,6 +1034,17 @@ fn render(r: RenderArgs) -> Result<()> {
     }
     let (scene, mut settings) = build_scene(&r.scene, r.samples.is_some())?;
     r.accel.apply(&mut settings)?;
+    if r.multi.active() {
+        return cli_multi::render(
+            &r.multi,
+            &scene,
+            &r.scene.load,
+            &settings,
+            r.backend,
+            &r.out,
+            r.sixteen_bit,
+        );
+    }
     if let Some(sampling) = r.sampling {
         return cli_adaptive::render_sampling(
             &scene,

@@ -18,7 +18,7 @@
 //! and are refused.
 //!
 //! Both views are rendered through [`render::Renderer`](crate::render::Renderer), so any
-//! backend works.
+//! backend works, or on a given GPU context with [`render_pair_gpu`].
 //!
 //! # Layouts
 //! - **side by side**: left | right, `2W × H` (parallel viewing: left image on the
@@ -150,6 +150,57 @@ pub fn render_pair(
     convergence_mm: f64,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<StereoPair> {
+    render_pair_with(
+        &|sc, p| Ok(renderer.render(sc, settings, p)?.output.image),
+        scene,
+        separation_mm,
+        convergence_mm,
+        progress,
+    )
+}
+
+/// [`render_pair`] on a given GPU context (e.g. the process-wide
+/// `GpuContext::shared()`) instead of a [`Renderer`]'s own device.
+pub fn render_pair_gpu(
+    ctx: &crate::gpu::GpuContext,
+    scene: &Scene,
+    settings: &RenderSettings,
+    separation_mm: f64,
+    convergence_mm: f64,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<StereoPair> {
+    render_pair_with(
+        &|sc, p| {
+            Ok(
+                crate::gpu::raycast::render(
+                    ctx,
+                    &sc.volume,
+                    &sc.transfer,
+                    &sc.camera,
+                    settings,
+                    p,
+                )?
+                .output
+                .image,
+            )
+        },
+        scene,
+        separation_mm,
+        convergence_mm,
+        progress,
+    )
+}
+
+/// A view renderer: the image of a scene, with a progress callback.
+type ViewRenderer<'a> = dyn Fn(&Scene, &(dyn Fn(usize, usize) + Sync)) -> Result<Frame> + 'a;
+
+fn render_pair_with(
+    render_view: &ViewRenderer<'_>,
+    scene: &Scene,
+    separation_mm: f64,
+    convergence_mm: f64,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<StereoPair> {
     let cams = stereo_cameras(&scene.camera, separation_mm, convergence_mm)?;
     let w = scene.camera.width;
     let h = scene.camera.height;
@@ -159,10 +210,10 @@ pub fn render_pair(
             transfer: scene.transfer.clone(),
             camera: cam.clone(),
         };
-        let out = renderer.render(&sc, settings, &|done, _| {
+        let image = render_view(&sc, &|done, _| {
             progress(if first { done } else { h + done }, 2 * h)
         })?;
-        Ok(crop_columns(&out.output.image, offset, w))
+        Ok(crop_columns(&image, offset, w))
     };
     let left = view(&cams.left, cams.left_offset, true)?;
     let right = view(&cams.right, cams.right_offset, false)?;

@@ -14,6 +14,7 @@ pub mod filter;
 pub mod fvr;
 pub mod gradient;
 pub mod modes;
+pub mod multi;
 pub mod parker;
 pub mod preintegrate;
 pub mod process;

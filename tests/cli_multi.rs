@@ -1,0 +1,119 @@
+//! `voxlab render --volume …`: multi-volume rendering from the command line, and clear
+//! errors for bad volume lists and transforms.
+
+mod common;
+
+use common::{s, scratch, stderr, voxlab};
+use voxlab::io::npy::read_npy_f32;
+
+const PHANTOM: &str = "phantom:shepp-logan-modified:24";
+const SIZE: [&str; 4] = ["--width", "20", "--height", "16"];
+
+fn render(extra: &[&str], out: &std::path::Path) -> std::process::Output {
+    let mut args = vec!["render", PHANTOM, "--out", s(out)];
+    args.extend_from_slice(&SIZE);
+    args.extend_from_slice(extra);
+    voxlab(&args)
+}
+
+/// X-ray of INPUT with a coincident copy is twice INPUT alone (the line integrals add);
+/// a shifted, rotated copy with its own transfer function renders DVR on both CPU
+/// backends.
+#[test]
+fn extra_volumes_render_on_the_cpu_backends() {
+    let d = scratch("cli_multi_render");
+    let one = d.join("one.npy");
+    let two = d.join("two.npy");
+    let o = render(&["--mode", "xray"], &one);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = render(&["--mode", "xray", "--volume", PHANTOM], &two);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2 volumes"), "{}", stderr(&o));
+    let (shape, a) = read_npy_f32(&one).unwrap();
+    let (_, b) = read_npy_f32(&two).unwrap();
+    assert_eq!(shape, vec![16, 20]);
+    assert!(a.iter().any(|&x| x > 10.0));
+    for (x, y) in a.iter().zip(&b) {
+        // f32 files of f64 renders: relative rounding 6e-8.
+        assert!((2.0 * x - y).abs() <= 1e-6 * y.abs().max(1.0), "{x} {y}");
+    }
+    for backend in ["cpu", "cpu-f32"] {
+        let png = d.join(format!("dvr-{backend}.png"));
+        let o = render(
+            &[
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "0,-1,0,60,1,0,0,-20,0,0,1,0",
+                "--volume-tf",
+                "grayscale",
+                "--backend",
+                backend,
+            ],
+            &png,
+        );
+        assert!(o.status.success(), "{backend}: {}", stderr(&o));
+        assert!(png.is_file());
+    }
+}
+
+#[test]
+fn bad_volume_lists_and_transforms_are_refused_clearly() {
+    let d = scratch("cli_multi_errors");
+    let out = d.join("x.png");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "--volume", PHANTOM, "--volume", PHANTOM, "--volume", PHANTOM,
+            ],
+            "at most 2 extra volumes",
+        ),
+        (
+            vec!["--volume", PHANTOM, "--transform", "1,0,0,0,0,1,0,0,0,0,1"],
+            "11 values",
+        ),
+        (
+            vec![
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "1,0,0,0,0,1,0,0,0,0,0,0",
+            ],
+            "singular",
+        ),
+        (
+            vec![
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "1,0,0,NaN,0,1,0,0,0,0,1,0",
+            ],
+            "not finite",
+        ),
+        (
+            vec!["--transform", "1,0,0,0,0,1,0,0,0,0,1,0"],
+            "at least one --volume",
+        ),
+        (
+            vec![
+                "--volume",
+                PHANTOM,
+                "--volume-tf",
+                "grayscale",
+                "--volume-tf",
+                "grayscale",
+            ],
+            "at most one per --volume",
+        ),
+        (vec!["--volume", PHANTOM, "--mode", "mida"], "not supported"),
+    ];
+    for (args, words) in cases {
+        let o = render(&args, &out);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            stderr(&o).contains(words),
+            "{args:?}: '{words}' not in {}",
+            stderr(&o)
+        );
+    }
+}
