@@ -35,7 +35,9 @@ fn gpu_render_refuses_a_clip_mesh() {
             ..Default::default()
         };
         let r = voxlab::gpu::raycast::render(ctx, &vol, &tf, &cam, &s, &|_, _| {});
-        let e = r.err().expect("a GPU render with a clip mesh must fail");
+        let Err(e) = r else {
+            panic!("a GPU render with a clip mesh must fail");
+        };
         assert!(e.to_string().contains("clip mesh"), "{e}");
     }
 }

@@ -315,7 +315,7 @@ pub fn sinc_tail_right(x: f64, n: usize) -> f64 {
     if s == 0.0 {
         return 0.0;
     }
-    let sign = if n % 2 == 0 { 1.0 } else { -1.0 };
+    let sign = if n.is_multiple_of(2) { 1.0 } else { -1.0 };
     -sign * s / std::f64::consts::PI * alternating_harmonic(n as f64 - x)
 }
 

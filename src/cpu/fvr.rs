@@ -275,7 +275,7 @@ pub fn padded_side(dims: [usize; 3], padding: usize) -> Result<usize> {
 /// [`crate::cpu::dft::fftshift`] would make.
 pub fn fftshift_cube_in_place<T: Send>(data: &mut [T], m: usize) {
     assert!(
-        m % 2 == 0 && data.len() == m * m * m,
+        m.is_multiple_of(2) && data.len() == m * m * m,
         "an M³ cube of even side"
     );
     let h = m / 2;

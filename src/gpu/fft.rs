@@ -603,7 +603,7 @@ pub fn fft_lines(
     norm: Normalization,
     variant: GpuFftVariant,
 ) -> Result<Vec<Complex<f32>>> {
-    if n == 0 || data.len() % n != 0 {
+    if n == 0 || !data.len().is_multiple_of(n) {
         return Err(Error::invalid(
             "fft line length",
             format!("{n} does not divide the {} values", data.len()),
