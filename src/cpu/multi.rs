@@ -25,7 +25,7 @@
 //! image).
 
 use super::filter::Grid;
-use super::raycast::{intersect_box, phong, Field, GridField, RenderOutput, ShadingR};
+use super::raycast::{intersect_box, Field, GridField, RenderOutput, ShadingR};
 use crate::camera::{Camera, Ray};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
@@ -480,20 +480,13 @@ fn shade<R: Real>(
     light: V3<R>,
     half: V3<R>,
 ) -> [R; 3] {
-    let g = l.field.gradient(p);
-    let mag = g.length();
-    let two = R::of(2.0);
-    let w = ((mag / l.grad_thr - R::of(0.5)) * two)
-        .max(R::zero())
-        .min(R::one());
-    if w <= R::zero() {
-        return rgb;
-    }
-    let n = -(l.normal.mul_vec(g)).normalize_or_zero();
-    let lit = phong(rgb, n, light, half, &c.k);
-    [
-        rgb[0] + w * (lit[0] - rgb[0]),
-        rgb[1] + w * (lit[1] - rgb[1]),
-        rgb[2] + w * (lit[2] - rgb[2]),
-    ]
+    crate::cpu::raycast::shade_gradient(
+        l.field.gradient(p),
+        l.grad_thr,
+        &l.normal,
+        &c.k,
+        rgb,
+        light,
+        half,
+    )
 }

@@ -689,17 +689,40 @@ pub(crate) fn shade_sample<R: Real, F: Field<R>>(
     light: V3<R>,
     half: V3<R>,
 ) -> [R; 3] {
-    let g = field.gradient(p);
+    shade_gradient(
+        field.gradient(p),
+        s.grad_thr,
+        &s.normal,
+        &s.k,
+        rgb,
+        light,
+        half,
+    )
+}
+
+/// The shading of [`shade_sample`] from an index-space gradient `g`: Phong with the
+/// world normal `−normal·g`, blended in from the unshaded colour as `|g|` rises from
+/// ½ to 1 × `grad_thr`. Shared with the multi-volume caster (`cpu::multi`).
+#[inline]
+pub(crate) fn shade_gradient<R: Real>(
+    g: V3<R>,
+    grad_thr: R,
+    normal: &M3<R>,
+    k: &ShadingR<R>,
+    rgb: [R; 3],
+    light: V3<R>,
+    half: V3<R>,
+) -> [R; 3] {
     let mag = g.length();
     let two = R::of(2.0);
-    let w = ((mag / s.grad_thr - R::of(0.5)) * two)
+    let w = ((mag / grad_thr - R::of(0.5)) * two)
         .max(R::zero())
         .min(R::one());
     if w <= R::zero() {
         return rgb;
     }
-    let n = -(s.normal.mul_vec(g)).normalize_or_zero();
-    let lit = phong(rgb, n, light, half, &s.k);
+    let n = -(normal.mul_vec(g)).normalize_or_zero();
+    let lit = phong(rgb, n, light, half, k);
     [
         rgb[0] + w * (lit[0] - rgb[0]),
         rgb[1] + w * (lit[1] - rgb[1]),
