@@ -355,8 +355,8 @@ fn multi_params_layout_agrees() {
 #[test]
 fn multi_shader_validates() {
     let src = voxlab::gpu::multi::multi_shader();
-    let module = naga::front::wgsl::parse_str(&src)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
     naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
         naga::valid::Capabilities::all(),

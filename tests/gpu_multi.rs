@@ -73,11 +73,13 @@ fn scene(case: &Case) -> (Vec<MultiVolume>, Camera, RenderSettings) {
     let v2 = sample([24, 24, 24], 1.4);
     let mut vols = vec![MultiVolume::new(v0, tf.clone())];
     if case.volumes > 1 {
-        vols.push(MultiVolume::new(v1, other_tf()).with_transform(rotation_translation(
-            2,
-            30.0,
-            DVec3::new(70.0, -20.0, 30.0),
-        )));
+        vols.push(
+            MultiVolume::new(v1, other_tf()).with_transform(rotation_translation(
+                2,
+                30.0,
+                DVec3::new(70.0, -20.0, 30.0),
+            )),
+        );
     }
     if case.volumes > 2 {
         let mut v = MultiVolume::new(v2, tf).with_transform(rotation_translation(
@@ -176,7 +178,10 @@ fn check(name: &str, case: Case) {
     );
     if case.mode != Mode::Minip {
         let lit = cpu.image.data.iter().filter(|x| **x != 0.0).count();
-        assert!(lit * 10 > cpu.image.data.len(), "{name}: the scene is mostly empty");
+        assert!(
+            lit * 10 > cpu.image.data.len(),
+            "{name}: the scene is mostly empty"
+        );
     }
     // For scale: the CPU caster in f32 against the same oracle.
     let f32_img = voxlab::cpu::multi::render::<f32>(&vols, &cam, &s, &|_, _| {})
@@ -268,7 +273,10 @@ fn one_volume_identity_equals_gpu_single_volume_caster() {
         let scale = single.data.iter().fold(1.0f64, |m, x| m.max(x.abs()));
         let d = max_diff(&single, &multi) / scale;
         eprintln!("{mode:?} shading {shading}: max |Δ| {d:.2e} (relative)");
-        assert!(d <= bound, "{mode:?} shading {shading}: {d:.2e} > {bound:.0e}");
+        assert!(
+            d <= bound,
+            "{mode:?} shading {shading}: {d:.2e} > {bound:.0e}"
+        );
     }
 }
 
@@ -282,8 +290,7 @@ fn unsupported_gpu_options_are_refused() {
     let (vols, cam, s) = scene(&BASE);
     let refuse = |s: RenderSettings, needle: &str| {
         let e = voxlab::gpu::multi::render(ctx, &vols, &cam, &s, &|_, _| {})
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(e.contains(needle), "{e}");
     };

@@ -79,10 +79,7 @@ pub const MULTI_WGSL: &str = include_str!("../../shaders/multi.wgsl");
 
 /// The complete shader: the parameter struct, the shared ray helpers, the body.
 pub fn multi_shader() -> String {
-    format!(
-        "{PARAMS_WGSL}\n{}\n{MULTI_WGSL}",
-        super::raycast::RAYS_WGSL
-    )
+    format!("{PARAMS_WGSL}\n{}\n{MULTI_WGSL}", super::raycast::RAYS_WGSL)
 }
 
 /// Pixels per dispatch: keeps one submission well under the ~10 s after which a
@@ -197,7 +194,12 @@ pub fn multi_params(
             0,
             camera.height as u32,
         ],
-        gradient: [(settings.gradient == GradientMethod::Forward) as u32, 0, 0, 0],
+        gradient: [
+            (settings.gradient == GradientMethod::Forward) as u32,
+            0,
+            0,
+            0,
+        ],
         ..Default::default()
     };
     let mut base = 0usize;
