@@ -84,7 +84,7 @@ pub fn multi_shader() -> String {
 
 /// Pixels per dispatch: keeps one submission well under the ~10 s after which a
 /// software driver may lose the device.
-const PIXELS_PER_DISPATCH: usize = 16 * 1024;
+const PIXELS_PER_DISPATCH: usize = 8 * 1024;
 
 fn v4(v: DVec3, w: f64) -> [f32; 4] {
     [v.x as f32, v.y as f32, v.z as f32, w as f32]
