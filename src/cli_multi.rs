@@ -113,12 +113,25 @@ pub(crate) fn render(
             voxlab::cpu::multi::render::<f64>(&vols, &scene.camera, settings, &progress)?,
             "cpu (f64 oracle)",
         ),
-        Backend::Gpu | Backend::Auto => {
-            return Err(Error::invalid(
-                "--backend",
-                "multi-volume rendering runs on cpu or cpu-f32",
-            ))
+        Backend::Gpu => {
+            let ctx = voxlab::gpu::GpuContext::new()?;
+            (
+                voxlab::gpu::multi::render(&ctx, &vols, &scene.camera, settings, &progress)?.output,
+                "gpu",
+            )
         }
+        // As the single-volume path (render::Renderer::new): a real GPU when there is
+        // one; a CPU emulating a GPU only when VOXLAB_ADAPTER chose it; else the oracle.
+        Backend::Auto => match voxlab::gpu::GpuContext::new() {
+            Ok(ctx) if !ctx.summary.is_cpu() || std::env::var_os("VOXLAB_ADAPTER").is_some() => (
+                voxlab::gpu::multi::render(&ctx, &vols, &scene.camera, settings, &progress)?.output,
+                "gpu",
+            ),
+            _ => (
+                voxlab::cpu::multi::render::<f64>(&vols, &scene.camera, settings, &progress)?,
+                "cpu (f64 oracle)",
+            ),
+        },
     };
     output.image.save(
         out,

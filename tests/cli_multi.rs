@@ -117,3 +117,43 @@ fn bad_volume_lists_and_transforms_are_refused_clearly() {
         );
     }
 }
+
+/// `--backend gpu` renders the same scene as the f64 oracle, within the parity bound of
+/// tests/gpu_multi.rs (DVR max |Δ| 5e-3; measured here on lavapipe: 6.4e-5).
+#[test]
+fn extra_volumes_render_on_the_gpu_backend() {
+    if common::gpu("extra_volumes_render_on_the_gpu_backend").is_none() {
+        return;
+    }
+    let d = scratch("cli_multi_gpu");
+    let mut images = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let npy = d.join(format!("dvr-{backend}.npy"));
+        let o = render(
+            &[
+                "--volume",
+                PHANTOM,
+                "--transform",
+                "0,-1,0,60,1,0,0,-20,0,0,1,0",
+                "--volume-tf",
+                "grayscale",
+                "--backend",
+                backend,
+            ],
+            &npy,
+        );
+        assert!(o.status.success(), "{backend}: {}", stderr(&o));
+        assert!(stderr(&o).contains("2 volumes"), "{}", stderr(&o));
+        images.push(read_npy_f32(&npy).unwrap());
+    }
+    assert_eq!(images[0].0, images[1].0, "shapes");
+    let worst = images[0]
+        .1
+        .iter()
+        .zip(&images[1].1)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(images[0].1.iter().any(|&x| x > 0.1), "an empty image");
+    eprintln!("cli gpu vs cpu: max |Δ| {worst:.2e}");
+    assert!(worst <= 5e-3, "max |Δ| {worst:.2e}");
+}

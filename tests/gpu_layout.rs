@@ -320,3 +320,47 @@ fn adaptive_params_layout_agrees() {
         assert_eq!(*woff as usize, *roff, "offset of {rname}");
     }
 }
+
+#[test]
+fn multi_params_layout_agrees() {
+    use voxlab::gpu::multi::{MultiParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "MultiParams");
+    assert_eq!(span as usize, size_of::<MultiParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("eye", offset_of!(MultiParams, eye)),
+        ("forward", offset_of!(MultiParams, forward)),
+        ("right", offset_of!(MultiParams, right)),
+        ("up", offset_of!(MultiParams, up)),
+        ("background", offset_of!(MultiParams, background)),
+        ("light", offset_of!(MultiParams, light)),
+        ("shading", offset_of!(MultiParams, shading)),
+        ("misc", offset_of!(MultiParams, misc)),
+        ("image", offset_of!(MultiParams, image)),
+        ("flags", offset_of!(MultiParams, flags)),
+        ("to_index", offset_of!(MultiParams, to_index)),
+        ("normal", offset_of!(MultiParams, normal)),
+        ("box_hi", offset_of!(MultiParams, box_hi)),
+        ("lut", offset_of!(MultiParams, lut)),
+        ("dims", offset_of!(MultiParams, dims)),
+        ("gradient", offset_of!(MultiParams, gradient)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
+/// The multi-volume shader parses and validates.
+#[test]
+fn multi_shader_validates() {
+    let src = voxlab::gpu::multi::multi_shader();
+    let module =
+        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+}

@@ -11,6 +11,7 @@ pub mod ct;
 pub mod d2vr;
 pub mod fourier;
 pub mod machine;
+pub mod multi;
 pub mod process;
 pub mod raycast;
 pub mod report;
@@ -27,6 +28,7 @@ pub const FAMILIES: [&str; 10] = [
 pub fn cases(suite: Suite) -> Vec<Case> {
     let mut all = Vec::new();
     all.extend(raycast::cases(suite));
+    all.extend(multi::cases(suite));
     all.extend(adaptive::cases(suite));
     all.extend(process::cases(suite));
     all.extend(fourier::cases(suite));

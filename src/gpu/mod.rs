@@ -14,6 +14,7 @@ pub mod fbp;
 pub mod fft;
 pub mod fvr;
 pub mod gradient;
+pub mod multi;
 pub mod parker;
 pub mod preintegrate;
 pub mod probe;

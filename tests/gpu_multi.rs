@@ -1,0 +1,327 @@
+//! The GPU multi-volume caster (`gpu::multi`) against the CPU f64 oracle
+//! (`cpu::multi`): every mode with two and three placed volumes, generated from one
+//! case list; the one-volume identity scene against the GPU single-volume caster; and
+//! clear errors for what the port does not cover.
+
+mod common;
+
+use glam::DVec3;
+use voxlab::camera::{Camera, Orbit, Projection};
+use voxlab::frame::Frame;
+use voxlab::metrics::Tolerance;
+use voxlab::multi::{rotation_translation, MultiVolume};
+use voxlab::phantom::Phantom;
+use voxlab::settings::{Compositing, Filter, GradientMethod, Light, Mode, RenderSettings};
+use voxlab::transfer::TransferFunction;
+use voxlab::AnyVolume;
+
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    mode: Mode,
+    /// Volumes in the scene (1 … 3).
+    volumes: usize,
+    filter: Filter,
+    shading: bool,
+    compositing: Compositing,
+    gradient: GradientMethod,
+    ert: f64,
+    ortho: bool,
+    directional: bool,
+}
+
+const BASE: Case = Case {
+    mode: Mode::Dvr,
+    volumes: 2,
+    filter: Filter::Trilinear,
+    shading: false,
+    compositing: Compositing::FrontToBack,
+    gradient: GradientMethod::Central,
+    ert: 0.99,
+    ortho: false,
+    directional: false,
+};
+
+/// The phantom's transfer function with its colours permuted (b, r, g) and its
+/// opacities doubled (capped at 1): a second volume that looks different.
+fn other_tf() -> TransferFunction {
+    let mut tf = TransferFunction::preset("phantom").unwrap();
+    for p in tf.points.iter_mut() {
+        let [r, g, b, a] = p.rgba;
+        p.rgba = [b, r, g, (2.0 * a).min(1.0)];
+    }
+    tf
+}
+
+/// Volume 0 (MinIP: `lift − f` per volume): the modified Shepp–Logan phantom sampled on 32×30×28; volume 1: the same
+/// phantom on 28×32×30 rotated 30° about z and shifted, with [`other_tf`]; volume 2: a
+/// 24³ copy rotated 90° about x, shifted the other way, unshaded.
+fn scene(case: &Case) -> (Vec<MultiVolume>, Camera, RenderSettings) {
+    let ph = Phantom::shepp_logan_modified();
+    let tf = TransferFunction::preset("phantom").unwrap();
+    // MinIP of the phantom is 0 on every ray (the box's corners are empty): MinIP
+    // renders `lift − f` instead, a different constant per volume, so that the minimum
+    // shows the volumes' structure.
+    let sample = |dims, lift: f32| -> AnyVolume {
+        let mut v = ph.sample(dims).unwrap();
+        if case.mode == Mode::Minip {
+            v.data_mut().iter_mut().for_each(|x| *x = lift - *x);
+        }
+        v.into()
+    };
+    let v0 = sample([32, 30, 28], 1.0);
+    let v1 = sample([28, 32, 30], 1.2);
+    let v2 = sample([24, 24, 24], 1.4);
+    let mut vols = vec![MultiVolume::new(v0, tf.clone())];
+    if case.volumes > 1 {
+        vols.push(
+            MultiVolume::new(v1, other_tf()).with_transform(rotation_translation(
+                2,
+                30.0,
+                DVec3::new(70.0, -20.0, 30.0),
+            )),
+        );
+    }
+    if case.volumes > 2 {
+        let mut v = MultiVolume::new(v2, tf).with_transform(rotation_translation(
+            0,
+            90.0,
+            DVec3::new(-60.0, 40.0, -25.0),
+        ));
+        v.shade = false;
+        vols.push(v);
+    }
+    let projection = if case.ortho {
+        Projection::Orthographic {
+            width_mm: 460.0,
+            height_mm: 460.0,
+        }
+    } else {
+        Projection::Perspective { fov_y_deg: 40.0 }
+    };
+    let cam = Camera::orbit(
+        DVec3::ZERO,
+        [300.0; 3],
+        Orbit {
+            azimuth_deg: 35.0,
+            elevation_deg: 25.0,
+            distance_mm: Some(650.0),
+        },
+        projection,
+        56,
+        48,
+    )
+    .unwrap();
+    let mut s = RenderSettings {
+        mode: case.mode,
+        filter: case.filter,
+        compositing: case.compositing,
+        gradient: case.gradient,
+        ert_threshold: case.ert,
+        skip_empty: false,
+        sample_count: true,
+        ..RenderSettings::default()
+    };
+    s.shading.enabled = case.shading;
+    if case.directional {
+        s.shading.light = Light::Direction([0.3, -0.5, 0.8]);
+    }
+    (vols, cam, s)
+}
+
+/// DVR colours and opacities (in [0, 1]). Measured on lavapipe (Mesa 22.3.6): worst
+/// max |Δ| 1.8e-3 (three volumes, shaded with forward gradients and a directional
+/// light: one pixel where a gradient crosses the shading threshold's blend), otherwise
+/// ≤ 4.6e-4; worst RMSE 2.0e-5. The CPU caster in f32 measures 2.7e-4 / 9.7e-6 on the
+/// same scenes: the differences are f32 rounding of sample positions (rotated frames,
+/// |t| ≈ 650 mm) amplified by the `phantom` preset's narrow opacity bands, as for the
+/// single-volume caster (tests/gpu_raycast.rs: EXACT_DVR). Bound ≈ 3× the worst.
+const DVR: Tolerance = Tolerance {
+    max_abs: 5e-3,
+    rmse: 6e-5,
+};
+
+/// MIP, MinIP and X-ray, relative to the image's largest value (at least 1). Measured
+/// on lavapipe: MIP max |Δ| 1.5e-5, RMSE 1.7e-6 (cpu-f32: 1.3e-5); MinIP 1.7e-5 / 1.4e-6
+/// relative (cpu-f32: 1.1e-5); X-ray 4.9e-4 absolute
+/// on integrals up to ≈ 10², i.e. ≈ 5e-6 relative. Bound: tests/gpu_raycast.rs'
+/// EXACT_SCALAR, ≈ 3× the worst.
+const SCALAR: Tolerance = Tolerance {
+    max_abs: 5e-5,
+    rmse: 1e-5,
+};
+
+/// Renders a case on the oracle and the GPU and checks parity of the image and of the
+/// samples-per-ray image.
+fn check(name: &str, case: Case) {
+    let Some(ctx) = common::gpu(name) else {
+        return;
+    };
+    let (vols, cam, s) = scene(&case);
+    let cpu = voxlab::cpu::multi::render::<f64>(&vols, &cam, &s, &|_, _| {}).unwrap();
+    let gpu = voxlab::gpu::multi::render(ctx, &vols, &cam, &s, &|_, _| {})
+        .unwrap()
+        .output;
+    let tol = if case.mode == Mode::Dvr {
+        DVR
+    } else {
+        SCALAR.scaled(cpu.image.data.iter().fold(1.0f64, |m, x| m.max(x.abs())))
+    };
+    let stats = common::assert_parity(name, &cpu.image, &gpu.image, tol);
+    let (a, b) = (cpu.samples.unwrap().data, gpu.samples.unwrap().data);
+    // Ray lengths are identical; early ray termination may flip at the threshold for a
+    // ray whose opacity lands within rounding of it, and a step count may flip where
+    // (t_out − t_in)/Δ lands within rounding of an integer (not seen on lavapipe).
+    let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    assert!(
+        differ * 100 <= a.len(),
+        "{name}: {differ} rays took a different number of samples"
+    );
+    if case.mode != Mode::Minip {
+        let lit = cpu.image.data.iter().filter(|x| **x != 0.0).count();
+        assert!(
+            lit * 10 > cpu.image.data.len(),
+            "{name}: the scene is mostly empty"
+        );
+    }
+    // For scale: the CPU caster in f32 against the same oracle.
+    let f32_img = voxlab::cpu::multi::render::<f32>(&vols, &cam, &s, &|_, _| {})
+        .unwrap()
+        .image;
+    let f32_stats = voxlab::metrics::error_stats(&cpu.image.data, &f32_img.data, f64::INFINITY);
+    eprintln!(
+        "{name}: GPU max |Δ| {:.2e}, rmse {:.2e}, {differ} sample counts differ; \
+         cpu-f32 max |Δ| {:.2e}, rmse {:.2e}",
+        stats.max_abs, stats.rmse, f32_stats.max_abs, f32_stats.rmse
+    );
+}
+
+/// One test per case, all from this list.
+macro_rules! parity_cases {
+    ($($name:ident: $case:expr;)*) => {
+        $(
+            #[test]
+            fn $name() {
+                check(stringify!($name), $case);
+            }
+        )*
+    };
+}
+
+parity_cases! {
+    dvr_two_volumes_front_to_back: Case { ..BASE };
+    dvr_two_volumes_back_to_front: Case { compositing: Compositing::BackToFront, ..BASE };
+    dvr_three_volumes_no_early_termination: Case { volumes: 3, ert: 1.0, ..BASE };
+    dvr_two_volumes_shaded: Case { shading: true, ..BASE };
+    dvr_three_volumes_shaded_directional_forward: Case { volumes: 3, shading: true, directional: true, gradient: GradientMethod::Forward, ..BASE };
+    dvr_two_volumes_nearest_ortho: Case { filter: Filter::Nearest, ortho: true, ..BASE };
+    xray_three_volumes: Case { mode: Mode::Xray, volumes: 3, ..BASE };
+    xray_two_volumes_ortho: Case { mode: Mode::Xray, ortho: true, ..BASE };
+    mip_three_volumes: Case { mode: Mode::Mip, volumes: 3, ..BASE };
+    minip_two_volumes_ortho: Case { mode: Mode::Minip, ortho: true, ..BASE };
+}
+
+fn max_diff(a: &Frame, b: &Frame) -> f64 {
+    assert_eq!(
+        (a.width, a.height, a.channels),
+        (b.width, b.height, b.channels)
+    );
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// One volume placed by the identity is the GPU single-volume caster: the same steps
+/// and samples; the opacity correction differs only in rounding
+/// (`−expm1(ln1p(−α)·x)` against `1 − (1 − α)^x`). Measured on lavapipe: DVR shaded
+/// 8.9e-8, unshaded 1.8e-7; MIP, MinIP and X-ray bit-identical.
+#[test]
+fn one_volume_identity_equals_gpu_single_volume_caster() {
+    let Some(ctx) = common::gpu("one_volume_identity_equals_gpu_single_volume_caster") else {
+        return;
+    };
+    for (mode, shading, bound) in [
+        (Mode::Dvr, true, 1e-6),
+        (Mode::Dvr, false, 1e-6),
+        (Mode::Mip, false, 1e-6),
+        (Mode::Minip, false, 1e-6),
+        (Mode::Xray, false, 1e-6),
+    ] {
+        let case = Case {
+            mode,
+            volumes: 1,
+            shading,
+            ..BASE
+        };
+        let (vols, cam, s) = scene(&case);
+        let multi = voxlab::gpu::multi::render(ctx, &vols, &cam, &s, &|_, _| {})
+            .unwrap()
+            .output
+            .image;
+        let single = voxlab::gpu::raycast::render(
+            ctx,
+            &vols[0].volume,
+            &vols[0].transfer,
+            &cam,
+            &s,
+            &|_, _| {},
+        )
+        .unwrap()
+        .output
+        .image;
+        let scale = single.data.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+        let d = max_diff(&single, &multi) / scale;
+        eprintln!("{mode:?} shading {shading}: max |Δ| {d:.2e} (relative)");
+        assert!(
+            d <= bound,
+            "{mode:?} shading {shading}: {d:.2e} > {bound:.0e}"
+        );
+    }
+}
+
+/// Filters, gradients and paths the port does not cover are refused with an error
+/// naming what it supports.
+#[test]
+fn unsupported_gpu_options_are_refused() {
+    let Some(ctx) = common::gpu("unsupported_gpu_options_are_refused") else {
+        return;
+    };
+    let (vols, cam, s) = scene(&BASE);
+    let refuse = |s: RenderSettings, needle: &str| {
+        let e = voxlab::gpu::multi::render(ctx, &vols, &cam, &s, &|_, _| {})
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains(needle), "{e}");
+    };
+    refuse(
+        RenderSettings {
+            filter: Filter::CatmullRom,
+            ..s.clone()
+        },
+        "nearest or trilinear",
+    );
+    let mut shaded = s.clone();
+    shaded.shading.enabled = true;
+    refuse(
+        RenderSettings {
+            gradient: GradientMethod::Sobel,
+            ..shaded.clone()
+        },
+        "central or forward",
+    );
+    refuse(
+        RenderSettings {
+            precompute_gradients: true,
+            ..shaded
+        },
+        "on the fly",
+    );
+    refuse(
+        RenderSettings {
+            hardware_filtering: true,
+            ..s
+        },
+        "exact trilinear",
+    );
+}
