@@ -13,7 +13,7 @@
 //! (γ = 0) and two semi-transparent iso-surfaces (0.25 and 0.6); empty-space skipping
 //! (on in every other variant) switched off (`dvr-shaded-trilinear-skip-off`), and the
 //! bundled micro-CT scan with skipping on and off (`microct-dvr-skip-on|off`, see
-//! [`microct_scene`]). One run is
+//! [`microct_scene`]); clipping meshes on and off ([`mesh_variants`]). One run is
 //! `cpu::raycast::render::<R>` or `gpu::raycast::render` end to end (the volume's
 //! conversion to the working precision included, as a caller would see it). Work: rays
 //! (= pixels) and samples (the oracle's `total_samples`, counted by one untimed f64
@@ -127,6 +127,56 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
                 ];
             }),
         ),
+    ]
+}
+
+/// The clipping-mesh variants (`cpu::clipmesh`, `gpu::clipmesh`), all shaded DVR or
+/// X-ray with trilinear reconstruction: without a mesh and skipping off
+/// (`mesh-off-dvr`), the bricks mesh of the skipping grid with skipping off
+/// (`mesh-bricks-dvr`: the same image), a user mesh of two boxes that cut a 40 mm slab
+/// out of the head along x (`mesh-slab-dvr`, skipping on, against `dvr-shaded-trilinear`;
+/// `mesh-slab-xray` against `mesh-off-xray`), and on the micro-CT scan
+/// (`microct-mesh-off`, `microct-mesh-bricks`, skipping off).
+pub fn mesh_variants() -> Vec<(&'static str, RenderSettings)> {
+    use crate::settings::{ClipMesh, ClipMeshUnits};
+    let mut slab = crate::io::mesh::TriMesh::cuboid([-200.0; 3], [-20.0, 200.0, 200.0]);
+    slab.append_cuboid([20.0, -200.0, -200.0], [200.0; 3]);
+    let slab = Some(ClipMesh::Mesh {
+        mesh: std::sync::Arc::new(slab),
+        units: ClipMeshUnits::World,
+    });
+    let off = RenderSettings {
+        skip_empty: false,
+        ..RenderSettings::default()
+    };
+    let bricks = RenderSettings {
+        clip_mesh: Some(ClipMesh::Bricks),
+        ..off.clone()
+    };
+    let xray = RenderSettings {
+        mode: Mode::Xray,
+        ..RenderSettings::default()
+    };
+    vec![
+        ("mesh-off-dvr", off.clone()),
+        ("mesh-bricks-dvr", bricks.clone()),
+        (
+            "mesh-slab-dvr",
+            RenderSettings {
+                clip_mesh: slab.clone(),
+                ..RenderSettings::default()
+            },
+        ),
+        ("mesh-off-xray", xray.clone()),
+        (
+            "mesh-slab-xray",
+            RenderSettings {
+                clip_mesh: slab,
+                ..xray
+            },
+        ),
+        ("microct-mesh-off", off),
+        ("microct-mesh-bricks", bricks),
     ]
 }
 
@@ -256,6 +306,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("xray-trilinear", 24, 32),
             ("mida-trilinear", 24, 32),
             ("iso-trilinear", 24, 32),
+            ("mesh-slab-dvr", 24, 32),
         ],
         // The f64 oracle dominates: on 16 cores about 0.1 s at 128³ → 256² (shaded DVR,
         // trilinear), ×8 per doubling of both sides (×4 rays, ×2 samples per ray).
@@ -280,6 +331,13 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-shaded-lanczos3", 128, 256),
             ("mida-trilinear", 128, 256),
             ("iso-trilinear", 128, 256),
+            ("mesh-off-dvr", 128, 256),
+            ("mesh-bricks-dvr", 128, 256),
+            ("mesh-slab-dvr", 128, 256),
+            ("mesh-off-xray", 128, 256),
+            ("mesh-slab-xray", 128, 256),
+            ("microct-mesh-off", 128, 256),
+            ("microct-mesh-bricks", 128, 256),
         ],
     }
 }
@@ -288,6 +346,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
 pub fn cases(suite: Suite) -> Vec<Case> {
     let mut variants = raycast_variants();
     variants.extend(microct_variants());
+    variants.extend(mesh_variants());
     let mut out = Vec::new();
     for (name, n, size) in raycast_grid(suite) {
         let settings = variants

@@ -577,8 +577,12 @@ pub fn render(
             } else {
                 0.0
             };
-        let steps =
+        let mut steps =
             (diag / settings.step + 2.0) * per_step + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
+        if settings.clip_mesh.is_some() {
+            // Up to MAX_SEGMENTS mesh ranges per skipping range, and their search.
+            steps += 8.0 * 2.0 * (cells[0] + cells[1] + cells[2]) as f64 + 64.0;
+        }
         if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
             return Err(Error::invalid(
                 "step",
