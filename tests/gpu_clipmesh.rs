@@ -201,7 +201,10 @@ fn check(name: &str, case: Case) {
     );
     if matches!(case.mesh, Mesh::Enclosing | Mesh::Bricks) {
         let off = gpu(false);
-        assert_eq!(on.image.data, off.image.data, "{name}: the mesh changed the image");
+        assert_eq!(
+            on.image.data, off.image.data,
+            "{name}: the mesh changed the image"
+        );
         if case.mesh == Mesh::Enclosing {
             assert_eq!(on.total_samples, off.total_samples);
         } else {

@@ -113,7 +113,8 @@ impl GpuClipMesh {
                 buffer_entry(4, storage(false)),
             ],
         });
-        let pipeline = |entry| super::raycast::compute_pipeline(ctx, entry, &module, entry, &layout);
+        let pipeline =
+            |entry| super::raycast::compute_pipeline(ctx, entry, &module, entry, &layout);
         Ok(GpuClipMesh {
             hits: pipeline("clip_hits")?,
             finish: pipeline("clip_segments")?,

@@ -761,7 +761,8 @@ pub fn render(
             Classification::Post if bspline_interp => prepare(&grid, settings.filter),
             _ => grid.clone(),
         };
-        let r = crate::cpu::clipmesh::resolve(settings, volume.affine(), dims, Some(&voxels), &lut)?;
+        let r =
+            crate::cpu::clipmesh::resolve(settings, volume.affine(), dims, Some(&voxels), &lut)?;
         match r {
             Some(m) => Some(super::clipmesh::GpuClipMesh::new(ctx, &m)?),
             None => None,
