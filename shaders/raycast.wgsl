@@ -44,6 +44,12 @@ const PI: f32 = 3.14159265358979323846;
 // prefix count of non-zero opacities.
 @group(0) @binding(9) var<storage, read> skip_minmax: array<vec2<f32>>;
 @group(0) @binding(10) var<storage, read> skip_prefix: array<u32>;
+// Clipping mesh: per pixel of the tile (count, 0, 0, 0) then four (a₀, b₀, a₁, b₁)
+// (shaders/clipmesh.wgsl); one dummy pixel when params.clip_mesh.x == 0.
+@group(0) @binding(11) var<storage, read> mesh_segments: array<vec4<f32>>;
+
+// The pixel of the tile this invocation casts (indexes mesh_segments).
+var<private> mesh_pixel: u32;
 
 // ---------------------------------------------------------------- kernels
 // mirrors src/cpu/filter.rs: weight_tent
@@ -283,6 +289,14 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     if (mode == MODE_ISO || (mode == MODE_DVR && params.iso_flags.x > 0u)) {
         return cast_iso(ray, o, d, t_in, t_out, dt, n0, speed, mode == MODE_DVR);
     }
+    // The clipping mesh keeps the step grid and takes only the samples inside it.
+    var mr = mesh_ranges_all(n);
+    if (params.clip_mesh.x == 1u) {
+        mr = mesh_ranges(n, t_in, t_out, t_s, dt);
+        if (mode == MODE_MIP || mode == MODE_MINIP || mode == MODE_XRAY) {
+            return cast_scalar_ranges(mode, mr, miss, n, t_in, t_s, t_out, dt, o, d);
+        }
+    }
     if (mode == MODE_MIP || mode == MODE_MINIP) {
         var best = sample_value(segment_point(0u, n, t_in, t_s, t_out, dt, o, d));
         for (var k = 1u; k < n; k++) {
@@ -326,8 +340,17 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     if (range.x == 0) {
         break;
     }
-    let k_lo = u32(range.y);
-    let k_hi = u32(range.z);
+    // Intersected with the mesh's ranges (mirrors src/cpu/clipmesh.rs: ClippedRanges).
+    for (var m = 0u; m < mr.count; m++) {
+    var j = m;
+    if (back_to_front) {
+        j = mr.count - 1u - m;
+    }
+    let k_lo = max(u32(range.y), mr.range[j].x);
+    let k_hi = min(u32(range.z), mr.range[j].y);
+    if (k_lo > k_hi) {
+        continue;
+    }
     for (var i = k_lo; i <= k_hi; i++) {
         var k = i;
         if (back_to_front) {
@@ -366,6 +389,10 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
         break;
     }
     }
+    if (terminated) {
+        break;
+    }
+    }
     let t = 1.0 - a;
     let bg = params.background;
     return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
@@ -389,8 +416,108 @@ fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let row = params.flags2.z + local_row;
-    let px = cast_ray(camera_ray(col, row), ray_offset(col, row));
     let idx = local_row * params.image.x + col;
+    mesh_pixel = idx;
+    let px = cast_ray(camera_ray(col, row), ray_offset(col, row));
     out_pixels[idx] = px.value;
     out_samples[idx] = px.samples;
+}
+
+// ---------------------------------------------------------------- clipping mesh
+struct MeshRanges {
+    count: u32,
+    range: array<vec2<u32>, 8>,
+}
+
+// mirrors src/cpu/clipmesh.rs: MeshRanges::all
+fn mesh_ranges_all(n: u32) -> MeshRanges {
+    var r: MeshRanges;
+    r.count = 1u;
+    r.range[0] = vec2<u32>(0u, n - 1u);
+    return r;
+}
+
+// mirrors src/cpu/clipmesh.rs: step_mid
+fn step_mid(k: i32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32) -> f32 {
+    let b = step_bounds(u32(k), n, t_in, t_s, t_out, dt);
+    return (b.x + b.y) * 0.5;
+}
+
+// mirrors src/cpu/clipmesh.rs: MeshRanges::new (the samples whose midpoint lies in a
+// segment of this pixel's ray, from shaders/clipmesh.wgsl)
+fn mesh_ranges(n: u32, t_in: f32, t_out: f32, t_s: f32, dt: f32) -> MeshRanges {
+    var out: MeshRanges;
+    out.count = 0u;
+    let base = mesh_pixel * 5u;
+    let count = u32(mesh_segments[base].x);
+    let last = i32(n) - 1;
+    for (var s = 0u; s < count; s++) {
+        let v = mesh_segments[base + 1u + s / 2u];
+        var seg = v.xy;
+        if (s % 2u == 1u) {
+            seg = v.zw;
+        }
+        let a = seg.x;
+        let b = seg.y;
+        // Estimate, then correct against the exact midpoints.
+        let ga = i32(floor(min(max((a - t_s) / dt - 0.5, -2.0), f32(n) + 2.0)));
+        let gb = i32(floor(min(max((b - t_s) / dt - 0.5, -2.0), f32(n) + 2.0)));
+        var lo = clamp(ga - 1, 0, last);
+        while (lo <= last && step_mid(lo, n, t_in, t_s, t_out, dt) < a) {
+            lo += 1;
+        }
+        while (lo > 0 && step_mid(lo - 1, n, t_in, t_s, t_out, dt) >= a) {
+            lo -= 1;
+        }
+        var hi = clamp(gb + 2, 0, last);
+        while (hi >= 0 && step_mid(hi, n, t_in, t_s, t_out, dt) > b) {
+            hi -= 1;
+        }
+        while (hi < last && step_mid(hi + 1, n, t_in, t_s, t_out, dt) <= b) {
+            hi += 1;
+        }
+        if (lo > hi) {
+            continue;
+        }
+        // Keep the ranges disjoint and increasing.
+        if (out.count > 0u && u32(lo) <= out.range[out.count - 1u].y) {
+            out.range[out.count - 1u].y = max(out.range[out.count - 1u].y, u32(hi));
+            continue;
+        }
+        out.range[out.count] = vec2<u32>(u32(lo), u32(hi));
+        out.count += 1u;
+    }
+    return out;
+}
+
+// mirrors src/cpu/clipmesh.rs: cast_scalar_ranges (MIP, MinIP, X-ray over the ranges)
+fn cast_scalar_ranges(mode: u32, mr: MeshRanges, miss: vec4<f32>, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> Pixel {
+    var taken = 0u;
+    var best = 0.0;
+    var sum = 0.0;
+    for (var r = 0u; r < mr.count; r++) {
+        for (var k = mr.range[r].x; k <= mr.range[r].y; k++) {
+            let v = sample_value(segment_point(k, n, t_in, t_s, t_out, dt, o, d));
+            if (mode == MODE_XRAY) {
+                sum = sum + v * segment_length(k, n, t_in, t_s, t_out, dt);
+            } else if (taken == 0u) {
+                best = v;
+            } else if (mode == MODE_MIP) {
+                best = max(best, v);
+            } else {
+                best = min(best, v);
+            }
+            taken += 1u;
+        }
+    }
+    if (taken == 0u) {
+        return Pixel(miss, 0u);
+    }
+    if (mode == MODE_XRAY) {
+        return Pixel(vec4<f32>(sum, 0.0, 0.0, 0.0), taken);
+    }
+    if (params.window.z == 1.0) {
+        best = window_map(best);
+    }
+    return Pixel(vec4<f32>(best, 0.0, 0.0, 0.0), taken);
 }

@@ -52,6 +52,7 @@ fn raycast_params_layout_agrees() {
         ("iso_color_1", offset_of!(RaycastParams, iso_color_1)),
         ("iso_color_2", offset_of!(RaycastParams, iso_color_2)),
         ("iso_color_3", offset_of!(RaycastParams, iso_color_3)),
+        ("clip_mesh", offset_of!(RaycastParams, clip_mesh)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

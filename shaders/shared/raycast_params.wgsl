@@ -66,4 +66,6 @@ struct RaycastParams {
     iso_color_1: vec4<f32>,
     iso_color_2: vec4<f32>,
     iso_color_3: vec4<f32>,
+    // Clipping mesh: x = 1 when on (segments per pixel, shaders/clipmesh.wgsl); yzw unused.
+    clip_mesh: vec4<u32>,
 }

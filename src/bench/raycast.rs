@@ -13,7 +13,7 @@
 //! (γ = 0) and two semi-transparent iso-surfaces (0.25 and 0.6); empty-space skipping
 //! (on in every other variant) switched off (`dvr-shaded-trilinear-skip-off`), and the
 //! bundled micro-CT scan with skipping on and off (`microct-dvr-skip-on|off`, see
-//! [`microct_scene`]). One run is
+//! [`microct_scene`]); clipping meshes on and off ([`mesh_variants`]). One run is
 //! `cpu::raycast::render::<R>` or `gpu::raycast::render` end to end (the volume's
 //! conversion to the working precision included, as a caller would see it). Work: rays
 //! (= pixels) and samples (the oracle's `total_samples`, counted by one untimed f64
@@ -130,6 +130,56 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
     ]
 }
 
+/// The clipping-mesh variants (`cpu::clipmesh`, `gpu::clipmesh`), all shaded DVR or
+/// X-ray with trilinear reconstruction: without a mesh and skipping off
+/// (`mesh-off-dvr`), the bricks mesh of the skipping grid with skipping off
+/// (`mesh-bricks-dvr`: the same image), a user mesh of two boxes that cut a 40 mm slab
+/// out of the head along x (`mesh-slab-dvr`, skipping on, against `dvr-shaded-trilinear`;
+/// `mesh-slab-xray` against `mesh-off-xray`), and on the micro-CT scan
+/// (`microct-mesh-off`, `microct-mesh-bricks`, skipping off).
+pub fn mesh_variants() -> Vec<(&'static str, RenderSettings)> {
+    use crate::settings::{ClipMesh, ClipMeshUnits};
+    let mut slab = crate::io::mesh::TriMesh::cuboid([-200.0; 3], [-20.0, 200.0, 200.0]);
+    slab.append_cuboid([20.0, -200.0, -200.0], [200.0; 3]);
+    let slab = Some(ClipMesh::Mesh {
+        mesh: std::sync::Arc::new(slab),
+        units: ClipMeshUnits::World,
+    });
+    let off = RenderSettings {
+        skip_empty: false,
+        ..RenderSettings::default()
+    };
+    let bricks = RenderSettings {
+        clip_mesh: Some(ClipMesh::Bricks),
+        ..off.clone()
+    };
+    let xray = RenderSettings {
+        mode: Mode::Xray,
+        ..RenderSettings::default()
+    };
+    vec![
+        ("mesh-off-dvr", off.clone()),
+        ("mesh-bricks-dvr", bricks.clone()),
+        (
+            "mesh-slab-dvr",
+            RenderSettings {
+                clip_mesh: slab.clone(),
+                ..RenderSettings::default()
+            },
+        ),
+        ("mesh-off-xray", xray.clone()),
+        (
+            "mesh-slab-xray",
+            RenderSettings {
+                clip_mesh: slab,
+                ..xray
+            },
+        ),
+        ("microct-mesh-off", off),
+        ("microct-mesh-bricks", bricks),
+    ]
+}
+
 /// The micro-CT variants ([`microct_scene`]): skipping on and off.
 pub fn microct_variants() -> Vec<(&'static str, RenderSettings)> {
     vec![
@@ -227,6 +277,16 @@ const XRAY: Tol = Tol {
     max_abs_rel: 8e-5,
     rel_l2: 1e-5,
 };
+/// The GPU's X-ray through a user clipping mesh (`gpu::clipmesh`): its segments are
+/// computed in f32, so a sample whose midpoint lies within rounding (≈ 1e-7 of |t|) of a
+/// mesh face is taken on one backend and not on the other, which moves that pixel by one
+/// sample's `value × step` (1 mm here) against a peak of ≈ 330 value·mm, 3e-3. Measured
+/// on lavapipe (`mesh-slab-xray`, 128³ → 256²): max 3.1e-3 (one sample), rel L2 8.4e-5.
+/// Bound: about three flipped samples on a pixel.
+const XRAY_MESH_GPU: Tol = Tol {
+    max_abs_rel: 1e-2,
+    rel_l2: 3e-4,
+};
 /// MIP and MinIP. The maximum along a ray sits on the sharpest edges, where f32 rounding
 /// of the sample position (≈ 3e-5 mm at |t| ≈ 540 mm, several roundings) meets a slope of
 /// up to the data range per voxel: the error grows with the resolution. Measured (f32
@@ -256,6 +316,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("xray-trilinear", 24, 32),
             ("mida-trilinear", 24, 32),
             ("iso-trilinear", 24, 32),
+            ("mesh-slab-dvr", 24, 32),
         ],
         // The f64 oracle dominates: on 16 cores about 0.1 s at 128³ → 256² (shaded DVR,
         // trilinear), ×8 per doubling of both sides (×4 rays, ×2 samples per ray).
@@ -280,6 +341,13 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-shaded-lanczos3", 128, 256),
             ("mida-trilinear", 128, 256),
             ("iso-trilinear", 128, 256),
+            ("mesh-off-dvr", 128, 256),
+            ("mesh-bricks-dvr", 128, 256),
+            ("mesh-slab-dvr", 128, 256),
+            ("mesh-off-xray", 128, 256),
+            ("mesh-slab-xray", 128, 256),
+            ("microct-mesh-off", 128, 256),
+            ("microct-mesh-bricks", 128, 256),
         ],
     }
 }
@@ -288,6 +356,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
 pub fn cases(suite: Suite) -> Vec<Case> {
     let mut variants = raycast_variants();
     variants.extend(microct_variants());
+    variants.extend(mesh_variants());
     let mut out = Vec::new();
     for (name, n, size) in raycast_grid(suite) {
         let settings = variants
@@ -321,10 +390,15 @@ pub fn cases(suite: Suite) -> Vec<Case> {
 
 /// The tolerances of a ray-caster variant: (f32 CPU, GPU).
 pub fn raycast_tolerances(settings: &RenderSettings) -> (Tol, Tol) {
+    let user_mesh = matches!(
+        settings.clip_mesh,
+        Some(crate::settings::ClipMesh::Mesh { .. })
+    );
     match settings.mode {
         Mode::Dvr if settings.hardware_filtering => (DVR_F32, HARDWARE_DVR_GPU),
         Mode::Dvr if settings.filter == Filter::Nearest => (NEAREST_DVR, NEAREST_DVR),
         Mode::Dvr | Mode::Mida | Mode::Iso => (DVR_F32, DVR_GPU),
+        Mode::Xray if user_mesh => (XRAY, XRAY_MESH_GPU),
         Mode::Xray => (XRAY, XRAY),
         Mode::Mip | Mode::Minip => (MIP, MIP),
     }

@@ -8,6 +8,7 @@
 //! volume rendering slice and its inverse FFT; `project` Joseph's CT forward projector.
 
 pub mod adaptive;
+pub mod clipmesh;
 pub mod context;
 pub mod d2vr;
 pub mod fbp;

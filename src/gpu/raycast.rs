@@ -89,6 +89,9 @@ pub struct RaycastParams {
     pub iso_color_1: [f32; 4],
     pub iso_color_2: [f32; 4],
     pub iso_color_3: [f32; 4],
+    /// Clipping mesh: 1 when on (segments per pixel in binding 11, `gpu::clipmesh`),
+    /// the rest unused.
+    pub clip_mesh: [u32; 4],
 }
 
 /// The WGSL struct shared by both shaders.
@@ -551,13 +554,6 @@ pub fn render(
     settings.validate()?;
     tf.validate()?;
     volume.check_finite("volume")?;
-    if settings.clip_mesh.is_some() {
-        // Segments per pixel are computed on the CPU ray caster only (cpu::clipmesh).
-        return Err(Error::invalid(
-            "clip mesh",
-            "not yet available on the GPU backend; render with the CPU backend",
-        ));
-    }
     let dims = volume.dims();
     let max3d = ctx.limits.max_texture_dimension_3d as usize;
     if dims.iter().any(|&n| n > max3d) {
@@ -581,8 +577,12 @@ pub fn render(
             } else {
                 0.0
             };
-        let steps =
+        let mut steps =
             (diag / settings.step + 2.0) * per_step + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
+        if settings.clip_mesh.is_some() {
+            // Up to MAX_SEGMENTS mesh ranges per skipping range, and their search.
+            steps += 8.0 * 2.0 * (cells[0] + cells[1] + cells[2]) as f64 + 64.0;
+        }
         if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
             return Err(Error::invalid(
                 "step",
@@ -639,6 +639,7 @@ pub fn render(
             buffer_entry(8, storage(true)),
             buffer_entry(9, storage(true)),
             buffer_entry(10, storage(true)),
+            buffer_entry(11, storage(true)),
         ],
     });
     let pipeline = compute_pipeline(ctx, "raycast", &raycast_module, "raycast", &layout)?;
@@ -753,13 +754,38 @@ pub fn render(
         };
         (dummy("skip minmax (off)"), dummy("skip prefix (off)"))
     };
+    // Clipping mesh (gpu::clipmesh): resolved on the host (the bricks mesh from the
+    // same grid the skipping bounds), its segments computed per tile below.
+    let clip_mesh = {
+        let voxels = match settings.classification {
+            Classification::Post if bspline_interp => prepare(&grid, settings.filter),
+            _ => grid.clone(),
+        };
+        let r =
+            crate::cpu::clipmesh::resolve(settings, volume.affine(), dims, Some(&voxels), &lut)?;
+        match r {
+            Some(m) => Some(super::clipmesh::GpuClipMesh::new(ctx, &m)?),
+            None => None,
+        }
+    };
+    params.clip_mesh[0] = clip_mesh.is_some() as u32;
+    let no_segments = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("clip mesh segments (off)"),
+        contents: &[0u8; 16 * super::clipmesh::SEGMENT_VEC4S],
+        usage: wgpu::BufferUsages::STORAGE,
+    });
     ctx.wait()?;
     let prepare_time = t_prep.elapsed().as_secs_f64();
 
     // Ray casting, in bands of rows that fit the storage-binding limit.
     let (w, h) = (camera.width, camera.height);
     let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
-    let rows_per_tile = (max_binding / (w * 16))
+    let pixel_bytes = if clip_mesh.is_some() {
+        16 * super::clipmesh::SEGMENT_VEC4S
+    } else {
+        16
+    };
+    let rows_per_tile = (max_binding / (w * pixel_bytes))
         .clamp(1, h)
         .min((1 << 20) / w + 1)
         .max(1);
@@ -787,6 +813,10 @@ pub fn render(
         let cnt_bytes = (rows * w * 4) as u64;
         let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
+        let seg_buf = match &clip_mesh {
+            Some(m) => Some(m.segments(ctx, &params)?),
+            None => None,
+        };
         let bind = ctx.bind_group(
             "raycast",
             &layout,
@@ -802,6 +832,7 @@ pub fn render(
                 lut2_buf.as_entire_binding(),
                 skip_minmax.as_entire_binding(),
                 skip_prefix.as_entire_binding(),
+                seg_buf.as_ref().unwrap_or(&no_segments).as_entire_binding(),
             ],
         );
         let t_k = Instant::now();
