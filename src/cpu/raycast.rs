@@ -603,7 +603,7 @@ fn cast_ray<R: Real, F: Field<R>>(
                         continue;
                     }
                     // Opacity correction for a step of len·speed voxels.
-                    let alpha = R::one() - (R::one() - alpha).powf(len * speed / s.ref_step);
+                    let alpha = R::one() - transmit_pow(R::one() - alpha, len * speed / s.ref_step);
                     let rgb = if s.shade {
                         shade_sample(field, s, p, rgb, light, half)
                     } else {
@@ -641,6 +641,21 @@ fn cast_ray<R: Real, F: Field<R>>(
                 taken,
             )
         }
+    }
+}
+
+/// `x^e` for the opacity correction `1 − (1 − α)^e`. The default step is half the
+/// reference step, so `e = ½` is by far the commonest exponent: there the correctly
+/// rounded square root stands in for the general power (the same value to within an
+/// ulp, and several times cheaper); `e = 1` is `x` itself.
+#[inline]
+pub(crate) fn transmit_pow<R: Real>(x: R, e: R) -> R {
+    if e == R::of(0.5) {
+        x.sqrt()
+    } else if e == R::one() {
+        x
+    } else {
+        x.powf(e)
     }
 }
 
