@@ -386,42 +386,16 @@ pub fn render(
                 cnt_buf.as_entire_binding(),
             ],
         );
-        let t_k = Instant::now();
-        let query = timestamps.then(|| ctx.timestamp_pair());
-        let mut enc = dev.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("multi"),
-                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
-        }
-        if let Some(q) = &query {
-            q.resolve(&mut enc);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        kernel += match &query {
-            Some(q) => q.seconds(ctx)?,
-            None => t_k.elapsed().as_secs_f64(),
-        };
-        let t_r = Instant::now();
-        let px: Vec<[f32; 4]> =
-            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
-        let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
-        readback += t_r.elapsed().as_secs_f64();
-        let ch = image.channels;
-        for (i, p) in px.iter().enumerate() {
-            let dst = (row0 * w + i) * ch;
-            image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
-        }
-        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+        let (k, r) = super::raycast::run_band(
+            ctx,
+            (&pipeline, &bind, "multi"),
+            timestamps,
+            (row0, rows, w),
+            (&out_buf, &cnt_buf),
+            (&mut image, &mut counts),
+        )?;
+        kernel += k;
+        readback += r;
         row0 += rows;
         progress(row0, h);
     }

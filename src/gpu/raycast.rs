@@ -835,42 +835,16 @@ pub fn render(
                 seg_buf.as_ref().unwrap_or(&no_segments).as_entire_binding(),
             ],
         );
-        let t_k = Instant::now();
-        let query = timestamps.then(|| ctx.timestamp_pair());
-        let mut enc = dev.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("raycast"),
-                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
-        }
-        if let Some(q) = &query {
-            q.resolve(&mut enc);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        kernel += match &query {
-            Some(q) => q.seconds(ctx)?,
-            None => t_k.elapsed().as_secs_f64(),
-        };
-        let t_r = Instant::now();
-        let px: Vec<[f32; 4]> =
-            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
-        let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
-        readback += t_r.elapsed().as_secs_f64();
-        let ch = image.channels;
-        for (i, p) in px.iter().enumerate() {
-            let dst = (row0 * w + i) * ch;
-            image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
-        }
-        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+        let (k, r) = super::raycast::run_band(
+            ctx,
+            (&pipeline, &bind, "raycast"),
+            timestamps,
+            (row0, rows, w),
+            (&out_buf, &cnt_buf),
+            (&mut image, &mut counts),
+        )?;
+        kernel += k;
+        readback += r;
         row0 += rows;
         progress(row0, h);
     }
@@ -889,6 +863,58 @@ pub fn render(
 }
 
 /// Interleaves three or four grids into RGBA texels (the fourth channel 0 if absent).
+/// One band of a per-pixel caster (rows `row0..row0 + rows` of a `w`-wide image, 8 × 8
+/// workgroups): dispatch, wait, read the RGBA pixels and sample counts back into
+/// `image` and `counts`. Returns the kernel time (timestamps when asked for, else the
+/// wall clock) and the readback time, in seconds. Shared by `gpu::raycast`,
+/// `gpu::multi` and `gpu::adaptive`.
+pub(crate) fn run_band(
+    ctx: &GpuContext,
+    (pipeline, bind, label): (&wgpu::ComputePipeline, &wgpu::BindGroup, &str),
+    timestamps: bool,
+    (row0, rows, w): (usize, usize, usize),
+    (out_buf, cnt_buf): (&wgpu::Buffer, &wgpu::Buffer),
+    (image, counts): (&mut Frame, &mut [u32]),
+) -> Result<(f64, f64)> {
+    let t_k = Instant::now();
+    let query = timestamps.then(|| ctx.timestamp_pair());
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: &q.set,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: Some(1),
+            }),
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind, &[]);
+        pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
+    }
+    if let Some(q) = &query {
+        q.resolve(&mut enc);
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait()?;
+    let kernel = match &query {
+        Some(q) => q.seconds(ctx)?,
+        None => t_k.elapsed().as_secs_f64(),
+    };
+    let t_r = Instant::now();
+    let (pix_bytes, cnt_bytes) = ((rows * w * 16) as u64, (rows * w * 4) as u64);
+    let px: Vec<[f32; 4]> = bytemuck::cast_slice(&ctx.read_buffer(out_buf, pix_bytes)?).to_vec();
+    let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(cnt_buf, cnt_bytes)?).to_vec();
+    let readback = t_r.elapsed().as_secs_f64();
+    let ch = image.channels;
+    for (i, p) in px.iter().enumerate() {
+        let dst = (row0 * w + i) * ch;
+        image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
+    }
+    counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+    Ok((kernel, readback))
+}
+
 fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>) -> Vec<[f32; 4]> {
     (0..r.data.len())
         .map(|i| {
