@@ -56,9 +56,10 @@ pub struct Grid<R> {
 impl<R: Real> Grid<R> {
     /// Copies a volume's values into precision `R` (exact for f64).
     pub fn from_volume<T: Voxel>(v: &Volume<T>) -> Self {
+        use rayon::prelude::*;
         Grid {
             dims: v.dims(),
-            data: v.data().iter().map(|x| R::of(x.to_f64())).collect(),
+            data: v.data().par_iter().map(|x| R::of(x.to_f64())).collect(),
         }
     }
     /// A grid of `f(i, j, k)`.

@@ -13,6 +13,7 @@ pub mod fft;
 pub mod filter;
 pub mod fvr;
 pub mod gradient;
+pub mod march;
 pub mod modes;
 pub mod multi;
 pub mod parker;

@@ -79,11 +79,7 @@ impl<R: Real> GridField<R> {
     pub fn new(values: Grid<R>, filter: Filter, method: GradientMethod, precompute: bool) -> Self {
         let gradients =
             precompute.then(|| precompute_gradients(&values, method).map(|g| prepare(&g, filter)));
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for v in &values.data {
-            lo = lo.min(v.f64());
-            hi = hi.max(v.f64());
-        }
+        let (lo, hi) = value_range(&values.data);
         let (grid, values) = if filter.prefiltered() {
             (prepare(&values, filter), Some(values))
         } else {
@@ -133,6 +129,15 @@ impl<R: Real> Field<R> for GridField<R> {
     fn sampled_grid(&self) -> Option<&Grid<R>> {
         Some(&self.grid)
     }
+}
+
+/// The smallest and largest value (±∞ for no values), in parallel chunks.
+pub(crate) fn value_range<R: Real>(data: &[R]) -> (f64, f64) {
+    let (lo, hi) = data.par_chunks(1 << 16).map(super::skip::min_max).reduce(
+        || (R::infinity(), R::neg_infinity()),
+        |a, b| (a.0.min(b.0), a.1.max(b.1)),
+    );
+    (lo.f64(), hi.f64())
 }
 
 /// An analytic phantom seen through a virtual grid of `dims` (the grid
@@ -273,6 +278,22 @@ pub(crate) struct Setup<R> {
     pub(crate) modes: super::modes::ModeSetup<R>,
     /// The clipping mesh (`cpu::clipmesh`), if any.
     clip_mesh: Option<std::sync::Arc<super::clipmesh::ClipTriangles>>,
+    /// DVR steps are classified in batches (`cpu::march`): post-classification with
+    /// the 1D table, front to back.
+    batched: bool,
+    /// The table as the batches read it (`march::lut_pairs`), when batched.
+    lut_pairs: Vec<[R; 8]>,
+}
+
+/// Which loop a DVR ray's steps go through. Both give the same image to the last bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// Steps classified in batches (`cpu::march`) wherever that applies: DVR with
+    /// post-classification, the 1D transfer function and front-to-back compositing.
+    Batched,
+    /// One step at a time through the general per-sample code (the reference the
+    /// batched kernel is tested against).
+    PerSample,
 }
 
 /// Renders a volume with precision `R`. `progress(done_rows, total_rows)` is called as
@@ -283,6 +304,18 @@ pub fn render<R: Real>(
     camera: &Camera,
     settings: &RenderSettings,
     progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<RenderOutput> {
+    render_with::<R>(volume, tf, camera, settings, progress, Kernel::Batched)
+}
+
+/// [`render`] with a chosen DVR [`Kernel`].
+pub fn render_with<R: Real>(
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    kernel: Kernel,
 ) -> Result<RenderOutput> {
     settings.validate()?;
     tf.validate()?;
@@ -300,7 +333,15 @@ pub fn render<R: Real>(
         settings.gradient,
         settings.precompute_gradients,
     );
-    render_field(&field, volume.affine(), tf, camera, settings, progress)
+    render_field_with(
+        &field,
+        volume.affine(),
+        tf,
+        camera,
+        settings,
+        progress,
+        kernel,
+    )
 }
 
 /// Refuses renders whose cost is absurd (the full sinc is O(n³) per sample).
@@ -340,6 +381,27 @@ pub fn render_field<R: Real, F: Field<R>>(
     camera: &Camera,
     settings: &RenderSettings,
     progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<RenderOutput> {
+    render_field_with(
+        field,
+        affine,
+        tf,
+        camera,
+        settings,
+        progress,
+        Kernel::Batched,
+    )
+}
+
+/// [`render_field`] with a chosen DVR [`Kernel`].
+pub fn render_field_with<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    kernel: Kernel,
 ) -> Result<RenderOutput> {
     settings.validate()?;
     tf.validate()?;
@@ -399,6 +461,12 @@ pub fn render_field<R: Real, F: Field<R>>(
         clip: settings.clip_box.as_ref().map(super::skip::ClipR::new),
         modes: super::modes::ModeSetup::new(settings, (lo_v, hi_v)),
         clip_mesh: None,
+        batched: settings.mode == Mode::Dvr
+            && settings.classification == Classification::Post
+            && settings.compositing == Compositing::FrontToBack
+            && settings.transfer_2d.is_none()
+            && kernel == Kernel::Batched,
+        lut_pairs: Vec::new(),
     };
     // Post-classification bounds what the filter samples; pre-classification the voxels.
     let skip_voxels = match settings.classification {
@@ -407,6 +475,11 @@ pub fn render_field<R: Real, F: Field<R>>(
     };
     let setup = Setup {
         skip: skip_voxels.and_then(|g| super::skip::Skipper::new(g, &setup.lut, settings)),
+        lut_pairs: if setup.batched {
+            super::march::lut_pairs(&setup.lut)
+        } else {
+            Vec::new()
+        },
         clip_mesh: super::clipmesh::resolve(settings, affine, dims, skip_voxels, &setup.lut)?,
         ..setup
     };
@@ -458,6 +531,60 @@ pub fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
     [ch(0), ch(1), ch(2), ch(3)]
 }
 
+/// A ray carried into index space, clipped and cut into steps: what every mode marches.
+pub(crate) struct Plan<R> {
+    pub(crate) steps: super::march::Steps<R>,
+    /// Voxels per unit `t` (`t` is world mm along a unit direction).
+    pub(crate) speed: R,
+    /// The steps inside the clipping mesh, when there is one.
+    pub(crate) mesh: Option<super::clipmesh::MeshRanges>,
+}
+
+/// Plans `ray` (steps offset by `u·Δs`); `None` when nothing of it is left to sample.
+/// Mirrors the start of `shaders/raycast.wgsl: cast_ray`.
+pub(crate) fn plan_ray<R: Real>(s: &Setup<R>, ray: &crate::camera::Ray, u: R) -> Option<Plan<R>> {
+    let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
+    let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
+    let (t_in, t_out) = intersect_box(o, d, s.lo, s.hi)?;
+    let mut t_in = t_in.max(R::of(ray.t_min));
+    let mut t_out = t_out;
+    if let Some(clip) = &s.clip {
+        let (wo, wd) = (V3::from_dvec(ray.origin), V3::from_dvec(ray.dir));
+        let (c0, c1) = clip.interval(o, d, wo, wd)?;
+        t_in = t_in.max(c0);
+        t_out = t_out.min(c1);
+    }
+    if t_out <= t_in {
+        return None;
+    }
+    let speed = d.length();
+    let dt = s.step / speed;
+    // The virtual start of the (jittered) step grid; u = 0 gives t_s = t_in.
+    let t_s = t_in - u * dt;
+    let n = ((t_out - t_s) / dt - R::of(1e-3)).ceil().max(R::one());
+    let n = n.to_usize().unwrap_or(1);
+    // Step k covers [t_s + k dt, t_s + (k+1) dt]; the first starts at t_in, the last
+    // ends at t_out. The clipping mesh keeps the step grid and takes only the samples
+    // inside it.
+    let mesh = s.clip_mesh.as_ref().map(|m| {
+        let segs = m.segments(ray.origin, ray.dir, ray.t_min);
+        super::clipmesh::MeshRanges::new(&segs, n, t_in, t_out, t_s, dt)
+    });
+    Some(Plan {
+        steps: super::march::Steps {
+            o,
+            d,
+            t_in,
+            t_out,
+            t_s,
+            dt,
+            n,
+        },
+        speed,
+        mesh,
+    })
+}
+
 /// Casts one ray; returns the pixel (RGBA, or the scalar in channel 0) and the number
 /// of samples taken; `u` offsets the ray's steps by `u·Δs` (`accumulate`).
 /// Mirrors `shaders/raycast.wgsl: cast_ray`.
@@ -469,54 +596,26 @@ fn cast_ray<R: Real, F: Field<R>>(
     ray: crate::camera::Ray,
     u: R,
 ) -> ([R; 4], u32) {
-    let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
-    let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
     let miss = if mode.rgba() {
         s.bg
     } else {
         [s.miss, R::zero(), R::zero(), R::zero()]
     };
-    let Some((t_in, t_out)) = intersect_box(o, d, s.lo, s.hi) else {
+    let Some(plan) = plan_ray(s, &ray, u) else {
         return (miss, 0);
     };
-    let mut t_in = t_in.max(R::of(ray.t_min));
-    let mut t_out = t_out;
-    if let Some(clip) = &s.clip {
-        let (wo, wd) = (V3::from_dvec(ray.origin), V3::from_dvec(ray.dir));
-        let Some((c0, c1)) = clip.interval(o, d, wo, wd) else {
-            return (miss, 0);
-        };
-        t_in = t_in.max(c0);
-        t_out = t_out.min(c1);
-    }
-    if t_out <= t_in {
-        return (miss, 0);
-    }
-    let mesh_segments = s
-        .clip_mesh
-        .as_ref()
-        .map(|m| m.segments(ray.origin, ray.dir, ray.t_min));
-    let speed = d.length(); // voxels per unit t (t is world mm along a unit direction)
-    let dt = s.step / speed;
-    // The virtual start of the (jittered) step grid; u = 0 gives t_s = t_in.
-    let t_s = t_in - u * dt;
-    let n = ((t_out - t_s) / dt - R::of(1e-3)).ceil().max(R::one());
-    let n = n.to_usize().unwrap_or(1);
-    // Step k covers [t_s + k dt, t_s + (k+1) dt]; the first starts at t_in, the last
-    // ends at t_out.
-    let segment = |k: usize| {
-        let ta = if k == 0 {
-            t_in
-        } else {
-            t_s + R::of(k as f64) * dt
-        };
-        let tb = if k + 1 == n {
-            t_out
-        } else {
-            t_s + R::of((k + 1) as f64) * dt
-        };
-        (o + d * ((ta + tb) * R::of(0.5)), tb - ta)
-    };
+    let steps = plan.steps;
+    let super::march::Steps {
+        o,
+        d,
+        t_in,
+        t_out,
+        t_s,
+        dt,
+        n,
+    } = steps;
+    let speed = plan.speed;
+    let segment = |k: usize| steps.segment(k);
     // MIDA and iso-surfaces march the unjittered grid from t_in.
     let span = super::modes::Span {
         o,
@@ -531,12 +630,11 @@ fn cast_ray<R: Real, F: Field<R>>(
             .unwrap_or(1),
         speed,
     };
-    // The clipping mesh keeps the step grid and takes only the samples inside it.
-    let mesh_ranges = match &mesh_segments {
-        Some(segs) => super::clipmesh::MeshRanges::new(segs, n, t_in, t_out, t_s, dt),
-        None => super::clipmesh::MeshRanges::all(n),
-    };
-    if mesh_segments.is_some() && matches!(mode, Mode::Mip | Mode::Minip | Mode::Xray) {
+    let has_mesh = plan.mesh.is_some();
+    let mesh_ranges = plan
+        .mesh
+        .unwrap_or_else(|| super::clipmesh::MeshRanges::all(n));
+    if has_mesh && matches!(mode, Mode::Mip | Mode::Minip | Mode::Xray) {
         let value = |k: usize| {
             let (p, len) = segment(k);
             (field.value(p), len)
@@ -593,7 +691,47 @@ fn cast_ray<R: Real, F: Field<R>>(
                 mesh_ranges,
                 back,
             );
+            let batched = match field.sampled_grid() {
+                Some(grid) if s.batched && !back => Some(super::march::Source {
+                    grid,
+                    filter: s.filter,
+                    lut: &s.lut,
+                    pairs: &s.lut_pairs,
+                    speed,
+                    ref_step: s.ref_step,
+                }),
+                _ => None,
+            };
+            let mut batch = super::march::Batch::default();
             'ray: while let Some((k_lo, k_hi)) = ranges.next(skip) {
+                if let Some(src) = &batched {
+                    // The same samples and sums as the loop below, classified in batches.
+                    let mut k = k_lo;
+                    while k <= k_hi {
+                        let m = (k_hi + 1 - k).min(super::march::BATCH);
+                        batch.fill(src, &steps, k, m);
+                        k += m;
+                        // Only visible steps change the pixel; count up to the last one
+                        // taken (all m unless the ray terminates early in this batch).
+                        let mut left = batch.visible;
+                        while left != 0 {
+                            let l = left.trailing_zeros() as usize;
+                            left &= left - 1;
+                            let rgb = if s.shade {
+                                let p = batch.position(l);
+                                shade_sample(field, s, p, batch.colour(l), light, half)
+                            } else {
+                                batch.colour(l)
+                            };
+                            if over(&mut c, &mut a, rgb, batch.alpha_step[l], s.ert) {
+                                taken += l as u32 + 1;
+                                break 'ray;
+                            }
+                        }
+                        taken += m as u32;
+                    }
+                    continue;
+                }
                 for i in k_lo..=k_hi {
                     let k = if back { k_lo + k_hi - i } else { i };
                     let (p, len) = segment(k);
@@ -609,23 +747,13 @@ fn cast_ray<R: Real, F: Field<R>>(
                     } else {
                         rgb
                     };
-                    match order {
-                        Compositing::FrontToBack => {
-                            let w = (R::one() - a) * alpha;
-                            for ch in 0..3 {
-                                c[ch] = c[ch] + w * rgb[ch];
-                            }
-                            a = a + w;
-                            if a >= s.ert {
-                                break 'ray;
-                            }
+                    if back {
+                        for ch in 0..3 {
+                            c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
                         }
-                        Compositing::BackToFront => {
-                            for ch in 0..3 {
-                                c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
-                            }
-                            a = alpha + (R::one() - alpha) * a;
-                        }
+                        a = alpha + (R::one() - alpha) * a;
+                    } else if over(&mut c, &mut a, rgb, alpha, s.ert) {
+                        break 'ray;
                     }
                 }
             }
@@ -642,6 +770,18 @@ fn cast_ray<R: Real, F: Field<R>>(
             )
         }
     }
+}
+
+/// Front to back: one step's colour and opacity `alpha` under the pixel so far
+/// (`c`, `a`); true once `a` reaches the early-termination threshold `ert`.
+#[inline(always)]
+fn over<R: Real>(c: &mut [R; 3], a: &mut R, rgb: [R; 3], alpha: R, ert: R) -> bool {
+    let w = (R::one() - *a) * alpha;
+    for ch in 0..3 {
+        c[ch] = c[ch] + w * rgb[ch];
+    }
+    *a = *a + w;
+    *a >= ert
 }
 
 /// `x^e` for the opacity correction `1 − (1 − α)^e`. The default step is half the
