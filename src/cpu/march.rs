@@ -183,7 +183,7 @@ impl<R: Real> Batch<R> {
 
 #[cfg(target_arch = "x86_64")]
 mod simd {
-    use super::{Batch, Source, Steps, BATCH};
+    use super::{Batch, Packet, Source, Steps, BATCH, PACKET};
     use std::arch::x86_64::*;
 
     /// Whether the AVX-512 batch can run: the CPU has it, every voxel index, table
@@ -213,63 +213,61 @@ mod simd {
         )
     }
 
-    /// [`Batch::fill`] in sixteen f32 lanes with the trilinear filter. Returns `false`
-    /// (and fills nothing) when a coordinate is out of the range where the scalar path
-    /// floors by truncation; the caller then takes the scalar path.
-    ///
-    /// # Safety
-    /// The CPU must support AVX-512F and [`usable`] must hold.
+    /// Sixteen step grids, one per lane (the same ray in every lane for a batch).
+    struct Lanes {
+        o: [__m512; 3],
+        d: [__m512; 3],
+        t_in: __m512,
+        t_out: __m512,
+        t_s: __m512,
+        dt: __m512,
+        n: __m512i,
+        speed: __m512,
+    }
+
+    /// Sixteen classified steps.
+    struct Classified {
+        p: [__m512; 3],
+        rgb: [__m512; 3],
+        alpha: __m512,
+        /// `1 − (1 − α)^e`, right only where `e` is ½ or 1 (elsewhere see `general`).
+        alpha_step: __m512,
+        e: __m512,
+        /// Lanes whose exponent is neither ½ nor 1: `alpha_step` is to be raised there.
+        general: u16,
+        /// Lanes whose coordinates are all in (−1e9, 1e9), where the scalar path floors
+        /// by truncation; the others are to be computed by the scalar path.
+        moderate: u16,
+    }
+
+    /// Steps `k` (one per lane) of the step grids `g`, classified: the arithmetic of
+    /// `Steps::segment`, `filter::sample` (trilinear), `LutR::classify` and
+    /// `raycast::transmit_pow`, in the same order.
     #[target_feature(enable = "avx512f")]
-    pub unsafe fn fill_f32x16(
-        b: &mut Batch<f32>,
-        src: &Source<f32>,
-        st: &Steps<f32>,
-        k0: usize,
-        m: usize,
-    ) -> bool {
-        let lanes = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
-        let live: __mmask16 = if m >= BATCH { 0xffff } else { (1u16 << m) - 1 };
-        // Lanes past the batch repeat step k0 (valid indices; their results are unused).
-        let k = _mm512_mask_add_epi32(
-            _mm512_set1_epi32(k0 as i32),
-            live,
-            _mm512_set1_epi32(k0 as i32),
-            lanes,
-        );
+    #[inline]
+    unsafe fn classify(src: &Source<f32>, g: &Lanes, k: __m512i) -> Classified {
         let one_i = _mm512_set1_epi32(1);
         let zero_i = _mm512_setzero_si512();
         let k1 = _mm512_add_epi32(k, one_i);
-        let (ts, dt) = (_mm512_set1_ps(st.t_s), _mm512_set1_ps(st.dt));
         // ta = t_in for k = 0, else t_s + k·dt; tb = t_out for k + 1 = n, else t_s + (k+1)·dt.
         let ta = _mm512_mask_blend_ps(
             _mm512_cmpeq_epi32_mask(k, zero_i),
-            _mm512_add_ps(ts, _mm512_mul_ps(_mm512_cvtepi32_ps(k), dt)),
-            _mm512_set1_ps(st.t_in),
+            _mm512_add_ps(g.t_s, _mm512_mul_ps(_mm512_cvtepi32_ps(k), g.dt)),
+            g.t_in,
         );
         let tb = _mm512_mask_blend_ps(
-            _mm512_cmpeq_epi32_mask(k1, _mm512_set1_epi32(st.n as i32)),
-            _mm512_add_ps(ts, _mm512_mul_ps(_mm512_cvtepi32_ps(k1), dt)),
-            _mm512_set1_ps(st.t_out),
+            _mm512_cmpeq_epi32_mask(k1, g.n),
+            _mm512_add_ps(g.t_s, _mm512_mul_ps(_mm512_cvtepi32_ps(k1), g.dt)),
+            g.t_out,
         );
         let mid = _mm512_mul_ps(_mm512_add_ps(ta, tb), _mm512_set1_ps(0.5));
         let len = _mm512_sub_ps(tb, ta);
-        let pos = |a: usize| {
-            _mm512_add_ps(
-                _mm512_set1_ps(st.o.0[a]),
-                _mm512_mul_ps(_mm512_set1_ps(st.d.0[a]), mid),
-            )
-        };
-        let p = [pos(0), pos(1), pos(2)];
-        // The scalar path floors by truncation only for |x| < 1e9.
-        let lim = _mm512_set1_ps(1e9);
-        let neg_lim = _mm512_set1_ps(-1e9);
+        let p = [0, 1, 2].map(|a| _mm512_add_ps(g.o[a], _mm512_mul_ps(g.d[a], mid)));
+        let (lim, neg_lim) = (_mm512_set1_ps(1e9), _mm512_set1_ps(-1e9));
         let mut moderate = 0xffffu16;
         for x in p {
             moderate &= _mm512_cmp_ps_mask::<_CMP_GT_OQ>(x, neg_lim)
                 & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, lim);
-        }
-        if moderate & live != live {
-            return false;
         }
         let dims = src.grid.dims;
         // ⌊x⌋ by truncation, one down for negative non-integers, and f = x − ⌊x⌋.
@@ -353,29 +351,70 @@ mod simd {
             _mm512_add_ps(a, _mm512_mul_ps(f, d))
         };
         let alpha = channel(3);
-        // The opacity correction; exponents other than ½ and 1 (shortened end steps)
-        // are raised lane by lane below.
-        let e = _mm512_div_ps(
-            _mm512_mul_ps(len, _mm512_set1_ps(src.speed)),
-            _mm512_set1_ps(src.ref_step),
-        );
+        let e = _mm512_div_ps(_mm512_mul_ps(len, g.speed), _mm512_set1_ps(src.ref_step));
         let keep = _mm512_sub_ps(one, alpha);
         let half = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(e, _mm512_set1_ps(0.5));
         let unit = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(e, one);
         let tr = _mm512_mask_blend_ps(half, keep, _mm512_sqrt_ps(keep));
-        for (a, x) in p.iter().enumerate() {
-            _mm512_storeu_ps(b.p[a].as_mut_ptr(), *x);
+        Classified {
+            p,
+            rgb: [channel(0), channel(1), channel(2)],
+            alpha,
+            alpha_step: _mm512_sub_ps(one, tr),
+            e,
+            general: !(half | unit),
+            moderate,
         }
-        for c in 0..3 {
-            _mm512_storeu_ps(b.rgb[c].as_mut_ptr(), channel(c as i32));
+    }
+
+    /// [`Batch::fill`] in sixteen f32 lanes with the trilinear filter. Returns `false`
+    /// (and fills nothing) when a coordinate is out of the range where the scalar path
+    /// floors by truncation; the caller then takes the scalar path.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F and [`usable`] must hold.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn fill_f32x16(
+        b: &mut Batch<f32>,
+        src: &Source<f32>,
+        st: &Steps<f32>,
+        k0: usize,
+        m: usize,
+    ) -> bool {
+        let lanes = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        let live: __mmask16 = if m >= BATCH { 0xffff } else { (1u16 << m) - 1 };
+        // Lanes past the batch repeat step k0 (valid indices; their results are unused).
+        let k = _mm512_mask_add_epi32(
+            _mm512_set1_epi32(k0 as i32),
+            live,
+            _mm512_set1_epi32(k0 as i32),
+            lanes,
+        );
+        let g = Lanes {
+            o: st.o.0.map(|x| _mm512_set1_ps(x)),
+            d: st.d.0.map(|x| _mm512_set1_ps(x)),
+            t_in: _mm512_set1_ps(st.t_in),
+            t_out: _mm512_set1_ps(st.t_out),
+            t_s: _mm512_set1_ps(st.t_s),
+            dt: _mm512_set1_ps(st.dt),
+            n: _mm512_set1_epi32(st.n as i32),
+            speed: _mm512_set1_ps(src.speed),
+        };
+        let c = classify(src, &g, k);
+        if c.moderate & live != live {
+            return false;
         }
-        _mm512_storeu_ps(b.alpha.as_mut_ptr(), alpha);
-        _mm512_storeu_ps(b.alpha_step.as_mut_ptr(), _mm512_sub_ps(one, tr));
-        b.visible = (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(alpha, zero) & live) as u32;
-        let general = !(half | unit) & live;
+        for a in 0..3 {
+            _mm512_storeu_ps(b.p[a].as_mut_ptr(), c.p[a]);
+            _mm512_storeu_ps(b.rgb[a].as_mut_ptr(), c.rgb[a]);
+        }
+        _mm512_storeu_ps(b.alpha.as_mut_ptr(), c.alpha);
+        _mm512_storeu_ps(b.alpha_step.as_mut_ptr(), c.alpha_step);
+        b.visible = (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(c.alpha, _mm512_setzero_ps()) & live) as u32;
+        let general = c.general & live;
         if general != 0 {
             let mut ev = [0f32; BATCH];
-            _mm512_storeu_ps(ev.as_mut_ptr(), e);
+            _mm512_storeu_ps(ev.as_mut_ptr(), c.e);
             for (l, &e) in ev.iter().enumerate() {
                 if general & (1 << l) != 0 {
                     b.alpha_step[l] = 1.0 - (1.0 - b.alpha[l]).powf(e);
@@ -383,6 +422,181 @@ mod simd {
             }
         }
         true
+    }
+
+    /// One step of every live ray of a packet, composited front to back. Returns the
+    /// lanes whose current range ended or that reached the early-termination threshold
+    /// `ert`, and the latter apart.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F and [`usable`] must hold for every live lane.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn packet_step(pk: &mut Packet, src: &Source<f32>, ert: f32) -> (u16, u16) {
+        let live = pk.live;
+        let ld = |x: &[f32; PACKET]| _mm512_loadu_ps(x.as_ptr());
+        let g = Lanes {
+            o: [ld(&pk.o[0]), ld(&pk.o[1]), ld(&pk.o[2])],
+            d: [ld(&pk.d[0]), ld(&pk.d[1]), ld(&pk.d[2])],
+            t_in: ld(&pk.t_in),
+            t_out: ld(&pk.t_out),
+            t_s: ld(&pk.t_s),
+            dt: ld(&pk.dt),
+            n: _mm512_loadu_si512(pk.n.as_ptr() as *const _),
+            speed: ld(&pk.speed),
+        };
+        let k = _mm512_loadu_si512(pk.k.as_ptr() as *const _);
+        let mut c = classify(src, &g, k);
+        let odd = (!c.moderate | c.general) & live;
+        if odd != 0 {
+            // Lane by lane where the vector path does not apply.
+            let mut rgb = [[0f32; PACKET]; 3];
+            let (mut alpha, mut alpha_step, mut e) =
+                ([0f32; PACKET], [0f32; PACKET], [0f32; PACKET]);
+            for (a, v) in rgb.iter_mut().enumerate() {
+                _mm512_storeu_ps(v.as_mut_ptr(), c.rgb[a]);
+            }
+            _mm512_storeu_ps(alpha.as_mut_ptr(), c.alpha);
+            _mm512_storeu_ps(alpha_step.as_mut_ptr(), c.alpha_step);
+            _mm512_storeu_ps(e.as_mut_ptr(), c.e);
+            for l in 0..PACKET {
+                if odd & (1 << l) == 0 {
+                    continue;
+                }
+                if c.moderate & (1 << l) == 0 {
+                    let st = pk.steps(l);
+                    let (p, len) = st.segment(pk.k[l] as usize);
+                    let v = super::sample(src.grid, src.filter, p);
+                    let q = src.lut.classify(v);
+                    for a in 0..3 {
+                        rgb[a][l] = q[a];
+                    }
+                    alpha[l] = q[3];
+                    alpha_step[l] = 1.0
+                        - crate::cpu::raycast::transmit_pow(
+                            1.0 - q[3],
+                            len * pk.speed[l] / src.ref_step,
+                        );
+                } else {
+                    alpha_step[l] = 1.0 - (1.0 - alpha[l]).powf(e[l]);
+                }
+            }
+            c.rgb = [ld(&rgb[0]), ld(&rgb[1]), ld(&rgb[2])];
+            c.alpha = ld(&alpha);
+            c.alpha_step = ld(&alpha_step);
+        }
+        // raycast::over, lane by lane where the step is visible.
+        let visible = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(c.alpha, _mm512_setzero_ps()) & live;
+        let mut a = ld(&pk.a);
+        let w = _mm512_mul_ps(_mm512_sub_ps(_mm512_set1_ps(1.0), a), c.alpha_step);
+        for (ch, rgb) in c.rgb.iter().enumerate() {
+            let acc = ld(&pk.c[ch]);
+            let acc = _mm512_mask_add_ps(acc, visible, acc, _mm512_mul_ps(w, *rgb));
+            _mm512_storeu_ps(pk.c[ch].as_mut_ptr(), acc);
+        }
+        a = _mm512_mask_add_ps(a, visible, a, w);
+        _mm512_storeu_ps(pk.a.as_mut_ptr(), a);
+        let hit = _mm512_mask_cmp_ps_mask::<_CMP_GE_OQ>(visible, a, _mm512_set1_ps(ert));
+        let one_i = _mm512_set1_epi32(1);
+        let taken = _mm512_loadu_si512(pk.taken.as_ptr() as *const _);
+        _mm512_storeu_si512(
+            pk.taken.as_mut_ptr() as *mut _,
+            _mm512_mask_add_epi32(taken, live, taken, one_i),
+        );
+        let k = _mm512_mask_add_epi32(k, live, k, one_i);
+        _mm512_storeu_si512(pk.k.as_mut_ptr() as *mut _, k);
+        let k_hi = _mm512_loadu_si512(pk.k_hi.as_ptr() as *const _);
+        let past = _mm512_mask_cmpgt_epi32_mask(live, k, k_hi);
+        (past | hit, hit)
+    }
+}
+
+/// Rays in a packet.
+pub const PACKET: usize = 16;
+
+/// Sixteen rays marched together (DVR, front to back, f32): per lane its step grid,
+/// its current range of steps `k ..= k_hi` and what it has composited so far.
+#[derive(Clone, Debug, Default)]
+pub struct Packet {
+    pub o: [[f32; PACKET]; 3],
+    pub d: [[f32; PACKET]; 3],
+    pub t_in: [f32; PACKET],
+    pub t_out: [f32; PACKET],
+    pub t_s: [f32; PACKET],
+    pub dt: [f32; PACKET],
+    pub n: [i32; PACKET],
+    pub speed: [f32; PACKET],
+    pub k: [i32; PACKET],
+    pub k_hi: [i32; PACKET],
+    pub c: [[f32; PACKET]; 3],
+    pub a: [f32; PACKET],
+    pub taken: [u32; PACKET],
+    /// Bit `l` set while lane `l` holds a ray.
+    pub live: u16,
+}
+
+impl Packet {
+    /// Puts a ray in lane `l`, at the start of its range `k_lo ..= k_hi`.
+    pub fn start(&mut self, l: usize, st: &Steps<f32>, speed: f32, (k_lo, k_hi): (usize, usize)) {
+        for a in 0..3 {
+            self.o[a][l] = st.o.0[a];
+            self.d[a][l] = st.d.0[a];
+            self.c[a][l] = 0.0;
+        }
+        self.t_in[l] = st.t_in;
+        self.t_out[l] = st.t_out;
+        self.t_s[l] = st.t_s;
+        self.dt[l] = st.dt;
+        self.n[l] = st.n as i32;
+        self.speed[l] = speed;
+        self.k[l] = k_lo as i32;
+        self.k_hi[l] = k_hi as i32;
+        self.a[l] = 0.0;
+        self.taken[l] = 0;
+        self.live |= 1 << l;
+    }
+
+    /// Lane `l`'s step grid.
+    pub fn steps(&self, l: usize) -> Steps<f32> {
+        Steps {
+            o: V3::new(self.o[0][l], self.o[1][l], self.o[2][l]),
+            d: V3::new(self.d[0][l], self.d[1][l], self.d[2][l]),
+            t_in: self.t_in[l],
+            t_out: self.t_out[l],
+            t_s: self.t_s[l],
+            dt: self.dt[l],
+            n: self.n[l] as usize,
+        }
+    }
+
+    /// One step of every live lane; see [`simd::packet_step`]. `None` when the CPU has
+    /// no AVX-512 (then packets are not used).
+    pub fn step(&mut self, src: &Source<f32>, ert: f32) -> Option<(u16, u16)> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the feature is present; `packets_usable` held when the packet
+            // path was chosen.
+            return Some(unsafe { simd::packet_step(self, src, ert) });
+        }
+        None
+    }
+}
+
+/// Whether rays can be marched in packets for this grid and table, with at most
+/// `max_steps` steps per ray: f32 on an AVX-512 CPU with the trilinear filter.
+pub fn packets_usable(src: &Source<f32>, max_steps: usize) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        src.filter == Filter::Trilinear
+            && simd::usable(
+                src.grid.data.len(),
+                src.grid.dims[0],
+                src.pairs.len(),
+                max_steps,
+            )
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
