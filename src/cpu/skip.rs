@@ -128,25 +128,48 @@ pub struct MinMaxGrid<R> {
     pub minmax: Vec<[R; 2]>,
 }
 
-/// The smallest and largest of `values` (±∞ for none; NaNs are passed over), kept
-/// in sixteen running lanes so that the loop vectorises.
+/// The smallest and largest of `values` (±∞ for none; NaNs are passed over).
 pub(crate) fn min_max<R: Real>(values: &[R]) -> (R, R) {
-    const L: usize = 16;
-    let (mut lo, mut hi) = ([R::infinity(); L], [R::neg_infinity(); L]);
-    let chunks = values.chunks_exact(L);
-    let rest = chunks.remainder();
-    for c in chunks {
-        for i in 0..L {
-            lo[i] = if c[i] < lo[i] { c[i] } else { lo[i] };
-            hi[i] = if c[i] > hi[i] { c[i] } else { hi[i] };
+    let mut m = MinMax::new();
+    m.add(values);
+    m.get()
+}
+
+/// A running minimum and maximum kept in sixteen lanes, so that the loop vectorises.
+struct MinMax<R> {
+    lo: [R; 16],
+    hi: [R; 16],
+}
+
+impl<R: Real> MinMax<R> {
+    fn new() -> Self {
+        MinMax {
+            lo: [R::infinity(); 16],
+            hi: [R::neg_infinity(); 16],
         }
     }
-    for (i, &v) in rest.iter().enumerate() {
-        lo[i] = if v < lo[i] { v } else { lo[i] };
-        hi[i] = if v > hi[i] { v } else { hi[i] };
+
+    #[inline]
+    fn add(&mut self, values: &[R]) {
+        let chunks = values.chunks_exact(16);
+        let rest = chunks.remainder();
+        for c in chunks {
+            for i in 0..16 {
+                self.lo[i] = if c[i] < self.lo[i] { c[i] } else { self.lo[i] };
+                self.hi[i] = if c[i] > self.hi[i] { c[i] } else { self.hi[i] };
+            }
+        }
+        for (i, &v) in rest.iter().enumerate() {
+            self.lo[i] = if v < self.lo[i] { v } else { self.lo[i] };
+            self.hi[i] = if v > self.hi[i] { v } else { self.hi[i] };
+        }
     }
-    let fold = |a: [R; L], f: fn(R, R) -> R| a.into_iter().fold(a[0], f);
-    (fold(lo, R::min), fold(hi, R::max))
+
+    fn get(&self) -> (R, R) {
+        let lo = self.lo.iter().fold(R::infinity(), |m, &v| m.min(v));
+        let hi = self.hi.iter().fold(R::neg_infinity(), |m, &v| m.max(v));
+        (lo, hi)
+    }
 }
 
 /// Builds the min/max grid of `grid` for cells of `block` voxels and a filter of
@@ -165,15 +188,14 @@ pub fn min_max_grid<R: Real>(grid: &Grid<R>, block: usize, radius: usize) -> Min
             let (x0, x1) = footprint(cx, dims[0], block, radius);
             let (y0, y1) = footprint(cy, dims[1], block, radius);
             let (z0, z1) = footprint(cz, dims[2], block, radius);
-            let (mut lo, mut hi) = (R::infinity(), R::neg_infinity());
+            let mut m = MinMax::new();
             for z in z0..=z1 {
                 for y in y0..=y1 {
                     let row = dims[0] * (y + dims[1] * z);
-                    let (l, h) = min_max(&grid.data[row + x0..=row + x1]);
-                    lo = lo.min(l);
-                    hi = hi.max(h);
+                    m.add(&grid.data[row + x0..=row + x1]);
                 }
             }
+            let (lo, hi) = m.get();
             [lo, hi]
         })
         .collect();
@@ -242,6 +264,8 @@ impl<R: Real> OpacityPrefix<R> {
 pub struct Skipper<R> {
     pub grid: MinMaxGrid<R>,
     pub tf: OpacityPrefix<R>,
+    /// `tf.range_empty` of every cell, worked out once.
+    empty: Vec<bool>,
 }
 
 impl<R: Real> Skipper<R> {
@@ -249,27 +273,26 @@ impl<R: Real> Skipper<R> {
     /// prefix count of `lut` for `settings`; `None` when skipping does not apply.
     pub fn new(voxels: &Grid<R>, lut: &LutR<R>, settings: &RenderSettings) -> Option<Self> {
         let radius = skip_radius(settings)?;
-        Some(Skipper {
-            grid: min_max_grid(voxels, settings.block_size, radius),
-            tf: opacity_prefix(lut, overshoot(settings.filter, settings.classification)),
-        })
+        let grid = min_max_grid(voxels, settings.block_size, radius);
+        let tf = opacity_prefix(lut, overshoot(settings.filter, settings.classification));
+        let empty = grid
+            .minmax
+            .iter()
+            .map(|&[lo, hi]| tf.range_empty(lo, hi))
+            .collect();
+        Some(Skipper { grid, tf, empty })
     }
 
     /// Whether cell `c` is transparent. Mirrors `shaders/shared/skip.wgsl: cell_empty`.
     #[inline]
     pub fn cell_empty(&self, c: [i32; 3]) -> bool {
         let n = self.grid.cells;
-        let i = c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize);
-        let [lo, hi] = self.grid.minmax[i];
-        self.tf.range_empty(lo, hi)
+        self.empty[c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize)]
     }
 
     /// Whether every cell is transparent (nothing to render at all).
     pub fn all_empty(&self) -> bool {
-        self.grid
-            .minmax
-            .iter()
-            .all(|&[lo, hi]| self.tf.range_empty(lo, hi))
+        self.empty.iter().all(|&e| e)
     }
 }
 
