@@ -150,6 +150,7 @@ impl<R: Real> MinMax<R> {
     }
 
     #[inline]
+    #[allow(clippy::needless_range_loop)] // indexed lanes vectorise; zipped ones did not
     fn add(&mut self, values: &[R]) {
         let chunks = values.chunks_exact(16);
         let rest = chunks.remainder();
