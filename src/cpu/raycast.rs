@@ -840,8 +840,12 @@ fn cast_row_packets(
     if pk.step(src, s.ert).is_none() {
         return false;
     }
-    let mut ranges: [Option<ClippedRanges<f32>>; PACKET] = std::array::from_fn(|_| None);
-    let mut col_of = [0usize; PACKET];
+    // Packets in turn: the steps of one overlap the bookkeeping of the others.
+    const IN_TURN: usize = 2;
+    let mut pks: [Packet; IN_TURN] = std::array::from_fn(|_| pk.clone());
+    let mut ranges: [[Option<ClippedRanges<f32>>; PACKET]; IN_TURN] =
+        std::array::from_fn(|_| std::array::from_fn(|_| None));
+    let mut col_of = [[0usize; PACKET]; IN_TURN];
     let mut next_col = 0;
     let mut put = |col: usize, px: [f32; 4], n: u32| {
         for (c, v) in px.iter().enumerate() {
@@ -890,28 +894,36 @@ fn cast_row_packets(
             return;
         }
     };
-    for l in 0..PACKET {
-        refill(l, &mut pk, &mut ranges, &mut col_of, &mut put);
+    for p in 0..IN_TURN {
+        for l in 0..PACKET {
+            refill(l, &mut pks[p], &mut ranges[p], &mut col_of[p], &mut put);
+        }
     }
-    while pk.live != 0 {
-        let Some((ended, hit)) = pk.step(src, s.ert) else {
-            unreachable!("checked before the first ray");
-        };
-        let mut left = ended;
-        while left != 0 {
-            let l = left.trailing_zeros() as usize;
-            left &= left - 1;
-            if hit & (1 << l) == 0 {
-                if let Some((lo, hi)) = ranges[l].as_mut().and_then(|r| r.next(skip)) {
-                    pk.k[l] = lo as i32;
-                    pk.k_hi[l] = hi as i32;
-                    continue;
-                }
+    while pks.iter().any(|pk| pk.live != 0) {
+        for p in 0..IN_TURN {
+            let pk = &mut pks[p];
+            if pk.live == 0 {
+                continue;
             }
-            let c = [pk.c[0][l], pk.c[1][l], pk.c[2][l]];
-            put(col_of[l], over_background(c, pk.a[l], s.bg), pk.taken[l]);
-            pk.live &= !(1 << l);
-            refill(l, &mut pk, &mut ranges, &mut col_of, &mut put);
+            let Some((ended, hit)) = pk.step(src, s.ert) else {
+                unreachable!("checked before the first ray");
+            };
+            let mut left = ended;
+            while left != 0 {
+                let l = left.trailing_zeros() as usize;
+                left &= left - 1;
+                if hit & (1 << l) == 0 {
+                    if let Some((lo, hi)) = ranges[p][l].as_mut().and_then(|r| r.next(skip)) {
+                        pk.k[l] = lo as i32;
+                        pk.k_hi[l] = hi as i32;
+                        continue;
+                    }
+                }
+                let c = [pk.c[0][l], pk.c[1][l], pk.c[2][l]];
+                put(col_of[p][l], over_background(c, pk.a[l], s.bg), pk.taken[l]);
+                pk.live &= !(1 << l);
+                refill(l, pk, &mut ranges[p], &mut col_of[p], &mut put);
+            }
         }
     }
     true
