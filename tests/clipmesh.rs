@@ -8,7 +8,7 @@ mod common;
 use glam::DVec3;
 use std::path::Path;
 use std::sync::Arc;
-use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+use voxlab::camera::{AxisView, Camera, Projection};
 use voxlab::cpu::clipmesh::{intersect_triangle, make_segments, ClipTriangles, OPEN_END};
 use voxlab::cpu::raycast::render;
 use voxlab::io::mesh::{parse_obj, parse_ply, read_mesh, TriMesh};
@@ -49,19 +49,11 @@ fn phantom(n: usize) -> AnyVolume {
 }
 
 fn perspective(size: usize) -> Camera {
-    Camera::orbit(
-        DVec3::ZERO,
-        [256.0; 3],
-        Orbit {
-            azimuth_deg: 33.0,
-            elevation_deg: 21.0,
-            distance_mm: Some(540.0),
-        },
+    common::orbit_camera(
         Projection::Perspective { fov_y_deg: 30.0 },
         size,
         size * 3 / 4,
     )
-    .unwrap()
 }
 
 fn mesh(m: TriMesh, units: ClipMeshUnits) -> Option<ClipMesh> {

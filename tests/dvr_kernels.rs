@@ -3,8 +3,9 @@
 //! counts, to the last bit, in f32 and f64, over views, filters, skipping, clipping,
 //! jitter, shading, early termination, windows and value ranges.
 
-use glam::DVec3;
-use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+mod common;
+
+use voxlab::camera::{AxisView, Camera, Projection};
 use voxlab::cpu::raycast::{render_with, Kernel, RenderOutput};
 use voxlab::phantom::Phantom;
 use voxlab::real::Real;
@@ -118,21 +119,7 @@ fn volume(n: usize) -> AnyVolume {
 }
 
 fn camera(vol: &AnyVolume, cam: Cam) -> Camera {
-    let orbit = |projection| {
-        Camera::orbit(
-            DVec3::ZERO,
-            [256.0; 3],
-            Orbit {
-                azimuth_deg: 33.0,
-                elevation_deg: 21.0,
-                distance_mm: Some(540.0),
-            },
-            projection,
-            61,
-            47,
-        )
-        .unwrap()
-    };
+    let orbit = |projection| common::orbit_camera(projection, 61, 47);
     let d = vol.dims();
     match cam {
         Cam::Perspective => orbit(Projection::Perspective { fov_y_deg: 30.0 }),

@@ -9,7 +9,7 @@ mod common;
 
 use glam::DVec3;
 use std::sync::Arc;
-use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+use voxlab::camera::{AxisView, Camera, Projection};
 use voxlab::cpu::clipmesh::ClipTriangles;
 use voxlab::io::mesh::TriMesh;
 use voxlab::metrics::Tolerance;
@@ -55,19 +55,9 @@ fn camera(vol: &AnyVolume, cam: Cam) -> Camera {
     let d = vol.dims();
     match cam {
         Cam::Axis => Camera::axis_view(d, vol.affine(), AxisView::MinusY, d[0], d[2]).unwrap(),
-        Cam::Perspective => Camera::orbit(
-            DVec3::ZERO,
-            [256.0; 3],
-            Orbit {
-                azimuth_deg: 33.0,
-                elevation_deg: 21.0,
-                distance_mm: Some(540.0),
-            },
-            Projection::Perspective { fov_y_deg: 30.0 },
-            32,
-            24,
-        )
-        .unwrap(),
+        Cam::Perspective => {
+            common::orbit_camera(Projection::Perspective { fov_y_deg: 30.0 }, 32, 24)
+        }
     }
 }
 

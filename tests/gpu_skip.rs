@@ -4,8 +4,7 @@
 
 mod common;
 
-use glam::DVec3;
-use voxlab::camera::{AxisView, Camera, Orbit, Projection};
+use voxlab::camera::{AxisView, Camera, Projection};
 use voxlab::cpu::filter::Grid;
 use voxlab::gpu::skip::{SkipGridParams, MINMAX_WGSL};
 use voxlab::metrics::Tolerance;
@@ -60,21 +59,7 @@ enum Cam {
 }
 
 fn camera(vol: &AnyVolume, cam: Cam, size: usize) -> Camera {
-    let orbit = |projection| {
-        Camera::orbit(
-            DVec3::ZERO,
-            [256.0; 3],
-            Orbit {
-                azimuth_deg: 33.0,
-                elevation_deg: 21.0,
-                distance_mm: Some(540.0),
-            },
-            projection,
-            size,
-            size * 3 / 4,
-        )
-        .unwrap()
-    };
+    let orbit = |projection| common::orbit_camera(projection, size, size * 3 / 4);
     match cam {
         Cam::Perspective => orbit(Projection::Perspective { fov_y_deg: 30.0 }),
         Cam::Ortho => orbit(Projection::Orthographic {

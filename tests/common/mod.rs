@@ -285,3 +285,29 @@ pub fn ct_cases(
         ("cone", cone, rtk_grid([21, 15, 18], [1.1, 1.3, 0.9])),
     ]
 }
+
+// ---------------------------------------------------------------------------------
+// Scenes
+// ---------------------------------------------------------------------------------
+
+/// The ray-casting tests' orbit camera: 33° azimuth, 21° elevation, 540 mm from the
+/// centre of a 256 mm scene (the phantoms' world box).
+pub fn orbit_camera(
+    projection: voxlab::camera::Projection,
+    width: usize,
+    height: usize,
+) -> voxlab::camera::Camera {
+    voxlab::camera::Camera::orbit(
+        DVec3::ZERO,
+        [256.0; 3],
+        voxlab::camera::Orbit {
+            azimuth_deg: 33.0,
+            elevation_deg: 21.0,
+            distance_mm: Some(540.0),
+        },
+        projection,
+        width,
+        height,
+    )
+    .unwrap()
+}
