@@ -12,9 +12,7 @@ use voxlab::camera::{AxisView, Camera, Projection};
 use voxlab::cpu::clipmesh::{intersect_triangle, make_segments, ClipTriangles, OPEN_END};
 use voxlab::cpu::raycast::render;
 use voxlab::io::mesh::{parse_obj, parse_ply, read_mesh, TriMesh};
-use voxlab::phantom::Phantom;
 use voxlab::settings::{ClipBox, ClipMesh, ClipMeshUnits, ClipSpace, Mode, RenderSettings};
-use voxlab::transfer::{ControlPoint, TransferFunction};
 use voxlab::{AnyVolume, Volume};
 
 fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
@@ -25,28 +23,9 @@ fn p() -> &'static Path {
     Path::new("test.mesh")
 }
 
-fn sparse_tf() -> TransferFunction {
-    let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "sparse".into(),
-        domain: [0.0, 1.0],
-        points: vec![
-            p(0.0, [0.0; 4]),
-            p(0.6, [1.0, 0.8, 0.3, 0.0]),
-            p(1.0, [0.9, 0.9, 0.9, 0.25]),
-        ],
-        window: Default::default(),
-        interpolation: Default::default(),
-        faux_shading: None,
-    }
-}
+use common::sparse_tf;
 
-fn phantom(n: usize) -> AnyVolume {
-    Phantom::shepp_logan_modified()
-        .sample([n, n + 3, n - 2])
-        .unwrap()
-        .into()
-}
+use common::odd_phantom as phantom;
 
 fn perspective(size: usize) -> Camera {
     common::orbit_camera(

@@ -15,28 +15,13 @@ use voxlab::io::mesh::TriMesh;
 use voxlab::metrics::Tolerance;
 use voxlab::phantom::Phantom;
 use voxlab::settings::{ClipMesh, ClipMeshUnits, Compositing, Mode, RenderSettings};
-use voxlab::transfer::{ControlPoint, TransferFunction};
 use voxlab::AnyVolume;
 
 fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
     &|_, _| {}
 }
 
-fn sparse_tf() -> TransferFunction {
-    let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "sparse".into(),
-        domain: [0.0, 1.0],
-        points: vec![
-            p(0.0, [0.0; 4]),
-            p(0.6, [1.0, 0.8, 0.3, 0.0]),
-            p(1.0, [0.9, 0.9, 0.9, 0.25]),
-        ],
-        window: Default::default(),
-        interpolation: Default::default(),
-        faux_shading: None,
-    }
-}
+use common::sparse_tf;
 
 fn phantom() -> AnyVolume {
     Phantom::shepp_logan_modified()

@@ -12,7 +12,7 @@ use voxlab::phantom::Phantom;
 use voxlab::settings::{
     Classification, ClipBox, ClipSpace, Compositing, Filter, Mode, RenderSettings,
 };
-use voxlab::transfer::{ControlPoint, TransferFunction};
+use voxlab::transfer::TransferFunction;
 use voxlab::AnyVolume;
 
 /// The ray caster's DVR bound (tests/gpu_raycast.rs: EXACT_DVR, f32 rounding of sample
@@ -27,29 +27,9 @@ fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
     &|_, _| {}
 }
 
-/// Opaque only above 0.6 (the skull), as in tests/skip.rs.
-fn sparse_tf() -> TransferFunction {
-    let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "sparse".into(),
-        domain: [0.0, 1.0],
-        points: vec![
-            p(0.0, [0.0; 4]),
-            p(0.6, [1.0, 0.8, 0.3, 0.0]),
-            p(1.0, [0.9, 0.9, 0.9, 0.25]),
-        ],
-        window: Default::default(),
-        interpolation: Default::default(),
-        faux_shading: None,
-    }
-}
+use common::sparse_tf;
 
-fn phantom(n: usize) -> AnyVolume {
-    Phantom::shepp_logan_modified()
-        .sample([n, n + 3, n - 2])
-        .unwrap()
-        .into()
-}
+use common::odd_phantom as phantom;
 
 #[derive(Clone, Copy, Debug)]
 enum Cam {

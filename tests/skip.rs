@@ -10,43 +10,20 @@ use voxlab::camera::{AxisView, Camera, Orbit, Projection};
 use voxlab::cpu::filter::{sample, Grid};
 use voxlab::cpu::raycast::render;
 use voxlab::cpu::skip::{cell_count, Skipper};
-use voxlab::phantom::Phantom;
 use voxlab::real::{Real, V3};
 use voxlab::settings::{
     Classification, ClipBox, ClipSpace, Compositing, Filter, Mode, RenderSettings,
 };
-use voxlab::transfer::{ControlPoint, TransferFunction};
+use voxlab::transfer::TransferFunction;
 use voxlab::{AnyVolume, Volume};
 
 fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
     &|_, _| {}
 }
 
-/// Opaque only above 0.6: the modified Shepp–Logan's skull (1.0), translucent
-/// (α = 0.25 per voxel) so rays cross it twice; air, brain (0.2), ventricles (0) and
-/// the small ellipsoids (0.3) are transparent.
-pub fn sparse_tf() -> TransferFunction {
-    let p = |value: f64, rgba: [f64; 4]| ControlPoint { value, rgba };
-    TransferFunction {
-        name: "sparse".into(),
-        domain: [0.0, 1.0],
-        points: vec![
-            p(0.0, [0.0; 4]),
-            p(0.6, [1.0, 0.8, 0.3, 0.0]),
-            p(1.0, [0.9, 0.9, 0.9, 0.25]),
-        ],
-        window: Default::default(),
-        interpolation: Default::default(),
-        faux_shading: None,
-    }
-}
+use common::sparse_tf;
 
-fn phantom(n: usize) -> AnyVolume {
-    Phantom::shepp_logan_modified()
-        .sample([n, n + 3, n - 2])
-        .unwrap()
-        .into()
-}
+use common::odd_phantom as phantom;
 
 #[derive(Clone, Copy, Debug)]
 enum Cam {

@@ -311,3 +311,31 @@ pub fn orbit_camera(
     )
     .unwrap()
 }
+
+/// The modified Shepp–Logan phantom on an `n × (n+3) × (n−2)` grid (odd shapes catch
+/// axis mix-ups).
+pub fn odd_phantom(n: usize) -> AnyVolume {
+    voxlab::phantom::Phantom::shepp_logan_modified()
+        .sample([n, n + 3, n - 2])
+        .unwrap()
+        .into()
+}
+
+/// Opaque only above 0.6: the modified Shepp–Logan's skull (1.0), translucent
+/// (α = 0.25 per voxel) so rays cross it twice; air, brain (0.2), ventricles (0) and
+/// the small ellipsoids (0.3) are transparent, so empty-space skipping has much to skip.
+pub fn sparse_tf() -> voxlab::transfer::TransferFunction {
+    let p = |value: f64, rgba: [f64; 4]| voxlab::transfer::ControlPoint { value, rgba };
+    voxlab::transfer::TransferFunction {
+        name: "sparse".into(),
+        domain: [0.0, 1.0],
+        points: vec![
+            p(0.0, [0.0; 4]),
+            p(0.6, [1.0, 0.8, 0.3, 0.0]),
+            p(1.0, [0.9, 0.9, 0.9, 0.25]),
+        ],
+        window: Default::default(),
+        interpolation: Default::default(),
+        faux_shading: None,
+    }
+}
