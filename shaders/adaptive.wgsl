@@ -1,7 +1,8 @@
 // The adaptive ray caster: one invocation per pixel; DVR through the pre-integrated
 // transfer function, front to back, trilinear, no shading. Regular, adaptive or direct
 // steps (params.dims.w). Every helper mirrors its Rust twin in src/cpu/adaptive.rs or
-// src/cpu/preintegrate.rs by name. Prepended: shaders/shared/adaptive_params.wgsl.
+// src/cpu/preintegrate.rs by name. Prepended: shaders/shared/adaptive_params.wgsl and
+// shaders/shared/opacity.wgsl (step_opacity).
 //
 // Rays come from the host (origin and direction in index space, computed in f64 and
 // rounded to f32 exactly as the CPU's f32 path rounds them), so both start from the
@@ -101,7 +102,7 @@ fn preint_step(e: vec4<f32>, len: f32) -> vec4<f32> {
     if (a <= 0.0) {
         return vec4<f32>(0.0);
     }
-    let a2 = 1.0 - pow(1.0 - a, len);
+    let a2 = step_opacity(a, len);
     let k = a2 / a;
     return vec4<f32>(e.x * k, e.y * k, e.z * k, a2);
 }

@@ -7,7 +7,7 @@
 // Same sample positions, step rule, classification, shading and compositing as
 // src/cpu/raycast.rs: cast_ray with the field of src/cpu/d2vr.rs: ProjectionField.
 // Prepended at load time: ct_geometry.wgsl, raycast_params.wgsl, d2vr_params.wgsl,
-// classify.wgsl, rays.wgsl (shared with the ray caster), and the generated `fn tap(i: u32) -> f32` (f32 or f16 storage).
+// classify.wgsl, rays.wgsl (shared with the ray caster), opacity.wgsl (step_opacity), and the generated `fn tap(i: u32) -> f32` (f32 or f16 storage).
 
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
@@ -268,7 +268,7 @@ fn d2vr_chunk(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         var alpha = 1.0;
         if (c.w < 1.0) {
-            alpha = 1.0 - pow(1.0 - c.w, len * speed / params.misc.x);
+            alpha = step_opacity(c.w, len * speed / params.misc.x);
         }
         var rgb = c.xyz;
         if (params.flags.y == 1u) {

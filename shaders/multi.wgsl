@@ -5,7 +5,8 @@
 // apply_taps), src/cpu/gradient.rs (gradient_stencil: central, forward) and
 // src/cpu/raycast.rs (shade_gradient). Each helper names its Rust twin.
 // Prepended at load time by src/gpu/multi.rs: shaders/shared/multi_params.wgsl and
-// shaders/shared/rays.wgsl (camera_ray, intersect_box, phong, normalize_or_zero).
+// shaders/shared/rays.wgsl (camera_ray, intersect_box, phong, normalize_or_zero) and
+// shaders/shared/opacity.wgsl (ln_1p, exp_m1).
 //
 // Loops: llvmpipe stops every loop of an invocation after 65535 iterations in all, so
 // the ray march is the only long loop; the per-volume work is written out three times
@@ -23,27 +24,7 @@
 
 const FILTER_NEAREST: u32 = 0u;
 
-// mirrors src/real.rs: Real::ln_1p (accurate for small x: Goldberg's correction).
-fn ln_1p(x: f32) -> f32 {
-    let u = 1.0 + x;
-    if (u == 1.0) {
-        return x;
-    }
-    return log(u) * (x / (u - 1.0));
-}
-
-// mirrors src/real.rs: Real::exp_m1 (accurate for small x).
-fn exp_m1(x: f32) -> f32 {
-    let u = exp(x);
-    if (u == 1.0) {
-        return x;
-    }
-    let um1 = u - 1.0;
-    if (um1 == -1.0) {
-        return -1.0;
-    }
-    return um1 * (x / log(u));
-}
+// ln_1p and exp_m1: shaders/shared/opacity.wgsl.
 
 fn clamp_index(i: i32, n: u32) -> i32 {
     return clamp(i, 0, i32(n) - 1);

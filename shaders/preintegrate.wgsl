@@ -1,6 +1,6 @@
 // The pre-integrated transfer function: one invocation per table entry (front i, back
 // j). Mirrors src/cpu/preintegrate.rs (see its module docs for the definition).
-// Prepended: shaders/shared/adaptive_params.wgsl.
+// Prepended: shaders/shared/adaptive_params.wgsl and opacity.wgsl (step_opacity).
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
 @group(0) @binding(1) var<storage, read> lut: array<vec4<f32>>;
@@ -34,7 +34,7 @@ fn preint_entry(xf: f32, xb: f32) -> vec4<f32> {
         if (s.w <= 0.0) {
             continue;
         }
-        let alpha = 1.0 - pow(1.0 - s.w, inv_k);
+        let alpha = step_opacity(s.w, inv_k);
         let w = (1.0 - a) * alpha;
         c = c + w * s.xyz;
         a = a + w;

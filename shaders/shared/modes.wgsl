@@ -52,7 +52,7 @@ fn over_background(c: vec3<f32>, a: f32) -> vec4<f32> {
 // Opacity correction for a step of len·speed voxels (as in cast_ray).
 fn corrected_alpha(a: f32, len: f32, speed: f32) -> f32 {
     if (a < 1.0) {
-        return 1.0 - pow(1.0 - a, len * speed / params.misc.x);
+        return step_opacity(a, len * speed / params.misc.x);
     }
     return 1.0;
 }

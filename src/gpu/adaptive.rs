@@ -262,7 +262,13 @@ pub fn render(
         data: values.data().to_vec(),
     };
     let dev = &ctx.device;
-    let module = ctx.shader("adaptive.wgsl", &format!("{PARAMS_WGSL}\n{ADAPTIVE_WGSL}"))?;
+    let module = ctx.shader(
+        "adaptive.wgsl",
+        &format!(
+            "{PARAMS_WGSL}\n{}\n{ADAPTIVE_WGSL}",
+            super::raycast::OPACITY_WGSL
+        ),
+    )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

@@ -83,11 +83,12 @@ pub fn shader_source(storage: ProjStorage) -> String {
         }
     };
     format!(
-        "{}\n{}\n{PARAMS_WGSL}\n{}\n{}\n{tap}\n{D2VR_WGSL}",
+        "{}\n{}\n{PARAMS_WGSL}\n{}\n{}\n{}\n{tap}\n{D2VR_WGSL}",
         crate::ct::GEOMETRY_WGSL,
         super::raycast::PARAMS_WGSL,
         super::raycast::CLASSIFY_WGSL,
         super::raycast::RAYS_WGSL,
+        super::raycast::OPACITY_WGSL,
     )
 }
 

@@ -79,7 +79,11 @@ pub const MULTI_WGSL: &str = include_str!("../../shaders/multi.wgsl");
 
 /// The complete shader: the parameter struct, the shared ray helpers, the body.
 pub fn multi_shader() -> String {
-    format!("{PARAMS_WGSL}\n{}\n{MULTI_WGSL}", super::raycast::RAYS_WGSL)
+    format!(
+        "{PARAMS_WGSL}\n{}\n{}\n{MULTI_WGSL}",
+        super::raycast::RAYS_WGSL,
+        super::raycast::OPACITY_WGSL
+    )
 }
 
 /// Pixels per dispatch: keeps one submission well under the ~10 s after which a

@@ -29,7 +29,10 @@ pub fn preintegrate_buffer(
     let dev = &ctx.device;
     let module = ctx.shader(
         "preintegrate.wgsl",
-        &format!("{PARAMS_WGSL}\n{PREINTEGRATE_WGSL}"),
+        &format!(
+            "{PARAMS_WGSL}\n{}\n{PREINTEGRATE_WGSL}",
+            super::raycast::OPACITY_WGSL
+        ),
     )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };

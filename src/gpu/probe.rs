@@ -100,3 +100,52 @@ pub fn self_test(ctx: &GpuContext) -> Result<usize> {
     }
     Ok(x.len())
 }
+
+/// Evaluates the compositing shaders' `ln_1p`, `exp_m1` and `step_opacity`
+/// (`shaders/shared/opacity.wgsl`, through `shaders/opacity_probe.wgsl`) on the device:
+/// each input `[x₁, x₂, a, r]` gives `[ln_1p(x₁), exp_m1(x₂), step_opacity(a, r)]`.
+pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]>> {
+    if inputs.is_empty() {
+        return Ok(Vec::new());
+    }
+    let n = u32::try_from(inputs.len())
+        .map_err(|_| Error::too_large("opacity probe input", "over 2^32 values"))?;
+    let dev = &ctx.device;
+    let source = format!(
+        "{}\n{}",
+        super::raycast::OPACITY_WGSL,
+        include_str!("../../shaders/opacity_probe.wgsl")
+    );
+    let module = ctx.shader("opacity_probe.wgsl", &source)?;
+    let xbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("opacity probe in"),
+        contents: bytemuck::cast_slice(inputs),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let bytes = std::mem::size_of_val(inputs) as u64;
+    let ybuf = ctx.storage_buffer("opacity probe out", bytes)?;
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("opacity probe"),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let bind = ctx.bind_group(
+        "opacity probe",
+        &pipeline.get_bind_group_layout(0),
+        &[xbuf.as_entire_binding(), ybuf.as_entire_binding()],
+    );
+    let mut enc = dev.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(n.div_ceil(64), 1, 1);
+    }
+    ctx.queue.submit([enc.finish()]);
+    let out = ctx.read_buffer(&ybuf, bytes)?;
+    let out: &[[f32; 4]] = bytemuck::cast_slice(&out);
+    Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())
+}
