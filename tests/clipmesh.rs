@@ -305,3 +305,121 @@ fn enclosing_and_bricks_meshes_render_the_unclipped_image() {
     };
     assert!(render::<f64>(&vol, &sparse_tf(), &cam, &mida, none()).is_err());
 }
+
+/// The hierarchy (`ClipTriangles::segments`) finds exactly the hits of testing every
+/// triangle (`segments_brute_force`), so the same segments, on a brick wall of cubes
+/// with shared faces, the cut-away mesh and a random triangle soup; for random lines
+/// and for lines along the axes and diagonals through the bricks' edges and corners,
+/// where the boxes are flat and a slab test without padding drops hits.
+#[test]
+fn hierarchy_finds_every_hit_of_the_brute_force_search() {
+    let mut rng = common::Rng(0x9e37_79b9_7f4a_7c15);
+    let mut bricks = TriMesh::default();
+    for z in 0..4 {
+        for y in 0..5 {
+            for x in 0..6 {
+                if (x * 7 + y * 3 + z * 5) % 4 != 0 {
+                    let lo = [x as f64, y as f64, z as f64].map(|c| c * 2.0 - 5.0);
+                    bricks.append_cuboid(lo, lo.map(|c| c + 2.0));
+                }
+            }
+        }
+    }
+    let cutaway = read_mesh(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("data/meshes/cutaway.obj")
+            .as_path(),
+    )
+    .unwrap();
+    let mut soup = TriMesh::default();
+    for _ in 0..300 {
+        let base = soup.vertices.len() as u32;
+        let c = [0; 3].map(|_| rng.unit() * 10.0 - 5.0);
+        for _ in 0..3 {
+            soup.vertices
+                .push([0; 3].map(|a: usize| c[a % 3] + rng.unit() * 2.0 - 1.0));
+        }
+        soup.triangles.push([base, base + 1, base + 2]);
+    }
+    // A flat sheet of 0.7-mm squares at z = 0.3: its leaves' boxes have no thickness.
+    let mut sheet = TriMesh::default();
+    for j in 0..=16 {
+        for i in 0..=16 {
+            sheet
+                .vertices
+                .push([i as f64 * 0.7 - 5.6, j as f64 * 0.7 - 5.6, 0.3]);
+        }
+    }
+    for j in 0..16u32 {
+        for i in 0..16u32 {
+            let v = j * 17 + i;
+            sheet.triangles.push([v, v + 1, v + 18]);
+            sheet.triangles.push([v, v + 18, v + 17]);
+        }
+    }
+    let mut sheet_rays = Vec::new();
+    for j in 0..=32 {
+        for i in 0..=32 {
+            // Through the sheet's corners and edge midpoints, obliquely.
+            let p = DVec3::new(i as f64 * 0.35 - 5.6, j as f64 * 0.35 - 5.6, 0.3);
+            let d = DVec3::new(0.3 + 0.01 * i as f64, -0.2 + 0.013 * j as f64, 1.0).normalize();
+            sheet_rays.push((p - 7.0 * d, d));
+        }
+    }
+    for (name, m) in [
+        ("bricks", &bricks),
+        ("cutaway", &cutaway),
+        ("soup", &soup),
+        ("sheet", &sheet),
+    ] {
+        let tris = ClipTriangles::new(m);
+        assert!(tris.bvh_nodes() > 1, "{name}: a hierarchy was built");
+        let mut rays: Vec<(DVec3, DVec3)> = (0..3000)
+            .map(|_| {
+                let o = DVec3::new(rng.unit(), rng.unit(), rng.unit()) * 40.0 - 20.0;
+                let d = DVec3::new(rng.unit(), rng.unit(), rng.unit()) * 2.0 - 1.0;
+                (o, d.normalize())
+            })
+            .collect();
+        // Through the bricks' edges and corners (even integers from −5 … offsets).
+        for i in -3..=3 {
+            for j in -3..=3 {
+                let (u, v) = (i as f64 * 2.0 - 1.0, j as f64 * 2.0 - 1.0);
+                for d in [
+                    DVec3::X,
+                    DVec3::Y,
+                    DVec3::Z,
+                    -DVec3::Z,
+                    DVec3::ONE.normalize(),
+                    DVec3::new(1.0, 1.0, 0.0).normalize(),
+                ] {
+                    let o = if d.z == 0.0 {
+                        DVec3::new(u - 20.0 * d.x, v - 20.0 * d.y, u)
+                    } else {
+                        DVec3::new(u, v, 0.0) - 20.0 * d
+                    };
+                    rays.push((o, d));
+                }
+            }
+        }
+        if name == "sheet" {
+            rays.extend(sheet_rays.iter().copied());
+        }
+        let mut hits = 0;
+        for (o, d) in rays {
+            for t0 in [0.0, 20.0] {
+                let fast = tris.segments(o, d, t0);
+                assert_eq!(
+                    fast,
+                    tris.segments_brute_force(o, d, t0),
+                    "{name}: ray {o} {d} from {t0}"
+                );
+                hits += fast.count;
+            }
+        }
+        assert!(
+            hits > 100,
+            "{name}: the rays hit the mesh ({hits} segments)"
+        );
+    }
+}

@@ -27,6 +27,9 @@
 //! A ray exactly through a vertex is not guaranteed to count once.
 //! The test runs in f64 on the CPU (both precisions; the segments are then rounded to
 //! the working precision) and in f32 on the GPU (`shaders/clipmesh.wgsl`).
+//! On the CPU a bounding-volume hierarchy with padded boxes hands each ray only the
+//! triangles near its line ([`ClipTriangles::segments`]); it finds the same hits as
+//! testing every triangle. The GPU tests every triangle.
 //!
 //! **Segments.** Hits at `t ≤ t₀` (the ray's start) are only counted: an odd count
 //! means the ray starts inside, and `t₀` becomes the first boundary. Sorted with the
@@ -178,17 +181,18 @@ pub fn make_segments(t0: f64, behind: usize, forward: &[f64]) -> Segments {
     s
 }
 
-/// A clipping mesh resolved for one render: its triangles in world millimetres and
-/// their bounding box.
+/// A clipping mesh resolved for one render: its triangles in world millimetres, their
+/// bounding box, and a bounding-volume hierarchy over them ([`Bvh`]).
 #[derive(Clone, Debug)]
 pub struct ClipTriangles {
     pub triangles: Vec<Triangle>,
     pub lo: [f64; 3],
     pub hi: [f64; 3],
+    bvh: Bvh,
 }
 
 impl ClipTriangles {
-    /// Flattens a (validated) mesh.
+    /// Flattens a (validated) mesh and builds its hierarchy.
     #[allow(clippy::needless_range_loop)]
     pub fn new(mesh: &TriMesh) -> Self {
         let triangles: Vec<Triangle> = (0..mesh.triangles.len())
@@ -204,39 +208,45 @@ impl ClipTriangles {
                 }
             }
         }
-        ClipTriangles { triangles, lo, hi }
+        let bvh = Bvh::new(&triangles, lo, hi);
+        ClipTriangles {
+            triangles,
+            lo,
+            hi,
+            bvh,
+        }
     }
 
-    /// The inside segments of the ray `origin + dir·t`, `t ≥ t0` (f64, exact test).
-    #[allow(clippy::needless_range_loop)]
+    /// How many nodes the hierarchy has (a leaf holds at most [`Bvh::LEAF`] triangles).
+    pub fn bvh_nodes(&self) -> usize {
+        self.bvh.nodes.len()
+    }
+
+    /// The inside segments of the ray `origin + dir·t`, `t ≥ t0` (f64, exact test):
+    /// the hierarchy hands over the triangles whose (padded) boxes the ray's line
+    /// crosses, each gets the watertight test. The same hits as
+    /// [`segments_brute_force`](Self::segments_brute_force), so the same segments.
     pub fn segments(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
         let (o, d) = (origin.to_array(), dir.to_array());
-        // A ray that misses the bounding box hits nothing.
-        let (bl, bh) = (DVec3::from_array(self.lo), DVec3::from_array(self.hi));
-        let mut miss = self.triangles.is_empty();
-        for a in 0..3 {
-            if d[a] == 0.0 && (o[a] < bl[a] || o[a] > bh[a]) {
-                miss = true;
-            }
-        }
-        if !miss {
-            let inv = dir.recip();
-            let (ta, tb) = ((bl - origin) * inv, (bh - origin) * inv);
-            let t_lo = ta.min(tb);
-            let t_hi = ta.max(tb);
-            let mut near = f64::NEG_INFINITY;
-            let mut far = f64::INFINITY;
-            for a in 0..3 {
-                if d[a] != 0.0 {
-                    near = near.max(t_lo[a]);
-                    far = far.min(t_hi[a]);
+        let mut behind = 0usize;
+        let mut forward = Vec::new();
+        self.bvh.for_each_candidate(o, d, |i| {
+            if let Some(t) = intersect_triangle(o, d, &self.triangles[i]) {
+                if t <= t0 {
+                    behind += 1;
+                } else {
+                    forward.push(t);
                 }
             }
-            miss = near > far;
-        }
-        if miss {
-            return Segments::default();
-        }
+        });
+        forward.sort_by(f64::total_cmp);
+        make_segments(t0, behind, &forward)
+    }
+
+    /// [`segments`](Self::segments) by testing every triangle: the reference the
+    /// hierarchy is checked against.
+    pub fn segments_brute_force(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
+        let (o, d) = (origin.to_array(), dir.to_array());
         let mut behind = 0usize;
         let mut forward = Vec::new();
         for tri in &self.triangles {
@@ -250,6 +260,151 @@ impl ClipTriangles {
         }
         forward.sort_by(f64::total_cmp);
         make_segments(t0, behind, &forward)
+    }
+}
+
+/// A bounding-volume hierarchy over a mesh's triangles, for the CPU's segment search.
+///
+/// **Build**: top down; a node's triangles are split at the median of their centroids
+/// along the longest axis of the centroids' box, until at most [`Bvh::LEAF`] remain.
+/// Nodes are stored depth first (the left child follows its parent).
+///
+/// **Conservative boxes**: every box is widened by `pad` = 1e-9 × (the mesh box's
+/// largest extent or coordinate): far more than the rounding of the slab test (about
+/// 1e-16 relative) and of the watertight test's hit, so no triangle the exact test hits
+/// is ever left out. A false candidate only costs one exact test. Hits at any `t`
+/// count (those before the ray's start decide whether it starts inside), so the test
+/// is for the whole line, not a half ray.
+#[derive(Clone, Debug)]
+struct Bvh {
+    nodes: Vec<BvhNode>,
+    /// Triangle indices, grouped by leaf.
+    order: Vec<u32>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct BvhNode {
+    lo: [f64; 3],
+    hi: [f64; 3],
+    /// Leaf: the first index in `order`; interior: the right child.
+    first: u32,
+    /// Leaf: how many triangles; interior: 0.
+    count: u32,
+}
+
+impl Bvh {
+    /// The most triangles in a leaf.
+    const LEAF: usize = 4;
+
+    fn new(triangles: &[Triangle], lo: [f64; 3], hi: [f64; 3]) -> Self {
+        let scale = (0..3)
+            .map(|a| (hi[a] - lo[a]).max(lo[a].abs()).max(hi[a].abs()))
+            .fold(0.0f64, f64::max);
+        let pad = 1e-9 * scale;
+        let centroid = |t: &Triangle| [0, 1, 2].map(|a| (t[0][a] + t[1][a] + t[2][a]) / 3.0);
+        let centroids: Vec<[f64; 3]> = triangles.iter().map(centroid).collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * triangles.len().div_ceil(Self::LEAF));
+        if !triangles.is_empty() {
+            Self::build(triangles, &centroids, pad, &mut order, 0, &mut nodes);
+        }
+        Bvh { nodes, order }
+    }
+
+    /// Builds the node for `order[start..start + ids.len()]` (`ids`), returns its index.
+    fn build(
+        triangles: &[Triangle],
+        centroids: &[[f64; 3]],
+        pad: f64,
+        ids: &mut [u32],
+        start: usize,
+        nodes: &mut Vec<BvhNode>,
+    ) -> usize {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        let mut clo = [f64::INFINITY; 3];
+        let mut chi = [f64::NEG_INFINITY; 3];
+        for &i in ids.iter() {
+            for p in &triangles[i as usize] {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+            }
+            let c = centroids[i as usize];
+            for a in 0..3 {
+                clo[a] = clo[a].min(c[a]);
+                chi[a] = chi[a].max(c[a]);
+            }
+        }
+        let node = nodes.len();
+        nodes.push(BvhNode {
+            lo: lo.map(|x| x - pad),
+            hi: hi.map(|x| x + pad),
+            first: start as u32,
+            count: ids.len() as u32,
+        });
+        if ids.len() <= Self::LEAF {
+            return node;
+        }
+        let axis = (0..3)
+            .max_by(|&a, &b| (chi[a] - clo[a]).total_cmp(&(chi[b] - clo[b])))
+            .unwrap_or(0);
+        let mid = ids.len() / 2;
+        ids.select_nth_unstable_by(mid, |&p, &q| {
+            centroids[p as usize][axis].total_cmp(&centroids[q as usize][axis])
+        });
+        let (left, right) = ids.split_at_mut(mid);
+        Self::build(triangles, centroids, pad, left, start, nodes);
+        let r = Self::build(triangles, centroids, pad, right, start + mid, nodes);
+        nodes[node].first = r as u32;
+        nodes[node].count = 0;
+        node
+    }
+
+    /// Calls `f` with every triangle whose box the line `o + d·t` (any `t`) crosses.
+    fn for_each_candidate(&self, o: [f64; 3], d: [f64; 3], mut f: impl FnMut(usize)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let inv = d.map(|x| 1.0 / x);
+        let crosses = |n: &BvhNode| {
+            let mut near = f64::NEG_INFINITY;
+            let mut far = f64::INFINITY;
+            for a in 0..3 {
+                if d[a] == 0.0 {
+                    if o[a] < n.lo[a] || o[a] > n.hi[a] {
+                        return false;
+                    }
+                } else {
+                    let (t1, t2) = ((n.lo[a] - o[a]) * inv[a], (n.hi[a] - o[a]) * inv[a]);
+                    near = near.max(t1.min(t2));
+                    far = far.min(t1.max(t2));
+                }
+            }
+            near <= far
+        };
+        let mut stack = [0u32; 64];
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let i = stack[top] as usize;
+            let n = &self.nodes[i];
+            if !crosses(n) {
+                continue;
+            }
+            if n.count > 0 {
+                let first = n.first as usize;
+                for &t in &self.order[first..first + n.count as usize] {
+                    f(t as usize);
+                }
+            } else {
+                // Depth ≤ log2(triangles) + 1 < 64: the stack never holds more.
+                stack[top] = n.first;
+                stack[top + 1] = i as u32 + 1;
+                top += 2;
+            }
+        }
     }
 }
 
