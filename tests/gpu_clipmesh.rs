@@ -122,8 +122,9 @@ const DVR: Tolerance = Tolerance {
     rmse: 5e-5,
 };
 
-/// MIP and X-ray, relative to the largest oracle value. Measured on lavapipe: worst
-/// max |Δ| 7.9e-6 (MIP, comb and enclosing), RMSE 1.4e-6 (MIP); X-ray 3.6e-6 (comb).
+/// MIP, MinIP and X-ray, relative to the largest oracle value. Measured on lavapipe:
+/// worst max |Δ| 7.9e-6 (MIP, comb and enclosing), RMSE 1.4e-6 (MIP); X-ray 3.6e-6
+/// (comb); MinIP 1.6e-6 (comb).
 const SCALAR: Tolerance = Tolerance {
     max_abs: 2e-5,
     rmse: 5e-6,
@@ -209,6 +210,8 @@ gpu_cases! {
     gpu_clipmesh_comb_dvr_skip_axis: Case { mesh: Mesh::Comb, skip: true, cam: Cam::Axis, ..BASE };
     gpu_clipmesh_comb_mip: Case { mesh: Mesh::Comb, mode: Mode::Mip, ..BASE };
     gpu_clipmesh_comb_xray: Case { mesh: Mesh::Comb, mode: Mode::Xray, ..BASE };
+    gpu_clipmesh_comb_minip: Case { mesh: Mesh::Comb, mode: Mode::Minip, ..BASE };
+    gpu_clipmesh_cube_minip_axis: Case { mesh: Mesh::Cube, mode: Mode::Minip, cam: Cam::Axis, ..BASE };
     gpu_clipmesh_enclosing_dvr: Case { mesh: Mesh::Enclosing, ..BASE };
     gpu_clipmesh_enclosing_mip: Case { mesh: Mesh::Enclosing, mode: Mode::Mip, ..BASE };
     gpu_clipmesh_enclosing_xray: Case { mesh: Mesh::Enclosing, mode: Mode::Xray, ..BASE };
