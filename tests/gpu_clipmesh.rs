@@ -2,8 +2,8 @@
 //! CPU f64 oracle (`cpu::clipmesh`): the per-pixel segments themselves, then renders
 //! from one case list: a cube mesh equal to a clipping box, a comb of four boxes giving
 //! four segments per ray, an enclosing mesh and the bricks mesh (both must also equal
-//! the GPU image without a mesh, bit for bit), in DVR (both compositing orders), MIP and
-//! X-ray.
+//! the GPU image without a mesh, bit for bit), in DVR (both compositing orders), MIP,
+//! MinIP and X-ray.
 
 mod common;
 
