@@ -5,7 +5,7 @@
 //! ([`raycast_scene`]), seen by a perspective orbit camera (azimuth 30°, elevation 20°,
 //! 540 mm from the centre, 30° field of view) at `size × size` pixels, the `phantom`
 //! transfer function, step ½ voxel. The variants ([`raycast_variants`]): shaded DVR with
-//! trilinear and Catmull–Rom reconstruction, shaded DVR through the GPU's texture
+//! trilinear and Catmull–Rom reconstruction, unshaded DVR with trilinear, shaded DVR through the GPU's texture
 //! filtering unit (`hardware_filtering`), shaded DVR with the cubic B-spline as 64 taps
 //! (`bspline`), as 8 trilinear fetches (`cubic-bspline-fast`) and as 8 texture-unit
 //! fetches (`cubic-bspline-fast-hardware`), MIP, MinIP and X-ray; at 128³ → 256² shaded
@@ -67,6 +67,12 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
     };
     vec![
         ("dvr-shaded-trilinear", RenderSettings::default()),
+        // Post-classified DVR without shading: the CPU's ray-packet kernel
+        // (`cpu::march::Packet`), the configuration held against VTK's CPU ray caster.
+        (
+            "dvr-unshaded-trilinear",
+            with(&|s| s.shading.enabled = false),
+        ),
         (
             "dvr-shaded-catmull-rom",
             with(&|s| s.filter = Filter::CatmullRom),
@@ -309,6 +315,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
     match suite {
         Suite::Quick => vec![
             ("dvr-shaded-trilinear", 32, 48),
+            ("dvr-unshaded-trilinear", 24, 32),
             ("dvr-shaded-catmull-rom", 24, 32),
             ("dvr-shaded-hardware-trilinear", 24, 32),
             ("mip-trilinear", 24, 32),
@@ -325,6 +332,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-shaded-trilinear", 128, 256),
             ("dvr-shaded-trilinear", 256, 512),
             ("dvr-shaded-trilinear", 512, 1024),
+            ("dvr-unshaded-trilinear", 256, 512),
             ("dvr-shaded-catmull-rom", 256, 512),
             ("dvr-shaded-hardware-trilinear", 256, 512),
             ("dvr-shaded-bspline", 256, 512),
