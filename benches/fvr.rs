@@ -10,14 +10,15 @@
 //!   spectrum to the GPU (complex f32, with the slice pipeline and inverse FFT plan made
 //!   once — `GpuFvrSpectrum::upload`); a single run each;
 //! - **per-view FVR** on the CPU (`cpu::fvr::fvr_project`, f64 slice + f64 inverse
-//!   `M²` FFT) and on the GPU (`gpu::fvr::fvr_project`: slice dispatch, inverse FFT,
+//!   `M²` FFT; and in f32 from `FvrSpectrum::to_f32`, f32 slice + f32 FFT, the pairing
+//!   of the f32 ray caster) and on the GPU (`gpu::fvr::fvr_project`: slice dispatch, inverse FFT,
 //!   readback, crop), oblique view (azimuth 30°, elevation 20°), trilinear and
 //!   Lanczos-3 slicing, with de-apodisation;
 //! - **ray-cast X-ray** of the same volume and view (`voxlab::render`, `Mode::Xray`,
 //!   trilinear, step 1 voxel) on the CPU in f32 (the fair CPU baseline) and on the GPU,
 //!   at the FVR's own image (`n²`, pixel = voxel, the same pixel rays) and at 512²
 //!   (Jansen's image size, over the same field of view);
-//! - the ratios ray cast / FVR, and the relative L2 difference between the FVR image
+//! - the ratios ray cast / FVR (CPU f64 FVR, and CPU f32 FVR at 512²), and the relative L2 difference between the FVR image
 //!   and the CPU ray caster's image through the same pixels (a fast wrong answer must
 //!   not count: it is printed beside the times and asserted below 15 %; a wrong
 //!   projection is off by order 1. The two methods interpolate differently — a
@@ -109,9 +110,9 @@ fn main() {
     }
     println!();
     println!(
-        "| volume | M | pre-proc CPU (3-D FFT) | GPU upload | kernel | FVR CPU | FVR GPU | ray cast CPU f32 n² | ray cast CPU f32 {big_image}² | ray cast GPU n² | CPU ray cast n² / FVR CPU | CPU ray cast {big_image}² / FVR CPU | GPU ray cast / FVR GPU | rel L2 FVR vs ray cast |"
+        "| volume | M | pre-proc CPU (3-D FFT) | GPU upload | kernel | FVR CPU | FVR CPU f32 | FVR GPU | ray cast CPU f32 n² | ray cast CPU f32 {big_image}² | ray cast GPU n² | CPU ray cast n² / FVR CPU | CPU ray cast {big_image}² / FVR CPU | CPU ray cast {big_image}² / FVR CPU f32 | GPU ray cast / FVR GPU | rel L2 FVR vs ray cast |"
     );
-    println!("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for n in sizes {
         let name = format!("{n}³");
         if !args.wants(&name) {
@@ -148,10 +149,19 @@ fn main() {
             let up = voxlab::gpu::fvr::GpuFvrSpectrum::upload(ctx, &spectrum);
             (ctx, up, t.elapsed().as_secs_f64())
         });
+        let spectrum32 = spectrum.to_f32();
         for kernel in [Kernel::Trilinear, Kernel::Lanczos3] {
             let (img, fvr_cpu) = timed(runs, || {
                 fvr_project(&spectrum, view, kernel, true).expect("FVR on the CPU")
             });
+            let (img32, fvr_cpu32) = timed(runs, || {
+                fvr_project(&spectrum32, view, kernel, true).expect("f32 FVR on the CPU")
+            });
+            let e32 = rel_l2(&img32.data, &img.data);
+            assert!(
+                e32 < 1e-4,
+                "{name}: f32 FVR differs from f64 FVR ({e32:.2e})"
+            );
             let err = rel_l2(&img.data, &reference);
             assert!(
                 err < 0.15,
@@ -175,16 +185,18 @@ fn main() {
                 }
             };
             println!(
-                "| {name} | {m} | {} | {up_col} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {err:.2e} |",
+                "| {name} | {m} | {} | {up_col} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {err:.2e} |",
                 ms(pre),
                 kernel.name(),
                 ms(fvr_cpu),
+                ms(fvr_cpu32),
                 ms(fvr_gpu),
                 ms(rc_cpu),
                 ms(rc_cpu_big),
                 ms(rc_gpu),
                 ratio(rc_cpu, fvr_cpu),
                 ratio(rc_cpu_big, fvr_cpu),
+                ratio(rc_cpu_big, fvr_cpu32),
                 ratio(rc_gpu, fvr_gpu),
             );
         }

@@ -46,7 +46,7 @@
 use crate::camera::{AxisView, Camera, Orbit, Projection};
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fft::fft_nd;
-use crate::cpu::filter::{sinc, weight_lanczos, weight_tent};
+use crate::cpu::filter::{sin_pi, sinc, weight_lanczos, weight_tent};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::real::Real;
@@ -475,7 +475,16 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
         let m = self.m as i64;
         let half = (self.m / 2) as f64;
         let g = [kappa.x + half, kappa.y + half, kappa.z + half];
-        let wrap = |i: i64| i.rem_euclid(m) as usize;
+        // Periodic index; taps lie within one period of the cube, so mostly no division.
+        let wrap = |i: i64| {
+            if (0..m).contains(&i) {
+                i as usize
+            } else if (-m..0).contains(&i) {
+                (i + m) as usize
+            } else {
+                i.rem_euclid(m) as usize
+            }
+        };
         if kernel == Kernel::Nearest {
             let i = g.map(|v| wrap(v.round() as i64));
             return self.spectrum[(i[2] * self.m + i[1]) * self.m + i[0]];
@@ -490,10 +499,15 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
         for a in 0..3 {
             let first = g[a].floor() as i64 - r + 1;
             let mut w64 = [0.0f64; 8];
-            for (t, wt) in w64[..taps].iter_mut().enumerate() {
-                let j = first + t as i64;
-                idx[a][t] = wrap(j);
-                *wt = kernel.weight(g[a] - j as f64);
+            for (t, i) in idx[a][..taps].iter_mut().enumerate() {
+                *i = wrap(first + t as i64);
+            }
+            if r == 1 {
+                for (t, wt) in w64[..taps].iter_mut().enumerate() {
+                    *wt = kernel.weight(g[a] - (first + t as i64) as f64);
+                }
+            } else {
+                lanczos_weights(g[a] - g[a].floor(), r as usize, &mut w64[..taps]);
             }
             let sum: f64 = w64[..taps].iter().sum();
             for (x, v) in w[a][..taps].iter_mut().zip(&w64) {
@@ -501,14 +515,24 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
             }
         }
         let zero = Complex::new(R::zero(), R::zero());
+        // Away from the cube's edge the x taps are one contiguous run (same sum).
+        let x_run = (idx[0][0] + taps <= self.m && idx[0][taps - 1] == idx[0][0] + taps - 1)
+            .then_some(idx[0][0]);
         let mut acc = zero;
         for tz in 0..taps {
             let mut az = zero;
             for ty in 0..taps {
                 let row = (idx[2][tz] * self.m + idx[1][ty]) * self.m;
                 let mut ax = zero;
-                for tx in 0..taps {
-                    ax += self.spectrum[row + idx[0][tx]] * w[0][tx];
+                if let Some(x0) = x_run {
+                    let line = &self.spectrum[row + x0..row + x0 + taps];
+                    for (v, &wt) in line.iter().zip(&w[0][..taps]) {
+                        ax += *v * wt;
+                    }
+                } else {
+                    for tx in 0..taps {
+                        ax += self.spectrum[row + idx[0][tx]] * w[0][tx];
+                    }
                 }
                 az += ax * w[1][ty];
             }
@@ -559,6 +583,54 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
     }
 }
 
+/// The Lanczos-`a` weights of the `2a` taps `x_t = f + a − 1 − t` (`f` ∈ [0, 1), the
+/// fractional part of the sample's coordinate), equal to `Kernel::weight` up to
+/// rounding, with three trigonometric calls per axis instead of two per tap:
+/// `sin π(f + k) = (−1)^k sin πf`, and `sin (π(f + k)/a)` by angle addition from
+/// `sin πf/a`, `cos πf/a` and a table of `sin kπ/a`, `cos kπ/a`, except for the two
+/// taps beside the sample (`k` = 0, −1), which take their own arguments.
+fn lanczos_weights(f: f64, a: usize, w: &mut [f64]) {
+    use std::sync::OnceLock;
+    // [a][k + 4] = (sin kπ/a, cos kπ/a), k = −4 … 3.
+    static TABLE: OnceLock<[[(f64, f64); 8]; 5]> = OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        let mut t = [[(0.0, 1.0); 8]; 5];
+        for (a, row) in t.iter_mut().enumerate().skip(2) {
+            for (i, e) in row.iter_mut().enumerate() {
+                *e = ((i as f64 - 4.0) * PI / a as f64).sin_cos();
+            }
+        }
+        t
+    });
+    let af = a as f64;
+    let s = sin_pi(f);
+    let (sa, ca) = (PI * f / af).sin_cos();
+    // The inner taps' sin(πx/a) straight from their own (exact) arguments: there the
+    // weight is near 1 and the angle addition would lose relative accuracy.
+    let s_left = (PI * (f - 1.0) / af).sin();
+    for (t, wt) in w.iter_mut().enumerate() {
+        let k = a as i64 - 1 - t as i64;
+        let x = f + k as f64;
+        *wt = if x == 0.0 {
+            1.0
+        } else if x.abs() >= af {
+            0.0
+        } else {
+            let s1 = if k.rem_euclid(2) == 0 { s } else { -s };
+            let s2 = match k {
+                0 => sa,
+                -1 => s_left,
+                _ => {
+                    let (sk, ck) = table[a][(k + 4) as usize];
+                    sa * ck + ca * sk
+                }
+            };
+            // sinc(x)·sinc(x/a) = a·sin πx·sin(πx/a) / (π x)².
+            af * s1 * s2 / (PI * PI * x * x)
+        };
+    }
+}
+
 /// Rounds `c` to an integer when it is within `1e-9` of one (axis views), else returns
 /// its nearest integer and the remainder.
 fn split(c: f64) -> (i64, f64) {
@@ -597,11 +669,20 @@ pub fn fvr_project<R: SpectrumReal>(
     // The slice in DC-at-0 order ([k_u][k_r], each k at k mod M): the ifftshift of
     // the centred slice. Mirrored per sample by `shaders/fvr_slice.wgsl: extract_slice`
     // (src/gpu/fvr.rs).
+    // The sub-voxel shift's phase ramp e^{2πi(k_r δ_r + k_u δ_u)/M}, separable: one
+    // factor per column and one per row.
+    let k_of = |i: usize| (i as i64 + half).rem_euclid(m as i64) - half;
+    let ramp = |d: f64| -> Vec<Complex<f64>> {
+        (0..m)
+            .map(|i| Complex::from_polar(1.0, 2.0 * PI * k_of(i) as f64 * d / m as f64))
+            .collect()
+    };
+    let (ramp_r, ramp_u) = (ramp(dr), ramp(du));
     let mut slice = vec![Complex::new(R::zero(), R::zero()); m * m];
     slice.par_chunks_mut(m).enumerate().for_each(|(ju, line)| {
         for (ir, out) in line.iter_mut().enumerate() {
-            let ku = (ju as i64 + half).rem_euclid(m as i64) - half;
-            let kr = (ir as i64 + half).rem_euclid(m as i64) - half;
+            let ku = k_of(ju);
+            let kr = k_of(ir);
             let kappa = g.right * kr as f64 + g.up * ku as f64;
             let mut s = match kernel {
                 Kernel::Dirichlet => {
@@ -611,8 +692,8 @@ pub fn fvr_project<R: SpectrumReal>(
                 k => spectrum.sample(k, kappa),
             };
             if dr != 0.0 || du != 0.0 {
-                let phase = 2.0 * PI * (kr as f64 * dr + ku as f64 * du) / m as f64;
-                s *= Complex::new(R::of(phase.cos()), R::of(phase.sin()));
+                let e = ramp_r[ir] * ramp_u[ju];
+                s *= Complex::new(R::of(e.re), R::of(e.im));
             }
             *out = s;
         }
@@ -728,6 +809,28 @@ mod tests {
         assert!(padded_side([4, 4, 4], 0).is_err());
         let e = padded_side([100_000, 1, 1], 2).unwrap_err();
         assert!(e.to_string().contains("too large"), "{e}");
+    }
+
+    #[test]
+    fn lanczos_weights_by_angle_addition_equal_the_kernel() {
+        for (a, kernel) in [
+            (2, Kernel::Lanczos2),
+            (3, Kernel::Lanczos3),
+            (4, Kernel::Lanczos4),
+        ] {
+            for i in 0..1000 {
+                let f = i as f64 / 1000.0 + if i % 7 == 3 { 1e-12 } else { 0.0 };
+                let mut w = [0.0; 8];
+                lanczos_weights(f, a, &mut w[..2 * a]);
+                for (t, &wt) in w[..2 * a].iter().enumerate() {
+                    let x = f + (a as f64 - 1.0 - t as f64);
+                    let want = kernel.weight(x);
+                    // Different roundings of the same formula: a few ulps of 1. A
+                    // wrong sign or tap is off by order 0.1.
+                    assert!((wt - want).abs() <= 1e-15, "a {a} x {x}: {wt} vs {want}");
+                }
+            }
+        }
     }
 
     #[test]
