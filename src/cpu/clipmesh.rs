@@ -228,9 +228,28 @@ impl ClipTriangles {
     /// [`segments_brute_force`](Self::segments_brute_force), so the same segments.
     pub fn segments(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
         let (o, d) = (origin.to_array(), dir.to_array());
+        self.pair_hits(o, d, t0, |f| self.bvh.for_each_candidate(o, d, f))
+    }
+
+    /// [`segments`](Self::segments) by testing every triangle: the reference the
+    /// hierarchy is checked against.
+    pub fn segments_brute_force(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
+        let (o, d) = (origin.to_array(), dir.to_array());
+        self.pair_hits(o, d, t0, |f| (0..self.triangles.len()).for_each(f))
+    }
+
+    /// Tests the triangles `candidates` names, counts the hits at or before `t0`, sorts
+    /// the others and pairs them.
+    fn pair_hits(
+        &self,
+        o: [f64; 3],
+        d: [f64; 3],
+        t0: f64,
+        candidates: impl FnOnce(&mut dyn FnMut(usize)),
+    ) -> Segments {
         let mut behind = 0usize;
         let mut forward = Vec::new();
-        self.bvh.for_each_candidate(o, d, |i| {
+        candidates(&mut |i| {
             if let Some(t) = intersect_triangle(o, d, &self.triangles[i]) {
                 if t <= t0 {
                     behind += 1;
@@ -239,25 +258,6 @@ impl ClipTriangles {
                 }
             }
         });
-        forward.sort_by(f64::total_cmp);
-        make_segments(t0, behind, &forward)
-    }
-
-    /// [`segments`](Self::segments) by testing every triangle: the reference the
-    /// hierarchy is checked against.
-    pub fn segments_brute_force(&self, origin: DVec3, dir: DVec3, t0: f64) -> Segments {
-        let (o, d) = (origin.to_array(), dir.to_array());
-        let mut behind = 0usize;
-        let mut forward = Vec::new();
-        for tri in &self.triangles {
-            if let Some(t) = intersect_triangle(o, d, tri) {
-                if t <= t0 {
-                    behind += 1;
-                } else {
-                    forward.push(t);
-                }
-            }
-        }
         forward.sort_by(f64::total_cmp);
         make_segments(t0, behind, &forward)
     }

@@ -54,31 +54,18 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     });
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("probe"),
-        layout: None,
-        module: &module,
-        entry_point: Some("saxpy"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let bind = ctx.bind_group(
+    dispatch_1d(
+        ctx,
         "probe",
-        &pipeline.get_bind_group_layout(0),
+        &module,
+        "saxpy",
         &[
             pbuf.as_entire_binding(),
             xbuf.as_entire_binding(),
             ybuf.as_entire_binding(),
         ],
+        n,
     );
-    let mut enc = dev.create_command_encoder(&Default::default());
-    {
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(n.div_ceil(64), 1, 1);
-    }
-    ctx.queue.submit([enc.finish()]);
     let out = ctx.read_buffer(&ybuf, bytes)?;
     Ok(bytemuck::cast_slice(&out).to_vec())
 }
@@ -124,20 +111,41 @@ pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]
     });
     let bytes = std::mem::size_of_val(inputs) as u64;
     let ybuf = ctx.storage_buffer("opacity probe out", bytes)?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("opacity probe"),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let bind = ctx.bind_group(
+    dispatch_1d(
+        ctx,
         "opacity probe",
-        &pipeline.get_bind_group_layout(0),
+        &module,
+        "main",
         &[xbuf.as_entire_binding(), ybuf.as_entire_binding()],
+        n,
     );
-    let mut enc = dev.create_command_encoder(&Default::default());
+    let out = ctx.read_buffer(&ybuf, bytes)?;
+    let out: &[[f32; 4]] = bytemuck::cast_slice(&out);
+    Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())
+}
+
+/// Runs `entry` of `module` over `n` invocations (workgroups of 64), the bindings in
+/// group 0 in order, and submits.
+fn dispatch_1d(
+    ctx: &GpuContext,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    bindings: &[wgpu::BindingResource],
+    n: u32,
+) {
+    let pipeline = ctx
+        .device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+    let bind = ctx.bind_group(label, &pipeline.get_bind_group_layout(0), bindings);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
         pass.set_pipeline(&pipeline);
@@ -145,7 +153,4 @@ pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]
         pass.dispatch_workgroups(n.div_ceil(64), 1, 1);
     }
     ctx.queue.submit([enc.finish()]);
-    let out = ctx.read_buffer(&ybuf, bytes)?;
-    let out: &[[f32; 4]] = bytemuck::cast_slice(&out);
-    Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())
 }
