@@ -1,7 +1,9 @@
-// Rays, boxes, steps and Phong shading shared by the ray caster (shaders/raycast.wgsl)
-// and D²VR (shaders/d2vr.wgsl). Both declare `params: RaycastParams`
-// (shaders/shared/raycast_params.wgsl), which camera_ray and phong read.
-// Prepended at load time by src/gpu/raycast.rs and src/gpu/d2vr.rs.
+// Rays, boxes, steps and Phong shading shared by the ray caster (shaders/raycast.wgsl),
+// D²VR (shaders/d2vr.wgsl), the clipping-mesh pass (shaders/clipmesh.wgsl) and the
+// multi-volume caster (shaders/multi.wgsl). Each declares a `params` uniform with the
+// members camera_ray and phong read (RaycastParams, shaders/shared/raycast_params.wgsl;
+// MultiParams, shaders/shared/multi_params.wgsl). Prepended at load time by
+// src/gpu/raycast.rs, d2vr.rs, clipmesh.rs and multi.rs.
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
