@@ -215,17 +215,42 @@ impl<R: Real> Span<R> {
         };
         (ta, tb)
     }
-    /// Step k's midpoint parameter.
+    /// Whether step k is a full step (neither the first nor the last), as
+    /// `march::Steps::full`.
+    #[inline]
+    pub fn full(&self, k: usize) -> bool {
+        k > 0 && k + 1 < self.n
+    }
+    /// Step k's midpoint parameter: `t_in + (k + ½)·dt` for a full step, the middle of
+    /// its bounds otherwise (the rule of `march::Steps::segment`, so that a MIDA or
+    /// iso-surface ray that reduces to DVR gives DVR's image to the bit).
     #[inline]
     pub fn t_mid(&self, k: usize) -> R {
+        if self.full(k) {
+            return self.t_in + (R::of(k as f64) + R::of(0.5)) * self.dt;
+        }
         let (a, b) = self.bounds(k);
         (a + b) * R::of(0.5)
     }
-    /// Step k's midpoint and length.
+    /// Step k's midpoint and length (`dt` exactly for a full step).
     #[inline]
     pub fn segment(&self, k: usize) -> (V3<R>, R) {
-        let (a, b) = self.bounds(k);
-        (self.o + self.d * ((a + b) * R::of(0.5)), b - a)
+        let len = if self.full(k) {
+            self.dt
+        } else {
+            let (a, b) = self.bounds(k);
+            b - a
+        };
+        (self.o + self.d * self.t_mid(k), len)
+    }
+    /// Step k's opacity-correction exponent, as `march::Steps::exponent`.
+    #[inline]
+    pub fn exponent(&self, k: usize, len: R, ref_step: R, e_full: R) -> R {
+        if self.full(k) {
+            e_full
+        } else {
+            len * self.speed / ref_step
+        }
     }
 }
 
@@ -353,7 +378,8 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
             a = beta * a;
             continue;
         }
-        let alpha = R::one() - (R::one() - alpha).powf(len * span.speed / s.ref_step);
+        let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
+        let alpha = R::one() - super::raycast::transmit_pow(R::one() - alpha, e);
         let rgb = if s.shade {
             shade_sample(field, s, p, rgb, light, half)
         } else {
@@ -429,7 +455,8 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
         if alpha <= R::zero() {
             return;
         }
-        let alpha = R::one() - (R::one() - alpha).powf(len * span.speed / s.ref_step);
+        let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
+        let alpha = R::one() - super::raycast::transmit_pow(R::one() - alpha, e);
         let rgb = if s.shade {
             shade_sample(field, s, p, rgb, light, half)
         } else {

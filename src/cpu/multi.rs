@@ -319,7 +319,12 @@ fn cast_multi<R: Real>(layers: &[Prepared<'_, R>], c: &Common<R>, ray: Ray) -> (
         .max(R::one())
         .to_usize()
         .unwrap_or(1);
+    // The step rule of `march::Steps::segment`: a full step is dt long, its midpoint
+    // t_in + (k + ½)·dt (so one volume gives the single-volume caster's samples).
     let segment = |k: usize| {
+        if k > 0 && k + 1 < n {
+            return (t_in + (R::of(k as f64) + R::of(0.5)) * dt, dt);
+        }
         let ta = if k == 0 {
             t_in
         } else {

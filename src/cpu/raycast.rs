@@ -550,6 +550,7 @@ fn packet_source<'a, R: Real, F: Field<R>>(
         pairs: &s.lut_pairs,
         speed: 1.0,
         ref_step: s.ref_step,
+        e_full: s.step / s.ref_step,
     };
     let d = grid.dims;
     let diag = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64).sqrt();
@@ -660,6 +661,7 @@ fn cast_ray<R: Real, F: Field<R>>(
         n,
     } = steps;
     let speed = plan.speed;
+    let e_full = s.step / s.ref_step;
     let segment = |k: usize| steps.segment(k);
     // MIDA and iso-surfaces march the unjittered grid from t_in.
     let span = super::modes::Span {
@@ -744,6 +746,7 @@ fn cast_ray<R: Real, F: Field<R>>(
                     pairs: &s.lut_pairs,
                     speed,
                     ref_step: s.ref_step,
+                    e_full: s.step / s.ref_step,
                 }),
                 _ => None,
             };
@@ -786,7 +789,8 @@ fn cast_ray<R: Real, F: Field<R>>(
                         continue;
                     }
                     // Opacity correction for a step of len·speed voxels.
-                    let alpha = R::one() - transmit_pow(R::one() - alpha, len * speed / s.ref_step);
+                    let e = steps.exponent(k, len, speed, s.ref_step, e_full);
+                    let alpha = R::one() - transmit_pow(R::one() - alpha, e);
                     let rgb = if s.shade {
                         shade_sample(field, s, p, rgb, light, half)
                     } else {
@@ -842,7 +846,8 @@ fn cast_row_packets(
     if pk.step(src, s.ert).is_none() {
         return false;
     }
-    // Packets in turn: the steps of one overlap the bookkeeping of the others.
+    // Two packets stepped at once, their stages interleaved: one's fetches overlap the
+    // other's arithmetic (three or four at once were slower here: registers run out).
     const IN_TURN: usize = 2;
     let mut pks: [Packet; IN_TURN] = std::array::from_fn(|_| pk.clone());
     let mut ranges: [[Option<ClippedRanges<f32>>; PACKET]; IN_TURN] =
@@ -902,14 +907,11 @@ fn cast_row_packets(
         }
     }
     while pks.iter().any(|pk| pk.live != 0) {
-        for p in 0..IN_TURN {
+        // All packets stepped at once: the fetches of one overlap the others' arithmetic.
+        let res = Packet::step_all(&mut pks, src, s.ert).expect("checked before the first ray");
+        for (p, r) in res.into_iter().enumerate() {
+            let (ended, hit) = r;
             let pk = &mut pks[p];
-            if pk.live == 0 {
-                continue;
-            }
-            let Some((ended, hit)) = pk.step(src, s.ert) else {
-                unreachable!("checked before the first ray");
-            };
             let mut left = ended;
             while left != 0 {
                 let l = left.trailing_zeros() as usize;
