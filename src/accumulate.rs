@@ -76,13 +76,15 @@ pub fn render_accumulated(
         return Err(Error::invalid("accumulate", "frames must lie in 1 … 65536"));
     }
     let mut acc: Option<Rendered> = None;
+    // The volume is checked, converted and bounded once, not once per frame.
+    let prepared = renderer.prepare(scene, settings)?;
     for f in 0..frames {
         let s = RenderSettings {
             jitter: Some(seed.wrapping_add(f as u32)),
             interleaved: false,
             ..settings.clone()
         };
-        let r = renderer.render(scene, &s, &|_, _| {})?;
+        let r = renderer.render_prepared(&prepared, &scene.camera, &s, &|_, _| {})?;
         acc = Some(match acc {
             None => r,
             Some(mut a) => {

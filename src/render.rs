@@ -159,6 +159,73 @@ impl Renderer {
     }
 }
 
+/// A scene whose volume is prepared once for many frames: on the CPU backends the
+/// finiteness check, the conversion and the skipping's min/max grids
+/// ([`raycast::Prepared`]); the GPU backend renders from the scene as usual.
+pub struct PreparedScene<'a> {
+    scene: &'a Scene,
+    cpu: PreparedCpu,
+}
+
+enum PreparedCpu {
+    Gpu,
+    F32(raycast::Prepared<f32>),
+    F64(raycast::Prepared<f64>),
+}
+
+impl Renderer {
+    /// Prepares `scene` for frames with `settings`' filter and gradients.
+    pub fn prepare<'a>(
+        &self,
+        scene: &'a Scene,
+        settings: &RenderSettings,
+    ) -> Result<PreparedScene<'a>> {
+        settings.validate()?;
+        let v = &scene.volume;
+        let cpu = match (self.backend, &self.gpu) {
+            (Backend::Gpu, Some(_)) => PreparedCpu::Gpu,
+            (Backend::CpuF32, _) => PreparedCpu::F32(raycast::Prepared::new(v, settings)?),
+            _ => PreparedCpu::F64(raycast::Prepared::new(v, settings)?),
+        };
+        Ok(PreparedScene { scene, cpu })
+    }
+
+    /// Renders a frame of a prepared scene seen by `camera`: the same image as
+    /// [`Renderer::render`] of the scene with that camera.
+    pub fn render_prepared(
+        &self,
+        p: &PreparedScene,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rendered> {
+        let tf = &p.scene.transfer;
+        settings.validate()?;
+        tf.validate()?;
+        let (output, gpu_timings) = match (&p.cpu, &self.gpu) {
+            (PreparedCpu::Gpu, Some(ctx)) => {
+                let g = crate::gpu::raycast::render(
+                    ctx,
+                    &p.scene.volume,
+                    tf,
+                    camera,
+                    settings,
+                    progress,
+                )?;
+                (g.output, Some(g.timings))
+            }
+            (PreparedCpu::F32(c), _) => (c.render(tf, camera, settings, progress)?, None),
+            (PreparedCpu::F64(c), _) => (c.render(tf, camera, settings, progress)?, None),
+            (PreparedCpu::Gpu, None) => unreachable!("prepared for the GPU without one"),
+        };
+        Ok(Rendered {
+            output,
+            backend: self.backend,
+            gpu_timings,
+        })
+    }
+}
+
 /// Renders `scene` with `settings` on `backend`.
 pub fn render(scene: &Scene, settings: &RenderSettings, backend: Backend) -> Result<RenderOutput> {
     Ok(render_with_progress(scene, settings, backend, &|_, _| {})?.output)

@@ -105,3 +105,64 @@ fn bad_acceleration_flags_are_refused() {
     ]);
     assert!(!o.status.success());
 }
+
+/// `--repeat N` renders the frame N times from one prepared volume: the image and
+/// sample counts are a single render's, the per-frame median is reported, and it
+/// refuses what it cannot time.
+#[test]
+fn repeat_times_frames_of_the_same_image() {
+    let d = scratch("cli-repeat");
+    for backend in ["cpu-f32", "cpu"] {
+        let (one, n_one) = render(&d, "one", &["--backend", backend, "--no-shading"]);
+        let img = d.join("rep.npy");
+        let samples = d.join("rep-samples.npy");
+        let o = voxlab(&[
+            "render",
+            "phantom:shepp-logan-modified:40",
+            "--tf",
+            "phantom",
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--out",
+            s(&img),
+            "--samples",
+            s(&samples),
+            "--backend",
+            backend,
+            "--no-shading",
+            "--repeat",
+            "3",
+        ]);
+        let err = stderr(&o);
+        assert!(o.status.success(), "{err}");
+        assert!(err.contains("per frame: median"), "{err}");
+        assert!(err.contains("of 3 frames"), "{err}");
+        let (_, rep) = voxlab::io::npy::read_npy_f32(&img).unwrap();
+        let (_, n_rep) = voxlab::io::npy::read_npy_f32(&samples).unwrap();
+        assert_eq!(one, rep, "{backend}: --repeat changed the image");
+        assert_eq!(
+            n_one, n_rep,
+            "{backend}: --repeat changed the sample counts"
+        );
+    }
+    for (extra, words) in [
+        (vec!["--repeat", "2", "--accumulate", "2"], "--accumulate"),
+        (vec!["--repeat", "0"], "repeat"),
+        (vec!["--repeat", "2", "--stereo", "anaglyph"], "--stereo"),
+    ] {
+        let never = d.join("never.png");
+        let mut args = vec![
+            "render",
+            "phantom:shepp-logan-modified:24",
+            "--out",
+            s(&never),
+        ];
+        args.extend_from_slice(&extra);
+        let o = voxlab(&args);
+        assert!(!o.status.success(), "{extra:?} was accepted");
+        assert!(stderr(&o).contains(words), "{extra:?}: {}", stderr(&o));
+        assert!(!never.exists(), "{extra:?} left an output behind");
+    }
+}

@@ -545,3 +545,101 @@ fn skipping_leaves_the_micro_ct_unchanged() {
     eprintln!("micro-CT: samples kept {kept:.3}");
     assert!(kept < 0.9);
 }
+
+/// A volume prepared once (`raycast::Prepared`, what frame accumulation and
+/// `render --repeat` use) renders every frame exactly as a one-off render does, while
+/// the camera, transfer function, block size, mode, classification and jitter change
+/// from frame to frame and the min/max grids are reused; a frame with another filter is
+/// refused, not rendered wrongly.
+#[test]
+fn prepared_volume_frames_equal_one_off_renders() {
+    use voxlab::cpu::raycast::Prepared;
+    let vol = phantom(29);
+    let dense = TransferFunction::preset("phantom").unwrap();
+    let sparse = sparse_tf();
+    let mut base = RenderSettings {
+        step: 0.7,
+        ..Default::default()
+    };
+    base.shading.enabled = false; // the ray-packet kernel's case
+    let prepared32 = Prepared::<f32>::new(&vol, &base).unwrap();
+    let prepared64 = Prepared::<f64>::new(&vol, &base).unwrap();
+    let frames: Vec<(Cam, &TransferFunction, RenderSettings)> = vec![
+        (Cam::Perspective, &sparse, base.clone()),
+        (Cam::Axis, &dense, base.clone()),
+        (
+            Cam::Ortho,
+            &sparse,
+            RenderSettings {
+                block_size: 4,
+                ..base.clone()
+            },
+        ),
+        (
+            Cam::Perspective,
+            &dense,
+            RenderSettings {
+                jitter: Some(7),
+                ..base.clone()
+            },
+        ),
+        (
+            Cam::Ortho,
+            &dense,
+            RenderSettings {
+                mode: Mode::Mip,
+                ..base.clone()
+            },
+        ),
+        (
+            Cam::Axis,
+            &sparse,
+            RenderSettings {
+                classification: Classification::Pre,
+                block_size: 4,
+                ..base.clone()
+            },
+        ),
+        (
+            Cam::Perspective,
+            &sparse,
+            RenderSettings {
+                block_size: 4,
+                ..base.clone()
+            },
+        ),
+        (Cam::Axis, &dense, RenderSettings::default()),
+    ];
+    for (i, (cam, tf, s)) in frames.iter().enumerate() {
+        let camera = camera(&vol, *cam, 40);
+        let a = prepared32.render(tf, &camera, s, none()).unwrap();
+        let b = render::<f32>(&vol, tf, &camera, s, none()).unwrap();
+        assert!(
+            a.image
+                .data
+                .iter()
+                .zip(&b.image.data)
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "frame {i} (f32) differs from the one-off render"
+        );
+        assert_eq!(a.total_samples, b.total_samples, "frame {i} (f32)");
+        let a = prepared64.render(tf, &camera, s, none()).unwrap();
+        let b = render::<f64>(&vol, tf, &camera, s, none()).unwrap();
+        assert!(
+            a.image
+                .data
+                .iter()
+                .zip(&b.image.data)
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "frame {i} (f64) differs from the one-off render"
+        );
+    }
+    let other = RenderSettings {
+        filter: Filter::CatmullRom,
+        ..base.clone()
+    };
+    let e = prepared32
+        .render(&dense, &camera(&vol, Cam::Axis, 16), &other, none())
+        .unwrap_err();
+    assert!(e.to_string().contains("prepared for"), "{e}");
+}

@@ -273,7 +273,7 @@ mod simd {
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn classify(src: &Source<f32>, g: &Lanes, k: __m512i) -> Classified {
-        let at = place(src, g, k);
+        let at = place::<true>(src, g, k);
         let v = reconstruct(src, &at);
         look_up(src, g, &at, v)
     }
@@ -293,10 +293,12 @@ mod simd {
         hi_edge: __mmask16,
     }
 
-    /// The first stage of [`classify`]: positions and taps, no memory read.
+    /// The first stage of [`classify`]: positions and taps, no memory read. With
+    /// `CHECK` false every lane is taken as moderate (packets check each ray once, in
+    /// [`Packet::start`]).
     #[target_feature(enable = "avx512f")]
     #[inline]
-    unsafe fn place(src: &Source<f32>, g: &Lanes, k: __m512i) -> Taps {
+    unsafe fn place<const CHECK: bool>(src: &Source<f32>, g: &Lanes, k: __m512i) -> Taps {
         let one_i = _mm512_set1_epi32(1);
         let zero_i = _mm512_setzero_si512();
         let k1 = _mm512_add_epi32(k, one_i);
@@ -326,17 +328,17 @@ mod simd {
         let p = [0, 1, 2].map(|a| _mm512_add_ps(g.o[a], _mm512_mul_ps(g.d[a], mid)));
         let (lim, neg_lim) = (_mm512_set1_ps(1e9), _mm512_set1_ps(-1e9));
         let mut moderate = 0xffffu16;
-        for x in p {
-            moderate &= _mm512_cmp_ps_mask::<_CMP_GT_OQ>(x, neg_lim)
-                & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, lim);
+        if CHECK {
+            for x in p {
+                moderate &= _mm512_cmp_ps_mask::<_CMP_GT_OQ>(x, neg_lim)
+                    & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(x, lim);
+            }
         }
         let dims = src.grid.dims;
-        // ⌊x⌋ by truncation, one down for negative non-integers, and f = x − ⌊x⌋.
+        // ⌊x⌋ (exact: rounded toward −∞) and f = x − ⌊x⌋.
         let floor = |x: __m512| {
-            let t = _mm512_cvttps_epi32(x);
-            let down = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(_mm512_cvtepi32_ps(t), x);
-            let i0 = _mm512_mask_sub_epi32(t, down, t, one_i);
-            (i0, _mm512_sub_ps(x, _mm512_cvtepi32_ps(i0)))
+            let fl = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(x);
+            (_mm512_cvttps_epi32(fl), _mm512_sub_ps(x, fl))
         };
         let clamp = |i: __m512i, n: usize| {
             _mm512_min_epi32(_mm512_max_epi32(i, zero_i), _mm512_set1_epi32(n as i32 - 1))
@@ -389,24 +391,27 @@ mod simd {
             _mm512_sub_ps(one, fz),
         );
         let data = src.grid.data.as_ptr();
-        let zero = _mm512_setzero_ps();
+        // The scalar sums start from zero; here the first product stands in for
+        // 0 + product, which differs only in the sign of a zero (and a zero's sign
+        // changes nothing downstream: the table index is clamped at 0).
+        let edges = (t.lo_edge | t.hi_edge) != 0;
         let line = |at: __m512i| {
             let (p0, p1) = pairs(data, at);
-            let a = _mm512_mask_blend_ps(t.hi_edge, p0, p1);
-            let c = _mm512_mask_blend_ps(t.lo_edge, p1, p0);
-            _mm512_add_ps(
-                _mm512_add_ps(zero, _mm512_mul_ps(wx0, a)),
-                _mm512_mul_ps(fx, c),
-            )
+            let (a, c) = if edges {
+                (
+                    _mm512_mask_blend_ps(t.hi_edge, p0, p1),
+                    _mm512_mask_blend_ps(t.lo_edge, p1, p0),
+                )
+            } else {
+                (p0, p1)
+            };
+            _mm512_add_ps(_mm512_mul_ps(wx0, a), _mm512_mul_ps(fx, c))
         };
         let plane = |a0: __m512i, a1: __m512i| {
-            _mm512_add_ps(
-                _mm512_add_ps(zero, _mm512_mul_ps(wy0, line(a0))),
-                _mm512_mul_ps(fy, line(a1)),
-            )
+            _mm512_add_ps(_mm512_mul_ps(wy0, line(a0)), _mm512_mul_ps(fy, line(a1)))
         };
         _mm512_add_ps(
-            _mm512_add_ps(zero, _mm512_mul_ps(wz0, plane(t.at[0], t.at[1]))),
+            _mm512_mul_ps(wz0, plane(t.at[0], t.at[1])),
             _mm512_mul_ps(fz, plane(t.at[2], t.at[3])),
         )
     }
@@ -554,7 +559,7 @@ mod simd {
         }
         let mut taps: [Taps; N] = std::mem::zeroed();
         for i in 0..N {
-            taps[i] = place(src, &g[i], k[i]);
+            taps[i] = place::<false>(src, &g[i], k[i]);
         }
         let mut v: [__m512; N] = std::mem::zeroed();
         for i in 0..N {
@@ -563,6 +568,7 @@ mod simd {
         let mut c: [Classified; N] = std::mem::zeroed();
         for i in 0..N {
             c[i] = look_up(src, &g[i], &taps[i], v[i]);
+            c[i].moderate = !pks[i].far;
         }
         let mut out = [(0u16, 0u16); N];
         for i in 0..N {
@@ -685,6 +691,9 @@ pub struct Packet {
     pub taken: [u32; PACKET],
     /// Bit `l` set while lane `l` holds a ray.
     pub live: u16,
+    /// Bit `l` set when lane `l`'s ray reaches coordinates of 5·10⁸ or more, where
+    /// the scalar path floors differently: its steps are classified lane by lane.
+    pub far: u16,
 }
 
 impl Packet {
@@ -706,6 +715,13 @@ impl Packet {
         self.a[l] = 0.0;
         self.taken[l] = 0;
         self.live |= 1 << l;
+        // Every sample lies between the ray's ends (and within rounding of them).
+        let moderate = |t: f32| (0..3).all(|a| (st.o.0[a] + st.d.0[a] * t).abs() < 5e8);
+        if moderate(st.t_in) && moderate(st.t_out) && moderate(st.t_s) {
+            self.far &= !(1 << l);
+        } else {
+            self.far |= 1 << l;
+        }
     }
 
     /// Lane `l`'s step grid.

@@ -321,29 +321,91 @@ pub fn render_with<R: Real>(
 ) -> Result<RenderOutput> {
     settings.validate()?;
     tf.validate()?;
-    volume.check_finite("volume")?;
     check_cost(volume.dims(), camera, settings)?;
-    let grid = match volume {
-        AnyVolume::U8(v) => Grid::<R>::from_volume(v),
-        AnyVolume::U16(v) => Grid::from_volume(v),
-        AnyVolume::I16(v) => Grid::from_volume(v),
-        AnyVolume::F32(v) => Grid::from_volume(v),
-    };
-    let field = GridField::new(
-        grid,
-        settings.filter,
-        settings.gradient,
-        settings.precompute_gradients,
-    );
-    render_field_with(
-        &field,
-        volume.affine(),
-        tf,
-        camera,
-        settings,
-        progress,
-        kernel,
-    )
+    Prepared::<R>::new(volume, settings)?.render_with(tf, camera, settings, progress, kernel)
+}
+
+/// The per-volume part of a CPU render, done once for many frames (frame
+/// accumulation, stereo pairs, repeated renders): the finiteness check, the conversion
+/// to `R` (with the gradients when they are precomputed), and the min/max grids of
+/// empty-space skipping, built on first use for each block size and filter reach. Each
+/// frame then pays only for its rays (and the transfer function's table).
+pub struct Prepared<R: Real> {
+    field: GridField<R>,
+    affine: DMat4,
+    gradient: (GradientMethod, bool),
+    minmax: super::skip::MinMaxCache<R>,
+}
+
+impl<R: Real> Prepared<R> {
+    /// Checks and converts `volume` for frames with `settings`' filter and gradients.
+    pub fn new(volume: &AnyVolume, settings: &RenderSettings) -> Result<Self> {
+        volume.check_finite("volume")?;
+        let grid = match volume {
+            AnyVolume::U8(v) => Grid::<R>::from_volume(v),
+            AnyVolume::U16(v) => Grid::from_volume(v),
+            AnyVolume::I16(v) => Grid::from_volume(v),
+            AnyVolume::F32(v) => Grid::from_volume(v),
+        };
+        let gradient = (settings.gradient, settings.precompute_gradients);
+        Ok(Prepared {
+            field: GridField::new(grid, settings.filter, gradient.0, gradient.1),
+            affine: volume.affine(),
+            gradient,
+            minmax: Default::default(),
+        })
+    }
+
+    /// Renders a frame; `settings` must keep the filter and gradients prepared for
+    /// (everything else, the camera and the transfer function may change).
+    pub fn render(
+        &self,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<RenderOutput> {
+        self.render_with(tf, camera, settings, progress, Kernel::Batched)
+    }
+
+    /// [`Prepared::render`] with a chosen DVR [`Kernel`].
+    pub fn render_with(
+        &self,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+        kernel: Kernel,
+    ) -> Result<RenderOutput> {
+        if settings.filter != self.field.filter
+            || (settings.gradient, settings.precompute_gradients) != self.gradient
+        {
+            return Err(Error::invalid(
+                "prepared volume",
+                format!(
+                    "prepared for the {:?} filter and {:?} gradients (precomputed: {}); \
+                     this frame asks for {:?} and {:?} ({})",
+                    self.field.filter,
+                    self.gradient.0,
+                    self.gradient.1,
+                    settings.filter,
+                    settings.gradient,
+                    settings.precompute_gradients
+                ),
+            ));
+        }
+        check_cost(self.field.dims(), camera, settings)?;
+        render_field_cached(
+            &self.field,
+            self.affine,
+            tf,
+            camera,
+            settings,
+            progress,
+            kernel,
+            Some(&self.minmax),
+        )
+    }
 }
 
 /// Refuses renders whose cost is absurd (the full sinc is O(n³) per sample).
@@ -404,6 +466,22 @@ pub fn render_field_with<R: Real, F: Field<R>>(
     settings: &RenderSettings,
     progress: &(dyn Fn(usize, usize) + Sync),
     kernel: Kernel,
+) -> Result<RenderOutput> {
+    render_field_cached(field, affine, tf, camera, settings, progress, kernel, None)
+}
+
+/// [`render_field_with`], taking the skipping's min/max grid from `cache` (and
+/// adding it there) when one is given.
+#[allow(clippy::too_many_arguments)]
+fn render_field_cached<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    kernel: Kernel,
+    cache: Option<&super::skip::MinMaxCache<R>>,
 ) -> Result<RenderOutput> {
     settings.validate()?;
     tf.validate()?;
@@ -476,7 +554,8 @@ pub fn render_field_with<R: Real, F: Field<R>>(
         Classification::Pre => field.voxel_values(),
     };
     let setup = Setup {
-        skip: skip_voxels.and_then(|g| super::skip::Skipper::new(g, &setup.lut, settings)),
+        skip: skip_voxels
+            .and_then(|g| super::skip::Skipper::cached(g, &setup.lut, settings, cache)),
         lut_pairs: if setup.batched {
             super::march::lut_pairs(&setup.lut)
         } else {

@@ -260,28 +260,80 @@ impl<R: Real> OpacityPrefix<R> {
     }
 }
 
+/// Min/max grids already built for one prepared volume, by the address of the voxels
+/// they bound (see [`Skipper::cached`]).
+pub type MinMaxCache<R> = std::sync::Mutex<Vec<(usize, std::sync::Arc<MinMaxGrid<R>>)>>;
+
 /// What a ray needs to skip: the grid and the transfer function's prefix count.
 #[derive(Clone, Debug)]
 pub struct Skipper<R> {
-    pub grid: MinMaxGrid<R>,
+    pub grid: std::sync::Arc<MinMaxGrid<R>>,
     pub tf: OpacityPrefix<R>,
     /// `tf.range_empty` of every cell, worked out once.
     empty: Vec<bool>,
+    /// Per cell, the chessboard distance (in cells, at most 255) to the nearest cell
+    /// of the other kind (empty or not) in the grid: every cell within `run − 1` of it
+    /// is of its kind, so a walk may leap that far (see [`CellWalk::next_span_leaping`]).
+    run: Vec<u8>,
 }
 
 impl<R: Real> Skipper<R> {
     /// Builds the grid over `voxels` (see the module docs for which voxels) and the
     /// prefix count of `lut` for `settings`; `None` when skipping does not apply.
     pub fn new(voxels: &Grid<R>, lut: &LutR<R>, settings: &RenderSettings) -> Option<Self> {
+        Self::cached(voxels, lut, settings, None)
+    }
+
+    /// [`Skipper::new`], taking the min/max grid from `cache` when it holds one for
+    /// these voxels, block size and filter reach, and adding the one it builds
+    /// otherwise.
+    pub fn cached(
+        voxels: &Grid<R>,
+        lut: &LutR<R>,
+        settings: &RenderSettings,
+        cache: Option<&MinMaxCache<R>>,
+    ) -> Option<Self> {
+        use std::sync::Arc;
         let radius = skip_radius(settings)?;
-        let grid = min_max_grid(voxels, settings.block_size, radius);
+        let block = settings.block_size;
+        // The grid's voxels are named by their address: a cache belongs to one
+        // prepared volume, whose grids live as long as it does.
+        let voxels_at = voxels.data.as_ptr() as usize;
+        let found = cache.and_then(|c| {
+            let c = c.lock().unwrap_or_else(|e| e.into_inner());
+            c.iter()
+                .find(|(at, g)| *at == voxels_at && g.block == block && g.radius == radius)
+                .map(|(_, g)| g.clone())
+        });
+        let grid = found.unwrap_or_else(|| {
+            let g = Arc::new(min_max_grid(voxels, block, radius));
+            if let Some(c) = cache {
+                c.lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .push((voxels_at, g.clone()));
+            }
+            g
+        });
         let tf = opacity_prefix(lut, overshoot(settings.filter, settings.classification));
         let empty = grid
             .minmax
             .iter()
             .map(|&[lo, hi]| tf.range_empty(lo, hi))
-            .collect();
-        Some(Skipper { grid, tf, empty })
+            .collect::<Vec<bool>>();
+        let run = chessboard_runs(&empty, grid.cells);
+        Some(Skipper {
+            grid,
+            tf,
+            empty,
+            run,
+        })
+    }
+
+    /// [`Skipper::run`] of cell `c`.
+    #[inline]
+    pub fn cell_run(&self, c: [i32; 3]) -> u8 {
+        let n = self.grid.cells;
+        self.run[c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize)]
     }
 
     /// Whether cell `c` is transparent. Mirrors `shaders/shared/skip.wgsl: cell_empty`.
@@ -296,6 +348,87 @@ impl<R: Real> Skipper<R> {
         self.empty.iter().all(|&e| e)
     }
 }
+
+/// Per cell of a grid of `cells` whose kinds are `kind`, the chessboard (L∞) distance
+/// to the nearest cell of the other kind, capped at 255 (also where there is none):
+/// the exact distance transform by two raster passes over the 26 neighbours.
+pub fn chessboard_runs(kind: &[bool], cells: [usize; 3]) -> Vec<u8> {
+    let [nx, ny, nz] = cells.map(|n| n as i64);
+    let at = |x: i64, y: i64, z: i64| (x + nx * (y + ny * z)) as usize;
+    let mut d = vec![255u8; kind.len()];
+    // A cell next to one of the other kind is at distance 1.
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let k = kind[at(x, y, z)];
+                let mut near = false;
+                for (dx, dy, dz) in NEIGHBOURS {
+                    let (u, v, w) = (x + dx, y + dy, z + dz);
+                    if (0..nx).contains(&u)
+                        && (0..ny).contains(&v)
+                        && (0..nz).contains(&w)
+                        && kind[at(u, v, w)] != k
+                    {
+                        near = true;
+                        break;
+                    }
+                }
+                if near {
+                    d[at(x, y, z)] = 1;
+                }
+            }
+        }
+    }
+    // Then d = min(d, 1 + d(neighbour)), forward over the 13 neighbours before a cell
+    // in raster order and backward over the 13 after it.
+    let relax = |x: i64, y: i64, z: i64, forward: bool, d: &mut Vec<u8>| {
+        let here = at(x, y, z);
+        for (dx, dy, dz) in NEIGHBOURS {
+            let before = (dz, dy, dx) < (0, 0, 0);
+            if before != forward {
+                continue;
+            }
+            let (u, v, w) = (x + dx, y + dy, z + dz);
+            if (0..nx).contains(&u) && (0..ny).contains(&v) && (0..nz).contains(&w) {
+                let n = d[at(u, v, w)].saturating_add(1);
+                if n < d[here] {
+                    d[here] = n;
+                }
+            }
+        }
+    };
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                relax(x, y, z, true, &mut d);
+            }
+        }
+    }
+    for z in (0..nz).rev() {
+        for y in (0..ny).rev() {
+            for x in (0..nx).rev() {
+                relax(x, y, z, false, &mut d);
+            }
+        }
+    }
+    d
+}
+
+/// The 26 neighbours of a cell.
+const NEIGHBOURS: [(i64, i64, i64); 26] = {
+    let mut n = [(0, 0, 0); 26];
+    let mut i = 0;
+    let mut k = 0;
+    while k < 27 {
+        let (dx, dy, dz) = (k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1);
+        if !(dx == 0 && dy == 0 && dz == 0) {
+            n[i] = (dx, dy, dz);
+            i += 1;
+        }
+        k += 1;
+    }
+    n
+};
 
 /// An Amanatides–Woo walk through the cells of a grid along `o + d·t`, `t ∈ [t, t_end]`.
 /// Mirrors `shaders/shared/skip.wgsl: CellWalk` (walk_new, walk_boundaries, walk_advance).
@@ -348,10 +481,17 @@ impl<R: Real> CellWalk<R> {
     /// Mirrors `skip.wgsl: walk_boundaries`.
     #[inline]
     fn boundary(&self, a: usize) -> R {
+        self.boundary_beyond(a, 0)
+    }
+
+    /// The parameter at which the walk leaves the cell `m` cells further along axis
+    /// `a` (in its direction of travel).
+    #[inline]
+    fn boundary_beyond(&self, a: usize, m: i32) -> R {
         if self.step[a] == 0 {
             return R::of(BIG);
         }
-        let edge = self.cell[a] + (self.step[a] > 0) as i32;
+        let edge = self.cell[a] + self.step[a] * m + (self.step[a] > 0) as i32;
         (R::of(edge as f64) * self.block - R::of(0.5) - self.o.0[a]) / self.d.0[a]
     }
 
@@ -373,6 +513,75 @@ impl<R: Real> CellWalk<R> {
     #[inline]
     fn active(&self) -> bool {
         self.t < self.t_end && (0..3).all(|a| self.cell[a] >= 0 && self.cell[a] < self.cells[a])
+    }
+
+    /// Leaps out of the cube of cells within `m ≥ 1` of the current one (all of its
+    /// kind): to where the ray leaves the cube, into the cell there.
+    #[inline(always)]
+    fn leap(&mut self, m: i32) {
+        let b = [
+            self.boundary_beyond(0, m),
+            self.boundary_beyond(1, m),
+            self.boundary_beyond(2, m),
+        ];
+        let x_first = b[0] <= b[1] && b[0] <= b[2];
+        let a = if x_first {
+            0
+        } else if b[1] <= b[2] {
+            1
+        } else {
+            2
+        };
+        let t = self.t.max(b[a]);
+        for (q, c) in self.cell.iter_mut().enumerate() {
+            if q == a {
+                *c += self.step[q] * (m + 1);
+            } else if self.step[q] != 0 {
+                // The cell along q at t, held inside the cube against rounding.
+                let p = self.o.0[q] + self.d.0[q] * t;
+                let x = (p + R::of(0.5)) / self.block;
+                // ⌊x⌋ by truncation, one down for negative non-integers.
+                let mut k = x.to_i32().unwrap_or(*c);
+                if R::of(k as f64) > x {
+                    k -= 1;
+                }
+                *c = k.clamp(*c - m, *c + m);
+            }
+        }
+        self.t = t;
+    }
+
+    /// One leap, or one cell where the current one borders the other kind.
+    #[inline(always)]
+    fn go(&mut self, skip: &Skipper<R>) {
+        let r = skip.cell_run(self.cell) as i32;
+        if r >= 2 {
+            self.leap(r - 1);
+        } else {
+            self.advance();
+        }
+    }
+
+    /// [`CellWalk::next_span`] over `skip`'s cells, leaping across runs of cells of one
+    /// kind by their chessboard distance ([`Skipper::cell_run`]) instead of stepping
+    /// through each: the same spans, up to rounding where the ray grazes a cube's
+    /// corner (and spans only bound which steps are sampled; a sample in an empty cell
+    /// is transparent anyway).
+    pub fn next_span_leaping(&mut self, skip: &Skipper<R>) -> Option<(R, R)> {
+        while self.active() && skip.cell_empty(self.cell) {
+            self.go(skip);
+        }
+        if !self.active() {
+            return None;
+        }
+        let start = self.t;
+        loop {
+            self.go(skip);
+            if !self.active() || skip.cell_empty(self.cell) {
+                break;
+            }
+        }
+        Some((start, self.t.min(self.t_end)))
     }
 
     /// The next span `[t_a, t_b]` of consecutive non-empty cells, or `None` when the
@@ -453,7 +662,7 @@ impl<R: Real> SampleRanges<R> {
             return Some((0, self.n as usize - 1));
         };
         loop {
-            let (sa, sb) = walk.next_span(|c| skip.cell_empty(c))?;
+            let (sa, sb) = walk.next_span_leaping(skip)?;
             let (ta, tb) = if self.backward { (-sb, -sa) } else { (sa, sb) };
             let lim = R::of(self.n as f64 + 2.0);
             let k = |t: R| ((t - self.t_s) / self.dt - R::of(0.5)).max(-lim).min(lim);
@@ -542,5 +751,159 @@ mod tests {
         assert_eq!(w.next_span(empty), Some((4.5, 6.5)));
         assert_eq!(w.next_span(empty), Some((10.5, 12.5)));
         assert_eq!(w.next_span(empty), None);
+    }
+
+    /// A small generator for the tests below.
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Blobs of empty cells in a 13×9×11 grid (a few balls), or none, or all.
+    fn blob_kinds(seed: u64, cells: [usize; 3]) -> Vec<bool> {
+        let mut st = seed;
+        let n = cells[0] * cells[1] * cells[2];
+        match seed % 7 {
+            0 => return vec![false; n],
+            1 => return vec![true; n],
+            _ => {}
+        }
+        let balls: Vec<([f64; 3], f64)> = (0..4)
+            .map(|_| {
+                let c = [0, 1, 2].map(|a| lcg(&mut st) * cells[a] as f64);
+                (c, 1.0 + 3.0 * lcg(&mut st))
+            })
+            .collect();
+        (0..n)
+            .map(|i| {
+                let p = [
+                    i % cells[0],
+                    (i / cells[0]) % cells[1],
+                    i / (cells[0] * cells[1]),
+                ];
+                balls
+                    .iter()
+                    .any(|(c, r)| (0..3).map(|a| (p[a] as f64 - c[a]).powi(2)).sum::<f64>() < r * r)
+                    == seed.is_multiple_of(2)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn chessboard_runs_are_the_distances_to_the_other_kind() {
+        let cells = [13, 9, 11];
+        for seed in 0..12 {
+            let kinds = blob_kinds(seed, cells);
+            let runs = chessboard_runs(&kinds, cells);
+            let at = |i: usize| [i % 13, (i / 13) % 9, i / 117].map(|x| x as i64);
+            for i in 0..kinds.len() {
+                let p = at(i);
+                let nearest = (0..kinds.len())
+                    .filter(|&j| kinds[j] != kinds[i])
+                    .map(|j| {
+                        let q = at(j);
+                        (0..3).map(|a| (p[a] - q[a]).abs()).max().unwrap()
+                    })
+                    .min()
+                    .unwrap_or(255)
+                    .min(255);
+                assert_eq!(runs[i] as i64, nearest, "seed {seed}, cell {p:?}");
+            }
+        }
+    }
+
+    /// The leaping walk finds the spans of the cell-by-cell walk: as many, their ends
+    /// the same up to rounding, over rays in every direction (axis-aligned too).
+    #[test]
+    fn leaping_walk_finds_the_stepping_walks_spans() {
+        let cells = [13, 9, 11];
+        let block = 4;
+        let tf = TransferFunctionLike::prefix();
+        let mut st = 99u64;
+        let mut spans = 0;
+        for seed in 0..14 {
+            let empty = blob_kinds(seed, cells);
+            let skip = Skipper {
+                grid: std::sync::Arc::new(MinMaxGrid {
+                    block,
+                    radius: 1,
+                    cells,
+                    minmax: vec![[0.0, 0.0]; empty.len()],
+                }),
+                tf: tf.clone(),
+                run: chessboard_runs(&empty, cells),
+                empty,
+            };
+            for r in 0..300 {
+                let lo = V3::new(-0.5, -0.5, -0.5);
+                let hi = V3::new(51.5, 35.5, 43.5);
+                let o = V3::new(
+                    -10.0 + 70.0 * lcg(&mut st),
+                    -10.0 + 55.0 * lcg(&mut st),
+                    -10.0 + 60.0 * lcg(&mut st),
+                );
+                let mut d = V3::new(lcg(&mut st) - 0.5, lcg(&mut st) - 0.5, lcg(&mut st) - 0.5);
+                if r % 5 == 0 {
+                    // Axis-aligned, either way.
+                    let a = r / 5 % 3;
+                    let s = if r % 2 == 0 { 1.0 } else { -1.0 };
+                    d = V3::new(0.0, 0.0, 0.0);
+                    d.0[a] = s;
+                }
+                let Some((t0, t1)) = slab(o, d, lo, hi) else {
+                    continue;
+                };
+                let mut a = CellWalk::new(o, d, t0, t1, block, cells);
+                let mut b = a;
+                loop {
+                    let x = a.next_span(|c| skip.cell_empty(c));
+                    let y = b.next_span_leaping(&skip);
+                    match (x, y) {
+                        (None, None) => break,
+                        (Some(x), Some(y)) => {
+                            spans += 1;
+                            let tol = 1e-9 * (1.0 + x.1.abs());
+                            assert!(
+                                (x.0 - y.0).abs() <= tol && (x.1 - y.1).abs() <= tol,
+                                "seed {seed}, ray {r}: {x:?} vs {y:?}"
+                            );
+                        }
+                        _ => panic!("seed {seed}, ray {r}: {x:?} vs {y:?}"),
+                    }
+                }
+            }
+        }
+        assert!(spans > 1000, "only {spans} spans compared");
+    }
+
+    /// The entry and exit of `o + d·t` through the box `[lo, hi]`.
+    fn slab(o: V3<f64>, d: V3<f64>, lo: V3<f64>, hi: V3<f64>) -> Option<(f64, f64)> {
+        let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+        for a in 0..3 {
+            if d.0[a] == 0.0 {
+                if o.0[a] < lo.0[a] || o.0[a] > hi.0[a] {
+                    return None;
+                }
+                continue;
+            }
+            let (u, v) = ((lo.0[a] - o.0[a]) / d.0[a], (hi.0[a] - o.0[a]) / d.0[a]);
+            t0 = t0.max(u.min(v));
+            t1 = t1.min(u.max(v));
+        }
+        (t0 < t1).then_some((t0, t1))
+    }
+
+    /// A transfer function's prefix count, for building a skipper by hand.
+    struct TransferFunctionLike;
+    impl TransferFunctionLike {
+        fn prefix() -> OpacityPrefix<f64> {
+            let lut = crate::transfer::TransferFunction::preset("phantom")
+                .unwrap()
+                .lut(64)
+                .to_real::<f64>();
+            opacity_prefix(&lut, 0.0)
+        }
     }
 }
