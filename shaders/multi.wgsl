@@ -228,8 +228,12 @@ fn take_extreme(b: vec2<f32>, v: vec2<f32>, mip: bool) -> vec2<f32> {
     return vec2<f32>(min(b.x, v.x), 1.0);
 }
 
-// Step k of n over [t_in, t_out]: (midpoint, length), as the Rust twin's `segment`.
+// Step k of n over [t_in, t_out]: (midpoint, length), as the Rust twin's `segment`: a
+// full step (neither the first nor the last) is dt long, its midpoint t_in + (k + 1/2) dt.
 fn segment(k: u32, n: u32, t_in: f32, t_out: f32, dt: f32) -> vec2<f32> {
+    if (k > 0u && k + 1u < n) {
+        return vec2<f32>(t_in + (f32(k) + 0.5) * dt, dt);
+    }
     var ta = t_in;
     if (k != 0u) {
         ta = t_in + f32(k) * dt;

@@ -348,10 +348,16 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
         if (s.w <= 0.0) {
             continue;
         }
-        // Opacity correction for a step of len·speed voxels.
+        // Opacity correction for a step of len·speed voxels: a full step's exponent is
+        // the step over the reference step exactly (mirrors src/cpu/march.rs:
+        // Steps::exponent).
         var alpha = 1.0;
         if (s.w < 1.0) {
-            alpha = step_opacity(s.w, len * speed / params.misc.x);
+            var e = len * speed / params.misc.x;
+            if (full_step(k, n)) {
+                e = params.box_hi.w / params.misc.x;
+            }
+            alpha = step_opacity(s.w, e);
         }
         var rgb = s.xyz;
         if (params.flags.y == 1u) {
@@ -383,12 +389,25 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
 }
 
+// A full step (neither the first nor the last) has midpoint t_s + (k + 1/2) dt and
+// length dt exactly; the first starts at t_in, the last ends at t_out.
+// mirrors src/cpu/march.rs: Steps::full, Steps::segment
+fn full_step(k: u32, n: u32) -> bool {
+    return k > 0u && k + 1u < n;
+}
+
 fn segment_point(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    if (full_step(k, n)) {
+        return o + d * (t_s + (f32(k) + 0.5) * dt);
+    }
     let b = step_bounds(k, n, t_in, t_s, t_out, dt);
     return o + d * ((b.x + b.y) * 0.5);
 }
 
 fn segment_length(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32) -> f32 {
+    if (full_step(k, n)) {
+        return dt;
+    }
     let b = step_bounds(k, n, t_in, t_s, t_out, dt);
     return b.y - b.x;
 }

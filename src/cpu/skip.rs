@@ -383,11 +383,14 @@ pub fn chessboard_runs(kind: &[bool], cells: [usize; 3]) -> Vec<u8> {
     // in raster order and backward over the 13 after it.
     let relax = |x: i64, y: i64, z: i64, forward: bool, d: &mut Vec<u8>| {
         let here = at(x, y, z);
-        for (dx, dy, dz) in NEIGHBOURS {
-            let before = (dz, dy, dx) < (0, 0, 0);
-            if before != forward {
-                continue;
-            }
+        // Forward: the 13 neighbours before the cell in raster order (the first 13 of
+        // NEIGHBOURS); backward: the 13 after it.
+        let half = if forward {
+            &NEIGHBOURS[..13]
+        } else {
+            &NEIGHBOURS[13..]
+        };
+        for &(dx, dy, dz) in half {
             let (u, v, w) = (x + dx, y + dy, z + dz);
             if (0..nx).contains(&u) && (0..ny).contains(&v) && (0..nz).contains(&w) {
                 let n = d[at(u, v, w)].saturating_add(1);
@@ -414,7 +417,8 @@ pub fn chessboard_runs(kind: &[bool], cells: [usize; 3]) -> Vec<u8> {
     d
 }
 
-/// The 26 neighbours of a cell.
+/// The 26 neighbours of a cell, in raster order (x fastest): the first 13 come before
+/// it, the last 13 after.
 const NEIGHBOURS: [(i64, i64, i64); 26] = {
     let mut n = [(0, 0, 0); 26];
     let mut i = 0;
