@@ -17,6 +17,10 @@ pub trait Real:
     fn of(x: f64) -> Self;
     /// Converts to `f64` (exact).
     fn f64(self) -> f64;
+    /// `self^e` for a transmittance `self ∈ [0, 1]` and `e > 0`: the library power in
+    /// f64, [`crate::cpu::pow01::pow01`] in f32 (which vector lanes reproduce bit for
+    /// bit).
+    fn pow01(self, e: Self) -> Self;
 }
 
 impl Real for f32 {
@@ -29,6 +33,10 @@ impl Real for f32 {
     fn f64(self) -> f64 {
         self as f64
     }
+    #[inline]
+    fn pow01(self, e: Self) -> Self {
+        crate::cpu::pow01::pow01(self, e)
+    }
 }
 
 impl Real for f64 {
@@ -40,6 +48,10 @@ impl Real for f64 {
     #[inline(always)]
     fn f64(self) -> f64 {
         self
+    }
+    #[inline]
+    fn pow01(self, e: Self) -> Self {
+        self.powf(e)
     }
 }
 

@@ -257,11 +257,9 @@ mod simd {
         p: [__m512; 3],
         rgb: [__m512; 3],
         alpha: __m512,
-        /// `1 − (1 − α)^e`, right only where `e` is ½ or 1 (elsewhere see `general`).
+        /// `1 − (1 − α)^e` (`raycast::transmit_pow`: a square root for ½, the power
+        /// of `cpu::pow01` for exponents other than ½ and 1).
         alpha_step: __m512,
-        e: __m512,
-        /// Lanes whose exponent is neither ½ nor 1: `alpha_step` is to be raised there.
-        general: u16,
         /// Lanes whose coordinates are all in (−1e9, 1e9), where the scalar path floors
         /// by truncation; the others are to be computed by the scalar path.
         moderate: u16,
@@ -455,14 +453,16 @@ mod simd {
         let keep = _mm512_sub_ps(one, alpha);
         let half = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(e, _mm512_set1_ps(0.5));
         let unit = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(e, one);
-        let tr = _mm512_mask_blend_ps(half, keep, _mm512_sqrt_ps(keep));
+        let mut tr = _mm512_mask_blend_ps(half, keep, _mm512_sqrt_ps(keep));
+        let general = !(half | unit);
+        if general != 0 {
+            tr = _mm512_mask_blend_ps(general, tr, crate::cpu::pow01::pow01_x16(keep, e));
+        }
         Classified {
             p: t.p,
             rgb: [channel(0), channel(1), channel(2)],
             alpha,
             alpha_step: _mm512_sub_ps(one, tr),
-            e,
-            general: !(half | unit),
             moderate: t.moderate,
         }
     }
@@ -511,16 +511,6 @@ mod simd {
         _mm512_storeu_ps(b.alpha.as_mut_ptr(), c.alpha);
         _mm512_storeu_ps(b.alpha_step.as_mut_ptr(), c.alpha_step);
         b.visible = (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(c.alpha, _mm512_setzero_ps()) & live) as u32;
-        let general = c.general & live;
-        if general != 0 {
-            let mut ev = [0f32; BATCH];
-            _mm512_storeu_ps(ev.as_mut_ptr(), c.e);
-            for (l, &e) in ev.iter().enumerate() {
-                if general & (1 << l) != 0 {
-                    b.alpha_step[l] = 1.0 - (1.0 - b.alpha[l]).powf(e);
-                }
-            }
-        }
         true
     }
 
@@ -600,24 +590,20 @@ mod simd {
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn finish_odd(pk: &Packet, src: &Source<f32>, c: &mut Classified) {
-        let odd = (!c.moderate | c.general) & pk.live;
+        let odd = !c.moderate & pk.live;
         if odd == 0 {
             return;
         }
         let ld = |x: &[f32; PACKET]| _mm512_loadu_ps(x.as_ptr());
         let mut rgb = [[0f32; PACKET]; 3];
-        let (mut alpha, mut alpha_step, mut e) = ([0f32; PACKET], [0f32; PACKET], [0f32; PACKET]);
+        let (mut alpha, mut alpha_step) = ([0f32; PACKET], [0f32; PACKET]);
         for (a, v) in rgb.iter_mut().enumerate() {
             _mm512_storeu_ps(v.as_mut_ptr(), c.rgb[a]);
         }
         _mm512_storeu_ps(alpha.as_mut_ptr(), c.alpha);
         _mm512_storeu_ps(alpha_step.as_mut_ptr(), c.alpha_step);
-        _mm512_storeu_ps(e.as_mut_ptr(), c.e);
         for l in 0..PACKET {
-            if odd & (1 << l) == 0 {
-                continue;
-            }
-            if c.moderate & (1 << l) == 0 {
+            if odd & (1 << l) != 0 {
                 let st = pk.steps(l);
                 let k = pk.k[l] as usize;
                 let (p, len) = st.segment(k);
@@ -629,8 +615,6 @@ mod simd {
                 alpha[l] = q[3];
                 let e = st.exponent(k, len, pk.speed[l], src.ref_step, src.e_full);
                 alpha_step[l] = 1.0 - crate::cpu::raycast::transmit_pow(1.0 - q[3], e);
-            } else {
-                alpha_step[l] = 1.0 - (1.0 - alpha[l]).powf(e[l]);
             }
         }
         c.rgb = [ld(&rgb[0]), ld(&rgb[1]), ld(&rgb[2])];

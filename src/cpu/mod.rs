@@ -17,6 +17,7 @@ pub mod march;
 pub mod modes;
 pub mod multi;
 pub mod parker;
+pub mod pow01;
 pub mod preintegrate;
 pub mod process;
 pub mod project;

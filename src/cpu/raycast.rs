@@ -1035,7 +1035,7 @@ pub(crate) fn transmit_pow<R: Real>(x: R, e: R) -> R {
     } else if e == R::one() {
         x
     } else {
-        x.powf(e)
+        x.pow01(e)
     }
 }
 
