@@ -7,6 +7,16 @@ mod common;
 use common::{s, scratch, stderr, voxlab};
 
 fn render(dir: &std::path::Path, name: &str, extra: &[&str]) -> (Vec<f32>, Vec<f32>) {
+    let (px, n, _) = render_logged(dir, name, extra);
+    (px, n)
+}
+
+/// [`render`], also returning what the command printed.
+fn render_logged(
+    dir: &std::path::Path,
+    name: &str,
+    extra: &[&str],
+) -> (Vec<f32>, Vec<f32>, String) {
     let img = dir.join(format!("{name}.npy"));
     let samples = dir.join(format!("{name}-samples.npy"));
     let mut args = vec![
@@ -28,7 +38,7 @@ fn render(dir: &std::path::Path, name: &str, extra: &[&str]) -> (Vec<f32>, Vec<f
     assert!(o.status.success(), "{}", stderr(&o));
     let (_, px) = voxlab::io::npy::read_npy_f32(&img).unwrap();
     let (_, n) = voxlab::io::npy::read_npy_f32(&samples).unwrap();
-    (px, n)
+    (px, n, stderr(&o))
 }
 
 #[test]
@@ -114,33 +124,13 @@ fn repeat_times_frames_of_the_same_image() {
     let d = scratch("cli-repeat");
     for backend in ["cpu-f32", "cpu"] {
         let (one, n_one) = render(&d, "one", &["--backend", backend, "--no-shading"]);
-        let img = d.join("rep.npy");
-        let samples = d.join("rep-samples.npy");
-        let o = voxlab(&[
-            "render",
-            "phantom:shepp-logan-modified:40",
-            "--tf",
-            "phantom",
-            "--width",
-            "48",
-            "--height",
-            "36",
-            "--out",
-            s(&img),
-            "--samples",
-            s(&samples),
-            "--backend",
-            backend,
-            "--no-shading",
-            "--repeat",
-            "3",
-        ]);
-        let err = stderr(&o);
-        assert!(o.status.success(), "{err}");
+        let (rep, n_rep, err) = render_logged(
+            &d,
+            "rep",
+            &["--backend", backend, "--no-shading", "--repeat", "3"],
+        );
         assert!(err.contains("per frame: median"), "{err}");
         assert!(err.contains("of 3 frames"), "{err}");
-        let (_, rep) = voxlab::io::npy::read_npy_f32(&img).unwrap();
-        let (_, n_rep) = voxlab::io::npy::read_npy_f32(&samples).unwrap();
         assert_eq!(one, rep, "{backend}: --repeat changed the image");
         assert_eq!(
             n_one, n_rep,

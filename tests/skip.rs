@@ -564,7 +564,8 @@ fn prepared_volume_frames_equal_one_off_renders() {
     base.shading.enabled = false; // the ray-packet kernel's case
     let prepared32 = Prepared::<f32>::new(&vol, &base).unwrap();
     let prepared64 = Prepared::<f64>::new(&vol, &base).unwrap();
-    let frames: Vec<(Cam, &TransferFunction, RenderSettings)> = vec![
+    type Frame<'a> = (Cam, &'a TransferFunction, RenderSettings);
+    let frames: Vec<Frame> = vec![
         (Cam::Perspective, &sparse, base.clone()),
         (Cam::Axis, &dense, base.clone()),
         (
@@ -610,29 +611,25 @@ fn prepared_volume_frames_equal_one_off_renders() {
         ),
         (Cam::Axis, &dense, RenderSettings::default()),
     ];
-    for (i, (cam, tf, s)) in frames.iter().enumerate() {
-        let camera = camera(&vol, *cam, 40);
-        let a = prepared32.render(tf, &camera, s, none()).unwrap();
-        let b = render::<f32>(&vol, tf, &camera, s, none()).unwrap();
+    fn same<R: voxlab::real::Real>(p: &Prepared<R>, v: &AnyVolume, f: &Frame, i: usize) {
+        let (cam, tf, s) = f;
+        let camera = camera(v, *cam, 40);
+        let a = p.render(tf, &camera, s, none()).unwrap();
+        let b = render::<R>(v, tf, &camera, s, none()).unwrap();
         assert!(
             a.image
                 .data
                 .iter()
                 .zip(&b.image.data)
                 .all(|(x, y)| x.to_bits() == y.to_bits()),
-            "frame {i} (f32) differs from the one-off render"
+            "frame {i} ({}) differs from the one-off render",
+            R::NAME
         );
-        assert_eq!(a.total_samples, b.total_samples, "frame {i} (f32)");
-        let a = prepared64.render(tf, &camera, s, none()).unwrap();
-        let b = render::<f64>(&vol, tf, &camera, s, none()).unwrap();
-        assert!(
-            a.image
-                .data
-                .iter()
-                .zip(&b.image.data)
-                .all(|(x, y)| x.to_bits() == y.to_bits()),
-            "frame {i} (f64) differs from the one-off render"
-        );
+        assert_eq!(a.total_samples, b.total_samples, "frame {i} ({})", R::NAME);
+    }
+    for (i, f) in frames.iter().enumerate() {
+        same(&prepared32, &vol, f, i);
+        same(&prepared64, &vol, f, i);
     }
     let other = RenderSettings {
         filter: Filter::CatmullRom,

@@ -529,12 +529,7 @@ pub fn prepare<R: Real>(
     settings.validate()?;
     tf.validate()?;
     volume.check_finite("volume")?;
-    let grid = match volume {
-        AnyVolume::U8(v) => Grid::<R>::from_volume(v),
-        AnyVolume::U16(v) => Grid::from_volume(v),
-        AnyVolume::I16(v) => Grid::from_volume(v),
-        AnyVolume::F32(v) => Grid::from_volume(v),
-    };
+    let grid = Grid::<R>::from_any(volume);
     let adaptive = settings.sampling == Sampling::Adaptive;
     let direct = settings.sampling == Sampling::Direct;
     Ok(AdaptiveScene {

@@ -44,7 +44,7 @@
 
 use crate::real::{Real, V3};
 use crate::settings::Filter;
-use crate::volume::{Volume, Voxel};
+use crate::volume::{AnyVolume, Volume, Voxel};
 
 /// A voxel grid in the working precision: the data the CPU algorithms sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,6 +60,15 @@ impl<R: Real> Grid<R> {
         Grid {
             dims: v.dims(),
             data: v.data().par_iter().map(|x| R::of(x.to_f64())).collect(),
+        }
+    }
+    /// The voxel values of a volume of any voxel type.
+    pub fn from_any(v: &AnyVolume) -> Self {
+        match v {
+            AnyVolume::U8(v) => Grid::from_volume(v),
+            AnyVolume::U16(v) => Grid::from_volume(v),
+            AnyVolume::I16(v) => Grid::from_volume(v),
+            AnyVolume::F32(v) => Grid::from_volume(v),
         }
     }
     /// A grid of `f(i, j, k)`.

@@ -33,7 +33,6 @@ use crate::multi::MultiVolume;
 use crate::real::{Real, M3, V3};
 use crate::settings::{Compositing, Light, Mode, RenderSettings};
 use crate::transfer::{LutR, TransferFunction};
-use crate::volume::AnyVolume;
 use glam::{DMat3, DMat4};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -72,7 +71,7 @@ pub fn render<R: Real>(
         .iter()
         .map(|v| {
             GridField::new(
-                grid_of(&v.volume),
+                Grid::from_any(&v.volume),
                 settings.filter,
                 settings.gradient,
                 settings.precompute_gradients,
@@ -92,16 +91,6 @@ pub fn render<R: Real>(
         })
         .collect::<Result<Vec<_>>>()?;
     render_layers(&layers, camera, settings, progress)
-}
-
-/// The voxel values of a volume as a grid in precision `R`.
-pub(crate) fn grid_of<R: Real>(v: &AnyVolume) -> Grid<R> {
-    match v {
-        AnyVolume::U8(v) => Grid::from_volume(v),
-        AnyVolume::U16(v) => Grid::from_volume(v),
-        AnyVolume::I16(v) => Grid::from_volume(v),
-        AnyVolume::F32(v) => Grid::from_volume(v),
-    }
 }
 
 /// The most samples a ray through the union of the boxes may take, from the union's

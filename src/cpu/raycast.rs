@@ -341,12 +341,7 @@ impl<R: Real> Prepared<R> {
     /// Checks and converts `volume` for frames with `settings`' filter and gradients.
     pub fn new(volume: &AnyVolume, settings: &RenderSettings) -> Result<Self> {
         volume.check_finite("volume")?;
-        let grid = match volume {
-            AnyVolume::U8(v) => Grid::<R>::from_volume(v),
-            AnyVolume::U16(v) => Grid::from_volume(v),
-            AnyVolume::I16(v) => Grid::from_volume(v),
-            AnyVolume::F32(v) => Grid::from_volume(v),
-        };
+        let grid = Grid::<R>::from_any(volume);
         let gradient = (settings.gradient, settings.precompute_gradients);
         Ok(Prepared {
             field: GridField::new(grid, settings.filter, gradient.0, gradient.1),
