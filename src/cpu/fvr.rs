@@ -514,23 +514,37 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
                 *x = R::of(v / sum);
             }
         }
+        // The tap count as a constant, so that the sums unroll (the same sums).
+        match taps {
+            2 => self.sum_taps::<2>(&idx, &w),
+            4 => self.sum_taps::<4>(&idx, &w),
+            6 => self.sum_taps::<6>(&idx, &w),
+            _ => self.sum_taps::<8>(&idx, &w),
+        }
+    }
+
+    /// `Σ_z w_z Σ_y w_y Σ_x w_x S[z][y][x]` over `T` taps per axis at indices `idx`.
+    #[inline(always)]
+    fn sum_taps<const T: usize>(&self, idx: &[[usize; 8]; 3], w: &[[R; 8]; 3]) -> Complex<R> {
         let zero = Complex::new(R::zero(), R::zero());
         // Away from the cube's edge the x taps are one contiguous run (same sum).
-        let x_run = (idx[0][0] + taps <= self.m && idx[0][taps - 1] == idx[0][0] + taps - 1)
-            .then_some(idx[0][0]);
+        let x_run =
+            (idx[0][0] + T <= self.m && idx[0][T - 1] == idx[0][0] + T - 1).then_some(idx[0][0]);
         let mut acc = zero;
-        for tz in 0..taps {
+        for tz in 0..T {
             let mut az = zero;
-            for ty in 0..taps {
+            for ty in 0..T {
                 let row = (idx[2][tz] * self.m + idx[1][ty]) * self.m;
                 let mut ax = zero;
                 if let Some(x0) = x_run {
-                    let line = &self.spectrum[row + x0..row + x0 + taps];
-                    for (v, &wt) in line.iter().zip(&w[0][..taps]) {
+                    let line: &[Complex<R>; T] = self.spectrum[row + x0..row + x0 + T]
+                        .try_into()
+                        .expect("T taps");
+                    for (v, &wt) in line.iter().zip(&w[0][..T]) {
                         ax += *v * wt;
                     }
                 } else {
-                    for tx in 0..taps {
+                    for tx in 0..T {
                         ax += self.spectrum[row + idx[0][tx]] * w[0][tx];
                     }
                 }
