@@ -88,7 +88,8 @@ fn sample(kappa: vec3<f32>) -> vec2<f32> {
     return acc;
 }
 
-// src/cpu/fvr.rs: fvr_project, the per-sample closure: S(k_r, k_u) = F(k_r·r + k_u·u)
+// src/cpu/fvr.rs: fvr_project, the per-sample closure `sample_at` and the Hermitian
+// fill: S(k_r, k_u) = F(k_r·r + k_u·u)
 // times the phase ramp e^{2πi(k_r δ_r + k_u δ_u)/M}.
 @compute @workgroup_size(64)
 fn extract_slice(
@@ -103,6 +104,14 @@ fn extract_slice(
     let half = m / 2;
     let ju = i32(id / p.m);
     let ir = i32(id % p.m);
+    // The slice is Hermitian (the volume is real): rows 0 < k_u < M/2 are the
+    // conjugates of rows −k_u, written by those rows' invocations, except at
+    // k_r = −M/2 (its partner +M/2 is not on the slice). The nearest kernel samples
+    // everywhere (its ties round one way for κ and the other for −κ).
+    let hermitian = p.kernel != 0u && ir != half;
+    if hermitian && ju >= 1 && ju < half {
+        return;
+    }
     let ku = ((ju + half) % m) - half;
     let kr = ((ir + half) % m) - half;
     let right = vec3<f32>(p.right_x, p.right_y, p.right_z);
@@ -115,4 +124,7 @@ fn extract_slice(
         s = vec2<f32>(s.x * c.x - s.y * c.y, s.x * c.y + s.y * c.x);
     }
     slice[id] = s;
+    if hermitian && ju > half {
+        slice[u32((m - ju) * m + (m - ir) % m)] = vec2<f32>(s.x, -s.y);
+    }
 }

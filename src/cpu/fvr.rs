@@ -692,26 +692,56 @@ pub fn fvr_project<R: SpectrumReal>(
             .collect()
     };
     let (ramp_r, ramp_u) = (ramp(dr), ramp(du));
+    let sample_at = |ir: usize, ju: usize| -> Complex<R> {
+        let kappa = g.right * k_of(ir) as f64 + g.up * k_of(ju) as f64;
+        let mut s = match kernel {
+            Kernel::Dirichlet => {
+                let e = spectrum.sample_exact(kappa);
+                Complex::new(R::of(e.re), R::of(e.im))
+            }
+            k => spectrum.sample(k, kappa),
+        };
+        if dr != 0.0 || du != 0.0 {
+            let e = ramp_r[ir] * ramp_u[ju];
+            s *= Complex::new(R::of(e.re), R::of(e.im));
+        }
+        s
+    };
+    // The volume is real, so its spectrum is Hermitian, `S(−κ) = S(κ)*`, and so is any
+    // interpolant of it with an even kernel over the periodic grid, and so is the phase
+    // ramp: the slice at `(−k_r, −k_u)` is the conjugate of the slice at `(k_r, k_u)`.
+    // Rows `k_u ≤ 0` are sampled; rows `0 < k_u < M/2` are the conjugates of rows
+    // `−k_u`, except at `k_r = −M/2`, whose partner `+M/2` is not on the slice.
+    // (The nearest kernel breaks ties one way for `κ` and the other for `−κ`, so it is
+    // sampled everywhere; it is cheap.)
+    let hermitian = kernel != Kernel::Nearest;
+    let mirrored = |ju: usize| hermitian && (1..m / 2).contains(&ju);
     let mut slice = vec![Complex::new(R::zero(), R::zero()); m * m];
     slice.par_chunks_mut(m).enumerate().for_each(|(ju, line)| {
-        for (ir, out) in line.iter_mut().enumerate() {
-            let ku = k_of(ju);
-            let kr = k_of(ir);
-            let kappa = g.right * kr as f64 + g.up * ku as f64;
-            let mut s = match kernel {
-                Kernel::Dirichlet => {
-                    let e = spectrum.sample_exact(kappa);
-                    Complex::new(R::of(e.re), R::of(e.im))
-                }
-                k => spectrum.sample(k, kappa),
-            };
-            if dr != 0.0 || du != 0.0 {
-                let e = ramp_r[ir] * ramp_u[ju];
-                s *= Complex::new(R::of(e.re), R::of(e.im));
+        if !mirrored(ju) {
+            for (ir, out) in line.iter_mut().enumerate() {
+                *out = sample_at(ir, ju);
             }
-            *out = s;
         }
     });
+    if hermitian {
+        let (low, high) = slice.split_at_mut(m / 2 * m);
+        let high = &*high;
+        low.par_chunks_mut(m)
+            .enumerate()
+            .skip(1)
+            .for_each(|(ju, line)| {
+                // Row `M − ju` holds `k_u = −k_of(ju)`; it lies in `high` at `M/2 − ju`.
+                let partner = &high[(m / 2 - ju) * m..(m / 2 - ju + 1) * m];
+                for (ir, out) in line.iter_mut().enumerate() {
+                    *out = if ir == m / 2 {
+                        sample_at(ir, ju)
+                    } else {
+                        partner[(m - ir) % m].conj()
+                    };
+                }
+            });
+    }
     fft_nd(
         &mut slice,
         &[m, m],

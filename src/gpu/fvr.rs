@@ -19,7 +19,9 @@
 //! Per view:
 //! 1. `shaders/fvr_slice.wgsl: extract_slice` interpolates the central slice, one
 //!    invocation per frequency sample (nearest, trilinear, Lanczos-2/3/4; the same taps,
-//!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure);
+//!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure;
+//!    like the CPU it samples the rows `k_u ≤ 0` and writes the rows `k_u > 0` as
+//!    their Hermitian conjugates);
 //! 2. the inverse 2-D FFT of the slice, in place in the slice's buffer (no host round
 //!    trip), with a [`GpuFftPlan`] made once at upload (Stockham; `M` must be a power
 //!    of two), and the readback of the `M²` result;
