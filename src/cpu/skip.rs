@@ -271,10 +271,11 @@ pub struct Skipper<R> {
     pub tf: OpacityPrefix<R>,
     /// `tf.range_empty` of every cell, worked out once.
     empty: Vec<bool>,
-    /// Per cell, the chessboard distance (in cells, at most 255) to the nearest cell
-    /// of the other kind (empty or not) in the grid: every cell within `run − 1` of it
-    /// is of its kind, so a walk may leap that far (see [`CellWalk::next_span_leaping`]).
-    run: Vec<u8>,
+    /// Per octant of ray directions, made when a ray first needs it: the
+    /// [`octant_runs`] of the cells' kinds (empty or not), so that a walk in that
+    /// octant may leap across the box of one kind ahead of it (see
+    /// [`CellWalk::next_span_leaping`]).
+    runs: [std::sync::OnceLock<Vec<u8>>; 8],
 }
 
 impl<R: Real> Skipper<R> {
@@ -320,20 +321,21 @@ impl<R: Real> Skipper<R> {
             .iter()
             .map(|&[lo, hi]| tf.range_empty(lo, hi))
             .collect::<Vec<bool>>();
-        let run = chessboard_runs(&empty, grid.cells);
         Some(Skipper {
             grid,
             tf,
             empty,
-            run,
+            runs: Default::default(),
         })
     }
 
-    /// [`Skipper::run`] of cell `c`.
+    /// The side of the box of cells of `c`'s kind ahead of cell `c` in `octant` (see
+    /// [`octant_runs`]).
     #[inline]
-    pub fn cell_run(&self, c: [i32; 3]) -> u8 {
+    pub fn cell_run(&self, c: [i32; 3], octant: usize) -> u8 {
         let n = self.grid.cells;
-        self.run[c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize)]
+        let run = self.runs[octant].get_or_init(|| octant_runs(&self.empty, n, octant));
+        run[c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize)]
     }
 
     /// Whether cell `c` is transparent. Mirrors `shaders/shared/skip.wgsl: cell_empty`.
@@ -349,90 +351,54 @@ impl<R: Real> Skipper<R> {
     }
 }
 
-/// Per cell of a grid of `cells` whose kinds are `kind`, the chessboard (L∞) distance
-/// to the nearest cell of the other kind, capped at 255 (also where there is none):
-/// the exact distance transform by two raster passes over the 26 neighbours.
-pub fn chessboard_runs(kind: &[bool], cells: [usize; 3]) -> Vec<u8> {
+/// Per cell of a grid of `cells` whose kinds are `kind`, for the octant of directions
+/// `octant` (bit `a` set: travel towards lower indices along axis `a`), the side `m`
+/// of the largest box of cells with the cell at its corner, extending from it along the
+/// octant, all of whose cells inside the grid are of the cell's kind: cells
+/// `c + i∘s`, `i ∈ [0, m − 1]³`, `s` the octant's signs. Capped at 255 (also where the
+/// box reaches the grid's far faces). Dynamic programming over the 7 cells ahead of
+/// each cell: `m(c) = 1 + min m(c + e∘s)` over `e ∈ {0, 1}³ \ {0}`, 1 when one of them
+/// is of the other kind, and a cell ahead outside the grid bounds nothing.
+pub fn octant_runs(kind: &[bool], cells: [usize; 3], octant: usize) -> Vec<u8> {
     let [nx, ny, nz] = cells.map(|n| n as i64);
     let at = |x: i64, y: i64, z: i64| (x + nx * (y + ny * z)) as usize;
-    let mut d = vec![255u8; kind.len()];
-    // A cell next to one of the other kind is at distance 1.
-    for z in 0..nz {
-        for y in 0..ny {
-            for x in 0..nx {
-                let k = kind[at(x, y, z)];
-                let mut near = false;
-                for (dx, dy, dz) in NEIGHBOURS {
-                    let (u, v, w) = (x + dx, y + dy, z + dz);
-                    if (0..nx).contains(&u)
-                        && (0..ny).contains(&v)
-                        && (0..nz).contains(&w)
-                        && kind[at(u, v, w)] != k
-                    {
-                        near = true;
-                        break;
-                    }
-                }
-                if near {
-                    d[at(x, y, z)] = 1;
-                }
-            }
-        }
-    }
-    // Then d = min(d, 1 + d(neighbour)), forward over the 13 neighbours before a cell
-    // in raster order and backward over the 13 after it.
-    let relax = |x: i64, y: i64, z: i64, forward: bool, d: &mut Vec<u8>| {
-        let here = at(x, y, z);
-        // Forward: the 13 neighbours before the cell in raster order (the first 13 of
-        // NEIGHBOURS); backward: the 13 after it.
-        let half = if forward {
-            &NEIGHBOURS[..13]
+    let s = [0, 1, 2].map(|a| if octant >> a & 1 == 1 { -1i64 } else { 1 });
+    // Visit the cells ahead first: against the octant's direction along every axis.
+    let order = |n: i64, s: i64| -> Box<dyn Iterator<Item = i64>> {
+        if s > 0 {
+            Box::new((0..n).rev())
         } else {
-            &NEIGHBOURS[13..]
-        };
-        for &(dx, dy, dz) in half {
-            let (u, v, w) = (x + dx, y + dy, z + dz);
-            if (0..nx).contains(&u) && (0..ny).contains(&v) && (0..nz).contains(&w) {
-                let n = d[at(u, v, w)].saturating_add(1);
-                if n < d[here] {
-                    d[here] = n;
-                }
-            }
+            Box::new(0..n)
         }
     };
-    for z in 0..nz {
-        for y in 0..ny {
-            for x in 0..nx {
-                relax(x, y, z, true, &mut d);
+    let mut run = vec![255u8; kind.len()];
+    for z in order(nz, s[2]) {
+        for y in order(ny, s[1]) {
+            for x in order(nx, s[0]) {
+                let here = at(x, y, z);
+                let mut m = 255u8;
+                for e in 1..8 {
+                    let (u, v, w) = (
+                        x + (e & 1) * s[0],
+                        y + (e >> 1 & 1) * s[1],
+                        z + (e >> 2 & 1) * s[2],
+                    );
+                    if !((0..nx).contains(&u) && (0..ny).contains(&v) && (0..nz).contains(&w)) {
+                        continue;
+                    }
+                    let there = at(u, v, w);
+                    if kind[there] != kind[here] {
+                        m = 1;
+                        break;
+                    }
+                    m = m.min(run[there].saturating_add(1));
+                }
+                run[here] = m;
             }
         }
     }
-    for z in (0..nz).rev() {
-        for y in (0..ny).rev() {
-            for x in (0..nx).rev() {
-                relax(x, y, z, false, &mut d);
-            }
-        }
-    }
-    d
+    run
 }
-
-/// The 26 neighbours of a cell, in raster order (x fastest): the first 13 come before
-/// it, the last 13 after.
-const NEIGHBOURS: [(i64, i64, i64); 26] = {
-    let mut n = [(0, 0, 0); 26];
-    let mut i = 0;
-    let mut k = 0;
-    while k < 27 {
-        let (dx, dy, dz) = (k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1);
-        if !(dx == 0 && dy == 0 && dz == 0) {
-            n[i] = (dx, dy, dz);
-            i += 1;
-        }
-        k += 1;
-    }
-    n
-};
 
 /// An Amanatides–Woo walk through the cells of a grid along `o + d·t`, `t ∈ [t, t_end]`.
 /// Mirrors `shaders/shared/skip.wgsl: CellWalk` (walk_new, walk_boundaries, walk_advance).
@@ -443,6 +409,8 @@ pub struct CellWalk<R> {
     cell: [i32; 3],
     step: [i32; 3],
     cells: [i32; 3],
+    /// The octant of `d` (bit `a`: `d` negative along axis `a`), for [`octant_runs`].
+    octant: usize,
     block: R,
     t: R,
     t_end: R,
@@ -475,6 +443,7 @@ impl<R: Real> CellWalk<R> {
             cell,
             step,
             cells: cells.map(|c| c as i32),
+            octant: (0..3).map(|a| ((step[a] < 0) as usize) << a).sum(),
             block: b,
             t: t0,
             t_end: t1,
@@ -519,8 +488,9 @@ impl<R: Real> CellWalk<R> {
         self.t < self.t_end && (0..3).all(|a| self.cell[a] >= 0 && self.cell[a] < self.cells[a])
     }
 
-    /// Leaps out of the cube of cells within `m ≥ 1` of the current one (all of its
-    /// kind): to where the ray leaves the cube, into the cell there.
+    /// Leaps out of the box of cells from the current one to `m ≥ 1` cells ahead
+    /// along every axis it travels (all of its kind): to where the ray leaves the box,
+    /// into the cell there.
     #[inline(always)]
     fn leap(&mut self, m: i32) {
         let b = [
@@ -541,7 +511,7 @@ impl<R: Real> CellWalk<R> {
             if q == a {
                 *c += self.step[q] * (m + 1);
             } else if self.step[q] != 0 {
-                // The cell along q at t, held inside the cube against rounding.
+                // The cell along q at t, held inside the box against rounding.
                 let p = self.o.0[q] + self.d.0[q] * t;
                 let x = (p + R::of(0.5)) / self.block;
                 // ⌊x⌋ by truncation, one down for negative non-integers.
@@ -549,7 +519,8 @@ impl<R: Real> CellWalk<R> {
                 if R::of(k as f64) > x {
                     k -= 1;
                 }
-                *c = k.clamp(*c - m, *c + m);
+                let ahead = *c + self.step[q] * m;
+                *c = k.clamp((*c).min(ahead), (*c).max(ahead));
             }
         }
         self.t = t;
@@ -558,7 +529,7 @@ impl<R: Real> CellWalk<R> {
     /// One leap, or one cell where the current one borders the other kind.
     #[inline(always)]
     fn go(&mut self, skip: &Skipper<R>) {
-        let r = skip.cell_run(self.cell) as i32;
+        let r = skip.cell_run(self.cell, self.octant) as i32;
         if r >= 2 {
             self.leap(r - 1);
         } else {
@@ -566,11 +537,11 @@ impl<R: Real> CellWalk<R> {
         }
     }
 
-    /// [`CellWalk::next_span`] over `skip`'s cells, leaping across runs of cells of one
-    /// kind by their chessboard distance ([`Skipper::cell_run`]) instead of stepping
-    /// through each: the same spans, up to rounding where the ray grazes a cube's
-    /// corner (and spans only bound which steps are sampled; a sample in an empty cell
-    /// is transparent anyway).
+    /// [`CellWalk::next_span`] over `skip`'s cells, leaping across boxes of cells of
+    /// one kind ahead of the ray ([`Skipper::cell_run`]) instead of stepping through
+    /// each: the same spans, up to rounding where the ray grazes a box's corner (and
+    /// spans only bound which steps are sampled; a sample in an empty cell is
+    /// transparent anyway).
     pub fn next_span_leaping(&mut self, skip: &Skipper<R>) -> Option<(R, R)> {
         while self.active() && skip.cell_empty(self.cell) {
             self.go(skip);
@@ -796,24 +767,35 @@ mod tests {
     }
 
     #[test]
-    fn chessboard_runs_are_the_distances_to_the_other_kind() {
+    fn octant_runs_are_the_largest_uniform_boxes_ahead() {
         let cells = [13, 9, 11];
-        for seed in 0..12 {
+        let at = |p: [i64; 3]| (p[0] + 13 * (p[1] + 9 * p[2])) as usize;
+        for seed in 0..6 {
             let kinds = blob_kinds(seed, cells);
-            let runs = chessboard_runs(&kinds, cells);
-            let at = |i: usize| [i % 13, (i / 13) % 9, i / 117].map(|x| x as i64);
-            for i in 0..kinds.len() {
-                let p = at(i);
-                let nearest = (0..kinds.len())
-                    .filter(|&j| kinds[j] != kinds[i])
-                    .map(|j| {
-                        let q = at(j);
-                        (0..3).map(|a| (p[a] - q[a]).abs()).max().unwrap()
-                    })
-                    .min()
-                    .unwrap_or(255)
-                    .min(255);
-                assert_eq!(runs[i] as i64, nearest, "seed {seed}, cell {p:?}");
+            for octant in 0..8 {
+                let runs = octant_runs(&kinds, cells, octant);
+                let s = [0, 1, 2].map(|a| if octant >> a & 1 == 1 { -1i64 } else { 1 });
+                for i in 0..kinds.len() {
+                    let p = [i % 13, (i / 13) % 9, i / 117].map(|x| x as i64);
+                    // The smallest box side that takes in a cell of the other kind; 255
+                    // when none of sides up to 14 (the whole grid ahead) does.
+                    let other = |m: i64| {
+                        (0..m).any(|a| {
+                            (0..m).any(|b| {
+                                (0..m).any(|c| {
+                                    let q = [p[0] + a * s[0], p[1] + b * s[1], p[2] + c * s[2]];
+                                    (0..3).all(|k| (0..cells[k] as i64).contains(&q[k]))
+                                        && kinds[at(q)] != kinds[i]
+                                })
+                            })
+                        })
+                    };
+                    let want = (2..=14).find(|&m| other(m)).map_or(255, |m| m - 1);
+                    assert_eq!(
+                        runs[i] as i64, want,
+                        "seed {seed}, octant {octant}, cell {p:?}"
+                    );
+                }
             }
         }
     }
@@ -837,7 +819,7 @@ mod tests {
                     minmax: vec![[0.0, 0.0]; empty.len()],
                 }),
                 tf: tf.clone(),
-                run: chessboard_runs(&empty, cells),
+                runs: Default::default(),
                 empty,
             };
             for r in 0..300 {
