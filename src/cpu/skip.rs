@@ -271,11 +271,10 @@ pub struct Skipper<R> {
     pub tf: OpacityPrefix<R>,
     /// `tf.range_empty` of every cell, worked out once.
     empty: Vec<bool>,
-    /// Per octant of ray directions, made when a ray first needs it: the
-    /// [`octant_runs`] of the cells' kinds (empty or not), so that a walk in that
-    /// octant may leap across the box of one kind ahead of it (see
-    /// [`CellWalk::next_span_leaping`]).
-    runs: [std::sync::OnceLock<Vec<u8>>; 8],
+    /// Per class of ray directions (see [`direction_runs`]), made when a ray first
+    /// needs it: the side of the box of cells of one kind (empty or not) ahead of each
+    /// cell, so that a walk may leap across it (see [`CellWalk::next_span_leaping`]).
+    runs: [std::sync::OnceLock<Vec<u8>>; 27],
 }
 
 impl<R: Real> Skipper<R> {
@@ -329,12 +328,12 @@ impl<R: Real> Skipper<R> {
         })
     }
 
-    /// The side of the box of cells of `c`'s kind ahead of cell `c` in `octant` (see
-    /// [`octant_runs`]).
+    /// The side of the box of cells of `c`'s kind ahead of cell `c` for rays of
+    /// direction class `class` (see [`direction_runs`]).
     #[inline]
-    pub fn cell_run(&self, c: [i32; 3], octant: usize) -> u8 {
+    pub fn cell_run(&self, c: [i32; 3], class: usize) -> u8 {
         let n = self.grid.cells;
-        let run = self.runs[octant].get_or_init(|| octant_runs(&self.empty, n, octant));
+        let run = self.runs[class].get_or_init(|| direction_runs(&self.empty, n, class));
         run[c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize)]
     }
 
@@ -351,19 +350,42 @@ impl<R: Real> Skipper<R> {
     }
 }
 
-/// Per cell of a grid of `cells` whose kinds are `kind`, for the octant of directions
-/// `octant` (bit `a` set: travel towards lower indices along axis `a`), the side `m`
-/// of the largest box of cells with the cell at its corner, extending from it along the
-/// octant, all of whose cells inside the grid are of the cell's kind: cells
-/// `c + i∘s`, `i ∈ [0, m − 1]³`, `s` the octant's signs. Capped at 255 (also where the
-/// box reaches the grid's far faces). Dynamic programming over the 7 cells ahead of
-/// each cell: `m(c) = 1 + min m(c + e∘s)` over `e ∈ {0, 1}³ \ {0}`, 1 when one of them
-/// is of the other kind, and a cell ahead outside the grid bounds nothing.
-pub fn octant_runs(kind: &[bool], cells: [usize; 3], octant: usize) -> Vec<u8> {
+/// The class of a direction whose steps along the axes are `step` (each −1, 0 or
+/// 1): `Σ_a code_a·3^a`, code 0 for +1, 1 for −1, 2 for 0.
+pub fn direction_class(step: [i32; 3]) -> usize {
+    (0..3)
+        .map(|a| {
+            let code = match step[a] {
+                1 => 0,
+                -1 => 1,
+                _ => 2,
+            };
+            code * 3usize.pow(a as u32)
+        })
+        .sum()
+}
+
+/// The steps `s` (each −1, 0 or 1) of direction class `class` ([`direction_class`]).
+fn class_steps(class: usize) -> [i64; 3] {
+    [0, 1, 2].map(|a| [1, -1, 0][class / 3usize.pow(a) % 3])
+}
+
+/// Per cell of a grid of `cells` whose kinds are `kind`, for the rays of direction
+/// class `class` (steps `s` along the axes, [`direction_class`]), the side `m` of the
+/// largest box of cells with the cell at its corner, extending from it the way those
+/// rays travel, all of whose cells inside the grid are of the cell's kind: cells
+/// `c + i∘s`, `i_a ∈ [0, m − 1]` (`i_a = 0` along an axis the rays do not move along).
+/// Capped at 255 (also where the box reaches the grid's far faces). Dynamic
+/// programming over the cells ahead of each cell: `m(c) = 1 + min m(c + e∘s)` over
+/// `e ∈ {0, 1}³ \ {0}` with `e_a = 0` where `s_a = 0`, 1 when one of them is of the
+/// other kind, and a cell ahead outside the grid bounds nothing. Rays along an axis
+/// (the orthographic axis views) thus leap along columns of cells, whatever lies beside
+/// them.
+pub fn direction_runs(kind: &[bool], cells: [usize; 3], class: usize) -> Vec<u8> {
     let [nx, ny, nz] = cells.map(|n| n as i64);
     let at = |x: i64, y: i64, z: i64| (x + nx * (y + ny * z)) as usize;
-    let s = [0, 1, 2].map(|a| if octant >> a & 1 == 1 { -1i64 } else { 1 });
-    // Visit the cells ahead first: against the octant's direction along every axis.
+    let s = class_steps(class);
+    // Visit the cells ahead first: against the direction along every axis.
     let order = |n: i64, s: i64| -> Box<dyn Iterator<Item = i64>> {
         if s > 0 {
             Box::new((0..n).rev())
@@ -371,18 +393,19 @@ pub fn octant_runs(kind: &[bool], cells: [usize; 3], octant: usize) -> Vec<u8> {
             Box::new(0..n)
         }
     };
+    let ahead: Vec<[i64; 3]> = (1..8)
+        .map(|e: i64| [e & 1, e >> 1 & 1, e >> 2 & 1])
+        .filter(|e| (0..3).all(|a| e[a] == 0 || s[a] != 0))
+        .map(|e| [e[0] * s[0], e[1] * s[1], e[2] * s[2]])
+        .collect();
     let mut run = vec![255u8; kind.len()];
     for z in order(nz, s[2]) {
         for y in order(ny, s[1]) {
             for x in order(nx, s[0]) {
                 let here = at(x, y, z);
                 let mut m = 255u8;
-                for e in 1..8 {
-                    let (u, v, w) = (
-                        x + (e & 1) * s[0],
-                        y + (e >> 1 & 1) * s[1],
-                        z + (e >> 2 & 1) * s[2],
-                    );
+                for e in &ahead {
+                    let (u, v, w) = (x + e[0], y + e[1], z + e[2]);
                     if !((0..nx).contains(&u) && (0..ny).contains(&v) && (0..nz).contains(&w)) {
                         continue;
                     }
@@ -409,8 +432,8 @@ pub struct CellWalk<R> {
     cell: [i32; 3],
     step: [i32; 3],
     cells: [i32; 3],
-    /// The octant of `d` (bit `a`: `d` negative along axis `a`), for [`octant_runs`].
-    octant: usize,
+    /// The direction class of `d`, for [`direction_runs`].
+    class: usize,
     block: R,
     t: R,
     t_end: R,
@@ -443,7 +466,7 @@ impl<R: Real> CellWalk<R> {
             cell,
             step,
             cells: cells.map(|c| c as i32),
-            octant: (0..3).map(|a| ((step[a] < 0) as usize) << a).sum(),
+            class: direction_class(step),
             block: b,
             t: t0,
             t_end: t1,
@@ -471,15 +494,10 @@ impl<R: Real> CellWalk<R> {
     /// Crosses the nearest boundary. Mirrors `skip.wgsl: walk_advance`.
     #[inline]
     fn advance(&mut self) {
-        let (bx, by, bz) = (self.boundary(0), self.boundary(1), self.boundary(2));
-        let a = if bx <= by && bx <= bz {
-            0
-        } else if by <= bz {
-            1
-        } else {
-            2
-        };
-        self.t = self.t.max([bx, by, bz][a]);
+        let b = [self.boundary(0), self.boundary(1), self.boundary(2)];
+        let xy = (b[1] < b[0]) as usize;
+        let a = if b[2] < b[xy] { 2 } else { xy };
+        self.t = self.t.max(b[a]);
         self.cell[a] += self.step[a];
     }
 
@@ -498,14 +516,8 @@ impl<R: Real> CellWalk<R> {
             self.boundary_beyond(1, m),
             self.boundary_beyond(2, m),
         ];
-        let x_first = b[0] <= b[1] && b[0] <= b[2];
-        let a = if x_first {
-            0
-        } else if b[1] <= b[2] {
-            1
-        } else {
-            2
-        };
+        let xy = (b[1] < b[0]) as usize;
+        let a = if b[2] < b[xy] { 2 } else { xy };
         let t = self.t.max(b[a]);
         for (q, c) in self.cell.iter_mut().enumerate() {
             if q == a {
@@ -529,7 +541,7 @@ impl<R: Real> CellWalk<R> {
     /// One leap, or one cell where the current one borders the other kind.
     #[inline(always)]
     fn go(&mut self, skip: &Skipper<R>) {
-        let r = skip.cell_run(self.cell, self.octant) as i32;
+        let r = skip.cell_run(self.cell, self.class) as i32;
         if r >= 2 {
             self.leap(r - 1);
         } else {
@@ -767,22 +779,28 @@ mod tests {
     }
 
     #[test]
-    fn octant_runs_are_the_largest_uniform_boxes_ahead() {
+    fn direction_runs_are_the_largest_uniform_boxes_ahead() {
         let cells = [13, 9, 11];
         let at = |p: [i64; 3]| (p[0] + 13 * (p[1] + 9 * p[2])) as usize;
-        for seed in 0..6 {
+        for seed in 0..4 {
             let kinds = blob_kinds(seed, cells);
-            for octant in 0..8 {
-                let runs = octant_runs(&kinds, cells, octant);
-                let s = [0, 1, 2].map(|a| if octant >> a & 1 == 1 { -1i64 } else { 1 });
+            for class in 0..27 {
+                let runs = direction_runs(&kinds, cells, class);
+                let s = class_steps(class);
+                assert_eq!(
+                    direction_class(s.map(|x| x as i32)),
+                    class,
+                    "class {class} from its steps {s:?}"
+                );
                 for i in 0..kinds.len() {
                     let p = [i % 13, (i / 13) % 9, i / 117].map(|x| x as i64);
-                    // The smallest box side that takes in a cell of the other kind; 255
-                    // when none of sides up to 14 (the whole grid ahead) does.
+                    // Whether the box of side m (extent 1 along an axis the rays do not
+                    // move along) takes in a cell of the other kind.
                     let other = |m: i64| {
-                        (0..m).any(|a| {
-                            (0..m).any(|b| {
-                                (0..m).any(|c| {
+                        let side = |a: usize| if s[a] == 0 { 1 } else { m };
+                        (0..side(0)).any(|a| {
+                            (0..side(1)).any(|b| {
+                                (0..side(2)).any(|c| {
                                     let q = [p[0] + a * s[0], p[1] + b * s[1], p[2] + c * s[2]];
                                     (0..3).all(|k| (0..cells[k] as i64).contains(&q[k]))
                                         && kinds[at(q)] != kinds[i]
@@ -790,10 +808,12 @@ mod tests {
                             })
                         })
                     };
+                    // The largest side without one; 255 when even the side that
+                    // reaches across the whole grid (14) has none.
                     let want = (2..=14).find(|&m| other(m)).map_or(255, |m| m - 1);
                     assert_eq!(
                         runs[i] as i64, want,
-                        "seed {seed}, octant {octant}, cell {p:?}"
+                        "seed {seed}, class {class}, cell {p:?}"
                     );
                 }
             }
