@@ -1,7 +1,7 @@
 //! The backend-neutral front door: `render(&scene, &settings, backend)`.
 //!
 //! A [`Scene`] is what is rendered (volume, transfer function, camera); the
-//! [`RenderSettings`](crate::settings::RenderSettings) say how. The backend says who
+//! [`RenderSettings`] say how. The backend says who
 //! computes it: the f64 oracle, the same code in f32, or the GPU port. A [`Renderer`]
 //! keeps one GPU device open across many renders.
 

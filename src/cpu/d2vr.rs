@@ -295,7 +295,7 @@ pub struct D2vrOutput {
     pub stats: D2vrStats,
 }
 
-/// Derivatives of [`bilinear_zero`] with respect to `x` and `y`, with its value:
+/// Derivatives of [`bilinear_zero`](crate::ct::bilinear_zero) with respect to `x` and `y`, with its value:
 /// `(q, ∂q/∂x, ∂q/∂y)` of the bilinear patch of the cell `(floor x, floor y)` (taps
 /// outside the image are zero, as in the value).
 ///

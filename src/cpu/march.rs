@@ -721,7 +721,7 @@ impl Packet {
         }
     }
 
-    /// One step of every live lane; see [`simd::packet_step`]. `None` when the CPU has
+    /// One step of every live lane; see `simd::packet_step`. `None` when the CPU has
     /// no AVX-512 (then packets are not used).
     pub fn step(&mut self, src: &Source<f32>, ert: f32) -> Option<(u16, u16)> {
         #[cfg(target_arch = "x86_64")]
