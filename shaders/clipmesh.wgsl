@@ -5,27 +5,35 @@
 // (camera_ray, the same rays as shaders/raycast.wgsl).
 //
 // Two entry points, one bind group:
-// - clip_hits: tests the triangles [chunk.x, chunk.y) against the pixel's ray and
-//   merges the hits into the pixel's state (hits at or before t_min only counted;
-//   the KEEP smallest beyond it kept sorted, with their count and maximum). One
-//   dispatch per chunk of triangles keeps every invocation under llvmpipe's 65535
-//   loop iterations (a chunk costs at most CHUNK · (1 + KEEP) iterations).
+// - clip_hits: tests triangles against the pixel's ray and merges the hits into the
+//   pixel's state (hits at or before t_min only counted; the KEEP smallest beyond it
+//   kept sorted, with their count and maximum): the candidates of a walk of the
+//   mesh's bounding-volume hierarchy, NODES_PER_DISPATCH nodes per dispatch (the
+//   pixel's place in the walk kept in its state), or, without the hierarchy, the
+//   triangles [chunk.x, chunk.y) (a chunk costs at most CHUNK · (1 + KEEP) loop
+//   iterations). Either way every invocation stays under llvmpipe's 65535.
 // - clip_segments: pairs the boundaries into at most MAX_SEGMENTS segments.
 
 const MAX_SEGMENTS: u32 = 8u;
 // 2 · MAX_SEGMENTS: enough boundaries for every segment and the merged eighth one.
 const KEEP: u32 = 16u;
-// Words of state per pixel: behind count, forward count, largest forward hit, unused,
-// then KEEP sorted hits (f32 bits).
+// Words of state per pixel: behind count, forward count, largest forward hit, the
+// next node of the hierarchy's walk, then KEEP sorted hits (f32 bits).
 const STATE_WORDS: u32 = 20u;
 // vec4s of output per pixel: (count, 0, 0, 0), then four of (a₀, b₀, a₁, b₁).
 const SEGMENT_VEC4S: u32 = 5u;
 const OPEN_END: f32 = 3.0e38;
 
 struct ClipChunk {
-    // First triangle, one past the last, 1 on the first chunk (reset the state), unused.
+    // First triangle, one past the last, 1 on the first chunk (reset the state), and
+    // the number of hierarchy nodes: 0 tests the triangles [x, y); otherwise the pixel
+    // walks the hierarchy for at most NODES_PER_DISPATCH nodes from where it stopped.
     range: vec4<u32>,
 }
+
+// Nodes a pixel visits per dispatch: each costs at most 1 + LEAF · (1 + KEEP) loop
+// iterations (LEAF = 4), so a dispatch stays under llvmpipe's 65535.
+const NODES_PER_DISPATCH: u32 = 512u;
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var<uniform> chunk: ClipChunk;
@@ -33,6 +41,11 @@ struct ClipChunk {
 @group(0) @binding(2) var<storage, read> triangles: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> state: array<u32>;
 @group(0) @binding(4) var<storage, read_write> segments: array<vec4<f32>>;
+// The hierarchy (src/cpu/clipmesh.rs: ClipTriangles::flat_hierarchy), two vec4s a node:
+// (lo.xyz, bits of the index past its subtree), (hi.xyz, bits of first · 8 + count);
+// count 0 for an interior node, whose first child is the next node. The triangles are
+// stored in the hierarchy's leaf order.
+@group(0) @binding(5) var<storage, read> nodes: array<vec4<f32>>;
 
 // mirrors src/cpu/clipmesh.rs: lex_less
 fn lex_less(p: vec3<f32>, q: vec3<f32>) -> bool {
@@ -107,6 +120,54 @@ fn intersect_triangle(o: vec3<f32>, d: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>, 
     return vec2<f32>(1.0, t);
 }
 
+// Whether the line o + d·t (any t) crosses the box [lo, hi]: the slab test, an axis
+// the line runs parallel to checked directly. Mirrors src/cpu/clipmesh.rs:
+// Bvh::for_each_candidate (crosses).
+fn line_crosses_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> bool {
+    var near = -OPEN_END;
+    var far = OPEN_END;
+    for (var a = 0u; a < 3u; a++) {
+        let da = comp(d, a);
+        let oa = comp(o, a);
+        if (da == 0.0) {
+            if (oa < comp(lo, a) || oa > comp(hi, a)) {
+                return false;
+            }
+        } else {
+            let t1 = (comp(lo, a) - oa) / da;
+            let t2 = (comp(hi, a) - oa) / da;
+            near = max(near, min(t1, t2));
+            far = min(far, max(t1, t2));
+        }
+    }
+    return near <= far;
+}
+
+// Tests triangle tri against the ray and merges a hit into the pixel's state.
+fn add_hit(ray: Ray, tri: u32, behind: ptr<function, u32>, count: ptr<function, u32>, tmax: ptr<function, f32>, h: ptr<function, array<f32, 16>>) {
+    let hit = intersect_triangle(ray.origin, ray.dir, triangles[3u * tri].xyz, triangles[3u * tri + 1u].xyz, triangles[3u * tri + 2u].xyz);
+    if (hit.x == 0.0) {
+        return;
+    }
+    let t = hit.y;
+    if (t <= ray.t_min) {
+        *behind += 1u;
+        return;
+    }
+    // Insertion into the KEEP smallest, sorted.
+    *tmax = max(*tmax, t);
+    var j = min(*count, KEEP - 1u);
+    *count += 1u;
+    if (*count > KEEP && t >= (*h)[KEEP - 1u]) {
+        return;
+    }
+    while (j > 0u && (*h)[j - 1u] > t) {
+        (*h)[j] = (*h)[j - 1u];
+        j -= 1u;
+    }
+    (*h)[j] = t;
+}
+
 fn pixel_of(id: vec3<u32>) -> i32 {
     if (id.x >= params.image.x || id.y >= params.flags2.w) {
         return -1;
@@ -120,13 +181,23 @@ fn clip_hits(@builtin(global_invocation_id) id: vec3<u32>) {
     if (pix < 0) {
         return;
     }
-    let ray = camera_ray(id.x, params.flags2.z + id.y);
     let base = u32(pix) * STATE_WORDS;
+    let first = chunk.range.z == 1u;
+    let n_nodes = chunk.range.w;
+    // Where this pixel's walk of the hierarchy stopped; past the end, it is done.
+    var node = 0u;
+    if (!first) {
+        node = state[base + 3u];
+        if (n_nodes > 0u && node >= n_nodes) {
+            return;
+        }
+    }
+    let ray = camera_ray(id.x, params.flags2.z + id.y);
     var behind = 0u;
     var count = 0u;
     var tmax = -OPEN_END;
     var h: array<f32, 16>;
-    if (chunk.range.z == 0u) {
+    if (!first) {
         behind = state[base];
         count = state[base + 1u];
         tmax = bitcast<f32>(state[base + 2u]);
@@ -134,29 +205,29 @@ fn clip_hits(@builtin(global_invocation_id) id: vec3<u32>) {
             h[i] = bitcast<f32>(state[base + 4u + i]);
         }
     }
-    for (var tri = chunk.range.x; tri < chunk.range.y; tri++) {
-        let hit = intersect_triangle(ray.origin, ray.dir, triangles[3u * tri].xyz, triangles[3u * tri + 1u].xyz, triangles[3u * tri + 2u].xyz);
-        if (hit.x == 0.0) {
-            continue;
+    if (n_nodes == 0u) {
+        for (var tri = chunk.range.x; tri < chunk.range.y; tri++) {
+            add_hit(ray, tri, &behind, &count, &tmax, &h);
         }
-        let t = hit.y;
-        if (t <= ray.t_min) {
-            behind += 1u;
-            continue;
+    } else {
+        // Stackless: into a node whose box the line crosses (its first child, or its
+        // triangles for a leaf, then the next node), past its subtree otherwise.
+        for (var visited = 0u; visited < NODES_PER_DISPATCH && node < n_nodes; visited++) {
+            let a = nodes[2u * node];
+            let b = nodes[2u * node + 1u];
+            if (!line_crosses_box(ray.origin, ray.dir, a.xyz, b.xyz)) {
+                node = bitcast<u32>(a.w);
+                continue;
+            }
+            let leaf = bitcast<u32>(b.w);
+            let n_tri = leaf & 7u;
+            for (var tri = leaf >> 3u; tri < (leaf >> 3u) + n_tri; tri++) {
+                add_hit(ray, tri, &behind, &count, &tmax, &h);
+            }
+            node += 1u;
         }
-        // Insertion into the KEEP smallest, sorted.
-        tmax = max(tmax, t);
-        var j = min(count, KEEP - 1u);
-        count += 1u;
-        if (count > KEEP && t >= h[KEEP - 1u]) {
-            continue;
-        }
-        while (j > 0u && h[j - 1u] > t) {
-            h[j] = h[j - 1u];
-            j -= 1u;
-        }
-        h[j] = t;
     }
+    state[base + 3u] = node;
     state[base] = behind;
     state[base + 1u] = count;
     state[base + 2u] = bitcast<u32>(tmax);

@@ -182,7 +182,7 @@ pub fn make_segments(t0: f64, behind: usize, forward: &[f64]) -> Segments {
 }
 
 /// A clipping mesh resolved for one render: its triangles in world millimetres, their
-/// bounding box, and a bounding-volume hierarchy over them ([`Bvh`]).
+/// bounding box, and a bounding-volume hierarchy over them (see `Bvh`).
 #[derive(Clone, Debug)]
 pub struct ClipTriangles {
     pub triangles: Vec<Triangle>,
@@ -217,9 +217,42 @@ impl ClipTriangles {
         }
     }
 
-    /// How many nodes the hierarchy has (a leaf holds at most [`Bvh::LEAF`] triangles).
+    /// How many nodes the hierarchy has (a leaf holds at most `Bvh::LEAF` = 4 triangles).
     pub fn bvh_nodes(&self) -> usize {
         self.bvh.nodes.len()
+    }
+
+    /// The hierarchy laid out for a stackless walk (`shaders/clipmesh.wgsl:
+    /// clip_hits`): the nodes in depth-first order, each with the index just past its
+    /// subtree (where a walk goes when the line misses the node's box), and the
+    /// triangle indices grouped by leaf. Each box is widened by a further `pad`
+    /// (absolute, world mm) on every side.
+    pub fn flat_hierarchy(&self, pad: f64) -> (Vec<FlatNode>, Vec<u32>) {
+        let nodes = &self.bvh.nodes;
+        let mut flat = Vec::with_capacity(nodes.len());
+        // (node, index past its subtree), depth first: the left child follows its
+        // parent, so a node's subtree ends where its parent's right child starts.
+        let mut stack = vec![(0usize, nodes.len())];
+        if nodes.is_empty() {
+            stack.clear();
+        }
+        while let Some((i, skip)) = stack.pop() {
+            let n = &nodes[i];
+            debug_assert_eq!(flat.len(), i);
+            flat.push(FlatNode {
+                lo: n.lo.map(|x| x - pad),
+                hi: n.hi.map(|x| x + pad),
+                skip: skip as u32,
+                first: if n.count > 0 { n.first } else { 0 },
+                count: n.count,
+            });
+            if n.count == 0 {
+                let right = n.first as usize;
+                stack.push((right, skip));
+                stack.push((i + 1, right));
+            }
+        }
+        (flat, self.bvh.order.clone())
     }
 
     /// The inside segments of the ray `origin + dir·t`, `t ≥ t0` (f64, exact test):
@@ -280,6 +313,19 @@ struct Bvh {
     nodes: Vec<BvhNode>,
     /// Triangle indices, grouped by leaf.
     order: Vec<u32>,
+}
+
+/// A node of [`ClipTriangles::flat_hierarchy`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FlatNode {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+    /// The index just past this node's subtree.
+    pub skip: u32,
+    /// Leaf: its first triangle in the order; interior: 0.
+    pub first: u32,
+    /// Leaf: how many triangles; interior: 0 (its first child is the next node).
+    pub count: u32,
 }
 
 #[derive(Clone, Copy, Debug)]

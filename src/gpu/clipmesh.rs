@@ -12,15 +12,20 @@
 //! shader instead runs the same formulas as the CPU test, so both backends pair the same
 //! hits by parity and agree wherever the hits agree.
 //!
-//! **Passes.** `clip_hits` tests a chunk of [`CHUNK`] triangles per dispatch and merges
-//! the hits into a per-pixel state: hits at or before the ray's start only counted
-//! (parity: does the ray start inside?), the 16 smallest hits beyond it kept sorted by
-//! insertion, plus their count and maximum, which is all `make_segments` needs (with
-//! more than 16 boundaries the eighth segment runs from boundary 14 to the last one, or
-//! to infinity when their count is odd). A chunk costs at most `CHUNK · 17` loop
-//! iterations, under the 65535 that llvmpipe runs per invocation, so a mesh of any size
-//! runs as several dispatches; `clip_segments` then pairs the boundaries. A mesh whose
-//! triangles do not fit one storage binding (48 bytes a triangle) is refused.
+//! **Passes.** `clip_hits` merges the hits of the triangles it tests into a per-pixel
+//! state: hits at or before the ray's start only counted (parity: does the ray start
+//! inside?), the 16 smallest hits beyond it kept sorted by insertion, plus their count
+//! and maximum, which is all `make_segments` needs (with more than 16 boundaries the
+//! eighth segment runs from boundary 14 to the last one, or to infinity when their count
+//! is odd). The triangles it tests are those of a stackless walk of the mesh's
+//! bounding-volume hierarchy (`ClipTriangles::flat_hierarchy`, boxes widened by
+//! [`BOX_PAD`] × the mesh's scale), at most [`NODES_PER_DISPATCH`] nodes per dispatch,
+//! the pixel's place in the walk kept in its state; or, as the reference
+//! ([`GpuClipMesh::with_search`]), every triangle in chunks of [`CHUNK`] per dispatch.
+//! Either way an invocation stays under the 65535 loop iterations llvmpipe runs, so a
+//! mesh of any size runs as several dispatches; `clip_segments` then pairs the
+//! boundaries. A mesh whose triangles do not fit one storage binding (48 bytes a
+//! triangle) is refused.
 //!
 //! **f32.** The CPU test runs in f64, the GPU one in f32 with the same names and order of
 //! operations. The edge rule still makes a shared edge count once (the edge functions
@@ -62,20 +67,41 @@ pub fn shader() -> String {
     )
 }
 
+/// Hierarchy nodes a pixel visits per `clip_hits` dispatch
+/// (`shaders/clipmesh.wgsl: NODES_PER_DISPATCH`).
+pub const NODES_PER_DISPATCH: usize = 512;
+
+/// How far the GPU's hierarchy boxes are widened, relative to the mesh's scale (its
+/// box's largest extent or coordinate): some 800 times f32's rounding, so no triangle
+/// the f32 test hits is left out when the ray's origin lies within a hundred mesh
+/// sizes of it.
+pub const BOX_PAD: f64 = 1e-4;
+
 /// A clipping mesh uploaded for one render, with its pipelines.
 pub struct GpuClipMesh {
     triangles: wgpu::Buffer,
     count: usize,
+    /// The hierarchy (two vec4s a node) and its node count; 0 tests every triangle.
+    nodes: wgpu::Buffer,
+    node_count: usize,
     layout: wgpu::BindGroupLayout,
     hits: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
 }
 
 impl GpuClipMesh {
-    /// Uploads `mesh`'s triangles (f32, world mm) and builds the pipelines.
+    /// Uploads `mesh`'s triangles (f32, world mm) in the order of its hierarchy, the
+    /// hierarchy itself, and builds the pipelines.
     pub fn new(ctx: &GpuContext, mesh: &ClipTriangles) -> Result<Self> {
+        Self::with_search(ctx, mesh, true)
+    }
+
+    /// [`GpuClipMesh::new`], walking the hierarchy (`hierarchy`) or testing every
+    /// triangle: the same hits, the latter the reference for tests.
+    pub fn with_search(ctx: &GpuContext, mesh: &ClipTriangles, hierarchy: bool) -> Result<Self> {
         let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
         let count = mesh.triangles.len();
+        // A node is two vec4s (32 bytes); a mesh has fewer nodes than triangles.
         if count.saturating_mul(48) > max_binding {
             return Err(Error::too_large(
                 "clip mesh",
@@ -86,11 +112,33 @@ impl GpuClipMesh {
                 ),
             ));
         }
+        let scale = (0..3)
+            .map(|a| {
+                (mesh.hi[a] - mesh.lo[a])
+                    .max(mesh.lo[a].abs())
+                    .max(mesh.hi[a].abs())
+            })
+            .fold(0.0f64, f64::max);
+        let (flat, order) = if hierarchy && count > 0 {
+            mesh.flat_hierarchy(BOX_PAD * scale)
+        } else {
+            (Vec::new(), (0..count as u32).collect())
+        };
         let mut corners: Vec<[f32; 4]> = Vec::with_capacity(3 * count.max(1));
-        for t in &mesh.triangles {
-            for p in t {
+        for &i in &order {
+            for p in &mesh.triangles[i as usize] {
                 corners.push([p[0] as f32, p[1] as f32, p[2] as f32, 0.0]);
             }
+        }
+        let mut node_data: Vec<[f32; 4]> = Vec::with_capacity(2 * flat.len().max(1));
+        for n in &flat {
+            let lo = n.lo.map(|x| x as f32);
+            let hi = n.hi.map(|x| x as f32);
+            node_data.push([lo[0], lo[1], lo[2], f32::from_bits(n.skip)]);
+            node_data.push([hi[0], hi[1], hi[2], f32::from_bits(n.first * 8 + n.count)]);
+        }
+        if node_data.is_empty() {
+            node_data.push([0.0; 4]);
         }
         if corners.is_empty() {
             corners.push([0.0; 4]);
@@ -99,6 +147,11 @@ impl GpuClipMesh {
         let triangles = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("clip mesh triangles"),
             contents: bytemuck::cast_slice(&corners),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let nodes = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("clip mesh hierarchy"),
+            contents: bytemuck::cast_slice(&node_data),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let module = ctx.shader("clipmesh.wgsl", &shader())?;
@@ -111,6 +164,7 @@ impl GpuClipMesh {
                 buffer_entry(2, storage(true)),
                 buffer_entry(3, storage(false)),
                 buffer_entry(4, storage(false)),
+                buffer_entry(5, storage(true)),
             ],
         });
         let pipeline =
@@ -120,6 +174,8 @@ impl GpuClipMesh {
             finish: pipeline("clip_segments")?,
             triangles,
             count,
+            node_count: flat.len(),
+            nodes,
             layout,
         })
     }
@@ -138,12 +194,18 @@ impl GpuClipMesh {
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let groups = ((w as u32).div_ceil(8), (rows as u32).div_ceil(8));
-        let chunks = self.count.div_ceil(CHUNK).max(1);
+        // Without the hierarchy, chunks of triangles; with it, dispatches of a walk
+        // (a pixel visits each node at most once; a finished pixel returns at once).
+        let chunks = if self.node_count > 0 {
+            self.node_count.div_ceil(NODES_PER_DISPATCH)
+        } else {
+            self.count.div_ceil(CHUNK).max(1)
+        };
         for c in 0..=chunks {
             let finish = c == chunks;
             let lo = (c * CHUNK).min(self.count) as u32;
             let hi = ((c + 1) * CHUNK).min(self.count) as u32;
-            let range: [u32; 4] = [lo, hi, (c == 0) as u32, 0];
+            let range: [u32; 4] = [lo, hi, (c == 0) as u32, self.node_count as u32];
             let cbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("clip mesh chunk"),
                 contents: bytemuck::bytes_of(&range),
@@ -158,6 +220,7 @@ impl GpuClipMesh {
                     self.triangles.as_entire_binding(),
                     state.as_entire_binding(),
                     out.as_entire_binding(),
+                    self.nodes.as_entire_binding(),
                 ],
             );
             let mut enc = dev.create_command_encoder(&Default::default());
@@ -182,7 +245,17 @@ pub fn segments(
     mesh: &ClipTriangles,
     params: &RaycastParams,
 ) -> Result<Vec<Vec<[f32; 2]>>> {
-    let gm = GpuClipMesh::new(ctx, mesh)?;
+    segments_with_search(ctx, mesh, params, true)
+}
+
+/// [`segments`] with the hierarchy (`hierarchy`) or testing every triangle.
+pub fn segments_with_search(
+    ctx: &GpuContext,
+    mesh: &ClipTriangles,
+    params: &RaycastParams,
+    hierarchy: bool,
+) -> Result<Vec<Vec<[f32; 2]>>> {
+    let gm = GpuClipMesh::with_search(ctx, mesh, hierarchy)?;
     let buf = gm.segments(ctx, params)?;
     let pixels = params.image[0] as usize * params.flags2[3] as usize;
     let raw: Vec<[f32; 4]> =
