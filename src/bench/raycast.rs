@@ -454,10 +454,15 @@ fn prepare_raycast(
             setup: t.setup,
         })
     }) as super::GpuFn;
-    let mut note = String::from(
-        "Shepp–Logan (modified), perspective orbit camera, step 0.5 voxel, `phantom` TF; \
-         end to end per backend (volume conversion included; GPU end to end = upload, \
-         set-up passes, ray casting, readback). Samples: the f64 oracle's count.",
+    let subject = if name.starts_with("microct") {
+        "the bundled micro-CT bone scan (128³ u8), `microct-bone` TF"
+    } else {
+        "Shepp–Logan (modified), `phantom` TF"
+    };
+    let mut note = format!(
+        "{subject}, perspective orbit camera, step 0.5 voxel; end to end per backend \
+         (volume conversion included; GPU end to end = upload, set-up passes, ray \
+         casting, readback). Samples: the f64 oracle's count."
     );
     if scene.3.hardware_filtering {
         note.push_str(
