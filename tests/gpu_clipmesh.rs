@@ -219,6 +219,31 @@ gpu_cases! {
     gpu_clipmesh_bricks_dvr_skip_back_to_front: Case { mesh: Mesh::Bricks, skip: true, compositing: Compositing::BackToFront, ..BASE };
 }
 
+/// `m` (voxel units) carried to world mm by `vol`'s affine, ready for the segment search.
+fn world_triangles(vol: &AnyVolume, m: &TriMesh) -> ClipTriangles {
+    let affine = vol.affine();
+    ClipTriangles::new(&TriMesh {
+        vertices: m
+            .vertices
+            .iter()
+            .map(|&p| affine.transform_point3(DVec3::from_array(p)).to_array())
+            .collect(),
+        triangles: m.triangles.clone(),
+    })
+}
+
+/// The ray caster's parameters for `cam` over `vol`, as one tile of all its rows.
+fn tile_params(vol: &AnyVolume, cam: &Camera) -> voxlab::gpu::raycast::RaycastParams {
+    let s = RenderSettings::default();
+    let lut = sparse_tf().lut(s.lut_size).to_real::<f32>();
+    let mut params =
+        voxlab::gpu::raycast::raycast_params(vol.dims(), vol.affine(), &lut, (0.0, 1.0), cam, &s)
+            .unwrap();
+    params.flags2[2] = 0;
+    params.flags2[3] = cam.height as u32;
+    params
+}
+
 /// The segments of every pixel's ray, GPU (f32) against `ClipTriangles::segments`
 /// (f64): the comb gives four segments on a good share of the rays (97 of 768 in this
 /// oblique view), and the counts agree on every pixel; the ends agree to f32 rounding of
@@ -230,25 +255,8 @@ fn gpu_segments_match_the_cpu() {
     };
     let vol = phantom();
     let cam = camera(&vol, Cam::Perspective);
-    let tf = sparse_tf();
-    let s = RenderSettings::default();
-    let lut = tf.lut(s.lut_size).to_real::<f32>();
-    let mut params =
-        voxlab::gpu::raycast::raycast_params(vol.dims(), vol.affine(), &lut, (0.0, 1.0), &cam, &s)
-            .unwrap();
-    params.flags2[2] = 0;
-    params.flags2[3] = cam.height as u32;
-    let affine = vol.affine();
-    let m = comb();
-    let world = TriMesh {
-        vertices: m
-            .vertices
-            .iter()
-            .map(|&p| affine.transform_point3(DVec3::from_array(p)).to_array())
-            .collect(),
-        triangles: m.triangles.clone(),
-    };
-    let tris = ClipTriangles::new(&world);
+    let params = tile_params(&vol, &cam);
+    let tris = world_triangles(&vol, &comb());
     let gpu = voxlab::gpu::clipmesh::segments(ctx, &tris, &params).unwrap();
     let (mut worst, mut four) = (0.0f64, 0);
     for row in 0..cam.height {
@@ -281,7 +289,6 @@ fn gpu_hierarchy_finds_the_hits_of_every_triangle() {
         return;
     };
     let vol = phantom();
-    let affine = vol.affine();
     let mut wall = TriMesh::default();
     for z in 0..6 {
         for y in 0..6 {
@@ -295,33 +302,11 @@ fn gpu_hierarchy_finds_the_hits_of_every_triangle() {
             }
         }
     }
-    let tf = sparse_tf();
-    let s = RenderSettings::default();
-    let lut = tf.lut(s.lut_size).to_real::<f32>();
     let mut pixels = 0;
     for (name, m) in [("comb", comb()), ("wall", wall)] {
-        let world = TriMesh {
-            vertices: m
-                .vertices
-                .iter()
-                .map(|&p| affine.transform_point3(DVec3::from_array(p)).to_array())
-                .collect(),
-            triangles: m.triangles.clone(),
-        };
-        let tris = ClipTriangles::new(&world);
+        let tris = world_triangles(&vol, &m);
         for cam in [Cam::Perspective, Cam::Axis] {
-            let c = camera(&vol, cam);
-            let mut params = voxlab::gpu::raycast::raycast_params(
-                vol.dims(),
-                vol.affine(),
-                &lut,
-                (0.0, 1.0),
-                &c,
-                &s,
-            )
-            .unwrap();
-            params.flags2[2] = 0;
-            params.flags2[3] = c.height as u32;
+            let params = tile_params(&vol, &camera(&vol, cam));
             let every =
                 voxlab::gpu::clipmesh::segments_with_search(ctx, &tris, &params, false).unwrap();
             let walked =
