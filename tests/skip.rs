@@ -166,13 +166,8 @@ fn the_grid_is_conservative() {
         _ => unreachable!(),
     };
     let dims = values.dims;
-    let mut rng = 0x1234_5678_u64;
-    let mut unit = || {
-        rng = rng
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = common::Rng(0x1234_5678);
+    let mut unit = || rng.unit();
     for filter in [
         Filter::Nearest,
         Filter::Trilinear,

@@ -390,7 +390,7 @@ impl<R: Real> Prepared<R> {
             ));
         }
         check_cost(self.field.dims(), camera, settings)?;
-        render_field_cached(
+        render_field_with(
             &self.field,
             self.affine,
             tf,
@@ -449,26 +449,14 @@ pub fn render_field<R: Real, F: Field<R>>(
         settings,
         progress,
         Kernel::Batched,
+        None,
     )
 }
 
-/// [`render_field`] with a chosen DVR [`Kernel`].
-pub fn render_field_with<R: Real, F: Field<R>>(
-    field: &F,
-    affine: DMat4,
-    tf: &TransferFunction,
-    camera: &Camera,
-    settings: &RenderSettings,
-    progress: &(dyn Fn(usize, usize) + Sync),
-    kernel: Kernel,
-) -> Result<RenderOutput> {
-    render_field_cached(field, affine, tf, camera, settings, progress, kernel, None)
-}
-
-/// [`render_field_with`], taking the skipping's min/max grid from `cache` (and
-/// adding it there) when one is given.
+/// [`render_field`] with a chosen DVR [`Kernel`], taking the skipping's min/max grid
+/// from `cache` (and adding it there) when one is given (see [`Prepared`]).
 #[allow(clippy::too_many_arguments)]
-fn render_field_cached<R: Real, F: Field<R>>(
+pub fn render_field_with<R: Real, F: Field<R>>(
     field: &F,
     affine: DMat4,
     tf: &TransferFunction,
