@@ -1,12 +1,16 @@
 // The adaptive ray caster: one invocation per pixel; DVR through the pre-integrated
 // transfer function, front to back, trilinear, no shading. Regular, adaptive or direct
-// steps (params.dims.w). Every helper mirrors its Rust twin in src/cpu/adaptive.rs or
-// src/cpu/preintegrate.rs by name. Prepended: shaders/shared/adaptive_params.wgsl and
-// shaders/shared/opacity.wgsl (step_opacity).
+// steps (params.dims.w). Every helper names its Rust twin in src/cpu/adaptive.rs or
+// src/cpu/preintegrate.rs. The box test is shared/rays.wgsl's intersect_box, opacity
+// correction shared/opacity.wgsl's step_opacity.
 //
 // Rays come from the host (origin and direction in index space, computed in f64 and
 // rounded to f32 exactly as the CPU's f32 path rounds them), so both start from the
 // same numbers.
+
+#import adaptive_params
+#import opacity
+#import rays
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
 @group(0) @binding(1) var<storage, read> volume: array<f32>;
@@ -17,8 +21,6 @@
 @group(0) @binding(6) var<storage, read> rays: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> pixels: array<vec4<f32>>;
 @group(0) @binding(8) var<storage, read_write> counts: array<u32>;
-
-const BIG: f32 = 3.0e38;
 
 fn voxel(i: i32, j: i32, k: i32) -> f32 {
     let n = vec3<i32>(params.dims.xyz);
@@ -41,32 +43,6 @@ fn sample_trilinear(p: vec3<f32>) -> f32 {
     let y0 = 0.0 + wy0 * x00 + f.y * x10;
     let y1 = 0.0 + wy0 * x01 + f.y * x11;
     return 0.0 + wz0 * y0 + f.z * y1;
-}
-
-struct Hit {
-    ok: bool,
-    t0: f32,
-    t1: f32,
-}
-
-// mirrors src/cpu/raycast.rs: intersect_box
-fn intersect_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> Hit {
-    var t0 = -BIG;
-    var t1 = BIG;
-    for (var a = 0u; a < 3u; a++) {
-        if (d[a] == 0.0) {
-            if (o[a] < lo[a] || o[a] > hi[a]) {
-                return Hit(false, 0.0, 0.0);
-            }
-        } else {
-            let inv = 1.0 / d[a];
-            let ta = (lo[a] - o[a]) * inv;
-            let tb = (hi[a] - o[a]) * inv;
-            t0 = max(t0, min(ta, tb));
-            t1 = min(t1, max(ta, tb));
-        }
-    }
-    return Hit(t1 > t0, t0, t1);
 }
 
 // mirrors src/cpu/preintegrate.rs: PreintTable::coord
@@ -114,7 +90,7 @@ fn nearest_voxel(p: vec3<f32>) -> vec3<u32> {
     return vec3<u32>(v);
 }
 
-// mirrors src/cpu/adaptive.rs: SpectralTable::bins_of and lookup
+// mirrors src/cpu/adaptive.rs: SpectralTable::bins_of, SpectralTable::lookup
 fn spectrum_lookup(lo: f32, hi: f32) -> f32 {
     let m = u32(params.spectrum.z);
     let top = params.spectrum.z;

@@ -1,7 +1,8 @@
 // The importance volume of adaptive sampling: per voxel and axis the largest one-sided
 // difference, then a max filter along one axis per pass (x, y, z).
 // Mirrors src/cpu/adaptive.rs: axis_difference, max_filter_axis.
-// Prepended: shaders/shared/adaptive_params.wgsl.
+
+#import adaptive_params
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
 @group(0) @binding(1) var<storage, read> volume: array<f32>;

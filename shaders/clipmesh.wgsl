@@ -1,8 +1,7 @@
 // Clipping meshes on the GPU: the inside segments of every pixel's ray.
-// Mirrors src/cpu/clipmesh.rs (intersect_triangle, lex_less, make_segments); the
-// module docs of src/gpu/clipmesh.rs explain the passes and what f32 changes.
-// Prepended at load time: shaders/shared/raycast_params.wgsl and rays.wgsl
-// (camera_ray, the same rays as shaders/raycast.wgsl).
+// The twin of src/cpu/clipmesh.rs (intersect_triangle, lex_less, make_segments); the
+// module docs of src/gpu/clipmesh.rs explain the passes and what f32 changes. The rays
+// are shared/camera.wgsl's camera_ray, the same rays as shaders/raycast.wgsl.
 //
 // Two entry points, one bind group:
 // - clip_hits: tests triangles against the pixel's ray and merges the hits into the
@@ -13,6 +12,9 @@
 //   triangles [chunk.x, chunk.y) (a chunk costs at most CHUNK · (1 + KEEP) loop
 //   iterations). Either way every invocation stays under llvmpipe's 65535.
 // - clip_segments: pairs the boundaries into at most MAX_SEGMENTS segments.
+
+#import raycast_params
+#import camera
 
 const MAX_SEGMENTS: u32 = 8u;
 // 2 · MAX_SEGMENTS: enough boundaries for every segment and the merged eighth one.
@@ -121,8 +123,8 @@ fn intersect_triangle(o: vec3<f32>, d: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>, 
 }
 
 // Whether the line o + d·t (any t) crosses the box [lo, hi]: the slab test, an axis
-// the line runs parallel to checked directly. Mirrors src/cpu/clipmesh.rs:
-// Bvh::for_each_candidate (crosses).
+// the line runs parallel to checked directly (the closure `crosses` of
+// src/cpu/clipmesh.rs: Bvh::for_each_candidate).
 fn line_crosses_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> bool {
     var near = -OPEN_END;
     var far = OPEN_END;

@@ -6,9 +6,19 @@
 // llvmpipe's 65535-iteration limit (see shaders/raycast.wgsl): the host sizes chunks.
 // Same sample positions, step rule, classification, shading and compositing as
 // src/cpu/raycast.rs: cast_ray with the field of src/cpu/d2vr.rs: ProjectionField.
-// Prepended at load time: ct_geometry.wgsl, raycast_params.wgsl, d2vr_params.wgsl,
-// classify.wgsl, rays.wgsl (shared with the ray caster), opacity.wgsl (step_opacity), and the generated `fn tap(i: u32) -> f32` (f32 or f16 storage).
+// The generated module d2vr_tap (src/gpu/d2vr.rs: shader_source) defines
+// `fn tap(i: u32) -> f32`, element i of the projections in their storage precision
+// (f32 or f16 pairs), which shared/ct_geometry.wgsl's bilinear_zero reads.
 
+#import ct_geometry
+#import raycast_params
+#import d2vr_params
+#import classify
+#import rays
+#import camera
+#import shading
+#import opacity
+#import d2vr_tap
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var<uniform> dp: D2vrParams;
@@ -23,28 +33,6 @@
 // reconstructions.
 @group(0) @binding(7) var<storage, read_write> counts: array<vec4<u32>>;
 
-// mirrors src/ct.rs: bilinear_zero (taps read through `tap`)
-fn bilinear_zero(base: u32, x: f32, y: f32) -> f32 {
-    let cols = dp.det.x;
-    let rows = dp.det.y;
-    let fx = floor(x);
-    let fy = floor(y);
-    if (!(fx >= -1.0 && fx < f32(cols) && fy >= -1.0 && fy < f32(rows))) {
-        return 0.0;
-    }
-    let tx = x - fx;
-    let ty = y - fy;
-    let ix = i32(fx);
-    let iy = i32(fy);
-    let a = tap_at(base, ix, iy);
-    let b = tap_at(base, ix + 1, iy);
-    let c = tap_at(base, ix, iy + 1);
-    let d = tap_at(base, ix + 1, iy + 1);
-    let top = a * (1.0 - tx) + b * tx;
-    let bottom = c * (1.0 - tx) + d * tx;
-    return top * (1.0 - ty) + bottom * ty;
-}
-
 // mirrors src/cpu/d2vr.rs: bilinear_zero_grad — (q, ∂q/∂x, ∂q/∂y)
 fn bilinear_zero_grad(base: u32, x: f32, y: f32) -> vec3<f32> {
     let cols = dp.det.x;
@@ -58,20 +46,13 @@ fn bilinear_zero_grad(base: u32, x: f32, y: f32) -> vec3<f32> {
     let ty = y - fy;
     let ix = i32(fx);
     let iy = i32(fy);
-    let a = tap_at(base, ix, iy);
-    let b = tap_at(base, ix + 1, iy);
-    let c = tap_at(base, ix, iy + 1);
-    let d = tap_at(base, ix + 1, iy + 1);
+    let a = tap_zero(base, cols, rows, ix, iy);
+    let b = tap_zero(base, cols, rows, ix + 1, iy);
+    let c = tap_zero(base, cols, rows, ix, iy + 1);
+    let d = tap_zero(base, cols, rows, ix + 1, iy + 1);
     let top = a * (1.0 - tx) + b * tx;
     let bottom = c * (1.0 - tx) + d * tx;
     return vec3<f32>(top * (1.0 - ty) + bottom * ty, (b - a) * (1.0 - ty) + (d - c) * ty, bottom - top);
-}
-
-fn tap_at(base: u32, i: i32, j: i32) -> f32 {
-    if (i < 0 || j < 0 || i >= i32(dp.det.x) || j >= i32(dp.det.y)) {
-        return 0.0;
-    }
-    return tap(base + u32(j) * dp.det.x + u32(i));
 }
 
 // mirrors src/cpu/d2vr.rs: ProjectionField::reconstruct_sample
@@ -81,7 +62,7 @@ fn reconstruct_sample(w: vec3<f32>) -> f32 {
     for (var k = 0u; k < dp.det.z; k++) {
         let pr = project_point(views[k], w);
         if (pr.w != 0.0) {
-            sum = sum + pr.z * bilinear_zero(k * n, pr.x, pr.y);
+            sum = sum + pr.z * bilinear_zero(k * n, dp.det.x, dp.det.y, pr.x, pr.y);
         }
     }
     return sum * dp.cylinder.w;

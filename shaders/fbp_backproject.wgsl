@@ -1,38 +1,18 @@
 // Backprojection for FBP and FDK: one invocation per voxel, a loop over a chunk of views.
-// Rust twin: src/gpu/fbp.rs (dispatch), src/cpu/fbp.rs (the oracle). Compiled with
-// shaders/shared/ct_geometry.wgsl (CtView, project_point) prepended.
+// Rust twin: src/gpu/fbp.rs (dispatch), src/cpu/fbp.rs (the oracle). The geometry
+// (CtView, project_point, bilinear_zero) is shared/ct_geometry.wgsl.
 
-// FbpParams is declared in shaders/shared/fbp_params.wgsl (prepended at load time).
+#import ct_geometry
+#import fbp_params
 
 @group(0) @binding(0) var<uniform> params: FbpParams;
 @group(0) @binding(1) var<storage, read> views: array<CtView>;
 @group(0) @binding(2) var<storage, read> proj: array<f32>;
 @group(0) @binding(3) var<storage, read_write> out_vol: array<f32>;
 
-fn tap(base: u32, cols: i32, rows: i32, i: i32, j: i32) -> f32 {
-    if i < 0 || j < 0 || i >= cols || j >= rows {
-        return 0.0;
-    }
-    return proj[base + u32(j * cols + i)];
-}
-
-// Bilinear interpolation with zeros outside the `cols × rows` image at `base`.
-// mirrors src/ct.rs: bilinear_zero
-fn bilinear_zero(base: u32, cols: u32, rows: u32, x: f32, y: f32) -> f32 {
-    let fx = floor(x);
-    let fy = floor(y);
-    if !(fx >= -1.0 && fx < f32(cols) && fy >= -1.0 && fy < f32(rows)) {
-        return 0.0;
-    }
-    let tx = x - fx;
-    let ty = y - fy;
-    let ix = i32(fx);
-    let iy = i32(fy);
-    let c = i32(cols);
-    let r = i32(rows);
-    let top = tap(base, c, r, ix, iy) * (1.0 - tx) + tap(base, c, r, ix + 1, iy) * tx;
-    let bottom = tap(base, c, r, ix, iy + 1) * (1.0 - tx) + tap(base, c, r, ix + 1, iy + 1) * tx;
-    return top * (1.0 - ty) + bottom * ty;
+// Element i of the filtered projections, for shared/ct_geometry.wgsl: bilinear_zero.
+fn tap(i: u32) -> f32 {
+    return proj[i];
 }
 
 // Adds this chunk's share of π/(2A)·Σ_k w_k·bilinear_zero(q_k, col_k, row_k).

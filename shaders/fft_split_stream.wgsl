@@ -7,6 +7,9 @@
 // four small radix-4 kernels.
 // Orchestration and the CPU twin of every function: src/gpu/fft.rs.
 
+#import fft_params
+#import fft_common
+
 // Input element k of the current pass: in pass 0 the bit-reversed element of the
 // original data (the tangling), later passes read straight.
 // mirrors src/gpu/fft.rs: split_stream_load

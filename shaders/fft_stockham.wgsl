@@ -6,6 +6,9 @@
 // (stockham_local).
 // Orchestration and the CPU twin of every function: src/gpu/fft.rs.
 
+#import fft_params
+#import fft_common
+
 // Radix-4 butterfly j of a line: inputs j + m·N/4 (m = 0 … 3) times
 // exp(∓2πi·m·k/(4Ns)), k = j mod Ns, then a 4-point DFT, written to
 // (j / Ns)·4Ns + k + m·Ns.

@@ -1,6 +1,9 @@
 // Two real FFTs through one complex FFT: the split of src/gpu/fft.rs: two_real_ffts.
-// Prepended by shared/fft_params.wgsl and fft_common.wgsl (bindings: params.n = N,
-// src = Z, the FFT of z = a + i·b; dst = [A_0 … A_{N−1}, B_0 … B_{N−1}]).
+// The bindings are shared/fft_common.wgsl's: params.n = N, src = Z, the FFT of
+// z = a + i·b; dst = [A_0 … A_{N−1}, B_0 … B_{N−1}].
+
+#import fft_params
+#import fft_common
 
 // A_k = (Z_k + conj(Z_{N−k})) / 2 and B_k = (Z_k − conj(Z_{N−k})) / (2i), from
 // zk = Z_k and zm = Z_{(N−k) mod N}; (d / 2i) = −i·d / 2 is a swap and a sign.

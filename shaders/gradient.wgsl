@@ -1,18 +1,14 @@
 // The gradient volume on the GPU, one invocation per voxel of a slab of z-slices,
 // written component-planar (all x, then all y, then all z components of the slab).
 // mirrors src/cpu/gradient.rs: precompute_gradients
-// Joined at load time with shaders/shared/gradient_params.wgsl and
-// shaders/shared/gradient_voxel.wgsl (gradient_at_voxel).
+// The stencil (voxel, gradient_at_voxel) is shared/gradient_voxel.wgsl.
+
+#import gradient_params
+#import gradient_voxel
 
 @group(0) @binding(0) var<uniform> params: GradientParams;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read_write> out: array<f32>;
-
-// The voxel at i with clamped indices (the CPU's Grid::at_clamped).
-fn voxel(i: vec3<i32>) -> f32 {
-    let n = vec3<i32>(params.dims.xyz) - vec3<i32>(1);
-    return textureLoad(volume, clamp(i, vec3<i32>(0), n), 0).x;
-}
 
 @compute @workgroup_size(4, 4, 4)
 fn gradient_slab(@builtin(global_invocation_id) id: vec3<u32>) {

@@ -1,17 +1,24 @@
 // The GPU multi-volume ray caster: one invocation per pixel, up to three volumes.
 //
-// Mirrors src/cpu/multi.rs (cast_multi, combine_sample, shade_layer), src/transfer.rs
-// (LutR::classify), src/cpu/filter.rs (sample: nearest and trilinear through
-// apply_taps), src/cpu/gradient.rs (gradient_stencil: central, forward) and
-// src/cpu/raycast.rs (shade_gradient). Each helper names its Rust twin.
-// Prepended at load time by src/gpu/multi.rs: shaders/shared/multi_params.wgsl and
-// shaders/shared/rays.wgsl (camera_ray, intersect_box, phong, normalize_or_zero) and
-// shaders/shared/opacity.wgsl (ln_1p, exp_m1).
+// The twin of src/cpu/multi.rs (cast_multi, combine_sample, shade_layer), with
+// src/transfer.rs (LutR::classify), src/cpu/filter.rs (sample: nearest and trilinear
+// through apply_taps), src/cpu/gradient.rs (gradient_stencil: central, forward) and
+// src/cpu/raycast.rs (shade_gradient). Each helper names its Rust twin. Shared with
+// the ray caster: camera_ray (shared/camera.wgsl), intersect_box and normalize_or_zero
+// (shared/rays.wgsl), phong (shared/shading.wgsl), clamp_index (shared/filters.wgsl),
+// ln_1p and exp_m1 (shared/opacity.wgsl).
 //
 // Loops: llvmpipe stops every loop of an invocation after 65535 iterations in all, so
 // the ray march is the only long loop; the per-volume work is written out three times
 // (straight-line calls guarded by the volume count), and src/gpu/multi.rs refuses steps
 // that would take a ray past the limit.
+
+#import multi_params
+#import rays
+#import camera
+#import shading
+#import opacity
+#import filters
 
 @group(0) @binding(0) var<uniform> params: MultiParams;
 @group(0) @binding(1) var volume_0: texture_3d<f32>;
@@ -24,11 +31,7 @@
 
 const FILTER_NEAREST: u32 = 0u;
 
-// ln_1p and exp_m1: shaders/shared/opacity.wgsl.
-
-fn clamp_index(i: i32, n: u32) -> i32 {
-    return clamp(i, 0, i32(n) - 1);
-}
+// ln_1p and exp_m1: shaders/shared/opacity.wgsl; clamp_index: shaders/shared/filters.wgsl.
 
 // mirrors src/cpu/filter.rs: sample (nearest, and trilinear = axis_taps + apply_taps:
 // Σ_k w_z[k] Σ_j w_y[j] Σ_i w_x[i] f[i, j, k], x innermost, clamped indices).

@@ -1,7 +1,9 @@
-// Evaluates shaders/shared/opacity.wgsl (prepended) on many inputs, so tests can hold
-// ln_1p, exp_m1 and step_opacity against f64. Host side: src/gpu/probe.rs: opacity_gpu.
-// Each input is (x for ln_1p, x for exp_m1, a, r); each output is
+// Evaluates shaders/shared/opacity.wgsl on many inputs, so tests can hold ln_1p, exp_m1
+// and step_opacity against f64. Host side: src/gpu/probe.rs: opacity_gpu. Each input
+// is (x for ln_1p, x for exp_m1, a, r); each output is
 // (ln_1p(x), exp_m1(x), step_opacity(a, r), 0).
+
+#import opacity
 
 @group(0) @binding(0) var<storage, read> inputs: array<vec4<f32>>;
 @group(0) @binding(1) var<storage, read_write> outputs: array<vec4<f32>>;

@@ -1,6 +1,7 @@
 // Parker's short-scan weights applied to a chunk of projection views in place.
 // mirrors src/cpu/parker.rs: weigh
-// Joined at load time with shaders/shared/parker_params.wgsl.
+
+#import parker_params
 
 @group(0) @binding(0) var<uniform> params: ParkerParams;
 // β of every view of the scan: gantry angle from the first view, radians.

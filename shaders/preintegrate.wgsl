@@ -1,6 +1,8 @@
 // The pre-integrated transfer function: one invocation per table entry (front i, back
-// j). Mirrors src/cpu/preintegrate.rs (see its module docs for the definition).
-// Prepended: shaders/shared/adaptive_params.wgsl and opacity.wgsl (step_opacity).
+// j), the twin of src/cpu/preintegrate.rs (see its module docs for the definition).
+
+#import adaptive_params
+#import opacity
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
 @group(0) @binding(1) var<storage, read> lut: array<vec4<f32>>;

@@ -1,6 +1,7 @@
 // One separable pass of the Gaussian filter, one invocation per output voxel.
 // Mirrors src/cpu/process.rs: gaussian; the host side is src/gpu/process.rs.
-// Prepended: shaders/shared/process_params.wgsl.
+
+#import process_params
 
 // The normalised weights w[t + r], t = −r … r (params.op.y = r).
 @group(0) @binding(3) var<storage, read> weights: array<f32>;

@@ -1,11 +1,8 @@
 // Gradient magnitude in world units, one invocation per voxel: central differences with
 // clamped neighbours (src/cpu/gradient.rs: gradient_at_voxel, Central), then |L⁻ᵀ g|.
 // Mirrors src/cpu/process.rs: gradient_magnitude; the host side is src/gpu/process.rs.
-// Prepended: shaders/shared/process_params.wgsl.
 
-fn clamped(i: i32, n: u32) -> u32 {
-    return u32(clamp(i, 0, i32(n) - 1));
-}
+#import process_params
 
 // |M g| with M's rows in params.m0..m2. Mirrors src/cpu/process.rs: world_gradient_length.
 fn world_gradient_length(g: vec3<f32>) -> f32 {

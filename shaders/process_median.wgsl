@@ -1,6 +1,7 @@
 // 3-D median filter (cubic window k ≤ 5, reflect rule), one invocation per voxel.
 // Mirrors src/cpu/process.rs: median; the host side is src/gpu/process.rs.
-// Prepended: shaders/shared/process_params.wgsl.
+
+#import process_params
 
 const MAX_WINDOW: u32 = 125u;
 

@@ -1,71 +1,19 @@
 // Resampling with a truncated reconstruction filter, one invocation per output voxel.
-// Mirrors src/cpu/process.rs: resample and src/cpu/filter.rs: sample (clamp-to-edge);
-// the host side is src/gpu/process.rs. Prepended: shaders/shared/process_params.wgsl.
-// Filter codes (params.op.x): 0 nearest, 1 trilinear, 2 cubic B-spline (on the host's
-// prefiltered coefficients for the interpolating variant), 3 Catmull–Rom, 4 Lanczos of
-// order params.op.y.
+// Mirrors src/cpu/process.rs: resample; mirrors src/cpu/filter.rs: sample
+// (clamp-to-edge); the host side is src/gpu/process.rs. The kernels are
+// shared/filters.wgsl's. Filter codes (params.op.x): 0 nearest, 1 trilinear, 2 cubic
+// B-spline (on the host's prefiltered coefficients for the interpolating variant),
+// 3 Catmull–Rom, 4 Lanczos of order params.op.y.
 
-const PI: f32 = 3.14159265358979;
+#import process_params
+#import filters
+
 const MAX_TAPS: u32 = 8u;
 
 struct AxisTaps {
     first: i32,
     count: u32,
     w: array<f32, MAX_TAPS>,
-}
-
-// Mirrors src/cpu/filter.rs: sin_pi (argument reduced to [−1, 1] first).
-fn sin_pi(x: f32) -> f32 {
-    let r = x - 2.0 * round(x / 2.0);
-    if r > 0.5 {
-        return sin(PI * (1.0 - r));
-    }
-    if r < -0.5 {
-        return -sin(PI * (1.0 + r));
-    }
-    return sin(PI * r);
-}
-
-// Mirrors src/cpu/filter.rs: sinc.
-fn sinc(x: f32) -> f32 {
-    if x == 0.0 {
-        return 1.0;
-    }
-    return sin_pi(x) / (PI * x);
-}
-
-// Mirrors src/cpu/filter.rs: weight_bspline.
-fn weight_bspline(x: f32) -> f32 {
-    let a = abs(x);
-    if a < 1.0 {
-        return (4.0 - 6.0 * a * a + 3.0 * a * a * a) / 6.0;
-    }
-    if a < 2.0 {
-        let t = 2.0 - a;
-        return t * t * t / 6.0;
-    }
-    return 0.0;
-}
-
-// Mirrors src/cpu/filter.rs: weight_catmull_rom.
-fn weight_catmull_rom(x: f32) -> f32 {
-    let a = abs(x);
-    if a < 1.0 {
-        return 1.5 * a * a * a - 2.5 * a * a + 1.0;
-    }
-    if a < 2.0 {
-        return -0.5 * a * a * a + 2.5 * a * a - 4.0 * a + 2.0;
-    }
-    return 0.0;
-}
-
-// Mirrors src/cpu/filter.rs: weight_lanczos.
-fn weight_lanczos(x: f32, n: u32) -> f32 {
-    let nr = f32(n);
-    if abs(x) >= nr {
-        return 0.0;
-    }
-    return sinc(x) * sinc(x / nr);
 }
 
 // Taps along one axis at index coordinate x. Mirrors src/cpu/filter.rs: axis_taps.
@@ -112,10 +60,6 @@ fn axis_taps(x: f32) -> AxisTaps {
         }
     }
     return t;
-}
-
-fn clamped(i: i32, n: u32) -> u32 {
-    return u32(clamp(i, 0, i32(n) - 1));
 }
 
 // Σ_k w_z[k] Σ_j w_y[j] Σ_i w_x[i] f[i, j, k], clamped indices, x innermost.

@@ -1,6 +1,8 @@
 // Joseph forward projection of a voxel grid, one invocation per detector pixel.
 // Mirrors src/cpu/project.rs: project_volume (per pixel: pixel_ray, then joseph_ray);
-// the host side is src/gpu/project.rs. Prepended: shaders/shared/project_params.wgsl.
+// the host side is src/gpu/project.rs.
+
+#import project_params
 
 @group(0) @binding(0) var<uniform> p: ProjectParams;
 @group(0) @binding(1) var<storage, read> views: array<JosephView>;

@@ -3,7 +3,9 @@
 // the padded length P (`z = a + i·b`): the response is real and even, so it acts on
 // both parts separately. Three entry points around the batched FFT of src/gpu/fft.rs:
 // `ramp_pad` (pre-weight, pack, zero-pad) → FFT → `ramp_multiply` → inverse FFT →
-// `ramp_crop`. Compiled with shaders/shared/ramp_params.wgsl prepended.
+// `ramp_crop`.
+
+#import ramp_params
 
 @group(0) @binding(0) var<uniform> params: RampParams;
 // The detector lines of the chunk (pad reads, crop writes), `cols` values each.

@@ -1,21 +1,18 @@
 // Set-up passes of the GPU ray caster, one invocation per voxel, written to
 // rgba32float storage textures that the ray caster then samples like the data.
-// Mirrors src/cpu/raycast.rs: preclassify and src/cpu/gradient.rs: precompute_gradients.
-// Joined at load time with shaders/shared/raycast_params.wgsl, classify.wgsl and
-// gradient_voxel.wgsl.
+// Twins of src/cpu/raycast.rs: preclassify and src/cpu/gradient.rs:
+// precompute_gradients.
+
+#import raycast_params
+#import classify
+#import gradient_voxel
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> lut: array<vec4<f32>>;
 @group(0) @binding(3) var target_tex: texture_storage_3d<rgba32float, write>;
 
-// classify(t): shaders/shared/classify.wgsl.
-
-
-fn voxel(i: vec3<i32>) -> f32 {
-    let n = vec3<i32>(params.dims.xyz) - vec3<i32>(1);
-    return textureLoad(volume, clamp(i, vec3<i32>(0), n), 0).x;
-}
+// classify(t): shaders/shared/classify.wgsl; voxel(i): shaders/shared/gradient_voxel.wgsl.
 
 fn inside(id: vec3<u32>) -> bool {
     return all(id < params.dims.xyz);

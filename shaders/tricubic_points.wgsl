@@ -1,6 +1,8 @@
 // The fast tricubic B-spline at a list of points (src/gpu/tricubic.rs: sample_fast),
 // for measuring the manual and the texture-unit paths against src/cpu/tricubic.rs:
-// sample_fast. Prepended at load time: shaders/shared/tricubic.wgsl.
+// sample_fast. The sampling itself is shared/tricubic.wgsl, as in the ray caster.
+
+#import tricubic
 
 // x: the number of points.
 @group(0) @binding(0) var<uniform> count: vec4<u32>;

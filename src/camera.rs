@@ -339,7 +339,7 @@ impl Camera {
 }
 
 /// Entry and exit parameters of the ray `o + t d` through the box `[lo, hi]` (slab
-/// method), or `None` when it misses. Mirrors `shaders/raycast.wgsl: intersect_box`.
+/// method), or `None` when it misses. Mirrors `shaders/shared/rays.wgsl: intersect_box`.
 pub fn intersect_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
     crate::phantom::slab_interval(o, d, lo, hi)
 }

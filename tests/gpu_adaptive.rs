@@ -26,12 +26,8 @@ fn validate(src: &str) {
 
 #[test]
 fn adaptive_shaders_validate() {
-    use voxlab::gpu::adaptive::{ADAPTIVE_WGSL, IMPORTANCE_WGSL, PARAMS_WGSL};
-    use voxlab::gpu::preintegrate::PREINTEGRATE_WGSL;
-    use voxlab::gpu::raycast::OPACITY_WGSL;
-    validate(&format!("{PARAMS_WGSL}\n{IMPORTANCE_WGSL}"));
-    for body in [ADAPTIVE_WGSL, PREINTEGRATE_WGSL] {
-        validate(&format!("{PARAMS_WGSL}\n{OPACITY_WGSL}\n{body}"));
+    for name in ["adaptive_importance", "adaptive", "preintegrate"] {
+        validate(&voxlab::gpu::shaders::resolve(name));
     }
 }
 

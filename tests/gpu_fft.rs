@@ -500,12 +500,7 @@ fn a_device_buffer_transforms_like_host_data() {
 
 #[test]
 fn two_real_shader_validates() {
-    let src = format!(
-        "{}\n{}\n{}",
-        fft::PARAMS_WGSL,
-        fft::COMMON_WGSL,
-        fft::TWO_REAL_WGSL
-    );
+    let src = voxlab::gpu::shaders::resolve("fft_two_real");
     let module = naga::front::wgsl::parse_str(&src)
         .unwrap_or_else(|e| panic!("fft_two_real.wgsl: {}", e.emit_to_string(&src)));
     naga::valid::Validator::new(

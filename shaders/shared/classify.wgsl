@@ -1,6 +1,5 @@
-// The transfer-function lookup shared by the ray caster and its set-up passes.
-// Prepended after raycast_params.wgsl; expects the module to declare
-// `params: RaycastParams` and `lut: array<vec4<f32>>`.
+// The transfer-function lookup shared by the ray caster, its set-up passes and D²VR.
+// Reads the importer's `params: RaycastParams` and `lut: array<vec4<f32>>`.
 
 // mirrors src/transfer.rs: LutR::classify
 fn classify(t: f32) -> vec4<f32> {

@@ -1,6 +1,6 @@
 // The 2D transfer-function lookup over (value, gradient magnitude), read with manual
-// bilinear interpolation. Prepended after raycast_params.wgsl; expects the module to
-// declare `params: RaycastParams` and `lut2d: array<vec4<f32>>` (value fastest).
+// bilinear interpolation, for the ray caster. Reads the importer's
+// `params: RaycastParams` and `lut2d: array<vec4<f32>>` (value fastest).
 // params.tf2d_a = (value scale, value offset, nv − 1, ng − 1);
 // params.tf2d_b = (gradient scale, 1/g0, log axis ? 1 : 0, enabled ? 1 : 0).
 

@@ -1,8 +1,13 @@
 // The gradient of the voxel grid at voxel p, index space, with clamped neighbours:
-// central (method 0), forward (1) or 3D Sobel (2). The includer defines
-// `fn voxel(i: vec3<i32>) -> f32` (clamped load). Used by raycast_prepare.wgsl
-// (precompute_gradients) and gradient.wgsl.
-// mirrors src/cpu/gradient.rs: gradient_at_voxel
+// central (method 0), forward (1) or 3D Sobel (2). Imported by raycast_prepare.wgsl
+// (precompute_gradients) and gradient.wgsl; reads the importer's
+// `volume: texture_3d<f32>` and `params.dims` (RaycastParams, GradientParams).
+
+// The voxel at i with clamped indices (the CPU's Grid::at_clamped).
+fn voxel(i: vec3<i32>) -> f32 {
+    let n = vec3<i32>(params.dims.xyz) - vec3<i32>(1);
+    return textureLoad(volume, clamp(i, vec3<i32>(0), n), 0).x;
+}
 
 fn unit(a: u32, s: i32) -> vec3<i32> {
     var v = vec3<i32>(0);
@@ -10,6 +15,7 @@ fn unit(a: u32, s: i32) -> vec3<i32> {
     return v;
 }
 
+// mirrors src/cpu/gradient.rs: gradient_at_voxel
 fn gradient_at_voxel(p: vec3<i32>, method: u32) -> vec3<f32> {
     var g = vec3<f32>(0.0);
     if (method == 0u) {

@@ -2,8 +2,9 @@
 // Rust twin: src/gpu/multi.rs: MultiParams (#[repr(C)], bytemuck). Every member is a
 // 16-byte vector or an array of them, so both sides agree without padding rules;
 // tests/gpu_layout.rs checks the offsets with naga. The camera, shading and image
-// members carry the names and meanings of RaycastParams, so camera_ray and phong of
-// shaders/shared/rays.wgsl read them unchanged.
+// members carry the names and meanings of RaycastParams, so camera_ray
+// (shaders/shared/camera.wgsl) and phong (shaders/shared/shading.wgsl) read them
+// unchanged.
 
 struct MultiParams {
     // Camera in world space (mm), as RaycastParams: eye.w = 1 perspective, 0 orthographic.

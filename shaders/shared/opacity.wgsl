@@ -5,10 +5,10 @@
 // hardware (NVIDIA: 1e-6 relative differences between two casters on one image), while
 // lavapipe computes it in full f32. Near zero both functions use series here, and
 // log/exp only where those are accurate to a few ulp.
-// Prepended at load time to the ray caster, D²VR, the multi-volume and the adaptive
-// casters and the pre-integration table.
+// Imported by the ray caster, D²VR, the multi-volume and the adaptive casters and the
+// pre-integration table.
 
-// ln(1 + x) (mirrors f64::ln_1p): for x in [−1/2, 1], 2·atanh(z) with z = x / (2 + x),
+// ln(1 + x) (as f64::ln_1p): for x in [−1/2, 1], 2·atanh(z) with z = x / (2 + x),
 // |z| ≤ 1/3, summed to z^17 (truncation < 2^-28 relative); elsewhere log(1 + x), whose
 // argument then lies outside [1/2, 2], where log is good to 3 ulp.
 fn ln_1p(x: f32) -> f32 {
@@ -29,7 +29,7 @@ fn ln_1p(x: f32) -> f32 {
     return log(1.0 + x);
 }
 
-// e^x − 1 (mirrors f64::exp_m1): for |x| ≤ 1/2 the Taylor series to x^11/11!
+// e^x − 1 (as f64::exp_m1): for |x| ≤ 1/2 the Taylor series to x^11/11!
 // (truncation < 2^-30 relative); elsewhere exp(x) − 1, which loses nothing there.
 fn exp_m1(x: f32) -> f32 {
     if (abs(x) <= 0.5) {

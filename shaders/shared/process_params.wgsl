@@ -1,6 +1,7 @@
-// Parameters of one dispatch of the volume-processing shaders (shaders/process_*.wgsl).
-// Rust twin: src/gpu/process.rs: ProcessParams (#[repr(C)], bytemuck). Six 16-byte
-// vectors, no padding (96 bytes); tests/gpu_layout.rs checks the offsets with naga.
+// Parameters of one dispatch of the volume-processing shaders (shaders/process_*.wgsl),
+// their bindings and the index helpers they share. Rust twin: src/gpu/process.rs:
+// ProcessParams (#[repr(C)], bytemuck). Six 16-byte vectors, no padding (96 bytes);
+// tests/gpu_layout.rs checks the offsets with naga.
 
 struct ProcessParams {
     // The input grid: nx, ny, nz, 0.
@@ -40,6 +41,11 @@ fn output_voxel(gid: vec3<u32>, nwg: vec3<u32>, out: ptr<function, vec3<u32>>) -
 
 fn out_index(v: vec3<u32>) -> u32 {
     return v.x + params.out_dims.x * (v.y + params.out_dims.y * v.z);
+}
+
+// The clamp-to-edge index of i on an axis of n voxels (the CPU's Grid::at_clamped).
+fn clamped(i: i32, n: u32) -> u32 {
+    return u32(clamp(i, 0, i32(n) - 1));
 }
 
 fn in_at(i: u32, j: u32, k: u32) -> f32 {

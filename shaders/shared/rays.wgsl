@@ -1,9 +1,7 @@
-// Rays, boxes, steps and Phong shading shared by the ray caster (shaders/raycast.wgsl),
-// D²VR (shaders/d2vr.wgsl), the clipping-mesh pass (shaders/clipmesh.wgsl) and the
-// multi-volume caster (shaders/multi.wgsl). Each declares a `params` uniform with the
-// members camera_ray and phong read (RaycastParams, shaders/shared/raycast_params.wgsl;
-// MultiParams, shaders/shared/multi_params.wgsl). Prepended at load time by
-// src/gpu/raycast.rs, d2vr.rs, clipmesh.rs and multi.rs.
+// Rays and boxes: the one ray–box slab test, the step bounds of a march, and the ray
+// struct and constants every caster shares (shaders/raycast.wgsl, d2vr.wgsl,
+// clipmesh.wgsl, multi.wgsl, adaptive.wgsl, shared/skip.wgsl). Reads no bindings:
+// camera rays are in shared/camera.wgsl, Phong shading in shared/shading.wgsl.
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -19,42 +17,11 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// mirrors src/cpu/raycast.rs: phong (two-sided)
-fn phong(c: vec3<f32>, n: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec3<f32> {
-    let ndl = abs(dot(n, l));
-    let ndh = abs(dot(n, h));
-    let diffuse = params.shading.x + params.shading.y * ndl;
-    var spec = 0.0;
-    if (ndh > 0.0) {
-        spec = params.shading.z * pow(ndh, params.shading.w);
-    }
-    return c * diffuse + vec3<f32>(spec);
-}
-
 // ---------------------------------------------------------------- rays
 struct Ray {
     origin: vec3<f32>,
     dir: vec3<f32>,
     t_min: f32,
-}
-
-// mirrors src/camera.rs: Camera::ray (pixel centres at +0.5)
-fn camera_ray(col: u32, row: u32) -> Ray {
-    let u = (f32(col) + 0.5) / f32(params.image.x) - 0.5;
-    let v = 0.5 - (f32(row) + 0.5) / f32(params.image.y);
-    var r: Ray;
-    if (params.eye.w == 1.0) {
-        let h = params.forward.w;
-        let aspect = params.right.w;
-        r.origin = params.eye.xyz;
-        r.dir = normalize(params.forward.xyz + params.right.xyz * (2.0 * u * h * aspect) + params.up.xyz * (2.0 * v * h));
-        r.t_min = 0.0;
-    } else {
-        r.origin = params.eye.xyz + params.right.xyz * (u * params.right.w) + params.up.xyz * (v * params.up.w);
-        r.dir = params.forward.xyz;
-        r.t_min = -BIG;
-    }
-    return r;
 }
 
 struct Hit {

@@ -1,10 +1,11 @@
-// Empty-space skipping, the clipping box and jittered ray starts for the ray caster.
-// Mirrors src/cpu/skip.rs (range_empty, cell_empty, CellWalk, SampleRanges,
+// Empty-space skipping, the clipping box and jittered ray starts for the ray caster:
+// the twins of src/cpu/skip.rs (range_empty, cell_empty, CellWalk, SampleRanges,
 // ClipR::interval) and src/accumulate.rs (pcg_hash, jitter_offset, interleaved_offset);
-// each helper names its Rust twin. Prepended by src/gpu/raycast.rs after rays.wgsl;
-// expects `params: RaycastParams`, `skip_minmax: array<vec2<f32>>` (one [min, max] per
-// cell, x fastest) and `skip_prefix: array<u32>` (the LUT's prefix count of non-zero
-// opacities).
+// each helper names its Rust twin. Reads the ray caster's `params: RaycastParams`,
+// `skip_minmax: array<vec2<f32>>` (one [min, max] per cell, x fastest) and
+// `skip_prefix: array<u32>` (the LUT's prefix count of non-zero opacities).
+
+#import rays
 
 // ---------------------------------------------------------------- jitter
 // mirrors src/accumulate.rs: pcg_hash
@@ -194,7 +195,8 @@ fn ranges_new(skip: bool, t_s: f32, dt: f32, n: u32, backward: bool) -> SampleRa
     return r;
 }
 
-// The walk of a ray, reversed for back-to-front (mirrors SampleRanges::new).
+// The walk of a ray, reversed for back-to-front.
+// mirrors src/cpu/skip.rs: SampleRanges::new
 fn ranges_walk(o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, backward: bool) -> CellWalk {
     if (backward) {
         return walk_new(o, -d, -t_out, -t_in);

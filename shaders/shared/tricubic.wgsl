@@ -1,5 +1,5 @@
 // Fast tricubic B-spline filtering: the 64-tap cubic B-spline as 8 trilinear fetches
-// (Sigg & Hadwiger 2005, GPU Gems 2 ch. 20). Mirrors src/cpu/tricubic.rs, whose module
+// (Sigg & Hadwiger 2005, GPU Gems 2 ch. 20). The twin of src/cpu/tricubic.rs, whose module
 // docs derive the formula: per axis, with i = floor(x), f = x − i and the B-spline
 // weights w0..w3 of the taps i − 1 … i + 2, the fetches lie at i − 1 + w1/g0 and
 // i + 1 + w3/g1 with weights g0 = w0 + w1 and g1 = w2 + w3.

@@ -42,7 +42,7 @@
 //! frequencies). The cut-off is the smallest frequency below which the fraction `energy`
 //! (0.99 by default) of the non-DC energy lies; a constant signal has cut-off 0.
 //!
-//! Mirrors `shaders/adaptive.wgsl` (the caster: `adaptive_step`, `direct_step`,
+//! The GPU twins: `shaders/adaptive.wgsl` (the caster: `adaptive_step`, `direct_step`,
 //! `cast_ray`) and `shaders/adaptive_importance.wgsl` (the importance volume).
 
 use super::dft::{Direction, Normalization};
@@ -263,7 +263,7 @@ pub fn spectral_table(tf: &TransferFunction, bins: usize, energy: f64) -> Spectr
 impl SpectralTable {
     /// The bins `(i, j)`, `i < j`, of the smallest table interval covering the mapped
     /// interval `[lo, hi]` (clamped to the domain, where the transfer function is
-    /// constant beyond). Mirrors `shaders/adaptive.wgsl: spectrum_bins`.
+    /// constant beyond). Mirrors `shaders/adaptive.wgsl: spectrum_lookup`.
     #[inline]
     pub fn bins_of<R: Real>(&self, lo: R, hi: R) -> (usize, usize) {
         let m = self.bins as f64;
@@ -554,8 +554,8 @@ pub fn render<R: Real>(
     render_prepared(&scene, camera, settings)
 }
 
-/// The nearest voxel of `p`, clamped to the grid. Mirrors `shaders/adaptive.wgsl:
-/// nearest_voxel`.
+/// The nearest voxel of `p`, clamped to the grid.
+/// Mirrors `shaders/adaptive.wgsl: nearest_voxel`.
 #[inline]
 fn nearest_voxel<R: Real>(p: V3<R>, dims: [usize; 3]) -> [usize; 3] {
     std::array::from_fn(|a| {

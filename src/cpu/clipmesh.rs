@@ -156,7 +156,7 @@ impl Segments {
 }
 
 /// Pairs the sorted hits beyond `t0` into segments, given how many hits lie at or
-/// before `t0` (see the module docs). Mirrors `shaders/clipmesh.wgsl: make_segments`.
+/// before `t0` (see the module docs). Mirrors `shaders/clipmesh.wgsl: clip_segments`.
 pub fn make_segments(t0: f64, behind: usize, forward: &[f64]) -> Segments {
     let mut b: Vec<f64> = Vec::with_capacity(forward.len() + 1);
     if behind % 2 == 1 {

@@ -93,6 +93,7 @@ impl<R: Real> Grid<R> {
 }
 
 /// `sin(πx)`, exactly zero at integers (argument reduced to [−½, ½] first).
+/// Mirrors `shaders/shared/filters.wgsl: sin_pi`.
 #[inline]
 pub fn sin_pi<R: Real>(x: R) -> R {
     let two = R::of(2.0);
@@ -108,7 +109,7 @@ pub fn sin_pi<R: Real>(x: R) -> R {
     }
 }
 
-/// `sinc(x) = sin(πx)/(πx)`, `sinc(0) = 1`. Mirrors `shaders/filter.wgsl: sinc`.
+/// `sinc(x) = sin(πx)/(πx)`, `sinc(0) = 1`. Mirrors `shaders/shared/filters.wgsl: sinc`.
 #[inline]
 pub fn sinc<R: Real>(x: R) -> R {
     if x == R::zero() {
@@ -118,13 +119,13 @@ pub fn sinc<R: Real>(x: R) -> R {
     }
 }
 
-/// Tent kernel. Mirrors `shaders/filter.wgsl: weight_tent`.
+/// Tent kernel. Mirrors `shaders/shared/filters.wgsl: weight_tent`.
 #[inline(always)]
 pub fn weight_tent<R: Real>(x: R) -> R {
     (R::one() - x.abs()).max(R::zero())
 }
 
-/// Cubic B-spline kernel. Mirrors `shaders/filter.wgsl: weight_bspline`.
+/// Cubic B-spline kernel. Mirrors `shaders/shared/filters.wgsl: weight_bspline`.
 #[inline(always)]
 pub fn weight_bspline<R: Real>(x: R) -> R {
     let a = x.abs();
@@ -139,7 +140,7 @@ pub fn weight_bspline<R: Real>(x: R) -> R {
     }
 }
 
-/// Catmull–Rom kernel (Keys, a = −½). Mirrors `shaders/filter.wgsl: weight_catmull_rom`.
+/// Catmull–Rom kernel (Keys, a = −½). Mirrors `shaders/shared/filters.wgsl: weight_catmull_rom`.
 #[inline(always)]
 pub fn weight_catmull_rom<R: Real>(x: R) -> R {
     let a = x.abs();
@@ -152,8 +153,8 @@ pub fn weight_catmull_rom<R: Real>(x: R) -> R {
     }
 }
 
-/// Lanczos-N kernel `sinc(x) sinc(x/N)` for `|x| < N`. Mirrors
-/// `shaders/filter.wgsl: weight_lanczos`.
+/// Lanczos-N kernel `sinc(x) sinc(x/N)` for `|x| < N`.
+/// Mirrors `shaders/shared/filters.wgsl: weight_lanczos`.
 #[inline(always)]
 pub fn weight_lanczos<R: Real>(x: R, n: usize) -> R {
     let nr = R::of(n as f64);
@@ -177,7 +178,7 @@ pub struct AxisTaps<R> {
 }
 
 /// Taps along one axis for index coordinate `x` (truncated kernels only).
-/// Mirrors `shaders/filter.wgsl: axis_taps`.
+/// Mirrors `shaders/process_resample.wgsl: axis_taps`.
 #[inline]
 pub fn axis_taps<R: Real>(filter: Filter, x: R) -> AxisTaps<R> {
     let mut w = [R::zero(); MAX_TAPS];
@@ -242,7 +243,7 @@ pub fn axis_taps<R: Real>(filter: Filter, x: R) -> AxisTaps<R> {
 
 /// Samples at index-space point `p` with `filter`. `grid` must be what [`prepare`]
 /// returned for that filter (the values themselves for every filter but
-/// `BsplineInterp`). Mirrors `shaders/filter.wgsl: sample_volume`.
+/// `BsplineInterp`). Mirrors `shaders/process_resample.wgsl: sample_volume`.
 #[inline]
 pub fn sample<R: Real>(grid: &Grid<R>, filter: Filter, p: V3<R>) -> R {
     match filter {

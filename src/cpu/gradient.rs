@@ -23,7 +23,8 @@ use crate::settings::{Filter, GradientMethod};
 const SOBEL_SMOOTH: [f64; 3] = [0.25, 0.5, 0.25];
 
 /// The stencil applied to any scalar function `f` of index-space position `p`
-/// (unit spacing). Mirrors `shaders/gradient.wgsl: gradient_at`.
+/// (unit spacing). Mirrors `src/gpu/raycast.rs: gradient_wgsl` (which writes it out in
+/// WGSL as the ray caster's `gradient_at`); mirrors `shaders/multi.wgsl: layer_gradient`.
 #[inline]
 pub fn gradient_stencil<R: Real>(
     f: impl Fn(V3<R>) -> R,

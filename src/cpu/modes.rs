@@ -255,8 +255,8 @@ impl<R: Real> Span<R> {
 }
 
 /// The grey level of `v` under the window `[width, centre]`:
-/// `clamp((v − centre) / width + ½, 0, 1)`. Mirrors `shaders/shared/modes.wgsl:
-/// window_map`.
+/// `clamp((v − centre) / width + ½, 0, 1)`.
+/// Mirrors `shaders/shared/modes.wgsl: window_map`.
 #[inline]
 pub fn window_map<R: Real>(v: R, window: [R; 2]) -> R {
     ((v - window[1]) / window[0] + R::of(0.5))
@@ -282,8 +282,8 @@ pub fn iso_hit_t<R: Real>(t0: R, v0: R, t1: R, v1: R, tau: R, refine: bool) -> R
     }
 }
 
-/// Whether the field crosses `tau` between two values. Mirrors
-/// `shaders/shared/modes.wgsl: crosses`.
+/// Whether the field crosses `tau` between two values.
+/// Mirrors `shaders/shared/modes.wgsl: crosses`.
 #[inline]
 pub fn crosses<R: Real>(v0: R, v1: R, tau: R) -> bool {
     (v0 >= tau) != (v1 >= tau)
@@ -341,7 +341,7 @@ fn light_half<R: Real>(s: &Setup<R>, dir: glam::DVec3) -> (V3<R>, V3<R>) {
 }
 
 /// MIDA along one ray; returns the RGBA pixel and the samples taken.
-/// Mirrors `shaders/shared/modes.wgsl: cast_mida`.
+/// Mirrors `shaders/shared/modes_cast.wgsl: cast_mida`.
 pub(crate) fn cast_mida<R: Real, F: Field<R>>(
     field: &F,
     s: &Setup<R>,
@@ -406,8 +406,8 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
 
 /// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples
 /// `p + (m + 1) Δ L` toward the light until the box is left; in shadow when one lies on
-/// another side of an iso-value than the first. Mirrors
-/// `shaders/shared/modes.wgsl: in_shadow`.
+/// another side of an iso-value than the first.
+/// Mirrors `shaders/shared/modes_cast.wgsl: in_shadow`.
 pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>, l: V3<R>) -> bool {
     let Some((_, t_exit)) = intersect_box(p, l, s.lo, s.hi) else {
         return false;
@@ -429,7 +429,7 @@ pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>,
 }
 
 /// Iso-surfaces along one ray, with DVR samples in between when `dvr`; returns the
-/// RGBA pixel and the samples taken. Mirrors `shaders/shared/modes.wgsl: cast_iso`.
+/// RGBA pixel and the samples taken. Mirrors `shaders/shared/modes_cast.wgsl: cast_iso`.
 pub(crate) fn cast_iso<R: Real, F: Field<R>>(
     field: &F,
     s: &Setup<R>,

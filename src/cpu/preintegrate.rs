@@ -35,7 +35,7 @@
 //! table dimension over step length: it is exact for opacity, costs nothing, and its
 //! measured colour error is far below the sampling error it replaces.
 //!
-//! Mirrors `shaders/preintegrate.wgsl` (the table) and `shaders/adaptive.wgsl`
+//! The GPU twins: `shaders/preintegrate.wgsl` (the table) and `shaders/adaptive.wgsl`
 //! (`preint_lookup`, `preint_step`).
 
 use crate::real::Real;

@@ -166,8 +166,8 @@ pub fn resample<R: Real, T: Voxel>(vol: &Volume<T>, spec: &ResampleSpec) -> Resu
 }
 
 /// scipy's `reflect` rule: index `i` of a line of `n` mirrored about the end edges
-/// (`d c b a | a b c d | d c b a`, period `2n`). Mirrors
-/// `shaders/shared/process_params.wgsl: reflect_index`.
+/// (`d c b a | a b c d | d c b a`, period `2n`).
+/// Mirrors `shaders/shared/process_params.wgsl: reflect_index`.
 #[inline(always)]
 pub fn reflect_index(i: isize, n: usize) -> usize {
     let p = 2 * n as isize;
@@ -329,8 +329,8 @@ pub fn world_gradient_matrix(affine: DMat4) -> DMat3 {
     DMat3::from_mat4(affine).inverse().transpose()
 }
 
-/// `|M g|` for an index-space gradient `g` and `M = L⁻ᵀ`. Mirrors
-/// `shaders/process_gradient.wgsl: world_gradient_length`.
+/// `|M g|` for an index-space gradient `g` and `M = L⁻ᵀ`.
+/// Mirrors `shaders/process_gradient.wgsl: world_gradient_length`.
 #[inline(always)]
 pub fn world_gradient_length<R: Real>(m: &[[R; 3]; 3], g: V3<R>) -> R {
     let row = |r: &[R; 3]| r[0] * g.x() + r[1] * g.y() + r[2] * g.z();

@@ -206,7 +206,7 @@ impl RenderOutput {
 }
 
 /// Ray–box intersection in precision `R` (slab method), box `[lo, hi]` on every axis.
-/// Mirrors `shaders/raycast.wgsl: intersect_box`.
+/// Mirrors `shaders/shared/rays.wgsl: intersect_box`.
 #[inline]
 pub fn intersect_box<R: Real>(o: V3<R>, d: V3<R>, lo: V3<R>, hi: V3<R>) -> Option<(R, R)> {
     let mut t0 = R::neg_infinity();
@@ -228,7 +228,7 @@ pub fn intersect_box<R: Real>(o: V3<R>, d: V3<R>, lo: V3<R>, hi: V3<R>) -> Optio
 }
 
 /// Phong shading of colour `c` with normal `n`, light `l` and half vector `h` (all
-/// unit, world space; two-sided). Mirrors `shaders/raycast.wgsl: phong`.
+/// unit, world space; two-sided). Mirrors `shaders/shared/shading.wgsl: phong`.
 #[inline]
 pub fn phong<R: Real>(c: [R; 3], n: V3<R>, l: V3<R>, h: V3<R>, k: &ShadingR<R>) -> [R; 3] {
     let ndl = n.dot(l).abs();
@@ -622,7 +622,7 @@ fn packet_source<'a, R: Real, F: Field<R>>(
 }
 
 /// Classifies every voxel: opacity-weighted colour grids `(αr, αg, αb, α)`.
-/// Mirrors `shaders/raycast.wgsl: preclassify`.
+/// Mirrors `shaders/raycast_prepare.wgsl: preclassify`.
 pub fn preclassify<R: Real>(grid: &Grid<R>, lut: &LutR<R>) -> [Grid<R>; 4] {
     let rgba: Vec<[R; 4]> = grid
         .data

@@ -440,7 +440,7 @@ pub struct CellWalk<R> {
 }
 
 impl<R: Real> CellWalk<R> {
-    /// Starts at `o + d·t0` (clamped into the grid). Mirrors `skip.wgsl: walk_new`.
+    /// Starts at `o + d·t0` (clamped into the grid). Mirrors `shaders/shared/skip.wgsl: walk_new`.
     pub fn new(o: V3<R>, d: V3<R>, t0: R, t1: R, block: usize, cells: [usize; 3]) -> Self {
         let b = R::of(block as f64);
         let p = o + d * t0;
@@ -474,7 +474,7 @@ impl<R: Real> CellWalk<R> {
     }
 
     /// The parameter at which the walk leaves the current cell along axis `a`.
-    /// Mirrors `skip.wgsl: walk_boundaries`.
+    /// Mirrors `shaders/shared/skip.wgsl: walk_boundaries`.
     #[inline]
     fn boundary(&self, a: usize) -> R {
         self.boundary_beyond(a, 0)
@@ -491,7 +491,7 @@ impl<R: Real> CellWalk<R> {
         (R::of(edge as f64) * self.block - R::of(0.5) - self.o.0[a]) / self.d.0[a]
     }
 
-    /// Crosses the nearest boundary. Mirrors `skip.wgsl: walk_advance`.
+    /// Crosses the nearest boundary. Mirrors `shaders/shared/skip.wgsl: walk_advance`.
     #[inline]
     fn advance(&mut self) {
         let b = [self.boundary(0), self.boundary(1), self.boundary(2)];
@@ -572,7 +572,7 @@ impl<R: Real> CellWalk<R> {
     }
 
     /// The next span `[t_a, t_b]` of consecutive non-empty cells, or `None` when the
-    /// ray has left the grid or its interval. Mirrors `skip.wgsl: walk_next_span`.
+    /// ray has left the grid or its interval. Mirrors `shaders/shared/skip.wgsl: walk_next_span`.
     pub fn next_span(&mut self, empty: impl Fn([i32; 3]) -> bool) -> Option<(R, R)> {
         while self.active() && empty(self.cell) {
             self.advance();
@@ -609,7 +609,7 @@ pub struct SampleRanges<R> {
 
 impl<R: Real> SampleRanges<R> {
     /// Ranges for `n` steps from `t_s` of `dt` along `o + d·t`, `t ∈ [t_in, t_out]`;
-    /// `backward` hands them out last first. Mirrors `skip.wgsl: ranges_new`.
+    /// `backward` hands them out last first. Mirrors `shaders/shared/skip.wgsl: ranges_new`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         skip: Option<&Skipper<R>>,
@@ -638,7 +638,7 @@ impl<R: Real> SampleRanges<R> {
         }
     }
 
-    /// The next range, or `None` when the ray is done. Mirrors `skip.wgsl: ranges_next`.
+    /// The next range, or `None` when the ray is done. Mirrors `shaders/shared/skip.wgsl: ranges_next`.
     pub fn next(&mut self, skip: Option<&Skipper<R>>) -> Option<(usize, usize)> {
         let (Some(walk), Some(skip)) = (self.walk.as_mut(), skip) else {
             // No skipping: one range, handed out once.

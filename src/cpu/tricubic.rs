@@ -39,7 +39,7 @@
 //! `tests/tricubic.rs`). `BsplineFastInterp` samples the prefiltered coefficients of
 //! `cpu::filter::prepare` the same way.
 //!
-//! Mirrors `shaders/shared/tricubic.wgsl` (`fast_bspline_axis`, `trilinear_fetch`,
+//! The GPU twin: `shaders/shared/tricubic.wgsl` (`fast_bspline_axis`, `trilinear_fetch`,
 //! `sample_fast_bspline`, and the texture-unit variant `sample_fast_bspline_hw`).
 
 use super::filter::Grid;

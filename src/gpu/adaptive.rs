@@ -14,7 +14,10 @@
 //! rays' index-space origins and directions are computed in f64 and rounded to f32,
 //! exactly as the CPU f32 path rounds them, so both march from the same numbers.
 
-use super::context::{buffer_entry, GpuContext};
+use super::context::{
+    buffer_entry, compute_pipeline, render_bands, GpuContext, LLVMPIPE_LOOP_LIMIT,
+};
+use super::shaders;
 use crate::camera::Camera;
 use crate::cpu::adaptive::{
     direct_steps, importance_radius, spectral_table, AdaptiveSettings, Sampling,
@@ -28,34 +31,10 @@ use crate::volume::AnyVolume;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
-/// Parameters of the adaptive passes; twin of `shaders/shared/adaptive_params.wgsl`
-/// (`tests/gpu_layout.rs` checks that the two layouts agree).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct AdaptiveParams {
-    /// step (T_min), T_max, 2·oversampling, early-termination opacity.
-    pub steps: [f32; 4],
-    /// Window map a, b; pre-integration coordinate scale, offset.
-    pub window: [f32; 4],
-    /// Spectral table: d0, bins/(d1 − d0), bins, 0.
-    pub spectrum: [f32; 4],
-    pub background: [f32; 4],
-    /// nx, ny, nz, sampling (0 regular, 1 adaptive, 2 direct).
-    pub dims: [u32; 4],
-    /// Width, height, first row, rows.
-    pub image: [u32; 4],
-    /// Pre-integration n, spectral bins, block edge, blocks along x.
-    pub table: [u32; 4],
-    /// Blocks along y, z; importance passes: axis, radius.
-    pub extra: [u32; 4],
-}
+pub use super::params::AdaptiveParams;
 
-/// The shared struct.
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/adaptive_params.wgsl");
-/// The ray caster (without the shared struct).
-pub const ADAPTIVE_WGSL: &str = include_str!("../../shaders/adaptive.wgsl");
-/// The importance-volume passes (without the shared struct).
-pub const IMPORTANCE_WGSL: &str = include_str!("../../shaders/adaptive_importance.wgsl");
+/// `shaders/shared/adaptive_params.wgsl`: the WGSL twin of [`AdaptiveParams`].
+pub const PARAMS_WGSL: &str = shaders::ADAPTIVE_PARAMS;
 
 /// Where the time of a GPU adaptive render went, in seconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -78,34 +57,6 @@ pub struct AdaptiveTimings {
 pub struct GpuAdaptiveOutput {
     pub output: RenderOutput,
     pub timings: AdaptiveTimings,
-}
-
-pub(crate) fn compute_pipeline(
-    ctx: &GpuContext,
-    label: &str,
-    module: &wgpu::ShaderModule,
-    entry: &str,
-    layout: &wgpu::BindGroupLayout,
-) -> Result<wgpu::ComputePipeline> {
-    let dev = &ctx.device;
-    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    });
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&pl),
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    match pollster::block_on(scope.pop()) {
-        None => Ok(pipeline),
-        Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
-    }
 }
 
 fn init_buffer(
@@ -151,7 +102,7 @@ pub fn importance_buffer(
     let dev = &ctx.device;
     let module = ctx.shader(
         "adaptive_importance.wgsl",
-        &format!("{PARAMS_WGSL}\n{IMPORTANCE_WGSL}"),
+        &shaders::resolve("adaptive_importance"),
     )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
@@ -248,9 +199,7 @@ pub fn render(
     volume.check_finite("volume")?;
     let dims = volume.dims();
     let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-    if ctx.summary.is_cpu()
-        && diag / settings.step + 2.0 > (super::raycast::LLVMPIPE_LOOP_LIMIT - 16) as f64
-    {
+    if ctx.summary.is_cpu() && diag / settings.step + 2.0 > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
         return Err(Error::invalid(
             "step",
             "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
@@ -262,13 +211,7 @@ pub fn render(
         data: values.data().to_vec(),
     };
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "adaptive.wgsl",
-        &format!(
-            "{PARAMS_WGSL}\n{}\n{ADAPTIVE_WGSL}",
-            super::raycast::OPACITY_WGSL
-        ),
-    )?;
+    let module = ctx.shader("adaptive.wgsl", &shaders::resolve("adaptive"))?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -388,61 +331,49 @@ pub fn render(
 
     // Bands of rows: bounded work per dispatch.
     let rows_per_band = (65536 / w.max(1)).clamp(1, h.max(1));
-    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
     let mut image = Frame::new(w, h, 4);
     let mut counts = vec![0u32; w * h];
-    let (mut kernel, mut readback) = (0.0, 0.0);
-    let mut row0 = 0;
-    while row0 < h {
-        let rows = rows_per_band.min(h - row0);
-        params.image[2] = row0 as u32;
-        params.image[3] = rows as u32;
-        let pbuf = init_buffer(
-            ctx,
-            "adaptive params",
-            bytemuck::bytes_of(&params),
-            wgpu::BufferUsages::UNIFORM,
-        )?;
-        let pix_bytes = (rows * w * 16) as u64;
-        let cnt_bytes = (rows * w * 4) as u64;
-        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
-        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
-        let bind = ctx.bind_group(
-            "adaptive",
-            &layout,
-            &[
-                pbuf.as_entire_binding(),
-                vol_buf.as_entire_binding(),
-                preint.as_entire_binding(),
-                spec_buf.as_entire_binding(),
-                importance.as_entire_binding(),
-                direct_buf.as_entire_binding(),
-                ray_buf.as_entire_binding(),
-                out_buf.as_entire_binding(),
-                cnt_buf.as_entire_binding(),
-            ],
-        );
-        let (k, r) = super::raycast::run_band(
-            ctx,
-            (&pipeline, &bind, "adaptive"),
-            timestamps,
-            (row0, rows, w),
-            (&out_buf, &cnt_buf),
-            (&mut image, &mut counts),
-        )?;
-        kernel += k;
-        readback += r;
-        row0 += rows;
-    }
+    let bands = render_bands(
+        ctx,
+        (&pipeline, "adaptive"),
+        rows_per_band,
+        (&mut image, &mut counts),
+        &|_, _| {},
+        |row0, rows, out_buf, cnt_buf| {
+            params.image[2] = row0 as u32;
+            params.image[3] = rows as u32;
+            let pbuf = init_buffer(
+                ctx,
+                "adaptive params",
+                bytemuck::bytes_of(&params),
+                wgpu::BufferUsages::UNIFORM,
+            )?;
+            Ok(ctx.bind_group(
+                "adaptive",
+                &layout,
+                &[
+                    pbuf.as_entire_binding(),
+                    vol_buf.as_entire_binding(),
+                    preint.as_entire_binding(),
+                    spec_buf.as_entire_binding(),
+                    importance.as_entire_binding(),
+                    direct_buf.as_entire_binding(),
+                    ray_buf.as_entire_binding(),
+                    out_buf.as_entire_binding(),
+                    cnt_buf.as_entire_binding(),
+                ],
+            ))
+        },
+    )?;
     Ok(GpuAdaptiveOutput {
         output: RenderOutput::from_counts(image, &counts, settings.sample_count),
         timings: AdaptiveTimings {
             setup: t_setup,
             upload,
             prepare,
-            kernel,
-            kernel_from_timestamps: timestamps,
-            readback,
+            kernel: bands.kernel,
+            kernel_from_timestamps: bands.from_timestamps,
+            readback: bands.readback,
             total: t_start.elapsed().as_secs_f64(),
         },
     })

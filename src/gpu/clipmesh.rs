@@ -39,14 +39,11 @@
 //! The bricks mesh is built on the host (`cpu::clipmesh::bricks_mesh` from the f32
 //! min/max grid) and then intersected here like any other mesh.
 
-use super::context::{buffer_entry, GpuContext};
-use super::raycast::RaycastParams;
+use super::context::{buffer_entry, compute_pipeline, GpuContext};
+use super::params::RaycastParams;
 use crate::cpu::clipmesh::{ClipTriangles, MAX_SEGMENTS};
 use crate::error::{Error, Result};
 use wgpu::util::DeviceExt;
-
-/// The shader (without the shared struct and rays, prepended by [`shader`]).
-pub const CLIPMESH_WGSL: &str = include_str!("../../shaders/clipmesh.wgsl");
 
 /// Triangles per `clip_hits` dispatch: `CHUNK · (1 + 16)` loop iterations stay under
 /// llvmpipe's 65535 per invocation.
@@ -58,13 +55,10 @@ const STATE_WORDS: usize = 20;
 /// vec4s of segments per pixel (`shaders/clipmesh.wgsl: SEGMENT_VEC4S`).
 pub const SEGMENT_VEC4S: usize = 1 + MAX_SEGMENTS / 2;
 
-/// The complete shader source.
+/// The complete shader source: `shaders/clipmesh.wgsl` and its imports (the ray
+/// caster's parameters and camera rays).
 pub fn shader() -> String {
-    format!(
-        "{}\n{}\n{CLIPMESH_WGSL}",
-        super::raycast::PARAMS_WGSL,
-        super::raycast::RAYS_WGSL
-    )
+    super::shaders::resolve("clipmesh")
 }
 
 /// Hierarchy nodes a pixel visits per `clip_hits` dispatch
@@ -167,8 +161,7 @@ impl GpuClipMesh {
                 buffer_entry(5, storage(true)),
             ],
         });
-        let pipeline =
-            |entry| super::raycast::compute_pipeline(ctx, entry, &module, entry, &layout);
+        let pipeline = |entry| compute_pipeline(ctx, entry, &module, entry, &layout);
         Ok(GpuClipMesh {
             hits: pipeline("clip_hits")?,
             finish: pipeline("clip_segments")?,

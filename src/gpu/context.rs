@@ -10,9 +10,18 @@
 //! - Optional features requested when present: `FLOAT32_FILTERABLE` (hardware
 //!   filtering of R32Float textures), `TEXTURE_FORMAT_16BIT_NORM`, `TIMESTAMP_QUERY`.
 //! - No adapter ⇒ [`Error::NoAdapter`] whose message says how to get one.
+//!
+//! Also the plumbing every family shares, so that families import it from here and
+//! never from each other: [`compute_pipeline`] (a pipeline over one bind group, its
+//! validation errors typed), the bind-group-layout entries [`buffer_entry`] and
+//! [`texture_entry`], [`LLVMPIPE_LOOP_LIMIT`], and the row-band loop of the per-pixel
+//! casters (`render_bands`: the ray caster, the adaptive and the multi-volume casters).
+//! The WGSL itself is assembled by `gpu::shaders`.
 
 use crate::error::{Error, Result};
+use crate::frame::Frame;
 use std::sync::OnceLock;
+use std::time::Instant;
 
 /// The backends voxlab uses.
 pub const BACKENDS: wgpu::Backends = wgpu::Backends::VULKAN
@@ -434,4 +443,133 @@ pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGrou
         },
         count: None,
     }
+}
+
+/// A compute-stage 3D float texture binding (`texture_3d<f32>`), filterable or not.
+pub fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// The compute pipeline of `entry` in `module` over the one bind group `layout`;
+/// validation errors become [`Error::Gpu`] naming `label`.
+pub fn compute_pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> Result<wgpu::ComputePipeline> {
+    let dev = &ctx.device;
+    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
+    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pl),
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    match pollster::block_on(scope.pop()) {
+        None => Ok(pipeline),
+        Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
+    }
+}
+
+/// The most loop iterations one llvmpipe invocation may run in total (Mesa's
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`); past it every loop silently stops. The casters
+/// refuse, on a CPU adapter, work whose rays could run longer.
+pub const LLVMPIPE_LOOP_LIMIT: usize = 65535;
+
+/// Where the time of [`render_bands`] went, in seconds.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct BandTimes {
+    /// The dispatches: timestamp queries when `from_timestamps`, else waited wall time.
+    pub kernel: f64,
+    pub from_timestamps: bool,
+    /// Copying pixels and sample counts back.
+    pub readback: f64,
+}
+
+/// The row bands of a per-pixel caster: `image` (RGBA f32 pixels on the device, its
+/// own channel count on the host) and `counts` (one u32 per pixel) in bands of at most
+/// `rows_per_band` rows. For each band `bind(row0, rows, pixels, samples)` makes the
+/// band's bind group around two new storage buffers, the band's pixels (`vec4<f32>`)
+/// and sample counts (`u32`); the band is dispatched in 8 × 8 workgroups (one
+/// invocation per pixel), waited for and read back, and `progress(rows done, height)`
+/// is called. Shared by `gpu::raycast`, `gpu::adaptive` and `gpu::multi`.
+pub(crate) fn render_bands(
+    ctx: &GpuContext,
+    (pipeline, label): (&wgpu::ComputePipeline, &str),
+    rows_per_band: usize,
+    (image, counts): (&mut Frame, &mut [u32]),
+    progress: &(dyn Fn(usize, usize) + Sync),
+    mut bind: impl FnMut(usize, usize, &wgpu::Buffer, &wgpu::Buffer) -> Result<wgpu::BindGroup>,
+) -> Result<BandTimes> {
+    let (w, h) = (image.width, image.height);
+    let mut times = BandTimes {
+        from_timestamps: ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY),
+        ..Default::default()
+    };
+    let mut row0 = 0;
+    while row0 < h {
+        let rows = rows_per_band.min(h - row0);
+        let pix_bytes = (rows * w * 16) as u64;
+        let cnt_bytes = (rows * w * 4) as u64;
+        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
+        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
+        let group = bind(row0, rows, &out_buf, &cnt_buf)?;
+        let t_k = Instant::now();
+        let query = times.from_timestamps.then(|| ctx.timestamp_pair());
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
+        }
+        if let Some(q) = &query {
+            q.resolve(&mut enc);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        times.kernel += match &query {
+            Some(q) => q.seconds(ctx)?,
+            None => t_k.elapsed().as_secs_f64(),
+        };
+        let t_r = Instant::now();
+        let px: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();
+        let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
+        times.readback += t_r.elapsed().as_secs_f64();
+        let ch = image.channels;
+        for (i, p) in px.iter().enumerate() {
+            let dst = (row0 * w + i) * ch;
+            image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
+        }
+        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
+        row0 += rows;
+        progress(row0, h);
+    }
+    Ok(times)
 }

@@ -19,8 +19,9 @@
 //! The final background blend is done on the host in f64 from the accumulated
 //! `(C, A)`, exactly as `cpu::raycast::cast_ray` ends.
 
-use super::context::GpuContext;
-use super::raycast::{raycast_params, RaycastParams, LLVMPIPE_LOOP_LIMIT};
+use super::context::{GpuContext, LLVMPIPE_LOOP_LIMIT};
+use super::params::RaycastParams;
+use super::raycast::raycast_params;
 use crate::camera::Camera;
 use crate::cpu::d2vr::{
     check_inputs, effective_cylinder, D2vrGradient, D2vrGrid, D2vrOptions, D2vrStats, OccupancyMask,
@@ -36,9 +37,7 @@ use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 /// `shaders/shared/d2vr_params.wgsl`: the WGSL twin of [`D2vrParams`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/d2vr_params.wgsl");
-/// `shaders/d2vr.wgsl`.
-pub const D2VR_WGSL: &str = include_str!("../../shaders/d2vr.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::D2VR_PARAMS;
 
 /// Bilinear taps one dispatch may read in total (keeps a dispatch well under a
 /// second on lavapipe).
@@ -73,7 +72,9 @@ pub struct D2vrParams {
     pub chunk: [u32; 4],
 }
 
-/// The complete WGSL module for a storage precision.
+/// The complete WGSL module for a storage precision: `shaders/d2vr.wgsl` and its
+/// imports, with the generated module `d2vr_tap` (`fn tap(i: u32) -> f32`, projection
+/// element i read in `storage`'s precision).
 pub fn shader_source(storage: ProjStorage) -> String {
     let tap = match storage {
         ProjStorage::F32 => "fn tap(i: u32) -> f32 {\n    return bitcast<f32>(proj[i]);\n}\n",
@@ -82,14 +83,7 @@ pub fn shader_source(storage: ProjStorage) -> String {
              return select(v.x, v.y, (i & 1u) == 1u);\n}\n"
         }
     };
-    format!(
-        "{}\n{}\n{PARAMS_WGSL}\n{}\n{}\n{}\n{tap}\n{D2VR_WGSL}",
-        crate::ct::GEOMETRY_WGSL,
-        super::raycast::PARAMS_WGSL,
-        super::raycast::CLASSIFY_WGSL,
-        super::raycast::RAYS_WGSL,
-        super::raycast::OPACITY_WGSL,
-    )
+    super::shaders::resolve_with("d2vr", &[("d2vr_tap", tap)])
 }
 
 /// Rounds to IEEE binary16 bits (round to nearest even), as `pack2x16float` does.

@@ -9,7 +9,7 @@
 
 use crate::cpu::fbp::{backprojection_scale, Grid, Reconstruction};
 use crate::cpu::ramp::RampFilter;
-use crate::ct::{Geometry, Projections, GEOMETRY_WGSL};
+use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::gpu::GpuContext;
 use crate::volume::check_dims;
@@ -34,13 +34,10 @@ const WORKGROUP: u32 = 64;
 /// Views per dispatch: bounded work per invocation.
 const VIEWS_PER_DISPATCH: usize = 32;
 
-/// The shader source: the shared CT geometry, then the backprojector.
+/// The shader source: `shaders/fbp_backproject.wgsl` and its imports (the shared CT
+/// geometry and `FbpParams`).
 pub fn shader_source() -> String {
-    format!(
-        "{GEOMETRY_WGSL}\n{}\n{}",
-        include_str!("../../shaders/shared/fbp_params.wgsl"),
-        include_str!("../../shaders/fbp_backproject.wgsl")
-    )
+    super::shaders::resolve("fbp_backproject")
 }
 
 /// Backprojects filtered projections onto `grid` on the GPU (f32); the same sum as

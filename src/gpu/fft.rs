@@ -76,17 +76,9 @@ use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 /// `shaders/shared/fft_params.wgsl`: the WGSL twin of [`FftParams`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/fft_params.wgsl");
-/// `shaders/fft_common.wgsl`: bindings and helpers of both variants.
-pub const COMMON_WGSL: &str = include_str!("../../shaders/fft_common.wgsl");
-/// `shaders/fft_split_stream.wgsl`.
-pub const SPLIT_STREAM_WGSL: &str = include_str!("../../shaders/fft_split_stream.wgsl");
-/// `shaders/fft_stockham.wgsl`.
-pub const STOCKHAM_WGSL: &str = include_str!("../../shaders/fft_stockham.wgsl");
-/// `shaders/fft_two_real.wgsl`: the split of [`two_real_ffts`].
-pub const TWO_REAL_WGSL: &str = include_str!("../../shaders/fft_two_real.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::FFT_PARAMS;
 
-/// Invocations per workgroup (`WORKGROUP` in `shaders/fft_common.wgsl`).
+/// Invocations per workgroup (`WORKGROUP` in `shaders/shared/fft_common.wgsl`).
 const WORKGROUP: u32 = 64;
 
 /// The longest line the Stockham variant transforms in workgroup memory: two lines of
@@ -116,13 +108,13 @@ impl GpuFftVariant {
         GpuFftVariant::StockhamGlobal,
     ];
 
-    /// The complete WGSL module of this variant.
+    /// The complete WGSL module of this variant: `shaders/fft_split_stream.wgsl` or
+    /// `shaders/fft_stockham.wgsl` and their imports.
     pub fn shader_source(self) -> String {
-        let body = match self {
-            GpuFftVariant::SplitStream => SPLIT_STREAM_WGSL,
-            GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => STOCKHAM_WGSL,
-        };
-        format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{body}")
+        super::shaders::resolve(match self {
+            GpuFftVariant::SplitStream => "fft_split_stream",
+            GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham",
+        })
     }
 }
 
@@ -246,7 +238,7 @@ pub fn twiddle_table(n: usize, dir: Direction) -> Vec<Complex<f64>> {
 // ---------------------------------------------------------------------------------
 
 /// Multiplies by `exp(∓2πi/4) = ∓i` exactly.
-/// mirrors shaders/fft_common.wgsl: times_w4
+/// mirrors shaders/shared/fft_common.wgsl: times_w4
 pub fn times_w4(v: Complex<f64>, dir: Direction) -> Complex<f64> {
     match dir {
         Direction::Forward => Complex::new(v.im, -v.re),
@@ -255,7 +247,7 @@ pub fn times_w4(v: Complex<f64>, dir: Direction) -> Complex<f64> {
 }
 
 /// The buffer index of element `j` of line `line` (see [`FftParams::stride`]).
-/// mirrors shaders/fft_common.wgsl: element_address
+/// mirrors shaders/shared/fft_common.wgsl: element_address
 pub fn element_address(p: &FftParams, line: u32, j: u32) -> u32 {
     let s = p.stride;
     (line / s) * p.n * s + line % s + j * s
@@ -1089,7 +1081,7 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
     let dev = &ctx.device;
     let module = ctx.shader(
         "fft_two_real.wgsl",
-        &format!("{PARAMS_WGSL}\n{COMMON_WGSL}\n{TWO_REAL_WGSL}"),
+        &super::shaders::resolve("fft_two_real"),
     )?;
     let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("two_real_split"),

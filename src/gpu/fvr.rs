@@ -19,9 +19,10 @@
 //! Per view:
 //! 1. `shaders/fvr_slice.wgsl: extract_slice` interpolates the central slice, one
 //!    invocation per frequency sample (nearest, trilinear, Lanczos-2/3/4; the same taps,
-//!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure;
-//!    like the CPU it samples the rows `k_u ≤ 0` and writes the rows `k_u > 0` as
-//!    their Hermitian conjugates);
+//!    per-axis weight normalisation and phase ramp as the CPU's per-sample closure, and
+//!    the CPU's kernels: `shaders/shared/filters.wgsl`, whose `sinc` reduces the
+//!    argument as `cpu::filter::sin_pi` does; like the CPU it samples the rows
+//!    `k_u ≤ 0` and writes the rows `k_u > 0` as their Hermitian conjugates);
 //! 2. the inverse 2-D FFT of the slice, in place in the slice's buffer (no host round
 //!    trip), with a [`GpuFftPlan`] made once at upload (Stockham; `M` must be a power
 //!    of two), and the readback of the `M²` result;
@@ -45,9 +46,7 @@ use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 /// `shaders/shared/fvr_params.wgsl`: the WGSL twin of [`FvrParams`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/fvr_params.wgsl");
-/// `shaders/fvr_slice.wgsl`.
-pub const SLICE_WGSL: &str = include_str!("../../shaders/fvr_slice.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::FVR_PARAMS;
 
 /// Invocations per workgroup (`WORKGROUP` in `shaders/fvr_slice.wgsl`).
 const WORKGROUP: u32 = 64;
@@ -56,8 +55,9 @@ const WORKGROUP: u32 = 64;
 /// binding 1). An adapter offering fewer storage buffers per shader stage lowers it.
 pub const MAX_SLABS: usize = 8;
 
-/// The storage bindings of `slabs` z-slabs (`spectrum0` … at bindings 2, 3, …) and
-/// `spectrum_at(slab, i)`, element `i` of slab `slab`, for `shaders/fvr_slice.wgsl: at`.
+/// The generated module `fvr_slabs`: the storage bindings of `slabs` z-slabs
+/// (`spectrum0` … at bindings 2, 3, …) and `spectrum_at(slab, i)`, element `i` of slab
+/// `slab`, for `shaders/fvr_slice.wgsl: at`.
 pub fn slab_bindings_wgsl(slabs: usize) -> String {
     assert!((1..=MAX_SLABS).contains(&slabs), "1 … {MAX_SLABS} slabs");
     let mut s = String::from(
@@ -85,9 +85,10 @@ pub fn slab_bindings_wgsl(slabs: usize) -> String {
     s
 }
 
-/// The complete WGSL module of the slice extraction for a spectrum in `slabs` z-slabs.
+/// The complete WGSL module of the slice extraction for a spectrum in `slabs` z-slabs:
+/// `shaders/fvr_slice.wgsl` and its imports, with [`slab_bindings_wgsl`].
 pub fn shader_source(slabs: usize) -> String {
-    format!("{PARAMS_WGSL}\n{}\n{SLICE_WGSL}", slab_bindings_wgsl(slabs))
+    super::shaders::resolve_with("fvr_slice", &[("fvr_slabs", &slab_bindings_wgsl(slabs))])
 }
 
 /// Parameters of one slice extraction, shared with

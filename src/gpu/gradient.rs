@@ -14,17 +14,15 @@
 //! a power of two (or, for Sobel, nine weighted terms), so the GPU result equals the
 //! CPU's f32 result up to the order of the Sobel sums (`tests/gpu_gradient.rs`).
 
-use super::context::{buffer_entry, GpuContext};
+use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
 use crate::cpu::filter::Grid;
 use crate::error::{Error, Result};
 use crate::settings::GradientMethod;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
-/// The shader (without the shared parts).
-pub const GRADIENT_WGSL: &str = include_str!("../../shaders/gradient.wgsl");
-/// The parameter struct's WGSL twin.
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/gradient_params.wgsl");
+/// `shaders/shared/gradient_params.wgsl`: the WGSL twin of [`GradientParams`].
+pub const PARAMS_WGSL: &str = super::shaders::GRADIENT_PARAMS;
 
 /// Parameters of one slab dispatch; twin of `shaders/shared/gradient_params.wgsl`.
 #[repr(C)]
@@ -36,12 +34,19 @@ pub struct GradientParams {
     pub slab: [u32; 4],
 }
 
-/// The complete shader source.
+/// The complete shader source: `shaders/gradient.wgsl` and its imports.
 pub fn shader_source() -> String {
-    format!(
-        "{PARAMS_WGSL}\n{}\n{GRADIENT_WGSL}",
-        super::raycast::GRADIENT_VOXEL_WGSL
-    )
+    super::shaders::resolve("gradient")
+}
+
+/// The code of a gradient method in `shaders/shared/gradient_voxel.wgsl:
+/// gradient_at_voxel` (`GradientParams::dims.w`, `RaycastParams::flags2.x`).
+pub(crate) fn gradient_method_id(m: GradientMethod) -> u32 {
+    match m {
+        GradientMethod::Central => 0,
+        GradientMethod::Forward => 1,
+        GradientMethod::Sobel => 2,
+    }
 }
 
 /// Where the time went, in seconds.
@@ -139,32 +144,11 @@ pub fn precompute_gradients_in_slabs(
         label: Some("gradient"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-                count: None,
-            },
+            texture_entry(1, false),
             buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
         ],
     });
-    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("gradient"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("gradient_slab"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("gradient_slab"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let pipeline = compute_pipeline(ctx, "gradient_slab", &module, "gradient_slab", &layout)?;
     let out = ctx.storage_buffer("gradient slab", per_slab as u64 * slice_bytes)?;
     let query = ctx
         .device
@@ -186,12 +170,7 @@ pub fn precompute_gradients_in_slabs(
     while z0 < nz {
         let slices = per_slab.min(nz - z0);
         let params = GradientParams {
-            dims: [
-                nx as u32,
-                ny as u32,
-                nz as u32,
-                super::raycast::gradient_method_id(method),
-            ],
+            dims: [nx as u32, ny as u32, nz as u32, gradient_method_id(method)],
             slab: [z0 as u32, slices as u32, 0, 0],
         };
         let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -2,10 +2,12 @@
 //! oracle.
 //!
 //! Shader: `shaders/multi.wgsl` (one invocation per pixel; every helper names its Rust
-//! twin), with `shaders/shared/rays.wgsl` (camera rays, box intersection, Phong)
-//! prepended. Parameters: [`MultiParams`], whose WGSL twin is
-//! `shaders/shared/multi_params.wgsl`; its camera, shading and image members carry
-//! `RaycastParams`' names, so the shared ray helpers read them unchanged.
+//! twin), importing the ray caster's shared modules: camera rays
+//! (`shaders/shared/camera.wgsl`), the box test (`rays.wgsl`), Phong (`shading.wgsl`),
+//! opacity (`opacity.wgsl`) and the clamped index (`filters.wgsl`). Parameters:
+//! [`MultiParams`], whose WGSL twin is `shaders/shared/multi_params.wgsl`; its camera,
+//! shading and image members carry `RaycastParams`' names, so the shared helpers read
+//! them unchanged.
 //!
 //! Data on the device:
 //! - every volume as its own `R32Float` 3D texture of raw values (bindings 1 … 3; a
@@ -27,8 +29,10 @@
 //! hardware filtering are refused with an error naming what is supported (the CPU
 //! backends render them).
 
-use super::context::{buffer_entry, GpuContext};
-use super::raycast::{compute_pipeline, GpuRenderOutput, GpuTimings, LLVMPIPE_LOOP_LIMIT};
+use super::context::{
+    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, LLVMPIPE_LOOP_LIMIT,
+};
+use super::raycast::{GpuRenderOutput, GpuTimings};
 use crate::camera::{Camera, Projection};
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
@@ -72,18 +76,12 @@ pub struct MultiParams {
     pub gradient: [u32; 4],
 }
 
-/// The WGSL twin of [`MultiParams`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/multi_params.wgsl");
-/// The multi-volume shader (without the shared parts).
-pub const MULTI_WGSL: &str = include_str!("../../shaders/multi.wgsl");
+/// `shaders/shared/multi_params.wgsl`: the WGSL twin of [`MultiParams`].
+pub const PARAMS_WGSL: &str = super::shaders::MULTI_PARAMS;
 
-/// The complete shader: the parameter struct, the shared ray helpers, the body.
+/// The complete shader: `shaders/multi.wgsl` and its imports.
 pub fn multi_shader() -> String {
-    format!(
-        "{PARAMS_WGSL}\n{}\n{}\n{MULTI_WGSL}",
-        super::raycast::RAYS_WGSL,
-        super::raycast::OPACITY_WGSL
-    )
+    super::shaders::resolve("multi")
 }
 
 /// Pixels per dispatch: keeps one submission well under the ~10 s after which a
@@ -239,20 +237,6 @@ pub fn multi_params(
     Ok(p)
 }
 
-/// A compute-stage, unfilterable 3D float texture binding.
-fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 /// Renders a multi-volume scene on the GPU. Same inputs and meaning as
 /// `cpu::multi::render`; returns the image, the sample counts and timings.
 pub fn render(
@@ -322,9 +306,9 @@ pub fn render(
         label: Some("multi"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1),
-            texture_entry(2),
-            texture_entry(3),
+            texture_entry(1, false),
+            texture_entry(2, false),
+            texture_entry(3, false),
             buffer_entry(4, storage(true)),
             buffer_entry(5, storage(false)),
             buffer_entry(6, storage(false)),
@@ -355,63 +339,50 @@ pub fn render(
     let rows_per_tile = (max_binding / (w * 16))
         .min(PIXELS_PER_DISPATCH / w)
         .clamp(1, h);
-    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
     let views: Vec<_> = textures
         .iter()
         .map(|t| t.create_view(&Default::default()))
         .collect();
     let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
     let mut counts = vec![0u32; w * h];
-    let (mut kernel, mut readback) = (0.0, 0.0);
-    let mut row0 = 0;
-    while row0 < h {
-        let rows = rows_per_tile.min(h - row0);
-        params.flags[2] = row0 as u32;
-        params.flags[3] = rows as u32;
-        let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("multi params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let pix_bytes = (rows * w * 16) as u64;
-        let cnt_bytes = (rows * w * 4) as u64;
-        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
-        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
-        let bind = ctx.bind_group(
-            "multi",
-            &layout,
-            &[
-                pbuf.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&views[0]),
-                wgpu::BindingResource::TextureView(&views[1]),
-                wgpu::BindingResource::TextureView(&views[2]),
-                lut_buf.as_entire_binding(),
-                out_buf.as_entire_binding(),
-                cnt_buf.as_entire_binding(),
-            ],
-        );
-        let (k, r) = super::raycast::run_band(
-            ctx,
-            (&pipeline, &bind, "multi"),
-            timestamps,
-            (row0, rows, w),
-            (&out_buf, &cnt_buf),
-            (&mut image, &mut counts),
-        )?;
-        kernel += k;
-        readback += r;
-        row0 += rows;
-        progress(row0, h);
-    }
+    let bands = render_bands(
+        ctx,
+        (&pipeline, "multi"),
+        rows_per_tile,
+        (&mut image, &mut counts),
+        progress,
+        |row0, rows, out_buf, cnt_buf| {
+            params.flags[2] = row0 as u32;
+            params.flags[3] = rows as u32;
+            let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("multi params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            Ok(ctx.bind_group(
+                "multi",
+                &layout,
+                &[
+                    pbuf.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&views[0]),
+                    wgpu::BindingResource::TextureView(&views[1]),
+                    wgpu::BindingResource::TextureView(&views[2]),
+                    lut_buf.as_entire_binding(),
+                    out_buf.as_entire_binding(),
+                    cnt_buf.as_entire_binding(),
+                ],
+            ))
+        },
+    )?;
     Ok(GpuRenderOutput {
         output: RenderOutput::from_counts(image, &counts, settings.sample_count),
         timings: GpuTimings {
             setup: t_setup,
             upload,
             prepare: 0.0,
-            kernel,
-            kernel_from_timestamps: timestamps,
-            readback,
+            kernel: bands.kernel,
+            kernel_from_timestamps: bands.from_timestamps,
+            readback: bands.readback,
             total: t_start.elapsed().as_secs_f64(),
         },
     })

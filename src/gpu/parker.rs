@@ -14,10 +14,8 @@ use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
 use wgpu::util::DeviceExt;
 
-/// The shader (without the shared struct).
-pub const PARKER_WGSL: &str = include_str!("../../shaders/parker.wgsl");
-/// The parameter struct's WGSL twin.
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/parker_params.wgsl");
+/// `shaders/shared/parker_params.wgsl`: the WGSL twin of [`ParkerParams`].
+pub const PARAMS_WGSL: &str = super::shaders::PARKER_PARAMS;
 
 const WORKGROUP: u32 = 64;
 
@@ -35,9 +33,9 @@ pub struct ParkerParams {
     pub work: [u32; 4],
 }
 
-/// The complete shader source.
+/// The complete shader source: `shaders/parker.wgsl` and its imports.
 pub fn shader_source() -> String {
-    format!("{PARAMS_WGSL}\n{PARKER_WGSL}")
+    super::shaders::resolve("parker")
 }
 
 /// The projections multiplied by Parker's weights and the short-scan scale, on the GPU

@@ -1,15 +1,13 @@
 //! The pre-integrated transfer function on the GPU: one invocation per table entry,
 //! the same sub-step definition as `cpu::preintegrate` (see its docs), in f32.
-//! Shader: `shaders/preintegrate.wgsl`; parameters: [`super::adaptive::AdaptiveParams`].
+//! Shader: `shaders/preintegrate.wgsl`; parameters: [`AdaptiveParams`] (the adaptive
+//! caster's block, in `gpu::params`).
 
-use super::adaptive::{compute_pipeline, AdaptiveParams, PARAMS_WGSL};
-use super::context::{buffer_entry, GpuContext};
+use super::context::{buffer_entry, compute_pipeline, GpuContext};
+use super::params::AdaptiveParams;
 use crate::error::{Error, Result};
 use crate::transfer::TransferFunction;
 use wgpu::util::DeviceExt;
-
-/// The shader (without the shared struct).
-pub const PREINTEGRATE_WGSL: &str = include_str!("../../shaders/preintegrate.wgsl");
 
 /// Builds the table on the device: `n × n` entries `(C_r, C_g, C_b, α)`, front value
 /// along the fast axis, in a storage buffer (`STORAGE | COPY_SRC`).
@@ -29,10 +27,7 @@ pub fn preintegrate_buffer(
     let dev = &ctx.device;
     let module = ctx.shader(
         "preintegrate.wgsl",
-        &format!(
-            "{PARAMS_WGSL}\n{}\n{PREINTEGRATE_WGSL}",
-            super::raycast::OPACITY_WGSL
-        ),
+        &super::shaders::resolve("preintegrate"),
     )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };

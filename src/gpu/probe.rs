@@ -19,8 +19,8 @@ pub struct ProbeParams {
     pub _pad: u32,
 }
 
-/// The WGSL source.
-pub const SHADER: &str = include_str!("../../shaders/probe.wgsl");
+/// The WGSL source, `shaders/probe.wgsl` (it imports nothing).
+pub const SHADER: &str = super::shaders::PROBE;
 
 /// The CPU twin of `shaders/probe.wgsl: saxpy` (one fused-free multiply-add in f32).
 pub fn saxpy_cpu(a: f32, x: f32, b: f32) -> f32 {
@@ -35,7 +35,7 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
     let n =
         u32::try_from(x.len()).map_err(|_| Error::too_large("probe input", "over 2^32 values"))?;
     let dev = &ctx.device;
-    let module = ctx.shader("probe.wgsl", SHADER)?;
+    let module = ctx.shader("probe.wgsl", &super::shaders::resolve("probe"))?;
     let params = ProbeParams { a, b, n, _pad: 0 };
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("probe params"),
@@ -98,12 +98,10 @@ pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]
     let n = u32::try_from(inputs.len())
         .map_err(|_| Error::too_large("opacity probe input", "over 2^32 values"))?;
     let dev = &ctx.device;
-    let source = format!(
-        "{}\n{}",
-        super::raycast::OPACITY_WGSL,
-        include_str!("../../shaders/opacity_probe.wgsl")
-    );
-    let module = ctx.shader("opacity_probe.wgsl", &source)?;
+    let module = ctx.shader(
+        "opacity_probe.wgsl",
+        &super::shaders::resolve("opacity_probe"),
+    )?;
     let xbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("opacity probe in"),
         contents: bytemuck::cast_slice(inputs),

@@ -2,8 +2,9 @@
 //! Gaussian smoothing, median filtering and the gradient-magnitude field.
 //!
 //! The input is uploaded once as an f32 storage buffer; each operation runs one compute
-//! shader (`shaders/process_*.wgsl`, with `shaders/shared/process_params.wgsl`
-//! prepended), one invocation per output voxel, and reads the result back. The work is
+//! shader (`shaders/process_*.wgsl`, importing `shaders/shared/process_params.wgsl`;
+//! resampling's kernels are `shaders/shared/filters.wgsl`, the ray caster's), one
+//! invocation per output voxel, and reads the result back. The work is
 //! split into several dispatches of at most [`WORK_PER_DISPATCH`] kernel taps each,
 //! each submitted and waited for, so that no single dispatch runs long on a software
 //! rasteriser (lavapipe can lose the device past ~10 s).
@@ -37,15 +38,15 @@ use wgpu::util::DeviceExt;
 
 /// `shaders/shared/process_params.wgsl`: the WGSL twin of [`ProcessParams`] and the
 /// bindings and helpers every processing shader shares.
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/process_params.wgsl");
-/// `shaders/process_resample.wgsl`.
-pub const RESAMPLE_WGSL: &str = include_str!("../../shaders/process_resample.wgsl");
-/// `shaders/process_gaussian.wgsl`.
-pub const GAUSSIAN_WGSL: &str = include_str!("../../shaders/process_gaussian.wgsl");
-/// `shaders/process_median.wgsl`.
-pub const MEDIAN_WGSL: &str = include_str!("../../shaders/process_median.wgsl");
-/// `shaders/process_gradient.wgsl`.
-pub const GRADIENT_WGSL: &str = include_str!("../../shaders/process_gradient.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::PROCESS_PARAMS;
+
+/// The processing shaders (`shaders/<name>.wgsl`), one per operation.
+pub const SHADERS: [&str; 4] = [
+    "process_resample",
+    "process_gaussian",
+    "process_median",
+    "process_gradient",
+];
 
 /// The largest median window side on the GPU (`5³ = 125` values per voxel).
 pub const MAX_MEDIAN_SIZE_GPU: usize = 5;
@@ -74,9 +75,9 @@ pub struct ProcessParams {
     pub m2: [f32; 4],
 }
 
-/// The complete WGSL module of one operation (`body` is one of the `*_WGSL` shaders).
-pub fn shader_source(body: &str) -> String {
-    format!("{PARAMS_WGSL}\n{body}")
+/// The complete WGSL module of one operation (`name` is one of [`SHADERS`]).
+pub fn shader_source(name: &str) -> String {
+    super::shaders::resolve(name)
 }
 
 fn u32_dims(d: [usize; 3]) -> [u32; 4] {
@@ -126,8 +127,8 @@ struct Op {
 }
 
 impl Op {
-    fn new(ctx: &GpuContext, body: &str, entry: &str) -> Result<Self> {
-        let module = ctx.shader(entry, &shader_source(body))?;
+    fn new(ctx: &GpuContext, name: &str, entry: &str) -> Result<Self> {
+        let module = ctx.shader(entry, &shader_source(name))?;
         let pipeline = ctx
             .device
             .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -268,7 +269,7 @@ pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Res
         m1,
         m2,
     };
-    Op::new(ctx, RESAMPLE_WGSL, "resample")?.run(ctx, p, &src, &dst, None, taps)?;
+    Op::new(ctx, "process_resample", "resample")?.run(ctx, p, &src, &dst, None, taps)?;
     Ok(field(spec.dims, read_f32(ctx, &dst, n_out)?, affine))
 }
 
@@ -283,7 +284,7 @@ pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<
     let n = vol.len();
     let mut a = upload(ctx, "volume", vol.data())?;
     let mut b = ctx.storage_buffer("gaussian pass", check_binding(ctx, "volume", n)?)?;
-    let op = Op::new(ctx, GAUSSIAN_WGSL, "gaussian_pass")?;
+    let op = Op::new(ctx, "process_gaussian", "gaussian_pass")?;
     for (axis, &s) in sigma.iter().enumerate() {
         let w: Vec<f32> = gaussian_weights(s).iter().map(|&x| x as f32).collect();
         let wbuf = upload(ctx, "gaussian weights", &w)?;
@@ -326,7 +327,7 @@ pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32
         op: [k as u32, 0, 0, 0],
         ..Default::default()
     };
-    Op::new(ctx, MEDIAN_WGSL, "median")?.run(ctx, p, &src, &dst, None, k3 * (k3 / 2 + 1))?;
+    Op::new(ctx, "process_median", "median")?.run(ctx, p, &src, &dst, None, k3 * (k3 / 2 + 1))?;
     Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
 }
 
@@ -348,6 +349,6 @@ pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f
         m1,
         m2,
     };
-    Op::new(ctx, GRADIENT_WGSL, "gradient_magnitude")?.run(ctx, p, &src, &dst, None, 7)?;
+    Op::new(ctx, "process_gradient", "gradient_magnitude")?.run(ctx, p, &src, &dst, None, 7)?;
     Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
 }

@@ -21,9 +21,7 @@ use wgpu::util::DeviceExt;
 
 /// `shaders/shared/project_params.wgsl`: the WGSL twins of [`ProjectParams`] and
 /// [`JosephView`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/project_params.wgsl");
-/// `shaders/project.wgsl`.
-pub const PROJECT_WGSL: &str = include_str!("../../shaders/project.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::PROJECT_PARAMS;
 
 /// Invocations per workgroup (`WORKGROUP` in `shaders/project.wgsl`).
 const WORKGROUP: u32 = 64;
@@ -31,9 +29,9 @@ const WORKGROUP: u32 = 64;
 /// The bilinear samples one dispatch may take at most (about a second on lavapipe).
 pub const SAMPLES_PER_DISPATCH: usize = 1 << 25;
 
-/// The complete WGSL module.
+/// The complete WGSL module: `shaders/project.wgsl` and its imports.
 pub fn shader_source() -> String {
-    format!("{PARAMS_WGSL}\n{PROJECT_WGSL}")
+    super::shaders::resolve("project")
 }
 
 /// Parameters of one dispatch, shared with

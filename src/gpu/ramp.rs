@@ -51,16 +51,13 @@ pub struct RampParams {
 }
 
 /// `shaders/shared/ramp_params.wgsl`: the WGSL twin of [`RampParams`].
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/ramp_params.wgsl");
+pub const PARAMS_WGSL: &str = super::shaders::RAMP_PARAMS;
 
 const WORKGROUP: u32 = 64;
 
-/// The shader source: the parameter struct, then the three entry points.
+/// The shader source: `shaders/ramp_filter.wgsl` (three entry points) and its imports.
 pub fn shader_source() -> String {
-    format!(
-        "{PARAMS_WGSL}\n{}",
-        include_str!("../../shaders/ramp_filter.wgsl")
-    )
+    super::shaders::resolve("ramp_filter")
 }
 
 /// Detector line `line` (view-major, then row; `data` holds the chunk) at column `c`,

@@ -1,9 +1,14 @@
 //! The GPU ray caster: a WGSL port of `cpu::raycast` that must match the f64 oracle.
 //!
-//! Shaders: `shaders/raycast.wgsl` (one invocation per pixel; every helper mirrors its
-//! Rust twin by name) and `shaders/raycast_prepare.wgsl` (pre-classification and
-//! gradient volumes, one invocation per voxel). Parameters: [`RaycastParams`], whose
-//! WGSL twin is `shaders/shared/raycast_params.wgsl`.
+//! Shaders: `shaders/raycast.wgsl` (one invocation per pixel; every helper names its
+//! Rust twin) and `shaders/raycast_prepare.wgsl` (pre-classification and gradient
+//! volumes, one invocation per voxel), assembled by `gpu::shaders` from their
+//! `#import`s: the shared modules under `shaders/shared/` (parameters, classification,
+//! rays and the camera, shading, opacity, skipping, modes, the filter kernels, the
+//! fast B-spline) and four modules generated here per render ([`sample_tex_wgsl`],
+//! [`accumulate_taps_wgsl`], [`gradient_wgsl`], [`modes_wgsl`]). Parameters:
+//! [`RaycastParams`] (in `gpu::params`), whose WGSL twin is
+//! `shaders/shared/raycast_params.wgsl`.
 //!
 //! Data on the device:
 //! - the volume as an `R32Float` 3D texture holding the raw values (u8/u16/i16 are exact
@@ -27,7 +32,11 @@
 //!   (`cpu::filter::prepare`), together with the pre-classified and gradient volumes it
 //!   would have to prefilter.
 
-use super::context::{buffer_entry, GpuContext};
+use super::context::{
+    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, LLVMPIPE_LOOP_LIMIT,
+};
+use super::gradient::gradient_method_id;
+use super::shaders;
 use crate::camera::{Camera, Projection};
 use crate::cpu::filter::{prepare, Grid};
 use crate::cpu::raycast::RenderOutput;
@@ -42,78 +51,10 @@ use glam::{DMat3, DVec3};
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
-/// Parameters of one ray-casting dispatch; twin of `shaders/shared/raycast_params.wgsl`
-/// (`tests/gpu_layout.rs` checks that the two layouts agree).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct RaycastParams {
-    pub eye: [f32; 4],
-    pub forward: [f32; 4],
-    pub right: [f32; 4],
-    pub up: [f32; 4],
-    pub to_index_0: [f32; 4],
-    pub to_index_1: [f32; 4],
-    pub to_index_2: [f32; 4],
-    pub normal_0: [f32; 4],
-    pub normal_1: [f32; 4],
-    pub normal_2: [f32; 4],
-    pub box_hi: [f32; 4],
-    pub background: [f32; 4],
-    pub light: [f32; 4],
-    pub shading: [f32; 4],
-    pub misc: [f32; 4],
-    pub lut: [f32; 4],
-    pub dims: [u32; 4],
-    pub image: [u32; 4],
-    pub flags: [u32; 4],
-    pub flags2: [u32; 4],
-    /// 2D transfer function: value scale, value offset, nv − 1, ng − 1.
-    pub tf2d_a: [f32; 4],
-    /// 2D transfer function: gradient scale, 1/g0, log axis, on.
-    pub tf2d_b: [f32; 4],
-    pub accel: [u32; 4],
-    pub skip_cells: [u32; 4],
-    pub skip_tf: [f32; 4],
-    pub clip_lo: [f32; 4],
-    pub clip_hi: [f32; 4],
-    /// MIDA γ, lowest value, 1/(value range), unused (`cpu::modes`).
-    pub mode_params: [f32; 4],
-    /// MIP/MinIP grey window: width, centre, 1 when on, unused.
-    pub window: [f32; 4],
-    /// Iso-surfaces drawn, opaque, shadows, refine.
-    pub iso_flags: [u32; 4],
-    /// The iso-values.
-    pub iso_values: [f32; 4],
-    /// Colour (rgb) and opacity of each iso-surface.
-    pub iso_color_0: [f32; 4],
-    pub iso_color_1: [f32; 4],
-    pub iso_color_2: [f32; 4],
-    pub iso_color_3: [f32; 4],
-    /// Clipping mesh: 1 when on (segments per pixel in binding 11, `gpu::clipmesh`),
-    /// the rest unused.
-    pub clip_mesh: [u32; 4],
-}
+pub use super::params::RaycastParams;
 
-/// The WGSL struct shared by both shaders.
-pub const PARAMS_WGSL: &str = include_str!("../../shaders/shared/raycast_params.wgsl");
-/// The transfer-function lookup shared by both shaders.
-pub const CLASSIFY_WGSL: &str = include_str!("../../shaders/shared/classify.wgsl");
-/// The 2D transfer-function lookup (`transfer2d`), used by the ray caster.
-pub const CLASSIFY2D_WGSL: &str = include_str!("../../shaders/shared/classify2d.wgsl");
-/// The ray-casting shader (without the shared parts).
-pub const RAYCAST_WGSL: &str = include_str!("../../shaders/raycast.wgsl");
-/// Rays, boxes, steps and Phong shading, shared with D²VR (`shaders/shared/rays.wgsl`).
-pub const RAYS_WGSL: &str = include_str!("../../shaders/shared/rays.wgsl");
-/// Opacity correction with `ln_1p` and `exp_m1` accurate on any conformant GPU
-/// (`shaders/shared/opacity.wgsl`), shared by every compositing shader.
-pub const OPACITY_WGSL: &str = include_str!("../../shaders/shared/opacity.wgsl");
-/// MIDA, windowed MIP and iso-surfaces (`shaders/shared/modes.wgsl`).
-pub const MODES_WGSL: &str = include_str!("../../shaders/shared/modes.wgsl");
-/// The set-up shader (without the shared struct).
-pub const PREPARE_WGSL: &str = include_str!("../../shaders/raycast_prepare.wgsl");
-/// The gradient stencil at a voxel, shared with `gpu::gradient`
-/// (`shaders/shared/gradient_voxel.wgsl`).
-pub const GRADIENT_VOXEL_WGSL: &str = include_str!("../../shaders/shared/gradient_voxel.wgsl");
+/// `shaders/shared/raycast_params.wgsl`: the WGSL twin of [`RaycastParams`].
+pub const PARAMS_WGSL: &str = super::shaders::RAYCAST_PARAMS;
 
 /// Where the time of a GPU render went, in seconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -141,10 +82,6 @@ pub struct GpuRenderOutput {
     pub output: RenderOutput,
     pub timings: GpuTimings,
 }
-
-/// The most loop iterations one llvmpipe invocation may run in total (Mesa's
-/// `LP_MAX_TGSI_LOOP_ITERATIONS`); past it every loop silently stops.
-pub const LLVMPIPE_LOOP_LIMIT: usize = 65535;
 
 /// The first tap's offset from `floor(x)` and the number of taps of a truncated filter.
 fn tap_layout(f: Filter) -> (i32, usize) {
@@ -309,8 +246,8 @@ pub fn sample_tex_wgsl(settings: &RenderSettings) -> String {
     )
 }
 
-/// The complete ray-casting shader for these settings: the shared struct, the
-/// hand-written body, and the generated tap sums and gradient stencil.
+/// The complete ray-casting shader for these settings: `shaders/raycast.wgsl` and its
+/// imports, with the generated sampling path, tap sums, gradient stencil and modes.
 pub fn raycast_shader(settings: &RenderSettings) -> String {
     let taps = match settings.filter {
         // Nearest, hardware trilinear and the fast B-splines never reach accumulate_taps.
@@ -324,52 +261,42 @@ pub fn raycast_shader(settings: &RenderSettings) -> String {
         && (settings.shading.enabled || settings.transfer_2d.is_some())
         && !settings.precompute_gradients;
     let gradient = gradient_wgsl(on_the_fly.then_some(settings.gradient));
-    let sample = sample_tex_wgsl(settings);
-    let skip = super::skip::SKIP_WGSL;
-    let modes = modes_wgsl(settings);
-    let tricubic = super::tricubic::TRICUBIC_WGSL;
-    format!(
-        "{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{CLASSIFY2D_WGSL}\n{RAYS_WGSL}\n{OPACITY_WGSL}\n{skip}\n{modes}\n{RAYCAST_WGSL}\n{sample}\n{taps}\n{gradient}\n{tricubic}"
+    shaders::resolve_with(
+        "raycast",
+        &[
+            ("sample_tex", &sample_tex_wgsl(settings)),
+            ("accumulate_taps", &taps),
+            ("gradient_at", &gradient),
+            ("cast_mida_iso", &modes_wgsl(settings)),
+        ],
     )
 }
 
-/// `shaders/shared/modes.wgsl` when the settings draw MIDA or iso-surfaces, else only its
-/// small helpers and stubs of `cast_mida`/`cast_iso`: each of those marches inlines the
-/// filter's tap sum many times over (samples, gradients, shadow rays), and with the
-/// 512-tap Lanczos-4 a software driver's compiler (llvmpipe) ran out of memory on
-/// shaders that never take those branches.
+/// The generated module `cast_mida_iso`: `shaders/shared/modes_cast.wgsl` (the MIDA and
+/// iso-surface marches) when the settings draw MIDA or iso-surfaces, else stubs of
+/// `cast_mida`/`cast_iso`: each of those marches inlines the filter's tap sum many
+/// times over (samples, gradients, shadow rays), and with the 512-tap Lanczos-4 a
+/// software driver's compiler (llvmpipe) ran out of memory on shaders that never take
+/// those branches.
 pub fn modes_wgsl(settings: &RenderSettings) -> String {
     let needed = matches!(settings.mode, Mode::Mida | Mode::Iso)
         || (settings.mode == Mode::Dvr && !settings.iso_surfaces.is_empty());
     if needed {
-        return MODES_WGSL.to_string();
+        return "#import modes_cast\n".to_string();
     }
-    let cut = MODES_WGSL
-        .find("fn cast_mida(")
-        .expect("modes.wgsl defines cast_mida");
-    format!(
-        "{}\n// Compiled out for these settings (src/gpu/raycast.rs: modes_wgsl).\n\
-         fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {{\n    var p: Pixel;\n    return p;\n}}\n\
-         fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {{\n    var p: Pixel;\n    return p;\n}}\n",
-        &MODES_WGSL[..cut]
-    )
+    STUB_MODES.to_string()
 }
 
-/// The complete set-up shader: the shared struct and lookup, and the passes.
+/// The complete set-up shader: `shaders/raycast_prepare.wgsl` and its imports.
 pub fn prepare_shader() -> String {
-    format!("{PARAMS_WGSL}\n{CLASSIFY_WGSL}\n{PREPARE_WGSL}\n{GRADIENT_VOXEL_WGSL}")
+    shaders::resolve("raycast_prepare")
 }
 
 const STUB_TAPS: &str = "// Unreachable for this filter.\nfn accumulate_taps(t: texture_3d<f32>, p: vec3<f32>) -> vec4<f32> {\n    return vec4<f32>(0.0);\n}\n";
 
-/// The WGSL code of a gradient method (`shaders/shared/gradient_voxel.wgsl`).
-pub(crate) fn gradient_method_id(m: GradientMethod) -> u32 {
-    match m {
-        GradientMethod::Central => 0,
-        GradientMethod::Forward => 1,
-        GradientMethod::Sobel => 2,
-    }
-}
+const STUB_MODES: &str = "// Compiled out for these settings (src/gpu/raycast.rs: modes_wgsl).\n\
+fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {\n    var p: Pixel;\n    return p;\n}\n\
+fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {\n    var p: Pixel;\n    return p;\n}\n";
 
 fn filter_id(f: Filter) -> Result<u32> {
     Ok(match f {
@@ -548,7 +475,7 @@ fn accel_params(dims: [usize; 3], settings: &RenderSettings, rest: RaycastParams
 }
 
 /// The members of the parameter block for MIDA, the grey window and iso-surfaces
-/// (mirrors `cpu::modes::ModeSetup::new`); the rest zero.
+/// (mirrors src/cpu/modes.rs: ModeSetup::new); the rest zero.
 fn modes_params(settings: &RenderSettings, value_range: (f64, f64)) -> RaycastParams {
     let m = crate::cpu::modes::ModeSetup::<f32>::new(settings, value_range);
     let mut p = RaycastParams {
@@ -826,7 +753,6 @@ pub fn render(
         .clamp(1, h)
         .min((1 << 20) / w + 1)
         .max(1);
-    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
     let view = |t: &wgpu::Texture| t.create_view(&Default::default());
     let (vol_view, pre_view, grad_view) = (
         view(&volume_tex),
@@ -835,123 +761,59 @@ pub fn render(
     );
     let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
     let mut counts = vec![0u32; w * h];
-    let (mut kernel, mut readback) = (0.0, 0.0);
-    let mut row0 = 0;
-    while row0 < h {
-        let rows = rows_per_tile.min(h - row0);
-        params.flags2[2] = row0 as u32;
-        params.flags2[3] = rows as u32;
-        let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("raycast params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let pix_bytes = (rows * w * 16) as u64;
-        let cnt_bytes = (rows * w * 4) as u64;
-        let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
-        let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
-        let seg_buf = match &clip_mesh {
-            Some(m) => Some(m.segments(ctx, &params)?),
-            None => None,
-        };
-        let bind = ctx.bind_group(
-            "raycast",
-            &layout,
-            &[
-                pbuf.as_entire_binding(),
-                wgpu::BindingResource::TextureView(&vol_view),
-                wgpu::BindingResource::TextureView(&pre_view),
-                wgpu::BindingResource::TextureView(&grad_view),
-                wgpu::BindingResource::Sampler(&sampler),
-                lut_buf.as_entire_binding(),
-                out_buf.as_entire_binding(),
-                cnt_buf.as_entire_binding(),
-                lut2_buf.as_entire_binding(),
-                skip_minmax.as_entire_binding(),
-                skip_prefix.as_entire_binding(),
-                seg_buf.as_ref().unwrap_or(&no_segments).as_entire_binding(),
-            ],
-        );
-        let (k, r) = super::raycast::run_band(
-            ctx,
-            (&pipeline, &bind, "raycast"),
-            timestamps,
-            (row0, rows, w),
-            (&out_buf, &cnt_buf),
-            (&mut image, &mut counts),
-        )?;
-        kernel += k;
-        readback += r;
-        row0 += rows;
-        progress(row0, h);
-    }
+    let bands = render_bands(
+        ctx,
+        (&pipeline, "raycast"),
+        rows_per_tile,
+        (&mut image, &mut counts),
+        progress,
+        |row0, rows, out_buf, cnt_buf| {
+            params.flags2[2] = row0 as u32;
+            params.flags2[3] = rows as u32;
+            let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("raycast params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let seg_buf = match &clip_mesh {
+                Some(m) => Some(m.segments(ctx, &params)?),
+                None => None,
+            };
+            Ok(ctx.bind_group(
+                "raycast",
+                &layout,
+                &[
+                    pbuf.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol_view),
+                    wgpu::BindingResource::TextureView(&pre_view),
+                    wgpu::BindingResource::TextureView(&grad_view),
+                    wgpu::BindingResource::Sampler(&sampler),
+                    lut_buf.as_entire_binding(),
+                    out_buf.as_entire_binding(),
+                    cnt_buf.as_entire_binding(),
+                    lut2_buf.as_entire_binding(),
+                    skip_minmax.as_entire_binding(),
+                    skip_prefix.as_entire_binding(),
+                    seg_buf.as_ref().unwrap_or(&no_segments).as_entire_binding(),
+                ],
+            ))
+        },
+    )?;
     Ok(GpuRenderOutput {
         output: RenderOutput::from_counts(image, &counts, settings.sample_count),
         timings: GpuTimings {
             setup: t_setup,
             upload,
             prepare: prepare_time,
-            kernel,
-            kernel_from_timestamps: timestamps,
-            readback,
+            kernel: bands.kernel,
+            kernel_from_timestamps: bands.from_timestamps,
+            readback: bands.readback,
             total: t_start.elapsed().as_secs_f64(),
         },
     })
 }
 
 /// Interleaves three or four grids into RGBA texels (the fourth channel 0 if absent).
-/// One band of a per-pixel caster (rows `row0..row0 + rows` of a `w`-wide image, 8 × 8
-/// workgroups): dispatch, wait, read the RGBA pixels and sample counts back into
-/// `image` and `counts`. Returns the kernel time (timestamps when asked for, else the
-/// wall clock) and the readback time, in seconds. Shared by `gpu::raycast`,
-/// `gpu::multi` and `gpu::adaptive`.
-pub(crate) fn run_band(
-    ctx: &GpuContext,
-    (pipeline, bind, label): (&wgpu::ComputePipeline, &wgpu::BindGroup, &str),
-    timestamps: bool,
-    (row0, rows, w): (usize, usize, usize),
-    (out_buf, cnt_buf): (&wgpu::Buffer, &wgpu::Buffer),
-    (image, counts): (&mut Frame, &mut [u32]),
-) -> Result<(f64, f64)> {
-    let t_k = Instant::now();
-    let query = timestamps.then(|| ctx.timestamp_pair());
-    let mut enc = ctx.device.create_command_encoder(&Default::default());
-    {
-        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                query_set: &q.set,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: Some(1),
-            }),
-        });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, bind, &[]);
-        pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
-    }
-    if let Some(q) = &query {
-        q.resolve(&mut enc);
-    }
-    ctx.queue.submit([enc.finish()]);
-    ctx.wait()?;
-    let kernel = match &query {
-        Some(q) => q.seconds(ctx)?,
-        None => t_k.elapsed().as_secs_f64(),
-    };
-    let t_r = Instant::now();
-    let (pix_bytes, cnt_bytes) = ((rows * w * 16) as u64, (rows * w * 4) as u64);
-    let px: Vec<[f32; 4]> = bytemuck::cast_slice(&ctx.read_buffer(out_buf, pix_bytes)?).to_vec();
-    let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(cnt_buf, cnt_bytes)?).to_vec();
-    let readback = t_r.elapsed().as_secs_f64();
-    let ch = image.channels;
-    for (i, p) in px.iter().enumerate() {
-        let dst = (row0 * w + i) * ch;
-        image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
-    }
-    counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
-    Ok((kernel, readback))
-}
-
 fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>) -> Vec<[f32; 4]> {
     (0..r.data.len())
         .map(|i| {
@@ -963,48 +825,6 @@ fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>
             ]
         })
         .collect()
-}
-
-/// A compute-stage 3D float texture binding.
-fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension: wgpu::TextureViewDimension::D3,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-pub(crate) fn compute_pipeline(
-    ctx: &GpuContext,
-    label: &str,
-    module: &wgpu::ShaderModule,
-    entry: &str,
-    layout: &wgpu::BindGroupLayout,
-) -> Result<wgpu::ComputePipeline> {
-    let dev = &ctx.device;
-    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    });
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&pl),
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    match pollster::block_on(scope.pop()) {
-        None => Ok(pipeline),
-        Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
-    }
 }
 
 /// Runs one of `raycast_prepare.wgsl`'s passes into a new RGBA texture.

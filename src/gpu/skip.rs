@@ -6,17 +6,15 @@
 //! f32 grid bit for bit. The per-ray walk runs inside the ray caster
 //! (`shaders/shared/skip.wgsl`).
 
-use super::context::{buffer_entry, GpuContext};
-use super::raycast::compute_pipeline;
+use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
 use crate::cpu::filter::Grid;
 use crate::cpu::skip::{cell_count, MinMaxGrid};
 use crate::error::Result;
 use wgpu::util::DeviceExt;
 
-/// The grid-building shader.
-pub const MINMAX_WGSL: &str = include_str!("../../shaders/skip_minmax.wgsl");
-/// The per-ray helpers included into the ray caster.
-pub const SKIP_WGSL: &str = include_str!("../../shaders/shared/skip.wgsl");
+/// The grid-building shader, `shaders/skip_minmax.wgsl` (it imports nothing). The
+/// per-ray helpers are `shaders/shared/skip.wgsl`, imported by the ray caster.
+pub const MINMAX_WGSL: &str = super::shaders::SKIP_MINMAX;
 
 /// Parameters of the grid build; twin of `SkipGridParams` in `shaders/skip_minmax.wgsl`.
 #[repr(C)]
@@ -56,21 +54,12 @@ pub fn min_max_buffer(
             }));
     }
     let dev = &ctx.device;
-    let module = ctx.shader("skip_minmax.wgsl", MINMAX_WGSL)?;
+    let module = ctx.shader("skip_minmax.wgsl", &super::shaders::resolve("skip_minmax"))?;
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("skip minmax"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-                count: None,
-            },
+            texture_entry(1, false),
             buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
         ],
     });

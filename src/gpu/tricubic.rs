@@ -1,4 +1,4 @@
-//! The fast tricubic B-spline on the GPU (`shaders/shared/tricubic.wgsl`, mirrors
+//! The fast tricubic B-spline on the GPU (`shaders/shared/tricubic.wgsl`, the twin of
 //! `cpu::tricubic`), evaluated at a list of points: what the ray caster does per sample
 //! with `cubic-bspline-fast`, exposed so that both of its paths can be measured point
 //! by point against the f64 oracle.
@@ -10,24 +10,19 @@
 //!   Real GPUs compute the sampler's lerp fractions in fixed point with
 //!   `subTexelPrecisionBits` (8 on NVIDIA) fractional bits; lavapipe lerps in f32.
 //!
-//! Shader: `shaders/tricubic_points.wgsl` (with the shared file prepended).
+//! Shader: `shaders/tricubic_points.wgsl`, importing `shaders/shared/tricubic.wgsl`.
 
 use super::context::GpuContext;
 use crate::cpu::filter::Grid;
 use crate::error::{Error, Result};
 use wgpu::util::DeviceExt;
 
-/// The shared fast-B-spline functions (also prepended to the ray caster).
-pub const TRICUBIC_WGSL: &str = include_str!("../../shaders/shared/tricubic.wgsl");
-/// The point-sampling entry points.
-pub const POINTS_WGSL: &str = include_str!("../../shaders/tricubic_points.wgsl");
-
 /// The most points one call takes (one dispatch of 64-wide workgroups).
 pub const MAX_POINTS: usize = 65535 * 64;
 
 /// The fast cubic B-spline of `grid` (values, or prefiltered coefficients) at
 /// index-space `points`, on the GPU: through the texture unit when `hardware`, by hand
-/// otherwise. Mirrors `cpu::tricubic::sample_fast`.
+/// otherwise. Mirrors `src/cpu/tricubic.rs: sample_fast`.
 ///
 /// # Errors
 /// [`Error::Invalid`] for an empty grid, [`Error::TooLarge`] past [`MAX_POINTS`] or the
@@ -65,7 +60,7 @@ pub fn sample_fast(
     let dev = &ctx.device;
     let module = ctx.shader(
         "tricubic_points.wgsl",
-        &format!("{TRICUBIC_WGSL}\n{POINTS_WGSL}"),
+        &super::shaders::resolve("tricubic_points"),
     )?;
     let entry = if hardware {
         "sample_points_hw"

@@ -1,6 +1,7 @@
-// Bindings and helpers shared by both FFT variants (fft_split_stream.wgsl and
-// fft_stockham.wgsl); prepended after shared/fft_params.wgsl by src/gpu/fft.rs.
-// Complex numbers are vec2<f32> (re, im).
+// Bindings and helpers shared by the FFT stages (shaders/fft_split_stream.wgsl,
+// fft_stockham.wgsl and fft_two_real.wgsl). Complex numbers are vec2<f32> (re, im).
+
+#import fft_params
 
 @group(0) @binding(0) var<uniform> params: FftParams;
 @group(0) @binding(1) var<storage, read> src: array<vec2<f32>>;

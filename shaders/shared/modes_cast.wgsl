@@ -1,0 +1,186 @@
+// The MIDA and iso-surface marches of the ray caster, twins of src/cpu/modes.rs (each
+// function names its Rust twin). Imported through the generated module cast_mida_iso
+// (src/gpu/raycast.rs: modes_wgsl) only by renders that draw MIDA or iso-surfaces:
+// each march inlines the filter's tap sum many times over (samples, gradients, shadow
+// rays), and with the 512-tap Lanczos-4 a software driver's compiler (llvmpipe) ran
+// out of memory on shaders that never take those branches. Calls sample_value,
+// classify_sample, shade_sample, segment_point and segment_length of
+// shaders/raycast.wgsl.
+
+#import modes
+
+// mirrors src/cpu/modes.rs: cast_mida
+fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {
+    let light = ray_light(ray);
+    let half_vec = normalize_or_zero(light - ray.dir);
+    let gamma = params.mode_params.x;
+    var c = vec3<f32>(0.0);
+    var a = 0.0;
+    var running = 0.0;
+    var best = -BIG;
+    var best_p = o;
+    for (var k = 0u; k < n; k++) {
+        let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
+        let len = segment_length(k, n, t_in, t_in, t_out, dt);
+        let v = sample_value(p);
+        let sn = (v - params.mode_params.y) * params.mode_params.z;
+        var delta = 0.0;
+        if (k > 0u && sn > running) {
+            delta = sn - running;
+        }
+        if (k == 0u) {
+            running = sn;
+        } else {
+            running = max(running, sn);
+        }
+        if (v > best) {
+            best = v;
+            best_p = p;
+        }
+        let beta = mida_beta(delta, gamma);
+        let s = classify_sample(p);
+        if (s.w <= 0.0) {
+            c = beta * c;
+            a = beta * a;
+            continue;
+        }
+        let alpha = corrected_alpha(s.w, len, speed);
+        var rgb = s.xyz;
+        if (params.flags.y == 1u) {
+            rgb = shade_sample(p, rgb, light, half_vec);
+        }
+        let w = (1.0 - beta * a) * alpha;
+        c = beta * c + w * rgb;
+        a = beta * a + w;
+    }
+    if (gamma > 0.0) {
+        // Unshaded, as on the CPU.
+        let s = classify_sample(best_p);
+        c = (1.0 - gamma) * c + gamma * s.w * s.xyz;
+        a = (1.0 - gamma) * a + gamma * s.w;
+    }
+    return Pixel(over_background(c, a), n);
+}
+
+// mirrors src/cpu/modes.rs: in_shadow
+fn in_shadow(p: vec3<f32>, l: vec3<f32>) -> bool {
+    let hit = intersect_box(p, l, vec3<f32>(-0.5), params.box_hi.xyz);
+    if (!hit.ok) {
+        return false;
+    }
+    let dt = params.box_hi.w / length(l);
+    let first = sample_value(p + l * dt);
+    let count = params.iso_flags.x;
+    for (var k = 2u; ; k++) {
+        let t = f32(k) * dt;
+        if (t >= hit.t1) {
+            return false;
+        }
+        let v = sample_value(p + l * t);
+        for (var j = 0u; j < count; j++) {
+            if (crosses(first, v, params.iso_values[j])) {
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
+// mirrors src/cpu/modes.rs: cast_iso (dvr: DVR samples between the surfaces)
+fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {
+    let light = ray_light(ray);
+    let half_vec = normalize_or_zero(light - ray.dir);
+    let l_index = vec3<f32>(dot(params.to_index_0.xyz, light), dot(params.to_index_1.xyz, light), dot(params.to_index_2.xyz, light));
+    let count = params.iso_flags.x;
+    let opaque = params.iso_flags.y == 1u;
+    let shade = params.flags.y == 1u;
+    var c = vec3<f32>(0.0);
+    var a = 0.0;
+    let b0 = segment_bounds(0u, n, t_in, t_out, dt);
+    var t0 = (b0.x + b0.y) * 0.5;
+    var v0 = sample_value(o + d * t0);
+    var taken = 1u;
+    if (dvr) {
+        let s = classify_sample(segment_point(0u, n, t_in, t_in, t_out, dt, o, d));
+        if (s.w > 0.0) {
+            let p = segment_point(0u, n, t_in, t_in, t_out, dt, o, d);
+            let alpha = corrected_alpha(s.w, segment_length(0u, n, t_in, t_in, t_out, dt), speed);
+            var rgb = s.xyz;
+            if (shade) {
+                rgb = shade_sample(p, rgb, light, half_vec);
+            }
+            let w = (1.0 - a) * alpha;
+            c = c + w * rgb;
+            a = a + w;
+        }
+    }
+    var done = false;
+    for (var k = 1u; k < n; k++) {
+        if (a >= params.misc.y || done) {
+            break;
+        }
+        let bk = segment_bounds(k, n, t_in, t_out, dt);
+        let t1 = (bk.x + bk.y) * 0.5;
+        let v1 = sample_value(o + d * t1);
+        taken = taken + 1u;
+        // The crossings of this interval in depth order (ties: list order).
+        var hit_t = vec4<f32>(0.0);
+        var hit_j = vec4<u32>(0u);
+        var nh = 0u;
+        for (var j = 0u; j < count; j++) {
+            let tau = params.iso_values[j];
+            if (crosses(v0, v1, tau)) {
+                let t = iso_hit_t(t0, v0, t1, v1, tau);
+                var q = nh;
+                while (q > 0u && hit_t[q - 1u] > t) {
+                    hit_t[q] = hit_t[q - 1u];
+                    hit_j[q] = hit_j[q - 1u];
+                    q = q - 1u;
+                }
+                hit_t[q] = t;
+                hit_j[q] = j;
+                nh = nh + 1u;
+            }
+        }
+        for (var h = 0u; h < nh; h++) {
+            let iso = iso_color(hit_j[h]);
+            let p = o + d * hit_t[h];
+            var rgb = iso.xyz;
+            if (shade) {
+                rgb = shade_sample(p, rgb, light, half_vec);
+            }
+            if (opaque) {
+                if (params.iso_flags.z == 1u && in_shadow(p, l_index)) {
+                    rgb = iso.xyz * params.shading.x;
+                }
+                c = c + (1.0 - a) * rgb;
+                a = a + (1.0 - a);
+                done = true;
+                break;
+            }
+            let w = (1.0 - a) * iso.w;
+            c = c + w * rgb;
+            a = a + w;
+        }
+        if (done) {
+            break;
+        }
+        if (dvr) {
+            let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
+            let s = classify_sample(p);
+            if (s.w > 0.0) {
+                let alpha = corrected_alpha(s.w, segment_length(k, n, t_in, t_in, t_out, dt), speed);
+                var rgb = s.xyz;
+                if (shade) {
+                    rgb = shade_sample(p, rgb, light, half_vec);
+                }
+                let w = (1.0 - a) * alpha;
+                c = c + w * rgb;
+                a = a + w;
+            }
+        }
+        t0 = t1;
+        v0 = v1;
+    }
+    return Pixel(over_background(c, a), taken);
+}
