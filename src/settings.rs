@@ -462,6 +462,68 @@ impl RenderSettings {
                 "random jitter and interleaved sampling exclude each other",
             ));
         }
-        crate::cpu::modes::validate(self)
+        validate_modes(self)
     }
+}
+
+/// Checks the settings of MIDA, the MIP/MinIP window and the iso-surfaces (the modes
+/// of `cpu::modes`; called by [`RenderSettings::validate`]).
+fn validate_modes(s: &RenderSettings) -> Result<()> {
+    if !(s.mida_gamma.is_finite() && (-1.0..=1.0).contains(&s.mida_gamma)) {
+        return Err(Error::invalid(
+            "MIDA gamma",
+            format!("{} must lie in [-1, 1]", s.mida_gamma),
+        ));
+    }
+    if let Some([w, c]) = s.window {
+        if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+            return Err(Error::invalid(
+                "window",
+                format!("width {w} must be finite and positive, centre {c} finite"),
+            ));
+        }
+    }
+    if s.iso_surfaces.len() > MAX_ISO_SURFACES {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            format!("{} given, at most {MAX_ISO_SURFACES}", s.iso_surfaces.len()),
+        ));
+    }
+    for iso in &s.iso_surfaces {
+        if !iso.value.is_finite() {
+            return Err(Error::invalid("iso-value", "must be finite"));
+        }
+        if iso.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(Error::invalid(
+                "iso-surface colour",
+                "components must lie in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&iso.opacity) {
+            return Err(Error::invalid(
+                "iso-surface opacity",
+                format!("{} must lie in [0, 1]", iso.opacity),
+            ));
+        }
+    }
+    if s.mode == Mode::Iso && s.iso_surfaces.is_empty() {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            "mode iso needs at least one iso-surface",
+        ));
+    }
+    let isos = s.mode == Mode::Iso || (s.mode == Mode::Dvr && !s.iso_surfaces.is_empty());
+    if (s.mode == Mode::Mida || isos) && s.compositing == Compositing::BackToFront {
+        return Err(Error::invalid(
+            "compositing",
+            "MIDA and iso-surfaces composite front to back only",
+        ));
+    }
+    if s.iso_shadows && !s.iso_opaque {
+        return Err(Error::invalid(
+            "shadows",
+            "shadow rays are cast from opaque iso-surfaces only (add --iso-opaque)",
+        ));
+    }
+    Ok(())
 }

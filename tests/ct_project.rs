@@ -7,7 +7,8 @@ use voxlab::cpu::project::{
     pixel_ray, project_phantom, project_volume, Grid, JosephView, ProjectOptions,
 };
 use voxlab::ct::{Geometry, Projections};
-use voxlab::phantom::{slab_interval, Phantom};
+use voxlab::phantom::Phantom;
+use voxlab::real::slab_interval;
 
 fn parallel(n: usize, d: f64, angles: usize) -> Geometry {
     Geometry::parallel_stack(n, n, d, d, Geometry::even_angles(angles, 180.0)).unwrap()

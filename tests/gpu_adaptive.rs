@@ -8,7 +8,7 @@ use common::Rng;
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::adaptive::{self, medical_tf, AdaptiveSettings, Sampling};
-use voxlab::cpu::filter::Grid;
+use voxlab::cpu::grid::Grid;
 use voxlab::metrics::error_stats;
 use voxlab::AnyVolume;
 use wgpu::naga;

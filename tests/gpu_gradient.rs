@@ -5,8 +5,8 @@
 
 mod common;
 
-use voxlab::cpu::filter::Grid;
 use voxlab::cpu::gradient::precompute_gradients;
+use voxlab::cpu::grid::Grid;
 use voxlab::gpu::gradient as gg;
 use voxlab::phantom::Phantom;
 use voxlab::settings::GradientMethod;

@@ -5,7 +5,7 @@
 mod common;
 
 use voxlab::camera::{AxisView, Camera, Projection};
-use voxlab::cpu::filter::Grid;
+use voxlab::cpu::grid::Grid;
 use voxlab::gpu::skip::{SkipGridParams, MINMAX_WGSL};
 use voxlab::metrics::Tolerance;
 use voxlab::phantom::Phantom;

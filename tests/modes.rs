@@ -4,11 +4,12 @@
 
 use glam::DVec3;
 use voxlab::camera::{AxisView, Camera, Orbit, Projection};
-use voxlab::cpu::filter::Grid;
+use voxlab::cpu::grid::Grid;
 use voxlab::cpu::modes::{first_iso_hit, window_map, window_preset, Span};
-use voxlab::cpu::raycast::{intersect_box, render, Field, GridField};
+use voxlab::cpu::raycast::{render, Field, GridField};
 use voxlab::frame::Frame;
 use voxlab::phantom::Phantom;
+use voxlab::real::intersect_box;
 use voxlab::real::{Real, V3};
 use voxlab::settings::{
     Classification, Filter, GradientMethod, IsoSurface, Light, Mode, RenderSettings,

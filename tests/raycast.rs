@@ -255,7 +255,7 @@ fn dvr_through_a_homogeneous_slab_is_beer_lambert() {
                             let r = cam.ray(col, row);
                             let lo = DVec3::splat(-0.5);
                             let hi = DVec3::new(7.5, 9.5, 11.5);
-                            let len = match voxlab::camera::intersect_box(r.origin, r.dir, lo, hi) {
+                            let len = match voxlab::real::slab_interval(r.origin, r.dir, lo, hi) {
                                 Some((a, b)) => (b - a.max(r.t_min)).max(0.0),
                                 None => 0.0,
                             };
@@ -409,7 +409,7 @@ fn mip_and_minip_of_spheres() {
             let (o, d) = (r.origin / h, r.dir);
             let dist = |c: DVec3| (o - c - d * (o - c).dot(d)).length();
             // Inside the cube along the whole image (the orbit fits the cube's sphere).
-            if voxlab::phantom::slab_interval(o, d, DVec3::splat(-1.0), DVec3::ONE).is_none() {
+            if voxlab::real::slab_interval(o, d, DVec3::splat(-1.0), DVec3::ONE).is_none() {
                 continue;
             }
             let (m, n) = (mip.image.pixel(col, row)[0], minip.image.pixel(col, row)[0]);

@@ -7,7 +7,8 @@ mod common;
 
 use glam::DVec3;
 use voxlab::camera::{AxisView, Camera, Orbit, Projection};
-use voxlab::cpu::filter::{sample, Grid};
+use voxlab::cpu::filter::sample;
+use voxlab::cpu::grid::Grid;
 use voxlab::cpu::raycast::render;
 use voxlab::cpu::skip::{cell_count, Skipper};
 use voxlab::real::{Real, V3};
@@ -391,7 +392,7 @@ fn clip_box_in_world_space_is_an_exact_chord() {
     for row in 0..24 {
         for col in 0..24 {
             let r = cam.ray(col, row);
-            let chord = voxlab::camera::intersect_box(r.origin, r.dir, lo.max(vlo), hi.min(vhi))
+            let chord = voxlab::real::slab_interval(r.origin, r.dir, lo.max(vlo), hi.min(vhi))
                 .map_or(0.0, |(t0, t1)| (t1 - t0).max(0.0));
             let got = out.image.data[row * 24 + col];
             let want = 0.5 * chord;
@@ -488,7 +489,7 @@ fn accumulated_jitter_converges_to_the_fine_step_reference() {
 /// seed; the Bayer pattern covers 16 distinct offsets.
 #[test]
 fn jitter_offsets_are_uniform_and_reproducible() {
-    use voxlab::accumulate::{interleaved_offset, jitter_offset, pcg_hash};
+    use voxlab::cpu::jitter::{interleaved_offset, jitter_offset, pcg_hash};
     // Reference values of the PCG hash (Jarzynski & Olano 2020), computed with Python integers.
     assert_eq!(pcg_hash(0), 129_708_002);
     let mut sum = 0.0;

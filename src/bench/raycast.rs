@@ -29,7 +29,7 @@
 
 use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
 use crate::camera::{Camera, Orbit, Projection};
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::error::Result;
 use crate::phantom::Phantom;
 use crate::settings::{Filter, GradientMethod, IsoSurface, Mode, RenderSettings};

@@ -29,7 +29,8 @@
 
 use super::context::{buffer_entry, GpuContext};
 use crate::camera::{Camera, Projection};
-use crate::cpu::filter::{prepare, Grid};
+use crate::cpu::filter::prepare;
+use crate::cpu::grid::Grid;
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
 use crate::frame::Frame;

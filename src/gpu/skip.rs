@@ -8,7 +8,7 @@
 
 use super::context::{buffer_entry, GpuContext};
 use super::raycast::compute_pipeline;
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::cpu::skip::{cell_count, MinMaxGrid};
 use crate::error::Result;
 use wgpu::util::DeviceExt;
