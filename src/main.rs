@@ -1202,6 +1202,7 @@ fn compare(c: CompareArgs) -> Result<ExitCode> {
     let tol = voxlab::metrics::Tolerance {
         max_abs: c.max_abs.unwrap_or(f64::INFINITY),
         rmse: c.rmse.unwrap_or(f64::INFINITY),
+        ..voxlab::metrics::Tolerance::NONE
     };
     let report =
         voxlab::metrics::check_parity("compare", &cpu_out.image, &g.output.image, tol, None)?;

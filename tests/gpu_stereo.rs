@@ -19,10 +19,12 @@ use voxlab::transfer::TransferFunction;
 const DVR: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 const SCALAR: Tolerance = Tolerance {
     max_abs: 5e-5,
     rmse: 1e-5,
+    ..Tolerance::NONE
 };
 
 fn scene() -> Scene {
