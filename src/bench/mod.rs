@@ -16,7 +16,7 @@ pub mod process;
 pub mod raycast;
 pub mod report;
 
-pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Unit, Work};
 pub use report::Report;
 
 /// The algorithm families, in report order (`--only` takes a comma-separated subset).
@@ -274,7 +274,7 @@ fn measure<T: Sample>(
     warmup: usize,
     runs: usize,
     mut call: impl FnMut() -> Result<T>,
-    mut first: impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>>,
+    mut first: impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Box<Measured<T>>>,
 ) -> Measured<T> {
     let mut warmups = Vec::new();
     let mut timed = Vec::new();
@@ -301,7 +301,7 @@ fn measure<T: Sample>(
             checked = true;
             match first(out) {
                 Ok(p) => parity = p,
-                Err(m) => return m,
+                Err(m) => return *m,
             }
         }
         if warm {
@@ -320,14 +320,14 @@ fn measure<T: Sample>(
 
 fn checker<T>(
     reference: &[f64],
-    tol: Tol,
-) -> impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>> + '_ {
+    tol: crate::metrics::Tolerance,
+) -> impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Box<Measured<T>>> + '_ {
     move |out| {
         let p = parity(reference, &out, tol);
         if p.passed {
             Ok(Some(p))
         } else {
-            Err(Measured::Failed(p))
+            Err(Box::new(Measured::Failed(p)))
         }
     }
 }
@@ -455,9 +455,9 @@ pub fn run_case(
     let m = measure(opts, w, n, &mut p.cpu_f64, |out: Vec<f64>| {
         let bad = out.iter().filter(|v| !v.is_finite()).count();
         if bad > 0 {
-            return Err(Measured::Errored(format!(
+            return Err(Box::new(Measured::Errored(format!(
                 "the oracle's result holds {bad} non-finite value(s)"
-            )));
+            ))));
         }
         reference = out;
         Ok(None)
