@@ -57,13 +57,11 @@ fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> (T, f64) {
     (first, median_min_max(t).0)
 }
 
+/// ‖a − b‖ / ‖b‖, `b` the reference (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn rel_l2(a: &[f64], b: &[f64]) -> f64 {
-    let (mut d, mut r) = (0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        d += (x - y) * (x - y);
-        r += y * y;
-    }
-    (d / r.max(f64::MIN_POSITIVE)).sqrt()
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 fn ms(t: f64) -> String {

@@ -73,20 +73,12 @@ pub fn random_complex(n: usize, seed: u64) -> Vec<Complex<f64>> {
     (0..n).map(|_| Complex::new(next(), next())).collect()
 }
 
-/// Relative L2 error `‖a − b‖ / ‖b‖` in f64 (`‖a − b‖` when `b` is zero).
-pub fn rel_l2<T: Into<f64> + Copy>(a: &[Complex<T>], b: &[Complex<f64>]) -> f64 {
-    let mut d = 0.0;
-    let mut r = 0.0;
-    for (x, y) in a.iter().zip(b) {
-        let x = Complex::new(x.re.into(), x.im.into());
-        d += (x - y).norm_sqr();
-        r += y.norm_sqr();
-    }
-    if r == 0.0 {
-        d.sqrt()
-    } else {
-        (d / r).sqrt()
-    }
+/// Relative L2 error `‖port − reference‖ / ‖reference‖` in f64
+/// ([`crate::metrics::error_stats_complex`]; ∞ when `port` has a NaN or infinity).
+pub fn rel_l2<T: Into<f64> + Copy>(port: &[Complex<T>], reference: &[Complex<f64>]) -> f64 {
+    crate::metrics::error_stats_complex(reference, port, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 /// The error allowed for a transform of `total` values in f32 (`single`) or f64.
