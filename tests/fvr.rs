@@ -64,24 +64,20 @@ fn axis_sum(v: &Volume<f32>, view: AxisView, spacing: f64) -> Vec<f64> {
     out
 }
 
-/// Largest |a − b| relative to the largest |b|.
+/// Largest |a − b| relative to the largest |b| (`metrics::error_stats`, `b` the
+/// reference; ∞ on a NaN/Inf mismatch).
 fn max_rel(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let peak = b.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    let err = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
-    err / peak
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs_rel
 }
 
-/// Root-mean-square error relative to the root-mean-square of `b`.
+/// Root-mean-square error relative to the root-mean-square of `b`: the relative L2
+/// error ‖a − b‖ / ‖b‖ (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn rel_rmse(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let e: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
-    let r: f64 = b.iter().map(|y| y * y).sum();
-    (e / r).sqrt()
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 #[test]

@@ -47,13 +47,15 @@ fn draw<R: Real>(
     render::<R>(vol, tf, cam, s, &|_, _| {}).unwrap().image
 }
 
+/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(a.data.len(), b.data.len());
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    assert_eq!(
+        (a.width, a.height, a.channels),
+        (b.width, b.height, b.channels)
+    );
+    voxlab::metrics::error_stats(&a.data, &b.data, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
 }
 
 /// γ = −1 makes β ≡ 1, so MIDA is DVR to the bit (DVR without early termination: MIDA

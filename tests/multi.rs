@@ -46,16 +46,15 @@ fn settings(mode: Mode) -> RenderSettings {
     }
 }
 
+/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn max_diff(a: &Frame, b: &Frame) -> f64 {
     assert_eq!(
         (a.width, a.height, a.channels),
         (b.width, b.height, b.channels)
     );
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    voxlab::metrics::error_stats(&a.data, &b.data, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
 }
 
 fn single(vol: &AnyVolume, tf: &TransferFunction, cam: &Camera, s: &RenderSettings) -> Frame {

@@ -336,11 +336,11 @@ fn clip_box_matches_zeroed_voxels() {
     assert!(inside < 0.5, "{inside}");
 }
 
+/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    voxlab::metrics::error_stats(a, b, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
 }
 
 /// X-ray of a constant volume through a world-space clip box: every ray that crosses

@@ -273,16 +273,15 @@ fn scene(n: usize, w: usize, h: usize) -> Scene {
     }
 }
 
+/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn max_diff(a: &Frame, b: &Frame) -> f64 {
     assert_eq!(
         (a.width, a.height, a.channels),
         (b.width, b.height, b.channels)
     );
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    voxlab::metrics::error_stats(&a.data, &b.data, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
 }
 
 /// A 1D transfer function converted to 2D renders exactly like the 1D one: the 2D
