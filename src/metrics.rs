@@ -7,10 +7,10 @@
 //! - A [`Tolerance`] bounds any of max |Δ|, the RMSE, max |Δ| relative to the oracle's
 //!   peak, and the relative L2 error; a bound left at ∞ is no bound.
 //! - [`check_parity`] (frames), [`check_parity_array`] (real N-D arrays, x fastest) and
-//!   [`check_parity_complex`] (complex N-D arrays, x fastest) hold a port against an oracle and a
-//!   tolerance. A NaN or infinity on one side only, or two different ones, always fails.
-//!   The message names the worst element by its index and, on failure, the bounds
-//!   exceeded and the first mismatches.
+//!   [`check_parity_complex`] (complex N-D arrays, x fastest) hold a port against an
+//!   oracle and a tolerance. A NaN or infinity on one side only, or two different ones,
+//!   always fails. The message names the worst element by its index and, on failure,
+//!   the bounds exceeded and the first mismatches.
 //!
 //! On failure the checks write their evidence into a folder (the tests use
 //! `target/parity/<case>/`): always `stats.json`; for frames and 2-D arrays `cpu.png`,
@@ -71,9 +71,9 @@ pub struct ErrorStats {
 
 impl ErrorStats {
     /// The same statistics with every error measure (`max_abs`, `max_abs_rel`, `rmse`,
-    /// `rel_l2`, `mean_abs`) infinite when a NaN/Inf mismatch was found, so that any bound asserted
-    /// on one of them fails: for code that bounds one number itself rather than through
-    /// a [`Tolerance`].
+    /// `rel_l2`, `mean_abs`) infinite when a NaN/Inf mismatch was found, so that any
+    /// bound asserted on one of them fails: for code that bounds one number itself
+    /// rather than through a [`Tolerance`].
     pub fn infinite_if_mismatched(mut self) -> Self {
         if self.non_finite_mismatches > 0 {
             self.max_abs = f64::INFINITY;
@@ -87,8 +87,8 @@ impl ErrorStats {
 }
 
 /// What counts as agreement: every bound must hold. A bound at ∞ is no bound; build
-/// one with the constructors and `with_*`, e.g. `Tolerance::max_abs(1e-3).with_rmse(5e-5)`,
-/// or as a literal with `..Tolerance::NONE`.
+/// one with the constructors and `with_*`, e.g.
+/// `Tolerance::max_abs(1e-3).with_rmse(5e-5)`, or as a literal with `..Tolerance::NONE`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Tolerance {
     /// No element may differ by more than this.
@@ -695,7 +695,10 @@ fn check_shape(case: &str, dims: &[usize], oracle: usize, port: usize) -> Result
     if oracle != n || port != n {
         return Err(Error::invalid(
             "parity check",
-            format!("{case}: dims {dims:?} holds {n} elements; the oracle has {oracle}, the port {port}"),
+            format!(
+                "{case}: dims {dims:?} hold {n} elements; the oracle has {oracle}, \
+                 the port {port}"
+            ),
         ));
     }
     Ok(())
