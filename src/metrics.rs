@@ -7,7 +7,8 @@
 //! mismatches.
 
 use crate::error::{Error, Result};
-use crate::frame::{Frame, PngOptions};
+use crate::frame::Frame;
+use crate::io::{write_frame, PngOptions};
 use serde::Serialize;
 use std::path::Path;
 
@@ -218,9 +219,13 @@ pub fn write_artifacts(
         sixteen_bit: false,
         range,
     };
-    oracle.save(&dir.join("cpu.png"), png)?;
-    port.save(&dir.join("gpu.png"), png)?;
-    diff_heatmap(oracle, port, None).save(&dir.join("diff.png"), PngOptions::default())?;
+    write_frame(&dir.join("cpu.png"), oracle, png)?;
+    write_frame(&dir.join("gpu.png"), port, png)?;
+    write_frame(
+        &dir.join("diff.png"),
+        &diff_heatmap(oracle, port, None),
+        PngOptions::default(),
+    )?;
     let json = serde_json::to_string_pretty(&serde_json::json!({
         "stats": stats,
         "tolerance": tol,
