@@ -207,7 +207,9 @@ impl Checkpoint<'_> {
 /// checkpoint leaves a cancelled kernel by unwinding out of it (with
 /// `std::panic::resume_unwind`, which prints nothing; rayon carries it back to this
 /// thread once the rows in flight are done), and this function turns that into
-/// [`Error::Cancelled`]. Nothing a kernel owns outlives it, so nothing is left half
+/// [`Error::Cancelled`]. A kernel's parallel loop takes rayon's `panic_fuse()`, so
+/// that rows not yet begun are skipped once one row has unwound (without it rayon
+/// still begins every split it has queued, one row each). Nothing a kernel owns outlives it, so nothing is left half
 /// done. Any other panic goes on unwinding.
 ///
 /// # Errors
@@ -366,10 +368,13 @@ mod tests {
         let rows_run = AtomicUsize::new(0);
         let r: Result<()> = cancellable(&p, |cp| {
             use rayon::prelude::*;
-            (0..10_000usize).into_par_iter().for_each(|row| {
-                rows_run.fetch_add(1, Ordering::SeqCst);
-                cp.advance(row, 10_000);
-            });
+            (0..10_000usize)
+                .into_par_iter()
+                .panic_fuse()
+                .for_each(|row| {
+                    rows_run.fetch_add(1, Ordering::SeqCst);
+                    cp.advance(row, 10_000);
+                });
             Ok(())
         });
         assert!(matches!(r, Err(Error::Cancelled)), "{r:?}");
