@@ -14,7 +14,7 @@
 //!   of the f32 ray caster) and on the GPU (`gpu::fvr::fvr_project`: slice dispatch, inverse FFT,
 //!   readback, crop), oblique view (azimuth 30°, elevation 20°), trilinear and
 //!   Lanczos-3 slicing, with de-apodisation;
-//! - **ray-cast X-ray** of the same volume and view (`voxlab::render`, `Mode::Xray`,
+//! - **ray-cast X-ray** of the same volume and view (`voxlab::jobs::render`, `Mode::Xray`,
 //!   trilinear, step 1 voxel) on the CPU in f32 (the fair CPU baseline) and on the GPU,
 //!   at the FVR's own image (`n²`, pixel = voxel, the same pixel rays) and at 512²
 //!   (Jansen's image size, over the same field of view);
@@ -38,7 +38,7 @@ use std::time::Instant;
 use voxlab::bench::fourier::{fvr_volume, FVR_PADDING, FVR_VIEW};
 use voxlab::camera::Camera;
 use voxlab::cpu::fvr::{fvr_project, FvrSpectrum, Kernel};
-use voxlab::render::{Backend, Renderer, Scene};
+use voxlab::jobs::render::{Backend, Renderer, Scene};
 use voxlab::settings::{Filter, Mode, RenderSettings};
 use voxlab::transfer::TransferFunction;
 use voxlab::volume::AnyVolume;

@@ -28,7 +28,8 @@
 //! ```
 
 use crate::error::{Error, Result};
-use crate::frame::{Frame, PngOptions};
+use crate::frame::Frame;
+use crate::io::{write_frame, PngOptions};
 use rustfft::num_complex::Complex;
 use serde::Serialize;
 use std::path::Path;
@@ -731,9 +732,13 @@ fn write_images(dir: &Path, oracle: &Frame, port: &Frame) -> Result<()> {
         sixteen_bit: false,
         range,
     };
-    oracle.save(&dir.join("cpu.png"), png)?;
-    port.save(&dir.join("gpu.png"), png)?;
-    diff_heatmap(oracle, port, None).save(&dir.join("diff.png"), PngOptions::default())
+    write_frame(&dir.join("cpu.png"), oracle, png)?;
+    write_frame(&dir.join("gpu.png"), port, png)?;
+    write_frame(
+        &dir.join("diff.png"),
+        &diff_heatmap(oracle, port, None),
+        PngOptions::default(),
+    )
 }
 
 fn write_json(path: &Path, json: &serde_json::Value) -> Result<()> {

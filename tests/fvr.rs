@@ -507,7 +507,8 @@ fn gaussian_blob_lanczos3_within_one_percent_of_its_analytic_projection() {
 #[test]
 #[ignore = "writes docs/images; run by hand"]
 fn docs_figures() {
-    use voxlab::frame::{Frame, PngOptions};
+    use voxlab::frame::Frame;
+    use voxlab::io::{write_frame, PngOptions};
     let phantom = Phantom::shepp_logan();
     let v = phantom.sample([128; 3]).unwrap();
     let dir = common::root().join("docs/images");
@@ -546,13 +547,13 @@ fn docs_figures() {
                     range: Some((0.0, 20.0)),
                 };
                 let file = format!("fvr-oblique-{}-pad{padding}-error.png", k.name());
-                err.save(&dir.join(&file), png).unwrap();
+                write_frame(&dir.join(&file), &err, png).unwrap();
                 let png = PngOptions {
                     sixteen_bit: false,
                     range: Some((0.0, truth.iter().cloned().fold(0.0, f64::max))),
                 };
                 let file = format!("fvr-oblique-{}-pad{padding}.png", k.name());
-                img.save(&dir.join(&file), png).unwrap();
+                write_frame(&dir.join(&file), &img, png).unwrap();
             }
         }
     }
@@ -570,8 +571,12 @@ fn docs_figures() {
         sixteen_bit: false,
         range: Some((0.0, 20.0)),
     };
-    err.save(&dir.join("fvr-oblique-lanczos3-pad2-cell-error.png"), png)
-        .unwrap();
+    write_frame(
+        &dir.join("fvr-oblique-lanczos3-pad2-cell-error.png"),
+        &err,
+        png,
+    )
+    .unwrap();
     eprintln!(
         "cell-averaged, Lanczos-3, padding 2, oblique: {:.4} against the pixel-averaged truth",
         rel_rmse(&img.data, &truth)

@@ -216,8 +216,8 @@ gpu_cases! {
 /// Accumulated jittered frames on the GPU match the CPU's (same seeds).
 #[test]
 fn gpu_accumulation_matches_the_cpu() {
-    use voxlab::accumulate::render_accumulated;
-    use voxlab::render::{Backend, Renderer, Scene};
+    use voxlab::jobs::accumulate::render_accumulated;
+    use voxlab::jobs::render::{Backend, Renderer, Scene};
     let Some(_) = common::gpu("gpu_accumulation_matches_the_cpu") else {
         return;
     };

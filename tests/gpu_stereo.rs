@@ -5,11 +5,11 @@ mod common;
 
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
+use voxlab::jobs::render::{Backend, Renderer, Scene};
+use voxlab::jobs::stereo::{combine, render_pair, render_pair_gpu, StereoLayout};
 use voxlab::metrics::Tolerance;
 use voxlab::phantom::Phantom;
-use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::{Mode, RenderSettings};
-use voxlab::stereo::{combine, render_pair, render_pair_gpu, StereoLayout};
 use voxlab::transfer::TransferFunction;
 
 /// The ray caster's exact-path tolerances (tests/gpu_raycast.rs: EXACT_DVR, and

@@ -409,7 +409,7 @@ fn clip_box_in_world_space_is_an_exact_chord() {
 /// The wood-grain scene: unshaded DVR of the modified Shepp–Logan (32³) with the
 /// `phantom` preset's thin opacity bands, a coarse step of 1.5 voxels, oblique
 /// orthographic view.
-fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
+fn grain_scene() -> (voxlab::jobs::render::Scene, RenderSettings) {
     let volume = phantom(32);
     let camera = camera(&volume, Cam::Ortho, 48);
     let mut s = RenderSettings {
@@ -417,7 +417,7 @@ fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
         ..RenderSettings::default()
     };
     s.shading.enabled = false;
-    let scene = voxlab::render::Scene {
+    let scene = voxlab::jobs::render::Scene {
         volume,
         transfer: TransferFunction::preset("phantom").unwrap(),
         camera,
@@ -435,8 +435,8 @@ fn rmse(a: &[f64], b: &[f64]) -> f64 {
 /// (N = 16 is 0.33× N = 1 and 0.31× the unjittered error).
 #[test]
 fn accumulated_jitter_converges_to_the_fine_step_reference() {
-    use voxlab::accumulate::render_accumulated;
-    use voxlab::render::{Backend, Renderer};
+    use voxlab::jobs::accumulate::render_accumulated;
+    use voxlab::jobs::render::{Backend, Renderer};
     let (scene, s) = grain_scene();
     let cpu = Renderer::new(Backend::Cpu).unwrap();
     let fine = RenderSettings {
@@ -488,7 +488,7 @@ fn accumulated_jitter_converges_to_the_fine_step_reference() {
 /// seed; the Bayer pattern covers 16 distinct offsets.
 #[test]
 fn jitter_offsets_are_uniform_and_reproducible() {
-    use voxlab::accumulate::{interleaved_offset, jitter_offset, pcg_hash};
+    use voxlab::jobs::accumulate::{interleaved_offset, jitter_offset, pcg_hash};
     // Reference values of the PCG hash (Jarzynski & Olano 2020), computed with Python integers.
     assert_eq!(pcg_hash(0), 129_708_002);
     let mut sum = 0.0;

@@ -6,10 +6,10 @@ use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::raycast::render;
 use voxlab::frame::Frame;
+use voxlab::jobs::render::{Backend, Renderer, Scene};
+use voxlab::jobs::stereo::{combine, stereo_cameras, StereoLayout};
 use voxlab::phantom::Phantom;
-use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::RenderSettings;
-use voxlab::stereo::{combine, stereo_cameras, StereoLayout};
 use voxlab::transfer::{
     bernstein3, faux_shade, ControlPoint, Interpolation, TransferFunction, WindowMap, HU_PRESETS,
 };
@@ -514,7 +514,7 @@ fn stereo_with_zero_separation_equals_the_mono_render() {
     let s = RenderSettings::default();
     let r = pixel_renderer();
     let mono = r.render(&sc, &s, none()).unwrap().output.image;
-    let pair = voxlab::stereo::render_pair(&r, &sc, &s, 0.0, 540.0, none()).unwrap();
+    let pair = voxlab::jobs::stereo::render_pair(&r, &sc, &s, 0.0, 540.0, none()).unwrap();
     assert_eq!(pair.cameras.shift_px, 0);
     assert_eq!(pair.left.data, mono.data);
     assert_eq!(pair.right.data, mono.data);
@@ -525,7 +525,7 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
     let sc = scene(16, 24, 18);
     let s = RenderSettings::default();
     let r = pixel_renderer();
-    let pair = voxlab::stereo::render_pair(&r, &sc, &s, 65.0, 540.0, none()).unwrap();
+    let pair = voxlab::jobs::stereo::render_pair(&r, &sc, &s, 65.0, 540.0, none()).unwrap();
     // s = e·H/(4 D tan 15°) = 65·18/(4·540·0.268) = 2.02 → 2 px.
     assert_eq!(pair.cameras.shift_px, 2);
     assert!(
@@ -564,7 +564,10 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
         ..sc.clone()
     };
     let full = r.render(&wide, &s, none()).unwrap().output.image;
-    assert_eq!(voxlab::stereo::crop_columns(&full, 4, 24).data, l.data);
+    assert_eq!(
+        voxlab::jobs::stereo::crop_columns(&full, 4, 24).data,
+        l.data
+    );
     // Orthographic cameras are refused.
     let mut ortho = sc.camera.clone();
     ortho.projection = Projection::Orthographic {

@@ -9,15 +9,16 @@ use crate::error::Result;
 use crate::gpu::GpuContext;
 use crate::metrics::Tolerance;
 
-/// Which suite a case belongs to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Suite {
-    /// Tiny inputs, every algorithm once: under a minute even on lavapipe. A smoke test
-    /// of correctness, not of speed.
-    Quick,
-    /// The real sizes (volumes 64³ … 512³, images 256² … 1024², where memory allows).
-    Full,
+crate::choice_enum! {
+    /// Which suite a case belongs to.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Suite: "suite" {
+        /// Tiny inputs, every algorithm once: under a minute even on lavapipe. A smoke
+        /// test of correctness, not of speed.
+        Quick = "quick",
+        /// The real sizes (volumes 64³ … 512³, images 256² … 1024², where memory allows).
+        Full = "full",
+    }
 }
 
 /// One timed CPU run: the wall-clock time of the computation alone (inputs built

@@ -2,7 +2,7 @@
 //! volume rendering (`fvr`).
 //!
 //! **fft.** The forward, unnormalised complex FFT of random values (uniform in
-//! `[−1, 1)` in both parts, [`crate::fft_check::random_complex`] with a fixed seed) in
+//! `[−1, 1)` in both parts, [`crate::jobs::fft::random_complex`] with a fixed seed) in
 //! 2-D (`256²`, `512²`, `1024²`) and 3-D (`64³`, `128³`, `256³`). The oracle is the f64
 //! FFT ([`crate::cpu::fft::fft_nd`], rustfft along every axis, all rayon threads): the
 //! exact DFT costs `N·ΣN_axis` multiply-adds (`1.8·10¹¹` at `256³`) and is far too slow
@@ -37,10 +37,10 @@ use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fft::fft_nd;
 use crate::cpu::fvr::{fvr_project, FvrSpectrum, FvrView, Kernel};
 use crate::error::Result;
-use crate::fft_check::random_complex;
 use crate::gpu::fft::{GpuFftPlan, GpuFftVariant};
 use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum};
 use crate::gpu::GpuContext;
+use crate::jobs::fft::random_complex;
 use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::volume::Volume;

@@ -7,7 +7,7 @@
 //! backend that failed it has no timings (a fast wrong answer never counts).
 
 use super::machine::Machine;
-use super::{Backends, Suite, Unit, Work, FAMILIES};
+use super::{BackendSet, Suite, Unit, Work, FAMILIES};
 use crate::error::{Error, Result};
 use crate::metrics::{error_stats, Tolerance};
 use std::fmt::Write as _;
@@ -370,7 +370,7 @@ pub struct Report {
     /// Timed runs asked for per backend (the budget may have cut some short).
     pub runs: usize,
     pub warmup: usize,
-    pub backends: Backends,
+    pub backends: BackendSet,
     /// Per backend and case: no more timed runs once `min_runs` are done and this many
     /// seconds are spent.
     pub budget_seconds: f64,

@@ -560,6 +560,8 @@ pub fn render_field_with<R: Real, F: Field<R>>(
         .par_chunks_mut(w * channels)
         .zip(counts.par_chunks_mut(w))
         .enumerate()
+        // A cancelled render unwinds from `progress`; the fuse stops the other rows.
+        .panic_fuse()
         .for_each(|(row, (pixels, row_counts))| {
             if let Some((src, s32)) = &packets {
                 if cast_row_packets(src, s32, camera, settings, row, pixels, row_counts) {
@@ -569,7 +571,7 @@ pub fn render_field_with<R: Real, F: Field<R>>(
             }
             for col in 0..w {
                 let ray = camera.ray(col, row);
-                let u = R::of(crate::accumulate::ray_offset(settings, col, row));
+                let u = R::of(crate::jobs::accumulate::ray_offset(settings, col, row));
                 let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray, u);
                 for (c, v) in px.iter().take(channels).enumerate() {
                     pixels[col * channels + c] = v.f64();
@@ -933,7 +935,7 @@ fn cast_row_packets(
             let col = next_col;
             next_col += 1;
             let ray = camera.ray(col, row);
-            let u = crate::accumulate::ray_offset(settings, col, row) as f32;
+            let u = crate::jobs::accumulate::ray_offset(settings, col, row) as f32;
             let Some(plan) = plan_ray(s, &ray, u) else {
                 put(col, s.bg, 0);
                 continue;

@@ -20,9 +20,9 @@
 //! (`shaders/shared/skip.wgsl: pcg_hash, ray_offset`), so the CPU and the GPU jitter
 //! the same pixel by the same amount. `u` has 24 bits, exact in f32 and f64.
 
+use super::render::{Rendered, Renderer, Scene};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::render::{Rendered, Renderer, Scene};
 use crate::settings::RenderSettings;
 
 /// The 4×4 ordered (Bayer) pattern of interleaved sampling.
