@@ -13,6 +13,13 @@ pub struct Frame {
     pub data: Vec<f64>,
 }
 
+/// A frame's samples, row-major, channels interleaved.
+impl AsRef<[f64]> for Frame {
+    fn as_ref(&self) -> &[f64] {
+        &self.data
+    }
+}
+
 impl Frame {
     /// A frame of zeros.
     pub fn new(width: usize, height: usize, channels: usize) -> Self {

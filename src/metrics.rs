@@ -353,6 +353,19 @@ fn measure<V: Value>(n: usize, pair: impl Fn(usize) -> (V, V), max_abs: f64) -> 
     s
 }
 
+/// The largest |a − b| over two real arrays (or frames) of one length, in f64; ∞ when
+/// one holds a NaN or infinity the other lacks there, so that any bound on it fails.
+/// For code that bounds this one number itself rather than through a [`Tolerance`].
+pub fn max_abs_error<A, B>(a: &(impl AsRef<[A]> + ?Sized), b: &(impl AsRef<[B]> + ?Sized)) -> f64
+where
+    A: Copy + Into<f64>,
+    B: Copy + Into<f64>,
+{
+    error_stats(a.as_ref(), b.as_ref(), f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
+}
+
 /// Computes the statistics of `port` against `oracle` (real values, f32 or f64 on
 /// either side); `max_abs` decides `n_over`. Panics when the lengths differ.
 pub fn error_stats<A, B>(oracle: &[A], port: &[B], max_abs: f64) -> ErrorStats

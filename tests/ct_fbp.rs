@@ -22,13 +22,6 @@ fn max_abs(a: &[f64]) -> f64 {
     a.iter().fold(0.0f64, |m, v| m.max(v.abs()))
 }
 
-/// The largest |port − oracle| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
-fn max_diff<T: Copy + Into<f64>>(oracle: &[f64], port: &[T]) -> f64 {
-    voxlab::metrics::error_stats(oracle, port, f64::INFINITY)
-        .infinite_if_mismatched()
-        .max_abs
-}
-
 #[test]
 fn padded_length_is_skimages() {
     assert_eq!(padded_length(1), 64);
@@ -138,7 +131,7 @@ fn direct_and_fft_filtering_agree() {
             let d = filter_projections(&p, g, f, FilterMethod::Direct).unwrap();
             let q = filter_projections(&p, g, f, FilterMethod::Fft).unwrap();
             let scale = max_abs(&d.data);
-            let err = max_diff(&d.data, &q.data);
+            let err = max_abs_error(&d.data, &q.data);
             // f64 FFT vs direct: measured worst 1.1e-15 relative to the data scale.
             assert!(err < 1e-14 * scale, "case {i} {f:?}: {err}");
             let p32 = Projections::new(
@@ -149,7 +142,7 @@ fn direct_and_fft_filtering_agree() {
             )
             .unwrap();
             let q32 = filter_projections(&p32, g, f, FilterMethod::Fft).unwrap();
-            let err = max_diff(&d.data, &q32.data);
+            let err = max_abs_error(&d.data, &q32.data);
             // f32 FFT vs the f64 oracle: measured worst 1.8e-7 relative to the data scale.
             assert!(err < 1e-6 * scale, "case {i} {f:?} f32: {err}");
         }
@@ -197,6 +190,7 @@ use voxlab::cpu::fbp::{
 };
 use voxlab::cpu::project::project_phantom;
 use voxlab::ct::{ct_to_phantom, phantom_to_ct};
+use voxlab::metrics::max_abs_error;
 use voxlab::phantom::{Phantom, Primitive, Shape};
 
 fn none(_: usize, _: usize) {}
@@ -227,7 +221,7 @@ fn grid_backprojection_equals_the_per_point_sum() {
             .collect();
         let want = reconstruct_points(&q, &g, &pts).unwrap();
         let scale = max_abs(&want);
-        let err = max_diff(&want, &vol.data);
+        let err = max_abs_error(&want, &vol.data);
         // Measured worst (relative to the data scale): 2.5e-15 parallel, 2.8e-15 stack,
         // 4.2e-15 cone, 5.7e-15 tilted cone — rounding of `a + i·b` against the
         // per-point dot products.
@@ -241,7 +235,7 @@ fn grid_backprojection_equals_the_per_point_sum() {
         )
         .unwrap();
         let v32 = backproject(&q32, &g, &grid, &none).unwrap();
-        let err = max_diff(&vol.data, &v32.data);
+        let err = max_abs_error(&vol.data, &v32.data);
         assert!(err < 1e-5 * scale, "{name} f32: {:e}", err / scale);
     }
 }
@@ -434,7 +428,7 @@ fn ramp_filtered_sinogram_equals_scikit_images() {
             let q = filter_projections(&p, &g, RampFilter::RamLak, m).unwrap();
             // The fixture is (detector, angle) with the angle fastest: ours transposed.
             let ours: Vec<f64> = (0..n * a).map(|i| q.data[(i % a) * n + i / a]).collect();
-            let worst = max_diff(&want, &ours);
+            let worst = max_abs_error(&want, &ours);
             // Measured worst, relative: Direct 6.5e-16, FFT 9.8e-16.
             assert!(worst < 1e-14 * scale, "{n} {m:?}: {worst:e}");
         }
@@ -464,7 +458,7 @@ fn fbp_equals_scikit_images_iradon_for_every_filter() {
                 .filter(|&x| inside(x % n, x / n, 1))
                 .map(|x| (want[x], vol.get(x % n, x / n, 0)))
                 .unzip();
-            let worst = max_diff(&theirs, &ours);
+            let worst = max_abs_error(&theirs, &ours);
             // Measured worst, relative, inside the circle minus one pixel: 4.9e-15
             // (ramp, n = 64); every filter and both sizes below 5e-15.
             assert!(worst < 3e-14 * scale, "{n} {f:?}: {worst:e}");

@@ -12,6 +12,7 @@ use voxlab::cpu::d2vr::{
     ProjectionField,
 };
 use voxlab::ct::{ct_to_phantom, Geometry, Projections};
+use voxlab::metrics::max_abs_error;
 use voxlab::real::{Real, V3};
 use voxlab::settings::{Classification, Mode, RenderSettings};
 
@@ -55,13 +56,6 @@ fn run<R: Real>(
         quiet(),
     )
     .unwrap()
-}
-
-/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
-fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
-    voxlab::metrics::error_stats(a, b, f64::INFINITY)
-        .infinite_if_mismatched()
-        .max_abs
 }
 
 /// X-ray mode of D²VR of a uniform sphere (radius 64 mm, density 1) from 64 Ram-Lak
@@ -180,9 +174,9 @@ fn accelerations_keep_the_image_and_cut_the_work() {
             Some(&occ),
             32,
         );
-        let d_cyl = max_abs_diff(&plain.render.image.data, &culled.render.image.data);
-        let d_ert = max_abs_diff(&culled.render.image.data, &ert.render.image.data);
-        let d_occ = max_abs_diff(&ert.render.image.data, &both.render.image.data);
+        let d_cyl = max_abs_error(&plain.render.image.data, &culled.render.image.data);
+        let d_ert = max_abs_error(&culled.render.image.data, &ert.render.image.data);
+        let d_occ = max_abs_error(&ert.render.image.data, &both.render.image.data);
         eprintln!(
             "{name}: fraction plain {:.3} cylinder {:.3} +ERT {:.3} +occupancy {:.3} (mask {:.3}); \
              max diff cylinder {d_cyl:.2e} ERT {d_ert:.2e} occupancy {d_occ:.2e}",

@@ -7,7 +7,7 @@ mod common;
 
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
-use voxlab::frame::Frame;
+use voxlab::metrics::max_abs_error;
 use voxlab::metrics::Tolerance;
 use voxlab::multi::{rotation_translation, MultiVolume};
 use voxlab::phantom::Phantom;
@@ -222,17 +222,6 @@ parity_cases! {
     minip_two_volumes_ortho: Case { mode: Mode::Minip, ortho: true, ..BASE };
 }
 
-/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
-fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(
-        (a.width, a.height, a.channels),
-        (b.width, b.height, b.channels)
-    );
-    voxlab::metrics::error_stats(&a.data, &b.data, f64::INFINITY)
-        .infinite_if_mismatched()
-        .max_abs
-}
-
 /// One volume placed by the identity is the GPU single-volume caster: the same steps
 /// and samples; DVR differs only in rounding (the multi-volume caster sums optical
 /// depth, `τ += −ln1p(−α)·x`, and composites `−expm1(−τ)`; the single caster corrects
@@ -275,7 +264,7 @@ fn one_volume_identity_equals_gpu_single_volume_caster() {
         .output
         .image;
         let scale = single.data.iter().fold(1.0f64, |m, x| m.max(x.abs()));
-        let d = max_diff(&single, &multi) / scale;
+        let d = max_abs_error(&single, &multi) / scale;
         eprintln!("{mode:?} shading {shading}: max |Δ| {d:.2e} (relative)");
         assert!(
             d <= bound,

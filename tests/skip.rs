@@ -24,6 +24,7 @@ fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
 use common::sparse_tf;
 
 use common::odd_phantom as phantom;
+use voxlab::metrics::max_abs_error;
 
 #[derive(Clone, Copy, Debug)]
 enum Cam {
@@ -287,7 +288,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip)), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("x-ray clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, nearest, step ½ on the axis view: the clipped rays start on the box face,
@@ -305,7 +306,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip), Filter::Nearest), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None, Filter::Nearest), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("dvr nearest clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, trilinear: the zeroed volume blends the zeros in over one voxel at every
@@ -319,7 +320,7 @@ fn clip_box_matches_zeroed_voxels() {
         for col in 0..n {
             // Axis view −y: columns along x, rows along z (top = high z).
             let (x, z) = (col, n - 1 - row);
-            let dd = max_diff(
+            let dd = max_abs_error(
                 &a.image.data[(row * n + col) * 4..][..4],
                 &b.image.data[(row * n + col) * 4..][..4],
             );
@@ -334,13 +335,6 @@ fn clip_box_matches_zeroed_voxels() {
     eprintln!("dvr trilinear clip vs zeroed: outside {outside:e}, through the box {inside:e}");
     assert!(outside < 1e-12, "{outside}");
     assert!(inside < 0.5, "{inside}");
-}
-
-/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    voxlab::metrics::error_stats(a, b, f64::INFINITY)
-        .infinite_if_mismatched()
-        .max_abs
 }
 
 /// X-ray of a constant volume through a world-space clip box: every ray that crosses

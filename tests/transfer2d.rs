@@ -5,9 +5,9 @@
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::raycast::render;
-use voxlab::frame::Frame;
 use voxlab::jobs::render::{Backend, Renderer, Scene};
 use voxlab::jobs::stereo::{combine, stereo_cameras, StereoLayout};
+use voxlab::metrics::max_abs_error;
 use voxlab::phantom::Phantom;
 use voxlab::settings::RenderSettings;
 use voxlab::transfer::{
@@ -273,17 +273,6 @@ fn scene(n: usize, w: usize, h: usize) -> Scene {
     }
 }
 
-/// The largest |a − b| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
-fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(
-        (a.width, a.height, a.channels),
-        (b.width, b.height, b.channels)
-    );
-    voxlab::metrics::error_stats(&a.data, &b.data, f64::INFINITY)
-        .infinite_if_mismatched()
-        .max_abs
-}
-
 /// A 1D transfer function converted to 2D renders exactly like the 1D one: the 2D
 /// table's value nodes coincide with the 1D table's (same size, domain and window), its
 /// two gradient rows are equal, so the bilinear read is the 1D linear read plus
@@ -305,8 +294,8 @@ fn a_converted_1d_transfer_function_renders_like_the_1d_one() {
         let two = render::<f64>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
         let two32 = render::<f32>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
         let (d, d32) = (
-            max_diff(&one.image, &two.image),
-            max_diff(&one32.image, &two32.image),
+            max_abs_error(&one.image, &two.image),
+            max_abs_error(&one32.image, &two32.image),
         );
         eprintln!("1D vs converted 2D, shading {shading}: f64 {d:e}, f32 {d32:e}");
         assert!(d <= 1e-12 && d32 <= 1e-6, "{d:e} {d32:e}");
@@ -370,7 +359,7 @@ fn gradient_magnitude_in_world_units_selects_what_is_seen() {
     let got = render::<f64>(&vol, &constant, &cam, &s, none())
         .unwrap()
         .image;
-    let d = max_diff(&want, &got);
+    let d = max_abs_error(&want, &got);
     assert!(d < 1e-12, "{d:e}");
     s.transfer_2d = Some(band([2.5, 8.0]));
     let got = render::<f64>(&vol, &constant, &cam, &s, none())
@@ -529,7 +518,7 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
     // s = e·H/(4 D tan 15°) = 65·18/(4·540·0.268) = 2.02 → 2 px.
     assert_eq!(pair.cameras.shift_px, 2);
     assert!(
-        max_diff(&pair.left, &pair.right) > 0.01,
+        max_abs_error(&pair.left, &pair.right) > 0.01,
         "the eyes see differently"
     );
     let (l, rt) = (&pair.left, &pair.right);
