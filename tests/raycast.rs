@@ -81,15 +81,9 @@ fn xray_of_ellipsoids_converges_to_the_exact_line_integrals() {
                 no_progress(),
             )
             .unwrap();
-            let errs: Vec<f64> = out
-                .image
-                .data
-                .iter()
-                .zip(&exact)
-                .map(|(a, b)| a - b)
-                .collect();
-            let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
-            let max = errs.iter().map(|e| e.abs()).fold(0.0, f64::max);
+            let e = voxlab::metrics::error_stats(&exact, &out.image.data, f64::INFINITY)
+                .infinite_if_mismatched();
+            let (rms, max) = (e.rmse, e.max_abs);
             let bound = abs_density * 2.0 * step * spacing * 1.000001;
             eprintln!("{name} step {step}: rms {rms:.4} max {max:.4} (bound {bound:.4}) value·mm");
             assert!(

@@ -25,6 +25,7 @@ fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
 use common::sparse_tf;
 
 use common::odd_phantom as phantom;
+use voxlab::metrics::max_abs_error;
 
 #[derive(Clone, Copy, Debug)]
 enum Cam {
@@ -288,7 +289,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip)), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("x-ray clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, nearest, step ½ on the axis view: the clipped rays start on the box face,
@@ -306,7 +307,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip), Filter::Nearest), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None, Filter::Nearest), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("dvr nearest clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, trilinear: the zeroed volume blends the zeros in over one voxel at every
@@ -320,7 +321,7 @@ fn clip_box_matches_zeroed_voxels() {
         for col in 0..n {
             // Axis view −y: columns along x, rows along z (top = high z).
             let (x, z) = (col, n - 1 - row);
-            let dd = max_diff(
+            let dd = max_abs_error(
                 &a.image.data[(row * n + col) * 4..][..4],
                 &b.image.data[(row * n + col) * 4..][..4],
             );
@@ -335,13 +336,6 @@ fn clip_box_matches_zeroed_voxels() {
     eprintln!("dvr trilinear clip vs zeroed: outside {outside:e}, through the box {inside:e}");
     assert!(outside < 1e-12, "{outside}");
     assert!(inside < 0.5, "{inside}");
-}
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
 }
 
 /// X-ray of a constant volume through a world-space clip box: every ray that crosses
@@ -410,7 +404,7 @@ fn clip_box_in_world_space_is_an_exact_chord() {
 /// The wood-grain scene: unshaded DVR of the modified Shepp–Logan (32³) with the
 /// `phantom` preset's thin opacity bands, a coarse step of 1.5 voxels, oblique
 /// orthographic view.
-fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
+fn grain_scene() -> (voxlab::jobs::render::Scene, RenderSettings) {
     let volume = phantom(32);
     let camera = camera(&volume, Cam::Ortho, 48);
     let mut s = RenderSettings {
@@ -418,7 +412,7 @@ fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
         ..RenderSettings::default()
     };
     s.shading.enabled = false;
-    let scene = voxlab::render::Scene {
+    let scene = voxlab::jobs::render::Scene {
         volume,
         transfer: TransferFunction::preset("phantom").unwrap(),
         camera,
@@ -436,8 +430,8 @@ fn rmse(a: &[f64], b: &[f64]) -> f64 {
 /// (N = 16 is 0.33× N = 1 and 0.31× the unjittered error).
 #[test]
 fn accumulated_jitter_converges_to_the_fine_step_reference() {
-    use voxlab::accumulate::render_accumulated;
-    use voxlab::render::{Backend, Renderer};
+    use voxlab::jobs::accumulate::render_accumulated;
+    use voxlab::jobs::render::{Backend, Renderer};
     let (scene, s) = grain_scene();
     let cpu = Renderer::new(Backend::Cpu).unwrap();
     let fine = RenderSettings {

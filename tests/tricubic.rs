@@ -250,13 +250,12 @@ fn fast_renders_equal_64_tap_renders_in_f64() {
 /// the short aliases.
 #[test]
 fn fast_filters_have_their_names() {
-    use clap::ValueEnum;
     for (f, name) in [
         (Filter::BsplineFast, "cubic-bspline-fast"),
         (Filter::BsplineFastInterp, "cubic-bspline-fast-interp"),
     ] {
         assert_eq!(f.name(), name);
-        assert_eq!(Filter::from_str(name, false).unwrap(), f);
+        assert_eq!(name.parse::<Filter>().unwrap(), f);
         assert_eq!(serde_json::to_string(&f).unwrap(), format!("\"{name}\""));
         assert_eq!(
             serde_json::from_str::<Filter>(&format!("\"{name}\"")).unwrap(),
@@ -265,7 +264,7 @@ fn fast_filters_have_their_names() {
         assert_eq!(f.radius(), 2);
     }
     assert_eq!(
-        Filter::from_str("bspline-fast", false).unwrap(),
+        "bspline-fast".parse::<Filter>().unwrap(),
         Filter::BsplineFast
     );
     assert_eq!(Filter::BsplineFast.exact(), Filter::Bspline);

@@ -64,29 +64,23 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
-/// Where the samples of a ray go.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Sampling {
-    /// Fixed steps of `step` voxels (the reference).
-    Regular,
-    /// Steps from the transfer function's spectrum and the importance volume (Suwelack
-    /// et al. 2010).
-    Adaptive,
-    /// Steps from the local spectrum of the classified volume (the upper bound; must be
-    /// recomputed for every transfer function).
-    Direct,
+crate::choice_enum! {
+    /// Where the samples of a ray go.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Sampling: "sampling" {
+        /// Fixed steps of `step` voxels (the reference).
+        Regular = "regular",
+        /// Steps from the transfer function's spectrum and the importance volume (Suwelack
+        /// et al. 2010).
+        Adaptive = "adaptive",
+        /// Steps from the local spectrum of the classified volume (the upper bound; must be
+        /// recomputed for every transfer function).
+        Direct = "direct",
+    }
 }
 
 impl Sampling {
     pub const ALL: [Sampling; 3] = [Sampling::Regular, Sampling::Direct, Sampling::Adaptive];
-    pub fn name(self) -> &'static str {
-        match self {
-            Sampling::Regular => "regular",
-            Sampling::Adaptive => "adaptive",
-            Sampling::Direct => "direct",
-        }
-    }
 }
 
 /// Settings of the adaptive ray caster.

@@ -223,6 +223,7 @@ pub fn render_layers<R: Real>(
         .par_chunks_mut(w * channels)
         .zip(counts.par_chunks_mut(w))
         .enumerate()
+        .panic_fuse()
         .for_each(|(row, (pixels, row_counts))| {
             for col in 0..w {
                 let (px, n) = cast_multi(&prepared, &common, camera.ray(col, row));

@@ -397,6 +397,7 @@ pub fn project_volume<R: Real>(
     out.data
         .par_chunks_mut(per_view)
         .enumerate()
+        .panic_fuse()
         .for_each(|(k, img)| {
             img.par_chunks_mut(g.cols)
                 .enumerate()

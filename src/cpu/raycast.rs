@@ -375,6 +375,8 @@ pub fn render_field_with<R: Real, F: Field<R>>(
         .par_chunks_mut(w * channels)
         .zip(counts.par_chunks_mut(w))
         .enumerate()
+        // A cancelled render unwinds from `progress`; the fuse stops the other rows.
+        .panic_fuse()
         .for_each(|(row, (pixels, row_counts))| {
             if let Some((src, s32)) = &packets {
                 if cast_row_packets(src, s32, camera, settings, row, pixels, row_counts) {

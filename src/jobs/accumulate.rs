@@ -5,9 +5,9 @@
 //! 1, …`) shrinks that noise like `1/√N` towards the exact integral. Both backends
 //! jitter each pixel by the same offsets.
 
+use super::render::{Rendered, Renderer, Scene};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::render::{Rendered, Renderer, Scene};
 use crate::settings::RenderSettings;
 
 /// Renders `frames` frames jittered with seeds `seed, seed + 1, …` and averages them
