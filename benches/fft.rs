@@ -24,9 +24,9 @@ use std::time::Instant;
 use voxlab::bench::fourier::fft_input;
 use voxlab::cpu::dft::{Direction, Normalization};
 use voxlab::cpu::fft::fft_nd;
-use voxlab::fft_check::rel_l2;
 use voxlab::gpu::fft::{fft_nd_timed, GpuFftVariant};
 use voxlab::gpu::GpuContext;
+use voxlab::jobs::fft::rel_l2;
 
 const FWD: Direction = Direction::Forward;
 const INV: Direction = Direction::Inverse;

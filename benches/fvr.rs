@@ -14,7 +14,7 @@
 //!   of the f32 ray caster) and on the GPU (`gpu::fvr::fvr_project`: slice dispatch, inverse FFT,
 //!   readback, crop), oblique view (azimuth 30°, elevation 20°), trilinear and
 //!   Lanczos-3 slicing, with de-apodisation;
-//! - **ray-cast X-ray** of the same volume and view (`voxlab::render`, `Mode::Xray`,
+//! - **ray-cast X-ray** of the same volume and view (`voxlab::jobs::render`, `Mode::Xray`,
 //!   trilinear, step 1 voxel) on the CPU in f32 (the fair CPU baseline) and on the GPU,
 //!   at the FVR's own image (`n²`, pixel = voxel, the same pixel rays) and at 512²
 //!   (Jansen's image size, over the same field of view);
@@ -38,7 +38,7 @@ use std::time::Instant;
 use voxlab::bench::fourier::{fvr_volume, FVR_PADDING, FVR_VIEW};
 use voxlab::camera::Camera;
 use voxlab::cpu::fvr::{fvr_project, FvrSpectrum, Kernel};
-use voxlab::render::{Backend, Renderer, Scene};
+use voxlab::jobs::render::{Backend, Renderer, Scene};
 use voxlab::settings::{Filter, Mode, RenderSettings};
 use voxlab::transfer::TransferFunction;
 use voxlab::volume::AnyVolume;
@@ -57,13 +57,11 @@ fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> (T, f64) {
     (first, median_min_max(t).0)
 }
 
+/// ‖a − b‖ / ‖b‖, `b` the reference (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn rel_l2(a: &[f64], b: &[f64]) -> f64 {
-    let (mut d, mut r) = (0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        d += (x - y) * (x - y);
-        r += y * y;
-    }
-    (d / r.max(f64::MIN_POSITIVE)).sqrt()
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 fn ms(t: f64) -> String {

@@ -36,14 +36,11 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (median_min_max(t).0, out)
 }
 
+/// max |p − oracle| / max |oracle| (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn max_rel<T: Copy + Into<f64>>(p: &Projections<T>, oracle: &Projections<f64>) -> f64 {
-    let peak = oracle.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    p.data
-        .iter()
-        .zip(&oracle.data)
-        .map(|(a, b)| ((*a).into() - b).abs())
-        .fold(0.0, f64::max)
-        / peak
+    voxlab::metrics::error_stats(&oracle.data, &p.data, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs_rel
 }
 
 fn main() {

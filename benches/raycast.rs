@@ -84,11 +84,9 @@ fn main() {
                         name,
                         &oracle.image,
                         &g.output.image,
-                        voxlab::metrics::Tolerance {
-                            max_abs: raycast_tolerances(&s).1.max_abs_rel
-                                * oracle.image.data.iter().fold(0.0f64, |m, v| m.max(v.abs())),
-                            rmse: f64::INFINITY,
-                        },
+                        voxlab::metrics::Tolerance::max_abs_rel(
+                            raycast_tolerances(&s).1.max_abs_rel,
+                        ),
                         None,
                     )
                     .unwrap();

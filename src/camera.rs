@@ -1,5 +1,6 @@
-//! Cameras: orthographic and perspective, orbit parameters, axis-aligned views, ray
-//! generation and ray–box intersection.
+//! Cameras: orthographic and perspective, orbit parameters, axis-aligned views and ray
+//! generation. Rays are clipped to boxes with the slab test of `crate::real`
+//! ([`intersect_box`](crate::real::intersect_box), [`slab_interval`](crate::real::slab_interval)).
 //!
 //! Image conventions: row 0 is at the top; pixel `(col, row)` has its centre at image
 //! coordinates `(col + 0.5, row + 0.5)`. A camera is an eye (or, for orthographic views,
@@ -336,12 +337,6 @@ impl Camera {
     pub fn ray(&self, col: usize, row: usize) -> Ray {
         self.ray_at(col as f64 + 0.5, row as f64 + 0.5)
     }
-}
-
-/// Entry and exit parameters of the ray `o + t d` through the box `[lo, hi]` (slab
-/// method), or `None` when it misses. Mirrors `shaders/shared/rays.wgsl: intersect_box`.
-pub fn intersect_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
-    crate::phantom::slab_interval(o, d, lo, hi)
 }
 
 #[cfg(test)]

@@ -451,6 +451,30 @@ impl<T: Copy + Default> Projections<T> {
     }
 }
 
+impl Projections<f64> {
+    /// The same stack rounded to f32.
+    pub fn narrow(&self) -> Result<Projections<f32>> {
+        Projections::new(
+            self.angles,
+            self.rows,
+            self.cols,
+            self.data.iter().map(|&v| v as f32).collect(),
+        )
+    }
+}
+
+impl Projections<f32> {
+    /// The same stack in f64 (exact).
+    pub fn widen(self) -> Projections<f64> {
+        Projections {
+            angles: self.angles,
+            rows: self.rows,
+            cols: self.cols,
+            data: self.data.into_iter().map(f64::from).collect(),
+        }
+    }
+}
+
 /// The rotation that places a [`crate::phantom::Phantom`] in the CT frame:
 /// phantom `(x, y, z)` → CT `(X, Y, Z) = (x, z, −y)`. The phantom's z axis (head–foot)
 /// becomes the rotation axis, and its axial slice `z = 0` lies in the plane `Y = 0`

@@ -44,6 +44,17 @@ pub enum Error {
     /// A GPU operation failed (shader compilation, out of memory, device lost).
     #[error("GPU error: {0}")]
     Gpu(String),
+    /// A job was asked for on a backend that does not implement it (or one of its
+    /// features): names the job (or feature) and the backend.
+    #[error("{job} does not run on the {backend} backend: {message}")]
+    Unsupported {
+        job: String,
+        backend: String,
+        message: String,
+    },
+    /// The caller asked a job to stop (through its progress callback).
+    #[error("cancelled")]
+    Cancelled,
 }
 
 impl Error {
@@ -73,6 +84,19 @@ impl Error {
         Error::Io {
             path: path.into(),
             source,
+        }
+    }
+
+    /// Shorthand for [`Error::Unsupported`].
+    pub fn unsupported(
+        job: impl Into<String>,
+        backend: impl std::fmt::Display,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Unsupported {
+            job: job.into(),
+            backend: backend.to_string(),
+            message: message.into(),
         }
     }
 

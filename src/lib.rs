@@ -19,12 +19,36 @@
 //!
 //! `docs/conventions.md` states all of them in one place.
 //!
-//! ## Example
+//! ## The shape of the crate
 //!
-//! Render the modified Shepp–Logan phantom with the f64 oracle:
+//! Dependencies point one way: the leaves ([`error`], [`real`], [`choice`]) → the model
+//! ([`volume`], [`camera`], [`transfer`], [`transfer2d`], [`settings`], [`phantom`],
+//! [`ct`], [`frame`], [`multi`]) → [`io`] → [`cpu`] (the oracle) → [`gpu`] (the port)
+//! → [`jobs`] (one function per user task: what `voxlab render`, `reconstruct`, `fvr`
+//! … do) → [`bench`] → the `voxlab` binary, a thin shell over the jobs.
+//!
+//! ## Examples
+//!
+//! What `voxlab render` does, from a typed request:
 //!
 //! ```
-//! use voxlab::{camera::*, phantom::Phantom, render::*, settings::*, transfer::TransferFunction};
+//! use voxlab::jobs::{input::VolumeInput, render, Backend};
+//!
+//! let mut req = render::RenderRequest::default();
+//! req.scene.input = VolumeInput::new("phantom:shepp-logan-modified:32");
+//! (req.scene.width, req.scene.height) = (Some(48), Some(40));
+//! req.backend = Backend::CpuF32;
+//! let out = render::run(&req, &())?; // `&()`: no progress display, never cancelled
+//! assert_eq!((out.output.image.width, out.output.image.height), (48, 40));
+//! assert!(out.output.total_samples > 0);
+//! # Ok::<(), voxlab::Error>(())
+//! ```
+//!
+//! One level down, a scene rendered with the f64 oracle:
+//!
+//! ```
+//! use voxlab::{camera::*, phantom::Phantom, settings::*, transfer::TransferFunction};
+//! use voxlab::jobs::render::{render, Backend, Scene};
 //!
 //! let volume = Phantom::shepp_logan_modified().sample([32; 3])?.into();
 //! let camera = Camera::orbit(
@@ -38,28 +62,26 @@
 //! let scene = Scene { volume, transfer: TransferFunction::preset("phantom")?, camera };
 //! let out = render(&scene, &RenderSettings::default(), Backend::Cpu)?;
 //! assert_eq!((out.image.width, out.image.height, out.image.channels), (48, 48, 4));
-//! out.image.save(&std::env::temp_dir().join("voxlab-doc-head.png"), Default::default())?;
+//! let path = std::env::temp_dir().join("voxlab-doc-head.png");
+//! voxlab::io::write_frame(&path, &out.image, Default::default())?;
 //! # Ok::<(), voxlab::Error>(())
 //! ```
 
-pub mod accumulate;
 pub mod bench;
 pub mod camera;
+pub mod choice;
 pub mod cpu;
 pub mod ct;
-pub mod demo;
 pub mod error;
-pub mod fft_check;
 pub mod frame;
 pub mod gpu;
 pub mod io;
+pub mod jobs;
 pub mod metrics;
 pub mod multi;
 pub mod phantom;
 pub mod real;
-pub mod render;
 pub mod settings;
-pub mod stereo;
 pub mod transfer;
 pub mod transfer2d;
 pub mod volume;

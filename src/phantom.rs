@@ -23,6 +23,7 @@
 //! `Σ ((A p − c)_k / r_k)² ≤ 1` with `A` the (φ, θ, ψ) rotation matrix below.
 
 use crate::error::{Error, Result};
+use crate::real::slab_interval;
 use crate::volume::Volume;
 use glam::{DMat3, DVec3};
 
@@ -330,24 +331,13 @@ pub fn gauss_legendre_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
     (nodes, weights)
 }
 
-/// Ray–box intersection by the slab method: the parameter interval inside
-/// `[min, max]`, or `None` when the ray misses (or only grazes) the box.
-pub fn slab_interval(o: DVec3, d: DVec3, min: DVec3, max: DVec3) -> Option<(f64, f64)> {
-    let mut t0 = f64::NEG_INFINITY;
-    let mut t1 = f64::INFINITY;
-    for a in 0..3 {
-        if d[a] == 0.0 {
-            if o[a] < min[a] || o[a] > max[a] {
-                return None;
-            }
-        } else {
-            let ta = (min[a] - o[a]) / d[a];
-            let tb = (max[a] - o[a]) / d[a];
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
-        }
-    }
-    (t1 > t0).then_some((t0, t1))
+/// Phantom coordinates (the cube `[−1, 1]³`) of index-space point `p` in the grid of
+/// `dims` voxels that [`Phantom::sample`] uses: `(p + ½)·2/n − 1` on each axis, so that
+/// voxel `i` sits at the centre of the `i`-th of `n` equal cells of the cube.
+#[inline]
+pub fn index_to_phantom(p: [f64; 3], dims: [usize; 3]) -> DVec3 {
+    let c = |x: f64, n: usize| (x + 0.5) * 2.0 / n as f64 - 1.0;
+    DVec3::new(c(p[0], dims[0]), c(p[1], dims[1]), c(p[2], dims[2]))
 }
 
 impl Phantom {
@@ -501,9 +491,9 @@ impl Phantom {
     /// exactly covers its cube (see the module docs), as an f32 volume centred on the
     /// world origin.
     pub fn sample(&self, dims: [usize; 3]) -> Result<Volume<f32>> {
-        let c = |i: usize, n: usize| (i as f64 + 0.5) * 2.0 / n as f64 - 1.0;
         let mut v = Volume::from_fn(dims, [1.0; 3], |i, j, k| {
-            self.value_at(DVec3::new(c(i, dims[0]), c(j, dims[1]), c(k, dims[2]))) as f32
+            let p = [i as f64, j as f64, k as f64];
+            self.value_at(index_to_phantom(p, dims)) as f32
         })?;
         v.set_affine(self.grid_affine(dims))?;
         Ok(v)

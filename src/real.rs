@@ -1,7 +1,12 @@
-//! The floating-point abstraction the CPU oracle is generic over.
+//! The floating-point abstraction the CPU oracle is generic over, and the one ray–box
+//! slab test every ray in the crate is clipped with.
 //!
 //! Every CPU algorithm is written once for `R: Real` and instantiated at `f64` (the
 //! oracle) and `f32` (the fair speed baseline, and the precision the GPU works in).
+//! This module is a leaf: the model, the CPU oracle and the GPU port all import it,
+//! and it imports none of them (its f32 power is its own, [`pow01`]).
+
+pub mod pow01;
 
 use std::fmt::{Debug, Display};
 use std::iter::Sum;
@@ -18,7 +23,7 @@ pub trait Real:
     /// Converts to `f64` (exact).
     fn f64(self) -> f64;
     /// `self^e` for a transmittance `self ∈ [0, 1]` and `e > 0`: the library power in
-    /// f64, [`crate::cpu::pow01::pow01`] in f32 (which vector lanes reproduce bit for
+    /// f64, [`pow01::pow01`] in f32 (which vector lanes reproduce bit for
     /// bit).
     fn pow01(self, e: Self) -> Self;
 }
@@ -35,7 +40,7 @@ impl Real for f32 {
     }
     #[inline]
     fn pow01(self, e: Self) -> Self {
-        crate::cpu::pow01::pow01(self, e)
+        pow01::pow01(self, e)
     }
 }
 
@@ -172,4 +177,76 @@ impl<R: Real> M3<R> {
             m[2][0] * v.0[0] + m[2][1] * v.0[1] + m[2][2] * v.0[2],
         ])
     }
+}
+
+/// The ray–box slab test (Kay & Kajiya 1986): the parameter interval `(t0, t1)` of the
+/// ray `o + t·d` inside the axis-aligned box `[lo, hi]`, or `None` when the ray misses
+/// it or only grazes it (`t1 ≤ t0`). Each axis with `d ≠ 0` gives the interval between
+/// its two planes, `(lo − o)/d` and `(hi − o)/d`, and the intervals intersect; an axis
+/// with `d = 0` (either sign of zero) keeps every `t` when `lo ≤ o ≤ hi` (bounds
+/// inclusive) and none otherwise. A NaN component of `o` or `d` drops its axis out of
+/// the test (its comparisons are false, and `min`/`max` return the other operand of a
+/// NaN), so `t0` and `t1` are never NaN.
+///
+/// The distance to a plane becomes a ray parameter by multiplying with `1/d`, as the
+/// GPU does; [`slab_interval`] is the same test dividing by `d` instead (one rounding
+/// instead of two: the analytic phantom's chords and the world-space callers keep it).
+/// mirrors shaders/shared/rays.wgsl: intersect_box
+#[inline]
+pub fn intersect_box<R: Real>(o: V3<R>, d: V3<R>, lo: V3<R>, hi: V3<R>) -> Option<(R, R)> {
+    slab(o.0, d.0, lo.0, hi.0, Quotient::Reciprocal)
+}
+
+/// [`intersect_box`] in f64 on glam vectors, each plane distance divided by `d`
+/// (correctly rounded) rather than multiplied by `1/d`: the ray parameters of the
+/// analytic phantom's chords and line integrals, and of world-space rays against a
+/// box in millimetres.
+#[inline]
+pub fn slab_interval(
+    o: glam::DVec3,
+    d: glam::DVec3,
+    lo: glam::DVec3,
+    hi: glam::DVec3,
+) -> Option<(f64, f64)> {
+    slab(
+        o.to_array(),
+        d.to_array(),
+        lo.to_array(),
+        hi.to_array(),
+        Quotient::Divide,
+    )
+}
+
+/// How [`slab`] turns a distance along an axis into a ray parameter.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Quotient {
+    /// `Δ · (1/d)`, the GPU's form.
+    Reciprocal,
+    /// `Δ / d`.
+    Divide,
+}
+
+/// The slab test behind [`intersect_box`] and [`slab_interval`].
+#[inline(always)]
+fn slab<R: Real>(o: [R; 3], d: [R; 3], lo: [R; 3], hi: [R; 3], q: Quotient) -> Option<(R, R)> {
+    let mut t0 = R::neg_infinity();
+    let mut t1 = R::infinity();
+    for a in 0..3 {
+        if d[a] == R::zero() {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+        } else {
+            let (ta, tb) = match q {
+                Quotient::Reciprocal => {
+                    let inv = R::one() / d[a];
+                    ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv)
+                }
+                Quotient::Divide => ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]),
+            };
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t1 > t0).then_some((t0, t1))
 }

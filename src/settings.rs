@@ -6,26 +6,27 @@
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
-/// What a ray computes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Mode {
-    /// Direct volume rendering: emission–absorption compositing through a transfer
-    /// function (RGBA output).
-    Dvr,
-    /// Maximum intensity projection of the raw values (scalar output).
-    Mip,
-    /// Minimum intensity projection of the raw values (scalar output).
-    Minip,
-    /// X-ray: the line integral of the raw values, in value × mm (scalar output).
-    Xray,
-    /// Maximum intensity difference accumulation (Bruckner & Gröller 2009): DVR whose
-    /// accumulated colour fades where a sample raises the running maximum; `mida_gamma`
-    /// moves it from DVR (−1) to MIP (+1) (RGBA output; see `cpu::modes`).
-    Mida,
-    /// Iso-surfaces only: the `iso_surfaces` composited front to back (RGBA output).
-    /// DVR with iso-surfaces set draws both in one image.
-    Iso,
+crate::choice_enum! {
+    /// What a ray computes.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Mode: "mode" {
+        /// Direct volume rendering: emission–absorption compositing through a transfer
+        /// function (RGBA output).
+        Dvr = "dvr",
+        /// Maximum intensity projection of the raw values (scalar output).
+        Mip = "mip",
+        /// Minimum intensity projection of the raw values (scalar output).
+        Minip = "minip",
+        /// X-ray: the line integral of the raw values, in value × mm (scalar output).
+        Xray = "xray",
+        /// Maximum intensity difference accumulation (Bruckner & Gröller 2009): DVR whose
+        /// accumulated colour fades where a sample raises the running maximum; `mida_gamma`
+        /// moves it from DVR (−1) to MIP (+1) (RGBA output; see `cpu::modes`).
+        Mida = "mida",
+        /// Iso-surfaces only: the `iso_surfaces` composited front to back (RGBA output).
+        /// DVR with iso-surfaces set draws both in one image.
+        Iso = "iso",
+    }
 }
 
 impl Mode {
@@ -44,45 +45,83 @@ pub struct IsoSurface {
     pub opacity: f64,
 }
 
+impl IsoSurface {
+    /// Reads `VALUE:#RRGGBB:OPACITY`, e.g. `0.3:#ff0000:0.4` (the `#` is optional;
+    /// opacity in [0, 1]).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming `--iso` and what is wrong.
+    pub fn parse(text: &str) -> Result<IsoSurface> {
+        let bad = |why: String| Error::invalid("--iso", format!("'{text}': {why}"));
+        let parts: Vec<&str> = text.split(':').collect();
+        let [value, color, opacity] = parts[..] else {
+            return Err(bad(
+                "expected VALUE:COLOUR:OPACITY, e.g. 0.3:#ff0000:0.4".into()
+            ));
+        };
+        let num = |t: &str, what: &str| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| bad(format!("{what} '{t}' is not a finite number")))
+        };
+        let hex = color.trim().strip_prefix('#').unwrap_or(color.trim());
+        if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+            return Err(bad(format!("colour '{color}' is not #rrggbb")));
+        }
+        let channel = |i: usize| {
+            u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).expect("checked hex digits") as f64
+                / 255.0
+        };
+        let opacity = num(opacity, "opacity")?;
+        if !(0.0..=1.0).contains(&opacity) {
+            return Err(bad(format!("opacity {opacity} must lie in [0, 1]")));
+        }
+        Ok(IsoSurface {
+            value: num(value, "value")?,
+            color: [channel(0), channel(1), channel(2)],
+            opacity,
+        })
+    }
+}
+
 /// The most iso-surfaces one render may draw (the GPU's parameter block holds four).
 pub const MAX_ISO_SURFACES: usize = 4;
 
-/// The reconstruction filter used to sample the volume between voxel centres.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Filter {
-    /// The nearest voxel (box kernel, radius ½).
-    Nearest,
-    /// Tent kernel (radius 1): trilinear interpolation.
-    Trilinear,
-    /// Cubic B-spline (radius 2) on the voxel values: smooth and approximating (it
-    /// does not pass through the voxel values, and blurs).
-    Bspline,
-    /// Cubic B-spline (radius 2) on prefiltered coefficients: interpolating, and the
-    /// most accurate cubic (Unser's B-spline interpolation).
-    BsplineInterp,
-    /// Catmull–Rom cubic (Keys, a = −½; radius 2): interpolating.
-    CatmullRom,
-    /// Lanczos-2 windowed sinc (radius 2), weights normalised to sum to 1.
-    Lanczos2,
-    /// Lanczos-3 windowed sinc (radius 3), weights normalised to sum to 1.
-    Lanczos3,
-    /// Lanczos-4 windowed sinc (radius 4), weights normalised to sum to 1.
-    Lanczos4,
-    /// The full sinc over the whole grid and the clamp-to-edge extension beyond it (no
-    /// window, no normalisation); O(n³) per sample, slow.
-    Sinc,
-    /// The cubic B-spline of `bspline`, evaluated with 8 trilinear fetches instead of
-    /// 64 taps (Sigg & Hadwiger 2005, `cpu::tricubic`); the same values to rounding. On
-    /// the GPU with `hardware_filtering` the fetches go through the texture unit.
-    #[value(name = "cubic-bspline-fast", alias = "bspline-fast")]
-    #[serde(rename = "cubic-bspline-fast", alias = "bspline-fast")]
-    BsplineFast,
-    /// The interpolating B-spline of `bspline-interp` (prefiltered coefficients),
-    /// evaluated with 8 trilinear fetches like `cubic-bspline-fast`.
-    #[value(name = "cubic-bspline-fast-interp", alias = "bspline-fast-interp")]
-    #[serde(rename = "cubic-bspline-fast-interp", alias = "bspline-fast-interp")]
-    BsplineFastInterp,
+crate::choice_enum! {
+    /// The reconstruction filter used to sample the volume between voxel centres.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Filter: "filter" {
+        /// The nearest voxel (box kernel, radius ½).
+        Nearest = "nearest",
+        /// Tent kernel (radius 1): trilinear interpolation.
+        Trilinear = "trilinear",
+        /// Cubic B-spline (radius 2) on the voxel values: smooth and approximating (it
+        /// does not pass through the voxel values, and blurs).
+        Bspline = "bspline",
+        /// Cubic B-spline (radius 2) on prefiltered coefficients: interpolating, and the
+        /// most accurate cubic (Unser's B-spline interpolation).
+        BsplineInterp = "bspline-interp",
+        /// Catmull–Rom cubic (Keys, a = −½; radius 2): interpolating.
+        CatmullRom = "catmull-rom",
+        /// Lanczos-2 windowed sinc (radius 2), weights normalised to sum to 1.
+        Lanczos2 = "lanczos2",
+        /// Lanczos-3 windowed sinc (radius 3), weights normalised to sum to 1.
+        Lanczos3 = "lanczos3",
+        /// Lanczos-4 windowed sinc (radius 4), weights normalised to sum to 1.
+        Lanczos4 = "lanczos4",
+        /// The full sinc over the whole grid and the clamp-to-edge extension beyond it (no
+        /// window, no normalisation); O(n³) per sample, slow.
+        Sinc = "sinc",
+        /// The cubic B-spline of `bspline`, evaluated with 8 trilinear fetches instead of
+        /// 64 taps (Sigg & Hadwiger 2005, `cpu::tricubic`); the same values to rounding. On
+        /// the GPU with `hardware_filtering` the fetches go through the texture unit.
+        BsplineFast = "cubic-bspline-fast" | "bspline-fast",
+        /// The interpolating B-spline of `bspline-interp` (prefiltered coefficients),
+        /// evaluated with 8 trilinear fetches like `cubic-bspline-fast`.
+        BsplineFastInterp = "cubic-bspline-fast-interp" | "bspline-fast-interp",
+    }
 }
 
 impl Filter {
@@ -130,54 +169,42 @@ impl Filter {
             Filter::Sinc => usize::MAX,
         }
     }
-    pub fn name(self) -> &'static str {
-        match self {
-            Filter::Nearest => "nearest",
-            Filter::Trilinear => "trilinear",
-            Filter::Bspline => "bspline",
-            Filter::BsplineInterp => "bspline-interp",
-            Filter::CatmullRom => "catmull-rom",
-            Filter::Lanczos2 => "lanczos2",
-            Filter::Lanczos3 => "lanczos3",
-            Filter::Lanczos4 => "lanczos4",
-            Filter::Sinc => "sinc",
-            Filter::BsplineFast => "cubic-bspline-fast",
-            Filter::BsplineFastInterp => "cubic-bspline-fast-interp",
-        }
+}
+
+crate::choice_enum! {
+    /// The finite-difference stencil for gradients.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum GradientMethod: "gradient method" {
+        /// `(f(x+h) − f(x−h)) / 2h`: exact on quadratics.
+        Central = "central",
+        /// `(f(x+h) − f(x)) / h`: exact on linear functions only.
+        Forward = "forward",
+        /// 3D Sobel: central difference smoothed by `[1 2 1]/4` across the other two axes.
+        Sobel = "sobel",
     }
 }
 
-/// The finite-difference stencil for gradients.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum GradientMethod {
-    /// `(f(x+h) − f(x−h)) / 2h`: exact on quadratics.
-    Central,
-    /// `(f(x+h) − f(x)) / h`: exact on linear functions only.
-    Forward,
-    /// 3D Sobel: central difference smoothed by `[1 2 1]/4` across the other two axes.
-    Sobel,
+crate::choice_enum! {
+    /// Where the transfer function is applied.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Classification: "classification" {
+        /// Interpolate the data, then classify each sample (the default, sharper).
+        Post = "post",
+        /// Classify every voxel, then interpolate opacity-weighted colours.
+        Pre = "pre",
+    }
 }
 
-/// Where the transfer function is applied.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Classification {
-    /// Interpolate the data, then classify each sample (the default, sharper).
-    Post,
-    /// Classify every voxel, then interpolate opacity-weighted colours.
-    Pre,
-}
-
-/// The order samples are composited in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Compositing {
-    /// `C += (1 − A) α c; A += (1 − A) α`, nearest sample first; allows early ray
-    /// termination.
-    FrontToBack,
-    /// `C = α c + (1 − α) C`, farthest sample first (the "over" operator).
-    BackToFront,
+crate::choice_enum! {
+    /// The order samples are composited in.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Compositing: "compositing" {
+        /// `C += (1 − A) α c; A += (1 − A) α`, nearest sample first; allows early ray
+        /// termination.
+        FrontToBack = "front-to-back",
+        /// `C = α c + (1 − α) C`, farthest sample first (the "over" operator).
+        BackToFront = "back-to-front",
+    }
 }
 
 /// Direction of the light.
@@ -292,14 +319,15 @@ pub struct RenderSettings {
     pub clip_mesh: Option<ClipMesh>,
 }
 
-/// The units a clipping mesh's vertices are given in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum ClipMeshUnits {
-    /// World millimetres (the volume's world frame).
-    #[default]
-    World,
-    /// Voxel indices (carried to world by the volume's affine).
-    Voxel,
+crate::choice_enum! {
+    /// The units a clipping mesh's vertices are given in.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum ClipMeshUnits: "clip-mesh units", default World {
+        /// World millimetres (the volume's world frame).
+        World = "world",
+        /// Voxel indices (carried to world by the volume's affine).
+        Voxel = "voxel",
+    }
 }
 
 /// A clipping mesh (`cpu::clipmesh`).
@@ -315,15 +343,16 @@ pub enum ClipMesh {
     Bricks,
 }
 
-/// The space a clipping box is given in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum ClipSpace {
-    /// Voxel indices: the box covers voxels `lo ..= hi`, i.e. index space
-    /// `[lo − ½, hi + ½]` (fractional indices allowed).
-    Voxel,
-    /// World millimetres: the box `[lo, hi]` in the volume's world frame.
-    World,
+crate::choice_enum! {
+    /// The space a clipping box is given in.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum ClipSpace: "clip space", default Voxel {
+        /// Voxel indices: the box covers voxels `lo ..= hi`, i.e. index space
+        /// `[lo − ½, hi + ½]` (fractional indices allowed).
+        Voxel = "voxel",
+        /// World millimetres: the box `[lo, hi]` in the volume's world frame.
+        World = "world",
+    }
 }
 
 /// An axis-aligned clipping box; rays see only box ∩ volume.
@@ -462,6 +491,68 @@ impl RenderSettings {
                 "random jitter and interleaved sampling exclude each other",
             ));
         }
-        crate::cpu::modes::validate(self)
+        validate_modes(self)
     }
+}
+
+/// Checks the settings of MIDA, the MIP/MinIP window and the iso-surfaces (the modes
+/// of `cpu::modes`; called by [`RenderSettings::validate`]).
+fn validate_modes(s: &RenderSettings) -> Result<()> {
+    if !(s.mida_gamma.is_finite() && (-1.0..=1.0).contains(&s.mida_gamma)) {
+        return Err(Error::invalid(
+            "MIDA gamma",
+            format!("{} must lie in [-1, 1]", s.mida_gamma),
+        ));
+    }
+    if let Some([w, c]) = s.window {
+        if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+            return Err(Error::invalid(
+                "window",
+                format!("width {w} must be finite and positive, centre {c} finite"),
+            ));
+        }
+    }
+    if s.iso_surfaces.len() > MAX_ISO_SURFACES {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            format!("{} given, at most {MAX_ISO_SURFACES}", s.iso_surfaces.len()),
+        ));
+    }
+    for iso in &s.iso_surfaces {
+        if !iso.value.is_finite() {
+            return Err(Error::invalid("iso-value", "must be finite"));
+        }
+        if iso.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(Error::invalid(
+                "iso-surface colour",
+                "components must lie in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&iso.opacity) {
+            return Err(Error::invalid(
+                "iso-surface opacity",
+                format!("{} must lie in [0, 1]", iso.opacity),
+            ));
+        }
+    }
+    if s.mode == Mode::Iso && s.iso_surfaces.is_empty() {
+        return Err(Error::invalid(
+            "iso-surfaces",
+            "mode iso needs at least one iso-surface",
+        ));
+    }
+    let isos = s.mode == Mode::Iso || (s.mode == Mode::Dvr && !s.iso_surfaces.is_empty());
+    if (s.mode == Mode::Mida || isos) && s.compositing == Compositing::BackToFront {
+        return Err(Error::invalid(
+            "compositing",
+            "MIDA and iso-surfaces composite front to back only",
+        ));
+    }
+    if s.iso_shadows && !s.iso_opaque {
+        return Err(Error::invalid(
+            "shadows",
+            "shadow rays are cast from opaque iso-surfaces only (add --iso-opaque)",
+        ));
+    }
+    Ok(())
 }

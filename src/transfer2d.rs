@@ -63,15 +63,15 @@ pub const DEFAULT_LUT_SIZE_2D: [usize; 2] = [1024, 256];
 /// The most entries a 2D table may have (2²² RGBA: 64 MiB in f32 on the GPU).
 pub const MAX_LUT_ENTRIES_2D: usize = 1 << 22;
 
-/// How gradient magnitudes are laid out along the table's second axis.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum GradientAxis {
-    /// `y = g / g_max`.
-    #[default]
-    Linear,
-    /// `y = ln(1 + g/g₀) / ln(1 + g_max/g₀)`.
-    Log,
+crate::choice_enum! {
+    /// How gradient magnitudes are laid out along the table's second axis.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum GradientAxis: "gradient axis", default Linear {
+        /// `y = g / g_max`.
+        Linear = "linear",
+        /// `y = ln(1 + g/g₀) / ln(1 + g_max/g₀)`.
+        Log = "log",
+    }
 }
 
 /// A widget's shape in the (mapped value, gradient magnitude) plane.

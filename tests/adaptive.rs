@@ -15,7 +15,8 @@ use voxlab::cpu::adaptive::{
     spectral_table, AdaptiveSettings, Sampling,
 };
 use voxlab::cpu::dft::{dft_nd, Direction, Normalization};
-use voxlab::cpu::filter::{sample, Grid};
+use voxlab::cpu::filter::sample;
+use voxlab::cpu::grid::Grid;
 use voxlab::cpu::preintegrate::{lut_at, preintegrate};
 use voxlab::metrics::error_stats;
 use voxlab::real::V3;

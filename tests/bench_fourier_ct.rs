@@ -8,32 +8,22 @@
 
 mod common;
 
-use voxlab::bench::{ct, fourier, Case, Suite, Tol, Unit, Work};
+use voxlab::bench::{ct, fourier, Case, Suite, Unit, Work};
+use voxlab::metrics::Tolerance;
 
-/// `(max |a − b| / max |b|, ‖a − b‖ / ‖b‖)`.
-fn errors(a: &[f64], b: &[f64]) -> (f64, f64) {
-    assert_eq!(a.len(), b.len(), "output lengths differ");
-    let peak = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let (mut worst, mut d2, mut r2) = (0.0f64, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        assert!(x.is_finite(), "non-finite output");
-        worst = worst.max((x - y).abs());
-        d2 += (x - y) * (x - y);
-        r2 += y * y;
-    }
-    (worst / peak, (d2 / r2).sqrt())
-}
-
-fn check(case: &str, backend: &str, got: &[f64], want: &[f64], tol: Tol) {
-    let (max_rel, l2) = errors(got, want);
+/// Holds `got` to `want` (the oracle) within `tol`, as the runner does
+/// (`metrics::check_parity_array`: max |Δ| / max |oracle| and ‖Δ‖ / ‖oracle‖; any
+/// NaN/∞ fails); prints the errors, and on failure leaves `target/parity/<case>/`.
+fn check(case: &str, backend: &str, got: &[f64], want: &[f64], tol: Tolerance) {
+    let name = format!("{case} {backend}");
+    let dir = common::parity_dir(&name);
+    let r = voxlab::metrics::check_parity_array(&name, &[want.len()], want, got, tol, Some(&dir))
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
     eprintln!(
-        "{case:<40} {backend:<8} max rel {max_rel:.2e} (bound {:.1e}), rel L2 {l2:.2e} (bound {:.1e})",
-        tol.max_abs_rel, tol.rel_l2
+        "{case:<40} {backend:<8} max rel {:.2e} (bound {:.1e}), rel L2 {:.2e} (bound {:.1e})",
+        r.stats.max_abs_rel, tol.max_abs_rel, r.stats.rel_l2, tol.rel_l2
     );
-    assert!(
-        max_rel <= tol.max_abs_rel && l2 <= tol.rel_l2,
-        "{case} {backend}: max rel {max_rel:e}, rel L2 {l2:e} outside {tol:?}"
-    );
+    assert!(r.passed, "{}", r.message);
 }
 
 /// Prepares and runs every quick case of `family` on every backend.

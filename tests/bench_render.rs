@@ -4,34 +4,23 @@
 
 mod common;
 
-use voxlab::bench::{self, Case, Prepared, Suite, Tol, Unit, Work};
+use voxlab::bench::{self, Case, Prepared, Suite, Unit, Work};
+use voxlab::metrics::Tolerance;
 
-/// (max |port − oracle| / max |oracle|, ‖port − oracle‖ / ‖oracle‖), as the runner
-/// checks them.
-fn errors(oracle: &[f64], port: &[f64]) -> (f64, f64) {
-    assert_eq!(oracle.len(), port.len(), "output lengths differ");
-    let peak = oracle
-        .iter()
-        .fold(0.0f64, |m, v| m.max(v.abs()))
-        .max(1e-300);
-    let (mut max, mut d2, mut o2) = (0.0f64, 0.0, 0.0);
-    for (a, b) in oracle.iter().zip(port) {
-        max = max.max((a - b).abs());
-        d2 += (a - b) * (a - b);
-        o2 += a * a;
-    }
-    (max / peak, (d2 / o2.max(1e-300)).sqrt())
-}
-
-fn within(id: &str, what: &str, (max, l2): (f64, f64), tol: Tol) {
+/// Holds `port` to `oracle` within `tol` (max |port − oracle| / max |oracle| and
+/// ‖port − oracle‖ / ‖oracle‖, as the runner checks them: `metrics::check_parity_array`);
+/// prints the errors, and on failure leaves `target/parity/<id what>/`.
+fn within(id: &str, what: &str, oracle: &[f64], port: &[f64], tol: Tolerance) {
+    let name = format!("{id} {what}");
+    let dir = common::parity_dir(&name);
+    let r =
+        voxlab::metrics::check_parity_array(&name, &[oracle.len()], oracle, port, tol, Some(&dir))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
     eprintln!(
-        "{id} {what}: max rel {max:.2e} (bound {:.1e}), rel L2 {l2:.2e} (bound {:.1e})",
-        tol.max_abs_rel, tol.rel_l2
+        "{id} {what}: max rel {:.2e} (bound {:.1e}), rel L2 {:.2e} (bound {:.1e})",
+        r.stats.max_abs_rel, tol.max_abs_rel, r.stats.rel_l2, tol.rel_l2
     );
-    assert!(
-        max <= tol.max_abs_rel && l2 <= tol.rel_l2,
-        "{id} {what}: max rel {max:.3e}, rel L2 {l2:.3e} outside {tol:?}"
-    );
+    assert!(r.passed, "{}", r.message);
 }
 
 /// Prepares every quick case of `family`, runs each backend once and checks it against
@@ -56,7 +45,7 @@ fn check_family(family: &str) -> usize {
         );
         if let Some(f32_run) = p.cpu_f32.as_mut() {
             let r = f32_run().unwrap();
-            within(&id, "cpu f32", errors(&oracle.output, &r.output), p.tol_f32);
+            within(&id, "cpu f32", &oracle.output, &r.output, p.tol_f32);
         }
         if let (Some(gpu_run), Some(ctx)) = (p.gpu.as_mut(), ctx) {
             let r = gpu_run(ctx).unwrap_or_else(|e| panic!("{id} gpu: {e}"));
@@ -64,7 +53,7 @@ fn check_family(family: &str) -> usize {
                 r.kernel > 0.0 && r.end_to_end >= r.kernel * 0.5,
                 "{id}: {r:?}"
             );
-            within(&id, "gpu", errors(&oracle.output, &r.output), p.tol_gpu);
+            within(&id, "gpu", &oracle.output, &r.output, p.tol_gpu);
         }
     }
     cases.len()

@@ -9,14 +9,12 @@ use std::rc::Rc;
 use voxlab::bench::report::{parity, slugify, Stats, Status};
 use voxlab::bench::{
     parse_families, run_suite, Case, CpuFn, GpuFn, GpuRun, Options, Prepared, Report, Run, Suite,
-    Tol, Unit, Work, FAMILIES,
+    Unit, Work, FAMILIES,
 };
+use voxlab::metrics::Tolerance;
 use voxlab::Error;
 
-const TOL: Tol = Tol {
-    max_abs_rel: 1e-6,
-    rel_l2: 1e-6,
-};
+const TOL: Tolerance = Tolerance::max_abs_rel(1e-6).with_rel_l2(1e-6);
 const ORACLE: [f64; 4] = [1.0, -2.0, 3.0, 4.0];
 const NO_GPU: Result<&voxlab::gpu::GpuContext, &str> = Err("no GPU in this test");
 
@@ -178,10 +176,7 @@ fn a_wrong_gpu_result_fails_and_is_not_timed() {
 
 #[test]
 fn nan_or_infinity_fails() {
-    let tol = Tol {
-        max_abs_rel: 1.0,
-        rel_l2: 1.0,
-    };
+    let tol = Tolerance::max_abs_rel(1.0).with_rel_l2(1.0);
     let p = parity(&ORACLE, &[1.0, f64::NAN, 3.0, 4.0], tol);
     assert!(!p.passed && p.non_finite == 1, "{p:?}");
     let p = parity(&ORACLE, &[1.0, -2.0, f64::INFINITY, 4.0], tol);

@@ -159,7 +159,8 @@ fn fft_without_an_adapter_runs_the_cpu_or_fails_clearly() {
 /// The library side: shapes, tolerances, and the report of a CPU run.
 #[test]
 fn fft_check_library_parses_shapes_and_sets_tolerances() {
-    use voxlab::fft_check::{parse_shape, run, tolerance, Backends};
+    use voxlab::jobs::fft::{parse_shape, run, tolerance};
+    use voxlab::jobs::BackendSet;
     assert_eq!(parse_shape("64x64x64").unwrap(), vec![64, 64, 64]);
     assert_eq!(parse_shape("1024").unwrap(), vec![1024]);
     assert!(parse_shape("4x").is_err() && parse_shape("0").is_err());
@@ -170,10 +171,7 @@ fn fft_check_library_parses_shapes_and_sets_tolerances() {
     assert!((tolerance(1024, true) - 1e-5).abs() < 1e-20);
     assert_eq!(tolerance(1, true), 1e-6);
     assert_eq!(tolerance(1024, false), 1e-12);
-    let backends = Backends {
-        cpu: true,
-        gpu: false,
-    };
+    let backends = BackendSet::Cpu;
     let mut lines = 0;
     let r = run(&[vec![3, 5]], backends, 1, None, &mut |_| lines += 1).unwrap();
     assert_eq!((lines, r.cases.len()), (2, 2));

@@ -7,7 +7,8 @@ use voxlab::cpu::project::{
     pixel_ray, project_phantom, project_volume, Grid, JosephView, ProjectOptions,
 };
 use voxlab::ct::{Geometry, Projections};
-use voxlab::phantom::{slab_interval, Phantom};
+use voxlab::phantom::Phantom;
+use voxlab::real::slab_interval;
 
 fn parallel(n: usize, d: f64, angles: usize) -> Geometry {
     Geometry::parallel_stack(n, n, d, d, Geometry::even_angles(angles, 180.0)).unwrap()
@@ -26,15 +27,11 @@ fn cone(n: usize, d: f64, angles: usize) -> Geometry {
     .unwrap()
 }
 
-/// Largest |a − b| and the largest |b|.
+/// Largest |a − b| and the largest |b| (`metrics::error_stats`, `b` the reference; ∞
+/// on a NaN/Inf mismatch).
 fn worst(a: &Projections<f64>, b: &Projections<f64>) -> (f64, f64) {
-    let d = a
-        .data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
-    (d, b.data.iter().fold(0.0, |m, v| m.max(v.abs())))
+    let e = voxlab::metrics::error_stats(&b.data, &a.data, f64::INFINITY).infinite_if_mismatched();
+    (e.max_abs, e.peak)
 }
 
 /// Mean |a − b| over the mean |b|.
@@ -163,15 +160,11 @@ fn peer(name: &str) -> std::path::PathBuf {
         .join(name)
 }
 
-/// Max |a − b| / max |b| and the RMS difference / max |b|.
+/// Max |a − b| / max |b| and the RMS difference / max |b| (`metrics::error_stats`,
+/// `b` the reference; ∞ on a NaN/Inf mismatch).
 fn rel_max_rms(a: &[f64], b: &[f64]) -> (f64, f64) {
-    let peak = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let (mut w, mut sq) = (0.0f64, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        w = w.max((x - y).abs());
-        sq += (x - y) * (x - y);
-    }
-    (w / peak, (sq / a.len() as f64).sqrt() / peak)
+    let e = voxlab::metrics::error_stats(b, a, f64::INFINITY).infinite_if_mismatched();
+    (e.max_abs_rel, e.rmse / e.peak)
 }
 
 #[test]

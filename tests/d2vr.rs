@@ -12,6 +12,7 @@ use voxlab::cpu::d2vr::{
     ProjectionField,
 };
 use voxlab::ct::{ct_to_phantom, Geometry, Projections};
+use voxlab::metrics::max_abs_error;
 use voxlab::real::{Real, V3};
 use voxlab::settings::{Classification, Mode, RenderSettings};
 
@@ -57,13 +58,6 @@ fn run<R: Real>(
     .unwrap()
 }
 
-fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
-
 /// X-ray mode of D²VR of a uniform sphere (radius 64 mm, density 1) from 64 Ram-Lak
 /// filtered parallel projections of 48² (5.33 mm bins) vs the exact chord lengths.
 /// Errors come from the reconstruction itself — Ram-Lak's Gibbs overshoot near the
@@ -84,23 +78,19 @@ fn xray_of_a_sphere_matches_its_line_integrals() {
         None,
         sc::N,
     );
-    let (mut worst, mut sum2, mut ref2) = (0.0f64, 0.0, 0.0);
-    let (mut tot_got, mut tot_truth) = (0.0, 0.0);
+    let (mut truths, mut gots) = (Vec::new(), Vec::new());
     for row in 0..cam.height {
         for col in 0..cam.width {
             let ray = cam.ray(col, row);
             let o = ct_to_phantom(ray.origin) * ph.half_extent_mm / ph.half_extent_mm;
             let d = ct_to_phantom(ray.dir);
-            let truth = ph.line_integral_world(o, d, f64::NEG_INFINITY, f64::INFINITY);
-            let got = out.render.image.pixel(col, row)[0];
-            worst = worst.max((got - truth).abs());
-            tot_got += got;
-            tot_truth += truth;
-            sum2 += (got - truth).powi(2);
-            ref2 += truth * truth;
+            truths.push(ph.line_integral_world(o, d, f64::NEG_INFINITY, f64::INFINITY));
+            gots.push(out.render.image.pixel(col, row)[0]);
         }
     }
-    let rel_l2 = (sum2 / ref2).sqrt();
+    let (tot_got, tot_truth): (f64, f64) = (gots.iter().sum(), truths.iter().sum());
+    let e = voxlab::metrics::error_stats(&truths, &gots, f64::INFINITY).infinite_if_mismatched();
+    let (worst, rel_l2) = (e.max_abs, e.rel_l2);
     eprintln!(
         "sphere X-ray: max |err| = {worst:.3} (peak 128), rel L2 = {rel_l2:.4}, total ratio {:.4}",
         tot_got / tot_truth
@@ -184,9 +174,9 @@ fn accelerations_keep_the_image_and_cut_the_work() {
             Some(&occ),
             32,
         );
-        let d_cyl = max_abs_diff(&plain.render.image.data, &culled.render.image.data);
-        let d_ert = max_abs_diff(&culled.render.image.data, &ert.render.image.data);
-        let d_occ = max_abs_diff(&ert.render.image.data, &both.render.image.data);
+        let d_cyl = max_abs_error(&plain.render.image.data, &culled.render.image.data);
+        let d_ert = max_abs_error(&culled.render.image.data, &ert.render.image.data);
+        let d_occ = max_abs_error(&ert.render.image.data, &both.render.image.data);
         eprintln!(
             "{name}: fraction plain {:.3} cylinder {:.3} +ERT {:.3} +occupancy {:.3} (mask {:.3}); \
              max diff cylinder {d_cyl:.2e} ERT {d_ert:.2e} occupancy {d_occ:.2e}",
@@ -244,13 +234,10 @@ fn f32_matches_the_f64_oracle() {
         let o = options(grad, true);
         let a = run(&q, &g, &s, &o, None, 24);
         let b = run(&q32, &g, &s, &o, None, 24);
-        let peak = a
-            .render
-            .image
-            .data
-            .iter()
-            .fold(0.0f64, |m, v| m.max(v.abs()));
-        let d = max_abs_diff(&a.render.image.data, &b.render.image.data) / peak.max(1e-30);
+        let d =
+            voxlab::metrics::error_stats(&a.render.image.data, &b.render.image.data, f64::INFINITY)
+                .infinite_if_mismatched()
+                .max_abs_rel;
         eprintln!("{mode:?} {grad:?} {beam}: f32 vs f64 max rel {d:.2e}");
         // Measured worst: 3.1e-4 (DVR GFR cone; the others ≤ 5.4e-6): f32 sums 64
         // views per sample, and a DVR pixel amplifies a value error by the TF's slope.
@@ -341,27 +328,28 @@ fn d2vr_against_the_grid_pipeline() {
         let r = voxlab::cpu::raycast::render::<f64>(&vol, &sc::tf(), &cam, &s, quiet()).unwrap();
         let a = &d.render.image.data;
         let b = &r.image.data;
-        let peak = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let dmax = max_abs_diff(a, b) / peak;
-        let mean = a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64 / peak;
+        let e = voxlab::metrics::error_stats(a, b, f64::INFINITY).infinite_if_mismatched();
+        let (peak, dmax, mean) = (e.peak, e.max_abs_rel, e.mean_abs / e.peak);
         let (mut e_d2vr, mut e_grid) = (0.0f64, 0.0f64);
         if mode == Mode::Xray {
+            let mut truth = Vec::with_capacity(a.len());
             for row in 0..cam.height {
                 for col in 0..cam.width {
                     let ray = cam.ray(col, row);
-                    let truth = ph.line_integral_world(
+                    truth.push(ph.line_integral_world(
                         ct_to_phantom(ray.origin),
                         ct_to_phantom(ray.dir),
                         f64::NEG_INFINITY,
                         f64::INFINITY,
-                    );
-                    let i = row * cam.width + col;
-                    e_d2vr += (a[i] - truth).powi(2);
-                    e_grid += (b[i] - truth).powi(2);
+                    ));
                 }
             }
-            e_d2vr = (e_d2vr / a.len() as f64).sqrt();
-            e_grid = (e_grid / a.len() as f64).sqrt();
+            let rmse = |x: &[f64]| {
+                voxlab::metrics::error_stats(&truth, x, f64::INFINITY)
+                    .infinite_if_mismatched()
+                    .rmse
+            };
+            (e_d2vr, e_grid) = (rmse(a), rmse(b));
         }
         eprintln!(
             "{mode:?}: D²VR vs grid pipeline: max {dmax:.3e} mean {mean:.3e} (of peak {peak:.3}); \

@@ -40,23 +40,20 @@ impl Rng {
     }
 }
 
-/// Relative L2 error `‖a − b‖ / ‖b‖` (or `‖a − b‖` when `b` is zero).
+/// Relative L2 error `‖a − b‖ / ‖b‖` of `a` against the reference `b`
+/// (`metrics::error_stats_complex`; ∞ when one side has a NaN or infinity the other
+/// lacks, so that every bound fails).
 fn rel_l2(a: &[C], b: &[C]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let d: f64 = a.iter().zip(b).map(|(x, y)| (x - y).norm_sqr()).sum();
-    let r: f64 = b.iter().map(|y| y.norm_sqr()).sum();
-    if r == 0.0 {
-        d.sqrt()
-    } else {
-        (d / r).sqrt()
-    }
+    voxlab::metrics::error_stats_complex(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
+/// The largest modulus `|a − b|` (∞ on a NaN/Inf mismatch, as [`rel_l2`]).
 fn max_abs(a: &[C], b: &[C]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).norm())
-        .fold(0.0, f64::max)
+    voxlab::metrics::error_stats_complex(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs
 }
 
 /// The scale of a forward (`s_f`) and inverse (`s_i`) transform of `n` points.

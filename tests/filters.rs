@@ -3,7 +3,8 @@
 mod common;
 
 use common::Rng;
-use voxlab::cpu::filter::{prepare, sample, Grid};
+use voxlab::cpu::filter::{prepare, sample};
+use voxlab::cpu::grid::Grid;
 use voxlab::phantom::{marschner_lobb, Phantom};
 use voxlab::real::V3;
 use voxlab::settings::Filter;

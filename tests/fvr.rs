@@ -64,24 +64,20 @@ fn axis_sum(v: &Volume<f32>, view: AxisView, spacing: f64) -> Vec<f64> {
     out
 }
 
-/// Largest |a − b| relative to the largest |b|.
+/// Largest |a − b| relative to the largest |b| (`metrics::error_stats`, `b` the
+/// reference; ∞ on a NaN/Inf mismatch).
 fn max_rel(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let peak = b.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    let err = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
-    err / peak
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs_rel
 }
 
-/// Root-mean-square error relative to the root-mean-square of `b`.
+/// Root-mean-square error relative to the root-mean-square of `b`: the relative L2
+/// error ‖a − b‖ / ‖b‖ (`metrics::error_stats`; ∞ on a NaN/Inf mismatch).
 fn rel_rmse(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    let e: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
-    let r: f64 = b.iter().map(|y| y * y).sum();
-    (e / r).sqrt()
+    voxlab::metrics::error_stats(b, a, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 #[test]
@@ -511,7 +507,8 @@ fn gaussian_blob_lanczos3_within_one_percent_of_its_analytic_projection() {
 #[test]
 #[ignore = "writes docs/images; run by hand"]
 fn docs_figures() {
-    use voxlab::frame::{Frame, PngOptions};
+    use voxlab::frame::Frame;
+    use voxlab::io::{write_frame, PngOptions};
     let phantom = Phantom::shepp_logan();
     let v = phantom.sample([128; 3]).unwrap();
     let dir = common::root().join("docs/images");
@@ -550,13 +547,13 @@ fn docs_figures() {
                     range: Some((0.0, 20.0)),
                 };
                 let file = format!("fvr-oblique-{}-pad{padding}-error.png", k.name());
-                err.save(&dir.join(&file), png).unwrap();
+                write_frame(&dir.join(&file), &err, png).unwrap();
                 let png = PngOptions {
                     sixteen_bit: false,
                     range: Some((0.0, truth.iter().cloned().fold(0.0, f64::max))),
                 };
                 let file = format!("fvr-oblique-{}-pad{padding}.png", k.name());
-                img.save(&dir.join(&file), png).unwrap();
+                write_frame(&dir.join(&file), &img, png).unwrap();
             }
         }
     }
@@ -574,8 +571,12 @@ fn docs_figures() {
         sixteen_bit: false,
         range: Some((0.0, 20.0)),
     };
-    err.save(&dir.join("fvr-oblique-lanczos3-pad2-cell-error.png"), png)
-        .unwrap();
+    write_frame(
+        &dir.join("fvr-oblique-lanczos3-pad2-cell-error.png"),
+        &err,
+        png,
+    )
+    .unwrap();
     eprintln!(
         "cell-averaged, Lanczos-3, padding 2, oblique: {:.4} against the pixel-averaged truth",
         rel_rmse(&img.data, &truth)

@@ -27,15 +27,15 @@ fn gpu_backprojection_matches_the_f64_oracle() {
         )
         .unwrap();
         let got = voxlab::gpu::fbp::backproject(ctx, &q32, &g, &grid).unwrap();
-        let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = want
-            .data
-            .iter()
-            .zip(&got.data)
-            .fold(0.0f64, |m, (a, &b)| m.max((a - b as f64).abs()));
         // Measured worst, relative to the data scale: 6.2e-7 parallel, 8.0e-7 stack,
         // 2.2e-6 cone (f32 projective map and interpolation).
-        assert!(worst < 1e-5 * scale, "{name}: {:e}", worst / scale);
+        common::assert_parity_array(
+            &format!("gpu_backproject_{name}"),
+            &grid.dims,
+            &want.data,
+            &got.data,
+            voxlab::metrics::Tolerance::max_abs_rel(1e-5),
+        );
     }
 }
 
@@ -80,15 +80,15 @@ fn gpu_fbp_of_shepp_logan_matches_the_cpu() {
         )
         .unwrap();
         let got = voxlab::gpu::fbp::fbp(ctx, &p32, &g, RampFilter::Hann, &grid).unwrap();
-        let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = want
-            .data
-            .iter()
-            .zip(&got.data)
-            .fold(0.0f64, |m, (a, &b)| m.max((a - b as f64).abs()));
         // Measured worst, relative (GPU ramp filter + GPU backprojection, f32): 8.2e-7
         // parallel, 2.3e-6 FDK.
-        assert!(worst < 1e-5 * scale, "{name}: {:e}", worst / scale);
+        common::assert_parity_array(
+            &format!("gpu_fbp_{name}"),
+            &grid.dims,
+            &want.data,
+            &got.data,
+            voxlab::metrics::Tolerance::max_abs_rel(1e-5),
+        );
     }
 }
 
@@ -135,19 +135,14 @@ fn gpu_ramp_filter_matches_the_f64_oracle() {
             )
             .unwrap();
             let got = voxlab::gpu::ramp::filter_projections(ctx, &p32, g, filter).unwrap();
-            let scale = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            let worst = want
-                .data
-                .iter()
-                .zip(&got.data)
-                .fold(0.0f64, |m, (a, &b)| m.max((a - b as f64).abs()));
             // Measured worst, relative: 2.3e-7 (ramp, cone); every case 1.3e-7 … 2.3e-7
             // (f32 pre-weighting, FFTs and response).
-            assert!(
-                worst < 1e-6 * scale,
-                "{} {name}: {:e}",
-                filter.name(),
-                worst / scale
+            common::assert_parity_array(
+                &format!("gpu_ramp_{}_{name}", filter.name()),
+                &[want.cols, want.rows, want.angles],
+                &want.data,
+                &got.data,
+                voxlab::metrics::Tolerance::max_abs_rel(1e-6),
             );
         }
     }

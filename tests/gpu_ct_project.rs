@@ -123,24 +123,16 @@ fn gpu_matches_the_f64_oracle() {
             (gpu.angles, gpu.rows, gpu.cols),
             (cpu.angles, cpu.rows, cpu.cols)
         );
-        let peak = cpu.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let (mut max_d, mut at, mut sq, mut norm) = (0.0f64, 0, 0.0, 0.0);
-        for (i, (c, g)) in cpu.data.iter().zip(&gpu.data).enumerate() {
-            let d = (*g as f64 - c).abs();
-            if d > max_d {
-                (max_d, at) = (d, i);
-            }
-            sq += d * d;
-            norm += c * c;
-        }
-        let (rel_max, rel_l2) = (max_d / peak, (sq / norm).sqrt());
+        let dims = [cpu.cols, cpu.rows, cpu.angles];
+        let tol = voxlab::metrics::Tolerance::max_abs_rel(TOL_MAX_REL).with_rel_l2(TOL_REL_L2);
+        let name = format!("gpu_project_{}", case.name);
+        let e = common::assert_parity_array(&name, &dims, &cpu.data, &gpu.data, tol);
+        let (rel_max, rel_l2, at) = (e.max_abs_rel, e.rel_l2, e.worst_index);
         eprintln!(
             "{}: max rel {rel_max:.2e} (at {at}: cpu {:.4} gpu {:.4}), rel L2 {rel_l2:.2e}",
             case.name, cpu.data[at], gpu.data[at]
         );
-        assert!(peak > 1.0, "{}: the case projects something", case.name);
-        assert!(rel_max < TOL_MAX_REL, "{}: {rel_max:.3e}", case.name);
-        assert!(rel_l2 < TOL_REL_L2, "{}: {rel_l2:.3e}", case.name);
+        assert!(e.peak > 1.0, "{}: the case projects something", case.name);
         worst_max = worst_max.max(rel_max);
         worst_l2 = worst_l2.max(rel_l2);
     }
@@ -158,15 +150,14 @@ fn many_views_are_split_into_dispatches_and_agree() {
     let g = Geometry::parallel_stack(64, 64, 4.5, 4.5, Geometry::even_angles(300, 180.0)).unwrap();
     let cpu = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
     let gpu = gproject::project_volume(ctx, &grid, &g, &ProjectOptions::default()).unwrap();
-    let peak = cpu.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let max_d = cpu
-        .data
-        .iter()
-        .zip(&gpu.data)
-        .map(|(c, g)| (*g as f64 - c).abs())
-        .fold(0.0, f64::max);
-    eprintln!("300 views: max rel {:.2e}", max_d / peak);
-    assert!(max_d / peak < TOL_MAX_REL);
+    let e = common::assert_parity_array(
+        "gpu_project_300_views",
+        &[cpu.cols, cpu.rows, cpu.angles],
+        &cpu.data,
+        &gpu.data,
+        voxlab::metrics::Tolerance::max_abs_rel(TOL_MAX_REL),
+    );
+    eprintln!("300 views: max rel {:.2e}", e.max_abs_rel);
 }
 
 #[test]

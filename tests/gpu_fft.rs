@@ -39,30 +39,26 @@ fn random_complex(rng: &mut common::Rng, n: usize) -> Vec<C> {
         .collect()
 }
 
-fn rel_l2(port: &[Complex<f32>], oracle: &[C]) -> f64 {
-    assert_eq!(port.len(), oracle.len());
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (p, o) in port.iter().zip(oracle) {
-        let d = C::new(p.re as f64, p.im as f64) - o;
-        num += d.norm_sqr();
-        den += o.norm_sqr();
-    }
-    (num / den.max(f64::MIN_POSITIVE)).sqrt()
+/// The relative L2 error of `port` against `oracle` (`metrics::error_stats_complex`;
+/// ∞ on a NaN/Inf mismatch, so that every bound fails).
+fn rel_l2<T: Copy + Into<f64>>(port: &[Complex<T>], oracle: &[C]) -> f64 {
+    voxlab::metrics::error_stats_complex(oracle, port, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
-/// The index and size of the largest difference.
-fn worst(port: &[Complex<f32>], oracle: &[C]) -> (usize, f64) {
-    port.iter()
-        .zip(oracle)
-        .map(|(p, o)| (C::new(p.re as f64, p.im as f64) - o).norm())
-        .enumerate()
-        .fold((0, 0.0), |a, (i, d)| if d > a.1 { (i, d) } else { a })
-}
-
-fn rel_l2_f64(a: &[C], b: &[C]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).norm_sqr()).sum();
-    let den: f64 = b.iter().map(|y| y.norm_sqr()).sum();
-    (num / den.max(f64::MIN_POSITIVE)).sqrt()
+/// Asserts the relative L2 error of `port` against `oracle` is at most `bound`
+/// (`metrics::check_parity_complex`: a failure names the worst element and leaves
+/// `target/parity/<case>/`); returns the error. `dims` x fastest.
+fn assert_rel_l2(
+    case: &str,
+    dims: &[usize],
+    port: &[Complex<f32>],
+    oracle: &[C],
+    bound: f64,
+) -> f64 {
+    let tol = voxlab::metrics::Tolerance::rel_l2(bound);
+    common::assert_parity_complex(case, dims, oracle, port, tol).rel_l2
 }
 
 fn to_f32(x: &[C]) -> Vec<Complex<f32>> {
@@ -90,7 +86,7 @@ fn cpu_twins_match_the_exact_dft() {
             let want = dft_1d(&x, dir, Normalization::None);
             for variant in GpuFftVariant::ALL {
                 let got = fft::reference_line(&x, dir, variant);
-                let e = rel_l2_f64(&got, &want);
+                let e = rel_l2(&got, &want);
                 assert!(e < TWIN_REL_L2, "{variant:?} N={n} {dir:?}: rel L2 {e:e}");
             }
         }
@@ -207,6 +203,11 @@ fn parity(name: &str, case: Case, variant: GpuFftVariant) {
         Case::Lines { n, lines } => (n * lines, n),
         Case::Nd(shape) => (shape.iter().product(), shape.iter().product()),
     };
+    // The array's dimensions x fastest (the FFT's shapes are row-major).
+    let dims: Vec<usize> = match case {
+        Case::Lines { n, lines } => vec![n, lines],
+        Case::Nd(shape) => shape.iter().rev().copied().collect(),
+    };
     let tol = REL_L2_PER_STAGE * (transformed as f64).log2();
     let mut rng = common::Rng(0x0ff7_0000 ^ total as u64);
     let x32 = to_f32(&random_complex(&mut rng, total));
@@ -219,18 +220,11 @@ fn parity(name: &str, case: Case, variant: GpuFftVariant) {
             }
             .unwrap_or_else(|e| panic!("{test}: {e}"));
             let want = oracle(&case, &x, dir, norm);
-            let e = rel_l2(&got, &want);
+            let case_name = format!("gpu_fft_{name}_{variant:?}_{dir:?}_{norm:?}");
+            let e = assert_rel_l2(&case_name, &dims, &got, &want, tol);
             eprintln!(
                 "gpu fft {name:<10} {variant:<11?} {dir:<7?} {norm:<12?} rel L2 {e:.2e} (bound {tol:.1e})"
             );
-            if e > tol {
-                let (i, d) = worst(&got, &want);
-                panic!(
-                    "{test} {dir:?} {norm:?}: rel L2 {e:e} over the bound {tol:e}; \
-                     worst element {i}: gpu {}, oracle {}, |Δ| = {d:e}",
-                    got[i], want[i]
-                );
-            }
         }
     }
 }
@@ -453,13 +447,15 @@ fn round_trip_restores_the_input() {
         for norm in [Normalization::Unitary, Normalization::Unnormalized] {
             let y = fft::fft_nd(ctx, &x, &shape, Direction::Forward, norm, variant).unwrap();
             let z = fft::fft_nd(ctx, &y, &shape, Direction::Inverse, norm, variant).unwrap();
-            let e = rel_l2(&z, &to_f64(&x));
-            eprintln!("gpu fft round trip 8x16x32 {variant:<14?} {norm:<12?} rel L2 {e:.2e}");
             // Two transforms, each within the parity bound.
-            assert!(
-                e <= 2.0 * REL_L2_PER_STAGE * 12.0,
-                "{variant:?} {norm:?}: {e:e}"
+            let e = assert_rel_l2(
+                &format!("gpu_fft_round_trip_{variant:?}_{norm:?}"),
+                &[32, 16, 8],
+                &z,
+                &to_f64(&x),
+                2.0 * REL_L2_PER_STAGE * 12.0,
             );
+            eprintln!("gpu fft round trip 8x16x32 {variant:<14?} {norm:<12?} rel L2 {e:.2e}");
         }
     }
 }
@@ -532,19 +528,20 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
         let (ga, gb) = fft::two_real_ffts(ctx, &a, &b).unwrap();
         let (ca, cb) = voxlab::cpu::fft::two_real_ffts(&a64, &b64);
         let tol = REL_L2_PER_STAGE * (n as f64).log2().max(1.0);
-        let (ea, eb) = (rel_l2(&ga, &ca), rel_l2(&gb, &cb));
+        let case = |which: &str| format!("gpu_two_real_ffts_{n}_{which}");
+        let ea = assert_rel_l2(&case("a_vs_cpu"), &[n], &ga, &ca, tol);
+        let eb = assert_rel_l2(&case("b_vs_cpu"), &[n], &gb, &cb, tol);
         eprintln!(
             "gpu two_real_ffts N={n:<6} vs cpu f64: rel L2 {ea:.2e}, {eb:.2e} (bound {tol:.1e})"
         );
-        assert!(ea <= tol && eb <= tol, "N={n}: {ea:e}, {eb:e} > {tol:e}");
         if n <= EXACT_DFT_MAX_LINE {
             let dft = |x: &[f64]| {
                 let c: Vec<C> = x.iter().map(|&v| C::new(v, 0.0)).collect();
                 dft_1d(&c, Direction::Forward, Normalization::Unnormalized)
             };
-            let (da, db) = (rel_l2(&ga, &dft(&a64)), rel_l2(&gb, &dft(&b64)));
+            let da = assert_rel_l2(&case("a_vs_dft"), &[n], &ga, &dft(&a64), tol);
+            let db = assert_rel_l2(&case("b_vs_dft"), &[n], &gb, &dft(&b64), tol);
             eprintln!("gpu two_real_ffts N={n:<6} vs exact DFT: rel L2 {da:.2e}, {db:.2e}");
-            assert!(da <= tol && db <= tol, "N={n}: {da:e}, {db:e} > {tol:e}");
         }
     }
     let e = fft::two_real_ffts(ctx, &[1.0; 4], &[1.0; 8]).unwrap_err();
@@ -578,20 +575,14 @@ fn large_parity(shape: &[usize], variant: GpuFftVariant) {
     let start = std::time::Instant::now();
     let got = fft::fft_nd_timed(ctx, &x32, shape, dir, norm, variant)
         .unwrap_or_else(|e| panic!("{test}: {e}"));
-    let e = rel_l2(&got.data, &want);
+    let seconds = start.elapsed().as_secs_f64();
+    let dims: Vec<usize> = shape.iter().rev().copied().collect();
+    let case = format!("gpu_fft_large_{shape:?}_{variant:?}");
+    let e = assert_rel_l2(&case, &dims, &got.data, &want, tol);
     eprintln!(
-        "gpu fft {test}: rel L2 {e:.2e} (bound {tol:.1e}); {:.2} s on the device, passes {:.3} s",
-        start.elapsed().as_secs_f64(),
+        "gpu fft {test}: rel L2 {e:.2e} (bound {tol:.1e}); {seconds:.2} s on the device, passes {:.3} s",
         got.timings.kernel
     );
-    if e > tol {
-        let (i, d) = worst(&got.data, &want);
-        panic!(
-            "{test}: rel L2 {e:e} over the bound {tol:e}; worst element {i}: gpu {}, \
-             oracle {}, |Δ| = {d:e}",
-            got.data[i], want[i]
-        );
-    }
 }
 
 /// One test per large case and variant, from one list.

@@ -142,21 +142,17 @@ fn cases() -> Vec<Case> {
     ]
 }
 
-/// `(‖a − b‖₂ / ‖a‖₂, max |a − b| / max |a|)`.
-fn errors(oracle: &Frame, port: &Frame) -> (f64, f64) {
-    assert_eq!(
-        (oracle.width, oracle.height, oracle.channels),
-        (port.width, port.height, port.channels)
-    );
-    let (mut d2, mut a2, mut dmax, mut amax) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in oracle.data.iter().zip(&port.data) {
-        assert!(b.is_finite(), "non-finite GPU pixel");
-        d2 += (a - b) * (a - b);
-        a2 += a * a;
-        dmax = dmax.max((a - b).abs());
-        amax = amax.max(a.abs());
-    }
-    (d2.sqrt() / a2.sqrt(), dmax / amax)
+/// Holds `port` to `oracle` within `tol` (`metrics::check_parity`: ‖Δ‖₂ / ‖oracle‖₂
+/// and max |Δ| / max |oracle|; any NaN/∞ fails); a failure leaves
+/// `target/parity/<label>/`.
+fn check(
+    label: &str,
+    oracle: &Frame,
+    port: &Frame,
+    tol: voxlab::metrics::Tolerance,
+) -> voxlab::metrics::ParityReport {
+    let dir = common::parity_dir(&format!("gpu_fvr {label}"));
+    voxlab::metrics::check_parity(label, oracle, port, tol, Some(&dir)).unwrap()
 }
 
 #[test]
@@ -201,12 +197,14 @@ fn gpu_fvr_matches_the_cpu_oracle() {
             );
             let port = gfvr::fvr_project(ctx, up, case.view, case.kernel, case.deapodize)
                 .unwrap_or_else(|e| panic!("{label}: {e}"));
-            let (l2, max) = errors(&oracle, &port);
+            let tol = voxlab::metrics::Tolerance::rel_l2(TOL_REL_L2).with_max_abs_rel(TOL_MAX_REL);
+            let r = check(&label, &oracle, &port, tol);
+            let (l2, max) = (r.stats.rel_l2, r.stats.max_abs_rel);
             eprintln!("{label}: rel L2 {l2:.2e}, max/peak {max:.2e}");
             worst_l2 = worst_l2.max(l2);
             worst_max = worst_max.max(max);
-            if l2 > TOL_REL_L2 || max > TOL_MAX_REL {
-                failures.push(format!("{label}: rel L2 {l2:.2e}, max/peak {max:.2e}"));
+            if !r.passed {
+                failures.push(r.message);
             }
             images.push(port);
         }
@@ -301,14 +299,14 @@ fn cli_backend_gpu_matches_backend_cpu() {
         images.push(voxlab::io::npy::read_npy_f32(&out).unwrap());
     }
     assert_eq!(images[0].0, images[1].0, "shape");
-    let peak = images[0].1.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
-    let worst = images[0]
-        .1
-        .iter()
-        .zip(&images[1].1)
-        .map(|(a, b)| (a - b).abs() as f64)
-        .fold(0.0, f64::max);
-    assert!(worst / peak <= TOL_MAX_REL, "max/peak {:.2e}", worst / peak);
+    let dims: Vec<usize> = images[0].0.iter().rev().copied().collect();
+    common::assert_parity_array(
+        "gpu_fvr_cli_backend_gpu_matches_backend_cpu",
+        &dims,
+        &images[0].1,
+        &images[1].1,
+        voxlab::metrics::Tolerance::max_abs_rel(TOL_MAX_REL),
+    );
 }
 
 /// A spectrum beyond one storage binding on the adapter's own limit: Shepp–Logan 256³
@@ -333,8 +331,9 @@ fn a_1_gib_spectrum_renders_from_slabs() {
     let oracle = fvr::fvr_project(&s, ORBIT, Kernel::Lanczos3, false).unwrap();
     let cpu = t.elapsed().as_secs_f64();
     let (port, times) = gfvr::fvr_project_timed(ctx, &g, ORBIT, Kernel::Lanczos3, false).unwrap();
-    let (l2, max) = errors(&oracle, &port);
     let tol = voxlab::bench::fourier::fvr_gpu_tol(s.side());
+    let r = check("a_1_gib_spectrum", &oracle, &port, tol);
+    let (l2, max) = (r.stats.rel_l2, r.stats.max_abs_rel);
     eprintln!(
         "M = {}: {} slabs of {} planes; CPU spectrum {pre:.1} s, upload {up:.1} s; view: \
          CPU {cpu:.2} s, GPU {:.2} s (slice {:.2} s, FFT {:.2} s); rel L2 {l2:.2e}, \
@@ -351,5 +350,5 @@ fn a_1_gib_spectrum_renders_from_slabs() {
     if ctx.limits.max_storage_buffer_binding_size < (1 << 30) {
         assert!(g.slab_count() > 1);
     }
-    assert!(l2 <= tol.rel_l2 && max <= tol.max_abs_rel, "{l2:e} {max:e}");
+    assert!(r.passed, "{}", r.message);
 }

@@ -107,6 +107,7 @@ fn scene(case: &Case, n: usize, size: usize) -> (AnyVolume, TransferFunction, Ca
 const MIDA: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 
 /// Windowed MIP/MinIP, window widths 0.1 and 0.4 on values in [0, 1] (the map's slope
@@ -115,6 +116,7 @@ const MIDA: Tolerance = Tolerance {
 const WINDOWED: Tolerance = Tolerance {
     max_abs: 2e-4,
     rmse: 1e-5,
+    ..Tolerance::NONE
 };
 
 /// Iso-surfaces (with and without DVR, semi-transparent, opaque, shadows, unrefined,
@@ -126,6 +128,7 @@ const WINDOWED: Tolerance = Tolerance {
 const ISO: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 
 fn run(name: &str, case: Case, n: usize, size: usize, tol: Tolerance) {

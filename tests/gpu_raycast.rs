@@ -142,6 +142,7 @@ fn run(
 const EXACT_DVR: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 
 /// MIP, MinIP and X-ray, exact path, relative to the data scale (see `check`): worst
@@ -150,6 +151,7 @@ const EXACT_DVR: Tolerance = Tolerance {
 const EXACT_SCALAR: Tolerance = Tolerance {
     max_abs: 5e-5,
     rmse: 1e-5,
+    ..Tolerance::NONE
 };
 
 /// The hardware trilinear path. Real GPUs compute the sampler's interpolation weights
@@ -168,10 +170,12 @@ const EXACT_SCALAR: Tolerance = Tolerance {
 const HARDWARE_SCALAR: Tolerance = Tolerance {
     max_abs: 3.0 / 256.0,
     rmse: 3.0 / 1024.0,
+    ..Tolerance::NONE
 };
 const HARDWARE_DVR: Tolerance = Tolerance {
     max_abs: 36.0 / 256.0,
     rmse: 9.0 / 256.0,
+    ..Tolerance::NONE
 };
 
 /// Renders a case on the oracle and the GPU and checks parity of the image and of the

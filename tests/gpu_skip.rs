@@ -5,7 +5,7 @@
 mod common;
 
 use voxlab::camera::{AxisView, Camera, Projection};
-use voxlab::cpu::filter::Grid;
+use voxlab::cpu::grid::Grid;
 use voxlab::gpu::skip::{SkipGridParams, MINMAX_WGSL};
 use voxlab::metrics::Tolerance;
 use voxlab::phantom::Phantom;
@@ -21,6 +21,7 @@ use voxlab::AnyVolume;
 const DVR: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 
 fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
@@ -157,13 +158,9 @@ fn check(name: &str, case: Case) {
     let (on, off) = (gpu(true), gpu(false));
     let cpu = voxlab::cpu::raycast::render::<f64>(&vol, &tf, &cam, &settings(&case, true), none())
         .unwrap();
-    let same = on
-        .image
-        .data
-        .iter()
-        .zip(&off.image.data)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
+    let same = voxlab::metrics::error_stats(&off.image.data, &on.image.data, f64::INFINITY)
+        .infinite_if_mismatched()
+        .max_abs;
     let stats = common::assert_parity(name, &cpu.image, &on.image, DVR);
     let counts_differ = cpu
         .samples
@@ -219,8 +216,8 @@ gpu_cases! {
 /// Accumulated jittered frames on the GPU match the CPU's (same seeds).
 #[test]
 fn gpu_accumulation_matches_the_cpu() {
-    use voxlab::accumulate::render_accumulated;
-    use voxlab::render::{Backend, Renderer, Scene};
+    use voxlab::jobs::accumulate::render_accumulated;
+    use voxlab::jobs::render::{Backend, Renderer, Scene};
     let Some(_) = common::gpu("gpu_accumulation_matches_the_cpu") else {
         return;
     };

@@ -5,11 +5,11 @@ mod common;
 
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
+use voxlab::jobs::render::{Backend, Renderer, Scene};
+use voxlab::jobs::stereo::{combine, render_pair, render_pair_gpu, StereoLayout};
 use voxlab::metrics::Tolerance;
 use voxlab::phantom::Phantom;
-use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::{Mode, RenderSettings};
-use voxlab::stereo::{combine, render_pair, render_pair_gpu, StereoLayout};
 use voxlab::transfer::TransferFunction;
 
 /// The ray caster's exact-path tolerances (tests/gpu_raycast.rs: EXACT_DVR, and
@@ -19,10 +19,12 @@ use voxlab::transfer::TransferFunction;
 const DVR: Tolerance = Tolerance {
     max_abs: 1e-3,
     rmse: 5e-5,
+    ..Tolerance::NONE
 };
 const SCALAR: Tolerance = Tolerance {
     max_abs: 5e-5,
     rmse: 1e-5,
+    ..Tolerance::NONE
 };
 
 fn scene() -> Scene {

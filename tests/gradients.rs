@@ -3,10 +3,10 @@
 //! `f_aa / 2` on quadratics; central differences and Sobel are exact on quadratics;
 //! central differences are off by `f_aaa / 6` on cubics.
 
-use voxlab::cpu::filter::Grid;
 use voxlab::cpu::gradient::{
     gradient_at, gradient_at_voxel, gradient_magnitude, precompute_gradients,
 };
+use voxlab::cpu::grid::Grid;
 use voxlab::real::V3;
 use voxlab::settings::{Filter, GradientMethod};
 

@@ -4,11 +4,13 @@
 
 use glam::DVec3;
 use voxlab::camera::{AxisView, Camera, Orbit, Projection};
-use voxlab::cpu::filter::Grid;
+use voxlab::cpu::grid::Grid;
 use voxlab::cpu::modes::{first_iso_hit, window_map, window_preset, Span};
-use voxlab::cpu::raycast::{intersect_box, render, Field, GridField};
+use voxlab::cpu::raycast::{render, Field, GridField};
 use voxlab::frame::Frame;
+use voxlab::metrics::max_abs_error;
 use voxlab::phantom::Phantom;
+use voxlab::real::intersect_box;
 use voxlab::real::{Real, V3};
 use voxlab::settings::{
     Classification, Filter, GradientMethod, IsoSurface, Light, Mode, RenderSettings,
@@ -47,15 +49,6 @@ fn draw<R: Real>(
     render::<R>(vol, tf, cam, s, &|_, _| {}).unwrap().image
 }
 
-fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(a.data.len(), b.data.len());
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
-
 /// γ = −1 makes β ≡ 1, so MIDA is DVR to the bit (DVR without early termination: MIDA
 /// never terminates early). Measured max |Δ| 0 in f64 and f32, shaded and unshaded,
 /// post- and pre-classified.
@@ -78,11 +71,11 @@ fn mida_at_gamma_minus_one_is_dvr() {
             mida_gamma: -1.0,
             ..dvr.clone()
         };
-        let d64 = max_diff(
+        let d64 = max_abs_error(
             &draw::<f64>(&vol, &tf, &cam, &dvr),
             &draw::<f64>(&vol, &tf, &cam, &mida),
         );
-        let d32 = max_diff(
+        let d32 = max_abs_error(
             &draw::<f32>(&vol, &tf, &cam, &dvr),
             &draw::<f32>(&vol, &tf, &cam, &mida),
         );
@@ -140,13 +133,13 @@ fn mida_tends_to_mip_as_gamma_tends_to_one() {
         )
     };
     let one = at(1.0);
-    let d1 = max_diff(&one, &expected);
+    let d1 = max_abs_error(&one, &expected);
     eprintln!("MIDA(γ=1) vs coloured MIP: max |Δ| {d1:.1e}");
     assert!(d1 <= 1e-12, "{d1}");
-    let d0 = max_diff(&at(0.0), &one);
+    let d0 = max_abs_error(&at(0.0), &one);
     assert!(d0 > 0.05, "plain MIDA should differ from MIP: {d0}");
     for g in [0.5, 0.9, 0.99] {
-        let dg = max_diff(&at(g), &one);
+        let dg = max_abs_error(&at(g), &one);
         eprintln!(
             "γ = {g}: max |MIDA(γ) − MIDA(1)| = {dg:.3e}, / d(0) = {:.6}",
             dg / d0
@@ -167,7 +160,7 @@ fn mida_at_gamma_zero_differs_from_dvr() {
         mode: Mode::Mida,
         ..dvr.clone()
     };
-    let d = max_diff(
+    let d = max_abs_error(
         &draw::<f64>(&vol, &tf, &cam, &dvr),
         &draw::<f64>(&vol, &tf, &cam, &mida),
     );
@@ -202,7 +195,7 @@ fn windowed_mip_is_the_window_of_the_mip() {
                 }
             }
             assert!(counts.data.contains(&0.0));
-            let d = max_diff(&w, &mapped);
+            let d = max_abs_error(&w, &mapped);
             eprintln!("{mode:?} window {window:?}: max |Δ| {d:.1e}");
             assert_eq!(d, 0.0);
             assert!(w.data.iter().all(|v| (0.0..=1.0).contains(v)));
@@ -542,7 +535,7 @@ fn dvr_with_transparent_iso_surfaces_is_dvr() {
         }],
         ..dvr.clone()
     };
-    let d = max_diff(
+    let d = max_abs_error(
         &draw::<f64>(&vol, &tf, &cam, &dvr),
         &draw::<f64>(&vol, &tf, &cam, &both),
     );
@@ -557,7 +550,7 @@ fn dvr_with_transparent_iso_surfaces_is_dvr() {
         ..dvr.clone()
     };
     let img = draw::<f64>(&vol, &tf, &cam, &opaque);
-    assert!(max_diff(&draw::<f64>(&vol, &tf, &cam, &dvr), &img) > 0.1);
+    assert!(max_abs_error(&draw::<f64>(&vol, &tf, &cam, &dvr), &img) > 0.1);
 }
 
 /// The f32 CPU path against the f64 oracle for every mode of this module (Shepp–Logan
@@ -631,7 +624,7 @@ fn f32_cpu_matches_the_f64_oracle() {
         ),
     ];
     for (name, s) in cases {
-        let d = max_diff(
+        let d = max_abs_error(
             &draw::<f64>(&vol, &tf, &cam, &s),
             &draw::<f32>(&vol, &tf, &cam, &s),
         );

@@ -8,6 +8,7 @@ use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::multi::{render_layers, Layer};
 use voxlab::cpu::raycast::{Field, PhantomField};
 use voxlab::frame::Frame;
+use voxlab::metrics::max_abs_error;
 use voxlab::multi::{rotation_translation, transform_matrix, MultiVolume, IDENTITY};
 use voxlab::phantom::Phantom;
 use voxlab::settings::{Compositing, GradientMethod, Mode, RenderSettings};
@@ -44,18 +45,6 @@ fn settings(mode: Mode) -> RenderSettings {
         skip_empty: false,
         ..RenderSettings::default()
     }
-}
-
-fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(
-        (a.width, a.height, a.channels),
-        (b.width, b.height, b.channels)
-    );
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
 }
 
 fn single(vol: &AnyVolume, tf: &TransferFunction, cam: &Camera, s: &RenderSettings) -> Frame {
@@ -97,7 +86,7 @@ fn one_volume_identity_equals_single_volume_caster() {
     for (name, s) in cases {
         let a = single(&vol, &tf, &cam, &s);
         let b = multi(&mv, &cam, &s);
-        let d = max_diff(&a, &b);
+        let d = max_abs_error(&a, &b);
         eprintln!("{name}: max |Δ| {d:.2e}");
         assert!(d <= 1e-12, "{name}: {d}");
     }
@@ -125,7 +114,7 @@ fn transformed_volume_equals_volume_with_that_affine() {
         let mv = [MultiVolume::new(v.clone().into(), tf.clone()).with_transform(*t)];
         for mode in [Mode::Dvr, Mode::Xray, Mode::Mip] {
             let s = settings(mode);
-            let d = max_diff(&single(&placed, &tf, &cam, &s), &multi(&mv, &cam, &s));
+            let d = max_abs_error(&single(&placed, &tf, &cam, &s), &multi(&mv, &cam, &s));
             eprintln!("transform {i}, {mode:?}: max |Δ| {d:.2e}");
             assert!(d <= 1e-12, "transform {i}, {mode:?}: {d}");
         }
@@ -151,7 +140,7 @@ fn two_copies_double_the_optical_depth() {
         reference_step: 0.5,
         ..s.clone()
     };
-    let d = max_diff(&single(&vol, &tf, &cam, &halved), &multi(&copies, &cam, &s));
+    let d = max_abs_error(&single(&vol, &tf, &cam, &halved), &multi(&copies, &cam, &s));
     eprintln!("two copies vs halved reference step: {d:.2e}");
     assert!(d <= 1e-12, "{d}");
 
@@ -165,7 +154,7 @@ fn two_copies_double_the_optical_depth() {
         // with it every sample position.
         MultiVolume::new(vol.clone(), clear),
     ];
-    let d = max_diff(&single(&vol, &tf, &cam, &s), &multi(&with_clear, &cam, &s));
+    let d = max_abs_error(&single(&vol, &tf, &cam, &s), &multi(&with_clear, &cam, &s));
     assert!(
         d <= 1e-12,
         "a transparent second volume changed the image: {d}"
@@ -180,7 +169,7 @@ fn two_copies_double_the_optical_depth() {
         .map(|(a, b)| (2.0 * a - b).abs())
         .fold(0.0, f64::max);
     assert!(d <= 1e-9, "x-ray of two copies: {d}");
-    let d = max_diff(
+    let d = max_abs_error(
         &single(&vol, &tf, &cam, &settings(Mode::Mip)),
         &multi(&copies, &cam, &settings(Mode::Mip)),
     );

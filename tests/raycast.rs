@@ -81,15 +81,9 @@ fn xray_of_ellipsoids_converges_to_the_exact_line_integrals() {
                 no_progress(),
             )
             .unwrap();
-            let errs: Vec<f64> = out
-                .image
-                .data
-                .iter()
-                .zip(&exact)
-                .map(|(a, b)| a - b)
-                .collect();
-            let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
-            let max = errs.iter().map(|e| e.abs()).fold(0.0, f64::max);
+            let e = voxlab::metrics::error_stats(&exact, &out.image.data, f64::INFINITY)
+                .infinite_if_mismatched();
+            let (rms, max) = (e.rmse, e.max_abs);
             let bound = abs_density * 2.0 * step * spacing * 1.000001;
             eprintln!("{name} step {step}: rms {rms:.4} max {max:.4} (bound {bound:.4}) value·mm");
             assert!(
@@ -255,7 +249,7 @@ fn dvr_through_a_homogeneous_slab_is_beer_lambert() {
                             let r = cam.ray(col, row);
                             let lo = DVec3::splat(-0.5);
                             let hi = DVec3::new(7.5, 9.5, 11.5);
-                            let len = match voxlab::camera::intersect_box(r.origin, r.dir, lo, hi) {
+                            let len = match voxlab::real::slab_interval(r.origin, r.dir, lo, hi) {
                                 Some((a, b)) => (b - a.max(r.t_min)).max(0.0),
                                 None => 0.0,
                             };
@@ -409,7 +403,7 @@ fn mip_and_minip_of_spheres() {
             let (o, d) = (r.origin / h, r.dir);
             let dist = |c: DVec3| (o - c - d * (o - c).dot(d)).length();
             // Inside the cube along the whole image (the orbit fits the cube's sphere).
-            if voxlab::phantom::slab_interval(o, d, DVec3::splat(-1.0), DVec3::ONE).is_none() {
+            if voxlab::real::slab_interval(o, d, DVec3::splat(-1.0), DVec3::ONE).is_none() {
                 continue;
             }
             let (m, n) = (mip.image.pixel(col, row)[0], minip.image.pixel(col, row)[0]);

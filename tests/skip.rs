@@ -7,7 +7,8 @@ mod common;
 
 use glam::DVec3;
 use voxlab::camera::{AxisView, Camera, Orbit, Projection};
-use voxlab::cpu::filter::{sample, Grid};
+use voxlab::cpu::filter::sample;
+use voxlab::cpu::grid::Grid;
 use voxlab::cpu::raycast::render;
 use voxlab::cpu::skip::{cell_count, Skipper};
 use voxlab::real::{Real, V3};
@@ -24,6 +25,7 @@ fn none() -> &'static (dyn Fn(usize, usize) + Sync) {
 use common::sparse_tf;
 
 use common::odd_phantom as phantom;
+use voxlab::metrics::max_abs_error;
 
 #[derive(Clone, Copy, Debug)]
 enum Cam {
@@ -287,7 +289,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip)), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("x-ray clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, nearest, step ½ on the axis view: the clipped rays start on the box face,
@@ -305,7 +307,7 @@ fn clip_box_matches_zeroed_voxels() {
     };
     let a = render::<f64>(&vol, &tf, &cam, &s(Some(clip), Filter::Nearest), none()).unwrap();
     let b = render::<f64>(&zeroed, &tf, &cam, &s(None, Filter::Nearest), none()).unwrap();
-    let d = max_diff(&a.image.data, &b.image.data);
+    let d = max_abs_error(&a.image.data, &b.image.data);
     eprintln!("dvr nearest clip vs zeroed: max |Δ| {d:e}");
     assert!(d < 1e-12, "{d}");
     // DVR, trilinear: the zeroed volume blends the zeros in over one voxel at every
@@ -319,7 +321,7 @@ fn clip_box_matches_zeroed_voxels() {
         for col in 0..n {
             // Axis view −y: columns along x, rows along z (top = high z).
             let (x, z) = (col, n - 1 - row);
-            let dd = max_diff(
+            let dd = max_abs_error(
                 &a.image.data[(row * n + col) * 4..][..4],
                 &b.image.data[(row * n + col) * 4..][..4],
             );
@@ -334,13 +336,6 @@ fn clip_box_matches_zeroed_voxels() {
     eprintln!("dvr trilinear clip vs zeroed: outside {outside:e}, through the box {inside:e}");
     assert!(outside < 1e-12, "{outside}");
     assert!(inside < 0.5, "{inside}");
-}
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
 }
 
 /// X-ray of a constant volume through a world-space clip box: every ray that crosses
@@ -391,7 +386,7 @@ fn clip_box_in_world_space_is_an_exact_chord() {
     for row in 0..24 {
         for col in 0..24 {
             let r = cam.ray(col, row);
-            let chord = voxlab::camera::intersect_box(r.origin, r.dir, lo.max(vlo), hi.min(vhi))
+            let chord = voxlab::real::slab_interval(r.origin, r.dir, lo.max(vlo), hi.min(vhi))
                 .map_or(0.0, |(t0, t1)| (t1 - t0).max(0.0));
             let got = out.image.data[row * 24 + col];
             let want = 0.5 * chord;
@@ -409,7 +404,7 @@ fn clip_box_in_world_space_is_an_exact_chord() {
 /// The wood-grain scene: unshaded DVR of the modified Shepp–Logan (32³) with the
 /// `phantom` preset's thin opacity bands, a coarse step of 1.5 voxels, oblique
 /// orthographic view.
-fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
+fn grain_scene() -> (voxlab::jobs::render::Scene, RenderSettings) {
     let volume = phantom(32);
     let camera = camera(&volume, Cam::Ortho, 48);
     let mut s = RenderSettings {
@@ -417,7 +412,7 @@ fn grain_scene() -> (voxlab::render::Scene, RenderSettings) {
         ..RenderSettings::default()
     };
     s.shading.enabled = false;
-    let scene = voxlab::render::Scene {
+    let scene = voxlab::jobs::render::Scene {
         volume,
         transfer: TransferFunction::preset("phantom").unwrap(),
         camera,
@@ -435,8 +430,8 @@ fn rmse(a: &[f64], b: &[f64]) -> f64 {
 /// (N = 16 is 0.33× N = 1 and 0.31× the unjittered error).
 #[test]
 fn accumulated_jitter_converges_to_the_fine_step_reference() {
-    use voxlab::accumulate::render_accumulated;
-    use voxlab::render::{Backend, Renderer};
+    use voxlab::jobs::accumulate::render_accumulated;
+    use voxlab::jobs::render::{Backend, Renderer};
     let (scene, s) = grain_scene();
     let cpu = Renderer::new(Backend::Cpu).unwrap();
     let fine = RenderSettings {
@@ -488,7 +483,7 @@ fn accumulated_jitter_converges_to_the_fine_step_reference() {
 /// seed; the Bayer pattern covers 16 distinct offsets.
 #[test]
 fn jitter_offsets_are_uniform_and_reproducible() {
-    use voxlab::accumulate::{interleaved_offset, jitter_offset, pcg_hash};
+    use voxlab::cpu::jitter::{interleaved_offset, jitter_offset, pcg_hash};
     // Reference values of the PCG hash (Jarzynski & Olano 2020), computed with Python integers.
     assert_eq!(pcg_hash(0), 129_708_002);
     let mut sum = 0.0;

@@ -5,11 +5,11 @@
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::raycast::render;
-use voxlab::frame::Frame;
+use voxlab::jobs::render::{Backend, Renderer, Scene};
+use voxlab::jobs::stereo::{combine, stereo_cameras, StereoLayout};
+use voxlab::metrics::max_abs_error;
 use voxlab::phantom::Phantom;
-use voxlab::render::{Backend, Renderer, Scene};
 use voxlab::settings::RenderSettings;
-use voxlab::stereo::{combine, stereo_cameras, StereoLayout};
 use voxlab::transfer::{
     bernstein3, faux_shade, ControlPoint, Interpolation, TransferFunction, WindowMap, HU_PRESETS,
 };
@@ -273,18 +273,6 @@ fn scene(n: usize, w: usize, h: usize) -> Scene {
     }
 }
 
-fn max_diff(a: &Frame, b: &Frame) -> f64 {
-    assert_eq!(
-        (a.width, a.height, a.channels),
-        (b.width, b.height, b.channels)
-    );
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
-
 /// A 1D transfer function converted to 2D renders exactly like the 1D one: the 2D
 /// table's value nodes coincide with the 1D table's (same size, domain and window), its
 /// two gradient rows are equal, so the bilinear read is the 1D linear read plus
@@ -306,8 +294,8 @@ fn a_converted_1d_transfer_function_renders_like_the_1d_one() {
         let two = render::<f64>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
         let two32 = render::<f32>(&sc.volume, tf, &sc.camera, &s, none()).unwrap();
         let (d, d32) = (
-            max_diff(&one.image, &two.image),
-            max_diff(&one32.image, &two32.image),
+            max_abs_error(&one.image, &two.image),
+            max_abs_error(&one32.image, &two32.image),
         );
         eprintln!("1D vs converted 2D, shading {shading}: f64 {d:e}, f32 {d32:e}");
         assert!(d <= 1e-12 && d32 <= 1e-6, "{d:e} {d32:e}");
@@ -371,7 +359,7 @@ fn gradient_magnitude_in_world_units_selects_what_is_seen() {
     let got = render::<f64>(&vol, &constant, &cam, &s, none())
         .unwrap()
         .image;
-    let d = max_diff(&want, &got);
+    let d = max_abs_error(&want, &got);
     assert!(d < 1e-12, "{d:e}");
     s.transfer_2d = Some(band([2.5, 8.0]));
     let got = render::<f64>(&vol, &constant, &cam, &s, none())
@@ -515,7 +503,7 @@ fn stereo_with_zero_separation_equals_the_mono_render() {
     let s = RenderSettings::default();
     let r = pixel_renderer();
     let mono = r.render(&sc, &s, none()).unwrap().output.image;
-    let pair = voxlab::stereo::render_pair(&r, &sc, &s, 0.0, 540.0, none()).unwrap();
+    let pair = voxlab::jobs::stereo::render_pair(&r, &sc, &s, 0.0, 540.0, none()).unwrap();
     assert_eq!(pair.cameras.shift_px, 0);
     assert_eq!(pair.left.data, mono.data);
     assert_eq!(pair.right.data, mono.data);
@@ -526,11 +514,11 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
     let sc = scene(16, 24, 18);
     let s = RenderSettings::default();
     let r = pixel_renderer();
-    let pair = voxlab::stereo::render_pair(&r, &sc, &s, 65.0, 540.0, none()).unwrap();
+    let pair = voxlab::jobs::stereo::render_pair(&r, &sc, &s, 65.0, 540.0, none()).unwrap();
     // s = e·H/(4 D tan 15°) = 65·18/(4·540·0.268) = 2.02 → 2 px.
     assert_eq!(pair.cameras.shift_px, 2);
     assert!(
-        max_diff(&pair.left, &pair.right) > 0.01,
+        max_abs_error(&pair.left, &pair.right) > 0.01,
         "the eyes see differently"
     );
     let (l, rt) = (&pair.left, &pair.right);
@@ -565,7 +553,10 @@ fn stereo_layouts_take_their_channels_and_rows_from_the_right_eye() {
         ..sc.clone()
     };
     let full = r.render(&wide, &s, none()).unwrap().output.image;
-    assert_eq!(voxlab::stereo::crop_columns(&full, 4, 24).data, l.data);
+    assert_eq!(
+        voxlab::jobs::stereo::crop_columns(&full, 4, 24).data,
+        l.data
+    );
     // Orthographic cameras are refused.
     let mut ortho = sc.camera.clone();
     ortho.projection = Projection::Orthographic {

@@ -7,8 +7,9 @@ mod common;
 use common::Rng;
 use glam::DVec3;
 use voxlab::camera::{Camera, Orbit, Projection};
-use voxlab::cpu::filter::{prepare, sample, Grid};
-use voxlab::cpu::tricubic::{fetch_points, sample_fast};
+use voxlab::cpu::filter::{axis_taps, prepare, sample};
+use voxlab::cpu::grid::Grid;
+use voxlab::cpu::tricubic::{fast_bspline_axis, fetch_points, sample_fast};
 use voxlab::phantom::Phantom;
 use voxlab::real::V3;
 use voxlab::settings::{Filter, Mode, RenderSettings};
@@ -49,6 +50,28 @@ fn points(dims: [usize; 3], count: usize, seed: u64) -> Vec<[f64; 3]> {
 }
 
 const SHAPES: [[usize; 3]; 5] = [[1, 1, 1], [2, 3, 1], [5, 7, 3], [9, 4, 6], [16, 16, 16]];
+
+/// Each axis's two fetches reproduce the four B-spline taps of `cpu::filter::axis_taps`
+/// (the weights pair up, the fractions stay between their voxels).
+#[test]
+fn pairs_reproduce_the_four_taps() {
+    for k in 0..=200 {
+        let x = -1.5 + k as f64 * 0.0371;
+        let t = axis_taps::<f64>(Filter::Bspline, x);
+        let a = fast_bspline_axis(x);
+        assert_eq!(a.base[0], t.first);
+        assert!((a.g[0] - (t.w[0] + t.w[1])).abs() < 1e-15);
+        assert!((a.g[1] - (t.w[2] + t.w[3])).abs() < 1e-15);
+        assert!((a.g[0] * a.frac[0] - t.w[1]).abs() < 1e-15);
+        assert!((a.g[1] * a.frac[1] - t.w[3]).abs() < 1e-15);
+        assert!((0.5..=1.0).contains(&a.frac[0]), "{x}: {:?}", a.frac);
+        assert!(
+            (0.0..=0.2 + 1e-15).contains(&a.frac[1]),
+            "{x}: {:?}",
+            a.frac
+        );
+    }
+}
 
 /// f64: the 8 fetches equal the 64 taps to rounding, everywhere including the borders
 /// and beyond them (clamp-to-edge). Measured worst |Δ| 1.3e-15 over 5 shapes × 2
@@ -227,13 +250,12 @@ fn fast_renders_equal_64_tap_renders_in_f64() {
 /// the short aliases.
 #[test]
 fn fast_filters_have_their_names() {
-    use clap::ValueEnum;
     for (f, name) in [
         (Filter::BsplineFast, "cubic-bspline-fast"),
         (Filter::BsplineFastInterp, "cubic-bspline-fast-interp"),
     ] {
         assert_eq!(f.name(), name);
-        assert_eq!(Filter::from_str(name, false).unwrap(), f);
+        assert_eq!(name.parse::<Filter>().unwrap(), f);
         assert_eq!(serde_json::to_string(&f).unwrap(), format!("\"{name}\""));
         assert_eq!(
             serde_json::from_str::<Filter>(&format!("\"{name}\"")).unwrap(),
@@ -242,7 +264,7 @@ fn fast_filters_have_their_names() {
         assert_eq!(f.radius(), 2);
     }
     assert_eq!(
-        Filter::from_str("bspline-fast", false).unwrap(),
+        "bspline-fast".parse::<Filter>().unwrap(),
         Filter::BsplineFast
     );
     assert_eq!(Filter::BsplineFast.exact(), Filter::Bspline);

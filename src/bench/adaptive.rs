@@ -19,10 +19,11 @@
 //! time adds the uploads, the device preparation and the readback. Work: rays and the oracle's samples, so that the samples/s of
 //! `adaptive` and `regular` show what fewer samples buy.
 
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::camera::Camera;
 use crate::cpu::adaptive::{self as ca, AdaptiveSettings, Sampling};
 use crate::error::Result;
+use crate::metrics::Tolerance;
 use crate::transfer::TransferFunction;
 use crate::AnyVolume;
 use std::rc::Rc;
@@ -37,10 +38,7 @@ use std::time::Instant;
 /// max. Measured at 128³ → 256² (docs/bench/lavapipe.md, all three step rules): CPU
 /// f32 max 1.0e-4, rel L2 1.5e-6; lavapipe max 2.9e-3, rel L2 1.8e-5 (phantom) and
 /// 8.0e-5 / 1.6e-6 (micro-CT). Bound: the plain caster's DVR bound.
-const ADAPTIVE_TOL: Tol = Tol {
-    max_abs_rel: 1.2e-2,
-    rel_l2: 1.5e-4,
-};
+const ADAPTIVE_TOL: Tolerance = Tolerance::max_abs_rel(1.2e-2).with_rel_l2(1.5e-4);
 
 /// (scene, sampling, volume side, image side) of every case of a suite.
 fn grid(suite: Suite) -> Vec<(&'static str, Sampling, usize, usize)> {

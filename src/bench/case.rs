@@ -1,21 +1,24 @@
 //! What one benchmark case is: how to build its inputs, how to run it on each backend,
-//! how much work one run does, and how close each backend must come to the oracle.
+//! how much work one run does, and how close each backend must come to the oracle (a
+//! [`crate::metrics::Tolerance`]).
 //!
 //! Every family of algorithms (`raycast`, `fft`, `ct`, …) lists its cases in its own
 //! module; the runner in [`super`] times them all the same way.
 
 use crate::error::Result;
 use crate::gpu::GpuContext;
+use crate::metrics::Tolerance;
 
-/// Which suite a case belongs to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Suite {
-    /// Tiny inputs, every algorithm once: under a minute even on lavapipe. A smoke test
-    /// of correctness, not of speed.
-    Quick,
-    /// The real sizes (volumes 64³ … 512³, images 256² … 1024², where memory allows).
-    Full,
+crate::choice_enum! {
+    /// Which suite a case belongs to.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Suite: "suite" {
+        /// Tiny inputs, every algorithm once: under a minute even on lavapipe. A smoke
+        /// test of correctness, not of speed.
+        Quick = "quick",
+        /// The real sizes (volumes 64³ … 512³, images 256² … 1024², where memory allows).
+        Full = "full",
+    }
 }
 
 /// One timed CPU run: the wall-clock time of the computation alone (inputs built
@@ -64,16 +67,6 @@ pub struct Work {
     pub unit: Unit,
 }
 
-/// How close a result must come to the f64 oracle's: the largest absolute difference
-/// relative to the oracle's largest |value|, and the relative L2 error
-/// ‖port − oracle‖ / ‖oracle‖. A result outside either bound fails, and its timings are
-/// not reported (a fast wrong answer never counts).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Tol {
-    pub max_abs_rel: f64,
-    pub rel_l2: f64,
-}
-
 /// A CPU backend of a prepared case: each call runs the computation once.
 pub type CpuFn = Box<dyn FnMut() -> Result<Run>>;
 /// The GPU backend of a prepared case: each call runs the computation once.
@@ -88,8 +81,13 @@ pub struct Prepared {
     pub cpu_f32: Option<CpuFn>,
     /// None where the algorithm has no GPU port.
     pub gpu: Option<GpuFn>,
-    pub tol_f32: Tol,
-    pub tol_gpu: Tol,
+    /// How close the f32 CPU result must come to the oracle's; the bench bounds
+    /// [`Tolerance::max_abs_rel`] (max |Δ| relative to the oracle's largest |value|) and
+    /// [`Tolerance::rel_l2`] (‖port − oracle‖ / ‖oracle‖). A result outside either fails,
+    /// and its timings are not reported (a fast wrong answer never counts).
+    pub tol_f32: Tolerance,
+    /// The same for the GPU result.
+    pub tol_gpu: Tolerance,
     /// The work one run does (the same on every backend).
     pub work: Vec<Work>,
     /// Anything a reader needs to know about what is timed (shown in the report).

@@ -32,7 +32,7 @@
 //! constructors.
 
 use super::case::flat;
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::cpu::fbp::{fbp, rtk_grid, skimage_grid, Grid as FbpGrid};
 use crate::cpu::project::{
     joseph_views, pixel_ray, project_phantom, project_volume, Grid, JosephView, ProjectOptions,
@@ -41,6 +41,7 @@ use crate::cpu::ramp::RampFilter;
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::Result;
 use crate::gpu::GpuContext;
+use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use glam::DMat4;
 use rayon::prelude::*;
@@ -316,15 +317,12 @@ fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
 /// beyond: max `max(5e-5, 3e-7·D)`, rel L2 `max(7e-6, 3e-8·D)`. Measured on lavapipe
 /// (CPU f32 and GPU alike): cone 16³ (D = 62) 3.8e-6 / 9.3e-7; parallel 16³ 2.3e-6 /
 /// 4.2e-7; cone 128³ (D = 500) 4.0e-5 / 2.3e-6; parallel 128³ 8.8e-6 / 7.3e-7.
-pub fn project_tol(g: &Geometry, n: usize) -> Tol {
+pub fn project_tol(g: &Geometry, n: usize) -> Tolerance {
     let d = match g.beam {
         Beam::Cone { sid, .. } => sid * n as f64 / 256.0,
         Beam::Parallel => n as f64,
     };
-    Tol {
-        max_abs_rel: (3e-7 * d).max(5e-5),
-        rel_l2: (3e-8 * d).max(7e-6),
-    }
+    Tolerance::max_abs_rel((3e-7 * d).max(5e-5)).with_rel_l2((3e-8 * d).max(7e-6))
 }
 
 /// Tolerance of FBP/FDK in f32 (CPU and GPU) against the f64 oracle for an `n²` image
@@ -337,11 +335,8 @@ pub fn project_tol(g: &Geometry, n: usize) -> Tol {
 /// 6.8e-6 / 3.2e-6; 3.4e-6 / 2.0e-6; FBP 512² 1.4e-5 / 6.0e-6; 7.3e-6 / 3.9e-6;
 /// FDK 16³ 9.6e-7 / 8.1e-7; 7.8e-7 / 6.4e-7; FDK 128³ 6.3e-6 / 3.6e-6; 4.2e-6 /
 /// 2.8e-6.
-pub fn recon_tol(n: usize) -> Tol {
-    Tol {
-        max_abs_rel: (1.5e-7 * n as f64).max(1e-5),
-        rel_l2: (1e-7 * n as f64).max(5e-6),
-    }
+pub fn recon_tol(n: usize) -> Tolerance {
+    Tolerance::max_abs_rel((1.5e-7 * n as f64).max(1e-5)).with_rel_l2((1e-7 * n as f64).max(5e-6))
 }
 
 fn to_f32(p: &Projections<f64>) -> Result<Projections<f32>> {

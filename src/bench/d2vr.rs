@@ -23,7 +23,7 @@
 //! every ray (`box_samples`, the plain march without cylinder, mask or early
 //! termination), so what the accelerations skip shows as throughput.
 
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::camera::{Camera, Orbit, Projection};
 use crate::cpu::d2vr::OccupancyMask;
 use crate::cpu::d2vr::{box_samples, render_d2vr, D2vrGradient, D2vrGrid, D2vrOptions};
@@ -31,6 +31,7 @@ use crate::cpu::project::project_phantom;
 use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
 use crate::ct::{Geometry, Projections};
 use crate::error::Result;
+use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::settings::{Mode, RenderSettings};
 use crate::transfer::{ControlPoint, TransferFunction, WindowMap};
@@ -215,20 +216,14 @@ pub fn d2vr_mask(scene: &D2vrScene) -> Result<OccupancyMask> {
 /// within rounding stops one sample earlier or later. Measured on lavapipe (f32 CPU /
 /// GPU): max 9.8e-5 / 2.2e-4 (half, every GFS variant), 8.6e-4 / 2.2e-3 (table1
 /// GFS+B+OC), 1.2e-6 / 1.9e-6 (quick); rel L2 ≤ 2.2e-5. Bound: about 4× the worst.
-const GFS_F32: Tol = Tol {
-    max_abs_rel: 1e-2,
-    rel_l2: 1e-4,
-};
+const GFS_F32: Tolerance = Tolerance::max_abs_rel(1e-2).with_rel_l2(1e-4);
 /// GFR: its gradient jumps at every detector-cell edge (the bilinear interpolant's
 /// derivative is piecewise constant), so where f32 puts a sample across an edge the
 /// shading of that pixel changes by up to a few per cent (isolated pixels: 3 of 16384 at
 /// half, 17–23 of 65536 at table1 beyond 1e-3). Measured on lavapipe (f32 CPU / GPU): max
 /// 5.8e-3 / 1.2e-2 (half), 1.4e-2 / 9.2e-3 (table1 GFR+B+OC), 1.0e-6 / 1.1e-6 (quick);
 /// rel L2 ≤ 1.3e-4. Bound: about 4× the worst.
-const GFR_F32: Tol = Tol {
-    max_abs_rel: 5e-2,
-    rel_l2: 5e-4,
-};
+const GFR_F32: Tolerance = Tolerance::max_abs_rel(5e-2).with_rel_l2(5e-4);
 
 /// Every D²VR case of a suite.
 pub fn cases(suite: Suite) -> Vec<Case> {
@@ -267,7 +262,7 @@ pub fn cases(suite: Suite) -> Vec<Case> {
 }
 
 /// The tolerance of a variant's f32 paths (CPU and GPU alike).
-pub fn d2vr_tolerance(v: &D2vrVariant) -> Tol {
+pub fn d2vr_tolerance(v: &D2vrVariant) -> Tolerance {
     match v.gradient {
         D2vrGradient::Gfs => GFS_F32,
         D2vrGradient::Gfr => GFR_F32,

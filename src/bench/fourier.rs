@@ -2,7 +2,7 @@
 //! volume rendering (`fvr`).
 //!
 //! **fft.** The forward, unnormalised complex FFT of random values (uniform in
-//! `[−1, 1)` in both parts, [`crate::fft_check::random_complex`] with a fixed seed) in
+//! `[−1, 1)` in both parts, [`crate::jobs::fft::random_complex`] with a fixed seed) in
 //! 2-D (`256²`, `512²`, `1024²`) and 3-D (`64³`, `128³`, `256³`). The oracle is the f64
 //! FFT ([`crate::cpu::fft::fft_nd`], rustfft along every axis, all rayon threads): the
 //! exact DFT costs `N·ΣN_axis` multiply-adds (`1.8·10¹¹` at `256³`) and is far too slow
@@ -32,15 +32,16 @@
 //! ([`fft_input`], [`fvr_volume`], [`FVR_VIEW`]).
 
 use super::case::flat;
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fft::fft_nd;
 use crate::cpu::fvr::{fvr_project, FvrSpectrum, FvrView, Kernel};
 use crate::error::Result;
-use crate::fft_check::random_complex;
 use crate::gpu::fft::{GpuFftPlan, GpuFftVariant};
 use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum};
 use crate::gpu::GpuContext;
+use crate::jobs::fft::random_complex;
+use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::volume::Volume;
 use rustfft::num_complex::Complex;
@@ -206,14 +207,8 @@ fn prepare_fft(shape: &[usize]) -> Result<Prepared> {
         // largest |X| of random data is a few times its RMS, the largest error a few
         // times the RMS error). Measured on lavapipe, CPU f32 and GPU alike: max
         // 1.3e-7 … 2.2e-7, rel L2 1.1e-7 … 1.8e-7 from 32² to 256³.
-        tol_f32: Tol {
-            max_abs_rel: l2,
-            rel_l2: l2,
-        },
-        tol_gpu: Tol {
-            max_abs_rel: l2,
-            rel_l2: l2,
-        },
+        tol_f32: Tolerance::max_abs_rel(l2).with_rel_l2(l2),
+        tol_gpu: Tolerance::max_abs_rel(l2).with_rel_l2(l2),
         work: vec![
             Work {
                 amount: 5.0 * total as f64 * log2n,
@@ -242,11 +237,8 @@ fn prepare_fft(shape: &[usize]) -> Result<Prepared> {
 /// L2, trilinear and Lanczos-3): M = 32 2.6e-7 / 2.4e-7; M = 128 1.1e-6 / 6.6e-7;
 /// M = 256 2.3e-6 / 1.2e-6; M = 512 (1 GiB, 8 slabs on lavapipe; Lanczos-3, not
 /// de-apodised, `tests/gpu_fvr.rs: a_1_gib_spectrum_renders_from_slabs`) 6.2e-6 / 4.3e-6.
-pub fn fvr_gpu_tol(m: usize) -> Tol {
-    Tol {
-        max_abs_rel: (4e-8 * m as f64).max(5e-6),
-        rel_l2: (2.5e-8 * m as f64).max(5e-6),
-    }
+pub fn fvr_gpu_tol(m: usize) -> Tolerance {
+    Tolerance::max_abs_rel((4e-8 * m as f64).max(5e-6)).with_rel_l2((2.5e-8 * m as f64).max(5e-6))
 }
 
 fn fvr_case(n: usize, kernel: Kernel) -> Case {

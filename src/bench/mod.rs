@@ -10,13 +10,14 @@ pub mod case;
 pub mod ct;
 pub mod d2vr;
 pub mod fourier;
+pub mod job;
 pub mod machine;
 pub mod multi;
 pub mod process;
 pub mod raycast;
 pub mod report;
 
-pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+pub use case::{Case, CpuFn, GpuFn, GpuRun, Prepared, Run, Suite, Unit, Work};
 pub use report::Report;
 
 /// The algorithm families, in report order (`--only` takes a comma-separated subset).
@@ -39,40 +40,10 @@ pub fn cases(suite: Suite) -> Vec<Case> {
 
 use crate::error::{Error, Result};
 use crate::gpu::GpuContext;
+pub use crate::jobs::BackendSet;
 use machine::Machine;
 use report::{parity, throughput, BackendReport, CaseReport, Speedups, Stats, Status};
 use std::time::Instant;
-
-/// Which backends run. The CPU f64 oracle always runs once, as the reference; with
-/// `Gpu` it is not timed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Backends {
-    Cpu,
-    Gpu,
-    All,
-}
-
-impl Backends {
-    /// `cpu`, `gpu` or `all`.
-    pub fn parse(s: &str) -> Result<Self> {
-        match s {
-            "cpu" => Ok(Backends::Cpu),
-            "gpu" => Ok(Backends::Gpu),
-            "all" => Ok(Backends::All),
-            other => Err(Error::invalid(
-                "--backends",
-                format!("'{other}' is not cpu, gpu or all"),
-            )),
-        }
-    }
-    pub fn cpu(self) -> bool {
-        self != Backends::Gpu
-    }
-    pub fn gpu(self) -> bool {
-        self != Backends::Cpu
-    }
-}
 
 /// How a suite is run.
 #[derive(Clone, Debug, PartialEq)]
@@ -82,7 +53,7 @@ pub struct Options {
     pub runs: usize,
     /// Untimed runs before them; the first result of all is the one checked.
     pub warmup: usize,
-    pub backends: Backends,
+    pub backends: BackendSet,
     /// Per backend and case: once `min_runs` timed runs are done and this many seconds
     /// are spent on timed runs, no more are added (a slow backend at a huge size).
     pub budget_seconds: f64,
@@ -100,7 +71,7 @@ impl Options {
                 Suite::Full => 5,
             },
             warmup: 1,
-            backends: Backends::All,
+            backends: BackendSet::All,
             budget_seconds: 30.0,
             min_runs: 3,
         }
@@ -274,7 +245,7 @@ fn measure<T: Sample>(
     warmup: usize,
     runs: usize,
     mut call: impl FnMut() -> Result<T>,
-    mut first: impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>>,
+    mut first: impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Box<Measured<T>>>,
 ) -> Measured<T> {
     let mut warmups = Vec::new();
     let mut timed = Vec::new();
@@ -301,7 +272,7 @@ fn measure<T: Sample>(
             checked = true;
             match first(out) {
                 Ok(p) => parity = p,
-                Err(m) => return m,
+                Err(m) => return *m,
             }
         }
         if warm {
@@ -320,14 +291,14 @@ fn measure<T: Sample>(
 
 fn checker<T>(
     reference: &[f64],
-    tol: Tol,
-) -> impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Measured<T>> + '_ {
+    tol: crate::metrics::Tolerance,
+) -> impl FnMut(Vec<f64>) -> std::result::Result<Option<report::Parity>, Box<Measured<T>>> + '_ {
     move |out| {
         let p = parity(reference, &out, tol);
         if p.passed {
             Ok(Some(p))
         } else {
-            Err(Measured::Failed(p))
+            Err(Box::new(Measured::Failed(p)))
         }
     }
 }
@@ -455,9 +426,9 @@ pub fn run_case(
     let m = measure(opts, w, n, &mut p.cpu_f64, |out: Vec<f64>| {
         let bad = out.iter().filter(|v| !v.is_finite()).count();
         if bad > 0 {
-            return Err(Measured::Errored(format!(
+            return Err(Box::new(Measured::Errored(format!(
                 "the oracle's result holds {bad} non-finite value(s)"
-            )));
+            ))));
         }
         reference = out;
         Ok(None)
@@ -508,11 +479,26 @@ pub fn run_suite(
     gpu: std::result::Result<&GpuContext, &str>,
     progress: &dyn Fn(Event),
 ) -> report::Report {
+    run_suite_until(cases, opts, gpu, progress, &|| false)
+}
+
+/// [`run_suite`] that asks `stop` before each case and, when it says so, returns the
+/// cases done so far.
+pub fn run_suite_until(
+    cases: Vec<Case>,
+    opts: &Options,
+    gpu: std::result::Result<&GpuContext, &str>,
+    progress: &dyn Fn(Event),
+    stop: &dyn Fn() -> bool,
+) -> report::Report {
     let machine = Machine::current(gpu);
     let start = Instant::now();
     let total = cases.len();
     let mut reports = Vec::with_capacity(total);
     for (index, case) in cases.iter().enumerate() {
+        if stop() {
+            break;
+        }
         let id = case.id();
         progress(Event::Started {
             index,

@@ -14,9 +14,10 @@
 //! its end-to-end column. Work: voxel updates (output voxels) and, for resampling,
 //! samples (output voxels × taps).
 
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::cpu::process::{self as cp, Field, Region, ResampleSpec};
 use crate::error::Result;
+use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::settings::Filter;
 use crate::volume::Volume;
@@ -29,10 +30,7 @@ use std::time::Instant;
 /// unit steps are the worst). The median of f32 values is one of them, exact.
 /// rel L2: a third of the max bound. Measured at 128³ (docs/bench/lavapipe.md), CPU
 /// f32 and lavapipe alike: max ≤ 4.0e-7 (Lanczos-3 resampling), rel L2 ≤ 1.4e-7.
-const PROCESS_TOL: Tol = Tol {
-    max_abs_rel: 2e-5,
-    rel_l2: 7e-6,
-};
+const PROCESS_TOL: Tolerance = Tolerance::max_abs_rel(2e-5).with_rel_l2(7e-6);
 
 /// One processing operation.
 #[derive(Clone, Copy, Debug)]

@@ -27,10 +27,11 @@
 //! updates (one gradient per voxel) and bytes (one f32 read and three f32 writes per
 //! voxel, 16 B, whatever the backend's precision).
 
-use super::{Case, GpuRun, Prepared, Run, Suite, Tol, Unit, Work};
+use super::{Case, GpuRun, Prepared, Run, Suite, Unit, Work};
 use crate::camera::{Camera, Orbit, Projection};
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::error::Result;
+use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::settings::{Filter, GradientMethod, IsoSurface, Mode, RenderSettings};
 use crate::transfer::TransferFunction;
@@ -244,14 +245,11 @@ pub fn microct_scene(size: usize) -> Result<(AnyVolume, TransferFunction, Camera
 /// (quick), 1.8e-3 (256³ → 512², trilinear and Catmull–Rom, 3–5 pixels beyond 1e-3);
 /// rel L2 1.7e-5 (64³) … 4.2e-5 (256³, Catmull–Rom), growing with the size: bound
 /// about 4× the worst.
-const DVR_F32: Tol = Tol {
-    max_abs_rel: 1.2e-2,
-    rel_l2: 1.5e-4,
-};
+const DVR_F32: Tolerance = Tolerance::max_abs_rel(1.2e-2).with_rel_l2(1.5e-4);
 /// The GPU's exact (shader-interpolated) path against the oracle, DVR: the same
 /// reasoning and measurements as [`DVR_F32`] (`tests/gpu_raycast.rs` EXACT_DVR holds
 /// 32³ → 48² to 1e-3, where no ray sits at the threshold).
-const DVR_GPU: Tol = DVR_F32;
+const DVR_GPU: Tolerance = DVR_F32;
 /// The hardware-filtered path: `tests/gpu_raycast.rs` HARDWARE_DVR, the derived bound
 /// for 8-bit sampler weights: each of the three 1-D weights may be off by 2⁻⁸, so a
 /// filtered value by 3 × 2⁻⁸ of the data range, and the `phantom` preset's opacity
@@ -261,10 +259,7 @@ const DVR_GPU: Tol = DVR_F32;
 /// NVIDIA H200 at 256³ → 512²: max 5.2e-2 (above the single-axis 12 × 2⁻⁸ first
 /// written here); lavapipe filters in full f32 and meets the exact bound (6.9e-5 max,
 /// 1.1e-5 rel L2 at 24³ → 32²).
-const HARDWARE_DVR_GPU: Tol = Tol {
-    max_abs_rel: 36.0 / 256.0,
-    rel_l2: 2.5e-2,
-};
+const HARDWARE_DVR_GPU: Tolerance = Tolerance::max_abs_rel(36.0 / 256.0).with_rel_l2(2.5e-2);
 /// DVR with the nearest-voxel filter, f32 CPU and GPU alike. A sample position within
 /// rounding of a cell boundary (x.5) picks the neighbouring voxel in one precision and
 /// not in the other: the sample's value jumps by the data step, so its classified
@@ -272,43 +267,28 @@ const HARDWARE_DVR_GPU: Tol = Tol {
 /// `phantom` preset's largest, 0.5 per reference voxel, is 0.29 at the ½-voxel step.
 /// Bound: 0.3 per pixel; such flips are rare, so rel L2 stays small: measured (CPU
 /// f32, 128³ → 256²) max 2.3e-2, rel L2 2.2e-4; bound about 4× that.
-const NEAREST_DVR: Tol = Tol {
-    max_abs_rel: 0.3,
-    rel_l2: 1e-3,
-};
+const NEAREST_DVR: Tolerance = Tolerance::max_abs_rel(0.3).with_rel_l2(1e-3);
 /// X-ray, both the f32 CPU and the GPU: `tests/gpu_raycast.rs` EXACT_SCALAR (5e-5 of
 /// the data scale, 4× its worst). Measured (f32 CPU / lavapipe): 2.0e-6 / 4.2e-6 at
 /// 24³ → 32², 9.6e-6 / 2.0e-5 at 256³ → 512²; rel L2 ≤ 2.8e-6. Bound: 4× the worst.
-const XRAY: Tol = Tol {
-    max_abs_rel: 8e-5,
-    rel_l2: 1e-5,
-};
+const XRAY: Tolerance = Tolerance::max_abs_rel(8e-5).with_rel_l2(1e-5);
 /// The GPU's X-ray through a user clipping mesh (`gpu::clipmesh`): its segments are
 /// computed in f32, so a sample whose midpoint lies within rounding (≈ 1e-7 of |t|) of a
 /// mesh face is taken on one backend and not on the other, which moves that pixel by one
 /// sample's `value × step` (1 mm here) against a peak of ≈ 330 value·mm, 3e-3. Measured
 /// on lavapipe (`mesh-slab-xray`, 128³ → 256²): max 3.1e-3 (one sample), rel L2 8.4e-5.
 /// Bound: about three flipped samples on a pixel.
-const XRAY_MESH_GPU: Tol = Tol {
-    max_abs_rel: 1e-2,
-    rel_l2: 3e-4,
-};
+const XRAY_MESH_GPU: Tolerance = Tolerance::max_abs_rel(1e-2).with_rel_l2(3e-4);
 /// MIP and MinIP. The maximum along a ray sits on the sharpest edges, where f32 rounding
 /// of the sample position (≈ 3e-5 mm at |t| ≈ 540 mm, several roundings) meets a slope of
 /// up to the data range per voxel: the error grows with the resolution. Measured (f32
 /// CPU / lavapipe): MIP 6.1e-6 / 9.6e-6 at 24³ → 32², 7.1e-5 / 1.5e-4 at 256³ → 512²;
 /// rel L2 ≤ 3.8e-6. MinIP 0 (every ray's minimum is the air's exact 0, in any precision:
 /// a timing case). Bound: about 3× the worst (the full suite has MIP at 256³ only).
-const MIP: Tol = Tol {
-    max_abs_rel: 5e-4,
-    rel_l2: 1.5e-5,
-};
+const MIP: Tolerance = Tolerance::max_abs_rel(5e-4).with_rel_l2(1.5e-5);
 /// Central differences in f32 against f64 from the same f32 voxels: one rounding of the
 /// difference (2⁻²⁴ relative to the larger neighbour), so ≤ 6e-8 of the peak.
-const GRADIENT_F32: Tol = Tol {
-    max_abs_rel: 1e-6,
-    rel_l2: 1e-6,
-};
+const GRADIENT_F32: Tolerance = Tolerance::max_abs_rel(1e-6).with_rel_l2(1e-6);
 
 /// (variant, volume side, image side) of every raycast case of a suite.
 fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
@@ -397,7 +377,7 @@ pub fn cases(suite: Suite) -> Vec<Case> {
 }
 
 /// The tolerances of a ray-caster variant: (f32 CPU, GPU).
-pub fn raycast_tolerances(settings: &RenderSettings) -> (Tol, Tol) {
+pub fn raycast_tolerances(settings: &RenderSettings) -> (Tolerance, Tolerance) {
     let user_mesh = matches!(
         settings.clip_mesh,
         Some(crate::settings::ClipMesh::Mesh { .. })

@@ -7,8 +7,9 @@
 //! backend that failed it has no timings (a fast wrong answer never counts).
 
 use super::machine::Machine;
-use super::{Backends, Suite, Tol, Unit, Work, FAMILIES};
+use super::{BackendSet, Suite, Unit, Work, FAMILIES};
 use crate::error::{Error, Result};
+use crate::metrics::{error_stats, Tolerance};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -69,16 +70,18 @@ pub struct Parity {
     pub rel_l2: f64,
     /// NaN or infinite values in the port's result (any fails).
     pub non_finite: usize,
-    pub tol: Tol,
+    /// The bounds it was held to; in the report `{"max_abs_rel": …, "rel_l2": …}`.
+    #[serde(with = "report_tolerance")]
+    pub tol: Tolerance,
     pub passed: bool,
     /// Why it failed, in words (empty when it passed).
     pub message: String,
 }
 
-/// Compares a result with the oracle's: the largest absolute difference relative to
-/// the oracle's largest |value|, and the relative L2 error. A length mismatch or any
-/// NaN/∞ in `port` fails.
-pub fn parity(oracle: &[f64], port: &[f64], tol: Tol) -> Parity {
+/// Compares a result with the oracle's ([`error_stats`]): the largest absolute
+/// difference relative to the oracle's largest |value|, and the relative L2 error,
+/// against the tolerance's bounds. A length mismatch or any NaN/∞ in `port` fails.
+pub fn parity(oracle: &[f64], port: &[f64], tol: Tolerance) -> Parity {
     let non_finite = port.iter().filter(|v| !v.is_finite()).count();
     if oracle.len() != port.len() {
         return Parity {
@@ -94,47 +97,65 @@ pub fn parity(oracle: &[f64], port: &[f64], tol: Tol) -> Parity {
             ),
         };
     }
-    let (mut max_d, mut max_o, mut sum_d2, mut sum_o2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (&o, &p) in oracle.iter().zip(port) {
-        let d = (p - o).abs();
-        if d.is_finite() {
-            max_d = max_d.max(d);
-            sum_d2 += d * d;
-        }
-        max_o = max_o.max(o.abs());
-        sum_o2 += o * o;
-    }
-    let ratio = |num: f64, den: f64| {
-        if num == 0.0 {
-            0.0
-        } else if den == 0.0 {
-            f64::INFINITY
-        } else {
-            num / den
-        }
-    };
-    let max_abs_rel = ratio(max_d, max_o);
-    let rel_l2 = ratio(sum_d2.sqrt(), sum_o2.sqrt());
+    let stats = error_stats(oracle, port, tol.max_abs);
     let mut why = Vec::new();
     if non_finite > 0 {
         why.push(format!("{non_finite} non-finite value(s)"));
     }
-    if max_abs_rel.is_nan() || max_abs_rel > tol.max_abs_rel {
-        why.push(format!(
-            "max |Δ|/max|oracle| {max_abs_rel:.3e} > {:.1e}",
-            tol.max_abs_rel
-        ));
-    }
-    if rel_l2.is_nan() || rel_l2 > tol.rel_l2 {
-        why.push(format!("rel L2 {rel_l2:.3e} > {:.1e}", tol.rel_l2));
-    }
+    why.extend(tol.exceeded(&stats));
     Parity {
-        max_abs_rel,
-        rel_l2,
+        max_abs_rel: stats.max_abs_rel,
+        rel_l2: stats.rel_l2,
         non_finite,
         tol,
         passed: why.is_empty(),
         message: why.join(", "),
+    }
+}
+
+/// A [`Tolerance`] as the report writes it: the bench's two bounds, `max_abs_rel` and
+/// `rel_l2` (the fields reports have always had, which `--merge` reads back), and
+/// `max_abs` and `rmse` only where a case sets them.
+mod report_tolerance {
+    use crate::metrics::Tolerance;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    fn unbounded() -> f64 {
+        f64::INFINITY
+    }
+
+    fn is_unbounded(v: &f64) -> bool {
+        *v == f64::INFINITY
+    }
+
+    #[derive(Serialize, Deserialize)]
+    struct Written {
+        max_abs_rel: f64,
+        rel_l2: f64,
+        #[serde(default = "unbounded", skip_serializing_if = "is_unbounded")]
+        max_abs: f64,
+        #[serde(default = "unbounded", skip_serializing_if = "is_unbounded")]
+        rmse: f64,
+    }
+
+    pub fn serialize<S: Serializer>(t: &Tolerance, s: S) -> Result<S::Ok, S::Error> {
+        Written {
+            max_abs_rel: t.max_abs_rel,
+            rel_l2: t.rel_l2,
+            max_abs: t.max_abs,
+            rmse: t.rmse,
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Tolerance, D::Error> {
+        let w = Written::deserialize(d)?;
+        Ok(Tolerance {
+            max_abs: w.max_abs,
+            rmse: w.rmse,
+            max_abs_rel: w.max_abs_rel,
+            rel_l2: w.rel_l2,
+        })
     }
 }
 
@@ -349,7 +370,7 @@ pub struct Report {
     /// Timed runs asked for per backend (the budget may have cut some short).
     pub runs: usize,
     pub warmup: usize,
-    pub backends: Backends,
+    pub backends: BackendSet,
     /// Per backend and case: no more timed runs once `min_runs` are done and this many
     /// seconds are spent.
     pub budget_seconds: f64,

@@ -46,13 +46,16 @@
 //! `cast_ray`) and `shaders/adaptive_importance.wgsl` (the importance volume).
 
 use super::dft::{Direction, Normalization};
-use super::filter::{sample, Grid};
+use super::field::box_hi;
+use super::filter::sample;
+use super::grid::Grid;
 use super::preintegrate::{preintegrate, PreintTable, DEFAULT_PREINT_SIZE};
-use super::raycast::{intersect_box, RenderOutput};
+use super::raycast::RenderOutput;
+use super::shade::over_background;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::real::{Real, V3};
+use crate::real::{intersect_box, Real, V3};
 use crate::settings::Filter;
 use crate::transfer::{LutR, TransferFunction};
 use crate::volume::AnyVolume;
@@ -61,29 +64,23 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
-/// Where the samples of a ray go.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Sampling {
-    /// Fixed steps of `step` voxels (the reference).
-    Regular,
-    /// Steps from the transfer function's spectrum and the importance volume (Suwelack
-    /// et al. 2010).
-    Adaptive,
-    /// Steps from the local spectrum of the classified volume (the upper bound; must be
-    /// recomputed for every transfer function).
-    Direct,
+crate::choice_enum! {
+    /// Where the samples of a ray go.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Sampling: "sampling" {
+        /// Fixed steps of `step` voxels (the reference).
+        Regular = "regular",
+        /// Steps from the transfer function's spectrum and the importance volume (Suwelack
+        /// et al. 2010).
+        Adaptive = "adaptive",
+        /// Steps from the local spectrum of the classified volume (the upper bound; must be
+        /// recomputed for every transfer function).
+        Direct = "direct",
+    }
 }
 
 impl Sampling {
     pub const ALL: [Sampling; 3] = [Sampling::Regular, Sampling::Direct, Sampling::Adaptive];
-    pub fn name(self) -> &'static str {
-        match self {
-            Sampling::Regular => "regular",
-            Sampling::Adaptive => "adaptive",
-            Sampling::Direct => "direct",
-        }
-    }
 }
 
 /// Settings of the adaptive ray caster.
@@ -669,11 +666,7 @@ pub fn cast_ray<R: Real>(
     let dims = scene.grid.dims;
     let bg = settings.background.map(R::of);
     let lo = V3::splat(R::of(-0.5));
-    let hi = V3::new(
-        R::of(dims[0] as f64 - 0.5),
-        R::of(dims[1] as f64 - 0.5),
-        R::of(dims[2] as f64 - 0.5),
-    );
+    let hi = box_hi(dims);
     let miss = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
     let Some((t_in, t_out)) = intersect_box(o, d, lo, hi) else {
         return (miss, 0);
@@ -718,16 +711,7 @@ pub fn cast_ray<R: Real>(
         f0 = f1;
         k += 1;
     }
-    let t = R::one() - a;
-    (
-        [
-            c[0] + t * bg[0] * bg[3],
-            c[1] + t * bg[1] * bg[3],
-            c[2] + t * bg[2] * bg[3],
-            a + t * bg[3],
-        ],
-        taken,
-    )
+    (over_background(c, a, bg), taken)
 }
 
 /// A medical-style transfer function over `[lo, hi]`: transparent up to `threshold`,

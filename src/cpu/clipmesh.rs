@@ -27,9 +27,11 @@
 //! A ray exactly through a vertex is not guaranteed to count once.
 //! The test runs in f64 on the CPU (both precisions; the segments are then rounded to
 //! the working precision) and in f32 on the GPU (`shaders/clipmesh.wgsl`).
-//! On the CPU a bounding-volume hierarchy with padded boxes hands each ray only the
-//! triangles near its line ([`ClipTriangles::segments`]); it finds the same hits as
-//! testing every triangle. The GPU tests every triangle.
+//! A bounding-volume hierarchy with padded boxes hands each ray only the triangles
+//! near its line ([`ClipTriangles::segments`]); it finds the same hits as testing
+//! every triangle. The GPU walks the same hierarchy
+//! ([`ClipTriangles::flat_hierarchy`], `gpu::clipmesh`), and keeps testing every
+//! triangle as its reference.
 //!
 //! **Segments.** Hits at `t ≤ t₀` (the ray's start) are only counted: an odd count
 //! means the ray starts inside, and `t₀` becomes the first boundary. Sorted with the
@@ -61,7 +63,8 @@
 //! Clipping meshes work with DVR, MIP, MinIP and X-ray; MIDA and iso-surfaces refuse
 //! them. A clipping box and a mesh combine (both apply).
 
-use super::filter::Grid;
+use super::grid::Grid;
+use super::march::step_bounds;
 use super::skip::{SampleRanges, Skipper};
 use crate::error::{Error, Result};
 use crate::io::mesh::TriMesh;
@@ -577,20 +580,11 @@ pub fn check_mode(settings: &RenderSettings) -> Result<()> {
     }
 }
 
-/// The midpoint parameter of step `k` of `n` from `t_s` by `dt`, cut to `[t_in, t_out]`,
-/// computed exactly as the ray caster places its sample.
+/// The midpoint parameter of step `k` of `n` from `t_s` by `dt`, cut to `[t_in, t_out]`:
+/// the middle of its bounds ([`step_bounds`]), for every step alike.
 #[inline]
 pub fn step_mid<R: Real>(k: usize, n: usize, t_in: R, t_out: R, t_s: R, dt: R) -> R {
-    let ta = if k == 0 {
-        t_in
-    } else {
-        t_s + R::of(k as f64) * dt
-    };
-    let tb = if k + 1 == n {
-        t_out
-    } else {
-        t_s + R::of((k + 1) as f64) * dt
-    };
+    let (ta, tb) = step_bounds(k, n, t_in, t_s, t_out, dt);
     (ta + tb) * R::of(0.5)
 }
 

@@ -45,7 +45,8 @@
 //! [`D2vrStats`] counts the reconstructions actually done against the samples a plain
 //! march through the grid's box would take: the paper's "rasterized voxels" fraction.
 
-use super::raycast::{render_field, Field, RenderOutput};
+use super::field::Field;
+use super::raycast::{render_field, RenderOutput};
 use crate::camera::Camera;
 use crate::ct::{Beam, Geometry, Projections, ViewMatrix};
 use crate::error::{Error, Result};
@@ -521,7 +522,7 @@ pub fn box_samples(dims: [usize; 3], affine: DMat4, camera: &Camera, step: f64) 
                 let ray = camera.ray(col, row);
                 let o = to_index.transform_point3(ray.origin);
                 let d = to_index.transform_vector3(ray.dir);
-                let Some((t0, t1)) = crate::camera::intersect_box(o, d, DVec3::splat(-0.5), hi)
+                let Some((t0, t1)) = crate::real::slab_interval(o, d, DVec3::splat(-0.5), hi)
                 else {
                     continue;
                 };

@@ -248,7 +248,7 @@ pub fn backproject<R: Real>(
     let ny = grid.dims[1];
     let mut lines: Vec<(usize, &mut [R])> = data.chunks_mut(nx).enumerate().collect();
     lines.sort_by_key(|(line, _)| (line % ny, line / ny));
-    lines.into_par_iter().for_each_init(
+    lines.into_par_iter().panic_fuse().for_each_init(
         || vec![R::zero(); pc],
         |blend, (line, out)| {
             let (j, k) = (line % grid.dims[1], line / grid.dims[1]);
@@ -378,6 +378,7 @@ fn backproject_columns<R: Real>(
     let dot = |r: &[R; 4], p: [R; 3], h: R| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + h;
     data.par_chunks_mut(kb * slice)
         .enumerate()
+        .panic_fuse()
         .for_each(|(block, out)| {
             let k0 = block * kb;
             let nk = out.len() / slice;

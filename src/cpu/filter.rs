@@ -42,55 +42,12 @@
 //! Sources: Fluør (2006) §2.3 on interpolation; Marschner & Lobb (1994) for the test
 //! signal; Keys (1981) for Catmull–Rom; Turkowski (1990) for Lanczos.
 
+// The grid lives in `cpu::grid`; named here too for the callers that still import it
+// from the filters.
+pub use super::grid::Grid;
 use crate::real::{Real, V3};
 use crate::settings::Filter;
-use crate::volume::{AnyVolume, Volume, Voxel};
-
-/// A voxel grid in the working precision: the data the CPU algorithms sample.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Grid<R> {
-    pub dims: [usize; 3],
-    pub data: Vec<R>,
-}
-
-impl<R: Real> Grid<R> {
-    /// Copies a volume's values into precision `R` (exact for f64).
-    pub fn from_volume<T: Voxel>(v: &Volume<T>) -> Self {
-        use rayon::prelude::*;
-        Grid {
-            dims: v.dims(),
-            data: v.data().par_iter().map(|x| R::of(x.to_f64())).collect(),
-        }
-    }
-    /// The voxel values of a volume of any voxel type.
-    pub fn from_any(v: &AnyVolume) -> Self {
-        match v {
-            AnyVolume::U8(v) => Grid::from_volume(v),
-            AnyVolume::U16(v) => Grid::from_volume(v),
-            AnyVolume::I16(v) => Grid::from_volume(v),
-            AnyVolume::F32(v) => Grid::from_volume(v),
-        }
-    }
-    /// A grid of `f(i, j, k)`.
-    pub fn from_fn(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> R) -> Self {
-        let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
-        for k in 0..dims[2] {
-            for j in 0..dims[1] {
-                for i in 0..dims[0] {
-                    data.push(f(i, j, k));
-                }
-            }
-        }
-        Grid { dims, data }
-    }
-    /// The value at voxel `(i, j, k)` with indices clamped to the grid.
-    #[inline(always)]
-    pub fn at_clamped(&self, i: isize, j: isize, k: isize) -> R {
-        let c = |x: isize, n: usize| x.clamp(0, n as isize - 1) as usize;
-        let (i, j, k) = (c(i, self.dims[0]), c(j, self.dims[1]), c(k, self.dims[2]));
-        self.data[i + self.dims[0] * (j + self.dims[1] * k)]
-    }
-}
+use crate::volume::Volume;
 
 /// `sin(πx)`, exactly zero at integers (argument reduced to [−½, ½] first).
 /// Mirrors `shaders/shared/filters.wgsl: sin_pi`.

@@ -56,41 +56,31 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use std::f64::consts::PI;
 
-/// How the spectrum is sampled between its grid points.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Kernel {
-    /// The nearest grid frequency (box, 1 tap per axis).
-    Nearest,
-    /// Tent kernel, 2 taps per axis.
-    Trilinear,
-    /// Lanczos-2 windowed sinc `sinc(x)·sinc(x/2)` (eq. 8, `a = 2`), 4 taps per axis.
-    /// The weights of every Lanczos kernel are normalised to sum to 1 per axis (eq. 8's
-    /// raw weights sum to 1 only at grid points: half-way between them to 1.019 for
-    /// `a = 2`, 0.994 for `a = 3`, 1.002 for `a = 4`, a bias `docs/fvr.md` measures).
-    Lanczos2,
-    /// Lanczos-3, 6 taps per axis.
-    Lanczos3,
-    /// Lanczos-4, 8 taps per axis.
-    Lanczos4,
-    /// The exact trigonometric interpolation of the DFT: the spectrum of the padded
-    /// grid evaluated directly at the wanted frequency, `Σ_r f(r) e^{−2πi κ·r/M}`.
-    /// `O(N³)` per sample: only for small volumes.
-    Dirichlet,
+crate::choice_enum! {
+    /// How the spectrum is sampled between its grid points.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Kernel: "FVR kernel" {
+        /// The nearest grid frequency (box, 1 tap per axis).
+        Nearest = "nearest",
+        /// Tent kernel, 2 taps per axis.
+        Trilinear = "trilinear",
+        /// Lanczos-2 windowed sinc `sinc(x)·sinc(x/2)` (eq. 8, `a = 2`), 4 taps per axis.
+        /// The weights of every Lanczos kernel are normalised to sum to 1 per axis (eq. 8's
+        /// raw weights sum to 1 only at grid points: half-way between them to 1.019 for
+        /// `a = 2`, 0.994 for `a = 3`, 1.002 for `a = 4`, a bias `docs/fvr.md` measures).
+        Lanczos2 = "lanczos2",
+        /// Lanczos-3, 6 taps per axis.
+        Lanczos3 = "lanczos3",
+        /// Lanczos-4, 8 taps per axis.
+        Lanczos4 = "lanczos4",
+        /// The exact trigonometric interpolation of the DFT: the spectrum of the padded
+        /// grid evaluated directly at the wanted frequency, `Σ_r f(r) e^{−2πi κ·r/M}`.
+        /// `O(N³)` per sample: only for small volumes.
+        Dirichlet = "dirichlet",
+    }
 }
 
 impl Kernel {
-    /// The kernel's name on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Kernel::Nearest => "nearest",
-            Kernel::Trilinear => "trilinear",
-            Kernel::Lanczos2 => "lanczos2",
-            Kernel::Lanczos3 => "lanczos3",
-            Kernel::Lanczos4 => "lanczos4",
-            Kernel::Dirichlet => "dirichlet",
-        }
-    }
-
     /// The windowed-sinc order `a` of a Lanczos kernel.
     pub(crate) fn lanczos_order(self) -> Option<usize> {
         match self {

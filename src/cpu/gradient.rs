@@ -15,7 +15,8 @@
 //! layer holds one-sided (halved) estimates. Source: Fluør (2006) §2.5 (gradient
 //! estimation) and its GPU-vs-CPU timing discussion.
 
-use super::filter::{sample, Grid};
+use super::filter::sample;
+use super::grid::Grid;
 use crate::real::{Real, V3};
 use crate::settings::{Filter, GradientMethod};
 

@@ -14,10 +14,11 @@
 //!
 //! Every path does the same arithmetic in the same order as the per-sample loop of
 //! [`super::raycast`] (`Steps::segment`, `filter::sample`, `LutR::classify`,
-//! `raycast::transmit_pow`), without fused multiply–adds, so the images are the same
+//! `shade::transmit_pow`), without fused multiply–adds, so the images are the same
 //! to the last bit; the unit tests below check that on every view and setting.
 
-use super::filter::{sample, Grid};
+use super::filter::sample;
+use super::grid::Grid;
 use crate::real::{Real, V3};
 use crate::settings::Filter;
 use crate::transfer::LutR;
@@ -44,21 +45,8 @@ impl<R: Real> Steps<R> {
     /// at `t_in`, the last ends at `t_out`.
     #[inline(always)]
     pub fn segment(&self, k: usize) -> (V3<R>, R) {
-        if self.full(k) {
-            let mid = self.t_s + (R::of(k as f64) + R::of(0.5)) * self.dt;
-            return (self.o + self.d * mid, self.dt);
-        }
-        let ta = if k == 0 {
-            self.t_in
-        } else {
-            self.t_s + R::of(k as f64) * self.dt
-        };
-        let tb = if k + 1 == self.n {
-            self.t_out
-        } else {
-            self.t_s + R::of((k + 1) as f64) * self.dt
-        };
-        (self.o + self.d * ((ta + tb) * R::of(0.5)), tb - ta)
+        let (mid, len) = segment_t(k, self.n, self.t_in, self.t_s, self.t_out, self.dt);
+        (self.o + self.d * mid, len)
     }
 
     /// Whether step `k` is a full step: neither the first nor the last.
@@ -79,6 +67,38 @@ impl<R: Real> Steps<R> {
             len * speed / ref_step
         }
     }
+}
+
+/// Step `k`'s bounds `(t_a, t_b)` in a grid of `n` steps from `t_s` by `dt`, cut to
+/// `[t_in, t_out]`: `t_s + k·dt` and `t_s + (k+1)·dt`, except that the first starts at
+/// `t_in` and the last ends at `t_out`.
+/// mirrors shaders/shared/skip.wgsl: step_bounds
+#[inline(always)]
+pub fn step_bounds<R: Real>(k: usize, n: usize, t_in: R, t_s: R, t_out: R, dt: R) -> (R, R) {
+    let ta = if k == 0 {
+        t_in
+    } else {
+        t_s + R::of(k as f64) * dt
+    };
+    let tb = if k + 1 == n {
+        t_out
+    } else {
+        t_s + R::of((k + 1) as f64) * dt
+    };
+    (ta, tb)
+}
+
+/// Step `k`'s midpoint parameter and length in the grid of [`step_bounds`]: a full
+/// step (neither the first nor the last) is `dt` long exactly, its midpoint
+/// `t_s + (k + ½)·dt`; the first and last are the middle and length of their bounds.
+/// The rule of [`Steps::segment`], shared with the multi-volume caster.
+#[inline(always)]
+pub fn segment_t<R: Real>(k: usize, n: usize, t_in: R, t_s: R, t_out: R, dt: R) -> (R, R) {
+    if k > 0 && k + 1 < n {
+        return (t_s + (R::of(k as f64) + R::of(0.5)) * dt, dt);
+    }
+    let (ta, tb) = step_bounds(k, n, t_in, t_s, t_out, dt);
+    ((ta + tb) * R::of(0.5), tb - ta)
 }
 
 /// What the batched kernel reads: the grid the filter samples and the 1D table.
@@ -191,7 +211,7 @@ impl<R: Real> Batch<R> {
             if c[3] > R::zero() {
                 self.visible |= 1 << l;
             }
-            self.alpha_step[l] = R::one() - super::raycast::transmit_pow(R::one() - c[3], e);
+            self.alpha_step[l] = R::one() - super::shade::transmit_pow(R::one() - c[3], e);
         }
     }
 
@@ -257,8 +277,8 @@ mod simd {
         p: [__m512; 3],
         rgb: [__m512; 3],
         alpha: __m512,
-        /// `1 − (1 − α)^e` (`raycast::transmit_pow`: a square root for ½, the power
-        /// of `cpu::pow01` for exponents other than ½ and 1).
+        /// `1 − (1 − α)^e` (`shade::transmit_pow`: a square root for ½, the power
+        /// of `real::pow01` for exponents other than ½ and 1).
         alpha_step: __m512,
         /// Lanes whose coordinates are all in (−1e9, 1e9), where the scalar path floors
         /// by truncation; the others are to be computed by the scalar path.
@@ -267,7 +287,7 @@ mod simd {
 
     /// Steps `k` (one per lane) of the step grids `g`, classified: the arithmetic of
     /// `Steps::segment`, `filter::sample` (trilinear), `LutR::classify` and
-    /// `raycast::transmit_pow`, in the same order.
+    /// `shade::transmit_pow`, in the same order.
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn classify(src: &Source<f32>, g: &Lanes, k: __m512i) -> Classified {
@@ -456,7 +476,7 @@ mod simd {
         let mut tr = _mm512_mask_blend_ps(half, keep, _mm512_sqrt_ps(keep));
         let general = !(half | unit);
         if general != 0 {
-            tr = _mm512_mask_blend_ps(general, tr, crate::cpu::pow01::pow01_x16(keep, e));
+            tr = _mm512_mask_blend_ps(general, tr, crate::real::pow01::pow01_x16(keep, e));
         }
         Classified {
             p: t.p,
@@ -614,7 +634,7 @@ mod simd {
                 }
                 alpha[l] = q[3];
                 let e = st.exponent(k, len, pk.speed[l], src.ref_step, src.e_full);
-                alpha_step[l] = 1.0 - crate::cpu::raycast::transmit_pow(1.0 - q[3], e);
+                alpha_step[l] = 1.0 - crate::cpu::shade::transmit_pow(1.0 - q[3], e);
             }
         }
         c.rgb = [ld(&rgb[0]), ld(&rgb[1]), ld(&rgb[2])];
@@ -622,7 +642,7 @@ mod simd {
         c.alpha_step = ld(&alpha_step);
     }
 
-    /// `raycast::over` lane by lane where the step is visible, and the next step.
+    /// `shade::under_until` lane by lane where the step is visible, and the next step.
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn composite(pk: &mut Packet, c: &Classified, k: __m512i, ert: f32) -> (u16, u16) {

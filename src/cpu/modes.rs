@@ -45,10 +45,13 @@
 //! side of some `τ_j` than `q_0`, the hit is in shadow and keeps only the ambient term,
 //! `c k_a`.
 
-use super::raycast::{classify_sample, intersect_box, shade_sample, Field, Setup};
+use super::field::Field;
+use super::shade::{
+    classify_sample, light_half, over_background, shade_sample, transmit_pow, under, SampleSetup,
+};
 use crate::error::{Error, Result};
-use crate::real::{Real, V3};
-use crate::settings::{Compositing, Mode, RenderSettings, MAX_ISO_SURFACES};
+use crate::real::{intersect_box, Real, V3};
+use crate::settings::{Mode, RenderSettings, MAX_ISO_SURFACES};
 
 /// CT window presets: (name, width, centre) in Hounsfield units, with a description.
 pub const WINDOW_PRESETS: [(&str, f64, f64, &str); 6] = [
@@ -73,68 +76,6 @@ pub fn window_preset(name: &str) -> Result<[f64; 2]> {
                 format!("unknown preset {name:?}; known: {}", names.join(", ")),
             )
         })
-}
-
-/// Checks the settings of the modes of this module (called by
-/// `RenderSettings::validate`).
-pub fn validate(s: &RenderSettings) -> Result<()> {
-    if !(s.mida_gamma.is_finite() && (-1.0..=1.0).contains(&s.mida_gamma)) {
-        return Err(Error::invalid(
-            "MIDA gamma",
-            format!("{} must lie in [-1, 1]", s.mida_gamma),
-        ));
-    }
-    if let Some([w, c]) = s.window {
-        if !(w.is_finite() && w > 0.0 && c.is_finite()) {
-            return Err(Error::invalid(
-                "window",
-                format!("width {w} must be finite and positive, centre {c} finite"),
-            ));
-        }
-    }
-    if s.iso_surfaces.len() > MAX_ISO_SURFACES {
-        return Err(Error::invalid(
-            "iso-surfaces",
-            format!("{} given, at most {MAX_ISO_SURFACES}", s.iso_surfaces.len()),
-        ));
-    }
-    for iso in &s.iso_surfaces {
-        if !iso.value.is_finite() {
-            return Err(Error::invalid("iso-value", "must be finite"));
-        }
-        if iso.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
-            return Err(Error::invalid(
-                "iso-surface colour",
-                "components must lie in [0, 1]",
-            ));
-        }
-        if !(0.0..=1.0).contains(&iso.opacity) {
-            return Err(Error::invalid(
-                "iso-surface opacity",
-                format!("{} must lie in [0, 1]", iso.opacity),
-            ));
-        }
-    }
-    if s.mode == Mode::Iso && s.iso_surfaces.is_empty() {
-        return Err(Error::invalid(
-            "iso-surfaces",
-            "mode iso needs at least one iso-surface",
-        ));
-    }
-    let isos = s.mode == Mode::Iso || (s.mode == Mode::Dvr && !s.iso_surfaces.is_empty());
-    if (s.mode == Mode::Mida || isos) && s.compositing == Compositing::BackToFront {
-        return Err(Error::invalid(
-            "compositing",
-            "MIDA and iso-surfaces composite front to back only",
-        ));
-    }
-    if s.iso_shadows && !s.iso_opaque {
-        return Err(Error::invalid(
-            "shadows",
-            "shadow rays are cast from opaque iso-surfaces only (add --iso-opaque)",
-        ));
-    }
-    Ok(())
 }
 
 /// One iso-surface in the working precision.
@@ -310,46 +251,16 @@ pub fn first_iso_hit<R: Real, F: Field<R>>(
     None
 }
 
-/// Composites `rgb` with opacity `alpha` behind `(c, a)`, front to back.
-#[inline]
-fn under<R: Real>(c: &mut [R; 3], a: &mut R, rgb: [R; 3], alpha: R) {
-    let w = (R::one() - *a) * alpha;
-    for ch in 0..3 {
-        c[ch] = c[ch] + w * rgb[ch];
-    }
-    *a = *a + w;
-}
-
-/// `(C, A)` over the background. Mirrors the end of `shaders/raycast.wgsl: cast_ray`.
-#[inline]
-fn over_background<R: Real>(s: &Setup<R>, c: [R; 3], a: R) -> [R; 4] {
-    let t = R::one() - a;
-    let bg = s.bg;
-    [
-        c[0] + t * bg[0] * bg[3],
-        c[1] + t * bg[1] * bg[3],
-        c[2] + t * bg[2] * bg[3],
-        a + t * bg[3],
-    ]
-}
-
-/// The light and half vectors of a ray with world direction `dir`.
-fn light_half<R: Real>(s: &Setup<R>, dir: glam::DVec3) -> (V3<R>, V3<R>) {
-    let view = -V3::<R>::from_dvec(dir);
-    let light = s.light.unwrap_or(view);
-    (light, (light + view).normalize_or_zero())
-}
-
 /// MIDA along one ray; returns the RGBA pixel and the samples taken.
 /// Mirrors `shaders/shared/modes_cast.wgsl: cast_mida`.
 pub(crate) fn cast_mida<R: Real, F: Field<R>>(
     field: &F,
-    s: &Setup<R>,
+    s: &SampleSetup<R>,
+    m: &ModeSetup<R>,
     span: &Span<R>,
     dir: glam::DVec3,
 ) -> ([R; 4], u32) {
-    let m = &s.modes;
-    let (light, half) = light_half(s, dir);
+    let (light, half) = light_half(s.light, dir);
     let mut c = [R::zero(); 3];
     let mut a = R::zero();
     let mut running = R::zero();
@@ -379,7 +290,7 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
             continue;
         }
         let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
-        let alpha = R::one() - super::raycast::transmit_pow(R::one() - alpha, e);
+        let alpha = R::one() - transmit_pow(R::one() - alpha, e);
         let rgb = if s.shade {
             shade_sample(field, s, p, rgb, light, half)
         } else {
@@ -401,14 +312,20 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
         }
         a = (R::one() - g) * a + g * alpha;
     }
-    (over_background(s, c, a), span.n as u32)
+    (over_background(c, a, s.bg), span.n as u32)
 }
 
 /// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples
 /// `p + (m + 1) Δ L` toward the light until the box is left; in shadow when one lies on
-/// another side of an iso-value than the first.
-/// Mirrors `shaders/shared/modes_cast.wgsl: in_shadow`.
-pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>, l: V3<R>) -> bool {
+/// another side of an iso-value than the first. Mirrors
+/// `shaders/shared/modes_cast.wgsl: in_shadow`.
+pub(crate) fn in_shadow<R: Real, F: Field<R>>(
+    field: &F,
+    s: &SampleSetup<R>,
+    iso: &[IsoR<R>],
+    p: V3<R>,
+    l: V3<R>,
+) -> bool {
     let Some((_, t_exit)) = intersect_box(p, l, s.lo, s.hi) else {
         return false;
     };
@@ -421,7 +338,7 @@ pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>,
             return false;
         }
         let v = field.value(p + l * t);
-        if s.modes.iso.iter().any(|iso| crosses(first, v, iso.value)) {
+        if iso.iter().any(|iso| crosses(first, v, iso.value)) {
             return true;
         }
         k += 1;
@@ -432,13 +349,13 @@ pub(crate) fn in_shadow<R: Real, F: Field<R>>(field: &F, s: &Setup<R>, p: V3<R>,
 /// RGBA pixel and the samples taken. Mirrors `shaders/shared/modes_cast.wgsl: cast_iso`.
 pub(crate) fn cast_iso<R: Real, F: Field<R>>(
     field: &F,
-    s: &Setup<R>,
+    s: &SampleSetup<R>,
+    m: &ModeSetup<R>,
     span: &Span<R>,
     dir: glam::DVec3,
     dvr: bool,
 ) -> ([R; 4], u32) {
-    let m = &s.modes;
-    let (light, half) = light_half(s, dir);
+    let (light, half) = light_half(s.light, dir);
     // The light in index space, for shadow rays: J⁻¹ L (headlight: back along the ray).
     let l_index = {
         let lw = light.to_dvec();
@@ -456,7 +373,7 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
             return;
         }
         let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
-        let alpha = R::one() - super::raycast::transmit_pow(R::one() - alpha, e);
+        let alpha = R::one() - transmit_pow(R::one() - alpha, e);
         let rgb = if s.shade {
             shade_sample(field, s, p, rgb, light, half)
         } else {
@@ -498,7 +415,7 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
                 iso.color
             };
             if m.opaque {
-                if m.shadows && in_shadow(field, s, p, l_index) {
+                if m.shadows && in_shadow(field, s, &m.iso, p, l_index) {
                     rgb = iso.color.map(|x| x * s.k.ambient);
                 }
                 under(&mut c, &mut a, rgb, R::one());
@@ -511,5 +428,5 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
         }
         (t0, v0) = (t1, v1);
     }
-    (over_background(s, c, a), taken)
+    (over_background(c, a, s.bg), taken)
 }

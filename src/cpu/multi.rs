@@ -15,7 +15,8 @@
 //!    (DVR) and optionally shaded with its own gradient (`n = −M_i⁻ᵀ ∇f_i`, normalised);
 //! 4. DVR: optical depths over the step `τ_i = −ln(1 − α_i) · len · |d_i| / Δ_ref` add,
 //!    colours mix weighted by them, and `α = 1 − e^{−τ}` composites as in
-//!    `cpu::raycast` (front to back with early ray termination, or back to front);
+//!    `cpu::raycast` (`cpu::shade`: front to back with early ray termination, or back
+//!    to front);
 //!    X-ray sums `Σ_i f_i · len`; MIP/MinIP take the extreme over volumes and steps.
 //!
 //! With one volume and the identity transform every step, sample point and opacity is
@@ -24,13 +25,16 @@
 //! the number of threads. Empty-space skipping does not apply (it never changes an
 //! image).
 
-use super::filter::Grid;
-use super::raycast::{intersect_box, Field, GridField, RenderOutput, ShadingR};
+use super::field::{box_hi, Field, GridField};
+use super::grid::Grid;
+use super::march::segment_t;
+use super::raycast::RenderOutput;
+use super::shade::{light_half, over, over_background, shade_gradient, under_until, ShadingR};
 use crate::camera::{Camera, Ray};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::multi::MultiVolume;
-use crate::real::{Real, M3, V3};
+use crate::real::{intersect_box, Real, M3, V3};
 use crate::settings::{Compositing, Light, Mode, RenderSettings};
 use crate::transfer::{LutR, TransferFunction};
 use glam::{DMat3, DMat4};
@@ -182,11 +186,7 @@ pub fn render_layers<R: Real>(
                 field: l.field,
                 to_index: m.inverse(),
                 normal: M3::from_dmat3(DMat3::from_mat4(m).inverse().transpose()),
-                hi: V3::new(
-                    R::of(dims[0] as f64 - 0.5),
-                    R::of(dims[1] as f64 - 0.5),
-                    R::of(dims[2] as f64 - 0.5),
-                ),
+                hi: box_hi(dims),
                 lut: l.transfer.lut(settings.lut_size).to_real::<R>(),
                 shade: l.shade && s.enabled && settings.mode == Mode::Dvr,
                 grad_thr: R::of(s.gradient_threshold * (hi_v - lo_v).max(f64::MIN_POSITIVE)),
@@ -223,6 +223,7 @@ pub fn render_layers<R: Real>(
         .par_chunks_mut(w * channels)
         .zip(counts.par_chunks_mut(w))
         .enumerate()
+        .panic_fuse()
         .for_each(|(row, (pixels, row_counts))| {
             for col in 0..w {
                 let (px, n) = cast_multi(&prepared, &common, camera.ray(col, row));
@@ -310,22 +311,7 @@ fn cast_multi<R: Real>(layers: &[Prepared<'_, R>], c: &Common<R>, ray: Ray) -> (
         .unwrap_or(1);
     // The step rule of `march::Steps::segment`: a full step is dt long, its midpoint
     // t_in + (k + ½)·dt (so one volume gives the single-volume caster's samples).
-    let segment = |k: usize| {
-        if k > 0 && k + 1 < n {
-            return (t_in + (R::of(k as f64) + R::of(0.5)) * dt, dt);
-        }
-        let ta = if k == 0 {
-            t_in
-        } else {
-            t_in + R::of(k as f64) * dt
-        };
-        let tb = if k + 1 == n {
-            t_out
-        } else {
-            t_in + R::of((k + 1) as f64) * dt
-        };
-        ((ta + tb) * R::of(0.5), tb - ta)
-    };
+    let segment = |k: usize| segment_t(k, n, t_in, t_in, t_out, dt);
     let inside = |sp: &Span<R>, tm: R| sp.hit && tm >= sp.t_in && tm <= sp.t_out;
     match c.mode {
         Mode::Mip | Mode::Minip => {
@@ -363,10 +349,7 @@ fn cast_multi<R: Real>(layers: &[Prepared<'_, R>], c: &Common<R>, ray: Ray) -> (
             ([sum, R::zero(), R::zero(), R::zero()], n as u32)
         }
         _ => {
-            let dir = V3::<R>::from_dvec(ray.dir);
-            let view = -dir;
-            let light = c.light.unwrap_or(view);
-            let half = (light + view).normalize_or_zero();
+            let (light, half) = light_half(c.light, ray.dir);
             let mut col = [R::zero(); 3];
             let mut a = R::zero();
             let mut taken = 0u32;
@@ -379,32 +362,12 @@ fn cast_multi<R: Real>(layers: &[Prepared<'_, R>], c: &Common<R>, ray: Ray) -> (
                     continue;
                 };
                 if c.back {
-                    for ch in 0..3 {
-                        col[ch] = alpha * rgb[ch] + (R::one() - alpha) * col[ch];
-                    }
-                    a = alpha + (R::one() - alpha) * a;
-                } else {
-                    let w = (R::one() - a) * alpha;
-                    for ch in 0..3 {
-                        col[ch] = col[ch] + w * rgb[ch];
-                    }
-                    a = a + w;
-                    if a >= c.ert {
-                        break;
-                    }
+                    over(&mut col, &mut a, rgb, alpha);
+                } else if under_until(&mut col, &mut a, rgb, alpha, c.ert) {
+                    break;
                 }
             }
-            let t = R::one() - a;
-            let bg = c.bg;
-            (
-                [
-                    col[0] + t * bg[0] * bg[3],
-                    col[1] + t * bg[1] * bg[3],
-                    col[2] + t * bg[2] * bg[3],
-                    a + t * bg[3],
-                ],
-                taken,
-            )
+            (over_background(col, a, c.bg), taken)
         }
     }
 }
@@ -464,7 +427,7 @@ fn combine_sample<R: Real>(
 }
 
 /// Phong-shades a volume's sample with its own world-space normal, blending in from
-/// unshaded where the gradient is tiny (as `cpu::raycast::shade_sample`).
+/// unshaded where the gradient is tiny (as `cpu::shade::shade_sample`).
 /// Mirrors `shaders/multi.wgsl: shade_layer`.
 fn shade<R: Real>(
     l: &Prepared<'_, R>,
@@ -474,7 +437,7 @@ fn shade<R: Real>(
     light: V3<R>,
     half: V3<R>,
 ) -> [R; 3] {
-    crate::cpu::raycast::shade_gradient(
+    shade_gradient(
         l.field.gradient(p),
         l.grad_thr,
         &l.normal,

@@ -53,8 +53,9 @@
 //! # Ok::<(), voxlab::Error>(())
 //! ```
 
-use super::filter::{prepare, sample, Grid};
+use super::filter::{prepare, sample};
 use super::gradient::precompute_gradients;
+use super::grid::Grid;
 use crate::error::{Error, Result};
 use crate::real::{Real, V3};
 use crate::settings::{Filter, GradientMethod};

@@ -32,7 +32,7 @@
 
 use crate::ct::{ct_to_phantom, phantom_to_ct, Beam, Geometry, Projections};
 use crate::error::{Error, Result};
-use crate::phantom::Phantom;
+use crate::phantom::{index_to_phantom, Phantom};
 use crate::real::Real;
 use crate::volume::{check_dims, Volume, Voxel};
 use glam::{DMat3, DMat4, DVec3};
@@ -134,14 +134,13 @@ impl<R: Real> Grid<R> {
     /// two projections differ only by discretisation.
     pub fn phantom(phantom: &Phantom, dims: [usize; 3]) -> Result<Self> {
         let n = check_dims(dims)?;
-        let c = |i: usize, n: usize| (i as f64 + 0.5) * 2.0 / n as f64 - 1.0;
         let mut data = vec![R::zero(); n];
         data.par_chunks_mut(dims[0] * dims[1])
             .enumerate()
             .for_each(|(k, slice)| {
                 for (idx, v) in slice.iter_mut().enumerate() {
                     let (i, j) = (idx % dims[0], idx / dims[0]);
-                    let p = DVec3::new(c(i, dims[0]), c(j, dims[1]), c(k, dims[2]));
+                    let p = index_to_phantom([i as f64, j as f64, k as f64], dims);
                     *v = R::of(phantom.value_at(p));
                 }
             });
@@ -398,6 +397,7 @@ pub fn project_volume<R: Real>(
     out.data
         .par_chunks_mut(per_view)
         .enumerate()
+        .panic_fuse()
         .for_each(|(k, img)| {
             img.par_chunks_mut(g.cols)
                 .enumerate()

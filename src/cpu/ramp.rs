@@ -66,20 +66,21 @@ use rustfft::num_complex::Complex;
 use rustfft::{FftNum, FftPlanner};
 use std::f64::consts::PI;
 
-/// The frequency windows of scikit-image's `iradon` (same names on the command line).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum RampFilter {
-    /// The plain band-limited ramp (Ram–Lak).
-    #[value(name = "ramp")]
-    RamLak,
-    /// Ramp × `sin ω / ω`.
-    SheppLogan,
-    /// Ramp × a half sine.
-    Cosine,
-    /// Ramp × a Hamming window.
-    Hamming,
-    /// Ramp × a Hann window.
-    Hann,
+crate::choice_enum! {
+    /// The frequency windows of scikit-image's `iradon` (same names on the command line).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum RampFilter: "ramp filter", default RamLak {
+        /// The plain band-limited ramp (Ram–Lak).
+        RamLak = "ramp",
+        /// Ramp × `sin ω / ω`.
+        SheppLogan = "shepp-logan",
+        /// Ramp × a half sine.
+        Cosine = "cosine",
+        /// Ramp × a Hamming window.
+        Hamming = "hamming",
+        /// Ramp × a Hann window.
+        Hann = "hann",
+    }
 }
 
 impl RampFilter {
@@ -91,17 +92,6 @@ impl RampFilter {
         RampFilter::Hamming,
         RampFilter::Hann,
     ];
-
-    /// scikit-image's name of the filter.
-    pub fn name(self) -> &'static str {
-        match self {
-            RampFilter::RamLak => "ramp",
-            RampFilter::SheppLogan => "shepp-logan",
-            RampFilter::Cosine => "cosine",
-            RampFilter::Hamming => "hamming",
-            RampFilter::Hann => "hann",
-        }
-    }
 }
 
 /// How the rows are filtered: the exact spatial convolution (the oracle) or rustfft.

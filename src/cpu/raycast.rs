@@ -25,13 +25,26 @@
 //! Pixels are independent and every sum runs in a fixed order, so the result is
 //! bit-identical for any number of threads. The same code runs in f64 (the oracle) and
 //! f32 (the fair CPU baseline).
+//!
+//! This file holds the set-up and the per-ray loops. What they are built from sits
+//! below it, each piece importing nothing above itself: the fields sampled
+//! ([`super::field`]), one sample's classification, shading, opacity correction and
+//! compositing ([`super::shade`]), the step grid and the batched kernels
+//! ([`super::march`]), the jittered starts ([`super::jitter`]) and the slab test
+//! ([`crate::real::intersect_box`]).
 
-use super::filter::{prepare, sample, Grid};
-use super::gradient::{gradient_at, gradient_stencil, precompute_gradients};
+use super::field::box_hi;
+pub use super::field::{Field, GridField, PhantomField};
+use super::filter::prepare;
+use super::grid::Grid;
+use super::shade::{
+    classify_sample, light_half, over, over_background, shade_sample, transmit_pow, under_until,
+    SampleSetup, ShadingR,
+};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::real::{Real, M3, V3};
+use crate::real::{intersect_box, Real, M3, V3};
 use crate::settings::{
     Classification, Compositing, Filter, GradientMethod, Light, Mode, RenderSettings,
 };
@@ -40,141 +53,6 @@ use crate::volume::AnyVolume;
 use glam::{DMat3, DMat4};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
-
-/// A scalar field the ray caster samples, in index coordinates.
-pub trait Field<R: Real>: Sync {
-    /// Grid dimensions; the field's box is `[-0.5, n − 0.5]` on each axis.
-    fn dims(&self) -> [usize; 3];
-    /// The value at index-space point `p`.
-    fn value(&self, p: V3<R>) -> R;
-    /// The index-space gradient at `p`.
-    fn gradient(&self, p: V3<R>) -> V3<R>;
-    /// Minimum and maximum value (scales the shading threshold).
-    fn value_range(&self) -> (f64, f64);
-    /// The voxel values behind the field, if any (pre-classification needs them).
-    fn voxel_values(&self) -> Option<&Grid<R>> {
-        None
-    }
-    /// What the filter samples (B-spline coefficients for `bspline-interp`), if a grid.
-    fn sampled_grid(&self) -> Option<&Grid<R>> {
-        None
-    }
-}
-
-/// A voxel grid reconstructed with a filter; gradients on the fly or precomputed.
-pub struct GridField<R> {
-    /// What the filter samples (see `filter::prepare`): the voxel values, or for
-    /// `BsplineInterp` their B-spline coefficients.
-    pub grid: Grid<R>,
-    /// The voxel values, kept apart only when `grid` holds coefficients.
-    values: Option<Grid<R>>,
-    pub filter: Filter,
-    pub method: GradientMethod,
-    /// Precomputed gradient components (prepared for the filter like the data).
-    pub gradients: Option<[Grid<R>; 3]>,
-    range: (f64, f64),
-}
-
-impl<R: Real> GridField<R> {
-    pub fn new(values: Grid<R>, filter: Filter, method: GradientMethod, precompute: bool) -> Self {
-        let gradients =
-            precompute.then(|| precompute_gradients(&values, method).map(|g| prepare(&g, filter)));
-        let (lo, hi) = value_range(&values.data);
-        let (grid, values) = if filter.prefiltered() {
-            (prepare(&values, filter), Some(values))
-        } else {
-            (values, None)
-        };
-        GridField {
-            grid,
-            values,
-            filter,
-            method,
-            gradients,
-            range: (lo, hi),
-        }
-    }
-
-    /// The voxel values.
-    pub fn values(&self) -> &Grid<R> {
-        self.values.as_ref().unwrap_or(&self.grid)
-    }
-}
-
-impl<R: Real> Field<R> for GridField<R> {
-    fn dims(&self) -> [usize; 3] {
-        self.grid.dims
-    }
-    #[inline]
-    fn value(&self, p: V3<R>) -> R {
-        sample(&self.grid, self.filter, p)
-    }
-    #[inline]
-    fn gradient(&self, p: V3<R>) -> V3<R> {
-        match &self.gradients {
-            Some([gx, gy, gz]) => V3::new(
-                sample(gx, self.filter, p),
-                sample(gy, self.filter, p),
-                sample(gz, self.filter, p),
-            ),
-            None => gradient_at(&self.grid, self.filter, p, self.method),
-        }
-    }
-    fn value_range(&self) -> (f64, f64) {
-        self.range
-    }
-    fn voxel_values(&self) -> Option<&Grid<R>> {
-        Some(self.values())
-    }
-    fn sampled_grid(&self) -> Option<&Grid<R>> {
-        Some(&self.grid)
-    }
-}
-
-/// The smallest and largest value (±∞ for no values), in parallel chunks.
-pub(crate) fn value_range<R: Real>(data: &[R]) -> (f64, f64) {
-    let (lo, hi) = data.par_chunks(1 << 16).map(super::skip::min_max).reduce(
-        || (R::infinity(), R::neg_infinity()),
-        |a, b| (a.0.min(b.0), a.1.max(b.1)),
-    );
-    (lo.f64(), hi.f64())
-}
-
-/// An analytic phantom seen through a virtual grid of `dims` (the grid
-/// `Phantom::sample(dims)` would produce), sampled exactly at every point: no
-/// reconstruction filter stands between the ray caster and the truth.
-pub struct PhantomField<'a> {
-    pub phantom: &'a crate::phantom::Phantom,
-    pub dims: [usize; 3],
-    pub method: GradientMethod,
-}
-
-impl PhantomField<'_> {
-    fn to_phantom(&self, p: V3<f64>) -> glam::DVec3 {
-        let c = |x: f64, n: usize| (x + 0.5) * 2.0 / n as f64 - 1.0;
-        glam::DVec3::new(
-            c(p.x(), self.dims[0]),
-            c(p.y(), self.dims[1]),
-            c(p.z(), self.dims[2]),
-        )
-    }
-}
-
-impl<R: Real> Field<R> for PhantomField<'_> {
-    fn dims(&self) -> [usize; 3] {
-        self.dims
-    }
-    fn value(&self, p: V3<R>) -> R {
-        let q = V3::new(p.x().f64(), p.y().f64(), p.z().f64());
-        R::of(self.phantom.value_at(self.to_phantom(q)))
-    }
-    fn gradient(&self, p: V3<R>) -> V3<R> {
-        gradient_stencil(|q| <Self as Field<R>>::value(self, q), p, self.method)
-    }
-    fn value_range(&self) -> (f64, f64) {
-        (0.0, 1.0)
-    }
-}
 
 /// What a render returns.
 #[derive(Clone, Debug)]
@@ -205,71 +83,10 @@ impl RenderOutput {
     }
 }
 
-/// Ray–box intersection in precision `R` (slab method), box `[lo, hi]` on every axis.
-/// Mirrors `shaders/shared/rays.wgsl: intersect_box`.
-#[inline]
-pub fn intersect_box<R: Real>(o: V3<R>, d: V3<R>, lo: V3<R>, hi: V3<R>) -> Option<(R, R)> {
-    let mut t0 = R::neg_infinity();
-    let mut t1 = R::infinity();
-    for a in 0..3 {
-        if d.0[a] == R::zero() {
-            if o.0[a] < lo.0[a] || o.0[a] > hi.0[a] {
-                return None;
-            }
-        } else {
-            let inv = R::one() / d.0[a];
-            let ta = (lo.0[a] - o.0[a]) * inv;
-            let tb = (hi.0[a] - o.0[a]) * inv;
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
-        }
-    }
-    (t1 > t0).then_some((t0, t1))
-}
-
-/// Phong shading of colour `c` with normal `n`, light `l` and half vector `h` (all
-/// unit, world space; two-sided). Mirrors `shaders/shared/shading.wgsl: phong`.
-#[inline]
-pub fn phong<R: Real>(c: [R; 3], n: V3<R>, l: V3<R>, h: V3<R>, k: &ShadingR<R>) -> [R; 3] {
-    let ndl = n.dot(l).abs();
-    let ndh = n.dot(h).abs();
-    let diffuse = k.ambient + k.diffuse * ndl;
-    let spec = k.specular * ndh.powf(k.shininess);
-    [
-        c[0] * diffuse + spec,
-        c[1] * diffuse + spec,
-        c[2] * diffuse + spec,
-    ]
-}
-
-/// Shading constants in the working precision.
-#[derive(Clone, Copy, Debug)]
-pub struct ShadingR<R> {
-    pub ambient: R,
-    pub diffuse: R,
-    pub specular: R,
-    pub shininess: R,
-}
-
-/// Everything a ray needs, prepared once per render.
+/// Everything a ray needs, prepared once per render: what every sample needs
+/// (`cpu::shade`), and what the ray caster adds around it.
 pub(crate) struct Setup<R> {
-    pub(crate) to_index: DMat4,
-    normal: M3<R>,
-    pub(crate) lo: V3<R>,
-    pub(crate) hi: V3<R>,
-    pub(crate) step: R,
-    pub(crate) ref_step: R,
-    lut: LutR<R>,
-    /// The 2D transfer function's table (DVR, post-classification), if any.
-    lut2: Option<crate::transfer2d::Lut2R<R>>,
-    pre: Option<[Grid<R>; 4]>,
-    filter: Filter,
-    pub(crate) k: ShadingR<R>,
-    pub(crate) shade: bool,
-    pub(crate) light: Option<V3<R>>,
-    grad_thr: R,
-    pub(crate) ert: R,
-    pub(crate) bg: [R; 4],
+    pub(crate) base: SampleSetup<R>,
     miss: R,
     /// Empty-space skipping (`cpu::skip`), when it applies.
     skip: Option<super::skip::Skipper<R>>,
@@ -488,37 +305,35 @@ pub fn render_field_with<R: Real, F: Field<R>>(
     let (lo_v, hi_v) = field.value_range();
     let s = &settings.shading;
     let setup = Setup {
-        to_index: affine.inverse(),
-        normal,
-        lo: V3::splat(R::of(-0.5)),
-        hi: V3::new(
-            R::of(dims[0] as f64 - 0.5),
-            R::of(dims[1] as f64 - 0.5),
-            R::of(dims[2] as f64 - 0.5),
-        ),
-        step: R::of(settings.step),
-        ref_step: R::of(settings.reference_step),
-        lut,
-        lut2: match (&settings.transfer_2d, settings.mode) {
-            (Some(t2), Mode::Dvr) => Some(t2.lut().to_real::<R>()),
-            _ => None,
+        base: SampleSetup {
+            to_index: affine.inverse(),
+            normal,
+            lo: V3::splat(R::of(-0.5)),
+            hi: box_hi(dims),
+            step: R::of(settings.step),
+            ref_step: R::of(settings.reference_step),
+            lut,
+            lut2: match (&settings.transfer_2d, settings.mode) {
+                (Some(t2), Mode::Dvr) => Some(t2.lut().to_real::<R>()),
+                _ => None,
+            },
+            pre,
+            filter: settings.filter,
+            k: ShadingR {
+                ambient: R::of(s.ambient),
+                diffuse: R::of(s.diffuse),
+                specular: R::of(s.specular),
+                shininess: R::of(s.shininess),
+            },
+            shade: s.enabled && settings.mode.rgba(),
+            light: match s.light {
+                Light::Headlight => None,
+                Light::Direction(d) => Some(V3::from_dvec(glam::DVec3::from_array(d).normalize())),
+            },
+            grad_thr: R::of(s.gradient_threshold * (hi_v - lo_v).max(f64::MIN_POSITIVE)),
+            ert: R::of(settings.ert_threshold),
+            bg: settings.background.map(R::of),
         },
-        pre,
-        filter: settings.filter,
-        k: ShadingR {
-            ambient: R::of(s.ambient),
-            diffuse: R::of(s.diffuse),
-            specular: R::of(s.specular),
-            shininess: R::of(s.shininess),
-        },
-        shade: s.enabled && settings.mode.rgba(),
-        light: match s.light {
-            Light::Headlight => None,
-            Light::Direction(d) => Some(V3::from_dvec(glam::DVec3::from_array(d).normalize())),
-        },
-        grad_thr: R::of(s.gradient_threshold * (hi_v - lo_v).max(f64::MIN_POSITIVE)),
-        ert: R::of(settings.ert_threshold),
-        bg: settings.background.map(R::of),
         miss: R::of(settings.miss_value),
         skip: None,
         clip: settings.clip_box.as_ref().map(super::skip::ClipR::new),
@@ -538,13 +353,13 @@ pub fn render_field_with<R: Real, F: Field<R>>(
     };
     let setup = Setup {
         skip: skip_voxels
-            .and_then(|g| super::skip::Skipper::cached(g, &setup.lut, settings, cache)),
+            .and_then(|g| super::skip::Skipper::cached(g, &setup.base.lut, settings, cache)),
         lut_pairs: if setup.batched {
-            super::march::lut_pairs(&setup.lut)
+            super::march::lut_pairs(&setup.base.lut)
         } else {
             Vec::new()
         },
-        clip_mesh: super::clipmesh::resolve(settings, affine, dims, skip_voxels, &setup.lut)?,
+        clip_mesh: super::clipmesh::resolve(settings, affine, dims, skip_voxels, &setup.base.lut)?,
         ..setup
     };
 
@@ -560,6 +375,8 @@ pub fn render_field_with<R: Real, F: Field<R>>(
         .par_chunks_mut(w * channels)
         .zip(counts.par_chunks_mut(w))
         .enumerate()
+        // A cancelled render unwinds from `progress`; the fuse stops the other rows.
+        .panic_fuse()
         .for_each(|(row, (pixels, row_counts))| {
             if let Some((src, s32)) = &packets {
                 if cast_row_packets(src, s32, camera, settings, row, pixels, row_counts) {
@@ -569,7 +386,7 @@ pub fn render_field_with<R: Real, F: Field<R>>(
             }
             for col in 0..w {
                 let ray = camera.ray(col, row);
-                let u = R::of(crate::accumulate::ray_offset(settings, col, row));
+                let u = R::of(super::jitter::ray_offset(settings, col, row));
                 let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray, u);
                 for (c, v) in px.iter().take(channels).enumerate() {
                     pixels[col * channels + c] = v.f64();
@@ -595,7 +412,7 @@ fn packet_source<'a, R: Real, F: Field<R>>(
 ) -> Option<(super::march::Source<'a, f32>, &'a Setup<f32>)> {
     use std::any::TypeId;
     let grid = field.sampled_grid()?;
-    if TypeId::of::<R>() != TypeId::of::<f32>() || !setup.batched || setup.shade {
+    if TypeId::of::<R>() != TypeId::of::<f32>() || !setup.batched || setup.base.shade {
         return None;
     }
     // SAFETY: R is f32 (checked above), so these have f32's layout.
@@ -607,12 +424,12 @@ fn packet_source<'a, R: Real, F: Field<R>>(
     };
     let src = super::march::Source {
         grid,
-        filter: s.filter,
-        lut: &s.lut,
+        filter: s.base.filter,
+        lut: &s.base.lut,
         pairs: &s.lut_pairs,
         speed: 1.0,
-        ref_step: s.ref_step,
-        e_full: s.step / s.ref_step,
+        ref_step: s.base.ref_step,
+        e_full: s.base.step / s.base.ref_step,
     };
     let d = grid.dims;
     let diag = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64).sqrt();
@@ -651,9 +468,9 @@ pub(crate) struct Plan<R> {
 /// Plans `ray` (steps offset by `u·Δs`); `None` when nothing of it is left to sample.
 /// Mirrors the start of `shaders/raycast.wgsl: cast_ray`.
 pub(crate) fn plan_ray<R: Real>(s: &Setup<R>, ray: &crate::camera::Ray, u: R) -> Option<Plan<R>> {
-    let o = V3::<R>::from_dvec(s.to_index.transform_point3(ray.origin));
-    let d = V3::<R>::from_dvec(s.to_index.transform_vector3(ray.dir));
-    let (t_in, t_out) = intersect_box(o, d, s.lo, s.hi)?;
+    let o = V3::<R>::from_dvec(s.base.to_index.transform_point3(ray.origin));
+    let d = V3::<R>::from_dvec(s.base.to_index.transform_vector3(ray.dir));
+    let (t_in, t_out) = intersect_box(o, d, s.base.lo, s.base.hi)?;
     let mut t_in = t_in.max(R::of(ray.t_min));
     let mut t_out = t_out;
     if let Some(clip) = &s.clip {
@@ -666,7 +483,7 @@ pub(crate) fn plan_ray<R: Real>(s: &Setup<R>, ray: &crate::camera::Ray, u: R) ->
         return None;
     }
     let speed = d.length();
-    let dt = s.step / speed;
+    let dt = s.base.step / speed;
     // The virtual start of the (jittered) step grid; u = 0 gives t_s = t_in.
     let t_s = t_in - u * dt;
     let n = ((t_out - t_s) / dt - R::of(1e-3)).ceil().max(R::one());
@@ -694,7 +511,7 @@ pub(crate) fn plan_ray<R: Real>(s: &Setup<R>, ray: &crate::camera::Ray, u: R) ->
 }
 
 /// Casts one ray; returns the pixel (RGBA, or the scalar in channel 0) and the number
-/// of samples taken; `u` offsets the ray's steps by `u·Δs` (`accumulate`).
+/// of samples taken; `u` offsets the ray's steps by `u·Δs` (`cpu::jitter`).
 /// Mirrors `shaders/raycast.wgsl: cast_ray`.
 fn cast_ray<R: Real, F: Field<R>>(
     field: &F,
@@ -704,8 +521,9 @@ fn cast_ray<R: Real, F: Field<R>>(
     ray: crate::camera::Ray,
     u: R,
 ) -> ([R; 4], u32) {
+    let b = &s.base;
     let miss = if mode.rgba() {
-        s.bg
+        b.bg
     } else {
         [s.miss, R::zero(), R::zero(), R::zero()]
     };
@@ -723,7 +541,7 @@ fn cast_ray<R: Real, F: Field<R>>(
         n,
     } = steps;
     let speed = plan.speed;
-    let e_full = s.step / s.ref_step;
+    let e_full = b.step / b.ref_step;
     let segment = |k: usize| steps.segment(k);
     // MIDA and iso-surfaces march the unjittered grid from t_in.
     let span = super::modes::Span {
@@ -757,10 +575,10 @@ fn cast_ray<R: Real, F: Field<R>>(
         );
     }
     match mode {
-        Mode::Mida => super::modes::cast_mida(field, s, &span, ray.dir),
-        Mode::Iso => super::modes::cast_iso(field, s, &span, ray.dir, false),
+        Mode::Mida => super::modes::cast_mida(field, b, &s.modes, &span, ray.dir),
+        Mode::Iso => super::modes::cast_iso(field, b, &s.modes, &span, ray.dir, false),
         Mode::Dvr if !s.modes.iso.is_empty() => {
-            super::modes::cast_iso(field, s, &span, ray.dir, true)
+            super::modes::cast_iso(field, b, &s.modes, &span, ray.dir, true)
         }
         Mode::Mip | Mode::Minip => {
             let mut best = field.value(segment(0).0);
@@ -786,10 +604,7 @@ fn cast_ray<R: Real, F: Field<R>>(
             ([sum, R::zero(), R::zero(), R::zero()], n as u32)
         }
         Mode::Dvr => {
-            let dir = V3::<R>::from_dvec(ray.dir);
-            let view = -dir;
-            let light = s.light.unwrap_or(view);
-            let half = (light + view).normalize_or_zero();
+            let (light, half) = light_half(b.light, ray.dir);
             let mut c = [R::zero(); 3];
             let mut a = R::zero();
             let mut taken = 0u32;
@@ -803,12 +618,12 @@ fn cast_ray<R: Real, F: Field<R>>(
             let batched = match field.sampled_grid() {
                 Some(grid) if s.batched && !back => Some(super::march::Source {
                     grid,
-                    filter: s.filter,
-                    lut: &s.lut,
+                    filter: b.filter,
+                    lut: &b.lut,
                     pairs: &s.lut_pairs,
                     speed,
-                    ref_step: s.ref_step,
-                    e_full: s.step / s.ref_step,
+                    ref_step: b.ref_step,
+                    e_full: b.step / b.ref_step,
                 }),
                 _ => None,
             };
@@ -827,13 +642,13 @@ fn cast_ray<R: Real, F: Field<R>>(
                         while left != 0 {
                             let l = left.trailing_zeros() as usize;
                             left &= left - 1;
-                            let rgb = if s.shade {
+                            let rgb = if b.shade {
                                 let p = batch.position(l);
-                                shade_sample(field, s, p, batch.colour(l), light, half)
+                                shade_sample(field, b, p, batch.colour(l), light, half)
                             } else {
                                 batch.colour(l)
                             };
-                            if over(&mut c, &mut a, rgb, batch.alpha_step[l], s.ert) {
+                            if under_until(&mut c, &mut a, rgb, batch.alpha_step[l], b.ert) {
                                 taken += l as u32 + 1;
                                 break 'ray;
                             }
@@ -846,43 +661,28 @@ fn cast_ray<R: Real, F: Field<R>>(
                     let k = if back { k_lo + k_hi - i } else { i };
                     let (p, len) = segment(k);
                     taken += 1;
-                    let (rgb, alpha) = classify_sample(field, s, p);
+                    let (rgb, alpha) = classify_sample(field, b, p);
                     if alpha <= R::zero() {
                         continue;
                     }
                     // Opacity correction for a step of len·speed voxels.
-                    let e = steps.exponent(k, len, speed, s.ref_step, e_full);
+                    let e = steps.exponent(k, len, speed, b.ref_step, e_full);
                     let alpha = R::one() - transmit_pow(R::one() - alpha, e);
-                    let rgb = if s.shade {
-                        shade_sample(field, s, p, rgb, light, half)
+                    let rgb = if b.shade {
+                        shade_sample(field, b, p, rgb, light, half)
                     } else {
                         rgb
                     };
                     if back {
-                        for ch in 0..3 {
-                            c[ch] = alpha * rgb[ch] + (R::one() - alpha) * c[ch];
-                        }
-                        a = alpha + (R::one() - alpha) * a;
-                    } else if over(&mut c, &mut a, rgb, alpha, s.ert) {
+                        over(&mut c, &mut a, rgb, alpha);
+                    } else if under_until(&mut c, &mut a, rgb, alpha, b.ert) {
                         break 'ray;
                     }
                 }
             }
-            (over_background(c, a, s.bg), taken)
+            (over_background(c, a, b.bg), taken)
         }
     }
-}
-
-/// The composited colour `c` and opacity `a` over the background `bg`.
-#[inline(always)]
-fn over_background<R: Real>(c: [R; 3], a: R, bg: [R; 4]) -> [R; 4] {
-    let t = R::one() - a;
-    [
-        c[0] + t * bg[0] * bg[3],
-        c[1] + t * bg[1] * bg[3],
-        c[2] + t * bg[2] * bg[3],
-        a + t * bg[3],
-    ]
 }
 
 /// One row of an unshaded DVR image (f32, trilinear, front to back), its rays marched
@@ -905,7 +705,7 @@ fn cast_row_packets(
     use super::skip::SampleRanges;
     let skip = s.skip.as_ref();
     let mut pk = Packet::default();
-    if pk.step(src, s.ert).is_none() {
+    if pk.step(src, s.base.ert).is_none() {
         return false;
     }
     // Two packets stepped at once, their stages interleaved: one's fetches overlap the
@@ -933,9 +733,9 @@ fn cast_row_packets(
             let col = next_col;
             next_col += 1;
             let ray = camera.ray(col, row);
-            let u = crate::accumulate::ray_offset(settings, col, row) as f32;
+            let u = super::jitter::ray_offset(settings, col, row) as f32;
             let Some(plan) = plan_ray(s, &ray, u) else {
-                put(col, s.bg, 0);
+                put(col, s.base.bg, 0);
                 continue;
             };
             let st = plan.steps;
@@ -954,7 +754,7 @@ fn cast_row_packets(
                 false,
             );
             let Some(first) = r.next(skip) else {
-                put(col, over_background([0.0; 3], 0.0, s.bg), 0);
+                put(col, over_background([0.0; 3], 0.0, s.base.bg), 0);
                 continue;
             };
             pk.start(l, &st, plan.speed, first);
@@ -970,7 +770,8 @@ fn cast_row_packets(
     }
     while pks.iter().any(|pk| pk.live != 0) {
         // All packets stepped at once: the fetches of one overlap the others' arithmetic.
-        let res = Packet::step_all(&mut pks, src, s.ert).expect("checked before the first ray");
+        let res =
+            Packet::step_all(&mut pks, src, s.base.ert).expect("checked before the first ray");
         for (p, r) in res.into_iter().enumerate() {
             let (ended, hit) = r;
             let pk = &mut pks[p];
@@ -986,124 +787,15 @@ fn cast_row_packets(
                     }
                 }
                 let c = [pk.c[0][l], pk.c[1][l], pk.c[2][l]];
-                put(col_of[p][l], over_background(c, pk.a[l], s.bg), pk.taken[l]);
+                put(
+                    col_of[p][l],
+                    over_background(c, pk.a[l], s.base.bg),
+                    pk.taken[l],
+                );
                 pk.live &= !(1 << l);
                 refill(l, pk, &mut ranges[p], &mut col_of[p], &mut put);
             }
         }
     }
     true
-}
-
-/// Front to back: one step's colour and opacity `alpha` under the pixel so far
-/// (`c`, `a`); true once `a` reaches the early-termination threshold `ert`.
-#[inline(always)]
-fn over<R: Real>(c: &mut [R; 3], a: &mut R, rgb: [R; 3], alpha: R, ert: R) -> bool {
-    let w = (R::one() - *a) * alpha;
-    for ch in 0..3 {
-        c[ch] = c[ch] + w * rgb[ch];
-    }
-    *a = *a + w;
-    *a >= ert
-}
-
-/// `x^e` for the opacity correction `1 − (1 − α)^e`. The default step is half the
-/// reference step, so `e = ½` is by far the commonest exponent: there the correctly
-/// rounded square root stands in for the general power (the same value to within an
-/// ulp, and several times cheaper); `e = 1` is `x` itself.
-#[inline]
-pub(crate) fn transmit_pow<R: Real>(x: R, e: R) -> R {
-    if e == R::of(0.5) {
-        x.sqrt()
-    } else if e == R::one() {
-        x
-    } else {
-        x.pow01(e)
-    }
-}
-
-/// Colour and opacity (per reference step) of the sample at `p`.
-/// Mirrors `shaders/raycast.wgsl: classify_sample`.
-#[inline]
-pub(crate) fn classify_sample<R: Real, F: Field<R>>(
-    field: &F,
-    s: &Setup<R>,
-    p: V3<R>,
-) -> ([R; 3], R) {
-    match &s.pre {
-        None => {
-            let c = match &s.lut2 {
-                // The world-space gradient magnitude, as the shading sees it.
-                Some(l2) => {
-                    l2.classify2d(field.value(p), s.normal.mul_vec(field.gradient(p)).length())
-                }
-                None => s.lut.classify(field.value(p)),
-            };
-            ([c[0], c[1], c[2]], c[3])
-        }
-        Some(g) => {
-            let a = sample(&g[3], s.filter, p).max(R::zero()).min(R::one());
-            if a <= R::zero() {
-                return ([R::zero(); 3], R::zero());
-            }
-            let un = |ch: usize| {
-                (sample(&g[ch], s.filter, p) / a)
-                    .max(R::zero())
-                    .min(R::one())
-            };
-            ([un(0), un(1), un(2)], a)
-        }
-    }
-}
-
-/// Phong-shades a sample, blending in from unshaded where the gradient is tiny.
-/// Mirrors `shaders/raycast.wgsl: shade_sample`.
-#[inline]
-pub(crate) fn shade_sample<R: Real, F: Field<R>>(
-    field: &F,
-    s: &Setup<R>,
-    p: V3<R>,
-    rgb: [R; 3],
-    light: V3<R>,
-    half: V3<R>,
-) -> [R; 3] {
-    shade_gradient(
-        field.gradient(p),
-        s.grad_thr,
-        &s.normal,
-        &s.k,
-        rgb,
-        light,
-        half,
-    )
-}
-
-/// The shading of [`shade_sample`] from an index-space gradient `g`: Phong with the
-/// world normal `−normal·g`, blended in from the unshaded colour as `|g|` rises from
-/// ½ to 1 × `grad_thr`. Shared with the multi-volume caster (`cpu::multi`).
-#[inline]
-pub(crate) fn shade_gradient<R: Real>(
-    g: V3<R>,
-    grad_thr: R,
-    normal: &M3<R>,
-    k: &ShadingR<R>,
-    rgb: [R; 3],
-    light: V3<R>,
-    half: V3<R>,
-) -> [R; 3] {
-    let mag = g.length();
-    let two = R::of(2.0);
-    let w = ((mag / grad_thr - R::of(0.5)) * two)
-        .max(R::zero())
-        .min(R::one());
-    if w <= R::zero() {
-        return rgb;
-    }
-    let n = -(normal.mul_vec(g)).normalize_or_zero();
-    let lit = phong(rgb, n, light, half, k);
-    [
-        rgb[0] + w * (lit[0] - rgb[0]),
-        rgb[1] + w * (lit[1] - rgb[1]),
-        rgb[2] + w * (lit[2] - rgb[2]),
-    ]
 }

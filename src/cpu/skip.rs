@@ -43,8 +43,9 @@
 //! WGSL twins of the per-ray helpers: `shaders/shared/skip.wgsl`; the grid is built on
 //! the GPU by `shaders/skip_minmax.wgsl` (`gpu::skip`).
 
-use super::filter::{axis_taps, Grid};
-use crate::real::{Real, V3};
+use super::filter::axis_taps;
+use super::grid::{Grid, MinMax};
+use crate::real::{intersect_box, Real, V3};
 use crate::settings::{Classification, ClipBox, ClipSpace, Filter, Mode, RenderSettings};
 use crate::transfer::LutR;
 use rayon::prelude::*;
@@ -126,51 +127,6 @@ pub struct MinMaxGrid<R> {
     pub radius: usize,
     pub cells: [usize; 3],
     pub minmax: Vec<[R; 2]>,
-}
-
-/// The smallest and largest of `values` (±∞ for none; NaNs are passed over).
-pub(crate) fn min_max<R: Real>(values: &[R]) -> (R, R) {
-    let mut m = MinMax::new();
-    m.add(values);
-    m.get()
-}
-
-/// A running minimum and maximum kept in sixteen lanes, so that the loop vectorises.
-struct MinMax<R> {
-    lo: [R; 16],
-    hi: [R; 16],
-}
-
-impl<R: Real> MinMax<R> {
-    fn new() -> Self {
-        MinMax {
-            lo: [R::infinity(); 16],
-            hi: [R::neg_infinity(); 16],
-        }
-    }
-
-    #[inline]
-    #[allow(clippy::needless_range_loop)] // indexed lanes vectorise; zipped ones did not
-    fn add(&mut self, values: &[R]) {
-        let chunks = values.chunks_exact(16);
-        let rest = chunks.remainder();
-        for c in chunks {
-            for i in 0..16 {
-                self.lo[i] = if c[i] < self.lo[i] { c[i] } else { self.lo[i] };
-                self.hi[i] = if c[i] > self.hi[i] { c[i] } else { self.hi[i] };
-            }
-        }
-        for (i, &v) in rest.iter().enumerate() {
-            self.lo[i] = if v < self.lo[i] { v } else { self.lo[i] };
-            self.hi[i] = if v > self.hi[i] { v } else { self.hi[i] };
-        }
-    }
-
-    fn get(&self) -> (R, R) {
-        let lo = self.lo.iter().fold(R::infinity(), |m, &v| m.min(v));
-        let hi = self.hi.iter().fold(R::neg_infinity(), |m, &v| m.max(v));
-        (lo, hi)
-    }
 }
 
 /// Builds the min/max grid of `grid` for cells of `block` voxels and a filter of
@@ -705,9 +661,9 @@ impl<R: Real> ClipR<R> {
     /// Mirrors `shaders/shared/skip.wgsl: clip_interval`.
     pub fn interval(&self, o: V3<R>, d: V3<R>, wo: V3<R>, wd: V3<R>) -> Option<(R, R)> {
         if self.world {
-            super::raycast::intersect_box(wo, wd, self.lo, self.hi)
+            intersect_box(wo, wd, self.lo, self.hi)
         } else {
-            super::raycast::intersect_box(o, d, self.lo, self.hi)
+            intersect_box(o, d, self.lo, self.hi)
         }
     }
 }
@@ -858,7 +814,12 @@ mod tests {
                     d = V3::new(0.0, 0.0, 0.0);
                     d.0[a] = s;
                 }
-                let Some((t0, t1)) = slab(o, d, lo, hi) else {
+                let Some((t0, t1)) = crate::real::slab_interval(
+                    o.to_dvec(),
+                    d.to_dvec(),
+                    lo.to_dvec(),
+                    hi.to_dvec(),
+                ) else {
                     continue;
                 };
                 let mut a = CellWalk::new(o, d, t0, t1, block, cells);
@@ -882,23 +843,6 @@ mod tests {
             }
         }
         assert!(spans > 1000, "only {spans} spans compared");
-    }
-
-    /// The entry and exit of `o + d·t` through the box `[lo, hi]`.
-    fn slab(o: V3<f64>, d: V3<f64>, lo: V3<f64>, hi: V3<f64>) -> Option<(f64, f64)> {
-        let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
-        for a in 0..3 {
-            if d.0[a] == 0.0 {
-                if o.0[a] < lo.0[a] || o.0[a] > hi.0[a] {
-                    return None;
-                }
-                continue;
-            }
-            let (u, v) = ((lo.0[a] - o.0[a]) / d.0[a], (hi.0[a] - o.0[a]) / d.0[a]);
-            t0 = t0.max(u.min(v));
-            t1 = t1.min(u.max(v));
-        }
-        (t0 < t1).then_some((t0, t1))
     }
 
     /// A transfer function's prefix count, for building a skipper by hand.

@@ -42,7 +42,7 @@
 //! The GPU twin: `shaders/shared/tricubic.wgsl` (`fast_bspline_axis`, `trilinear_fetch`,
 //! `sample_fast_bspline`, and the texture-unit variant `sample_fast_bspline_hw`).
 
-use super::filter::Grid;
+use super::grid::Grid;
 use crate::real::{Real, V3};
 
 /// One axis of the fast B-spline: the two fetches' first voxels `(i − 1, i + 1)`, their
@@ -144,28 +144,6 @@ pub fn fetch_points(p: [f64; 3]) -> [([f64; 3], f64); 8] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cpu::filter::axis_taps;
-    use crate::settings::Filter;
-
-    #[test]
-    fn pairs_reproduce_the_four_taps() {
-        for k in 0..=200 {
-            let x = -1.5 + k as f64 * 0.0371;
-            let t = axis_taps::<f64>(Filter::Bspline, x);
-            let a = fast_bspline_axis(x);
-            assert_eq!(a.base[0], t.first);
-            assert!((a.g[0] - (t.w[0] + t.w[1])).abs() < 1e-15);
-            assert!((a.g[1] - (t.w[2] + t.w[3])).abs() < 1e-15);
-            assert!((a.g[0] * a.frac[0] - t.w[1]).abs() < 1e-15);
-            assert!((a.g[1] * a.frac[1] - t.w[3]).abs() < 1e-15);
-            assert!((0.5..=1.0).contains(&a.frac[0]), "{x}: {:?}", a.frac);
-            assert!(
-                (0.0..=0.2 + 1e-15).contains(&a.frac[1]),
-                "{x}: {:?}",
-                a.frac
-            );
-        }
-    }
 
     #[test]
     fn fetch_weights_sum_to_one() {

@@ -22,7 +22,7 @@ use crate::camera::Camera;
 use crate::cpu::adaptive::{
     direct_steps, importance_radius, spectral_table, AdaptiveSettings, Sampling,
 };
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
 use crate::frame::Frame;

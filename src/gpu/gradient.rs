@@ -15,7 +15,7 @@
 //! CPU's f32 result up to the order of the Sobel sums (`tests/gpu_gradient.rs`).
 
 use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::error::{Error, Result};
 use crate::settings::GradientMethod;
 use std::time::Instant;

@@ -25,7 +25,8 @@
 //! (`max_storage_buffer_binding_size`, 128 MiB = 32 Mi voxels on lavapipe).
 
 use super::context::GpuContext;
-use crate::cpu::filter::{prepare, Grid};
+use crate::cpu::filter::prepare;
+use crate::cpu::grid::Grid;
 use crate::cpu::process::{
     check_median_size, check_sigma, gaussian_weights, resample_plan, world_gradient_matrix, Field,
     ResampleSpec,

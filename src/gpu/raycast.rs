@@ -38,7 +38,8 @@ use super::context::{
 use super::gradient::gradient_method_id;
 use super::shaders;
 use crate::camera::{Camera, Projection};
-use crate::cpu::filter::{prepare, Grid};
+use crate::cpu::filter::prepare;
+use crate::cpu::grid::Grid;
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
 use crate::frame::Frame;

@@ -7,7 +7,7 @@
 //! (`shaders/shared/skip.wgsl`).
 
 use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::cpu::skip::{cell_count, MinMaxGrid};
 use crate::error::Result;
 use wgpu::util::DeviceExt;

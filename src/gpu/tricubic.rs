@@ -13,7 +13,7 @@
 //! Shader: `shaders/tricubic_points.wgsl`, importing `shaders/shared/tricubic.wgsl`.
 
 use super::context::GpuContext;
-use crate::cpu::filter::Grid;
+use crate::cpu::grid::Grid;
 use crate::error::{Error, Result};
 use wgpu::util::DeviceExt;
 

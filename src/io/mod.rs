@@ -1,11 +1,19 @@
-//! Volume file formats: NRRD (`.nrrd`, `.nhdr`) and NumPy (`.npy`), and the atomic
+//! Files in and out: volume formats, images, projection stacks, meshes, and the atomic
 //! writer that every output file of the crate goes through.
 //!
-//! - [`read_volume`] and [`write_volume`] choose the format from the file extension.
-//! - [`nrrd`] and [`npy`] hold the format-specific readers and writers; both are
-//!   written by hand (no format crate) and are small enough to read in one sitting.
+//! - [`read_volume`] tells the format from the file's magic number or extension
+//!   ([`detect_format`]) and reads NRRD (`.nrrd`, `.nhdr`; raw, gzip or ascii; [`nrrd`]),
+//!   NIfTI-1 (`.nii`, `.nii.gz`; [`nifti`]), DICOM (a file, or a directory holding a
+//!   series; [`dicom`]), PVM ([`pvm`]), VolPack `.den` ([`den`]), multi-page TIFF stacks
+//!   ([`tiff`]), NumPy `.npy` ([`npy`]); [`raw`] reads headerless samples described by
+//!   the caller. [`write_volume`] writes NRRD, NIfTI-1 or `.npy` by extension.
+//! - [`write_frame`] writes an image as PNG (8- or 16-bit) or `.npy` ([`frame`]);
+//!   [`projections`] reads and writes projection stacks and their geometry JSON;
+//!   [`mesh`] reads clipping meshes (OBJ, PLY).
 //! - [`write_atomic`] writes to a temporary file beside the target and renames it into
-//!   place, so a failed or interrupted write never leaves a half-written file.
+//!   place, so a failed or interrupted write never leaves a half-written file;
+//!   [`write_text`] and every writer above go through it. [`check_output`] refuses an
+//!   output that cannot be written before a long job starts.
 //!
 //! # From stored samples to voxels
 //!
@@ -32,6 +40,7 @@
 
 pub mod den;
 pub mod dicom;
+pub mod frame;
 pub mod mesh;
 pub mod nifti;
 pub mod npy;
@@ -40,6 +49,8 @@ pub mod projections;
 pub mod pvm;
 pub mod raw;
 pub mod tiff;
+
+pub use frame::{write_frame, PngOptions};
 
 use crate::error::{Error, Result};
 use crate::volume::{AnyVolume, Volume};
@@ -85,6 +96,56 @@ impl Format {
             Format::Raw => "raw",
         }
     }
+}
+
+/// Fails early, before a long job, on an output `what` that cannot be written: an
+/// extension not in `allowed` (lower case, without the dot), or a folder that does not
+/// exist.
+///
+/// # Errors
+/// [`Error::Invalid`] naming `what`, the path and the accepted extensions.
+pub fn check_output(what: &str, path: &Path, allowed: &[&str]) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    if !ext.as_deref().is_some_and(|e| allowed.contains(&e)) {
+        let dotted: Vec<String> = allowed.iter().map(|e| format!(".{e}")).collect();
+        let dotted: Vec<&str> = dotted.iter().map(String::as_str).collect();
+        return Err(Error::invalid(
+            what,
+            format!(
+                "{}: the extension must be {}",
+                path.display(),
+                crate::choice::or_list(&dotted)
+            ),
+        ));
+    }
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        return Err(Error::invalid(
+            what,
+            format!(
+                "{}: folder {} does not exist",
+                path.display(),
+                parent.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Writes `text` to `path` atomically (a temporary file renamed into place).
+///
+/// # Errors
+/// I/O errors, naming the file.
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
+    write_atomic(path, |w| {
+        w.write_all(text.as_bytes()).map_err(|e| Error::io(path, e))
+    })
 }
 
 /// Tells a file's format from its first bytes (magic numbers), falling back to its

@@ -216,6 +216,24 @@ pub fn gpu(test: &str) -> Option<&'static GpuContext> {
     }
 }
 
+/// Where a failing parity check leaves its evidence: `target/parity/<case>/`, with
+/// every character of `case` but letters, digits, `-`, `_` and `.` made `_`.
+pub fn parity_dir(case: &str) -> PathBuf {
+    let name: String = case
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/parity")
+        .join(name)
+}
+
 /// Asserts parity of `port` against `oracle`, writing `target/parity/<case>/` on failure.
 pub fn assert_parity(
     case: &str,
@@ -223,10 +241,50 @@ pub fn assert_parity(
     port: &voxlab::frame::Frame,
     tol: voxlab::metrics::Tolerance,
 ) -> voxlab::metrics::ErrorStats {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("target/parity")
-        .join(case);
+    let dir = parity_dir(case);
     let report = voxlab::metrics::check_parity(case, oracle, port, tol, Some(&dir)).unwrap();
+    assert!(report.passed, "{}", report.message);
+    report.stats
+}
+
+/// Asserts parity of a real array `port` against `oracle`, both of dimensions `dims`
+/// (x fastest; `&[len]` for a plain slice), writing `target/parity/<case>/` on failure.
+pub fn assert_parity_array<A, B>(
+    case: &str,
+    dims: &[usize],
+    oracle: &[A],
+    port: &[B],
+    tol: voxlab::metrics::Tolerance,
+) -> voxlab::metrics::ErrorStats
+where
+    A: Copy + Into<f64>,
+    B: Copy + Into<f64>,
+{
+    let dir = parity_dir(case);
+    let report =
+        voxlab::metrics::check_parity_array(case, dims, oracle, port, tol, Some(&dir)).unwrap();
+    assert!(report.passed, "{}", report.message);
+    report.stats
+}
+
+/// Asserts parity of a complex array `port` against `oracle`, both of dimensions `dims` (x
+/// fastest), each
+/// element compared by the modulus of its difference; writes `target/parity/<case>/`
+/// on failure.
+pub fn assert_parity_complex<A, B>(
+    case: &str,
+    dims: &[usize],
+    oracle: &[rustfft::num_complex::Complex<A>],
+    port: &[rustfft::num_complex::Complex<B>],
+    tol: voxlab::metrics::Tolerance,
+) -> voxlab::metrics::ErrorStats
+where
+    A: Copy + Into<f64>,
+    B: Copy + Into<f64>,
+{
+    let dir = parity_dir(case);
+    let report =
+        voxlab::metrics::check_parity_complex(case, dims, oracle, port, tol, Some(&dir)).unwrap();
     assert!(report.passed, "{}", report.message);
     report.stats
 }

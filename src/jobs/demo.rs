@@ -4,11 +4,12 @@
 //! analytic phantoms in several modes and filters; then writes an `index.html` and a
 //! `README.md` that show them.
 
+use super::input::{volume_center, volume_extent};
+use super::render::{Renderer, Scene};
 use crate::camera::{AxisView, Camera, Orbit, Projection};
 use crate::error::{Error, Result};
-use crate::frame::PngOptions;
+use crate::io::{write_frame, PngOptions};
 use crate::phantom::Phantom;
-use crate::render::{Renderer, Scene};
 use crate::settings::{Classification, Filter, Mode, RenderSettings};
 use crate::transfer::TransferFunction;
 use std::path::{Path, PathBuf};
@@ -23,10 +24,10 @@ pub struct DemoItem {
 
 /// The X-ray micro-CT of trabecular bone from `data/microct-bone/` (qim3d, MIT), a
 /// 128³ u8 TIFF stack, embedded so that the demo needs no file.
-pub const MICROCT_BONE_TIFF: &[u8] = include_bytes!("../data/microct-bone/bone_128x128x128.tif");
+pub const MICROCT_BONE_TIFF: &[u8] = include_bytes!("../../data/microct-bone/bone_128x128x128.tif");
 
 /// The UNC MR brain as shipped with VolPack (`data/mr-brain-volpack/`, 128×128×84 u8).
-pub const MR_BRAIN_DEN: &[u8] = include_bytes!("../data/mr-brain-volpack/brainsmall.den");
+pub const MR_BRAIN_DEN: &[u8] = include_bytes!("../../data/mr-brain-volpack/brainsmall.den");
 
 /// Reads the embedded micro-CT of bone.
 pub fn microct_bone() -> Result<crate::AnyVolume> {
@@ -68,7 +69,7 @@ pub fn marschner_lobb_tf() -> Result<TransferFunction> {
 
 /// Renders the gallery into `out` with `renderer`, creating the folder; reports each
 /// finished picture.
-pub fn run_demo(
+pub fn run(
     out: &Path,
     renderer: &Renderer,
     report: &dyn Fn(&DemoItem, usize, usize),
@@ -84,7 +85,7 @@ pub fn run_demo(
     // Frame the phantoms' content (radius ≈ 0.95 of the half extent), not the corners
     // of their cubes.
     let orbit = |vol: &crate::AnyVolume, projection, elevation_deg: f64| {
-        let half = 0.5 * vol_extent(vol)[0];
+        let half = 0.5 * volume_extent(vol)[0];
         let projection = match projection {
             Projection::Orthographic { .. } => Projection::Orthographic {
                 width_mm: 2.1 * half,
@@ -93,8 +94,8 @@ pub fn run_demo(
             p => p,
         };
         Camera::orbit(
-            with_center(vol),
-            vol_extent(vol),
+            volume_center(vol),
+            volume_extent(vol),
             Orbit {
                 azimuth_deg: 30.0,
                 elevation_deg,
@@ -127,10 +128,10 @@ pub fn run_demo(
     // `distance` is in half-extents of the volume's longest side.
     let real_orbit =
         |vol: &crate::AnyVolume, azimuth_deg: f64, elevation_deg: f64, distance: f64| {
-            let half = 0.5 * vol_extent(vol).iter().cloned().fold(0.0, f64::max);
+            let half = 0.5 * volume_extent(vol).iter().cloned().fold(0.0, f64::max);
             Camera::orbit(
-                with_center(vol),
-                vol_extent(vol),
+                volume_center(vol),
+                volume_extent(vol),
                 Orbit {
                     azimuth_deg,
                     elevation_deg,
@@ -253,7 +254,7 @@ pub fn run_demo(
         settings.sample_count = counts;
         let out_img = renderer.render(&job.scene, &settings, &|_, _| {})?.output;
         let path = out.join(job.file);
-        out_img.image.save(&path, job.png)?;
+        write_frame(&path, &out_img.image, job.png)?;
         let item = DemoItem {
             file: path,
             title: job.title,
@@ -263,7 +264,7 @@ pub fn run_demo(
         items.push(item);
         if let Some(samples) = out_img.samples {
             let path = out.join("shepp-logan-samples.png");
-            samples.save(&path, PngOptions::default())?;
+            write_frame(&path, &samples, PngOptions::default())?;
             let item = DemoItem {
                 file: path,
                 title: "Samples per ray of the first picture (early ray termination at 0.99; white = most)".into(),
@@ -275,20 +276,6 @@ pub fn run_demo(
     }
     write_index(out, &items, &renderer.describe())?;
     Ok(items)
-}
-
-fn with_center(v: &crate::AnyVolume) -> glam::DVec3 {
-    let d = v.dims();
-    v.affine().transform_point3(glam::DVec3::new(
-        (d[0] as f64 - 1.0) * 0.5,
-        (d[1] as f64 - 1.0) * 0.5,
-        (d[2] as f64 - 1.0) * 0.5,
-    ))
-}
-
-fn vol_extent(v: &crate::AnyVolume) -> [f64; 3] {
-    let (d, s) = (v.dims(), v.spacing());
-    [d[0] as f64 * s[0], d[1] as f64 * s[1], d[2] as f64 * s[2]]
 }
 
 fn write_index(out: &Path, items: &[DemoItem], who: &str) -> Result<()> {
@@ -314,10 +301,7 @@ fn write_index(out: &Path, items: &[DemoItem], who: &str) -> Result<()> {
     }
     for (file, text) in [("index.html", html), ("README.md", md)] {
         let path = out.join(file);
-        crate::io::write_atomic(&path, |w| {
-            w.write_all(text.as_bytes())
-                .map_err(|e| Error::io(&path, e))
-        })?;
+        crate::io::write_text(&path, &text)?;
     }
     Ok(())
 }

@@ -16,6 +16,7 @@
 //! conventional `5·N·log2 N / t`; GB/s counts one read and one write of the array,
 //! `2·N·sizeof(complex) / t`.
 
+use super::BackendSet;
 use crate::cpu::dft::{dft_nd, Direction, Normalization};
 use crate::error::{Error, Result};
 use crate::gpu::fft::{fft_nd_timed, GpuFftVariant};
@@ -73,20 +74,12 @@ pub fn random_complex(n: usize, seed: u64) -> Vec<Complex<f64>> {
     (0..n).map(|_| Complex::new(next(), next())).collect()
 }
 
-/// Relative L2 error `‖a − b‖ / ‖b‖` in f64 (`‖a − b‖` when `b` is zero).
-pub fn rel_l2<T: Into<f64> + Copy>(a: &[Complex<T>], b: &[Complex<f64>]) -> f64 {
-    let mut d = 0.0;
-    let mut r = 0.0;
-    for (x, y) in a.iter().zip(b) {
-        let x = Complex::new(x.re.into(), x.im.into());
-        d += (x - y).norm_sqr();
-        r += y.norm_sqr();
-    }
-    if r == 0.0 {
-        d.sqrt()
-    } else {
-        (d / r).sqrt()
-    }
+/// Relative L2 error `‖port − reference‖ / ‖reference‖` in f64
+/// ([`crate::metrics::error_stats_complex`]; ∞ when `port` has a NaN or infinity).
+pub fn rel_l2<T: Into<f64> + Copy>(port: &[Complex<T>], reference: &[Complex<f64>]) -> f64 {
+    crate::metrics::error_stats_complex(reference, port, f64::INFINITY)
+        .infinite_if_mismatched()
+        .rel_l2
 }
 
 /// The error allowed for a transform of `total` values in f32 (`single`) or f64.
@@ -98,11 +91,23 @@ pub fn tolerance(total: usize, single: bool) -> f64 {
     }
 }
 
-/// Which implementations to run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Backends {
-    pub cpu: bool,
-    pub gpu: bool,
+/// The GPU for `backends`, and a line saying which it is (or why there is none).
+/// `all` without an adapter runs the CPU only; `gpu` without one fails.
+///
+/// # Errors
+/// [`Error::NoAdapter`] or [`Error::Gpu`] for `gpu` without a usable device.
+pub fn open(backends: BackendSet) -> Result<(Option<&'static GpuContext>, Option<String>)> {
+    if !backends.gpu() {
+        return Ok((None, None));
+    }
+    match GpuContext::shared() {
+        Ok(c) => Ok((Some(c), Some(format!("GPU: {}", c.describe())))),
+        Err(e) if backends.cpu() => Ok((
+            None,
+            Some(format!("GPU: none available ({e}); running the CPU only")),
+        )),
+        Err(e) => Err(e),
+    }
 }
 
 /// One implementation on one shape.
@@ -209,7 +214,7 @@ fn time_cpu<T: rustfft::FftNum>(
 /// [`Error::Invalid`] when `runs` is 0.
 pub fn run(
     shapes: &[Vec<usize>],
-    backends: Backends,
+    backends: BackendSet,
     runs: usize,
     gpu: Option<&GpuContext>,
     log: &mut dyn FnMut(&CaseResult),
@@ -232,7 +237,7 @@ pub fn run(
         let work = total as f64 * shape.iter().sum::<usize>() as f64;
         let exact = work <= EXACT_WORK_LIMIT;
         // The f64 FFT is always run (it may be the reference), timed only for the CPU.
-        let (f64_out, f64_t) = time_cpu(&x, shape, if backends.cpu { runs } else { 0 });
+        let (f64_out, f64_t) = time_cpu(&x, shape, if backends.cpu() { runs } else { 0 });
         let (reference, ref_name) = if exact {
             (
                 dft_nd(&x, shape, Direction::Forward, Normalization::Unnormalized),
@@ -241,7 +246,7 @@ pub fn run(
         } else {
             (f64_out.clone(), "cpu-f64-fft")
         };
-        if backends.cpu {
+        if backends.cpu() {
             let err = rel_l2(&f64_out, &reference);
             let c = case(shape, "cpu-f64", ref_name, err, false, f64_t, None, 16);
             push(c, &mut cases);
@@ -252,7 +257,7 @@ pub fn run(
                 &mut cases,
             );
         }
-        let Some(ctx) = gpu.filter(|_| backends.gpu) else {
+        let Some(ctx) = gpu.filter(|_| backends.gpu()) else {
             continue;
         };
         for (variant, name) in [
@@ -304,7 +309,7 @@ pub fn run(
     Ok(Report {
         runs,
         threads: rayon::current_num_threads(),
-        adapter: gpu.filter(|_| backends.gpu).map(|g| {
+        adapter: gpu.filter(|_| backends.gpu()).map(|g| {
             let s = &g.summary;
             format!("{} ({}, {})", s.name, s.backend, s.driver_info)
         }),

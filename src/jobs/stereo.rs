@@ -17,7 +17,7 @@
 //! `e = 0` both eyes are the mono camera. Orthographic cameras have no parallax to shift
 //! and are refused.
 //!
-//! Both views are rendered through [`render::Renderer`](crate::render::Renderer), so any
+//! Both views are rendered through [`render::Renderer`](crate::jobs::render::Renderer), so any
 //! backend works, or on a given GPU context with [`render_pair_gpu`].
 //!
 //! # Layouts
@@ -30,24 +30,23 @@
 //! - **interlaced**: rows alternate, even rows (0, 2, …) from the left image, odd rows
 //!   from the right (row-interleaved polarised displays).
 
+use super::render::{Renderer, Scene};
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::render::{Renderer, Scene};
 use crate::settings::RenderSettings;
 
-/// How the two views are combined.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum StereoLayout {
-    /// Left | right.
-    SideBySide,
-    /// Red from the left image, green and blue from the right.
-    Anaglyph,
-    /// Even rows from the left image, odd rows from the right.
-    Interlaced,
+crate::choice_enum! {
+    /// How the two views are combined.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum StereoLayout: "stereo layout" {
+        /// Left | right.
+        SideBySide = "side-by-side",
+        /// Red from the left image, green and blue from the right.
+        Anaglyph = "anaglyph",
+        /// Even rows from the left image, odd rows from the right.
+        Interlaced = "interlaced",
+    }
 }
 
 /// The left and right cameras, as windows of wider renders.

@@ -1,0 +1,112 @@
+//! `voxlab convert`: a volume in another format, optionally cropped, resampled (any
+//! reconstruction filter, in f64 through the oracle's filters) and converted to
+//! another voxel type.
+
+use super::input::VolumeInput;
+use super::Progress;
+use crate::error::{Error, Result};
+use crate::settings::Filter;
+use crate::volume::{AnyVolume, VoxelKind};
+use serde::{Deserialize, Serialize};
+
+/// The `voxlab convert` job (the output file is the caller's).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ConvertRequest {
+    pub input: VolumeInput,
+    /// Keep only the voxels `x0..x1, y0..y1, z0..z1` (end exclusive), given as
+    /// `[x0, y0, z0, x1, y1, z1]`; the world position of every kept voxel is unchanged.
+    pub crop: Option<[usize; 6]>,
+    /// Resample (after cropping) to these dimensions over the same box.
+    pub resize: Option<[usize; 3]>,
+    /// Resample (after cropping) to this spacing in mm (one value or three) over the
+    /// same box.
+    pub spacing: Option<Vec<f64>>,
+    /// Reconstruction filter for resampling.
+    pub filter: Filter,
+    /// Voxel type of the output: u8, u16, i16 or f32 (values rounded and clamped into
+    /// integer types). `None`: the input's type, or f32 after resampling.
+    pub voxel_type: Option<String>,
+}
+
+impl Default for ConvertRequest {
+    fn default() -> Self {
+        ConvertRequest {
+            input: VolumeInput::default(),
+            crop: None,
+            resize: None,
+            spacing: None,
+            filter: Filter::Trilinear,
+            voxel_type: None,
+        }
+    }
+}
+
+/// The voxel type named `t` (u8, u16, i16, f32 and their long names).
+///
+/// # Errors
+/// Another name.
+pub fn voxel_kind(t: &str) -> Result<VoxelKind> {
+    Ok(match t.to_ascii_lowercase().as_str() {
+        "u8" | "uint8" => VoxelKind::U8,
+        "u16" | "uint16" => VoxelKind::U16,
+        "i16" | "int16" => VoxelKind::I16,
+        "f32" | "float32" | "float" => VoxelKind::F32,
+        other => {
+            return Err(Error::invalid(
+                "--type",
+                format!("'{other}' is not u8, u16, i16 or f32"),
+            ))
+        }
+    })
+}
+
+/// Reads, crops, resamples and converts; returns the volume to write.
+///
+/// # Errors
+/// Bad options; the input's errors.
+pub fn run(c: &ConvertRequest, progress: &dyn Progress) -> Result<AnyVolume> {
+    if c.resize.is_some() && c.spacing.is_some() {
+        return Err(Error::invalid(
+            "--resize",
+            "give new dimensions or a new spacing, not both",
+        ));
+    }
+    let mut vol = c.input.load(progress)?;
+    if let Some(b) = &c.crop {
+        vol = vol.crop([b[0], b[1], b[2]], [b[3], b[4], b[5]])?;
+    }
+    let resample_dims = match (&c.resize, &c.spacing) {
+        (Some(d), _) => Some(*d),
+        (None, Some(sp)) => {
+            let sp: Vec<f64> = if sp.len() == 1 {
+                vec![sp[0]; 3]
+            } else {
+                sp.clone()
+            };
+            if sp.len() != 3 || !sp.iter().all(|x| x.is_finite() && *x > 0.0) {
+                return Err(Error::invalid(
+                    "--spacing",
+                    "give one or three positive numbers (mm)",
+                ));
+            }
+            let (d, s) = (vol.dims(), vol.spacing());
+            Some([0, 1, 2].map(|a| ((d[a] as f64 * s[a] / sp[a]).round() as usize).max(1)))
+        }
+        (None, None) => None,
+    };
+    if let Some(dims) = resample_dims {
+        let what = format!(
+            "resampling to {}×{}×{} ({:?})",
+            dims[0], dims[1], dims[2], c.filter
+        );
+        vol = super::stage(progress, &what, "volume", 0, || {
+            crate::cpu::filter::resample_volume(&vol.to_f32(), c.filter, dims)
+        })?
+        .into();
+    }
+    if let Some(t) = &c.voxel_type {
+        vol = vol.convert_to(voxel_kind(t)?);
+    }
+    Ok(vol)
+}

@@ -1,0 +1,941 @@
+//! `voxlab render`: ray casting, from a [`Scene`] or from a request.
+//!
+//! Two levels:
+//! - [`render`] / [`Renderer`]: a [`Scene`] (volume, transfer function, camera) and
+//!   [`RenderSettings`] (how) on a [`Backend`] (who: the f64 oracle, the same code in
+//!   f32, or the GPU port). A [`Renderer`] keeps its engine (and the GPU device) for
+//!   many renders, and [`Renderer::prepare`] checks and converts a volume once for many
+//!   frames.
+//! - [`run`]: the whole `voxlab render` job from a [`RenderRequest`] — load the
+//!   input, build the transfer function, camera and settings ([`build_scene`]), then
+//!   one frame, the median of repeated frames, jittered frames averaged, a stereo pair,
+//!   several volumes or the adaptive caster, with timings and sample counts.
+
+use super::input::{volume_center, volume_extent, VolumeInput};
+use super::stereo::StereoLayout;
+pub use super::Backend;
+use super::{cancellable, check_cancel, since, Engine, Progress};
+use crate::camera::{AxisView, Camera, Orbit, Projection};
+use crate::cpu::adaptive::Sampling;
+use crate::cpu::raycast::{self, RenderOutput};
+use crate::error::{Error, Result};
+use crate::gpu::raycast::GpuTimings;
+use crate::gpu::GpuContext;
+use crate::settings::{
+    Classification, ClipMeshUnits, ClipSpace, Compositing, Filter, GradientMethod, IsoSurface,
+    Light, Mode, RenderSettings,
+};
+use crate::transfer::{TransferFunction, WindowMap};
+use crate::transfer2d::{GradientAxis, TransferFunction2D};
+use crate::volume::AnyVolume;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// What to render.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub volume: AnyVolume,
+    pub transfer: TransferFunction,
+    pub camera: Camera,
+}
+
+/// A render and how it was made.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    pub output: RenderOutput,
+    /// The backend that computed it (never `Auto`).
+    pub backend: Backend,
+    /// GPU timings, for GPU renders.
+    pub gpu_timings: Option<GpuTimings>,
+}
+
+/// A backend made ready for renders: [`Engine`] with the ray caster's entry points.
+pub struct Renderer {
+    engine: Engine,
+}
+
+impl Renderer {
+    /// Opens the backend. `Gpu` fails without an adapter; `Auto` falls back to the CPU
+    /// oracle and records why ([`Renderer::fallback_reason`]).
+    pub fn new(backend: Backend) -> Result<Self> {
+        Ok(Renderer {
+            engine: Engine::open(backend)?,
+        })
+    }
+
+    /// A renderer on an engine already open.
+    pub fn on(engine: Engine) -> Self {
+        Renderer { engine }
+    }
+
+    /// The engine renders run on.
+    pub fn engine(&self) -> Engine {
+        self.engine
+    }
+
+    /// The backend renders run on (never `Auto`).
+    pub fn backend(&self) -> Backend {
+        self.engine.backend()
+    }
+
+    /// The GPU context, for GPU renderers.
+    pub fn gpu(&self) -> Option<&GpuContext> {
+        self.engine.gpu()
+    }
+
+    /// Why `Auto` fell back to the CPU, if it did.
+    pub fn fallback_reason(&self) -> Option<&str> {
+        self.engine.fallback_reason()
+    }
+
+    /// A description: the backend, and the adapter for the GPU.
+    pub fn describe(&self) -> String {
+        self.engine.describe()
+    }
+
+    /// Renders with a progress callback `(rows done, rows total)`.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rendered> {
+        let (v, tf, cam) = (&scene.volume, &scene.transfer, &scene.camera);
+        let (output, gpu_timings) = match (self.backend(), self.gpu()) {
+            (Backend::Gpu, Some(ctx)) => {
+                let g = crate::gpu::raycast::render(ctx, v, tf, cam, settings, progress)?;
+                (g.output, Some(g.timings))
+            }
+            (Backend::CpuF32, _) => (
+                raycast::render::<f32>(v, tf, cam, settings, progress)?,
+                None,
+            ),
+            _ => (
+                raycast::render::<f64>(v, tf, cam, settings, progress)?,
+                None,
+            ),
+        };
+        Ok(Rendered {
+            output,
+            backend: self.backend(),
+            gpu_timings,
+        })
+    }
+}
+
+/// A scene whose volume is prepared once for many frames: on the CPU backends the
+/// finiteness check, the conversion and the skipping's min/max grids
+/// ([`raycast::Prepared`]); the GPU backend renders from the scene as usual.
+pub struct PreparedScene<'a> {
+    scene: &'a Scene,
+    cpu: PreparedCpu,
+}
+
+enum PreparedCpu {
+    Gpu,
+    F32(raycast::Prepared<f32>),
+    F64(raycast::Prepared<f64>),
+}
+
+impl Renderer {
+    /// Prepares `scene` for frames with `settings`' filter and gradients.
+    pub fn prepare<'a>(
+        &self,
+        scene: &'a Scene,
+        settings: &RenderSettings,
+    ) -> Result<PreparedScene<'a>> {
+        settings.validate()?;
+        let v = &scene.volume;
+        let cpu = match (self.backend(), self.gpu()) {
+            (Backend::Gpu, Some(_)) => PreparedCpu::Gpu,
+            (Backend::CpuF32, _) => PreparedCpu::F32(raycast::Prepared::new(v, settings)?),
+            _ => PreparedCpu::F64(raycast::Prepared::new(v, settings)?),
+        };
+        Ok(PreparedScene { scene, cpu })
+    }
+
+    /// Renders a frame of a prepared scene seen by `camera`: the same image as
+    /// [`Renderer::render`] of the scene with that camera.
+    pub fn render_prepared(
+        &self,
+        p: &PreparedScene,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rendered> {
+        let tf = &p.scene.transfer;
+        settings.validate()?;
+        tf.validate()?;
+        let (output, gpu_timings) = match (&p.cpu, self.gpu()) {
+            (PreparedCpu::Gpu, Some(ctx)) => {
+                let g = crate::gpu::raycast::render(
+                    ctx,
+                    &p.scene.volume,
+                    tf,
+                    camera,
+                    settings,
+                    progress,
+                )?;
+                (g.output, Some(g.timings))
+            }
+            (PreparedCpu::F32(c), _) => (c.render(tf, camera, settings, progress)?, None),
+            (PreparedCpu::F64(c), _) => (c.render(tf, camera, settings, progress)?, None),
+            (PreparedCpu::Gpu, None) => unreachable!("prepared for the GPU without one"),
+        };
+        Ok(Rendered {
+            output,
+            backend: self.backend(),
+            gpu_timings,
+        })
+    }
+}
+
+/// Renders `scene` with `settings` on `backend`.
+pub fn render(scene: &Scene, settings: &RenderSettings, backend: Backend) -> Result<RenderOutput> {
+    Ok(render_with_progress(scene, settings, backend, &|_, _| {})?.output)
+}
+
+/// [`render`] with a progress callback `(rows done, rows total)`, saying which backend
+/// computed it.
+pub fn render_with_progress(
+    scene: &Scene,
+    settings: &RenderSettings,
+    backend: Backend,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered> {
+    Renderer::new(backend)?.render(scene, settings, progress)
+}
+
+/// Where the camera looks from: an axis view, or an orbit around the volume.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ViewRequest {
+    /// Axis-aligned orthographic view `+x`, `-x`, `+y`, `-y`, `+z`, `-z` (rays along
+    /// that index axis; the image is laid out like NumPy's reduction over that axis).
+    /// `None`: the orbit view.
+    pub axis: Option<String>,
+    /// Orbit view: rotation about world +z in degrees (0 looks along +y).
+    pub azimuth: f64,
+    /// Orbit view: degrees above the xy-plane.
+    pub elevation: f64,
+}
+
+impl Default for ViewRequest {
+    fn default() -> Self {
+        ViewRequest {
+            axis: None,
+            azimuth: 30.0,
+            elevation: 20.0,
+        }
+    }
+}
+
+/// Empty-space skipping, clipping and jittered sampling (docs/acceleration.md); each
+/// field left `None`/`false` keeps the settings' value.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AccelRequest {
+    /// Skip cells the transfer function leaves transparent (the image does not change).
+    pub skip_empty: Option<bool>,
+    /// Edge of one skipping cell in voxels.
+    pub block_size: Option<usize>,
+    /// Restrict rays to the box `x0, y0, z0, x1, y1, z1` (∩ the volume) in `clip_space`.
+    pub clip_box: Option<[f64; 6]>,
+    pub clip_space: ClipSpace,
+    /// Offset every ray's start by a random fraction of a step from this seed.
+    pub jitter: Option<u32>,
+    /// Average this many jittered frames (seeds `jitter` …, default 0).
+    pub accumulate: Option<usize>,
+    /// Offset ray starts by the 4×4 ordered pattern (interleaved sampling).
+    pub interleaved: bool,
+    /// Clip to a closed triangle mesh (a `.obj`/`.ply` file), or `bricks`: the
+    /// non-empty skipping cells.
+    pub clip_mesh: Option<String>,
+    /// Units of the mesh file's vertices.
+    pub clip_mesh_units: ClipMeshUnits,
+}
+
+impl AccelRequest {
+    /// Writes the fields given into `s` (reading a mesh file), then validates `s`.
+    ///
+    /// # Errors
+    /// The mesh reader's errors; `accumulate` with `interleaved`; invalid settings.
+    pub fn apply(&self, s: &mut RenderSettings) -> Result<()> {
+        if let Some(v) = self.skip_empty {
+            s.skip_empty = v;
+        }
+        if let Some(b) = self.block_size {
+            s.block_size = b;
+        }
+        if let Some(c) = self.clip_box {
+            s.clip_box = Some(crate::settings::ClipBox {
+                lo: [c[0], c[1], c[2]],
+                hi: [c[3], c[4], c[5]],
+                space: self.clip_space,
+            });
+        }
+        if self.jitter.is_some() {
+            s.jitter = self.jitter;
+        }
+        if self.interleaved {
+            s.interleaved = true;
+        }
+        if let Some(m) = &self.clip_mesh {
+            s.clip_mesh = Some(if m == "bricks" {
+                crate::settings::ClipMesh::Bricks
+            } else {
+                crate::settings::ClipMesh::Mesh {
+                    mesh: std::sync::Arc::new(crate::io::mesh::read_mesh(std::path::Path::new(m))?),
+                    units: self.clip_mesh_units,
+                }
+            });
+        }
+        if self.accumulate.is_some() && s.interleaved {
+            return Err(Error::invalid(
+                "--accumulate",
+                "averages jittered frames; it excludes --interleaved",
+            ));
+        }
+        s.validate()
+    }
+
+    /// Renders one frame, or the average of `accumulate` jittered frames (reporting
+    /// frames done).
+    pub fn render(
+        &self,
+        renderer: &Renderer,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Rendered> {
+        cancellable(progress, |cp| match self.accumulate {
+            Some(n) => super::accumulate::render_accumulated(
+                renderer,
+                scene,
+                settings,
+                settings.jitter.unwrap_or(0),
+                n,
+                &|done, total| cp.advance(done, total),
+            ),
+            None => renderer.render(scene, settings, &|done, total| cp.advance(done, total)),
+        })
+    }
+}
+
+/// What to render and how: the scene part of `voxlab render` and `voxlab compare`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneRequest {
+    pub input: VolumeInput,
+    /// What rays compute.
+    pub mode: Mode,
+    /// Transfer function: a preset name, a JSON file, or `auto` (the `phantom` preset
+    /// for phantoms; for files, a soft grayscale ramp over the volume's value range).
+    pub tf: String,
+    /// A 2D transfer function over (value, gradient magnitude): a JSON file of widgets
+    /// or a 2D preset name.
+    pub tf2d: Option<String>,
+    /// A named preset, 1D or 2D (replaces `tf`, or sets `tf2d`).
+    pub tf_preset: Option<String>,
+    /// The 2D transfer function's gradient axis (overrides its JSON's).
+    pub gradient_axis: Option<GradientAxis>,
+    /// Faux shading exponent k: colours become c·(α/α_max)^k.
+    pub faux_shading: Option<f64>,
+    /// `[width, centre]` in raw data units: the grey window of MIP and MinIP, else the
+    /// interval mapped onto the transfer function's domain.
+    pub window: Option<[f64; 2]>,
+    /// A named CT window (brain, subdural, abdomen, liver, lung, bone), used like
+    /// `window`.
+    pub window_preset: Option<String>,
+    /// MIDA's γ in [-1, 1].
+    pub mida_gamma: f64,
+    /// Iso-surfaces (up to 4), drawn by `iso` and with DVR.
+    pub iso: Vec<IsoSurface>,
+    /// The first iso-surface crossing ends the ray.
+    pub iso_opaque: bool,
+    /// Binary shadows on opaque iso-surfaces.
+    pub shadows: bool,
+    /// Refine iso-surface hits by linear interpolation between two samples.
+    pub iso_refine: bool,
+    pub view: ViewRequest,
+    /// Orbit camera: distance from the volume centre in mm (`None`: fit the volume).
+    pub distance: Option<f64>,
+    /// Orthographic instead of perspective projection for the orbit camera.
+    pub ortho: bool,
+    /// Perspective vertical field of view in degrees.
+    pub fov: f64,
+    /// Image size in pixels (default 256, or the cross-section for an axis view).
+    pub width: Option<usize>,
+    pub height: Option<usize>,
+    pub filter: Filter,
+    /// Step along rays in voxels.
+    pub step: f64,
+    pub classification: Classification,
+    pub compositing: Compositing,
+    /// Early ray termination threshold (1 = off).
+    pub ert: f64,
+    pub gradient: GradientMethod,
+    pub precompute_gradients: bool,
+    /// Phong shading on.
+    pub shading: bool,
+    /// Directional light (world, toward the light); `None`: a headlight.
+    pub light: Option<[f64; 3]>,
+    /// Background RGBA in [0, 1] for DVR.
+    pub background: [f64; 4],
+    /// Render settings from a JSON file instead of the fields above (the fields of
+    /// [`RenderSettings`]).
+    pub settings_file: Option<PathBuf>,
+    /// GPU only: trilinear filtering by the texture unit.
+    pub hardware_filtering: bool,
+    pub accel: AccelRequest,
+}
+
+impl Default for SceneRequest {
+    fn default() -> Self {
+        SceneRequest {
+            input: VolumeInput::default(),
+            mode: Mode::Dvr,
+            tf: "auto".into(),
+            tf2d: None,
+            tf_preset: None,
+            gradient_axis: None,
+            faux_shading: None,
+            window: None,
+            window_preset: None,
+            mida_gamma: 0.0,
+            iso: Vec::new(),
+            iso_opaque: false,
+            shadows: false,
+            iso_refine: true,
+            view: ViewRequest::default(),
+            distance: None,
+            ortho: false,
+            fov: 30.0,
+            width: None,
+            height: None,
+            filter: Filter::Trilinear,
+            step: 0.5,
+            classification: Classification::Post,
+            compositing: Compositing::FrontToBack,
+            ert: 0.99,
+            gradient: GradientMethod::Central,
+            precompute_gradients: false,
+            shading: true,
+            light: None,
+            background: [0.0, 0.0, 0.0, 1.0],
+            settings_file: None,
+            hardware_filtering: false,
+            accel: AccelRequest::default(),
+        }
+    }
+}
+
+/// The window `[width, centre]` of a request: `window_preset` or `window`, checked.
+fn window_of(a: &SceneRequest) -> Result<Option<[f64; 2]>> {
+    if let Some(name) = &a.window_preset {
+        if a.window.is_some() {
+            return Err(Error::invalid(
+                "--window-preset",
+                "give a window preset or a window, not both",
+            ));
+        }
+        return crate::cpu::modes::window_preset(name).map(Some);
+    }
+    let Some([w, c]) = a.window else {
+        return Ok(None);
+    };
+    if !(w.is_finite() && w > 0.0 && c.is_finite()) {
+        return Err(Error::invalid(
+            "--window",
+            format!("width {w} must be finite and positive, centre {c} finite"),
+        ));
+    }
+    Ok(Some([w, c]))
+}
+
+/// Loads the input and builds the scene (volume, transfer function, camera) and the
+/// settings (with sample counts when `sample_count`), checked; not yet the
+/// acceleration fields ([`AccelRequest::apply`]).
+///
+/// # Errors
+/// Whatever the input, the transfer functions, the camera or the settings refuse.
+pub fn build_scene(
+    a: &SceneRequest,
+    sample_count: bool,
+    progress: &dyn Progress,
+) -> Result<(Scene, RenderSettings)> {
+    let volume = a.input.load(progress)?;
+    let mut tf = if a.tf == "auto" {
+        if a.input.is_phantom() {
+            TransferFunction::preset("phantom")?
+        } else {
+            let r = volume.value_range();
+            TransferFunction::auto_for_range(r.min, r.max)
+        }
+    } else {
+        TransferFunction::preset_or_file(&a.tf)?
+    };
+    let mut tf2d = match &a.tf2d {
+        Some(spec) => Some(TransferFunction2D::preset_or_file(spec)?),
+        None => None,
+    };
+    if let Some(name) = &a.tf_preset {
+        if crate::transfer2d::PRESETS_2D.iter().any(|(n, _)| n == name) {
+            tf2d = Some(TransferFunction2D::preset(name)?);
+        } else {
+            tf = TransferFunction::preset(name).map_err(|_| {
+                let mut names: Vec<&str> =
+                    crate::transfer::PRESETS.iter().map(|(n, _)| *n).collect();
+                names.extend(crate::transfer2d::PRESETS_2D.iter().map(|(n, _)| *n));
+                Error::invalid(
+                    "--tf-preset",
+                    format!("'{name}' is not one of {}", names.join(", ")),
+                )
+            })?;
+        }
+    }
+    if let Some(axis) = a.gradient_axis {
+        match tf2d.as_mut() {
+            Some(t) => t.gradient_axis = axis,
+            None => {
+                return Err(Error::invalid(
+                    "--gradient-axis",
+                    "needs a 2D transfer function (--tf2d or a 2D --tf-preset)",
+                ))
+            }
+        }
+    }
+    if let Some(k) = a.faux_shading {
+        tf.faux_shading = Some(k);
+        if let Some(t) = tf2d.as_mut() {
+            t.faux_shading = Some(k);
+        }
+        tf.validate()?;
+    }
+    let window = window_of(a)?;
+    let grey_window = matches!(a.mode, Mode::Mip | Mode::Minip);
+    if let (Some([w, l]), false) = (window, grey_window) {
+        tf.window = WindowMap::from_window_level(w, l, tf.domain)?;
+        if let Some(t) = tf2d.as_mut() {
+            t.window = WindowMap::from_window_level(w, l, t.domain)?;
+        }
+    }
+    let camera = scene_camera(a, &volume)?;
+    let mut settings = match &a.settings_file {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            serde_json::from_str::<RenderSettings>(&text)
+                .map_err(|e| Error::format(p, "render settings JSON", e.to_string()))?
+        }
+        None => {
+            let mut s = RenderSettings {
+                mode: a.mode,
+                filter: a.filter,
+                step: a.step,
+                classification: a.classification,
+                compositing: a.compositing,
+                ert_threshold: a.ert,
+                gradient: a.gradient,
+                precompute_gradients: a.precompute_gradients,
+                background: a.background,
+                sample_count,
+                hardware_filtering: a.hardware_filtering,
+                ..RenderSettings::default()
+            };
+            s.shading.enabled = a.shading;
+            s.mida_gamma = a.mida_gamma;
+            s.window = window.filter(|_| grey_window);
+            s.iso_surfaces = a.iso.clone();
+            s.iso_opaque = a.iso_opaque;
+            s.iso_shadows = a.shadows;
+            s.iso_refine = a.iso_refine;
+            if let Some(l) = a.light {
+                s.shading.light = Light::Direction(l);
+            }
+            s
+        }
+    };
+    if tf2d.is_some() {
+        settings.transfer_2d = tf2d;
+    }
+    settings.validate()?;
+    let scene = Scene {
+        volume,
+        transfer: tf,
+        camera,
+    };
+    Ok((scene, settings))
+}
+
+/// The camera of a request for `volume`: the axis view, or the orbit around the
+/// volume's centre.
+fn scene_camera(a: &SceneRequest, volume: &AnyVolume) -> Result<Camera> {
+    let dims = volume.dims();
+    match &a.view.axis {
+        Some(v) => {
+            let view: AxisView = v.parse()?;
+            let (ca, ra) = view.image_axes();
+            Camera::axis_view(
+                dims,
+                volume.affine(),
+                view,
+                a.width.unwrap_or(dims[ca]),
+                a.height.unwrap_or(dims[ra]),
+            )
+        }
+        None => {
+            let projection = if a.ortho {
+                Projection::Orthographic {
+                    width_mm: 0.0,
+                    height_mm: 0.0,
+                }
+            } else {
+                Projection::Perspective { fov_y_deg: a.fov }
+            };
+            let orbit = Orbit {
+                azimuth_deg: a.view.azimuth,
+                elevation_deg: a.view.elevation,
+                distance_mm: a.distance,
+            };
+            Camera::orbit(
+                volume_center(volume),
+                volume_extent(volume),
+                orbit,
+                projection,
+                a.width.unwrap_or(256),
+                a.height.unwrap_or(256),
+            )
+        }
+    }
+}
+
+/// A stereo pair (parallel eyes, off-axis frusta; docs/stereo.md).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StereoRequest {
+    pub layout: StereoLayout,
+    /// Distance between the eyes in mm.
+    pub eye_separation: f64,
+    /// Distance of the zero-parallax plane in mm (`None`: the eye's distance to the
+    /// volume centre).
+    pub convergence: Option<f64>,
+}
+
+impl Default for StereoRequest {
+    fn default() -> Self {
+        StereoRequest {
+            layout: StereoLayout::Anaglyph,
+            eye_separation: 65.0,
+            convergence: None,
+        }
+    }
+}
+
+/// An extra volume rendered with the input in one image (docs/multi-volume.md).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraVolume {
+    /// A file or `phantom:NAME[:N]` (read with the input's load options).
+    pub input: String,
+    /// Row-major 3×4 matrix from the volume's own world frame (mm) into the input's
+    /// world (last column: translation in mm); `None`: the identity.
+    #[serde(default)]
+    pub transform: Option<[f64; 12]>,
+    /// Its transfer function (a preset name or a JSON file); `None`: the input's.
+    #[serde(default)]
+    pub tf: Option<String>,
+}
+
+/// The `voxlab render` job.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RenderRequest {
+    pub scene: SceneRequest,
+    pub backend: Backend,
+    /// Also return the samples-per-ray image.
+    pub samples: bool,
+    /// The pre-integrated caster of docs/adaptive-sampling.md, its samples placed
+    /// regularly, adaptively or directly (DVR only, no shading).
+    pub sampling: Option<Sampling>,
+    pub stereo: Option<StereoRequest>,
+    /// Render the frame this many times (1 … 1000) with the volume prepared once, and
+    /// report the median time per frame.
+    pub repeat: Option<u32>,
+    /// Volumes rendered together with the input (at most 2).
+    pub volumes: Vec<ExtraVolume>,
+}
+
+/// Per-frame timing of a repeated render.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FrameTimes {
+    /// The median seconds per frame.
+    pub median: f64,
+    pub frames: usize,
+    /// Seconds spent preparing the volume once.
+    pub prepare: f64,
+}
+
+/// How a stereo pair was made.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StereoInfo {
+    pub layout: StereoLayout,
+    pub eye_separation: f64,
+    /// Columns each eye's frustum is shifted by.
+    pub shift_px: usize,
+    /// Distance of the zero-parallax plane (mm).
+    pub convergence_mm: f64,
+}
+
+/// What a render job returns.
+#[derive(Clone, Debug)]
+pub struct Rendering {
+    /// The image (a stereo pair: the combined image), the samples-per-ray image when
+    /// asked for, and the sample count.
+    pub output: RenderOutput,
+    /// Who computed it.
+    pub engine: Engine,
+    /// Seconds of rendering (end to end after loading; the median frame for
+    /// `repeat`).
+    pub seconds: f64,
+    pub gpu_timings: Option<GpuTimings>,
+    pub frames: Option<FrameTimes>,
+    pub stereo: Option<StereoInfo>,
+    /// Volumes rendered (1 unless extra volumes were given).
+    pub volumes: usize,
+    pub sampling: Option<Sampling>,
+    /// The settings and the camera used.
+    pub settings: RenderSettings,
+    pub camera: Camera,
+}
+
+/// Runs `voxlab render`: see the [module docs](self).
+///
+/// # Errors
+/// Invalid input or settings, a missing GPU for `gpu`, an unsupported combination
+/// (e.g. `repeat` with a stereo pair), [`Error::Cancelled`].
+pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
+    let (scene, mut settings) = build_scene(&req.scene, req.samples, progress)?;
+    req.scene.accel.apply(&mut settings)?;
+    if req.repeat.is_some()
+        && (!req.volumes.is_empty() || req.sampling.is_some() || req.stereo.is_some())
+    {
+        return Err(Error::invalid(
+            "--repeat",
+            "times the single-volume caster; it excludes --stereo, --sampling and extra volumes",
+        ));
+    }
+    if let Some(n) = req.repeat {
+        if !(1..=1000).contains(&n) {
+            return Err(Error::invalid(
+                "--repeat",
+                format!("{n} is not in 1 … 1000"),
+            ));
+        }
+    }
+    check_cancel(progress)?;
+    if !req.volumes.is_empty() {
+        return render_multi(req, &scene, settings, progress);
+    }
+    if let Some(sampling) = req.sampling {
+        return render_sampling(req, &scene, settings, sampling);
+    }
+    let renderer = Renderer::new(req.backend)?;
+    if let Some(why) = renderer.fallback_reason() {
+        progress.note(&format!(
+            "not using a GPU: {why}; rendering with the CPU oracle"
+        ));
+    }
+    let who = renderer.describe();
+    let h = scene.camera.height as u64;
+    progress.begin(&format!("rendering ({who})"), "rows", h);
+    let t = Instant::now();
+    let mut result = Rendering {
+        output: RenderOutput {
+            image: crate::frame::Frame::new(1, 1, 1),
+            samples: None,
+            total_samples: 0,
+        },
+        engine: renderer.engine(),
+        seconds: 0.0,
+        gpu_timings: None,
+        frames: None,
+        stereo: None,
+        volumes: 1,
+        sampling: None,
+        settings: settings.clone(),
+        camera: scene.camera.clone(),
+    };
+    if let Some(st) = &req.stereo {
+        let conv = st.convergence.unwrap_or_else(|| {
+            (volume_center(&scene.volume) - scene.camera.eye).dot(scene.camera.forward)
+        });
+        let pair = cancellable(progress, |cp| {
+            super::stereo::render_pair(
+                &renderer,
+                &scene,
+                &settings,
+                st.eye_separation,
+                conv,
+                &|done, total| cp.advance(done, total),
+            )
+        })?;
+        let img = super::stereo::combine(&pair.left, &pair.right, st.layout)?;
+        result.output.image = img;
+        result.stereo = Some(StereoInfo {
+            layout: st.layout,
+            eye_separation: st.eye_separation,
+            shift_px: pair.cameras.shift_px,
+            convergence_mm: pair.cameras.convergence_mm,
+        });
+        result.seconds = since(t);
+        progress.end(result.seconds);
+        return Ok(result);
+    }
+    match req.repeat {
+        Some(n) => {
+            if req.scene.accel.accumulate.is_some() {
+                return Err(Error::invalid(
+                    "--repeat",
+                    "times one frame; it excludes --accumulate",
+                ));
+            }
+            let t_prep = Instant::now();
+            let prepared = renderer.prepare(&scene, &settings)?;
+            let prepare = since(t_prep);
+            let mut times = Vec::with_capacity(n as usize);
+            let mut last = None;
+            let rows = n as usize * h as usize;
+            for f in 0..n as usize {
+                let t_f = Instant::now();
+                let r = cancellable(progress, |cp| {
+                    renderer.render_prepared(&prepared, &scene.camera, &settings, &|done, _| {
+                        cp.advance(f * h as usize + done, rows)
+                    })
+                })?;
+                times.push(since(t_f));
+                last = Some(r);
+            }
+            times.sort_by(f64::total_cmp);
+            let frames = FrameTimes {
+                median: times[times.len() / 2],
+                frames: times.len(),
+                prepare,
+            };
+            let last = last.expect("at least one frame");
+            result.output = last.output;
+            result.gpu_timings = last.gpu_timings;
+            result.seconds = frames.median;
+            result.frames = Some(frames);
+        }
+        None => {
+            let r = req
+                .scene
+                .accel
+                .render(&renderer, &scene, &settings, progress)?;
+            result.output = r.output;
+            result.gpu_timings = r.gpu_timings;
+            result.seconds = since(t);
+        }
+    }
+    progress.end(since(t));
+    Ok(result)
+}
+
+/// The input with the extra volumes, on the chosen backend.
+fn render_multi(
+    req: &RenderRequest,
+    scene: &Scene,
+    settings: RenderSettings,
+    progress: &dyn Progress,
+) -> Result<Rendering> {
+    use crate::multi::{MultiVolume, MAX_VOLUMES};
+    if req.volumes.len() > MAX_VOLUMES - 1 {
+        return Err(Error::invalid(
+            "--volume",
+            format!(
+                "{} given: at most {} extra volumes besides INPUT ({MAX_VOLUMES} in all)",
+                req.volumes.len(),
+                MAX_VOLUMES - 1
+            ),
+        ));
+    }
+    let mut vols = vec![MultiVolume::new(
+        scene.volume.clone(),
+        scene.transfer.clone(),
+    )];
+    for extra in &req.volumes {
+        let input = VolumeInput::new(extra.input.clone()).with_load(req.scene.input.load.clone());
+        let volume = input.load(progress)?;
+        let transfer = match &extra.tf {
+            Some(t) => TransferFunction::preset_or_file(t)?,
+            None => scene.transfer.clone(),
+        };
+        let transform = extra.transform.unwrap_or(crate::multi::IDENTITY);
+        vols.push(MultiVolume::new(volume, transfer).with_transform(transform));
+    }
+    let engine = Engine::open(req.backend)?;
+    let t = Instant::now();
+    let progress_rows = |_: usize, _: usize| {};
+    let output = match engine.gpu() {
+        Some(ctx) => {
+            crate::gpu::multi::render(ctx, &vols, &scene.camera, &settings, &progress_rows)?.output
+        }
+        None if engine.backend() == Backend::CpuF32 => {
+            crate::cpu::multi::render::<f32>(&vols, &scene.camera, &settings, &progress_rows)?
+        }
+        None => crate::cpu::multi::render::<f64>(&vols, &scene.camera, &settings, &progress_rows)?,
+    };
+    Ok(Rendering {
+        output,
+        engine,
+        seconds: since(t),
+        gpu_timings: None,
+        frames: None,
+        stereo: None,
+        volumes: vols.len(),
+        sampling: None,
+        settings,
+        camera: scene.camera.clone(),
+    })
+}
+
+/// The scene through the adaptive caster (docs/adaptive-sampling.md).
+fn render_sampling(
+    req: &RenderRequest,
+    scene: &Scene,
+    settings: RenderSettings,
+    sampling: Sampling,
+) -> Result<Rendering> {
+    if settings.mode != Mode::Dvr {
+        return Err(Error::invalid(
+            "--sampling",
+            "the adaptive caster renders DVR only (--mode dvr)",
+        ));
+    }
+    let s = crate::cpu::adaptive::AdaptiveSettings {
+        sampling,
+        step: settings.step,
+        t_max: settings.step.max(8.0),
+        ert_threshold: settings.ert_threshold,
+        background: settings.background,
+        sample_count: true,
+        ..Default::default()
+    };
+    let engine = Engine::open(req.backend)?;
+    let t = Instant::now();
+    let run =
+        super::adaptive::render_once(&scene.volume, &scene.transfer, &scene.camera, &s, engine)?;
+    Ok(Rendering {
+        output: run.output,
+        engine,
+        seconds: since(t),
+        gpu_timings: None,
+        frames: None,
+        stereo: None,
+        volumes: 1,
+        sampling: Some(sampling),
+        settings,
+        camera: scene.camera.clone(),
+    })
+}

@@ -1,0 +1,237 @@
+//! The front door (`voxlab::jobs`): a request from JSON does what the command line
+//! does, to the bit; progress reaches the caller; a caller can stop a long job; a job
+//! refuses what it cannot do with a typed error.
+
+mod common;
+
+use common::{s, scratch, stderr, voxlab};
+use std::sync::atomic::{AtomicU64, Ordering};
+use voxlab::jobs::input::{NonFinite, VolumeInput};
+use voxlab::jobs::{self, Backend, Progress};
+use voxlab::{Error, Volume};
+
+/// Counts what a job reports, and asks it to stop after `stop_after` row updates.
+struct Recorder {
+    advances: AtomicU64,
+    last: AtomicU64,
+    warnings: std::sync::Mutex<Vec<String>>,
+    stages: std::sync::Mutex<Vec<String>>,
+    stop_after: u64,
+}
+
+impl Recorder {
+    fn new(stop_after: u64) -> Self {
+        Recorder {
+            advances: AtomicU64::new(0),
+            last: AtomicU64::new(0),
+            warnings: Default::default(),
+            stages: Default::default(),
+            stop_after,
+        }
+    }
+}
+
+impl Progress for Recorder {
+    fn begin(&self, stage: &str, _unit: &str, _steps: u64) {
+        self.stages.lock().unwrap().push(stage.to_string());
+    }
+    fn advance(&self, done: u64, steps: u64) {
+        assert!(done <= steps, "{done} of {steps}");
+        self.advances.fetch_add(1, Ordering::SeqCst);
+        self.last.fetch_max(done, Ordering::SeqCst);
+    }
+    fn warn(&self, text: &str) {
+        self.warnings.lock().unwrap().push(text.to_string());
+    }
+    fn cancelled(&self) -> bool {
+        self.advances.load(Ordering::SeqCst) >= self.stop_after
+    }
+}
+
+/// The float32 values of an `.npy` the command line wrote.
+fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f32>) {
+    voxlab::io::npy::read_npy_f32(path).unwrap()
+}
+
+#[test]
+fn a_render_request_in_json_gives_the_command_lines_image_bit_for_bit() {
+    let d = scratch("render-json");
+    let out = d.join("cli.npy");
+    let o = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:40",
+        "--width",
+        "36",
+        "--height",
+        "30",
+        "--filter",
+        "catmull-rom",
+        "--azimuth",
+        "-40",
+        "--backend",
+        "cpu-f32",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let req: jobs::render::RenderRequest = serde_json::from_str(
+        r#"{
+            "scene": {
+                "input": { "source": "phantom:shepp-logan-modified:40" },
+                "width": 36, "height": 30, "filter": "catmull-rom",
+                "view": { "azimuth": -40 }
+            },
+            "backend": "cpu-f32"
+        }"#,
+    )
+    .unwrap();
+    let r = jobs::render::run(&req, &()).unwrap();
+    let (shape, cli) = npy(&out);
+    assert_eq!(shape, vec![30, 36, 4]);
+    let job: Vec<f32> = r.output.image.data.iter().map(|&v| v as f32).collect();
+    assert_eq!(cli, job, "the job and the command line differ");
+    assert_eq!(r.engine.backend(), Backend::CpuF32);
+    assert!(r.output.total_samples > 0);
+}
+
+#[test]
+fn requests_refuse_unknown_fields_and_names() {
+    let e = serde_json::from_str::<jobs::render::RenderRequest>(r#"{"backnd": "gpu"}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown field `backnd`"), "{e}");
+    let e = serde_json::from_str::<jobs::render::RenderRequest>(r#"{"backend": "tpu"}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("unknown variant `tpu`") && e.contains("cpu-f32"),
+        "{e}"
+    );
+    let e = serde_json::from_str::<jobs::reconstruct::ReconstructRequest>(
+        r#"{"input": "p.npy", "filter": "ram-lak"}"#,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("unknown variant `ram-lak`"), "{e}");
+}
+
+#[test]
+fn a_job_names_the_feature_and_the_backend_it_refuses() {
+    let req = jobs::d2vr::D2vrRequest {
+        input: "phantom:sphere".into(),
+        f16_projections: true,
+        backend: Backend::Cpu,
+        ..Default::default()
+    };
+    let e = jobs::d2vr::run(&req, &()).unwrap_err();
+    assert!(matches!(e, Error::Unsupported { .. }), "{e:?}");
+    let text = e.to_string();
+    assert!(
+        text.contains("16-bit projections") && text.contains("cpu"),
+        "{text}"
+    );
+}
+
+#[test]
+fn progress_reaches_the_caller_and_every_row_is_counted() {
+    let mut req = jobs::render::RenderRequest::default();
+    req.scene.input = VolumeInput::new("phantom:sphere:24");
+    (req.scene.width, req.scene.height) = (Some(20), Some(17));
+    let p = Recorder::new(u64::MAX);
+    jobs::render::run(&req, &p).unwrap();
+    assert_eq!(p.last.load(Ordering::SeqCst), 17, "rows done");
+    assert_eq!(p.advances.load(Ordering::SeqCst), 17, "one report per row");
+    let stages = p.stages.lock().unwrap();
+    assert_eq!(stages.len(), 1);
+    assert!(
+        stages[0].starts_with("rendering (cpu (f64 oracle))"),
+        "{stages:?}"
+    );
+}
+
+#[test]
+fn a_caller_stops_a_render_and_a_reconstruction_midway() {
+    // A render stopped after 5 of its 200 rows.
+    let mut req = jobs::render::RenderRequest::default();
+    req.scene.input = VolumeInput::new("phantom:shepp-logan-modified:48");
+    (req.scene.width, req.scene.height) = (Some(64), Some(200));
+    let p = Recorder::new(5);
+    let e = jobs::render::run(&req, &p).unwrap_err();
+    assert!(matches!(e, Error::Cancelled), "{e:?}");
+    let n = p.advances.load(Ordering::SeqCst);
+    assert!(
+        n < 5 + 4 * rayon::current_num_threads() as u64,
+        "{n} rows ran"
+    );
+
+    // An FDK reconstruction stopped after 3 voxel lines.
+    let d = scratch("cancel-fdk");
+    let proj = d.join("p.npy");
+    let o = voxlab(&[
+        "project",
+        "phantom:shepp-logan:32",
+        "--geometry",
+        "cone",
+        "--cols",
+        "48",
+        "--rows",
+        "48",
+        "--angles",
+        "36",
+        "--du",
+        "8",
+        "--out",
+        s(&proj),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let req = jobs::reconstruct::ReconstructRequest {
+        input: proj.clone(),
+        size: Some(40),
+        out: Some(d.join("r.npy")),
+        ..Default::default()
+    };
+    let p = Recorder::new(3);
+    let e = jobs::reconstruct::run(&req, &p).unwrap_err();
+    assert!(matches!(e, Error::Cancelled), "{e:?}");
+    assert!(!d.join("r.npy").exists(), "a stopped job writes nothing");
+    // Not stopped, the same request runs to its end and writes its output.
+    jobs::reconstruct::run(&req, &Recorder::new(u64::MAX)).unwrap();
+    assert!(d.join("r.npy").is_file());
+}
+
+#[test]
+fn non_finite_voxels_are_a_warning_or_an_error_as_asked() {
+    let mut data = vec![0.5f32; 27];
+    data[13] = f32::NAN;
+    let vol: voxlab::AnyVolume = Volume::new([3, 3, 3], [1.0; 3], data).unwrap().into();
+    let input = VolumeInput::memory("array", vol);
+    let p = Recorder::new(u64::MAX);
+    let v = input.load(&p).unwrap();
+    assert_eq!(v.non_finite().total(), 0);
+    let w = p.warnings.lock().unwrap();
+    assert_eq!(w.len(), 1);
+    assert!(w[0].starts_with("array: 1 NaN"), "{w:?}");
+    let mut strict = input.clone();
+    strict.load.non_finite = NonFinite::Error;
+    assert!(matches!(
+        strict.load(&()).unwrap_err(),
+        Error::NonFinite {
+            count: 1,
+            first: 13,
+            ..
+        }
+    ));
+}
+
+#[test]
+fn auto_takes_a_backend_the_job_runs_on() {
+    let e = jobs::Engine::open(Backend::Auto).unwrap();
+    assert_ne!(e.backend(), Backend::Auto);
+    match e.gpu() {
+        Some(_) => assert_eq!(e.backend(), Backend::Gpu),
+        None => {
+            assert_eq!(e.backend(), Backend::Cpu);
+            assert!(e.fallback_reason().is_some());
+        }
+    }
+}
