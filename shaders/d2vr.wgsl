@@ -156,7 +156,7 @@ fn field_gradient(p: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(dot(dp.jt_0.xyz, gw), dot(dp.jt_1.xyz, gw), dot(dp.jt_2.xyz, gw), 1.0);
 }
 
-// mirrors src/cpu/raycast.rs: shade_sample (w of the result: reconstructions spent)
+// mirrors src/cpu/shade.rs: shade_sample (w of the result: reconstructions spent)
 fn shade_sample(p: vec3<f32>, rgb: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec4<f32> {
     let gr = field_gradient(p);
     let g = gr.xyz;

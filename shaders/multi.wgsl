@@ -62,7 +62,7 @@ fn sample_grid(t: texture_3d<f32>, n: vec3<u32>, p: vec3<f32>) -> f32 {
 }
 
 // Volume i's reconstructed field at index point p.
-// mirrors src/cpu/raycast.rs: GridField::value
+// mirrors src/cpu/field.rs: GridField::value
 fn layer_value(i: u32, p: vec3<f32>) -> f32 {
     let n = params.dims[i].xyz;
     if (i == 0u) {

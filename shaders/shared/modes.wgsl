@@ -45,7 +45,7 @@ fn iso_color(j: u32) -> vec4<f32> {
     return params.iso_color_3;
 }
 
-// (C, A) over the background; mirrors src/cpu/modes.rs: over_background
+// (C, A) over the background; mirrors src/cpu/shade.rs: over_background
 fn over_background(c: vec3<f32>, a: f32) -> vec4<f32> {
     let t = 1.0 - a;
     let bg = params.background;

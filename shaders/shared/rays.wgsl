@@ -30,7 +30,7 @@ struct Hit {
     t1: f32,
 }
 
-// mirrors src/cpu/raycast.rs: intersect_box
+// mirrors src/real.rs: intersect_box
 fn intersect_box(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> Hit {
     var t0 = -BIG;
     var t1 = BIG;

@@ -2,7 +2,7 @@
 // Reads the importer's `params.shading` (ambient, diffuse, specular, shininess), a
 // member of RaycastParams and MultiParams alike.
 
-// mirrors src/cpu/raycast.rs: phong (two-sided)
+// mirrors src/cpu/shade.rs: phong (two-sided)
 fn phong(c: vec3<f32>, n: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec3<f32> {
     let ndl = abs(dot(n, l));
     let ndh = abs(dot(n, h));

@@ -8,26 +8,26 @@
 #import rays
 
 // ---------------------------------------------------------------- jitter
-// mirrors src/accumulate.rs: pcg_hash
+// mirrors src/cpu/jitter.rs: pcg_hash
 fn pcg_hash(v: u32) -> u32 {
     let state = v * 747796405u + 2891336453u;
     let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
     return (word >> 22u) ^ word;
 }
 
-// mirrors src/accumulate.rs: jitter_offset (24 bits, exact in f32)
+// mirrors src/cpu/jitter.rs: jitter_offset (24 bits, exact in f32)
 fn jitter_offset(seed: u32, col: u32, row: u32) -> f32 {
     let h = pcg_hash(col + pcg_hash(row + pcg_hash(seed)));
     return f32(h >> 8u) / 16777216.0;
 }
 
-// mirrors src/accumulate.rs: interleaved_offset (the 4×4 Bayer pattern BAYER4)
+// mirrors src/cpu/jitter.rs: interleaved_offset (the 4×4 Bayer pattern BAYER4)
 fn interleaved_offset(col: u32, row: u32) -> f32 {
     var bayer = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
     return (f32(bayer[(row % 4u) * 4u + col % 4u]) + 0.5) / 16.0;
 }
 
-// mirrors src/accumulate.rs: ray_offset (accel.y: 0 none, 1 random, 2 interleaved)
+// mirrors src/cpu/jitter.rs: ray_offset (accel.y: 0 none, 1 random, 2 interleaved)
 fn ray_offset(col: u32, row: u32) -> f32 {
     if (params.accel.y == 1u) {
         return jitter_offset(params.accel.z, col, row);

@@ -317,8 +317,8 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
 
 /// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples
 /// `p + (m + 1) Δ L` toward the light until the box is left; in shadow when one lies on
-/// another side of an iso-value than the first. Mirrors
-/// `shaders/shared/modes_cast.wgsl: in_shadow`.
+/// another side of an iso-value than the first.
+/// Mirrors `shaders/shared/modes_cast.wgsl: in_shadow`.
 pub(crate) fn in_shadow<R: Real, F: Field<R>>(
     field: &F,
     s: &SampleSetup<R>,

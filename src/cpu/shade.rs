@@ -154,7 +154,7 @@ pub(crate) fn shade_gradient<R: Real>(
 
 /// Phong shading of colour `c` with normal `n`, light `l` and half vector `h` (all
 /// unit, world space; two-sided).
-/// mirrors shaders/shared/rays.wgsl: phong
+/// mirrors shaders/shared/shading.wgsl: phong
 #[inline]
 pub fn phong<R: Real>(c: [R; 3], n: V3<R>, l: V3<R>, h: V3<R>, k: &ShadingR<R>) -> [R; 3] {
     let ndl = n.dot(l).abs();
