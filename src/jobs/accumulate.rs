@@ -5,7 +5,7 @@
 //! 1, …`) shrinks that noise like `1/√N` towards the exact integral. Both backends
 //! jitter each pixel by the same offsets.
 
-use super::render::{Rendered, Renderer, Scene};
+use super::renderer::{Rendered, Renderer, Scene};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::settings::RenderSettings;

@@ -45,6 +45,7 @@ pub mod process;
 pub mod project;
 pub mod reconstruct;
 pub mod render;
+pub mod renderer;
 pub mod slice;
 pub mod stereo;
 pub mod tf;

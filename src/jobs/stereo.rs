@@ -17,7 +17,7 @@
 //! `e = 0` both eyes are the mono camera. Orthographic cameras have no parallax to shift
 //! and are refused.
 //!
-//! Both views are rendered through [`render::Renderer`](crate::jobs::render::Renderer), so any
+//! Both views are rendered through [`Renderer`], so any
 //! backend works, or on a given GPU context with [`render_pair_gpu`].
 //!
 //! # Layouts
@@ -30,7 +30,7 @@
 //! - **interlaced**: rows alternate, even rows (0, 2, …) from the left image, odd rows
 //!   from the right (row-interleaved polarised displays).
 
-use super::render::{Renderer, Scene};
+use super::renderer::{Renderer, Scene};
 use crate::camera::{Camera, Projection};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
