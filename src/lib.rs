@@ -25,7 +25,7 @@
 //! ([`volume`], [`camera`], [`transfer`], [`transfer2d`], [`settings`], [`phantom`],
 //! [`ct`], [`frame`], [`multi`]) → [`io`] → [`cpu`] (the oracle) → [`gpu`] (the port)
 //! → [`jobs`] (one function per user task: what `voxlab render`, `reconstruct`, `fvr`
-//! … do) → [`bench`] → the `voxlab` binary, a thin shell over the jobs.
+//! … do) → [`bench`](mod@bench) → the `voxlab` binary, a thin shell over the jobs.
 //!
 //! ## Examples
 //!

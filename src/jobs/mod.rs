@@ -16,7 +16,7 @@
 //! | `voxlab info` | [`info::run`], [`info::gpu`] |
 //! | `voxlab convert` | [`convert::run`] |
 //! | `voxlab slice` | [`slice::run`] |
-//! | `voxlab tf` | [`tf::run`] |
+//! | `voxlab tf` | [`tf::list`], [`tf::get`] |
 //! | `voxlab fvr` | [`fvr::run`] |
 //! | `voxlab project` | [`project::run`] |
 //! | `voxlab reconstruct` | [`reconstruct::run`] |
