@@ -371,7 +371,7 @@ fn shepp_logan_128_lanczos3_reaches_the_sampled_volumes_floor() {
 }
 
 #[test]
-fn cli_writes_an_fvr_image_on_each_cpu_backend_and_refuses_others() {
+fn cli_writes_an_fvr_image_on_each_cpu_backend_and_auto_and_refuses_others() {
     let dir = scratch("cli");
     let out = dir.join("p.npy");
     let o = voxlab(&[
@@ -409,6 +409,8 @@ fn cli_writes_an_fvr_image_on_each_cpu_backend_and_refuses_others() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(png.is_file());
+    // auto is every family's backend: a hardware GPU, else the CPU oracle.
+    std::fs::remove_file(&png).unwrap();
     let o = voxlab(&[
         "fvr",
         "phantom:sphere:16",
@@ -417,12 +419,24 @@ fn cli_writes_an_fvr_image_on_each_cpu_backend_and_refuses_others() {
         "--out",
         s(&png),
     ]);
-    assert!(!o.status.success());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(png.is_file());
+    let o = voxlab(&[
+        "fvr",
+        "phantom:sphere:16",
+        "--backend",
+        "tpu",
+        "--out",
+        s(&dir.join("q.png")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("is not cpu, cpu-f32 or gpu"),
+        stderr(&o).contains("invalid value 'tpu' for '--backend")
+            && stderr(&o).contains("cpu, cpu-f32, gpu, auto"),
         "{}",
         stderr(&o)
     );
+    assert!(!dir.join("q.png").exists());
     // The f32 path writes the same axis sum within f32 rounding.
     let o = voxlab(&[
         "fvr",
