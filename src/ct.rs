@@ -68,10 +68,6 @@ pub struct Geometry {
     pub cv: f64,
 }
 
-/// WGSL twin of [`ViewMatrix`], [`ViewMatrix::project`] and [`bilinear_zero`]; GPU CT
-/// shaders `#import ct_geometry` (registered in `gpu::shaders`).
-pub const GEOMETRY_WGSL: &str = include_str!("../shaders/shared/ct_geometry.wgsl");
-
 /// The largest number of projections or detector pixels per axis accepted (a lying
 /// header or a typo must not allocate terabytes).
 pub const MAX_DETECTOR: usize = 1 << 16;

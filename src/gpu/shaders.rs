@@ -62,17 +62,10 @@ macro_rules! registry {
         /// Every WGSL file under `shaders/`, once.
         pub static MODULES: &[Module] = &[
             $(Module { name: $name, path: concat!("shaders/", $path), source: $konst },)*
-            Module {
-                name: "ct_geometry",
-                path: "shaders/shared/ct_geometry.wgsl",
-                source: crate::ct::GEOMETRY_WGSL,
-            },
         ];
     };
 }
 
-// `ct_geometry` (the WGSL twin of `ct::ViewMatrix`) is included by `src/ct.rs` beside
-// its Rust twin and registered from there.
 registry! {
     ADAPTIVE = "adaptive" => "adaptive.wgsl",
     ADAPTIVE_IMPORTANCE = "adaptive_importance" => "adaptive_importance.wgsl",
@@ -103,6 +96,7 @@ registry! {
     CAMERA = "camera" => "shared/camera.wgsl",
     CLASSIFY = "classify" => "shared/classify.wgsl",
     CLASSIFY2D = "classify2d" => "shared/classify2d.wgsl",
+    CT_GEOMETRY = "ct_geometry" => "shared/ct_geometry.wgsl",
     D2VR_PARAMS = "d2vr_params" => "shared/d2vr_params.wgsl",
     FBP_PARAMS = "fbp_params" => "shared/fbp_params.wgsl",
     FFT_COMMON = "fft_common" => "shared/fft_common.wgsl",
