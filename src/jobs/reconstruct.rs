@@ -195,12 +195,9 @@ fn extension(p: &Path) -> Option<String> {
         .map(str::to_ascii_lowercase)
 }
 
-/// Reconstructs (and writes `out` and `error_map` when given).
-///
-/// # Errors
-/// Bad options, projections or geometry; an output the result cannot be written as;
-/// GPU errors; [`Error::Cancelled`].
-pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstructed> {
+/// The options checked before any input is read: the outputs, the truth phantom and
+/// the spacing.
+fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
     if let Some(out) = &a.out {
         crate::io::check_output("--out", out, &["npy", "nrrd", "nhdr", "png"])?;
     }
@@ -227,11 +224,40 @@ pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstruc
             ));
         }
     }
+    Ok(truth)
+}
+
+/// Reconstructs (and writes `out` and `error_map` when given).
+///
+/// # Errors
+/// Bad options, projections or geometry; an output the result cannot be written as;
+/// GPU errors; [`Error::Cancelled`].
+pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstructed> {
+    check_request(a)?;
     let p = read_projections::<f64>(&a.input)?;
     let (g, geometry_file) = geometry_for(a, &p)?;
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));
     }
+    reconstruct(a, p, g, geometry_file, progress)
+}
+
+/// Reconstructs projections already in memory with their geometry: what [`run`] does
+/// once it has read the input (the request's `input`, `geometry` and `angles` are not
+/// used; `geometry_file` is only reported back). A scikit-image sinogram
+/// `(detector, angle)` is the one-row stack of [`Geometry::parallel_skimage`].
+///
+/// # Errors
+/// As [`run`]; projections that do not fit the geometry.
+pub fn reconstruct(
+    a: &ReconstructRequest,
+    p: Projections<f64>,
+    g: Geometry,
+    geometry_file: Option<PathBuf>,
+    progress: &dyn Progress,
+) -> Result<Reconstructed> {
+    let truth = check_request(a)?;
+    p.check_against(&g)?;
     let parallel = g.beam == Beam::Parallel;
     let (p, g, grid) = if parallel {
         let n = a.size.unwrap_or(p.cols);

@@ -1,0 +1,248 @@
+//! `voxlab.render`, `voxlab.Renderer`, `voxlab.compare`, `voxlab.compare_images`: the
+//! render and compare jobs from JSON requests (built from keyword arguments).
+
+use crate::{arrays, errors, job};
+use numpy::PyReadonlyArrayDyn;
+use pyo3::prelude::*;
+use std::sync::Arc;
+use voxlab::cpu::raycast::RenderOutput;
+use voxlab::jobs::compare::CompareRequest;
+use voxlab::jobs::input::VolumeInput;
+use voxlab::jobs::render::{build_scene, RenderRequest, Renderer as JobRenderer, SceneRequest};
+use voxlab::jobs::Backend;
+use voxlab::metrics::{check_parity, diff_heatmap, Tolerance};
+use voxlab::volume::AnyVolume;
+
+/// A volume from Python: an array with its affine, or nothing (the request's `input`
+/// names a file or phantom).
+fn memory_input(
+    py: Python<'_>,
+    scene: &mut SceneRequest,
+    volume: Option<(&Bound<'_, PyAny>, [[f64; 4]; 4])>,
+) -> PyResult<()> {
+    if let Some((array, affine)) = volume {
+        let v: AnyVolume = arrays::volume(py, array, affine)?;
+        let load = scene.input.load.clone();
+        scene.input = VolumeInput {
+            source: "array".into(),
+            load,
+            memory: Some(Arc::new(v)),
+        };
+    }
+    Ok(())
+}
+
+/// What a render returns to the Python half: image, samples image, and the rest as JSON.
+type RenderParts = (Py<PyAny>, Option<Py<PyAny>>, String);
+
+fn output_parts(
+    py: Python<'_>,
+    out: &RenderOutput,
+    meta: serde_json::Value,
+) -> PyResult<RenderParts> {
+    let image = arrays::from_frame(py, &out.image)?;
+    let samples = match &out.samples {
+        Some(s) => Some(arrays::from_frame(py, s)?),
+        None => None,
+    };
+    Ok((image, samples, meta.to_string()))
+}
+
+/// The render job (`voxlab render`) from a JSON [`RenderRequest`].
+#[pyfunction]
+#[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+fn render(
+    py: Python<'_>,
+    request: &str,
+    volume: Option<Bound<'_, PyAny>>,
+    affine: Option<[[f64; 4]; 4]>,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<RenderParts> {
+    let mut req: RenderRequest =
+        serde_json::from_str(request).map_err(|e| errors::bad_request(py, "render option", &e))?;
+    let vol = volume
+        .as_ref()
+        .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
+    memory_input(py, &mut req.scene, vol)?;
+    let r = job::run(py, job::callback(&progress), |p| {
+        voxlab::jobs::render::run(&req, p)
+    })?;
+    let meta = serde_json::json!({
+        "engine": r.engine.describe(),
+        "backend": r.engine.backend().name(),
+        "fallback": r.engine.fallback_reason(),
+        "seconds": r.seconds,
+        "total_samples": r.output.total_samples,
+        "gpu_timings": r.gpu_timings,
+        "frames": r.frames,
+        "stereo": r.stereo,
+        "volumes": r.volumes,
+        "settings": r.settings,
+    });
+    output_parts(py, &r.output, meta)
+}
+
+/// A renderer that keeps its engine (for the GPU, the process's device and its
+/// compiled pipelines) between renders.
+#[pyclass(frozen, module = "voxlab._voxlab")]
+struct Renderer {
+    inner: JobRenderer,
+}
+
+#[pymethods]
+impl Renderer {
+    #[new]
+    fn new(py: Python<'_>, backend: &str) -> PyResult<Self> {
+        let b: Backend = backend.parse().map_err(|e| errors::to_py(py, &e))?;
+        let inner = job::run(py, None, |_| JobRenderer::new(b))?;
+        Ok(Renderer { inner })
+    }
+
+    /// The engine, described: `cpu (f64 oracle)`, `gpu (NAME, Vulkan)`.
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+
+    /// The backend renders run on (`auto` resolved).
+    #[getter]
+    fn backend(&self) -> &'static str {
+        self.inner.backend().name()
+    }
+
+    /// Why `auto` fell back to the CPU, if it did.
+    #[getter]
+    fn fallback_reason(&self) -> Option<String> {
+        self.inner.fallback_reason().map(str::to_string)
+    }
+
+    /// One frame of a JSON [`RenderRequest`] (its `backend` is ignored: the renderer's
+    /// is used). Stereo pairs, repeats, extra volumes and adaptive sampling go through
+    /// `voxlab.render`.
+    #[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+    fn render(
+        &self,
+        py: Python<'_>,
+        request: &str,
+        volume: Option<Bound<'_, PyAny>>,
+        affine: Option<[[f64; 4]; 4]>,
+        progress: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<RenderParts> {
+        let mut req: RenderRequest = serde_json::from_str(request)
+            .map_err(|e| errors::bad_request(py, "render option", &e))?;
+        if req.stereo.is_some()
+            || req.repeat.is_some()
+            || !req.volumes.is_empty()
+            || req.sampling.is_some()
+        {
+            return Err(errors::raise(
+                py,
+                "InvalidError",
+                "invalid Renderer.render option: a Renderer renders single frames; stereo, \
+                 repeat, volumes and sampling go through voxlab.render",
+            ));
+        }
+        let vol = volume
+            .as_ref()
+            .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
+        memory_input(py, &mut req.scene, vol)?;
+        let renderer = &self.inner;
+        let (out, timings, seconds) = job::run(py, job::callback(&progress), |p| {
+            let (scene, mut settings) = build_scene(&req.scene, req.samples, p)?;
+            req.scene.accel.apply(&mut settings)?;
+            let t = std::time::Instant::now();
+            let r = req.scene.accel.render(renderer, &scene, &settings, p)?;
+            Ok((r.output, r.gpu_timings, t.elapsed().as_secs_f64()))
+        })?;
+        let meta = serde_json::json!({
+            "engine": renderer.describe(),
+            "backend": renderer.backend().name(),
+            "fallback": renderer.fallback_reason(),
+            "seconds": seconds,
+            "total_samples": out.total_samples,
+            "gpu_timings": timings,
+        });
+        output_parts(py, &out, meta)
+    }
+}
+
+/// What a comparison returns: oracle image, GPU image, heat map, and the rest as JSON.
+type CompareParts = (Py<PyAny>, Py<PyAny>, Py<PyAny>, String);
+
+/// The compare job (`voxlab compare`) from a JSON [`CompareRequest`].
+#[pyfunction]
+#[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+fn compare(
+    py: Python<'_>,
+    request: &str,
+    volume: Option<Bound<'_, PyAny>>,
+    affine: Option<[[f64; 4]; 4]>,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<CompareParts> {
+    let mut req: CompareRequest =
+        serde_json::from_str(request).map_err(|e| errors::bad_request(py, "compare option", &e))?;
+    let vol = volume
+        .as_ref()
+        .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
+    memory_input(py, &mut req.scene, vol)?;
+    let c = job::run(py, job::callback(&progress), |p| {
+        voxlab::jobs::compare::run(&req, p)
+    })?;
+    let heat = diff_heatmap(&c.cpu.image, &c.gpu.image, None);
+    let meta = serde_json::json!({
+        "stats": c.report.stats,
+        "max_abs_rel": c.report.stats.max_abs_rel,
+        "peak": c.report.stats.peak,
+        "passed": c.report.passed,
+        "message": c.report.message,
+        "adapter": c.adapter,
+        "cpu_seconds": c.cpu_seconds,
+        "gpu_timings": c.gpu_timings,
+        "samples": {"cpu": c.cpu.total_samples, "gpu": c.gpu.total_samples},
+    });
+    Ok((
+        arrays::from_frame(py, &c.cpu.image)?,
+        arrays::from_frame(py, &c.gpu.image)?,
+        arrays::from_frame(py, &heat)?,
+        meta.to_string(),
+    ))
+}
+
+/// Two images of one shape compared with `metrics::check_parity`: the statistics and
+/// the heat map.
+#[pyfunction]
+#[pyo3(signature = (oracle, port, max_abs=None, rmse=None))]
+fn compare_images(
+    py: Python<'_>,
+    oracle: PyReadonlyArrayDyn<'_, f64>,
+    port: PyReadonlyArrayDyn<'_, f64>,
+    max_abs: Option<f64>,
+    rmse: Option<f64>,
+) -> PyResult<(Py<PyAny>, String)> {
+    let a = arrays::frame(py, &oracle, "the oracle image")?;
+    let b = arrays::frame(py, &port, "the image to check")?;
+    let tol = Tolerance {
+        max_abs: max_abs.unwrap_or(f64::INFINITY),
+        rmse: rmse.unwrap_or(f64::INFINITY),
+        ..Tolerance::NONE
+    };
+    let (report, heat) = job::run(py, None, |_| {
+        let r = check_parity("compare", &a, &b, tol, None)?;
+        Ok((r, diff_heatmap(&a, &b, None)))
+    })?;
+    let meta = serde_json::json!({
+        "stats": report.stats,
+        "max_abs_rel": report.stats.max_abs_rel,
+        "peak": report.stats.peak,
+        "passed": report.passed,
+        "message": report.message,
+    });
+    Ok((arrays::from_frame(py, &heat)?, meta.to_string()))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(compare_images, m)?)?;
+    m.add_class::<Renderer>()?;
+    Ok(())
+}

@@ -1,0 +1,188 @@
+//! Volumes, phantoms and transfer functions: `voxlab.read`, `voxlab.write`,
+//! `voxlab.phantom`, `voxlab.TransferFunction`.
+
+use crate::{arrays, errors, job};
+use glam::DVec3;
+use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+use voxlab::jobs::input::VolumeInput;
+use voxlab::phantom::Phantom;
+use voxlab::transfer::TransferFunction;
+
+/// What `read` and `phantom` hand to the Python half: the array, the affine (rows),
+/// the format's name and the voxel type's name.
+type VolumeParts = (Py<PyAny>, [[f64; 4]; 4], String, String);
+
+fn parts(py: Python<'_>, v: voxlab::volume::AnyVolume, format: &str) -> PyResult<VolumeParts> {
+    let affine = arrays::rows(v.affine());
+    let kind = v.kind().name().to_string();
+    Ok((
+        arrays::from_volume(py, v)?,
+        affine,
+        format.to_string(),
+        kind,
+    ))
+}
+
+/// Reads any volume `voxlab info` reads (a file, a DICOM directory, `phantom:…`),
+/// NaN and infinities kept.
+#[pyfunction]
+#[pyo3(signature = (source, raw_json=None))]
+fn read_volume(py: Python<'_>, source: String, raw_json: Option<String>) -> PyResult<VolumeParts> {
+    let mut input = VolumeInput::new(source);
+    if let Some(j) = raw_json {
+        input.load.raw =
+            Some(serde_json::from_str(&j).map_err(|e| errors::bad_request(py, "raw layout", &e))?);
+    }
+    let (v, format) = job::run(py, None, |_| {
+        let format = input.format_name()?;
+        Ok((input.read()?, format))
+    })?;
+    parts(py, v, format)
+}
+
+/// Writes a volume by extension (`.nrrd`, `.nhdr`, `.nii`, `.nii.gz`, `.npy`).
+#[pyfunction]
+fn write_volume(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    array: &Bound<'_, PyAny>,
+    affine: [[f64; 4]; 4],
+) -> PyResult<()> {
+    let v = arrays::volume(py, array, affine)?;
+    job::run(py, None, |_| voxlab::io::write_volume(&path, &v))
+}
+
+/// A phantom sampled at the voxel centres (`voxlab phantom`).
+#[pyfunction]
+fn sample_phantom(py: Python<'_>, spec: String) -> PyResult<VolumeParts> {
+    let s = job::run(py, None, |_| voxlab::jobs::phantom::run(&spec))?;
+    parts(py, s.volume, "analytic phantom")
+}
+
+fn phantom_by_name(py: Python<'_>, name: &str) -> PyResult<Phantom> {
+    let name = name.strip_prefix("phantom:").unwrap_or(name);
+    Phantom::by_name(name).map_err(|e| errors::to_py(py, &e))
+}
+
+/// `(n, 3)` float64 rows as points.
+fn points(py: Python<'_>, a: &PyReadonlyArrayDyn<'_, f64>, what: &str) -> PyResult<Vec<DVec3>> {
+    let s = a
+        .as_slice()
+        .map_err(|_| errors::raise(py, "LayoutError", &format!("{what} must be C-contiguous")))?;
+    if a.ndim() != 2 || a.shape()[1] != 3 {
+        return Err(errors::raise(
+            py,
+            "ShapeError",
+            &format!(
+                "{what} is an (n, 3) array of x, y, z; got shape {:?}",
+                a.shape()
+            ),
+        ));
+    }
+    Ok(s.chunks(3).map(|p| DVec3::new(p[0], p[1], p[2])).collect())
+}
+
+use numpy::PyUntypedArrayMethods;
+
+/// The exact phantom values at world points (mm).
+#[pyfunction]
+fn phantom_values(
+    py: Python<'_>,
+    name: String,
+    world: PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<Py<PyAny>> {
+    let ph = phantom_by_name(py, &name)?;
+    let pts = points(py, &world, "points")?;
+    let v: Vec<f64> = job::run(py, None, |_| {
+        Ok(pts.iter().map(|&p| ph.value_world(p)).collect())
+    })?;
+    Ok(v.into_pyarray(py).into_any().unbind())
+}
+
+/// The exact line integrals `∫ f(o + t d) |d| dt` over `[t0, t1]` (world mm).
+#[pyfunction]
+fn phantom_line_integrals(
+    py: Python<'_>,
+    name: String,
+    origins: PyReadonlyArrayDyn<'_, f64>,
+    directions: PyReadonlyArrayDyn<'_, f64>,
+    t0: f64,
+    t1: f64,
+) -> PyResult<Py<PyAny>> {
+    let ph = phantom_by_name(py, &name)?;
+    let o = points(py, &origins, "origins")?;
+    let d = points(py, &directions, "directions")?;
+    if o.len() != d.len() {
+        return Err(errors::raise(
+            py,
+            "ShapeError",
+            &format!("{} origins but {} directions", o.len(), d.len()),
+        ));
+    }
+    let v: Vec<f64> = job::run(py, None, |_| {
+        Ok(o.iter()
+            .zip(&d)
+            .map(|(&o, &d)| ph.line_integral_world(o, d, t0, t1))
+            .collect())
+    })?;
+    Ok(v.into_pyarray(py).into_any().unbind())
+}
+
+/// The names of the phantoms.
+#[pyfunction]
+fn phantom_names() -> Vec<&'static str> {
+    voxlab::phantom::PHANTOM_NAMES.to_vec()
+}
+
+/// The 1D transfer-function presets' names.
+#[pyfunction]
+fn tf_presets() -> Vec<&'static str> {
+    voxlab::transfer::PRESETS.iter().map(|(n, _)| *n).collect()
+}
+
+/// A preset as JSON.
+#[pyfunction]
+fn tf_preset(py: Python<'_>, name: &str) -> PyResult<String> {
+    voxlab::jobs::tf::get(name)
+        .map(|t| t.to_json())
+        .map_err(|e| errors::to_py(py, &e))
+}
+
+fn tf_parse(py: Python<'_>, json: &str) -> PyResult<TransferFunction> {
+    TransferFunction::from_json(json).map_err(|e| errors::to_py(py, &e))
+}
+
+/// A transfer function's JSON, parsed, validated and written back.
+#[pyfunction]
+fn tf_normalise(py: Python<'_>, json: &str) -> PyResult<String> {
+    Ok(tf_parse(py, json)?.to_json())
+}
+
+/// RGBA (with faux shading when on) at raw data values: the window map, then the
+/// control points.
+#[pyfunction]
+fn tf_eval(py: Python<'_>, json: &str, values: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Py<PyAny>> {
+    let tf = tf_parse(py, json)?;
+    let n = values.len();
+    let vals = values.as_array().iter().copied().collect::<Vec<f64>>();
+    let mut out = Vec::with_capacity(n * 4);
+    for v in vals {
+        out.extend(tf.eval_shaded(tf.window.apply(v)));
+    }
+    Ok(out.into_pyarray(py).reshape([n, 4])?.into_any().unbind())
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(read_volume, m)?)?;
+    m.add_function(wrap_pyfunction!(write_volume, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_phantom, m)?)?;
+    m.add_function(wrap_pyfunction!(phantom_values, m)?)?;
+    m.add_function(wrap_pyfunction!(phantom_line_integrals, m)?)?;
+    m.add_function(wrap_pyfunction!(phantom_names, m)?)?;
+    m.add_function(wrap_pyfunction!(tf_presets, m)?)?;
+    m.add_function(wrap_pyfunction!(tf_preset, m)?)?;
+    m.add_function(wrap_pyfunction!(tf_normalise, m)?)?;
+    m.add_function(wrap_pyfunction!(tf_eval, m)?)?;
+    Ok(())
+}

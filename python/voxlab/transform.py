@@ -1,0 +1,137 @@
+"""scikit-image's ``iradon`` on voxlab's filtered backprojection.
+
+:func:`iradon` has ``skimage.transform.iradon``'s signature, conventions, dtype
+handling and errors, and computes with the library's reconstruct job (the ramp
+filters of ``cpu::ramp``, which are scikit-image's ``_get_fourier_filter``, and the
+parallel-beam backprojector of ``cpu::fbp``/``gpu::fbp``) in float64 (``backend="cpu"``,
+the oracle), float32 (``"cpu-f32"``) or on the GPU (``"gpu"``).
+
+Conventions (scikit-image's): a sinogram has shape ``(detector, angle)``; angles
+``theta`` in degrees; the rotation centre is detector bin ``n // 2`` and image pixel
+``(n // 2, n // 2)``; ``x = col − n//2``, ``y = n//2 − row``, ``s = x·cos θ + y·sin θ``.
+
+Not covered yet, each refused with :class:`voxlab.UnsupportedError` rather than
+computed differently: ``interpolation="nearest"`` and ``"cubic"`` (only ``"linear"``,
+scikit-image's default), ``filter_name=None`` (no filter), and :func:`radon` (the
+library's forward projectors — exact line integrals and Joseph's method — are a
+different discretisation from scikit-image's rotate-and-sum ``radon``; see
+docs/projection.md for how far apart they are).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from . import _voxlab
+from ._errors import UnsupportedError
+
+__all__ = ["iradon", "radon"]
+
+_FILTERS = ("ramp", "shepp-logan", "cosine", "hamming", "hann", None)
+_INTERPOLATIONS = ("linear", "nearest", "cubic")
+
+
+def _convert_to_float(image: np.ndarray, preserve_range: bool) -> np.ndarray:
+    """scikit-image's ``convert_to_float``: float16 → float32; with ``preserve_range``
+    float32/float64 kept and everything else float64; without it ``img_as_float``'s
+    scaling of integers (unsigned to [0, 1], signed to [−1, 1])."""
+    if image.dtype == np.float16:
+        return image.astype(np.float32)
+    if preserve_range:
+        if image.dtype.char not in "df":
+            image = image.astype(float)
+        return image
+    if image.dtype.kind == "f":
+        return image
+    if image.dtype == bool:
+        return image.astype(float)
+    if image.dtype.kind == "u":
+        return image.astype(float) / float(np.iinfo(image.dtype).max)
+    if image.dtype.kind == "i":
+        out = image.astype(float) / float(np.iinfo(image.dtype).max)
+        return np.maximum(out, -1.0)
+    raise ValueError(f"Cannot convert from {image.dtype} to float64.")
+
+
+def iradon(
+    radon_image: Any,
+    theta: Any = None,
+    output_size: Optional[int] = None,
+    filter_name: Optional[str] = "ramp",
+    interpolation: str = "linear",
+    circle: bool = True,
+    preserve_range: bool = True,
+    *,
+    backend: str = "cpu",
+    progress: Any = None,
+) -> np.ndarray:
+    """Inverse radon transform by filtered backprojection (scikit-image's ``iradon``).
+
+    Parameters are scikit-image's: ``radon_image`` is the ``(detector, angle)``
+    sinogram; ``theta`` the angles in degrees (default: evenly over [0, 180));
+    ``output_size`` the image's side (default: the detector count when ``circle``,
+    else ``floor(sqrt(n²/2))``); ``filter_name`` one of ``ramp``, ``shepp-logan``,
+    ``cosine``, ``hamming``, ``hann``; ``circle`` that the object lies inside the
+    inscribed circle (the sinogram is padded to ``ceil(√2·n)`` bins and the output
+    zeroed outside the circle). The result has the input's float type (float32 for
+    float16/float32 input, float64 otherwise).
+
+    ``backend``: ``cpu`` (the f64 oracle), ``cpu-f32``, ``gpu`` or ``auto``.
+    """
+    radon_image = np.asarray(radon_image)
+    if radon_image.ndim != 2:
+        raise ValueError("The input image must be 2-D")
+    if theta is None:
+        theta = np.linspace(0, 180, radon_image.shape[1], endpoint=False)
+    angles_count = len(theta)
+    if angles_count != radon_image.shape[1]:
+        raise ValueError(
+            "The given ``theta`` does not match the number of "
+            "projections in ``radon_image``."
+        )
+    if interpolation not in _INTERPOLATIONS:
+        raise ValueError(f"Unknown interpolation: {interpolation}")
+    if filter_name not in _FILTERS:
+        raise ValueError(f"Unknown filter: {filter_name}")
+    if interpolation != "linear":
+        raise UnsupportedError(
+            f"iradon: interpolation={interpolation!r} is not implemented by voxlab's "
+            "backprojector (it interpolates linearly: interpolation='linear')"
+        )
+    if filter_name is None:
+        raise UnsupportedError(
+            "iradon: filter_name=None (unfiltered backprojection) is not implemented "
+            "(filters: 'ramp', 'shepp-logan', 'cosine', 'hamming', 'hann')"
+        )
+    radon_image = _convert_to_float(radon_image, preserve_range)
+    dtype = radon_image.dtype
+    img_shape = radon_image.shape[0]
+    if output_size is None:
+        if circle:
+            output_size = img_shape
+        else:
+            output_size = int(np.floor(np.sqrt((img_shape) ** 2 / 2.0)))
+    sino = np.ascontiguousarray(radon_image, dtype=np.float64)
+    theta = [float(t) for t in np.asarray(theta, dtype=np.float64).reshape(-1)]
+    rec = _voxlab.fbp_parallel(
+        sino, theta, int(output_size), filter_name, bool(circle), backend, progress
+    )
+    return rec.astype(dtype, copy=False)
+
+
+def radon(image: Any, theta: Any = None, circle: bool = True, *,
+          preserve_range: bool = False) -> np.ndarray:
+    """Not implemented yet: raises :class:`voxlab.UnsupportedError`.
+
+    scikit-image's ``radon`` rotates the image with bilinear interpolation and sums
+    columns; voxlab's forward projectors (exact line integrals of phantoms, Joseph's
+    method for grids) are different discretisations, and a drop-in must give equal
+    results. Use ``skimage.transform.radon`` for the sinogram and
+    :func:`iradon` to reconstruct it.
+    """
+    raise UnsupportedError(
+        "voxlab.transform.radon is not implemented yet: voxlab's projectors are not "
+        "scikit-image's rotate-and-sum discretisation (use skimage.transform.radon)"
+    )
