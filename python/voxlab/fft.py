@@ -56,14 +56,16 @@ def _swap_direction(norm):
                          '"ortho" or "forward".') from None
 
 
-def _factor(norm, n):
-    """The scale of a forward-direction transform of length ``n`` under ``norm``."""
+def _factor(norm, n, real_dtype=np.float64):
+    """The scale of a forward-direction transform of length ``n`` under ``norm``,
+    computed in ``real_dtype`` as numpy computes it (for float16 input numpy's factor
+    ``1/n`` is the float16 nearest to it, and so is voxlab's)."""
     if norm is None or norm == "backward":
         return 1.0
     if norm == "ortho":
-        return 1.0 / np.sqrt(float(n))
+        return float(np.reciprocal(np.sqrt(n, dtype=real_dtype)))
     if norm == "forward":
-        return 1.0 / float(n)
+        return float(np.reciprocal(n, dtype=real_dtype))
     raise ValueError(f'Invalid norm value {norm}; should be "backward",'
                      '"ortho" or "forward".')
 
@@ -106,7 +108,7 @@ def _raw_fft(a, n, axis, is_real, is_forward, norm, out=None):
     if not is_forward:
         norm = _swap_direction(norm)
     real_dtype = np.result_type(a.real.dtype, 1.0)
-    fct = _factor(norm, n)
+    fct = _factor(norm, n, real_dtype)
     n_out = n
     if is_real and is_forward:
         n_out = n // 2 + 1

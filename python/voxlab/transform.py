@@ -115,10 +115,44 @@ def iradon(
             output_size = int(np.floor(np.sqrt((img_shape) ** 2 / 2.0)))
     sino = np.ascontiguousarray(radon_image, dtype=np.float64)
     theta = [float(t) for t in np.asarray(theta, dtype=np.float64).reshape(-1)]
+    padded = int(np.ceil(np.sqrt(2) * img_shape)) if circle else img_shape
+    _warn_outside_detector(padded, int(output_size), theta, circle)
     rec = _voxlab.fbp_parallel(
         sino, theta, int(output_size), filter_name, bool(circle), backend, progress
     )
     return rec.astype(dtype, copy=False)
+
+
+def _warn_outside_detector(n: int, size: int, theta: Any, circle: bool) -> None:
+    """Warns when some output pixel's ray may miss the (padded) detector's bin centres
+    (an ``output_size`` larger than the detector allows, or the corners of a
+    ``circle=False`` output): there iradon's ``np.interp(left=0, right=0)`` gives 0
+    past the last bin centre, while voxlab's backprojector ramps linearly to 0 over
+    one more bin, so the two differ within one bin of the edge."""
+    r = size // 2
+    lo, hi = -(n // 2), n - 1 - n // 2
+    if circle:
+        # Pixels outside the circle of radius r are zeroed; inside, |s| ≤ r.
+        t = np.array([-r, r], dtype=np.float64)
+    else:
+        a = np.deg2rad(np.asarray(theta, dtype=np.float64))
+        c = np.array([-r, size - 1 - r], dtype=np.float64)
+        # s = col·cos θ − row·sin θ (offsets from the centre) is extreme at a corner.
+        t = (c[None, :, None] * np.cos(a)[:, None, None]
+             - c[None, None, :] * np.sin(a)[:, None, None])
+    if t.min() < lo or t.max() > hi:
+        import warnings
+
+        from ._errors import VoxlabWarning
+
+        warnings.warn(
+            f"iradon: rays of the {size}x{size} output may reach past the "
+            f"detector's last bin centre (|s| up to {np.abs(t).max():.2f}, bins span "
+            f"{lo}..{hi}); within one bin of the edge voxlab interpolates linearly to "
+            "zero where scikit-image gives 0, so pixels that far out differ",
+            VoxlabWarning,
+            stacklevel=3,
+        )
 
 
 def radon(image: Any, theta: Any = None, circle: bool = True, *,
