@@ -53,7 +53,33 @@ pub fn panic_to_py(py: Python<'_>, payload: &(dyn std::any::Any + Send)) -> PyEr
     )
 }
 
-/// A request that does not parse: the serde message names the field.
-pub fn bad_request(py: Python<'_>, what: &str, e: &serde_json::Error) -> PyErr {
-    raise(py, "InvalidError", &format!("invalid {what}: {e}"))
+/// A JSON request as `T`, or an `InvalidError` naming the keyword argument (the
+/// field's path in the request, less the nesting the Python half adds: `scene.`,
+/// `view.`, `accel.`, `input.load.`) and serde's message.
+pub fn parse_request<T: serde::de::DeserializeOwned>(
+    py: Python<'_>,
+    what: &str,
+    json: &str,
+) -> PyResult<T> {
+    let mut de = serde_json::Deserializer::from_str(json);
+    serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.inner().to_string();
+        // serde's own position in the generated JSON means nothing to the caller.
+        let inner = inner
+            .split(" at line ")
+            .next()
+            .unwrap_or(&inner)
+            .to_string();
+        let mut field = path.as_str();
+        for prefix in ["scene.", "view.", "accel.", "input.load.", "input."] {
+            field = field.strip_prefix(prefix).unwrap_or(field);
+        }
+        let message = if field.is_empty() || field == "." || inner.starts_with("unknown field") {
+            format!("invalid {what}: {inner}")
+        } else {
+            format!("invalid {what} `{field}`: {inner}")
+        };
+        raise(py, "InvalidError", &message)
+    })
 }

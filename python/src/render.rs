@@ -58,8 +58,7 @@ fn render(
     affine: Option<[[f64; 4]; 4]>,
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<RenderParts> {
-    let mut req: RenderRequest =
-        serde_json::from_str(request).map_err(|e| errors::bad_request(py, "render option", &e))?;
+    let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
     let vol = volume
         .as_ref()
         .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
@@ -127,8 +126,7 @@ impl Renderer {
         affine: Option<[[f64; 4]; 4]>,
         progress: Option<Bound<'_, PyAny>>,
     ) -> PyResult<RenderParts> {
-        let mut req: RenderRequest = serde_json::from_str(request)
-            .map_err(|e| errors::bad_request(py, "render option", &e))?;
+        let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
         if req.stereo.is_some()
             || req.repeat.is_some()
             || !req.volumes.is_empty()
@@ -178,8 +176,7 @@ fn compare(
     affine: Option<[[f64; 4]; 4]>,
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<CompareParts> {
-    let mut req: CompareRequest =
-        serde_json::from_str(request).map_err(|e| errors::bad_request(py, "compare option", &e))?;
+    let mut req: CompareRequest = errors::parse_request(py, "compare option", request)?;
     let vol = volume
         .as_ref()
         .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));

@@ -31,8 +31,7 @@ fn parts(py: Python<'_>, v: voxlab::volume::AnyVolume, format: &str) -> PyResult
 fn read_volume(py: Python<'_>, source: String, raw_json: Option<String>) -> PyResult<VolumeParts> {
     let mut input = VolumeInput::new(source);
     if let Some(j) = raw_json {
-        input.load.raw =
-            Some(serde_json::from_str(&j).map_err(|e| errors::bad_request(py, "raw layout", &e))?);
+        input.load.raw = Some(errors::parse_request(py, "raw layout", &j)?);
     }
     let (v, format) = job::run(py, None, |_| {
         let format = input.format_name()?;
