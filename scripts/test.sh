@@ -41,6 +41,31 @@ rm -f target/gpu-tests-skipped.txt
 cargo test --release --all-targets "$@"
 cargo test --release --doc
 
+# The Python package (python/): a virtual environment under target/, the package built
+# by pip (maturin, release, sharing the target directory with the cargo build above)
+# and its tests (python/tests: against numpy.fft, scikit-image and the command line
+# built above; GPU tests follow the same no-adapter rule).
+PYTHON=${PYTHON:-python3}
+VENV=target/py-venv
+if [ ! -x "$VENV/bin/python" ]; then
+    if ! "$PYTHON" -m venv "$VENV" 2>/dev/null; then
+        rm -rf "$VENV"
+        if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+            echo "test.sh: '$PYTHON -m venv' failed; installing python3-venv…"
+            export DEBIAN_FRONTEND=noninteractive
+            apt-get update -qq
+            apt-get install -y -qq --no-install-recommends python3-venv python3-pip >/dev/null
+            "$PYTHON" -m venv "$VENV"
+        else
+            echo "test.sh: '$PYTHON -m venv' failed: install Python's venv module (python3-venv)."
+            exit 1
+        fi
+    fi
+fi
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check -r python/requirements-test.txt
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps ./python
+"$VENV/bin/python" -m pytest -q -p no:cacheprovider python/tests
+
 if [ -s target/gpu-tests-skipped.txt ]; then
     echo
     echo "************************************************************"
