@@ -19,9 +19,16 @@ mod volumes;
 
 use pyo3::prelude::*;
 
+/// Panics inside a job (for the tests: a panic must become `voxlab.InternalError`).
+#[pyfunction]
+fn _panic_in_job(py: Python<'_>, message: String) -> PyResult<()> {
+    job::run(py, None, |_| -> voxlab::Result<()> { panic!("{message}") })
+}
+
 #[pymodule]
 fn _voxlab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(_panic_in_job, m)?)?;
     volumes::register(m)?;
     render::register(m)?;
     fft::register(m)?;
