@@ -1,11 +1,14 @@
 //! `voxlab.transform.iradon`: filtered backprojection of a scikit-image sinogram by
 //! the reconstruct job ([`voxlab::jobs::reconstruct::reconstruct`]), in memory.
 
-use crate::{errors, job};
+use crate::{arrays, errors, job};
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use voxlab::cpu::ramp::RampFilter;
 use voxlab::ct::{Geometry, Projections};
+use voxlab::io::projections::{geometry_from_json, geometry_to_json, Layout};
+use voxlab::jobs::input::VolumeInput;
+use voxlab::jobs::project::ProjectRequest;
 use voxlab::jobs::reconstruct::{reconstruct, ReconstructRequest};
 use voxlab::jobs::Backend;
 
@@ -64,7 +67,111 @@ fn fbp_parallel(
         .unbind())
 }
 
+/// What `project` returns: the stack `(angle, row, col)` (float64), the geometry JSON,
+/// and the rest as JSON.
+type ProjectParts = (Py<PyAny>, String, String);
+
+/// The project job (`voxlab project`) from a JSON request: a phantom (exact line
+/// integrals) or a volume (Joseph), parallel or cone beam.
+#[pyfunction]
+#[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+fn project(
+    py: Python<'_>,
+    request: &str,
+    volume: Option<Bound<'_, PyAny>>,
+    affine: Option<[[f64; 4]; 4]>,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<ProjectParts> {
+    let mut req: ProjectRequest = errors::parse_request(py, "project option", request)?;
+    if let Some(v) = &volume {
+        let a = affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY));
+        let vol = arrays::volume(py, v, a)?;
+        let load = req.input.load.clone();
+        req.input = VolumeInput::memory("array", vol).with_load(load);
+    }
+    let r = job::run(py, job::callback(&progress), |p| {
+        voxlab::jobs::project::run(&req, p)
+    })?;
+    let meta = serde_json::json!({
+        "layout": match r.layout { Layout::Stack => "stack", Layout::Skimage => "skimage" },
+        "backend": r.backend.name(),
+        "what": r.what,
+    });
+    let geometry = geometry_to_json(&r.geometry);
+    let p = r.projections;
+    let shape = [p.angles, p.rows, p.cols];
+    let arr = p.data.into_pyarray(py).reshape(shape)?.into_any().unbind();
+    Ok((arr, geometry, meta.to_string()))
+}
+
+/// The reconstruct job on projections in memory: a float64 `(detector, angle)`
+/// sinogram or `(angle, row, col)` stack with its geometry JSON, the options of a JSON
+/// [`ReconstructRequest`]. Returns the reconstruction laid out as the CLI's `.npy`
+/// (`(n, n)`, `(rows, n, n)` or `(N, N, N)`), its grid's voxel-to-world affine (rows,
+/// mm in the CT frame) and the rest as JSON.
+#[pyfunction]
+#[pyo3(signature = (projections, geometry, request, progress=None))]
+fn reconstruct_stack(
+    py: Python<'_>,
+    projections: PyReadonlyArrayDyn<'_, f64>,
+    geometry: &str,
+    request: &str,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<(Py<PyAny>, [[f64; 4]; 4], String)> {
+    let req: ReconstructRequest = errors::parse_request(py, "reconstruct option", request)?;
+    let shape = projections.shape().to_vec();
+    let s = projections
+        .as_slice()
+        .map_err(|_| errors::raise(py, "LayoutError", "the projections must be C-contiguous"))?;
+    let (angles, rows, cols, data) = match shape.len() {
+        2 => {
+            let (cols, angles) = (shape[0], shape[1]);
+            let mut data = vec![0.0; cols * angles];
+            for (c, row) in s.chunks(angles).enumerate() {
+                for (k, &v) in row.iter().enumerate() {
+                    data[k * cols + c] = v;
+                }
+            }
+            (angles, 1, cols, data)
+        }
+        3 => (shape[0], shape[1], shape[2], s.to_vec()),
+        _ => {
+            return Err(errors::raise(
+                py,
+                "ShapeError",
+                &format!(
+                    "projections are a (detector, angle) sinogram or an (angle, row, col) \
+                     stack; got shape {shape:?}"
+                ),
+            ))
+        }
+    };
+    let geometry = geometry.to_string();
+    let rec = job::run(py, job::callback(&progress), |p| {
+        let g = geometry_from_json(&geometry, std::path::Path::new("geometry"))?;
+        let proj = Projections::new(angles, rows, cols, data)?;
+        reconstruct(&req, proj, g, None, p)
+    })?;
+    let meta = serde_json::json!({
+        "parallel": rec.parallel,
+        "what": rec.what,
+        "truth_rms": rec.truth.as_ref().map(|t| t.rms),
+    });
+    let r = rec.reconstruction;
+    let d = r.grid.dims;
+    let affine = arrays::rows(r.grid.affine);
+    let arr = r.data.into_pyarray(py);
+    let arr = if d[2] == 1 {
+        arr.reshape([d[1], d[0]])?.into_any().unbind()
+    } else {
+        arr.reshape([d[2], d[1], d[0]])?.into_any().unbind()
+    };
+    Ok((arr, affine, meta.to_string()))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fbp_parallel, m)?)?;
+    m.add_function(wrap_pyfunction!(project, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_stack, m)?)?;
     Ok(())
 }

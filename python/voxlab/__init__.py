@@ -17,7 +17,8 @@ Conventions (docs/python.md has them all):
 - Errors are :class:`VoxlabError` subclasses (see :mod:`voxlab._errors`).
 
 Submodules: :mod:`voxlab.fft` (numpy.fft's namespace on voxlab's FFTs) and
-:mod:`voxlab.transform` (scikit-image's ``iradon`` on voxlab's FBP).
+:mod:`voxlab.transform` (scikit-image's ``iradon`` on voxlab's FBP) and :mod:`voxlab.ct`
+(forward projection, FBP and FDK with the library's geometry).
 """
 
 from __future__ import annotations
@@ -646,12 +647,12 @@ def compare(
     return CompareResult(cpu, gpu, heat, stats, info.pop("passed"), info.pop("message"), info)
 
 
-from . import fft, transform  # noqa: E402  (submodules use the names above)
+from . import ct, fft, transform  # noqa: E402  (submodules use the names above)
 
 __all__ = [
     "Volume", "read", "write", "phantom", "phantom_names", "phantom_values",
     "phantom_line_integrals", "TransferFunction", "render", "Renderer", "RenderResult",
-    "compare", "compare_images", "CompareResult", "fft", "transform", "BACKENDS",
+    "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "BACKENDS",
     "VOLUME_DTYPES", "VoxlabError", "FileError", "FormatError", "InvalidError",
     "TooLargeError", "NonFiniteError", "UnsupportedError", "GpuError", "NoGpuError",
     "CancelledError", "InternalError", "DtypeError", "ShapeError", "LayoutError",

@@ -1,0 +1,105 @@
+"""CT on voxlab's jobs: forward projection (``voxlab project``) and FBP/FDK
+(``voxlab reconstruct``), in memory.
+
+Geometry is the library's JSON form (docs/projection.md), as a dict: ``{"beam":
+"parallel" | "cone", "sid": …, "sdd": …, "cols": …, "rows": …, "du": …, "dv": …,
+"cu": …, "cv": …, "angles_deg": [...]}`` — scikit-image's parallel beam (rotation
+centre at bin ``cols // 2``) or RTK's circular cone beam (rotation axis +y, source at
+``(SID sin a, 0, SID cos a)``, flat detector, mm). :func:`project` returns it with the
+projections, and :func:`reconstruct` takes it back.
+
+Projections are float64 ``(angle, row, col)`` stacks; a one-row parallel beam is also
+accepted (and, with ``layout="skimage"``/``"auto"``, returned) as scikit-image's
+``(detector, angle)`` sinogram.
+"""
+
+from __future__ import annotations
+
+import json as _json
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, Optional
+
+import numpy as np
+
+from . import _voxlab
+from . import _as_volume, Volume  # noqa: F401  (re-exported names of the package)
+
+__all__ = ["Projected", "project", "reconstruct"]
+
+
+@dataclass
+class Projected:
+    """Projections and their geometry: ``projections`` is ``(angle, row, col)``
+    float64, or ``(detector, angle)`` for the ``skimage`` layout; ``geometry`` the
+    JSON form as a dict."""
+
+    projections: np.ndarray
+    geometry: Dict[str, Any]
+    layout: str
+    info: Dict[str, Any] = field(default_factory=dict)
+
+
+def project(
+    volume: Any = None,
+    *,
+    backend: str = "cpu",
+    progress: Optional[Callable[[str, int, int], Any]] = None,
+    **options: Any,
+) -> Projected:
+    """Forward projection (``voxlab project``): a phantom spec (``"phantom:NAME[:N]"``;
+    exact line integrals by default) or a volume (:class:`voxlab.Volume`, an array with
+    ``spacing=``, or a path: Joseph's method), with the job's options ``beam``
+    (``"parallel"`` | ``"cone"``), ``angles``, ``range``, ``angles_file``, ``cols``,
+    ``rows``, ``du``, ``dv``, ``sid``, ``sdd``, ``method`` (``"analytic"`` |
+    ``"joseph"``), ``layout`` (``"auto"`` | ``"stack"`` | ``"skimage"``)."""
+    spacing = options.pop("spacing", None)
+    affine = options.pop("affine", None)
+    req: Dict[str, Any] = dict(options, backend=backend)
+    arr = aff = None
+    if volume is None or isinstance(volume, str) or hasattr(volume, "__fspath__"):
+        if volume is not None:
+            import os
+
+            req["input"] = {"source": os.fspath(volume)}
+    else:
+        arr, m = _as_volume(volume, spacing, affine)
+        aff = m.tolist()
+        req["input"] = {"source": "array"}
+    stack, geometry, meta = _voxlab.project(_json.dumps(req), arr, aff, progress)
+    info = _json.loads(meta)
+    layout = info.pop("layout")
+    p = stack[:, 0, :].T.copy() if layout == "skimage" else stack
+    return Projected(p, _json.loads(geometry), layout, info)
+
+
+def reconstruct(
+    projections: Any,
+    geometry: Any,
+    *,
+    filter: str = "ramp",
+    size: Optional[int] = None,
+    spacing: Optional[float] = None,
+    circle: bool = True,
+    short_scan: bool = False,
+    backend: str = "cpu",
+    progress: Optional[Callable[[str, int, int], Any]] = None,
+) -> Volume:
+    """FBP (parallel beam: scikit-image's images, ``circle`` as iradon's) or FDK (cone
+    beam, RTK's centred grid) of ``projections`` with ``geometry`` (a dict, a JSON
+    string, or a :class:`Projected`'s ``geometry``): ``voxlab reconstruct`` in
+    memory. ``size``: the image side N (parallel; default the detector count) or the
+    volume N³ (cone; default the detector columns); ``spacing`` in mm; ``short_scan``:
+    Parker's weights for a cone beam over less than a full turn.
+
+    Returns a :class:`voxlab.Volume` whose array is laid out as the command line's
+    ``.npy`` (``(n, n)`` for one row, ``(rows, n, n)``, or ``(N, N, N)``) and whose
+    affine maps the grid into the CT frame (mm).
+    """
+    g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
+    req = {"filter": filter, "size": size, "spacing": spacing, "no_circle": not circle,
+           "short_scan": bool(short_scan), "backend": backend}
+    p = np.ascontiguousarray(np.asarray(projections, dtype=np.float64))
+    arr, affine, meta = _voxlab.reconstruct_stack(p, g, _json.dumps(req), progress)
+    v = Volume(arr, np.array(affine, dtype=np.float64), "reconstruction")
+    v.info = _json.loads(meta)  # type: ignore[attr-defined]
+    return v
