@@ -106,7 +106,7 @@ def test_dtype_promotion_is_numpy_2s(dtype):
     if np.dtype(dtype).kind != "c":
         close(vf.rfft(x), np.fft.rfft(x), dtype)
         close(vf.ihfft(x), np.fft.ihfft(x), dtype)
-    spec = np.fft.rfft(x.astype(np.float64)).astype(np.result_type(np.real(x).dtype, 1j))
+    spec = np.fft.rfft(np.real(x).astype(np.float64)).astype(np.result_type(np.real(x).dtype, 1j))
     close(vf.irfft(spec), np.fft.irfft(spec), dtype)
     close(vf.hfft(spec), np.fft.hfft(spec), dtype)
 

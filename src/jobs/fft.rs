@@ -443,3 +443,40 @@ pub fn transform_axes(
 fn dft_1d(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
     crate::cpu::dft::dft_1d(line, dir, Normalization::None)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `transform_axes` over every axis is the exact N-D DFT; over some axes it is the
+    /// exact 1-D DFT of every line along them; the exact path is the same sums.
+    #[test]
+    fn transform_axes_is_the_dft_along_the_axes_given() {
+        let shape = [3usize, 5, 4];
+        let x = random_complex(60, 11);
+        let want = dft_nd(&x, &shape, Direction::Forward, Normalization::Unnormalized);
+        for exact in [false, true] {
+            let mut y = x.clone();
+            transform_axes(&mut y, &shape, &[0, 1, 2], Direction::Forward, 1.0, exact).unwrap();
+            assert!(
+                rel_l2(&y, &want) < 1e-14,
+                "exact={exact}: {}",
+                rel_l2(&y, &want)
+            );
+        }
+        // Along axis 1 only: each (i, ·, k) line.
+        let mut y = x.clone();
+        transform_axes(&mut y, &shape, &[1], Direction::Inverse, 0.2, false).unwrap();
+        for i in 0..3 {
+            for k in 0..4 {
+                let line: Vec<_> = (0..5).map(|j| x[(i * 5 + j) * 4 + k]).collect();
+                let d = crate::cpu::dft::dft_1d(&line, Direction::Inverse, Normalization::None);
+                for (j, v) in d.iter().enumerate() {
+                    assert!((y[(i * 5 + j) * 4 + k] - v * 0.2).norm() < 1e-14);
+                }
+            }
+        }
+        let e = transform_axes(&mut y, &shape, &[3], Direction::Forward, 1.0, false);
+        assert!(matches!(e, Err(Error::Invalid { .. })));
+    }
+}
