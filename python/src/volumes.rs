@@ -40,6 +40,27 @@ fn read_volume(py: Python<'_>, source: String, raw_json: Option<String>) -> PyRe
     parts(py, v, format)
 }
 
+/// `voxlab info --json` of a source (or of an array with its affine), as JSON text.
+#[pyfunction]
+#[pyo3(signature = (source, bins, volume=None, affine=None))]
+fn volume_info(
+    py: Python<'_>,
+    source: String,
+    bins: usize,
+    volume: Option<Bound<'_, PyAny>>,
+    affine: Option<[[f64; 4]; 4]>,
+) -> PyResult<String> {
+    let input = match &volume {
+        Some(v) => {
+            let a = affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY));
+            VolumeInput::memory(source, arrays::volume(py, v, a)?)
+        }
+        None => VolumeInput::new(source),
+    };
+    let info = job::run(py, None, |_| voxlab::jobs::info::run(&input, bins, false))?;
+    serde_json::to_string(&info).map_err(|e| errors::raise(py, "InternalError", &e.to_string()))
+}
+
 /// Writes a volume by extension (`.nrrd`, `.nhdr`, `.nii`, `.nii.gz`, `.npy`).
 #[pyfunction]
 fn write_volume(
@@ -175,6 +196,7 @@ fn tf_eval(py: Python<'_>, json: &str, values: PyReadonlyArrayDyn<'_, f64>) -> P
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_volume, m)?)?;
     m.add_function(wrap_pyfunction!(write_volume, m)?)?;
+    m.add_function(wrap_pyfunction!(volume_info, m)?)?;
     m.add_function(wrap_pyfunction!(sample_phantom, m)?)?;
     m.add_function(wrap_pyfunction!(phantom_values, m)?)?;
     m.add_function(wrap_pyfunction!(phantom_line_integrals, m)?)?;

@@ -28,6 +28,24 @@ def test_read_matches_voxlab_info(repo, cli, path):
     assert float(v.array.max()) == info["range"]["max"]
 
 
+@pytest.mark.parametrize("path", DATA + ["phantom:spheres:20"])
+def test_info_is_the_command_lines_json(repo, cli, path):
+    want = json.loads(cli("info", path, "--json", "--bins", "24").stdout)
+    src = path if path.startswith("phantom:") else repo / path
+    got = voxlab.info(src, bins=24)
+    got["input"] = want["input"]  # the path as given
+    assert got == want
+
+
+def test_info_of_an_array():
+    a = np.zeros((3, 4, 5), np.int16)
+    a[1, 2, 3] = 7
+    d = voxlab.info(a, bins=2)
+    assert d["format"] == "array in memory" and d["dims"] == [5, 4, 3] and d["type"] == "i16"
+    assert d["range"]["min"] == 0 and d["range"]["max"] == 7
+    assert d["histogram"]["counts"] == [59, 1]
+
+
 def test_read_npy_is_the_array_and_a_phantom_spec_reads(tmp_path):
     a = (np.arange(4 * 5 * 6, dtype=np.int16).reshape(4, 5, 6) - 50)
     np.save(tmp_path / "a.npy", a)

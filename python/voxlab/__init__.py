@@ -193,6 +193,18 @@ def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] 
     return Volume(arr, np.array(affine, dtype=np.float64), fmt, source)
 
 
+def info(source: Any, *, bins: int = 16) -> Dict[str, Any]:
+    """``voxlab info --json`` as a dict: format, dims, spacing, type, orientation,
+    affine rows, value range, NaN/inf counts and a histogram of ``bins`` bins (the
+    command line's default 16), for a path, a ``phantom:`` spec, a :class:`Volume` or
+    an array (``format`` is then ``"array in memory"``)."""
+    if isinstance(source, (str, _os.PathLike)):
+        return _json.loads(_voxlab.volume_info(_os.fspath(source), int(bins)))
+    arr, aff = _as_volume(source)
+    name = source.source if isinstance(source, Volume) and source.source else "array"
+    return _json.loads(_voxlab.volume_info(name, int(bins), arr, aff.tolist()))
+
+
 def write(
     path: Union[str, "os.PathLike[str]"],
     volume: Any,
@@ -650,7 +662,7 @@ def compare(
 from . import ct, fft, transform  # noqa: E402  (submodules use the names above)
 
 __all__ = [
-    "Volume", "read", "write", "phantom", "phantom_names", "phantom_values",
+    "Volume", "read", "write", "info", "phantom", "phantom_names", "phantom_values",
     "phantom_line_integrals", "TransferFunction", "render", "Renderer", "RenderResult",
     "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "BACKENDS",
     "VOLUME_DTYPES", "VoxlabError", "FileError", "FormatError", "InvalidError",
