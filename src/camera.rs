@@ -190,6 +190,14 @@ impl Camera {
         let (se, ce) = orbit.elevation_deg.to_radians().sin_cos();
         let toward_eye = DVec3::new(ce * sa, -ce * ca, se);
         let aspect = width as f64 / height.max(1) as f64;
+        if let Projection::Perspective { fov_y_deg } = projection {
+            if !(fov_y_deg > 0.0 && fov_y_deg < 180.0) {
+                return Err(Error::invalid(
+                    "--fov",
+                    format!("{fov_y_deg}° must lie strictly between 0° and 180°"),
+                ));
+            }
+        }
         let (projection, fit_distance) = match projection {
             Projection::Perspective { fov_y_deg } => {
                 let half = 0.5 * fov_y_deg.to_radians();

@@ -39,7 +39,12 @@
 
 use crate::error::{Error, Result};
 use crate::real::Real;
-use glam::DVec3;
+use glam::{DMat4, DVec3};
+
+/// The shortest length (mm) a geometry may give: a nanometre.
+pub const MIN_LENGTH_MM: f64 = 1e-6;
+/// The longest length (mm) a geometry may give: a kilometre.
+pub const MAX_LENGTH_MM: f64 = 1e6;
 
 /// Parallel or circular cone-beam rays.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -191,7 +196,83 @@ impl Geometry {
                 ));
             }
         }
+        // Lengths in mm between a nanometre and a kilometre: a denormal or absurd
+        // distance gives zeros or overflow, not an error, further down.
+        let mut lengths = vec![
+            ("detector spacing du", self.du),
+            ("detector spacing dv", self.dv),
+        ];
+        if let Beam::Cone { sid, sdd } = self.beam {
+            lengths.push(("SID", sid));
+            lengths.push(("SDD", sdd));
+        }
+        for (name, v) in lengths {
+            if !(MIN_LENGTH_MM..=MAX_LENGTH_MM).contains(&v) {
+                return bad(format!(
+                    "{name} = {v:e} mm is outside [{MIN_LENGTH_MM:e}, {MAX_LENGTH_MM:e}] mm"
+                ));
+            }
+        }
         Ok(())
+    }
+
+    /// Checks the source against a voxel box (`dims` voxels placed by `affine` in the
+    /// CT frame, the volume projected or the grid reconstructed). A source inside the
+    /// largest circle about the rotation axis that fits in the box's cross-section lies
+    /// inside the box at every view — its rays start inside the object and their
+    /// integrals mean nothing — and is refused; a source that only enters the box's
+    /// corners at some views gives a warning (returned). Parallel beams pass.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming `--sid`, the SID and the box's radius.
+    pub fn check_source_outside(&self, affine: DMat4, dims: [usize; 3]) -> Result<Option<String>> {
+        let Beam::Cone { sid, .. } = self.beam else {
+            return Ok(None);
+        };
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut r_out: f64 = 0.0;
+        for c in 0..8 {
+            let idx = DVec3::new(
+                if c & 1 == 0 {
+                    -0.5
+                } else {
+                    dims[0] as f64 - 0.5
+                },
+                if c & 2 == 0 {
+                    -0.5
+                } else {
+                    dims[1] as f64 - 0.5
+                },
+                if c & 4 == 0 {
+                    -0.5
+                } else {
+                    dims[2] as f64 - 0.5
+                },
+            );
+            let p = affine.transform_point3(idx);
+            lo = lo.min(p);
+            hi = hi.max(p);
+            r_out = r_out.max(p.x.hypot(p.z));
+        }
+        // The rotation axis is the CT frame's y axis.
+        let r_in = (-lo.x).min(hi.x).min(-lo.z).min(hi.z).max(0.0);
+        if sid <= r_in {
+            return Err(Error::invalid(
+                "--sid",
+                format!(
+                    "the source at SID = {sid} mm lies inside the object at every view (its box \
+                     holds a circle of radius {r_in:.4} mm about the rotation axis): SID must \
+                     exceed {r_in:.4} mm"
+                ),
+            ));
+        }
+        Ok((sid < r_out).then(|| {
+            format!(
+                "the source at SID = {sid} mm enters the corners of the object's box (radius up \
+                 to {r_out:.4} mm about the rotation axis) at some views; rays that start \
+                 inside the object give wrong integrals there"
+            )
+        }))
     }
 
     /// Number of projections.

@@ -108,3 +108,34 @@ impl Error {
         }
     }
 }
+
+/// `s` with every control character (C0, DEL, C1: terminal escapes, NUL, bell) written
+/// as a Rust escape (`\u{1b}`), so that a message quoting a file's bytes cannot drive
+/// the terminal. Line feeds and tabs are kept.
+pub fn escape_controls(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.chars().any(|c| c.is_control() && c != '\n' && c != '\t') {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut out = String::with_capacity(s.len() + 8);
+    for c in s.chars() {
+        if c.is_control() && c != '\n' && c != '\t' {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn control_characters_are_escaped() {
+        let e = super::escape_controls("type: '\u{1b}[2J\u{1b}]0;pwned\u{7}\0'\nnext");
+        assert_eq!(e, "type: '\\u{1b}[2J\\u{1b}]0;pwned\\u{7}\\u{0}'\nnext");
+        assert!(matches!(
+            super::escape_controls("plain"),
+            std::borrow::Cow::Borrowed(_)
+        ));
+    }
+}

@@ -21,7 +21,7 @@
 //!
 //! ## The shape of the crate
 //!
-//! Dependencies point one way: the leaves ([`error`], [`real`], [`choice`]) → the model
+//! Dependencies point one way: the leaves ([`error`], [`real`], [`choice`], [`source`], [`json`]) → the model
 //! ([`volume`], [`camera`], [`transfer`], [`transfer2d`], [`settings`], [`phantom`],
 //! [`ct`], [`frame`], [`multi`]) → [`io`] → [`cpu`] (the oracle) → [`gpu`] (the port)
 //! → [`jobs`] (one function per user task: what `voxlab render`, `reconstruct`, `fvr`
@@ -77,11 +77,13 @@ pub mod frame;
 pub mod gpu;
 pub mod io;
 pub mod jobs;
+pub mod json;
 pub mod metrics;
 pub mod multi;
 pub mod phantom;
 pub mod real;
 pub mod settings;
+pub mod source;
 pub mod transfer;
 pub mod transfer2d;
 pub mod volume;

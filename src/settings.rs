@@ -39,6 +39,7 @@ impl Mode {
 /// One iso-surface: where the field crosses `value`, a surface of this colour and
 /// opacity (per crossing, not per step).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct IsoSurface {
     pub value: f64,
     pub color: [f64; 3],
@@ -219,7 +220,7 @@ pub enum Light {
 
 /// Phong shading parameters; the normal is the normalised negative gradient.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Shading {
     pub enabled: bool,
     pub ambient: f64,
@@ -249,7 +250,7 @@ impl Default for Shading {
 
 /// Everything that decides how a scene becomes an image, for every backend.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct RenderSettings {
     pub mode: Mode,
     pub filter: Filter,
@@ -357,6 +358,7 @@ crate::choice_enum! {
 
 /// An axis-aligned clipping box; rays see only box ∩ volume.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ClipBox {
     pub lo: [f64; 3],
     pub hi: [f64; 3],

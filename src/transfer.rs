@@ -20,6 +20,7 @@ pub const DEFAULT_LUT_SIZE: usize = 4096;
 
 /// One control point: a mapped value and its colour and opacity.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ControlPoint {
     pub value: f64,
     /// Red, green, blue in [0, 1]; alpha is the opacity per voxel-length step.
@@ -28,6 +29,7 @@ pub struct ControlPoint {
 
 /// The affine window map `Ψ(t) = a·t + b` applied to raw values before lookup.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct WindowMap {
     pub a: f64,
     pub b: f64,
@@ -61,6 +63,7 @@ impl WindowMap {
 
 /// A 1D RGBA transfer function.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TransferFunction {
     #[serde(default)]
     pub name: String,
@@ -260,8 +263,13 @@ impl TransferFunction {
 
     /// Parses and validates JSON.
     pub fn from_json(text: &str) -> Result<Self> {
-        let tf: TransferFunction = serde_json::from_str(text)
-            .map_err(|e| Error::invalid("transfer function JSON", e.to_string()))?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let tf: TransferFunction = serde_json::from_str(text).map_err(|e| {
+            Error::invalid(
+                "transfer function JSON",
+                crate::json::explain(&e.to_string()),
+            )
+        })?;
         tf.validate()?;
         Ok(tf)
     }
@@ -273,9 +281,7 @@ impl TransferFunction {
 
     /// Loads a JSON file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let tf: TransferFunction =
-            serde_json::from_str(&text).map_err(|e| Error::format(path, "JSON", e.to_string()))?;
+        let tf: TransferFunction = crate::json::read_file(path, "transfer function JSON")?;
         tf.validate()
             .map_err(|e| Error::format(path, "transfer function", e.to_string()))?;
         Ok(tf)
@@ -305,8 +311,22 @@ impl TransferFunction {
     pub fn preset_or_file(spec: &str) -> Result<Self> {
         if PRESETS.iter().any(|(n, _)| *n == spec) {
             Self::preset(spec)
-        } else {
+        } else if Path::new(spec).exists() {
             Self::load(Path::new(spec))
+        } else {
+            // Neither a preset nor a file: say both, with the presets.
+            let names: Vec<&str> = PRESETS.iter().map(|(n, _)| *n).collect();
+            let close = crate::json::nearest(spec, &names)
+                .map(|n| format!(" (did you mean {n}?)"))
+                .unwrap_or_default();
+            Err(Error::invalid(
+                "transfer function",
+                format!(
+                    "'{}' is neither a preset nor a file{close}; the presets are {}",
+                    crate::error::escape_controls(spec),
+                    names.join(", ")
+                ),
+            ))
         }
     }
 

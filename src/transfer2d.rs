@@ -76,7 +76,7 @@ crate::choice_enum! {
 
 /// A widget's shape in the (mapped value, gradient magnitude) plane.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "type", rename_all = "kebab-case")]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Shape {
     /// The box `value × gradient`.
     Rectangle { value: [f64; 2], gradient: [f64; 2] },
@@ -105,6 +105,7 @@ fn one4() -> [f64; 4] {
 
 /// A shape with a colour, an opacity and a soft edge.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Widget {
     pub shape: Shape,
     /// RGB in [0, 1] and opacity per reference step; for a profile, a tint multiplying
@@ -266,6 +267,7 @@ fn default_lut_size() -> [usize; 2] {
 
 /// A 2D transfer function: widgets over (mapped value, gradient magnitude).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TransferFunction2D {
     #[serde(default)]
     pub name: String,
@@ -358,8 +360,13 @@ impl TransferFunction2D {
 
     /// Parses and validates JSON.
     pub fn from_json(text: &str) -> Result<Self> {
-        let tf: TransferFunction2D = serde_json::from_str(text)
-            .map_err(|e| Error::invalid("2D transfer function JSON", e.to_string()))?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let tf: TransferFunction2D = serde_json::from_str(text).map_err(|e| {
+            Error::invalid(
+                "2D transfer function JSON",
+                crate::json::explain(&e.to_string()),
+            )
+        })?;
         tf.validate()?;
         Ok(tf)
     }
@@ -371,9 +378,7 @@ impl TransferFunction2D {
 
     /// Loads a JSON file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let tf: TransferFunction2D =
-            serde_json::from_str(&text).map_err(|e| Error::format(path, "JSON", e.to_string()))?;
+        let tf: TransferFunction2D = crate::json::read_file(path, "2D transfer function JSON")?;
         tf.validate()
             .map_err(|e| Error::format(path, "2D transfer function", e.to_string()))?;
         Ok(tf)
@@ -403,8 +408,22 @@ impl TransferFunction2D {
     pub fn preset_or_file(spec: &str) -> Result<Self> {
         if PRESETS_2D.iter().any(|(n, _)| *n == spec) {
             Self::preset(spec)
-        } else {
+        } else if Path::new(spec).exists() {
             Self::load(Path::new(spec))
+        } else {
+            // Neither a preset nor a file: say both, with the presets.
+            let names: Vec<&str> = PRESETS_2D.iter().map(|(n, _)| *n).collect();
+            let close = crate::json::nearest(spec, &names)
+                .map(|n| format!(" (did you mean {n}?)"))
+                .unwrap_or_default();
+            Err(Error::invalid(
+                "2D transfer function",
+                format!(
+                    "'{}' is neither a preset nor a file{close}; the presets are {}",
+                    crate::error::escape_controls(spec),
+                    names.join(", ")
+                ),
+            ))
         }
     }
 

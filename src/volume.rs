@@ -124,15 +124,26 @@ pub fn check_dims(dims: [usize; 3]) -> Result<usize> {
 
 /// Checks a spacing: finite and strictly positive on every axis.
 pub fn check_spacing(spacing: [f64; 3]) -> Result<()> {
-    if spacing.iter().all(|s| s.is_finite() && *s > 0.0) {
+    if spacing
+        .iter()
+        .all(|s| (MIN_SPACING_MM..=MAX_SPACING_MM).contains(s))
+    {
         Ok(())
     } else {
         Err(Error::invalid(
             "voxel spacing",
-            format!("{spacing:?} must be finite and positive on every axis"),
+            format!(
+                "{spacing:?} must lie in [{MIN_SPACING_MM:e}, {MAX_SPACING_MM:e}] mm on every axis"
+            ),
         ))
     }
 }
+
+/// The finest voxel spacing accepted, in mm (a picometre: below it, and for denormal
+/// numbers, the voxel-to-world affine cannot be inverted reliably).
+pub const MIN_SPACING_MM: f64 = 1e-9;
+/// The coarsest voxel spacing accepted, in mm (a thousand kilometres).
+pub const MAX_SPACING_MM: f64 = 1e9;
 
 /// A regular grid of voxels, x fastest, with spacing and a voxel-to-world affine.
 #[derive(Clone, Debug, PartialEq)]

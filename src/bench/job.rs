@@ -120,7 +120,7 @@ fn existing(a: &BenchRequest, flag: &str) -> Result<(String, Report)> {
         ));
     };
     let path = a.out.join(format!("{name}.json"));
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let text = crate::source::read_text_limited(&path, flag, crate::source::MAX_JSON_BYTES)?;
     let r: Report = serde_json::from_str(&text).map_err(|e| {
         Error::invalid(
             flag,

@@ -538,20 +538,7 @@ fn suite_name(s: Suite) -> &'static str {
 
 /// Refuses an output folder that is an existing file (or lies under one).
 pub fn check_out_dir(dir: &Path) -> Result<()> {
-    let mut p = Some(dir);
-    while let Some(d) = p {
-        if d.exists() && !d.is_dir() {
-            return Err(Error::invalid(
-                "--out",
-                format!(
-                    "{} is a file, not a folder (reports go into a folder)",
-                    d.display()
-                ),
-            ));
-        }
-        p = d.parent();
-    }
-    Ok(())
+    crate::io::check_output_dir("--out", dir)
 }
 
 /// Lower-case ASCII letters and digits, runs of anything else as one `-`.

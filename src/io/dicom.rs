@@ -217,7 +217,7 @@ impl Image {
 /// Whether the file has the `DICM` marker after a 128-byte preamble.
 fn has_dicm_marker(path: &Path) -> Result<bool> {
     let mut head = [0u8; 132];
-    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let (mut f, _) = super::open(path)?;
     let mut got = 0;
     while got < head.len() {
         match f.read(&mut head[got..]) {
@@ -250,6 +250,7 @@ fn parse_file(path: &Path) -> Result<(DefaultDicomObject, Option<Vec<u8>>)> {
             "not a DICOM file (no 'DICM' marker at byte 128)",
         ));
     }
+    prescan::check_lengths(path)?;
     let open = |until: bool| {
         let p = path.to_path_buf();
         std::panic::catch_unwind(move || {
@@ -281,6 +282,292 @@ fn parse_file(path: &Path) -> Result<(DefaultDicomObject, Option<Vec<u8>>)> {
         }
     }
     Err(Error::format(path, "file", error))
+}
+
+/// A pass over the element headers before the parser runs: every element, item and
+/// sequence whose length is given must fit in what remains of its container and of
+/// the file, so that a lying length (a PixelData element claiming 4 GiB in an 826-byte
+/// file) is refused in milliseconds, before anything is allocated or read.
+mod prescan {
+    use crate::error::{Error, Result};
+    use std::io::{BufReader, Read, Seek, SeekFrom};
+    use std::path::Path;
+
+    /// Elements visited before the pass gives up (and leaves the file to the parser).
+    const MAX_ELEMENTS: usize = 4_000_000;
+    const MAX_DEPTH: usize = 64;
+    const UNDEFINED: u32 = 0xFFFF_FFFF;
+
+    /// What a walk found: the container ended, or bytes that are not element headers
+    /// (padding after the data, a corrupt tail) stopped it; the parser judges those.
+    enum Flow {
+        Done,
+        Stop,
+    }
+
+    struct Walker<'a> {
+        file: BufReader<std::fs::File>,
+        pos: u64,
+        len: u64,
+        path: &'a Path,
+        big: bool,
+        implicit: bool,
+        steps: usize,
+        /// A delimiter ended the current undefined-length container.
+        delimited: bool,
+    }
+
+    /// Checks the lengths of `path`'s elements (meta group, then the data set in its
+    /// transfer syntax; a deflated data set is left to the parser).
+    pub(super) fn check_lengths(path: &Path) -> Result<()> {
+        let (file, len) = super::super::open(path)?;
+        let mut w = Walker {
+            file: BufReader::new(file),
+            pos: 0,
+            len,
+            path,
+            big: false,
+            implicit: false,
+            steps: 0,
+            delimited: false,
+        };
+        w.seek(132)?;
+        // The meta group (0002,xxxx) is always explicit VR little endian.
+        let mut syntax = String::new();
+        loop {
+            let Some(group) = w.peek_group()? else {
+                return Ok(());
+            };
+            if group != 0x0002 {
+                break;
+            }
+            match w.element(len, 0, true, Some(&mut syntax))? {
+                Flow::Done => {}
+                Flow::Stop => return Ok(()),
+            }
+        }
+        match syntax.trim_end_matches(['\0', ' ']) {
+            "1.2.840.10008.1.2" => w.implicit = true,
+            "1.2.840.10008.1.2.2" => w.big = true,
+            "1.2.840.10008.1.2.1.99" => return Ok(()),
+            _ => {}
+        }
+        w.walk(len, 0, true).map(|_| ())
+    }
+
+    impl Walker<'_> {
+        fn seek(&mut self, to: u64) -> Result<()> {
+            self.file
+                .seek(SeekFrom::Start(to))
+                .map_err(|e| Error::io(self.path, e))?;
+            self.pos = to;
+            Ok(())
+        }
+
+        fn bytes<const N: usize>(&mut self) -> Result<Option<[u8; N]>> {
+            if self.pos + N as u64 > self.len {
+                return Ok(None);
+            }
+            let mut b = [0u8; N];
+            self.file
+                .read_exact(&mut b)
+                .map_err(|e| Error::io(self.path, e))?;
+            self.pos += N as u64;
+            Ok(Some(b))
+        }
+
+        fn u16(&self, b: [u8; 2]) -> u16 {
+            if self.big {
+                u16::from_be_bytes(b)
+            } else {
+                u16::from_le_bytes(b)
+            }
+        }
+
+        fn u32(&self, b: [u8; 4]) -> u32 {
+            if self.big {
+                u32::from_be_bytes(b)
+            } else {
+                u32::from_le_bytes(b)
+            }
+        }
+
+        fn peek_group(&mut self) -> Result<Option<u16>> {
+            let at = self.pos;
+            let g = self.bytes::<2>()?.map(u16::from_le_bytes);
+            self.seek(at)?;
+            Ok(g)
+        }
+
+        /// Elements up to `end` (or a delimiter); the items met hold data sets
+        /// (`datasets`: a sequence's) or bytes (encapsulated pixel data's fragments).
+        fn walk(&mut self, end: u64, depth: usize, datasets: bool) -> Result<Flow> {
+            while self.pos + 8 <= end {
+                match self.element(end, depth, datasets, None)? {
+                    Flow::Done => {}
+                    Flow::Stop => return Ok(Flow::Stop),
+                }
+                if self.delimited {
+                    self.delimited = false;
+                    return Ok(Flow::Done);
+                }
+            }
+            Ok(Flow::Done)
+        }
+
+        /// One element (or item, or delimiter) within `end`; the transfer syntax UID
+        /// is kept in `syntax` when asked for.
+        fn element(
+            &mut self,
+            end: u64,
+            depth: usize,
+            datasets: bool,
+            syntax: Option<&mut String>,
+        ) -> Result<Flow> {
+            self.steps += 1;
+            if self.steps > MAX_ELEMENTS || depth > MAX_DEPTH {
+                return Ok(Flow::Stop);
+            }
+            let Some(t) = self.bytes::<4>()? else {
+                return Ok(Flow::Stop);
+            };
+            let group = self.u16([t[0], t[1]]);
+            let elem = self.u16([t[2], t[3]]);
+            if group == 0xFFFE {
+                let Some(l) = self.bytes::<4>()? else {
+                    return Ok(Flow::Stop);
+                };
+                let len = self.u32(l);
+                return match elem {
+                    0xE00D | 0xE0DD => {
+                        self.delimited = true;
+                        Ok(Flow::Done)
+                    }
+                    0xE000 if len == UNDEFINED && datasets => self.walk(end, depth + 1, true),
+                    0xE000 if len == UNDEFINED => Ok(Flow::Stop),
+                    0xE000 => {
+                        let stop = self.fits(group, elem, "item", len as u64, end)?;
+                        if datasets {
+                            self.walk(stop, depth + 1, true)?;
+                            self.delimited = false;
+                        }
+                        self.seek(stop)?;
+                        Ok(Flow::Done)
+                    }
+                    _ => Ok(Flow::Stop),
+                };
+            }
+            let (vr, len) = if self.implicit && group != 0x0002 {
+                let Some(l) = self.bytes::<4>()? else {
+                    return Ok(Flow::Stop);
+                };
+                (*b"--", self.u32(l))
+            } else {
+                let Some(vr) = self.bytes::<2>()? else {
+                    return Ok(Flow::Stop);
+                };
+                if !vr.iter().all(u8::is_ascii_uppercase) {
+                    return Ok(Flow::Stop);
+                }
+                let long = matches!(
+                    &vr,
+                    b"OB"
+                        | b"OD"
+                        | b"OF"
+                        | b"OL"
+                        | b"OV"
+                        | b"OW"
+                        | b"SQ"
+                        | b"SV"
+                        | b"UC"
+                        | b"UN"
+                        | b"UR"
+                        | b"UT"
+                        | b"UV"
+                );
+                let len = if long {
+                    match (self.bytes::<2>()?, self.bytes::<4>()?) {
+                        (Some(_), Some(l)) => self.u32(l),
+                        _ => return Ok(Flow::Stop),
+                    }
+                } else {
+                    match self.bytes::<2>()? {
+                        Some(l) => u32::from(self.u16(l)),
+                        None => return Ok(Flow::Stop),
+                    }
+                };
+                (vr, len)
+            };
+            if len == UNDEFINED {
+                // A sequence, or encapsulated pixel data: items up to the delimiter.
+                let fragments = (group, elem) == (0x7FE0, 0x0010) || matches!(&vr, b"OB" | b"OW");
+                let flow = self.walk(end, depth + 1, !fragments)?;
+                self.delimited = false;
+                if depth == 0 && (group, elem) == (0x7FE0, 0x0010) {
+                    return Ok(Flow::Stop);
+                }
+                return Ok(flow);
+            }
+            let stop = self.fits(
+                group,
+                elem,
+                std::str::from_utf8(&vr).unwrap_or("--"),
+                len as u64,
+                end,
+            )?;
+            if depth == 0 && (group, elem) == (0x7FE0, 0x0010) {
+                // What follows the top-level pixel data is padding in some files (the
+                // parser's fallback skips it), not elements to check.
+                return Ok(Flow::Stop);
+            }
+            if let (Some(s), 0x0002, 0x0010) = (syntax, group, elem) {
+                let mut b = vec![0u8; (len as usize).min(128)];
+                self.file
+                    .read_exact(&mut b)
+                    .map_err(|e| Error::io(self.path, e))?;
+                *s = String::from_utf8_lossy(&b).into_owned();
+            } else if &vr == b"SQ" {
+                self.walk(stop, depth + 1, true)?;
+                self.delimited = false;
+            }
+            self.seek(stop)?;
+            Ok(Flow::Done)
+        }
+
+        /// The end of a value of `len` bytes starting here, refused when it passes the
+        /// end of its container or of the file.
+        fn fits(&self, group: u16, elem: u16, vr: &str, len: u64, end: u64) -> Result<u64> {
+            let stop = self.pos + len;
+            if stop <= end.min(self.len) {
+                return Ok(stop);
+            }
+            use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+            // The element's keyword (PixelData, MediaStorageSOPInstanceUID), else its tag.
+            let name = dicom_object::StandardDataDictionary
+                .by_tag(dicom_object::Tag(group, elem))
+                .map(|e| e.alias().to_string())
+                .filter(|a| !a.is_empty() && group != 0xFFFE)
+                .unwrap_or_else(|| format!("({group:04X},{elem:04X})"));
+            let remain = end.min(self.len).saturating_sub(self.pos);
+            Err(Error::format(
+                self.path,
+                name.clone(),
+                format!(
+                    "element {name} ({group:04X},{elem:04X}) {vr} at byte {} claims {len} \
+                     bytes, but only {remain} \
+                     remain in {} of {} bytes: the file is truncated or its length field \
+                     is corrupt",
+                    self.pos,
+                    if end < self.len {
+                        "its container"
+                    } else {
+                        "the file"
+                    },
+                    self.len
+                ),
+            ))
+        }
+    }
 }
 
 /// Finds the last top-level PixelData element (7FE0,0010) of a file in a native,

@@ -150,14 +150,18 @@ impl TriMesh {
     }
 }
 
-/// Reads an OBJ (`.obj`) or PLY (`.ply`) mesh, chosen by the extension.
+/// The largest mesh file read (a 1 GiB OBJ holds some 15 million triangles).
+pub const MAX_MESH_BYTES: u64 = 1 << 30;
+
+/// Reads an OBJ (`.obj`) or PLY (`.ply`) mesh, chosen by the extension, from a regular
+/// file of at most [`MAX_MESH_BYTES`].
 pub fn read_mesh(path: &Path) -> Result<TriMesh> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::source::read_limited(path, "clipping mesh", MAX_MESH_BYTES)?;
     match ext.as_str() {
         "obj" => parse_obj(&bytes, path),
         "ply" => parse_ply(&bytes, path),

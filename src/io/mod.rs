@@ -50,6 +50,7 @@ pub mod pvm;
 pub mod raw;
 pub mod tiff;
 
+pub use crate::source::{open, read_limited, read_text_limited};
 pub use frame::{write_frame, PngOptions};
 
 use crate::error::{Error, Result};
@@ -135,7 +136,78 @@ pub fn check_output(what: &str, path: &Path, allowed: &[&str]) -> Result<()> {
             ),
         ));
     }
-    Ok(())
+    if path.is_dir() {
+        return Err(Error::invalid(
+            what,
+            format!("{} is a folder, not a file", path.display()),
+        ));
+    }
+    probe_writable(what, parent)
+}
+
+/// [`check_output`] for a volume file: the extensions [`write_volume`] knows
+/// (`.nrrd`, `.nhdr`, `.npy`, `.nii`, `.nii.gz`).
+///
+/// # Errors
+/// As [`check_output`].
+pub fn check_volume_output(what: &str, path: &Path) -> Result<()> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if name.ends_with(".gz") && !name.ends_with(".nii.gz") {
+        return Err(Error::invalid(
+            what,
+            format!(
+                "{}: volumes are written as .nrrd, .nhdr, .npy, .nii or .nii.gz",
+                path.display()
+            ),
+        ));
+    }
+    check_output(what, path, &["nrrd", "nhdr", "npy", "nii", "gz"])
+}
+
+/// Fails early on an output folder `what` that cannot be made or written: a path one
+/// of whose parts is a file, or a folder (or the nearest existing parent of a folder
+/// still to be made) where no file can be created.
+///
+/// # Errors
+/// [`Error::Invalid`] naming `what` and the folder.
+pub fn check_output_dir(what: &str, dir: &Path) -> Result<()> {
+    let mut nearest = None;
+    let mut p = Some(dir);
+    while let Some(d) = p.filter(|d| !d.as_os_str().is_empty()) {
+        if d.exists() {
+            if !d.is_dir() {
+                return Err(Error::invalid(
+                    what,
+                    format!("{} is a file, not a folder", d.display()),
+                ));
+            }
+            nearest.get_or_insert(d);
+        }
+        p = d.parent();
+    }
+    probe_writable(what, nearest.unwrap_or(Path::new(".")))
+}
+
+/// Creates and removes an empty file in `dir`: the one sure test that outputs can be
+/// written there (permissions, read-only mounts, `/proc`).
+fn probe_writable(what: &str, dir: &Path) -> Result<()> {
+    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let probe = dir.join(format!(".voxlab-probe-{}-{n}", std::process::id()));
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(f) => {
+            drop(f);
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(Error::invalid(
+            what,
+            format!("cannot write into the folder {}: {e}", dir.display()),
+        )),
+    }
 }
 
 /// Writes `text` to `path` atomically (a temporary file renamed into place).
@@ -157,7 +229,7 @@ pub fn detect_format(path: &Path) -> Result<Format> {
         return Ok(directory_format(path));
     }
     let mut head = [0u8; 352];
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let (mut file, _) = open(path)?;
     let n = fill(&mut file, &mut head).map_err(|e| Error::io(path, e))?;
     if let Some(f) = sniff(&head[..n]) {
         return Ok(f);
@@ -226,6 +298,11 @@ fn directory_format(dir: &Path) -> Format {
 /// Recognises a format from the first bytes of a file (up to 352 of them).
 fn sniff(head: &[u8]) -> Option<Format> {
     let starts = |m: &[u8]| head.starts_with(m);
+    // `DICM` after the 128-byte preamble wins over every other magic: classic CT and MR
+    // files carry a TIFF header (`II*\0`) in their preamble.
+    if head.len() >= 132 && &head[128..132] == b"DICM" {
+        return Some(Format::Dicom);
+    }
     if starts(b"NRRD000") {
         Some(Format::Nrrd)
     } else if starts(b"\x93NUMPY") {
@@ -247,13 +324,36 @@ fn sniff(head: &[u8]) -> Option<Format> {
 /// magic number or extension ([`detect_format`]); a directory is read as a DICOM
 /// series, or as a stack of TIFF files when it holds those and no DICOM file. Raw files need [`raw::read_raw`] with a [`raw::RawSpec`].
 pub fn read_volume(path: &Path) -> Result<AnyVolume> {
-    read_volume_as(path, detect_format(path)?)
+    read_volume_with(path, &ReadOptions::default())
+}
+
+/// How files are read, beyond what their headers say.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Refuse a data file a header names outside the header's own folder (a NRRD
+    /// `data file:` that is absolute or climbs with `../`, which the format allows), so
+    /// that an untrusted header cannot make voxlab read any file the user can.
+    pub confine_data_files: bool,
+}
+
+/// [`read_volume`] with [`ReadOptions`].
+pub fn read_volume_with(path: &Path, options: &ReadOptions) -> Result<AnyVolume> {
+    read_volume_as_with(path, detect_format(path)?, options)
 }
 
 /// Reads a volume in the given format.
 pub fn read_volume_as(path: &Path, format: Format) -> Result<AnyVolume> {
+    read_volume_as_with(path, format, &ReadOptions::default())
+}
+
+/// [`read_volume_as`] with [`ReadOptions`].
+pub fn read_volume_as_with(
+    path: &Path,
+    format: Format,
+    options: &ReadOptions,
+) -> Result<AnyVolume> {
     match format {
-        Format::Nrrd => nrrd::read_nrrd(path),
+        Format::Nrrd => nrrd::read_nrrd_with(path, options),
         Format::Npy => npy::read_npy_volume(path),
         Format::Nifti => nifti::read_nifti(path),
         Format::Dicom => dicom::read_dicom(path),
@@ -353,9 +453,12 @@ static TEMP_COUNTER: AtomicUsize = AtomicUsize::new(0);
 
 /// A temporary file that is deleted when dropped, unless it was renamed into place.
 /// Dropping also happens when the writer closure panics, so even then nothing is left.
+/// While it exists its name is also known to the signal handler
+/// ([`remove_temp_files_on_signals`]).
 struct TempFile {
     path: PathBuf,
     renamed: bool,
+    slot: Option<usize>,
 }
 
 impl Drop for TempFile {
@@ -363,6 +466,104 @@ impl Drop for TempFile {
         if !self.renamed {
             // Best effort: the file may not exist any more, and there is nobody to tell.
             let _ = std::fs::remove_file(&self.path);
+        }
+        if let Some(slot) = self.slot {
+            signals::forget(slot);
+        }
+    }
+}
+
+/// Removes the temporary files of writes in progress when the process receives SIGINT,
+/// SIGTERM or SIGHUP, then dies of that signal as it would have (exit status 128 + n).
+/// A signal the process ignores (SIGHUP under `nohup`) stays ignored. The command line
+/// calls this first thing; a library caller that handles these signals itself should
+/// not. SIGKILL cannot be caught: a write killed by it leaves its
+/// `.NAME.tmp-PID-N` file (never the half-written `NAME`), which is safe to delete.
+pub fn remove_temp_files_on_signals() {
+    signals::install();
+}
+
+/// Elsewhere than Unix the default actions stay, and an interrupted write may leave
+/// its temporary file.
+#[cfg(not(unix))]
+mod signals {
+    pub(super) fn remember(_: &std::path::Path) -> Option<usize> {
+        None
+    }
+    pub(super) fn forget(_: usize) {}
+    pub(super) fn install() {}
+}
+
+/// The signal side of [`TempFile`]: a fixed table of the temporary paths being written,
+/// read by a handler that only calls `unlink` (async-signal-safe).
+#[cfg(unix)]
+mod signals {
+    use std::ffi::CString;
+    use std::path::Path;
+    use std::sync::atomic::{AtomicBool, AtomicPtr, Ordering};
+
+    const SLOTS: usize = 256;
+    static PENDING: [AtomicPtr<libc::c_char>; SLOTS] =
+        [const { AtomicPtr::new(std::ptr::null_mut()) }; SLOTS];
+    static INSTALLED: AtomicBool = AtomicBool::new(false);
+
+    /// Records `path`; `None` when every slot is taken (the write goes on, only
+    /// without cleanup on a signal) or no handler is installed.
+    pub(super) fn remember(path: &Path) -> Option<usize> {
+        if !INSTALLED.load(Ordering::SeqCst) {
+            return None;
+        }
+        use std::os::unix::ffi::OsStrExt;
+        let c = CString::new(path.as_os_str().as_bytes()).ok()?.into_raw();
+        for (i, slot) in PENDING.iter().enumerate() {
+            if slot
+                .compare_exchange(std::ptr::null_mut(), c, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+            {
+                return Some(i);
+            }
+        }
+        // SAFETY: `c` came from `into_raw` above and was never shared.
+        drop(unsafe { CString::from_raw(c) });
+        None
+    }
+
+    /// Forgets a slot. The string is not freed: a handler running on another thread
+    /// may be reading it (a few bytes per file written, in a process with a handler).
+    pub(super) fn forget(slot: usize) {
+        PENDING[slot].store(std::ptr::null_mut(), Ordering::SeqCst);
+    }
+
+    extern "C" fn on_signal(sig: libc::c_int) {
+        for slot in PENDING.iter() {
+            let p = slot.swap(std::ptr::null_mut(), Ordering::SeqCst);
+            if !p.is_null() {
+                // SAFETY: `p` is a NUL-terminated string leaked by `remember`.
+                unsafe {
+                    libc::unlink(p);
+                }
+            }
+        }
+        // SAFETY: restoring the default action and re-raising are async-signal-safe.
+        unsafe {
+            libc::signal(sig, libc::SIG_DFL);
+            libc::raise(sig);
+        }
+    }
+
+    pub(super) fn install() {
+        if INSTALLED.swap(true, Ordering::SeqCst) {
+            return;
+        }
+        for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            // SAFETY: a handler that only touches atomics and async-signal-safe calls.
+            unsafe {
+                let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+                let previous = libc::signal(sig, handler);
+                if previous == libc::SIG_IGN {
+                    libc::signal(sig, libc::SIG_IGN);
+                }
+            }
         }
     }
 }
@@ -405,9 +606,13 @@ pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(name);
     tmp_name.push(format!(".tmp-{}-{n}", std::process::id()));
+    let tmp_path = dir.join(tmp_name);
+    // Known to the signal handler before the file exists, so no window leaves it behind.
+    let slot = signals::remember(&tmp_path);
     let mut temp = TempFile {
-        path: dir.join(tmp_name),
+        path: tmp_path,
         renamed: false,
+        slot,
     };
 
     // `create_new` never clobbers a file we did not create.
@@ -707,10 +912,13 @@ pub(crate) fn parse_text_samples(
     })
 }
 
-/// At most the first 40 characters of `s`, for quoting file contents in messages.
+/// At most the first 40 characters of `s`, for quoting file contents in messages, with
+/// control characters escaped ([`crate::error::escape_controls`]).
 pub(crate) fn snippet(s: &str) -> String {
-    let mut out: String = s.chars().take(40).collect();
-    if out.len() < s.len() {
+    let head: String = s.chars().take(40).collect();
+    let cut = head.len() < s.len();
+    let mut out = crate::error::escape_controls(&head).into_owned();
+    if cut {
         out.push('…');
     }
     out
@@ -739,13 +947,6 @@ pub(crate) fn write_le<T: bytemuck::Pod>(w: &mut dyn Write, data: &[T]) -> io::R
         }
     }
     Ok(())
-}
-
-/// Opens a file for reading, with its length.
-pub(crate) fn open(path: &Path) -> Result<(File, u64)> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    Ok((file, len))
 }
 
 #[cfg(test)]

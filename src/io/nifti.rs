@@ -368,7 +368,15 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
             ),
         ));
     }
-    // An f32 that is a whole number ≥ 0 converts exactly (up to 2^128, saturating).
+    // No file holds 2^53 bytes: a larger offset is refused as such here, rather than
+    // saturated to u64::MAX and printed so below.
+    if vox_offset >= 9.007_199e15 {
+        return Err(err(
+            "vox_offset",
+            format!("{vox_offset:e} bytes is past the end of any file"),
+        ));
+    }
+    // A whole f32 below 2^53 converts exactly.
     let vox_offset = vox_offset as u64;
 
     let slope = h.f64(112);

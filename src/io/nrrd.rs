@@ -50,7 +50,13 @@
 //! - `data file`: one file. The `LIST` and printf-style multi-file forms are refused.
 //! - `kinds` only marks non-spatial axes as above; key/value pairs, comments and other
 //!   fields (`content`, `units`, `measurement frame`, …) are ignored. A field given
-//!   twice is refused. Bytes after the data are ignored.
+//!   twice is refused. An attached file may carry bytes after its data; data beyond what
+//!   the header describes in a gzip stream or a detached raw data file is refused.
+//! - A detached pair written by voxlab records the data file's size and FNV-1a hash
+//!   (`voxlab_data_bytes:=`, `voxlab_data_fnv1a64:=`); a data file that does not match
+//!   them (an interrupted overwrite, two writers racing) is refused. With
+//!   [`ReadOptions::confine_data_files`](super::ReadOptions) the data file must lie in
+//!   the header's folder.
 //!
 //! # What is written
 //!
@@ -68,7 +74,6 @@ use flate2::read::MultiGzDecoder;
 use flate2::write::GzEncoder;
 use flate2::Compression;
 use glam::{DMat3, DMat4, DVec3};
-use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
@@ -92,9 +97,59 @@ impl Default for NrrdWriteOptions {
     }
 }
 
+/// A reader (or writer) that keeps the 64-bit FNV-1a hash and the count of the bytes
+/// that pass through it. (Not a CRC: the CRC-32 of a gzip file, which ends in the CRC
+/// of its contents, is the same for different files far too often.)
+struct Digest<R> {
+    inner: R,
+    hash: u64,
+    count: u64,
+}
+
+impl<R> Digest<R> {
+    fn new(inner: R) -> Self {
+        Digest {
+            inner,
+            hash: 0xcbf2_9ce4_8422_2325,
+            count: 0,
+        }
+    }
+    fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.hash = (self.hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        self.count += bytes.len() as u64;
+    }
+}
+
+impl<R: Read> Read for Digest<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.update(&buf[..n]);
+        Ok(n)
+    }
+}
+
+impl<W: Write> Write for Digest<W> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.update(&buf[..n]);
+        Ok(n)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
+    }
+}
+
 /// Reads a NRRD volume (attached or detached header); see the module docs for what is
 /// accepted.
 pub fn read_nrrd(path: &Path) -> Result<AnyVolume> {
+    read_nrrd_with(path, &super::ReadOptions::default())
+}
+
+/// [`read_nrrd`] with [`ReadOptions`](super::ReadOptions): with `confine_data_files`, a
+/// detached header may only name a data file inside its own folder.
+pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVolume> {
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
     let fields = read_fields(&mut reader, path)?;
@@ -104,18 +159,109 @@ pub fn read_nrrd(path: &Path) -> Result<AnyVolume> {
         Some(name) => {
             let dir = path.parent().unwrap_or(Path::new(""));
             let data_path = dir.join(name);
-            let file = File::open(&data_path).map_err(|e| {
+            if options.confine_data_files {
+                confine(path, dir, &data_path, name)?;
+            }
+            let (file, len) = open(&data_path).map_err(|e| {
+                let why = match e {
+                    Error::Io { source, .. } => source.to_string(),
+                    Error::Invalid { message, .. } => message,
+                    other => other.to_string(),
+                };
                 Error::format(
                     path,
                     "data file",
-                    format!("cannot open {}: {e}", data_path.display()),
+                    format!("cannot open {}: {why}", data_path.display()),
                 )
             })?;
-            let len = file.metadata().map_err(|e| Error::io(&data_path, e))?.len();
-            read_data(&mut BufReader::new(file), len, &data_path, &header)?
+            let mismatch = |what: String| {
+                Error::format(
+                    path,
+                    "data file",
+                    format!(
+                        "{} does not belong to this header: {what}; the pair comes from \
+                         different writes (an interrupted or concurrent write?)",
+                        data_path.display()
+                    ),
+                )
+            };
+            let mut reader = BufReader::new(file);
+            if let Some((bytes, hash)) = header.data_check {
+                // Checked before the data is decoded: the size at once, then the
+                // checksum in one pass over the file.
+                if len != bytes {
+                    return Err(mismatch(format!(
+                        "it holds {len} bytes, the header was written with {bytes}"
+                    )));
+                }
+                let mut summed = Digest::new(&mut reader);
+                io::copy(&mut summed, &mut io::sink()).map_err(|e| Error::io(&data_path, e))?;
+                let got = summed.hash;
+                if got != hash {
+                    return Err(mismatch(format!(
+                        "its FNV-1a hash is {got:016x}, the header was written with {hash:016x}"
+                    )));
+                }
+                reader
+                    .seek(SeekFrom::Start(0))
+                    .map_err(|e| Error::io(&data_path, e))?;
+            }
+            let samples = read_data(&mut reader, len, &data_path, &header)?;
+            if header.data_check.is_none()
+                && header.encoding == Encoding::Raw
+                && header.byte_skip >= 0
+            {
+                let used = reader
+                    .stream_position()
+                    .map_err(|e| Error::io(&data_path, e))?;
+                if len > used {
+                    return Err(Error::format(
+                        &data_path,
+                        "data",
+                        format!(
+                            "the data file holds {len} bytes, {} more than the header's \
+                             sizes, type, line skip and byte skip describe ({used})",
+                            len - used
+                        ),
+                    ));
+                }
+            }
+            samples
         }
     };
     samples.into_volume(header.dims, header.affine)
+}
+
+/// Refuses a data file outside the header's folder (after following links and `..`).
+fn confine(header: &Path, dir: &Path, data: &Path, name: &str) -> Result<()> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let outside = || {
+        Error::format(
+            header,
+            "data file",
+            format!(
+                "'{}' lies outside the header's folder {}; data files are confined to it \
+                 (--confine-data-files)",
+                super::snippet(name),
+                dir.display()
+            ),
+        )
+    };
+    let base = std::fs::canonicalize(dir).map_err(|e| Error::io(dir, e))?;
+    match std::fs::canonicalize(data) {
+        Ok(real) if real.starts_with(&base) => Ok(()),
+        Ok(_) => Err(outside()),
+        // A file that does not exist is reported by the reader; one reached by a
+        // path that leaves the folder is refused either way.
+        Err(_) if Path::new(name).is_absolute() || name.split(['/', '\\']).any(|c| c == "..") => {
+            Err(outside())
+        }
+        Err(_) => Ok(()),
+    }
 }
 
 /// Reads an attached-header NRRD file held in memory (`path` only names it in
@@ -150,10 +296,20 @@ pub fn write_nrrd(path: &Path, vol: &AnyVolume, options: NrrdWriteOptions) -> Re
     }
     let data_name = detached_data_name(path, gzip)?;
     let data_path = path.with_file_name(&data_name);
+    let mut check = (0u64, 0u64);
     write_atomic(&data_path, |w| {
-        write_data(w, vol, gzip).map_err(|e| Error::io(&data_path, e))
+        let mut w = Digest::new(w);
+        write_data(&mut w, vol, gzip).map_err(|e| Error::io(&data_path, e))?;
+        check = (w.count, w.hash);
+        Ok(())
     })?;
-    let header = header_text(vol, gzip, Some(&data_name));
+    let mut header = header_text(vol, gzip, Some(&data_name));
+    // The data file's size and hash: a reader can tell a header from the data of
+    // another write (an interrupted overwrite, two writers racing).
+    header.push_str(&format!(
+        "voxlab_data_bytes:={}\nvoxlab_data_fnv1a64:={:016x}\n",
+        check.0, check.1
+    ));
     write_atomic(path, |w| {
         w.write_all(header.as_bytes())
             .map_err(|e| Error::io(path, e))
@@ -166,6 +322,10 @@ pub fn write_nrrd(path: &Path, vol: &AnyVolume, options: NrrdWriteOptions) -> Re
 
 /// A header larger than this is refused (real ones are a few kilobytes).
 const MAX_HEADER_BYTES: u64 = 16 << 20;
+
+/// The most bytes one ascii value may take with its separators (`-1.2345678901234567e-308`
+/// and white space); text beyond `sizes × this` is not read.
+const MAX_TEXT_VALUE_BYTES: u64 = 64;
 
 /// NRRD's limit on the number of axes.
 const MAX_DIMENSION: usize = 16;
@@ -219,15 +379,26 @@ fn read_fields(reader: &mut impl BufRead, path: &Path) -> Result<Vec<(String, St
                 ),
             ));
         };
-        if line[colon + 1..].starts_with('=') {
-            continue; // key/value metadata
+        if let Some(value) = line[colon + 1..].strip_prefix('=') {
+            // Key/value metadata: only voxlab's own keys are kept, under a name no
+            // field can have.
+            let key = &line[..colon];
+            if key.starts_with("voxlab_") {
+                fields.push((format!("={key}"), value.trim().to_string()));
+            }
+            continue;
         }
         let name = canonical_name(line[..colon].trim());
         let value = line[colon + 1..].trim().to_string();
         if fields.iter().any(|(n, _)| *n == name) {
             return Err(Error::format(path, name, "the field is given twice"));
         }
+        // `data file: LIST` ends the fields: the lines after it name the data files.
+        let list = name == "data file" && value.split_whitespace().next() == Some("LIST");
         fields.push((name, value));
+        if list {
+            break;
+        }
     }
     Ok(fields)
 }
@@ -298,6 +469,9 @@ struct Header {
     byte_skip: i64,
     line_skip: u64,
     data_file: Option<String>,
+    /// The byte count and FNV-1a hash of the data file that voxlab recorded when it
+    /// wrote the pair (`voxlab_data_bytes:=`, `voxlab_data_fnv1a64:=`).
+    data_check: Option<(u64, u64)>,
 }
 
 /// Looks fields up and builds errors that name them.
@@ -463,7 +637,32 @@ impl Header {
             }
         };
 
+        let data_check = match (f.get("=voxlab_data_bytes"), f.get("=voxlab_data_fnv1a64")) {
+            (None, None) => None,
+            (Some(b), Some(c)) => {
+                let bytes = b.parse::<u64>().map_err(|_| {
+                    f.error(
+                        "voxlab_data_bytes",
+                        format!("'{}' is not a byte count", super::snippet(b)),
+                    )
+                })?;
+                let hash = u64::from_str_radix(c, 16).map_err(|_| {
+                    f.error(
+                        "voxlab_data_fnv1a64",
+                        format!("'{}' is not 16 hex digits", super::snippet(c)),
+                    )
+                })?;
+                Some((bytes, hash))
+            }
+            _ => {
+                return Err(f.error(
+                    "voxlab_data_bytes",
+                    "voxlab_data_bytes and voxlab_data_fnv1a64 go together",
+                ))
+            }
+        };
         Ok(Header {
+            data_check,
             stored,
             type_name,
             encoding,
@@ -832,16 +1031,42 @@ fn read_data<R: BufRead + Seek>(
             skip_bytes(&mut gz, h.byte_skip as u64, path)?;
             let samples = read_samples(&mut gz, h.stored, h.endian, h.count, path)?;
             // Decode to the end of the stream, so that its checksum is verified and a
-            // truncated or corrupt tail is reported rather than silently ignored.
-            io::copy(&mut gz, &mut io::sink()).map_err(|e| read_error(path, e))?;
+            // truncated or corrupt tail is reported rather than silently ignored; data
+            // beyond what the header describes is refused.
+            let extra = io::copy(&mut gz, &mut io::sink()).map_err(|e| read_error(path, e))?;
+            if extra > 0 {
+                return Err(Error::format(
+                    path,
+                    "data",
+                    format!(
+                        "the gzip data holds {extra} bytes more than the header's sizes, type \
+                         and byte skip describe ({})",
+                        expected + h.byte_skip.max(0) as u64
+                    ),
+                ));
+            }
             Ok(samples)
         }
         Encoding::Text => {
             skip_bytes(reader, h.byte_skip as u64, path)?;
+            // At most what the values can need, however long the file: a value takes
+            // at most MAX_TEXT_VALUE_BYTES with its separators.
+            let limit = (h.count as u64)
+                .saturating_mul(MAX_TEXT_VALUE_BYTES)
+                .saturating_add(1 << 16);
             let mut bytes = Vec::new();
             reader
+                .take(limit)
                 .read_to_end(&mut bytes)
                 .map_err(|e| Error::io(path, e))?;
+            // A cut inside a UTF-8 character at the limit is not an encoding error.
+            if bytes.len() as u64 == limit {
+                if let Err(e) = std::str::from_utf8(&bytes) {
+                    if e.error_len().is_none() {
+                        bytes.truncate(e.valid_up_to());
+                    }
+                }
+            }
             let text = String::from_utf8(bytes)
                 .map_err(|_| Error::format(path, "data", "the ascii data is not text"))?;
             parse_text_samples(&text, h.stored, h.count, path, &h.type_name)

@@ -321,14 +321,19 @@ pub fn geometry_to_json(g: &Geometry) -> String {
 /// Parses geometry JSON text (`path` only names it in errors) and validates it.
 pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
     let bad = |m: String| Error::format(path, "geometry", m);
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut value: serde_json::Value =
         serde_json::from_str(text).map_err(|e| bad(e.to_string()))?;
+    if !value.is_object() {
+        return Err(bad("the top level must be a JSON object { … }".into()));
+    }
     // Extra sections (objects, arrays) are metadata and ignored; an unknown scalar is
     // refused below as a likely typo.
     if let Some(map) = value.as_object_mut() {
         map.retain(|k, v| KNOWN_FIELDS.contains(&k.as_str()) || !(v.is_object() || v.is_array()));
     }
-    let j: GeometryJson = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
+    let j: GeometryJson =
+        serde_json::from_value(value).map_err(|e| bad(crate::json::explain(&e.to_string())))?;
     let beam = match (j.beam, j.sid, j.sdd) {
         (BeamName::Parallel, None, None) => Beam::Parallel,
         (BeamName::Parallel, _, _) => {
@@ -433,16 +438,7 @@ pub fn read_angles_txt(path: &Path) -> Result<Vec<f64>> {
 
 /// Reads a text file of at most 64 MiB (geometry and angle files are tiny).
 fn read_small_text(path: &Path) -> Result<String> {
-    let (file, len) = super::open(path)?;
-    if len > 64 << 20 {
-        return Err(Error::too_large(
-            format!("{}", path.display()),
-            format!("{len} bytes for a text file"),
-        ));
-    }
-    drop(file);
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    String::from_utf8(bytes).map_err(|_| Error::format(path, "text", "the file is not UTF-8"))
+    super::read_text_limited(path, "text file", 64 << 20)
 }
 
 fn extension(path: &Path) -> Option<String> {

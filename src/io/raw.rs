@@ -20,7 +20,6 @@ use super::{read_error, read_samples, Endian, Stored};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, check_spacing, AnyVolume};
 use glam::{DMat4, DVec4};
-use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
@@ -127,11 +126,10 @@ impl RawSpec {
 pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<AnyVolume> {
     let data_bytes = spec.data_bytes(path)?;
     check_spacing(spec.spacing).map_err(|e| Error::format(path, "spacing", e.to_string()))?;
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let (mut file, _) = super::open(path)?;
     let mut magic = [0u8; 2];
     let got = super::fill(&mut file, &mut magic).map_err(|e| Error::io(path, e))?;
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let (file, len) = super::open(path)?;
     let expected = spec.offset.saturating_add(data_bytes);
     if got == 2 && magic == [0x1f, 0x8b] {
         // Compressed: the decompressed length is known only after reading it all.

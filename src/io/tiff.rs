@@ -39,7 +39,6 @@ use super::{reserve, Samples};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, AnyVolume};
 use glam::{DMat4, DVec3};
-use std::fs::File;
 use std::io::{BufReader, Cursor, Read, Seek};
 use std::path::{Path, PathBuf};
 use tiff::decoder::{Decoder, DecodingResult, Limits};
@@ -181,7 +180,7 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
 fn open<'a>(input: &'a Input, page_bytes: usize) -> Result<Dec<'a>> {
     let path = input.path();
     let source: Box<dyn Source + 'a> = match input {
-        Input::File(p) => Box::new(BufReader::new(File::open(p).map_err(|e| Error::io(p, e))?)),
+        Input::File(p) => Box::new(BufReader::new(super::open(p)?.0)),
         Input::Bytes(b, _) => Box::new(Cursor::new(*b)),
     };
     let mut limits = Limits::default();

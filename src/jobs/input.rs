@@ -74,6 +74,9 @@ pub struct LoadOptions {
     pub raw: Option<RawInput>,
     /// NaN or infinite voxels: replaced (with a warning) or refused.
     pub non_finite: NonFinite,
+    /// Refuse data files that a header names outside its own folder
+    /// ([`crate::io::ReadOptions::confine_data_files`]).
+    pub confine_data_files: bool,
 }
 
 impl Default for LoadOptions {
@@ -82,6 +85,7 @@ impl Default for LoadOptions {
             phantom_size: 128,
             raw: None,
             non_finite: NonFinite::Replace,
+            confine_data_files: false,
         }
     }
 }
@@ -178,7 +182,12 @@ impl VolumeInput {
                 };
                 crate::io::raw::read_raw(path, &spec)
             }
-            None => crate::io::read_volume(path),
+            None => crate::io::read_volume_with(
+                path,
+                &crate::io::ReadOptions {
+                    confine_data_files: self.load.confine_data_files,
+                },
+            ),
         }
     }
 

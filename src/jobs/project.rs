@@ -229,6 +229,12 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                      use --method joseph)",
                 ));
                     }
+                    let (_, dims) = phantom.as_ref().expect("a phantom");
+                    let affine =
+                        crate::cpu::project::phantom_to_ct_matrix() * ph.grid_affine(*dims);
+                    if let Some(w) = g.check_source_outside(affine, *dims)? {
+                        progress.warn(&w);
+                    }
                     let p = project_phantom(ph, &g)?;
                     (format!("{} analytic, cpu f64", ph.name), p, Backend::Cpu)
                 }
@@ -246,6 +252,9 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                             )
                         }
                     };
+                    if let Some(w) = g.check_source_outside(grid.affine, grid.dims)? {
+                        progress.warn(&w);
+                    }
                     let engine = Engine::open(a.backend)?;
                     match (engine.backend(), engine.gpu()) {
                         (Backend::Gpu, Some(ctx)) => {

@@ -345,11 +345,7 @@ pub fn build_scene(
     }
     let camera = scene_camera(a, &volume)?;
     let mut settings = match &a.settings_file {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
-            serde_json::from_str::<RenderSettings>(&text)
-                .map_err(|e| Error::format(p, "render settings JSON", e.to_string()))?
-        }
+        Some(p) => crate::json::read_file::<RenderSettings>(p, "render settings JSON")?,
         None => {
             let mut s = RenderSettings {
                 mode: a.mode,

@@ -133,11 +133,49 @@ def src(rel):
         return f.read()
 
 
-put("dicom-truncated-pixels.dcm", src("tests/corpus/dicom/explicit_big.dcm")[:60000], "format", "file", "truncated")
-put("dicom-truncated-header.dcm", src("tests/corpus/dicom/implicit_little.dcm")[:200], "format", "file", "truncated")
+put("dicom-truncated-pixels.dcm", src("tests/corpus/dicom/explicit_big.dcm")[:60000], "format", "PixelData", "truncated")
+put("dicom-truncated-header.dcm", src("tests/corpus/dicom/implicit_little.dcm")[:200], "format", "MediaStorageSOPInstanceUID", "truncated")
 put("dicom-jpeg2000.dcm", src("tests/corpus/dicom/jpeg_2000.dcm"), "format", "TransferSyntaxUID", "JPEG 2000")
 put("tiff-truncated.tif", src("data/microct-bone/bone_128x128x128.tif")[:40000], "format", "file", "truncated")
 put("tiff-ifd-past-end.tif", b"II*\x00" + struct.pack("<I", 1 << 30) + bytes(16), "format", "file", "")
+
+# --- Hostile headers: lying lengths, endless data files, terminal escapes ----------
+def dicom_element(group, elem, vr, value):
+    v = value + (b"\0" if len(value) % 2 else b"")
+    if vr in (b"OB", b"OW", b"SQ", b"UN", b"UT"):
+        return struct.pack("<HH", group, elem) + vr + b"\0\0" + struct.pack("<I", len(v)) + v
+    return struct.pack("<HH", group, elem) + vr + struct.pack("<H", len(v)) + v
+
+
+def dicom_file(dataset, syntax=b"1.2.840.10008.1.2.1"):
+    meta = dicom_element(0x0002, 0x0001, b"OB", b"\0\1") + dicom_element(0x0002, 0x0010, b"UI", syntax)
+    meta = dicom_element(0x0002, 0x0000, b"UL", struct.pack("<I", len(meta))) + meta
+    return bytes(128) + b"DICM" + meta + dataset
+
+
+image = (dicom_element(0x0028, 0x0002, b"US", struct.pack("<H", 1))
+         + dicom_element(0x0028, 0x0004, b"CS", b"MONOCHROME2")
+         + dicom_element(0x0028, 0x0010, b"US", struct.pack("<H", 16))
+         + dicom_element(0x0028, 0x0011, b"US", struct.pack("<H", 16))
+         + dicom_element(0x0028, 0x0100, b"US", struct.pack("<H", 16))
+         + dicom_element(0x0028, 0x0101, b"US", struct.pack("<H", 16))
+         + dicom_element(0x0028, 0x0102, b"US", struct.pack("<H", 15))
+         + dicom_element(0x0028, 0x0103, b"US", struct.pack("<H", 0)))
+# PixelData (7FE0,0010) OW claiming 0xFFFFFFF0 bytes (4 GiB) in a file of a few hundred.
+huge = struct.pack("<HH", 0x7FE0, 0x0010) + b"OW\0\0" + struct.pack("<I", 0xFFFFFFF0) + bytes(512)
+put("dicom-huge-pixel-length.dcm", dicom_file(image + huge), "format", "PixelData", "claims 4294967280 bytes")
+put("nrrd-ascii-data-dev-zero.nhdr",
+    b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: ascii\ndata file: /dev/zero\n",
+    "format", "data file", "character device")
+put("nrrd-data-file-list.nhdr",
+    b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 2\nencoding: raw\ndata file: LIST\nslice0.raw\nslice1.raw\n",
+    "format", "data file", "LIST")
+put("nrrd-terminal-escapes.nrrd",
+    nrrd([("type", "\x1b[2J\x1b]0;pwned\x07\x00"), ("dimension", "3"), ("sizes", "1 1 1"), ("encoding", "raw")], bytes(1)),
+    "format", "type", "\\u{1b}[2J\\u{1b}]0;pwned\\u{7}\\u{0}")
+put("nrrd-gzip-extra-data.nrrd", nrrd(base[:3] + [("encoding", "gzip")], gzip.compress(bytes(65), mtime=0)),
+    "format", "data", "1 bytes more than")
+put("nifti-vox-offset-huge.nii", nifti(vox_offset=3e38), "format", "vox_offset", "past the end of any file")
 
 with open(os.path.join(HERE, "EXPECTED.tsv"), "w") as f:
     f.write("# file\terror kind\tfield (empty: any)\twords the message must contain (empty: none)\n")

@@ -104,6 +104,11 @@ pub struct LoadArgs {
     /// +inf by the largest, with a warning; see docs/io.md) or refuse the volume.
     #[arg(long, value_parser = choice::<NonFinite>(), default_value = "replace")]
     pub non_finite: NonFinite,
+    /// Refuse a data file that a header (NRRD `data file:`) names outside the header's
+    /// own folder. The format allows absolute paths and `../`, so without this flag a
+    /// header can make voxlab read any file you can read.
+    #[arg(long)]
+    pub confine_data_files: bool,
 }
 
 impl LoadArgs {
@@ -119,6 +124,7 @@ impl LoadArgs {
                 offset: self.raw_offset,
             }),
             non_finite: self.non_finite,
+            confine_data_files: self.confine_data_files,
         }
     }
 
@@ -278,10 +284,12 @@ impl Progress for Terminal {
 
     fn note(&self, text: &str) {
         let prefix = self.note_prefix;
+        let text = voxlab::error::escape_controls(text);
         self.suspend(|| eprintln!("{prefix}{text}"));
     }
 
     fn warn(&self, text: &str) {
+        let text = voxlab::error::escape_controls(text);
         self.suspend(|| eprintln!("voxlab: warning: {text}"));
     }
 }

@@ -101,11 +101,18 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // Ctrl-C, kill and a closed terminal remove the temporary files of unfinished
+    // writes (docs/io.md).
+    voxlab::io::remove_temp_files_on_signals();
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("voxlab: error: {e}");
+            // Messages quote file contents: no byte of them reaches the terminal raw.
+            eprintln!(
+                "voxlab: error: {}",
+                voxlab::error::escape_controls(&e.to_string())
+            );
             ExitCode::FAILURE
         }
     }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use voxlab::jobs::adaptive::AdaptiveRequest;
 use voxlab::jobs::Backend;
-use voxlab::{Error, Result};
+use voxlab::Result;
 
 /// Arguments of `voxlab adaptive`.
 #[derive(Args)]
@@ -62,12 +62,7 @@ pub struct AdaptiveArgs {
 
 /// Runs the comparison and writes the report into `a.out`.
 pub fn run(a: AdaptiveArgs) -> Result<ExitCode> {
-    if a.out.is_file() {
-        return Err(Error::invalid(
-            "--out",
-            format!("{} is a file, not a folder", a.out.display()),
-        ));
-    }
+    voxlab::io::check_output_dir("--out", &a.out)?;
     let input = a
         .input
         .clone()

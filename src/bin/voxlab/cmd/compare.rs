@@ -29,6 +29,7 @@ pub struct CompareArgs {
 /// Renders on the oracle and the GPU, writes the evidence, prints the numbers; exit
 /// status 3 when a given tolerance is exceeded.
 pub fn run(c: CompareArgs) -> Result<ExitCode> {
+    voxlab::io::check_output_dir("--out-dir", &c.out_dir)?;
     let req = CompareRequest {
         scene: c.scene.request(&c.accel)?,
         max_abs: c.max_abs,

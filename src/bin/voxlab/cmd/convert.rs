@@ -38,6 +38,7 @@ pub struct ConvertArgs {
 }
 
 pub fn run(c: ConvertArgs) -> Result<ExitCode> {
+    voxlab::io::check_volume_output("output file", &c.output)?;
     let req = ConvertRequest {
         input: c.load.input(&c.input),
         crop: c.crop,

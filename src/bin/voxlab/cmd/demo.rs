@@ -14,6 +14,7 @@ pub struct DemoArgs {
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
+    voxlab::io::check_output_dir("--out", &a.out)?;
     let renderer = Renderer::new(Backend::Auto)?;
     eprintln!(
         "voxlab demo: rendering a gallery of embedded real scans and built-in phantoms on {}…",

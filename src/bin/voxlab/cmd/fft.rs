@@ -30,6 +30,9 @@ pub fn run(a: FftArgs) -> Result<ExitCode> {
     if a.runs == 0 {
         return Err(Error::invalid("--runs", "must be at least 1"));
     }
+    if let Some(j) = &a.json {
+        voxlab::io::check_output("--json", j, &["json"])?;
+    }
     let shapes = a
         .shapes
         .iter()

@@ -49,6 +49,9 @@ pub fn run(a: InfoArgs) -> Result<ExitCode> {
     let input = a.input.as_deref().ok_or_else(|| {
         Error::invalid("arguments", "give a volume file or phantom:NAME, or --gpu")
     })?;
+    if let Some(p) = &a.plot {
+        voxlab::io::check_output("--plot", p, &["png"])?;
+    }
     let v = voxlab::jobs::info::run(&a.load.input(input), a.bins, a.plot.is_some())?;
     if let (Some(p), Some(h)) = (&a.plot, &v.plot_histogram) {
         write_frame(p, &h.plot(768, 320)?, Default::default())?;

@@ -17,6 +17,7 @@ pub struct PhantomArgs {
 }
 
 pub fn run(a: PhantomArgs) -> Result<ExitCode> {
+    voxlab::io::check_volume_output("--out", &a.out)?;
     let p = voxlab::jobs::phantom::run(&a.spec)?;
     voxlab::io::write_volume(&a.out, &p.volume)?;
     println!(

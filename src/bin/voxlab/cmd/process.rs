@@ -5,7 +5,6 @@ use crate::cli::{choice, list, LoadArgs, Terminal};
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use voxlab::io::check_output;
 use voxlab::jobs::process::{Op, ProcessRequest};
 use voxlab::jobs::Backend;
 use voxlab::settings::Filter;
@@ -54,7 +53,7 @@ pub struct ProcessArgs {
 }
 
 pub fn run(a: ProcessArgs) -> Result<ExitCode> {
-    check_output("--out", &a.out, &["nrrd", "nhdr", "npy", "nii", "gz"])?;
+    voxlab::io::check_volume_output("--out", &a.out)?;
     let req = ProcessRequest {
         input: a.load.input(&a.input),
         op: a.op,

@@ -6,7 +6,7 @@ use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use voxlab::io::projections::Layout;
-use voxlab::io::{write_frame, PngOptions};
+use voxlab::io::{check_output, write_frame, PngOptions};
 use voxlab::jobs::project::{BeamKind, LayoutChoice, Method, ProjectRequest};
 use voxlab::jobs::Backend;
 use voxlab::{Error, Result};
@@ -89,6 +89,10 @@ pub fn run(a: ProjectArgs) -> Result<ExitCode> {
                 a.out.display()
             ),
         ));
+    }
+    check_output("--out", &a.out, &["npy", "nrrd", "nhdr"])?;
+    if let Some(png) = &a.png {
+        check_output("--png", png, &["png"])?;
     }
     let req = ProjectRequest {
         input: a.load.input(&a.input),

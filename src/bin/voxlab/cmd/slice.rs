@@ -37,6 +37,7 @@ pub struct SliceArgs {
 }
 
 pub fn run(a: SliceArgs) -> Result<ExitCode> {
+    voxlab::io::check_output("--out", &a.out, &["png", "npy"])?;
     let req = SliceRequest {
         input: a.load.input(&a.input),
         axis: a.axis.clone(),
