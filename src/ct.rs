@@ -223,9 +223,18 @@ impl Geometry {
     /// integrals mean nothing — and is refused; a source that only enters the box's
     /// corners at some views gives a warning (returned). Parallel beams pass.
     ///
+    /// `what` names the SID's origin in the error (`--sid`, `geometry sid`) and `box_name`
+    /// the box (`the object`, `the reconstruction grid`).
+    ///
     /// # Errors
-    /// [`Error::Invalid`] naming `--sid`, the SID and the box's radius.
-    pub fn check_source_outside(&self, affine: DMat4, dims: [usize; 3]) -> Result<Option<String>> {
+    /// [`Error::Invalid`] naming `what`, the SID and the box's radius.
+    pub fn check_source_outside(
+        &self,
+        affine: DMat4,
+        dims: [usize; 3],
+        what: &str,
+        box_name: &str,
+    ) -> Result<Option<String>> {
         let Beam::Cone { sid, .. } = self.beam else {
             return Ok(None);
         };
@@ -258,9 +267,9 @@ impl Geometry {
         let r_in = (-lo.x).min(hi.x).min(-lo.z).min(hi.z).max(0.0);
         if sid <= r_in {
             return Err(Error::invalid(
-                "--sid",
+                what,
                 format!(
-                    "the source at SID = {sid} mm lies inside the object at every view (its box \
+                    "the source at SID = {sid} mm lies inside {box_name} at every view (its box \
                      holds a circle of radius {r_in:.4} mm about the rotation axis): SID must \
                      exceed {r_in:.4} mm"
                 ),
@@ -268,9 +277,9 @@ impl Geometry {
         }
         Ok((sid < r_out).then(|| {
             format!(
-                "the source at SID = {sid} mm enters the corners of the object's box (radius up \
-                 to {r_out:.4} mm about the rotation axis) at some views; rays that start \
-                 inside the object give wrong integrals there"
+                "the source at SID = {sid} mm enters the corners of {box_name}'s box (radius \
+                 up to {r_out:.4} mm about the rotation axis) at some views; rays from inside \
+                 the box give wrong values there"
             )
         }))
     }

@@ -380,6 +380,28 @@ fn a_source_inside_the_object_or_a_denormal_distance_is_refused() {
     let o = run("150");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("enters the corners"), "{}", stderr(&o));
+    // Reconstructing those projections onto a grid of 800 mm puts the source (150 mm
+    // from the axis) inside the grid.
+    let rec = dir.join("r.npy");
+    let o = voxlab(&[
+        "reconstruct",
+        s(&out),
+        "--size",
+        "8",
+        "--spacing",
+        "100",
+        "--out",
+        s(&rec),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains(
+            "invalid geometry sid: the source at SID = 150 mm lies inside the reconstruction grid"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!rec.exists());
     let g = voxlab::io::projections::geometry_from_json(
         r#"{"beam": "cone", "sid": 1e-320, "sdd": 1500, "cols": 4, "rows": 4, "du": 1, "dv": 1, "angles_deg": [0]}"#,
         Path::new("g.json"),

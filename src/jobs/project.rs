@@ -232,7 +232,7 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                     let (_, dims) = phantom.as_ref().expect("a phantom");
                     let affine =
                         crate::cpu::project::phantom_to_ct_matrix() * ph.grid_affine(*dims);
-                    if let Some(w) = g.check_source_outside(affine, *dims)? {
+                    if let Some(w) = g.check_source_outside(affine, *dims, "--sid", "the object")? {
                         progress.warn(&w);
                     }
                     let p = project_phantom(ph, &g)?;
@@ -252,7 +252,9 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                             )
                         }
                     };
-                    if let Some(w) = g.check_source_outside(grid.affine, grid.dims)? {
+                    if let Some(w) =
+                        g.check_source_outside(grid.affine, grid.dims, "--sid", "the object")?
+                    {
                         progress.warn(&w);
                     }
                     let engine = Engine::open(a.backend)?;

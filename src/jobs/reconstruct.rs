@@ -282,7 +282,17 @@ pub fn reconstruct(
         let n = a.size.unwrap_or(g.cols);
         check_size(n, 2048)?;
         let s = a.spacing.unwrap_or(g.du * sid / sdd);
-        (p, g, rtk_grid([n; 3], [s; 3]))
+        let grid = rtk_grid([n; 3], [s; 3]);
+        // A source inside the reconstructed grid: refused; in its corners: a warning.
+        if let Some(w) = g.check_source_outside(
+            grid.affine,
+            grid.dims,
+            "geometry sid",
+            "the reconstruction grid",
+        )? {
+            progress.warn(&w);
+        }
+        (p, g, grid)
     };
     let total = grid.dims.iter().product::<usize>();
     if total > crate::volume::max_voxels() {
