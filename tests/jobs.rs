@@ -235,3 +235,40 @@ fn auto_takes_a_backend_the_job_runs_on() {
         }
     }
 }
+
+#[test]
+fn an_in_memory_transfer_function_renders_as_its_file_does() {
+    use voxlab::jobs::render::{build_scene, SceneRequest};
+    let dir = std::env::temp_dir().join(format!("voxlab-jobs-tf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let tf = voxlab::transfer::TransferFunction::preset("ct-bone").unwrap();
+    let file = dir.join("bone.json");
+    tf.save(&file).unwrap();
+    let from_file = SceneRequest {
+        input: voxlab::jobs::input::VolumeInput::new("phantom:sphere:8"),
+        tf: file.to_str().unwrap().into(),
+        ..Default::default()
+    };
+    let in_memory = SceneRequest {
+        input: voxlab::jobs::input::VolumeInput::new("phantom:sphere:8"),
+        transfer: Some(tf.clone()),
+        ..Default::default()
+    };
+    let (a, _) = build_scene(&from_file, false, &()).unwrap();
+    let (b, _) = build_scene(&in_memory, false, &()).unwrap();
+    assert_eq!(a.transfer, b.transfer);
+    assert_eq!(b.transfer, tf);
+    // An invalid one is refused like a file's.
+    let mut bad = tf;
+    bad.points.clear();
+    let r = build_scene(
+        &SceneRequest {
+            transfer: Some(bad),
+            ..Default::default()
+        },
+        false,
+        &(),
+    );
+    assert!(r.is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

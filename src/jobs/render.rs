@@ -211,6 +211,13 @@ pub struct SceneRequest {
     /// GPU only: trilinear filtering by the texture unit.
     pub hardware_filtering: bool,
     pub accel: AccelRequest,
+    /// A transfer function given in memory (the Python package, the lab), used instead
+    /// of `tf` (but not of `tf_preset`, `faux_shading` and `window`, which apply to it).
+    #[serde(skip)]
+    pub transfer: Option<TransferFunction>,
+    /// A 2D transfer function given in memory, used instead of `tf2d`.
+    #[serde(skip)]
+    pub transfer_2d: Option<TransferFunction2D>,
 }
 
 impl Default for SceneRequest {
@@ -249,6 +256,8 @@ impl Default for SceneRequest {
             settings_file: None,
             hardware_filtering: false,
             accel: AccelRequest::default(),
+            transfer: None,
+            transfer_2d: None,
         }
     }
 }
@@ -288,7 +297,10 @@ pub fn build_scene(
     progress: &dyn Progress,
 ) -> Result<(Scene, RenderSettings)> {
     let volume = a.input.load(progress)?;
-    let mut tf = if a.tf == "auto" {
+    let mut tf = if let Some(t) = &a.transfer {
+        t.validate()?;
+        t.clone()
+    } else if a.tf == "auto" {
         if a.input.is_phantom() {
             TransferFunction::preset("phantom")?
         } else {
@@ -298,9 +310,13 @@ pub fn build_scene(
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };
-    let mut tf2d = match &a.tf2d {
-        Some(spec) => Some(TransferFunction2D::preset_or_file(spec)?),
-        None => None,
+    let mut tf2d = match (&a.transfer_2d, &a.tf2d) {
+        (Some(t), _) => {
+            t.validate()?;
+            Some(t.clone())
+        }
+        (None, Some(spec)) => Some(TransferFunction2D::preset_or_file(spec)?),
+        (None, None) => None,
     };
     if let Some(name) = &a.tf_preset {
         if crate::transfer2d::PRESETS_2D.iter().any(|(n, _)| n == name) {

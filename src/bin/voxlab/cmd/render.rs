@@ -378,6 +378,8 @@ impl SceneArgs {
             settings_file: self.settings.clone(),
             hardware_filtering: self.hardware_filtering,
             accel: accel.request(),
+            transfer: None,
+            transfer_2d: None,
         })
     }
 }
