@@ -1326,7 +1326,31 @@ fn pixel_bytes(im: &Image) -> Result<std::borrow::Cow<'_, [u8]>> {
             "reading DICOM on a big-endian machine is not supported",
         ));
     }
-    Ok(prim.to_bytes())
+    let big = im.obj.meta().transfer_syntax() == "1.2.840.10008.1.2.2";
+    let size = (im.px.bits_allocated / 8) as usize;
+    use dicom_core::PrimitiveValue as P;
+    Ok(match prim {
+        // Bytes in the file's order (VR OB): samples of a big-endian file are turned
+        // around whole.
+        P::U8(_) if big && size > 1 => {
+            let mut b = prim.to_bytes().into_owned();
+            b.chunks_exact_mut(size).for_each(|w| w.reverse());
+            std::borrow::Cow::Owned(b)
+        }
+        // 16-bit words already in the machine's order (VR OW): a 32-bit sample of a
+        // big-endian file holds its high word first, so the two words are swapped.
+        P::U16(_) | P::I16(_) if big && size == 4 => {
+            let mut b = prim.to_bytes().into_owned();
+            b.chunks_exact_mut(4).for_each(|w| {
+                let (hi, lo) = w.split_at_mut(2);
+                hi.swap_with_slice(lo);
+            });
+            std::borrow::Cow::Owned(b)
+        }
+        // Values of the sample's own width in the machine's order, or bytes of 8-bit
+        // samples: already little-endian samples.
+        _ => prim.to_bytes(),
+    })
 }
 
 /// Decodes all slices; chooses the voxel type from the values (module docs).
