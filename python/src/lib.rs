@@ -14,6 +14,7 @@ mod ct;
 mod errors;
 mod fft;
 mod job;
+mod jobs;
 mod render;
 mod volumes;
 
@@ -33,5 +34,6 @@ fn _voxlab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     render::register(m)?;
     fft::register(m)?;
     ct::register(m)?;
+    jobs::register(m)?;
     Ok(())
 }

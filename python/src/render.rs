@@ -11,6 +11,8 @@ use voxlab::jobs::input::VolumeInput;
 use voxlab::jobs::render::{build_scene, RenderRequest, Renderer as JobRenderer, SceneRequest};
 use voxlab::jobs::Backend;
 use voxlab::metrics::{check_parity, diff_heatmap, Tolerance};
+use voxlab::transfer::TransferFunction;
+use voxlab::transfer2d::TransferFunction2D;
 use voxlab::volume::AnyVolume;
 
 /// A volume from Python: an array with its affine, or nothing (the request's `input`
@@ -28,6 +30,24 @@ fn memory_input(
             load,
             memory: Some(Arc::new(v)),
         };
+    }
+    Ok(())
+}
+
+/// Transfer functions given in memory (their JSON, parsed here): the scene's
+/// `transfer` and `transfer_2d`, used instead of the request's `tf` and `tf2d`.
+fn memory_transfers(
+    py: Python<'_>,
+    scene: &mut SceneRequest,
+    tf: Option<&str>,
+    tf2d: Option<&str>,
+) -> PyResult<()> {
+    if let Some(t) = tf {
+        scene.transfer = Some(TransferFunction::from_json(t).map_err(|e| errors::to_py(py, &e))?);
+    }
+    if let Some(t) = tf2d {
+        scene.transfer_2d =
+            Some(TransferFunction2D::from_json(t).map_err(|e| errors::to_py(py, &e))?);
     }
     Ok(())
 }
@@ -50,19 +70,22 @@ fn output_parts(
 
 /// The render job (`voxlab render`) from a JSON [`RenderRequest`].
 #[pyfunction]
-#[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+#[pyo3(signature = (request, volume=None, affine=None, progress=None, tf=None, tf2d=None))]
 fn render(
     py: Python<'_>,
     request: &str,
     volume: Option<Bound<'_, PyAny>>,
     affine: Option<[[f64; 4]; 4]>,
     progress: Option<Bound<'_, PyAny>>,
+    tf: Option<&str>,
+    tf2d: Option<&str>,
 ) -> PyResult<RenderParts> {
     let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
     let vol = volume
         .as_ref()
         .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
     memory_input(py, &mut req.scene, vol)?;
+    memory_transfers(py, &mut req.scene, tf, tf2d)?;
     let r = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::render::run(&req, p)
     })?;
@@ -117,7 +140,7 @@ impl Renderer {
     /// One frame of a JSON [`RenderRequest`] (its `backend` is ignored: the renderer's
     /// is used). Stereo pairs, repeats, extra volumes and adaptive sampling go through
     /// `voxlab.render`.
-    #[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+    #[pyo3(signature = (request, volume=None, affine=None, progress=None, tf=None, tf2d=None))]
     fn render(
         &self,
         py: Python<'_>,
@@ -125,6 +148,8 @@ impl Renderer {
         volume: Option<Bound<'_, PyAny>>,
         affine: Option<[[f64; 4]; 4]>,
         progress: Option<Bound<'_, PyAny>>,
+        tf: Option<&str>,
+        tf2d: Option<&str>,
     ) -> PyResult<RenderParts> {
         let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
         if req.stereo.is_some()
@@ -143,6 +168,7 @@ impl Renderer {
             .as_ref()
             .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
         memory_input(py, &mut req.scene, vol)?;
+        memory_transfers(py, &mut req.scene, tf, tf2d)?;
         let renderer = &self.inner;
         let (out, timings, seconds) = job::run(py, job::callback(&progress), |p| {
             let (scene, mut settings) = build_scene(&req.scene, req.samples, p)?;
@@ -168,19 +194,22 @@ type CompareParts = (Py<PyAny>, Py<PyAny>, Py<PyAny>, String);
 
 /// The compare job (`voxlab compare`) from a JSON [`CompareRequest`].
 #[pyfunction]
-#[pyo3(signature = (request, volume=None, affine=None, progress=None))]
+#[pyo3(signature = (request, volume=None, affine=None, progress=None, tf=None, tf2d=None))]
 fn compare(
     py: Python<'_>,
     request: &str,
     volume: Option<Bound<'_, PyAny>>,
     affine: Option<[[f64; 4]; 4]>,
     progress: Option<Bound<'_, PyAny>>,
+    tf: Option<&str>,
+    tf2d: Option<&str>,
 ) -> PyResult<CompareParts> {
     let mut req: CompareRequest = errors::parse_request(py, "compare option", request)?;
     let vol = volume
         .as_ref()
         .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
     memory_input(py, &mut req.scene, vol)?;
+    memory_transfers(py, &mut req.scene, tf, tf2d)?;
     let c = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::compare::run(&req, p)
     })?;

@@ -16,16 +16,18 @@ Conventions (docs/python.md has them all):
   (called as ``callback(stage, done, total)``) and stop on Ctrl-C.
 - Errors are :class:`VoxlabError` subclasses (see :mod:`voxlab._errors`).
 
-Submodules: :mod:`voxlab.fft` (numpy.fft's namespace on voxlab's FFTs) and
-:mod:`voxlab.transform` (scikit-image's ``iradon`` on voxlab's FBP) and :mod:`voxlab.ct`
-(forward projection, FBP and FDK with the library's geometry).
+Submodules: :mod:`voxlab.fft` (numpy.fft's namespace on voxlab's FFTs),
+:mod:`voxlab.transform` (scikit-image's ``iradon`` on voxlab's FBP), :mod:`voxlab.ct`
+(forward projection, FBP and FDK with the library's geometry) and
+:mod:`voxlab.ndimage` (scipy.ndimage's Gaussian, median and gradient magnitude).
+Also :func:`fvr`, :func:`d2vr`, :func:`adaptive`, :func:`process`, :func:`resample`
+and :func:`bench`: the remaining jobs.
 """
 
 from __future__ import annotations
 
 import json as _json
 import os as _os
-import tempfile as _tempfile
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
 
@@ -401,11 +403,12 @@ class RenderResult:
 
 class _Request:
     """Keyword arguments as the render job's JSON request; a TransferFunction or a
-    dict of 2D widgets given in memory travels as a temporary JSON file (the request
-    names transfer functions by preset or file), removed afterwards."""
+    dict of 2D widgets given in memory travels beside it as JSON (the scene's
+    ``transfer`` / ``transfer_2d``, parsed by the library; no file)."""
 
     def __init__(self, options: Dict[str, Any], top_keys: Sequence[str]):
-        self.temp: list = []
+        #: The in-memory transfer functions' JSON: {"tf": …, "tf2d": …}.
+        self.transfers: Dict[str, str] = {}
         scene: Dict[str, Any] = {}
         top: Dict[str, Any] = {}
         view: Dict[str, Any] = {}
@@ -426,12 +429,10 @@ class _Request:
             elif key in _LOAD_KEYS:
                 load[key] = value
             elif key in ("tf", "tf2d") and not isinstance(value, (str, _os.PathLike)):
-                text = value.to_json() if isinstance(value, TransferFunction) else _json.dumps(value)
-                fd, path = _tempfile.mkstemp(suffix=".json", prefix="voxlab-tf-")
-                with _os.fdopen(fd, "w") as fh:
-                    fh.write(text)
-                self.temp.append(path)
-                scene[key] = path
+                self.transfers[key] = (
+                    value.to_json() if isinstance(value, TransferFunction)
+                    else _json.dumps(value, default=_json_default)
+                )
             elif isinstance(value, _os.PathLike):
                 scene[key] = _os.fspath(value)
             else:
@@ -463,11 +464,7 @@ class _Request:
         return _json.dumps({"scene": self.scene, **self.top, **extra}, default=_json_default)
 
     def close(self) -> None:
-        for p in self.temp:
-            try:
-                _os.unlink(p)
-            except OSError:
-                pass
+        pass
 
 
 def _json_default(o: Any) -> Any:
@@ -521,7 +518,7 @@ def render(
     try:
         arr, aff = req.input(volume)
         text = req.json(backend=backend, samples=bool(samples))
-        return _result(_voxlab.render(text, arr, aff, progress))
+        return _result(_voxlab.render(text, arr, aff, progress, **req.transfers))
     finally:
         req.close()
 
@@ -565,7 +562,7 @@ class Renderer:
         try:
             arr, aff = req.input(volume)
             text = req.json(samples=bool(samples))
-            return _result(self._inner.render(text, arr, aff, progress))
+            return _result(self._inner.render(text, arr, aff, progress, **req.transfers))
         finally:
             req.close()
 
@@ -651,7 +648,8 @@ def compare(
             extra["max_abs"] = max_abs
         if rmse is not None:
             extra["rmse"] = rmse
-        cpu, gpu, heat, meta = _voxlab.compare(req.json(**extra), arr, aff, progress)
+        cpu, gpu, heat, meta = _voxlab.compare(req.json(**extra), arr, aff, progress,
+                                                **req.transfers)
     finally:
         req.close()
     info = _json.loads(meta)
@@ -660,11 +658,17 @@ def compare(
 
 
 from . import ct, fft, transform  # noqa: E402  (submodules use the names above)
+from ._jobs import (  # noqa: E402
+    AdaptiveResult, D2vrResult, adaptive, bench, d2vr, fvr, process, resample,
+)
+from . import ndimage  # noqa: E402
 
 __all__ = [
     "Volume", "read", "write", "info", "phantom", "phantom_names", "phantom_values",
     "phantom_line_integrals", "TransferFunction", "render", "Renderer", "RenderResult",
-    "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "BACKENDS",
+    "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "ndimage",
+    "fvr", "d2vr", "D2vrResult", "adaptive", "AdaptiveResult", "process", "resample",
+    "bench", "BACKENDS",
     "VOLUME_DTYPES", "VoxlabError", "FileError", "FormatError", "InvalidError",
     "TooLargeError", "NonFiniteError", "UnsupportedError", "GpuError", "NoGpuError",
     "CancelledError", "InternalError", "DtypeError", "ShapeError", "LayoutError",
