@@ -303,3 +303,93 @@ fn a_directory_of_tiff_files_is_a_stack_in_natural_order() {
     let vals = v.values_f64();
     assert_eq!([vals[0], vals[6], vals[12]], [1.0, 2.0, 10.0]);
 }
+
+#[test]
+fn convert_keeps_nan_and_infinities_and_refuses_what_cannot_hold_them() {
+    let dir = common::scratch("convert_non_finite");
+    let data = vec![
+        1.0f32,
+        f32::NAN,
+        -2.5,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        7.0,
+        0.0,
+        3.0,
+    ];
+    let vol: voxlab::AnyVolume = voxlab::Volume::new([2, 2, 2], [1.0; 3], data.clone())
+        .unwrap()
+        .into();
+    let input = dir.join("nan.nii.gz");
+    voxlab::io::write_volume(&input, &vol).unwrap();
+    let bits = |v: &voxlab::AnyVolume| -> Vec<u32> {
+        v.values_f64()
+            .iter()
+            .map(|&x| (x as f32).to_bits())
+            .collect()
+    };
+    // Every format keeps every value, bit for bit.
+    for ext in ["nrrd", "nhdr", "npy", "nii"] {
+        let out = dir.join(format!("out.{ext}"));
+        let o = common::voxlab(&["convert", common::s(&input), common::s(&out)]);
+        assert!(o.status.success(), "{ext}: {}", common::stderr(&o));
+        let back = voxlab::io::read_volume(&out).unwrap();
+        assert_eq!(bits(&back), bits(&vol), "{ext}");
+    }
+    // An integer type and resampling cannot keep them: refused, with the way out.
+    let out = dir.join("u8.nrrd");
+    let o = common::voxlab(&[
+        "convert",
+        common::s(&input),
+        common::s(&out),
+        "--type",
+        "u8",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = common::stderr(&o);
+    assert!(e.contains("invalid --type:"), "{e}");
+    assert!(
+        e.contains("1 NaN, 1 +inf and 1 -inf voxel(s) (first at index 1)"),
+        "{e}"
+    );
+    assert!(e.contains("--replace-non-finite"), "{e}");
+    assert!(!out.exists());
+    let o = common::voxlab(&[
+        "convert",
+        common::s(&input),
+        common::s(&out),
+        "--resize",
+        "1,1,1",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(common::stderr(&o).contains("which resampling cannot keep"));
+    // Asked for, the rendering rule: NaN and -inf → the smallest finite value (-2.5),
+    // +inf → the largest (7); then rounded and clamped into u8 (-2.5 → 0).
+    let out = dir.join("f32.nrrd");
+    let o = common::voxlab(&[
+        "convert",
+        common::s(&input),
+        common::s(&out),
+        "--replace-non-finite",
+    ]);
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    assert!(common::stderr(&o).contains("replaced"));
+    assert_eq!(
+        voxlab::io::read_volume(&out).unwrap().values_f64(),
+        vec![1.0, -2.5, -2.5, 7.0, -2.5, 7.0, 0.0, 3.0]
+    );
+    // --non-finite error refuses the input outright.
+    let o = common::voxlab(&[
+        "convert",
+        common::s(&input),
+        common::s(&out),
+        "--non-finite",
+        "error",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        common::stderr(&o).contains("non-finite"),
+        "{}",
+        common::stderr(&o)
+    );
+}

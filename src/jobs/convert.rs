@@ -1,6 +1,12 @@
 //! `voxlab convert`: a volume in another format, optionally cropped, resampled (any
 //! reconstruction filter, in f64 through the oracle's filters) and converted to
 //! another voxel type.
+//!
+//! Converting keeps every value: NaN and ±∞ voxels of a float volume stay in a float
+//! output (the rendering rule that replaces them is not applied). An integer output
+//! type or resampling cannot keep them and is refused, unless `replace_non_finite`
+//! asks for the rendering rule (NaN and −∞ → the smallest finite value, +∞ → the
+//! largest, with a warning); `input.load.non_finite = error` refuses them in any case.
 
 use super::input::VolumeInput;
 use super::Progress;
@@ -27,6 +33,9 @@ pub struct ConvertRequest {
     /// Voxel type of the output: u8, u16, i16 or f32 (values rounded and clamped into
     /// integer types). `None`: the input's type, or f32 after resampling.
     pub voxel_type: Option<String>,
+    /// Replace NaN and infinite voxels as rendering does, so that an integer type or
+    /// resampling can take them (`--replace-non-finite`).
+    pub replace_non_finite: bool,
 }
 
 impl Default for ConvertRequest {
@@ -38,6 +47,7 @@ impl Default for ConvertRequest {
             spacing: None,
             filter: Filter::Trilinear,
             voxel_type: None,
+            replace_non_finite: false,
         }
     }
 }
@@ -72,7 +82,47 @@ pub fn run(c: &ConvertRequest, progress: &dyn Progress) -> Result<AnyVolume> {
             "give new dimensions or a new spacing, not both",
         ));
     }
-    let mut vol = c.input.load(progress)?;
+    let kind = c.voxel_type.as_deref().map(voxel_kind).transpose()?;
+    let mut vol = if c.input.load.non_finite == super::input::NonFinite::Error {
+        c.input.load(progress)?
+    } else {
+        c.input.read()?
+    };
+    let count = vol.non_finite();
+    if count.total() > 0 {
+        let needs_finite =
+            kind.is_some_and(|k| k != VoxelKind::F32) || c.resize.is_some() || c.spacing.is_some();
+        if c.replace_non_finite {
+            vol.replace_non_finite();
+            progress.warn(&format!(
+                "{}: {} NaN, {} +inf and {} -inf voxel(s) replaced (NaN and -inf by the \
+                 smallest finite value, +inf by the largest)",
+                c.input.source, count.nan, count.pos_inf, count.neg_inf
+            ));
+        } else if needs_finite {
+            return Err(Error::invalid(
+                if kind.is_some_and(|k| k != VoxelKind::F32) {
+                    "--type"
+                } else {
+                    "--resize/--spacing"
+                },
+                format!(
+                    "{} holds {} NaN, {} +inf and {} -inf voxel(s) (first at index {}), which \
+                     {} cannot keep; --replace-non-finite replaces them as rendering does",
+                    c.input.source,
+                    count.nan,
+                    count.pos_inf,
+                    count.neg_inf,
+                    count.first.unwrap_or(0),
+                    if kind.is_some_and(|k| k != VoxelKind::F32) {
+                        "an integer type"
+                    } else {
+                        "resampling"
+                    }
+                ),
+            ));
+        }
+    }
     if let Some(b) = &c.crop {
         vol = vol.crop([b[0], b[1], b[2]], [b[3], b[4], b[5]])?;
     }
@@ -105,8 +155,8 @@ pub fn run(c: &ConvertRequest, progress: &dyn Progress) -> Result<AnyVolume> {
         })?
         .into();
     }
-    if let Some(t) = &c.voxel_type {
-        vol = vol.convert_to(voxel_kind(t)?);
+    if let Some(k) = kind {
+        vol = vol.convert_to(k);
     }
     Ok(vol)
 }

@@ -35,6 +35,11 @@ pub struct ConvertArgs {
     /// integer types). Default: the input's type, or f32 after resampling.
     #[arg(long = "type")]
     pub voxel_type: Option<String>,
+    /// Replace NaN and infinite voxels as rendering does (NaN and -inf by the smallest
+    /// finite value, +inf by the largest). Without it, convert keeps every value: a
+    /// float output keeps them, and an integer --type or resampling is refused.
+    #[arg(long)]
+    pub replace_non_finite: bool,
 }
 
 pub fn run(c: ConvertArgs) -> Result<ExitCode> {
@@ -46,6 +51,7 @@ pub fn run(c: ConvertArgs) -> Result<ExitCode> {
         spacing: c.spacing.clone(),
         filter: c.filter,
         voxel_type: c.voxel_type.clone(),
+        replace_non_finite: c.replace_non_finite,
     };
     let term = Terminal::bars();
     let vol = voxlab::jobs::convert::run(&req, &term)?;
