@@ -76,6 +76,17 @@ fn element(out: &mut Vec<u8>, syntax: Syntax, group: u16, elem: u16, vr: &[u8; 2
 
 /// A 2 × 3 image of `values` (BitsStored = BitsAllocated) as a DICOM file.
 fn file(syntax: Syntax, bits: u16, signed: bool, ow: bool, values: &[i64]) -> Vec<u8> {
+    image_file(syntax, bits, signed, ow, Some(values))
+}
+
+/// [`file`], or the same image without its PixelData element (`values` = `None`).
+fn image_file(
+    syntax: Syntax,
+    bits: u16,
+    signed: bool,
+    ow: bool,
+    values: Option<&[i64]>,
+) -> Vec<u8> {
     let us = |v: u16| {
         if syntax.big() {
             v.to_be_bytes().to_vec()
@@ -113,7 +124,7 @@ fn file(syntax: Syntax, bits: u16, signed: bool, ow: bool, values: &[i64]) -> Ve
     // most significant byte first in big endian, so a 32-bit sample is its high word
     // then its low word, each turned around; for OB the bytes of each sample.
     let mut px = Vec::new();
-    for &v in values {
+    for &v in values.unwrap_or(&[]) {
         let w = v as u32; // two's complement for negative values
         match bits {
             8 => px.push(w as u8),
@@ -130,14 +141,10 @@ fn file(syntax: Syntax, bits: u16, signed: bool, ow: bool, values: &[i64]) -> Ve
         }
         px.chunks_exact_mut(2).for_each(|w| w.swap(0, 1));
     }
-    element(
-        &mut ds,
-        syntax,
-        0x7FE0,
-        0x0010,
-        if ow { b"OW" } else { b"OB" },
-        &px,
-    );
+    if values.is_some() {
+        let vr = if ow { b"OW" } else { b"OB" };
+        element(&mut ds, syntax, 0x7FE0, 0x0010, vr, &px);
+    }
     if syntax == Syntax::DeflatedLittle {
         let mut z = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::default());
         z.write_all(&ds).unwrap();
@@ -225,4 +232,23 @@ fn every_syntax_bit_depth_sign_and_vr_reads_the_values_written() {
         }
     }
     assert_eq!(cases, 42);
+}
+
+#[test]
+fn a_slice_without_its_pixel_data_is_named() {
+    let dir = scratch("no_pixels");
+    let syntax = Syntax::ExplicitLittle;
+    std::fs::write(
+        dir.join("a.dcm"),
+        file(syntax, 16, false, true, &values(16, false)),
+    )
+    .unwrap();
+    std::fs::write(dir.join("b.dcm"), image_file(syntax, 16, false, true, None)).unwrap();
+    common::assert_format(
+        voxlab::io::read_volume(&dir),
+        "PixelData",
+        "has no pixel data: the file is incomplete",
+    );
+    let e = voxlab::io::read_volume(&dir).unwrap_err().to_string();
+    assert!(e.contains("b.dcm"), "{e}");
 }

@@ -6,7 +6,8 @@
 //! - **A directory** is one series: every regular file in it (not in subdirectories)
 //!   that carries the `DICM` marker at byte 128 is parsed; other files (a `README`, a
 //!   thumbnail) are skipped, and so are DICOM objects without pixel data (`DICOMDIR`,
-//!   structured reports). A directory with no DICOM image at all is an error that says
+//!   structured reports); an image (it has Rows and Columns) without its pixel data is
+//!   an error naming the file. A directory with no DICOM image at all is an error that says
 //!   what was skipped. The images are grouped by SeriesInstanceUID (0020,000E); more
 //!   than one series is an error listing each (UID, description, file count): point
 //!   at a directory that holds one series.
@@ -668,6 +669,17 @@ fn read_directory(dir: &Path) -> Result<Vec<Image>> {
         }
         let (obj, raw) = parse_file(&p)?;
         if !has_pixels(&obj, &raw) {
+            // An image (Rows, Columns) without its pixels is a broken slice, not a
+            // DICOMDIR or a report: said as such, rather than found later as a gap.
+            if int(&obj, tags::ROWS).is_some() && int(&obj, tags::COLUMNS).is_some() {
+                return Err(Error::format(
+                    &p,
+                    "PixelData",
+                    "this image (it has Rows and Columns) has no pixel data: the file is \
+                     incomplete (an interrupted transfer or export?); the series cannot be \
+                     read without it",
+                ));
+            }
             skipped.push(format!("{name} (DICOM without pixel data)"));
             continue;
         }
