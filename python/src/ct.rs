@@ -169,7 +169,62 @@ fn reconstruct_stack(
     Ok((arr, affine, meta.to_string()))
 }
 
+/// The Radon transform of a C-contiguous float32 or float64 `(rows, cols)` image
+/// ([`voxlab::jobs::radon::radon`], in the image's precision), one angle per inverse
+/// map `[h0 … h5]` (scikit-image's rotation matrix's first two rows, as the Python half
+/// computes it): the `(bins, angles)` sinogram of the same dtype.
+#[pyfunction]
+#[pyo3(signature = (image, maps, circle, backend, progress=None))]
+fn radon(
+    py: Python<'_>,
+    image: &Bound<'_, PyAny>,
+    maps: Vec<[f64; 6]>,
+    circle: bool,
+    backend: &str,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<Py<PyAny>> {
+    let backend: Backend = backend.parse().map_err(|e| errors::to_py(py, &e))?;
+    let cs = maps;
+    fn go<R: voxlab::real::Real + numpy::Element>(
+        py: Python<'_>,
+        a: PyReadonlyArrayDyn<'_, R>,
+        cs: &[[f64; 6]],
+        circle: bool,
+        backend: Backend,
+        progress: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<Py<PyAny>> {
+        let shape = a.shape().to_vec();
+        if shape.len() != 2 {
+            return Err(errors::raise(py, "ShapeError", "the image must be 2-D"));
+        }
+        let s = a
+            .as_slice()
+            .map_err(|_| errors::raise(py, "LayoutError", "the image must be C-contiguous"))?;
+        let sino = job::run(py, job::callback(&progress), |p| {
+            voxlab::jobs::radon::radon(s, shape[0], shape[1], cs, circle, backend, p)
+        })?;
+        Ok(sino
+            .data
+            .into_pyarray(py)
+            .reshape([sino.bins, sino.angles])?
+            .into_any()
+            .unbind())
+    }
+    if let Ok(a) = image.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+        go(py, a, &cs, circle, backend, progress)
+    } else if let Ok(a) = image.extract::<PyReadonlyArrayDyn<'_, f32>>() {
+        go(py, a, &cs, circle, backend, progress)
+    } else {
+        Err(errors::raise(
+            py,
+            "DtypeError",
+            "the Radon transform takes a float32 or float64 image",
+        ))
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(radon, m)?)?;
     m.add_function(wrap_pyfunction!(fbp_parallel, m)?)?;
     m.add_function(wrap_pyfunction!(project, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_stack, m)?)?;

@@ -139,8 +139,6 @@ def test_what_is_not_covered_says_so():
             vt.iradon(sino, interpolation=interp)
     with pytest.raises(voxlab.UnsupportedError, match="filter_name=None"):
         vt.iradon(sino, filter_name=None)
-    with pytest.raises(NotImplementedError):
-        vt.radon(np.ones((8, 8)))
 
 
 def test_cpu_f32_backend():

@@ -1,4 +1,4 @@
-"""scikit-image's ``iradon`` on voxlab's filtered backprojection.
+"""scikit-image's ``radon`` and ``iradon`` on voxlab's library.
 
 :func:`iradon` has ``skimage.transform.iradon``'s signature, conventions, dtype
 handling and errors, and computes with the library's reconstruct job (the ramp
@@ -10,12 +10,12 @@ Conventions (scikit-image's): a sinogram has shape ``(detector, angle)``; angles
 ``theta`` in degrees; the rotation centre is detector bin ``n // 2`` and image pixel
 ``(n // 2, n // 2)``; ``x = col − n//2``, ``y = n//2 − row``, ``s = x·cos θ + y·sin θ``.
 
+:func:`radon` is scikit-image's rotate-and-sum transform on the library's
+``cpu::radon`` (``jobs::radon::radon``), equal to scikit-image's result.
+
 Not covered yet, each refused with :class:`voxlab.UnsupportedError` rather than
 computed differently: ``interpolation="nearest"`` and ``"cubic"`` (only ``"linear"``,
-scikit-image's default), ``filter_name=None`` (no filter), and :func:`radon` (the
-library's forward projectors — exact line integrals and Joseph's method — are a
-different discretisation from scikit-image's rotate-and-sum ``radon``; see
-docs/projection.md for how far apart they are).
+scikit-image's default) and ``filter_name=None`` (no filter).
 """
 
 from __future__ import annotations
@@ -48,9 +48,9 @@ def _convert_to_float(image: np.ndarray, preserve_range: bool) -> np.ndarray:
     if image.dtype == bool:
         return image.astype(float)
     if image.dtype.kind == "u":
-        return image.astype(float) / float(np.iinfo(image.dtype).max)
+        return np.multiply(image, 1.0 / np.iinfo(image.dtype).max, dtype=np.float64)
     if image.dtype.kind == "i":
-        out = image.astype(float) / float(np.iinfo(image.dtype).max)
+        out = np.multiply(image, 1.0 / np.iinfo(image.dtype).max, dtype=np.float64)
         return np.maximum(out, -1.0)
     raise ValueError(f"Cannot convert from {image.dtype} to float64.")
 
@@ -156,16 +156,40 @@ def _warn_outside_detector(n: int, size: int, theta: Any, circle: bool) -> None:
 
 
 def radon(image: Any, theta: Any = None, circle: bool = True, *,
-          preserve_range: bool = False) -> np.ndarray:
-    """Not implemented yet: raises :class:`voxlab.UnsupportedError`.
+          preserve_range: bool = False, backend: str = "cpu",
+          progress: Any = None) -> np.ndarray:
+    """Radon transform (scikit-image's ``radon``): the ``(detector, angle)`` sinogram
+    of a 2-D image at the angles ``theta`` (degrees; default ``np.arange(180)``).
 
-    scikit-image's ``radon`` rotates the image with bilinear interpolation and sums
-    columns; voxlab's forward projectors (exact line integrals of phantoms, Joseph's
-    method for grids) are different discretisations, and a drop-in must give equal
-    results. Use ``skimage.transform.radon`` for the sinogram and
-    :func:`iradon` to reconstruct it.
+    The library's rotate-and-sum transform (``cpu::radon``): the image — cropped to
+    its centred inscribed square when ``circle`` (warning when it is not zero outside
+    the inscribed circle), else zero-padded to ``ceil(√2·max(shape))`` — is rotated
+    about pixel ``(n // 2, n // 2)`` with bilinear interpolation (zero outside) and
+    its columns summed, step for step as scikit-image does, so the results are equal.
+    The rotation centre is detector bin ``n // 2``. dtypes as scikit-image's:
+    ``img_as_float`` scaling unless ``preserve_range``; float32 (and float16) images
+    compute and return float32, everything else float64.
+
+    ``backend``: ``cpu`` (the image's precision) or ``cpu-f32`` (float32 throughout);
+    the GPU has no Radon transform and is refused with :class:`voxlab.UnsupportedError`.
     """
-    raise UnsupportedError(
-        "voxlab.transform.radon is not implemented yet: voxlab's projectors are not "
-        "scikit-image's rotate-and-sum discretisation (use skimage.transform.radon)"
-    )
+    image = np.asarray(image)
+    if image.ndim != 2:
+        raise ValueError("The input image must be 2-D")
+    if theta is None:
+        theta = np.arange(180)
+    image = _convert_to_float(image, preserve_range)
+    if backend == "cpu-f32":
+        image = image.astype(np.float32)
+    # scikit-image's rotation matrices, built as it builds them (in the angles' own
+    # precision), then rounded to the image's precision by the library.
+    n = min(image.shape) if circle else int(np.ceil(np.sqrt(2) * max(image.shape)))
+    center = n // 2
+    maps = []
+    for angle in np.deg2rad(theta):
+        cos_a, sin_a = np.cos(angle), np.sin(angle)
+        r = np.array([cos_a, sin_a, -center * (cos_a + sin_a - 1),
+                      -sin_a, cos_a, -center * (cos_a - sin_a - 1)])
+        maps.append([float(v) for v in r.astype(image.dtype)])
+    img = np.ascontiguousarray(image)
+    return _voxlab.radon(img, maps, bool(circle), backend, progress)

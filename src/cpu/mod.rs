@@ -23,6 +23,7 @@ pub mod parker;
 pub mod preintegrate;
 pub mod process;
 pub mod project;
+pub mod radon;
 pub mod ramp;
 pub mod raycast;
 pub mod shade;

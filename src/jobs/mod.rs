@@ -20,6 +20,7 @@
 //! | `voxlab fvr` | [`fvr::run`] |
 //! | `voxlab project` | [`project::run`] |
 //! | `voxlab reconstruct` | [`reconstruct::run`] |
+//! | (Python: `voxlab.transform.radon`) | [`radon::radon`] |
 //! | `voxlab d2vr` | [`d2vr::run`] |
 //! | `voxlab fft` | [`fft::run`] |
 //! | `voxlab process` | [`process::run`] |
@@ -43,6 +44,7 @@ pub mod input;
 pub mod phantom;
 pub mod process;
 pub mod project;
+pub mod radon;
 pub mod reconstruct;
 pub mod render;
 pub mod renderer;
