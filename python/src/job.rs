@@ -11,10 +11,20 @@
 
 use crate::errors;
 use pyo3::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Mutex};
 use std::time::Duration;
 use voxlab::jobs::Progress;
+
+/// Seconds the last job's Rust work took on its worker thread (f64 bits), for the
+/// Python-overhead benchmark (`_last_job_seconds`).
+static LAST_SECONDS: AtomicU64 = AtomicU64::new(0);
+
+/// Seconds the last finished job spent in Rust (the worker's closure, nothing of the
+/// conversions around it).
+pub fn last_seconds() -> f64 {
+    f64::from_bits(LAST_SECONDS.load(Ordering::SeqCst))
+}
 
 /// How long the calling thread waits between two looks at signals and progress.
 const POLL: Duration = Duration::from_millis(25);
@@ -129,7 +139,9 @@ pub fn run<T: Send>(
         let (tx, rx) = mpsc::channel::<()>();
         let s = &shared;
         let worker = scope.spawn(move || {
+            let t = std::time::Instant::now();
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(s)));
+            LAST_SECONDS.store(t.elapsed().as_secs_f64().to_bits(), Ordering::SeqCst);
             let _ = tx.send(());
             r
         });

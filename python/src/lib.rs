@@ -26,10 +26,18 @@ fn _panic_in_job(py: Python<'_>, message: String) -> PyResult<()> {
     job::run(py, None, |_| -> voxlab::Result<()> { panic!("{message}") })
 }
 
+/// Seconds the last job spent in Rust on its worker thread (the Python-overhead
+/// benchmark compares this with the wall-clock time of the Python call).
+#[pyfunction]
+fn _last_job_seconds() -> f64 {
+    job::last_seconds()
+}
+
 #[pymodule]
 fn _voxlab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(_panic_in_job, m)?)?;
+    m.add_function(wrap_pyfunction!(_last_job_seconds, m)?)?;
     volumes::register(m)?;
     render::register(m)?;
     fft::register(m)?;

@@ -141,6 +141,7 @@ impl Renderer {
     /// is used). Stereo pairs, repeats, extra volumes and adaptive sampling go through
     /// `voxlab.render`.
     #[pyo3(signature = (request, volume=None, affine=None, progress=None, tf=None, tf2d=None))]
+    #[allow(clippy::too_many_arguments)]
     fn render(
         &self,
         py: Python<'_>,
