@@ -281,7 +281,27 @@ impl TransferFunction {
 
     /// Loads a JSON file.
     pub fn load(path: &Path) -> Result<Self> {
-        let tf: TransferFunction = crate::json::read_file(path, "transfer function JSON")?;
+        let tf: TransferFunction =
+            crate::json::read_file(path, "transfer function JSON").map_err(|e| match e {
+                // A 2D transfer function's widgets given where a 1D one is read.
+                Error::Format {
+                    path,
+                    field,
+                    message,
+                } if message.contains("unknown field `widgets`")
+                    || message.contains("unknown field `gradient_max`") =>
+                {
+                    Error::Format {
+                        path,
+                        field,
+                        message: format!(
+                            "{message}; this is a 2D transfer function (widgets over value × \
+                             gradient magnitude): give it with --tf2d"
+                        ),
+                    }
+                }
+                other => other,
+            })?;
         tf.validate()
             .map_err(|e| Error::format(path, "transfer function", e.to_string()))?;
         Ok(tf)

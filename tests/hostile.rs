@@ -462,6 +462,14 @@ fn json_with_unknown_fields_or_the_wrong_shape_is_refused() {
         .to_string();
     assert!(e.contains("unknown field `rgbaa`"), "{e}");
     assert!(e.contains("did you mean `rgba`?"), "{e}");
+    // A 2D transfer function where a 1D one is read: said so.
+    let tf2d = common::root().join("data/tf/ct-bone-2d.json");
+    let e = voxlab::transfer::TransferFunction::load(&tf2d)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("this is a 2D transfer function"), "{e}");
+    assert!(e.contains("--tf2d"), "{e}");
+    assert!(voxlab::transfer2d::TransferFunction2D::load(&tf2d).is_ok());
 }
 
 // 10. Misleading messages -----------------------------------------------------------
