@@ -240,25 +240,7 @@ impl Geometry {
         };
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         let mut r_out: f64 = 0.0;
-        for c in 0..8 {
-            let idx = DVec3::new(
-                if c & 1 == 0 {
-                    -0.5
-                } else {
-                    dims[0] as f64 - 0.5
-                },
-                if c & 2 == 0 {
-                    -0.5
-                } else {
-                    dims[1] as f64 - 0.5
-                },
-                if c & 4 == 0 {
-                    -0.5
-                } else {
-                    dims[2] as f64 - 0.5
-                },
-            );
-            let p = affine.transform_point3(idx);
+        for p in crate::volume::box_corners(dims, affine) {
             lo = lo.min(p);
             hi = hi.max(p);
             r_out = r_out.max(p.x.hypot(p.z));

@@ -139,6 +139,21 @@ pub fn check_spacing(spacing: [f64; 3]) -> Result<()> {
     }
 }
 
+/// The eight corners of the box of `dims` voxels (index −½ … n − ½ on each axis)
+/// placed by `affine`, in world coordinates.
+pub fn box_corners(dims: [usize; 3], affine: glam::DMat4) -> [glam::DVec3; 8] {
+    std::array::from_fn(|c| {
+        let at = |axis: usize| {
+            if c >> axis & 1 == 0 {
+                -0.5
+            } else {
+                dims[axis] as f64 - 0.5
+            }
+        };
+        affine.transform_point3(glam::DVec3::new(at(0), at(1), at(2)))
+    })
+}
+
 /// The finest voxel spacing accepted, in mm (a picometre: below it, and for denormal
 /// numbers, the voxel-to-world affine cannot be inverted reliably).
 pub const MIN_SPACING_MM: f64 = 1e-9;

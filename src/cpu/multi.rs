@@ -102,25 +102,7 @@ pub fn render<R: Real>(
 pub fn max_samples_per_ray(boxes: &[([usize; 3], DMat4)], step: f64) -> f64 {
     let (mut lo, mut hi) = (glam::DVec3::splat(f64::INFINITY), glam::DVec3::NEG_INFINITY);
     for (dims, m) in boxes {
-        for c in 0..8 {
-            let corner = glam::DVec3::new(
-                if c & 1 == 0 {
-                    -0.5
-                } else {
-                    dims[0] as f64 - 0.5
-                },
-                if c & 2 == 0 {
-                    -0.5
-                } else {
-                    dims[1] as f64 - 0.5
-                },
-                if c & 4 == 0 {
-                    -0.5
-                } else {
-                    dims[2] as f64 - 0.5
-                },
-            );
-            let w = m.transform_point3(corner);
+        for w in crate::volume::box_corners(*dims, *m) {
             lo = lo.min(w);
             hi = hi.max(w);
         }
