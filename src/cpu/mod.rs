@@ -15,6 +15,7 @@ pub mod filter;
 pub mod fvr;
 pub mod gradient;
 pub mod grid;
+pub mod iterative;
 pub mod jitter;
 pub mod march;
 pub mod modes;

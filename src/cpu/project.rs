@@ -312,13 +312,39 @@ fn clip_planes<R: Real>(x0: R, k: R, n: usize, lo: &mut R, hi: &mut R) -> bool {
     *lo <= *hi
 }
 
-/// Joseph's line integral (module docs) of the grid `data` (`dims`, x fastest) along
-/// `x(t) = o + t·d`, `t ≥ t_min`, in index coordinates with `|d|` = one world mm.
+/// Where one ray meets the grid in Joseph's scheme: the driving axis `m` (the ray
+/// moves fastest along it; ties go to the lower axis), the in-plane axes `a`, `b`, the
+/// in-plane coordinates on plane `s`, `x_a(s) = xa0 + s·ka` and `x_b(s) = xb0 + s·kb`,
+/// the planes `s0..=s1` that can hold a non-zero tap, and the world length `w` of the
+/// ray between two planes (`1/|d_m|`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JosephPlanes<R> {
+    pub m: usize,
+    pub a: usize,
+    pub b: usize,
+    pub xa0: R,
+    pub ka: R,
+    pub xb0: R,
+    pub kb: R,
+    pub s0: usize,
+    pub s1: usize,
+    pub w: R,
+}
+
+/// The planes of Joseph's sum (module docs) for the ray `x(t) = o + t·d`, `t ≥ t_min`,
+/// in index coordinates with `|d|` = one world mm; `None` when the ray takes no
+/// sample. The forward projector ([`joseph_ray`]) and its transpose
+/// ([`joseph_weight`]) both start here, so they use the very same numbers.
 ///
-/// mirrors shaders/project.wgsl: joseph_ray
-pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t_min: R) -> R {
+/// mirrors shaders/shared/joseph.wgsl: joseph_planes
+#[inline(always)]
+pub fn joseph_planes<R: Real>(
+    dims: [usize; 3],
+    o: [R; 3],
+    d: [R; 3],
+    t_min: R,
+) -> Option<JosephPlanes<R>> {
     let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
-    // The dominant axis m (ties go to the lower axis) and the two in-plane axes.
     let (m, a, b) = if ad[0] >= ad[1] && ad[0] >= ad[2] {
         (0, 1, 2)
     } else if ad[1] >= ad[2] {
@@ -327,9 +353,8 @@ pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t
         (2, 0, 1)
     };
     if ad[m] == R::zero() {
-        return R::zero();
+        return None;
     }
-    let stride = [1, dims[0], dims[0] * dims[1]];
     let inv = R::one() / d[m];
     // In-plane coordinates on plane s: x_a(s) = xa0 + s·ka (t = (s − o_m)/d_m).
     let (ka, kb) = (d[a] * inv, d[b] * inv);
@@ -339,7 +364,7 @@ pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t
     if !clip_planes(xa0, ka, dims[a], &mut lo, &mut hi)
         || !clip_planes(xb0, kb, dims[b], &mut lo, &mut hi)
     {
-        return R::zero();
+        return None;
     }
     // t ≥ t_min ⇔ s ≥ o_m + t_min·d_m (d_m > 0), s ≤ … (d_m < 0).
     let s_min = o[m] + t_min * d[m];
@@ -349,27 +374,86 @@ pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t
         hi = hi.min(s_min);
     }
     if lo > hi {
-        return R::zero();
+        return None;
     }
     // 0 ≤ lo ≤ hi ≤ n_m − 1 here, so the casts are in range.
     let s0 = lo.ceil().to_usize().unwrap_or(0);
     let s1 = hi.floor().to_usize().unwrap_or(0);
+    if s0 > s1 {
+        return None;
+    }
+    Some(JosephPlanes {
+        m,
+        a,
+        b,
+        xa0,
+        ka,
+        xb0,
+        kb,
+        s0,
+        s1,
+        w: inv.abs(),
+    })
+}
+
+/// Joseph's line integral (module docs) of the grid `data` (`dims`, x fastest) along
+/// `x(t) = o + t·d`, `t ≥ t_min`, in index coordinates with `|d|` = one world mm.
+///
+/// mirrors shaders/project.wgsl: joseph_ray
+pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t_min: R) -> R {
+    let Some(p) = joseph_planes(dims, o, d, t_min) else {
+        return R::zero();
+    };
+    let stride = [1, dims[0], dims[0] * dims[1]];
     let mut sum = R::zero();
-    for s in s0..=s1 {
+    for s in p.s0..=p.s1 {
         let sr = R::of(s as f64);
         sum = sum
             + slice_bilinear(
                 data,
-                s * stride[m],
-                stride[a],
-                dims[a],
-                stride[b],
-                dims[b],
-                xa0 + sr * ka,
-                xb0 + sr * kb,
+                s * stride[p.m],
+                stride[p.a],
+                dims[p.a],
+                stride[p.b],
+                dims[p.b],
+                p.xa0 + sr * p.ka,
+                p.xb0 + sr * p.kb,
             );
     }
-    sum * inv.abs()
+    sum * p.w
+}
+
+/// The weight of voxel `voxel` in Joseph's sum along a ray that meets the grid as
+/// `p` says: `w · h_a · h_b` on the voxel's plane `s = voxel[m]`, where `h_a` is the
+/// bilinear tap weight of [`slice_bilinear`] (`1 − t` for the tap at `floor(x_a)`,
+/// `t` for the one after it) — the very number the forward sum multiplies the voxel
+/// by, so the transpose built from it is exact.
+///
+/// mirrors shaders/shared/joseph.wgsl: joseph_weight
+#[inline(always)]
+pub fn joseph_weight<R: Real>(p: &JosephPlanes<R>, voxel: [usize; 3]) -> R {
+    let s = voxel[p.m];
+    if s < p.s0 || s > p.s1 {
+        return R::zero();
+    }
+    let sr = R::of(s as f64);
+    let tap = |x: R, i: usize| -> R {
+        let f = x.floor();
+        let t = x - f;
+        let fi = R::of(i as f64);
+        if f == fi {
+            R::one() - t
+        } else if f == fi - R::one() {
+            t
+        } else {
+            R::zero()
+        }
+    };
+    let ha = tap(p.xa0 + sr * p.ka, voxel[p.a]);
+    if ha == R::zero() {
+        return R::zero();
+    }
+    p.w * ha * tap(p.xb0 + sr * p.kb, voxel[p.b])
 }
 
 /// Options of [`project_volume`].
@@ -413,6 +497,292 @@ pub fn project_volume<R: Real>(
             }
         });
     Ok(out)
+}
+
+/// Where a voxel's rays land on the detector, per view: three rows `(α, α₀)`, `(β, β₀)`,
+/// `(γ, γ₀)` such that the ray of detector pixel `(c, r)` passes through the point `X`
+/// of the index frame exactly when `c = (α·X + α₀)/(γ·X + γ₀)` and
+/// `r = (β·X + β₀)/(γ·X + γ₀)` (a parallel beam has `γ = 0`, `γ₀ = 1`; for a cone
+/// beam the denominator is the ray parameter along `d0 + c·d_u + r·d_v`). Built in
+/// f64 from [`JosephView`]'s own rows. The transpose uses it only to bound the
+/// pixels it visits; their weights come from the rays themselves.
+///
+/// Three rows of four numbers: the same bytes as WGSL's `JosephFootprint` in
+/// `shaders/shared/project_params.wgsl` (48 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JosephFootprint<R> {
+    pub rows: [[R; 4]; 3],
+}
+
+// Only the f32 instance is uploaded.
+unsafe impl bytemuck::Zeroable for JosephFootprint<f32> {}
+unsafe impl bytemuck::Pod for JosephFootprint<f32> {}
+
+impl JosephFootprint<f64> {
+    /// The footprint map of one view (from the f64 rays of [`JosephView::new`]).
+    pub fn new(v: &JosephView<f64>) -> Self {
+        let row = |i: usize| DVec3::new(v.rows[i][0], v.rows[i][1], v.rows[i][2]);
+        let a0 = row(0);
+        let parallel = v.rows[0][3] < 0.0;
+        // Columns of M: the unknowns' coefficients in X − a0.
+        let m = if parallel {
+            DMat3::from_cols(row(1), row(2), row(3))
+        } else {
+            DMat3::from_cols(row(3), row(4), row(5))
+        };
+        let inv = m.inverse();
+        // Rows of M⁻¹ applied to X − a0: (row·X, −row·a0).
+        let r = |i: usize| {
+            let q = inv.row(i);
+            [q.x, q.y, q.z, -q.dot(a0)]
+        };
+        let rows = if parallel {
+            // (c, r, t) = M⁻¹ (X − a0).
+            [r(0), r(1), [0.0, 0.0, 0.0, 1.0]]
+        } else {
+            // (t, t·c, t·r) = M⁻¹ (X − a0).
+            [r(1), r(2), r(0)]
+        };
+        JosephFootprint { rows }
+    }
+
+    /// The detector pixels `(c0..=c1, r0..=r1)` whose rays can pass through the cube
+    /// of half-size `h` (index units) around the voxel centre `x`, clamped to
+    /// `cols × rows`; `None` when no pixel can. Interval arithmetic on the rows:
+    /// exact for a parallel beam, conservative for a cone beam, and the whole detector
+    /// when the cube reaches the plane of the source.
+    ///
+    /// mirrors shaders/shared/joseph.wgsl: footprint_pixels
+    pub fn pixels(
+        &self,
+        x: [f64; 3],
+        h: f64,
+        cols: usize,
+        rows: usize,
+    ) -> Option<(usize, usize, usize, usize)> {
+        let lin = |i: usize| {
+            let q = &self.rows[i];
+            let centre = q[0] * x[0] + q[1] * x[1] + q[2] * x[2] + q[3];
+            let half = h * (q[0].abs() + q[1].abs() + q[2].abs());
+            (centre - half, centre + half)
+        };
+        let (dlo, dhi) = lin(2);
+        let (full_c, full_r) = ((0.0, (cols - 1) as f64), (0.0, (rows - 1) as f64));
+        let ((clo, chi), (rlo, rhi)) = if dlo <= 1e-12 * dhi.abs().max(1.0) {
+            (full_c, full_r)
+        } else {
+            let ratio = |(nlo, nhi): (f64, f64)| {
+                let q = [nlo / dlo, nlo / dhi, nhi / dlo, nhi / dhi];
+                (
+                    q.iter().copied().fold(f64::INFINITY, f64::min),
+                    q.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                )
+            };
+            (ratio(lin(0)), ratio(lin(1)))
+        };
+        let span = |lo: f64, hi: f64, n: usize| -> Option<(usize, usize)> {
+            let lo = lo.ceil().max(0.0);
+            let hi = hi.floor().min((n - 1) as f64);
+            // Also false for NaN.
+            if lo <= hi {
+                Some((lo as usize, hi as usize))
+            } else {
+                None
+            }
+        };
+        let (c0, c1) = span(clo, chi, cols)?;
+        let (r0, r1) = span(rlo, rhi, rows)?;
+        Some((c0, c1, r0, r1))
+    }
+}
+
+/// The half-size of the cube whose pixels the transpose visits: a hair under one
+/// voxel, so that a ray that grazes the cube's face (tap weight 0 up to rounding,
+/// as when detector rows line up with voxel planes) is not visited.
+pub const FOOTPRINT_HALF: f64 = 1.0 - 1e-9;
+
+/// Joseph's projector as a matched pair: the forward projection `A` of
+/// [`project_volume`] and its exact transpose `Aᵀ`, which sums into every voxel the
+/// very weights ([`joseph_weight`]) the forward pass multiplied it by. Both run
+/// over any subset of the views, both are deterministic (every output value is a
+/// sum in a fixed order, whatever the thread count), and
+/// `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` holds to rounding (`tests/iterative.rs`).
+///
+/// The transpose is voxel-driven (a gather): for every voxel and view, the
+/// detector pixels whose rays can touch the voxel ([`JosephFootprint::pixels`]),
+/// each weighted as the forward pass weighs it. The rays' [`JosephPlanes`] are
+/// kept in a table when it fits in [`RAY_TABLE_BYTES`].
+pub struct JosephPair<R> {
+    pub dims: [usize; 3],
+    pub affine: DMat4,
+    pub cols: usize,
+    pub rows: usize,
+    pub views: Vec<JosephView<R>>,
+    pub footprints: Vec<JosephFootprint<f64>>,
+    table: Option<Vec<Option<JosephPlanes<R>>>>,
+}
+
+/// The largest ray table a [`JosephPair`] keeps (bytes).
+pub const RAY_TABLE_BYTES: usize = 512 << 20;
+
+impl<R: Real> JosephPair<R> {
+    /// The pair for a grid of `dims` voxels with index-to-world `affine`, seen in
+    /// geometry `g`.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for an invalid geometry, grid or affine.
+    pub fn new(dims: [usize; 3], affine: DMat4, g: &Geometry) -> Result<Self> {
+        g.validate()?;
+        check_dims(dims)?;
+        let det = DMat3::from_mat4(affine).determinant();
+        if !affine.is_finite() || !det.is_finite() || det.abs() < 1e-300 {
+            return Err(Error::invalid(
+                "reconstruction grid",
+                "the index-to-world affine must be finite and invertible",
+            ));
+        }
+        let views64: Vec<JosephView<f64>> = joseph_views(g, affine);
+        let footprints = views64.iter().map(JosephFootprint::new).collect();
+        let views = joseph_views(g, affine);
+        let mut pair = JosephPair {
+            dims,
+            affine,
+            cols: g.cols,
+            rows: g.rows,
+            views,
+            footprints,
+            table: None,
+        };
+        let rays = g.n_angles() * g.rows * g.cols;
+        if rays.saturating_mul(std::mem::size_of::<Option<JosephPlanes<R>>>()) <= RAY_TABLE_BYTES {
+            let per_view = g.rows * g.cols;
+            let table = (0..rays)
+                .into_par_iter()
+                .map(|i| pair.planes_of(i / per_view, i % per_view))
+                .collect();
+            pair.table = Some(table);
+        }
+        Ok(pair)
+    }
+
+    /// The number of views.
+    pub fn n_views(&self) -> usize {
+        self.views.len()
+    }
+
+    /// The number of voxels.
+    pub fn n_voxels(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// The number of detector pixels per view.
+    pub fn per_view(&self) -> usize {
+        self.rows * self.cols
+    }
+
+    fn planes_of(&self, view: usize, pixel: usize) -> Option<JosephPlanes<R>> {
+        let (col, row) = (pixel % self.cols, pixel / self.cols);
+        let (o, d, t_min) = pixel_ray(&self.views[view], R::of(col as f64), R::of(row as f64));
+        joseph_planes(self.dims, o, d, t_min)
+    }
+
+    #[inline(always)]
+    fn planes(&self, view: usize, pixel: usize) -> Option<JosephPlanes<R>> {
+        match &self.table {
+            Some(t) => t[view * self.per_view() + pixel],
+            None => self.planes_of(view, pixel),
+        }
+    }
+
+    /// `A x` over the views `views` (in that order): `views.len() × rows × cols`
+    /// line integrals, the numbers [`project_volume`] gives for them.
+    pub fn forward(&self, x: &[R], views: &[usize]) -> Vec<R> {
+        assert_eq!(x.len(), self.n_voxels(), "JosephPair::forward: grid size");
+        let dims = self.dims;
+        let stride = [1, dims[0], dims[0] * dims[1]];
+        let mut out = vec![R::zero(); views.len() * self.per_view()];
+        out.par_chunks_mut(self.cols)
+            .enumerate()
+            .for_each(|(line, dst)| {
+                let (k, row) = (views[line / self.rows], line % self.rows);
+                for (col, v) in dst.iter_mut().enumerate() {
+                    let Some(p) = self.planes(k, row * self.cols + col) else {
+                        *v = R::zero();
+                        continue;
+                    };
+                    let mut sum = R::zero();
+                    for s in p.s0..=p.s1 {
+                        let sr = R::of(s as f64);
+                        sum = sum
+                            + slice_bilinear(
+                                x,
+                                s * stride[p.m],
+                                stride[p.a],
+                                dims[p.a],
+                                stride[p.b],
+                                dims[p.b],
+                                p.xa0 + sr * p.ka,
+                                p.xb0 + sr * p.kb,
+                            );
+                    }
+                    *v = sum * p.w;
+                }
+            });
+        out
+    }
+
+    /// `Aᵀ y` over the views `views`: `y` holds `views.len() × rows × cols` values in
+    /// that order; the result is one value per voxel, each the sum over the views (in
+    /// order), rows and columns of `weight · y`.
+    pub fn transpose(&self, y: &[R], views: &[usize]) -> Vec<R> {
+        assert_eq!(
+            y.len(),
+            views.len() * self.per_view(),
+            "JosephPair::transpose: projection size"
+        );
+        let dims = self.dims;
+        let mut out = vec![R::zero(); self.n_voxels()];
+        out.par_chunks_mut(dims[0])
+            .enumerate()
+            .for_each(|(line, dst)| {
+                let (j, k) = (line % dims[1], line / dims[1]);
+                for (i, v) in dst.iter_mut().enumerate() {
+                    *v = self.transpose_voxel(y, views, [i, j, k]);
+                }
+            });
+        out
+    }
+
+    /// One voxel of [`Self::transpose`].
+    ///
+    /// mirrors shaders/project_transpose.wgsl: transpose_voxel
+    #[inline]
+    pub fn transpose_voxel(&self, y: &[R], views: &[usize], voxel: [usize; 3]) -> R {
+        let x = voxel.map(|v| v as f64);
+        let mut acc = R::zero();
+        for (slot, &k) in views.iter().enumerate() {
+            let Some((c0, c1, r0, r1)) =
+                self.footprints[k].pixels(x, FOOTPRINT_HALF, self.cols, self.rows)
+            else {
+                continue;
+            };
+            let base = slot * self.per_view();
+            for row in r0..=r1 {
+                for col in c0..=c1 {
+                    let pixel = row * self.cols + col;
+                    let yv = y[base + pixel];
+                    if yv == R::zero() {
+                        continue;
+                    }
+                    if let Some(p) = self.planes(k, pixel) {
+                        acc = acc + joseph_weight(&p, voxel) * yv;
+                    }
+                }
+            }
+        }
+        acc
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,755 @@
+//! Iterative reconstruction on Joseph's matched pair ([`JosephPair`]): SIRT, CGLS,
+//! OS-SART and a total-variation method (Chambolle–Pock), generic over f32/f64.
+//! See docs/iterative.md for the formulas, the weights and their sources.
+//!
+//! Notation: `A` the forward projector restricted to the support (`A M`, `M` the 0/1
+//! mask of the voxels that may be non-zero), `b` the measured projections, `x` the
+//! image, `r = b − A x` the residual.
+//!
+//! - **SIRT** (as ASTRA and TIGRE define it): `x ← x + λ C Aᵀ R (b − A x)` with
+//!   `R = diag(1 / A𝟙)` (row sums: every ray's length in the support) and
+//!   `C = diag(1 / Aᵀ𝟙)` (column sums); a zero sum gives a zero weight. Its fixed
+//!   point minimises `‖A x − b‖²_R`.
+//! - **OS-SART**: the same update over one ordered subset of the views at a time, with
+//!   the subset's own column sums `C_S = diag(1 / A_Sᵀ𝟙)`; one iteration visits every
+//!   subset once. Subset `s` of `K` holds the views `s, s + K, s + 2K, …`.
+//! - **CGLS**: conjugate gradients on the normal equations `AᵀA x = Aᵀ b`; from zero it
+//!   converges to the least-squares solution of least norm.
+//! - **TV**: `min ½‖A x − b‖² + w·TV(x)` (isotropic TV of forward differences, zero
+//!   past the last voxel), by Chambolle and Pock's primal–dual algorithm on
+//!   `K = [A; μ∇]` with `μ = ‖A‖ / ‖∇‖` (so that both blocks have the same norm),
+//!   steps `σ = τ = 0.99 / ‖K‖`, `‖A‖` from a power iteration.
+//!
+//! Non-negativity (SIRT, OS-SART, TV) projects `x` onto `x ≥ 0` after every update.
+//! Every sum over voxels or rays is taken in fixed chunks in a fixed order, so the
+//! results do not depend on the thread count; [`JosephPair`] is deterministic too.
+
+use super::project::JosephPair;
+use crate::error::{Error, Result};
+use crate::real::Real;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The iterative method.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    #[default]
+    Sirt,
+    Cgls,
+    OsSart,
+    Tv,
+}
+
+impl Method {
+    /// Every method, in the order the docs list them.
+    pub const ALL: [Method; 4] = [Method::Sirt, Method::Cgls, Method::OsSart, Method::Tv];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Sirt => "sirt",
+            Method::Cgls => "cgls",
+            Method::OsSart => "os-sart",
+            Method::Tv => "tv",
+        }
+    }
+
+    /// The method called `s`.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming the methods.
+    pub fn parse(s: &str) -> Result<Self> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                Error::invalid(
+                    "--method",
+                    format!("'{s}': give fbp, sirt, cgls, os-sart or tv"),
+                )
+            })
+    }
+}
+
+/// The order in which OS-SART visits its subsets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SubsetOrder {
+    /// 0, 1, 2, …, K − 1 in every iteration.
+    #[default]
+    Sequential,
+    /// A fresh permutation every iteration, from a fixed seed (the same run gives the
+    /// same order).
+    Random,
+}
+
+/// The options of [`solve`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IterativeOptions {
+    pub method: Method,
+    /// Iterations (OS-SART: passes over every subset).
+    pub iterations: usize,
+    /// OS-SART: the number of subsets (at most the number of views).
+    pub subsets: usize,
+    pub order: SubsetOrder,
+    /// SIRT and OS-SART: the relaxation λ, in (0, 2).
+    pub relaxation: f64,
+    /// TV: the weight `w` of the total variation (units of the image × mm).
+    pub tv_weight: f64,
+    /// SIRT, OS-SART, TV: keep `x ≥ 0`.
+    pub nonnegative: bool,
+    /// Stop once the objective falls by less than `tolerance` × its previous value in
+    /// one iteration (0: run every iteration).
+    pub tolerance: f64,
+}
+
+impl Default for IterativeOptions {
+    fn default() -> Self {
+        IterativeOptions {
+            method: Method::Sirt,
+            iterations: 100,
+            subsets: 10,
+            order: SubsetOrder::Sequential,
+            relaxation: 1.0,
+            tv_weight: DEFAULT_TV_WEIGHT,
+            nonnegative: false,
+            tolerance: 0.0,
+        }
+    }
+}
+
+/// The default TV weight (for images of densities near 1 per mm, as the phantoms).
+pub const DEFAULT_TV_WEIGHT: f64 = 0.2;
+
+/// The most iterations one run may take.
+pub const MAX_ITERATIONS: usize = 1_000_000;
+
+impl IterativeOptions {
+    /// Checks the options against a problem of `n_views` views.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming the option.
+    pub fn check(&self, n_views: usize) -> Result<()> {
+        if self.iterations == 0 || self.iterations > MAX_ITERATIONS {
+            return Err(Error::invalid(
+                "--iterations",
+                format!("{}: give 1 to {MAX_ITERATIONS}", self.iterations),
+            ));
+        }
+        if self.method == Method::OsSart && (self.subsets == 0 || self.subsets > n_views) {
+            return Err(Error::invalid(
+                "--subsets",
+                format!(
+                    "{}: give 1 to the number of views ({n_views})",
+                    self.subsets
+                ),
+            ));
+        }
+        if matches!(self.method, Method::Sirt | Method::OsSart)
+            && !(self.relaxation > 0.0 && self.relaxation < 2.0)
+        {
+            return Err(Error::invalid(
+                "--relaxation",
+                format!("{}: must lie in (0, 2)", self.relaxation),
+            ));
+        }
+        if !(self.tv_weight.is_finite() && self.tv_weight >= 0.0) {
+            return Err(Error::invalid(
+                "--tv-weight",
+                format!("{}: must be a finite number ≥ 0", self.tv_weight),
+            ));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
+            return Err(Error::invalid(
+                "--tolerance",
+                format!("{}: must be a finite number ≥ 0", self.tolerance),
+            ));
+        }
+        if self.method == Method::Cgls && self.nonnegative {
+            return Err(Error::invalid(
+                "--nonnegative",
+                "CGLS has no non-negativity constraint (use sirt, os-sart or tv)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What [`solve`] solves: `b ≈ A x` on the voxels of `support` (all when `None`).
+pub struct Problem<'a, R> {
+    pub pair: &'a JosephPair<R>,
+    /// Projections, `n_views × rows × cols`, in view order.
+    pub b: &'a [R],
+    pub support: Option<&'a [bool]>,
+}
+
+/// The result of [`solve`].
+#[derive(Clone, Debug)]
+pub struct Solution<R> {
+    pub x: Vec<R>,
+    /// `‖b − A x_k‖` for `k = 0` (the initial image) to the last iteration (CGLS: the
+    /// residual its recurrence carries).
+    pub residual: Vec<f64>,
+    /// The objective the method decreases, for the same iterates: SIRT and OS-SART
+    /// `½‖b − A x‖²_R`, CGLS `½‖b − A x‖²`, TV `½‖b − A x‖² + w·TV(x)`.
+    pub objective: Vec<f64>,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Stopped by the tolerance (or CGLS reached a zero gradient).
+    pub converged: bool,
+    /// TV: the estimate of `‖A‖` the steps were set from.
+    pub norm_estimate: Option<f64>,
+}
+
+/// Called after every iteration with its number (1-based), the image and its
+/// residual; an error (e.g. [`Error::Cancelled`]) stops the run.
+pub type OnIteration<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + 'a;
+
+/// Values per chunk of every deterministic sum.
+const CHUNK: usize = 4096;
+
+/// `Σ f(i)` over `0..n` in fixed chunks, the chunk sums added in order (f64).
+fn sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
+    let parts: Vec<f64> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut s = 0.0;
+            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                s += f(i);
+            }
+            s
+        })
+        .collect();
+    parts.iter().sum()
+}
+
+/// `⟨a, b⟩` (deterministic, f64).
+pub fn dot<R: Real>(a: &[R], b: &[R]) -> f64 {
+    debug_assert_eq!(a.len(), b.len());
+    sum_by(a.len(), |i| a[i].f64() * b[i].f64())
+}
+
+/// `‖a‖₂` (deterministic).
+pub fn norm<R: Real>(a: &[R]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// `1/v` where `v > ε`, else 0 (the weights of SIRT and OS-SART).
+fn reciprocal<R: Real>(v: Vec<R>) -> Vec<R> {
+    v.into_par_iter()
+        .map(|s| {
+            if s > R::of(1e-6) {
+                R::one() / s
+            } else {
+                R::zero()
+            }
+        })
+        .collect()
+}
+
+/// `x` with the voxels outside `support` set to 0.
+fn masked<R: Real>(mut x: Vec<R>, support: Option<&[bool]>) -> Vec<R> {
+    if let Some(m) = support {
+        x.par_iter_mut().zip(m).for_each(|(v, &keep)| {
+            if !keep {
+                *v = R::zero();
+            }
+        });
+    }
+    x
+}
+
+/// The views of subset `s` of `k`: `s, s + k, s + 2k, …`.
+pub fn subset_views(n_views: usize, k: usize, s: usize) -> Vec<usize> {
+    (s..n_views).step_by(k).collect()
+}
+
+/// The order of the subsets in iteration `it` (0-based).
+pub fn subset_order(order: SubsetOrder, k: usize, it: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..k).collect();
+    if order == SubsetOrder::Random {
+        // Fisher–Yates with a SplitMix64 stream seeded by the iteration.
+        let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ (it as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        let mut next = || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        };
+        for i in (1..k).rev() {
+            let j = (next() % (i as u64 + 1)) as usize;
+            v.swap(i, j);
+        }
+    }
+    v
+}
+
+/// Solves the problem from `x0` (masked to the support) with `opts`.
+///
+/// # Errors
+/// Bad options or sizes ([`Error::Invalid`]); what `on_iteration` returns.
+pub fn solve<R: Real>(
+    prob: &Problem<R>,
+    x0: Vec<R>,
+    opts: &IterativeOptions,
+    on_iteration: &mut OnIteration<R>,
+) -> Result<Solution<R>> {
+    let pair = prob.pair;
+    opts.check(pair.n_views())?;
+    let n = pair.n_voxels();
+    let rays = pair.n_views() * pair.per_view();
+    if x0.len() != n {
+        return Err(Error::invalid(
+            "initial image",
+            format!("{} values for a grid of {n} voxels", x0.len()),
+        ));
+    }
+    if prob.b.len() != rays {
+        return Err(Error::invalid(
+            "projections",
+            format!("{} values for {rays} rays", prob.b.len()),
+        ));
+    }
+    if prob.support.is_some_and(|m| m.len() != n) {
+        return Err(Error::invalid("support", "one flag per voxel"));
+    }
+    let x0 = masked(x0, prob.support);
+    match opts.method {
+        Method::Sirt => sart(prob, x0, opts, false, on_iteration),
+        Method::OsSart => sart(prob, x0, opts, true, on_iteration),
+        Method::Cgls => cgls(prob, x0, opts, on_iteration),
+        Method::Tv => tv(prob, x0, opts, on_iteration),
+    }
+}
+
+/// All the views.
+fn all_views(pair: &JosephPair<impl Real>) -> Vec<usize> {
+    (0..pair.n_views()).collect()
+}
+
+/// `b − A x` over `views` (`b` holds every view).
+fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Vec<R> {
+    let pv = prob.pair.per_view();
+    let mut r = prob.pair.forward(x, views);
+    r.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
+        let src = &prob.b[views[slot] * pv..(views[slot] + 1) * pv];
+        for (v, &bv) in img.iter_mut().zip(src) {
+            *v = bv - *v;
+        }
+    });
+    r
+}
+
+/// `Aᵀ y` on the support.
+fn transpose_masked<R: Real>(prob: &Problem<R>, y: &[R], views: &[usize]) -> Vec<R> {
+    masked(prob.pair.transpose(y, views), prob.support)
+}
+
+/// Has the objective stopped falling (by the tolerance)?
+fn stalled(opts: &IterativeOptions, objective: &[f64]) -> bool {
+    let k = objective.len();
+    opts.tolerance > 0.0
+        && k >= 2
+        && (objective[k - 2] - objective[k - 1]).abs() <= opts.tolerance * objective[k - 2].abs()
+}
+
+/// SIRT (`subsets = false`) and OS-SART.
+fn sart<R: Real>(
+    prob: &Problem<R>,
+    mut x: Vec<R>,
+    opts: &IterativeOptions,
+    subsets: bool,
+    on_iteration: &mut OnIteration<R>,
+) -> Result<Solution<R>> {
+    let pair = prob.pair;
+    let all = all_views(pair);
+    let ones_x = masked(vec![R::one(); pair.n_voxels()], prob.support);
+    let row_w = reciprocal(pair.forward(&ones_x, &all));
+    let k = if subsets { opts.subsets } else { 1 };
+    let groups: Vec<Vec<usize>> = (0..k).map(|s| subset_views(pair.n_views(), k, s)).collect();
+    // Column weights per subset: kept while they fit, else recomputed.
+    let keep = k == 1 || k.saturating_mul(pair.n_voxels()) * std::mem::size_of::<R>() <= 1 << 30;
+    let col_w_of = |views: &[usize]| {
+        let ones_y = vec![R::one(); views.len() * pair.per_view()];
+        reciprocal(transpose_masked(prob, &ones_y, views))
+    };
+    let kept: Vec<Vec<R>> = if keep {
+        groups.iter().map(|v| col_w_of(v)).collect()
+    } else {
+        Vec::new()
+    };
+    let lambda = R::of(opts.relaxation);
+    let pv = pair.per_view();
+    let weighted = |r: &[R]| -> f64 {
+        0.5 * sum_by(r.len(), |i| {
+            let v = r[i].f64();
+            row_w[i].f64() * v * v
+        })
+    };
+    let mut residual = Vec::new();
+    let mut objective = Vec::new();
+    let mut converged = false;
+    let mut iterations = 0;
+    for it in 0..=opts.iterations {
+        // The residual of the current iterate (the last pass only logs it).
+        let r = residual_of(prob, &x, &all);
+        residual.push(norm(&r));
+        objective.push(weighted(&r));
+        if it > 0 {
+            on_iteration(it, &x, *residual.last().unwrap_or(&0.0))?;
+            if stalled(opts, &objective) {
+                converged = true;
+                break;
+            }
+        }
+        if it == opts.iterations {
+            break;
+        }
+        iterations = it + 1;
+        if !subsets {
+            let mut wr = r;
+            wr.par_iter_mut()
+                .zip(&row_w)
+                .for_each(|(v, &w)| *v = *v * w);
+            let upd = transpose_masked(prob, &wr, &all);
+            let cw = &kept[0];
+            update(&mut x, &upd, cw, lambda, opts.nonnegative);
+            continue;
+        }
+        for s in subset_order(opts.order, k, it) {
+            let views = &groups[s];
+            let mut wr = residual_of(prob, &x, views);
+            wr.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
+                let w = &row_w[views[slot] * pv..(views[slot] + 1) * pv];
+                for (v, &wv) in img.iter_mut().zip(w) {
+                    *v = *v * wv;
+                }
+            });
+            let upd = transpose_masked(prob, &wr, views);
+            if keep {
+                update(&mut x, &upd, &kept[s], lambda, opts.nonnegative);
+            } else {
+                update(&mut x, &upd, &col_w_of(views), lambda, opts.nonnegative);
+            }
+        }
+    }
+    Ok(Solution {
+        x,
+        residual,
+        objective,
+        iterations,
+        converged,
+        norm_estimate: None,
+    })
+}
+
+/// `x ← x + λ·c·u`, then `max(x, 0)` when asked.
+///
+/// mirrors shaders/iterative.wgsl: sart_update
+fn update<R: Real>(x: &mut [R], u: &[R], c: &[R], lambda: R, nonneg: bool) {
+    x.par_iter_mut()
+        .zip(u.par_iter().zip(c))
+        .for_each(|(xv, (&uv, &cv))| {
+            let v = *xv + lambda * cv * uv;
+            *xv = if nonneg { v.max(R::zero()) } else { v };
+        });
+}
+
+/// `y ← y + α·x` (in place).
+fn axpy<R: Real>(y: &mut [R], alpha: R, x: &[R]) {
+    y.par_iter_mut()
+        .zip(x)
+        .for_each(|(yv, &xv)| *yv = *yv + alpha * xv);
+}
+
+/// CGLS (Hestenes–Stiefel on the normal equations).
+fn cgls<R: Real>(
+    prob: &Problem<R>,
+    mut x: Vec<R>,
+    opts: &IterativeOptions,
+    on_iteration: &mut OnIteration<R>,
+) -> Result<Solution<R>> {
+    let all = all_views(prob.pair);
+    let mut r = residual_of(prob, &x, &all);
+    let mut s = transpose_masked(prob, &r, &all);
+    let mut p = s.clone();
+    let mut gamma = dot(&s, &s);
+    let mut residual = vec![norm(&r)];
+    let mut objective = vec![0.5 * dot(&r, &r)];
+    let mut converged = false;
+    let mut iterations = 0;
+    for it in 1..=opts.iterations {
+        if gamma == 0.0 {
+            converged = true;
+            break;
+        }
+        let q = prob.pair.forward(&p, &all);
+        let qq = dot(&q, &q);
+        if qq == 0.0 {
+            converged = true;
+            break;
+        }
+        let alpha = gamma / qq;
+        axpy(&mut x, R::of(alpha), &p);
+        axpy(&mut r, R::of(-alpha), &q);
+        s = transpose_masked(prob, &r, &all);
+        let gamma_new = dot(&s, &s);
+        let beta = R::of(gamma_new / gamma);
+        gamma = gamma_new;
+        p.par_iter_mut()
+            .zip(&s)
+            .for_each(|(pv, &sv)| *pv = sv + beta * *pv);
+        iterations = it;
+        let rn = norm(&r);
+        residual.push(rn);
+        objective.push(0.5 * rn * rn);
+        on_iteration(it, &x, rn)?;
+        if stalled(opts, &objective) {
+            converged = true;
+            break;
+        }
+    }
+    Ok(Solution {
+        x,
+        residual,
+        objective,
+        iterations,
+        converged,
+        norm_estimate: None,
+    })
+}
+
+/// The axes of `dims` longer than one voxel.
+fn live_axes(dims: [usize; 3]) -> Vec<usize> {
+    (0..3).filter(|&a| dims[a] > 1).collect()
+}
+
+/// The forward difference of `x` along `axis` at voxel `i` (0 at the last voxel).
+///
+/// mirrors shaders/iterative.wgsl: forward_difference
+#[inline(always)]
+fn forward_difference<R: Real>(x: &[R], dims: [usize; 3], axis: usize, i: usize) -> R {
+    let stride = [1, dims[0], dims[0] * dims[1]][axis];
+    let c = (i / stride) % dims[axis];
+    if c + 1 < dims[axis] {
+        x[i + stride] - x[i]
+    } else {
+        R::zero()
+    }
+}
+
+/// `Σ_v |∇x(v)|₂` (isotropic TV, deterministic).
+pub fn total_variation<R: Real>(x: &[R], dims: [usize; 3]) -> f64 {
+    let axes = live_axes(dims);
+    sum_by(x.len(), |i| {
+        axes.iter()
+            .map(|&a| forward_difference(x, dims, a, i).f64().powi(2))
+            .sum::<f64>()
+            .sqrt()
+    })
+}
+
+/// `−div q = ∇ᵀ q` at voxel `i`, `q` holding one field per axis in `axes` order.
+///
+/// mirrors shaders/iterative.wgsl: gradient_transpose
+#[inline(always)]
+fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i: usize) -> R {
+    let strides = [1, dims[0], dims[0] * dims[1]];
+    let mut acc = R::zero();
+    for (f, &a) in q.iter().zip(axes) {
+        let c = (i / strides[a]) % dims[a];
+        // (∇ᵀq)_i = q_{i−1} − q_i, with q = 0 at the last voxel and before the first.
+        if c + 1 < dims[a] {
+            acc = acc - f[i];
+        }
+        if c > 0 {
+            acc = acc + f[i - strides[a]];
+        }
+    }
+    acc
+}
+
+/// `‖A‖` by 20 power iterations on `AᵀA` (from the support's ones), raised by 1 %.
+fn operator_norm<R: Real>(prob: &Problem<R>) -> f64 {
+    let all = all_views(prob.pair);
+    let mut v = masked(vec![R::one(); prob.pair.n_voxels()], prob.support);
+    let mut est = 0.0;
+    for _ in 0..20 {
+        let nv = norm(&v);
+        if nv == 0.0 {
+            return 0.0;
+        }
+        let inv = R::of(1.0 / nv);
+        v.par_iter_mut().for_each(|x| *x = *x * inv);
+        let w = transpose_masked(prob, &prob.pair.forward(&v, &all), &all);
+        est = norm(&w).sqrt();
+        v = w;
+    }
+    est * 1.01
+}
+
+/// Total variation by Chambolle–Pock (module docs).
+fn tv<R: Real>(
+    prob: &Problem<R>,
+    mut x: Vec<R>,
+    opts: &IterativeOptions,
+    on_iteration: &mut OnIteration<R>,
+) -> Result<Solution<R>> {
+    let pair = prob.pair;
+    let dims = pair.dims;
+    let all = all_views(pair);
+    let axes = live_axes(dims);
+    let norm_a = operator_norm(prob);
+    // ‖∇‖² ≤ 4 per axis (forward differences).
+    let norm_grad = (4.0 * axes.len().max(1) as f64).sqrt();
+    let mu = if norm_a > 0.0 {
+        norm_a / norm_grad
+    } else {
+        1.0
+    };
+    let k_norm = (norm_a * norm_a + mu * mu * norm_grad * norm_grad)
+        .sqrt()
+        .max(1e-30);
+    let step = 0.99 / k_norm;
+    let (sigma, tau) = (R::of(step), R::of(step));
+    let radius = R::of(opts.tv_weight / mu);
+    let mu_r = R::of(mu);
+    let n = pair.n_voxels();
+    let mut p = vec![R::zero(); prob.b.len()];
+    let mut q: Vec<Vec<R>> = axes.iter().map(|_| vec![R::zero(); n]).collect();
+    let mut xbar = x.clone();
+    let mut ax_prev = pair.forward(&x, &all);
+    let objective_of = |x: &[R], ax: &[R]| {
+        let data = 0.5
+            * sum_by(ax.len(), |i| {
+                let d = ax[i].f64() - prob.b[i].f64();
+                d * d
+            });
+        data + opts.tv_weight * total_variation(x, dims)
+    };
+    let resid_of = |ax: &[R]| {
+        sum_by(ax.len(), |i| {
+            let d = ax[i].f64() - prob.b[i].f64();
+            d * d
+        })
+        .sqrt()
+    };
+    let mut residual = vec![resid_of(&ax_prev)];
+    let mut objective = vec![objective_of(&x, &ax_prev)];
+    let mut converged = false;
+    let mut iterations = 0;
+    let one = R::one();
+    let two = R::of(2.0);
+    let support = prob.support;
+    for it in 1..=opts.iterations {
+        // A x̄ = 2 A x_k − A x_{k−1}: one forward per iteration gives both.
+        let axbar = pair.forward(&xbar, &all);
+        if it > 1 {
+            // A x_{k} = (A x̄_k + A x_{k−1}) / 2: the objective of the last iterate.
+            let ax: Vec<R> = axbar
+                .par_iter()
+                .zip(&ax_prev)
+                .map(|(&a, &b)| (a + b) / two)
+                .collect();
+            let rn = resid_of(&ax);
+            residual.push(rn);
+            objective.push(objective_of(&x, &ax));
+            on_iteration(it - 1, &x, rn)?;
+            ax_prev = ax;
+            if stalled(opts, &objective) {
+                converged = true;
+                break;
+            }
+        }
+        // Dual of the data term: p ← (p + σ(A x̄ − b)) / (1 + σ).
+        p.par_iter_mut()
+            .zip(axbar.par_iter().zip(prob.b))
+            .for_each(|(pv, (&a, &b))| *pv = (*pv + sigma * (a - b)) / (one + sigma));
+        // Dual of TV: q ← proj_{|q| ≤ w/μ}(q + σ μ ∇x̄).
+        tv_dual_step(&mut q, &xbar, &axes, dims, sigma * mu_r, radius);
+        // Primal: x ← proj(x − τ(Aᵀp + μ ∇ᵀq)); x̄ ← 2x_new − x.
+        let atp = transpose_masked(prob, &p, &all);
+        let q_ref = &q;
+        let axes_ref = &axes;
+        let new: Vec<R> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let g = atp[i] + mu_r * gradient_transpose(q_ref, axes_ref, dims, i);
+                let mut v = x[i] - tau * g;
+                if opts.nonnegative {
+                    v = v.max(R::zero());
+                }
+                if support.is_some_and(|m| !m[i]) {
+                    v = R::zero();
+                }
+                v
+            })
+            .collect();
+        xbar.par_iter_mut()
+            .zip(new.par_iter().zip(&x))
+            .for_each(|(b, (&nv, &ov))| *b = two * nv - ov);
+        x = new;
+        iterations = it;
+    }
+    if !converged && iterations == opts.iterations {
+        let ax = pair.forward(&x, &all);
+        let rn = resid_of(&ax);
+        residual.push(rn);
+        objective.push(objective_of(&x, &ax));
+        on_iteration(iterations, &x, rn)?;
+        if stalled(opts, &objective) {
+            converged = true;
+        }
+    }
+    Ok(Solution {
+        x,
+        residual,
+        objective,
+        iterations,
+        converged,
+        norm_estimate: Some(norm_a),
+    })
+}
+
+/// `q ← proj_{|q(v)|₂ ≤ radius}(q + s·∇x)`, voxel by voxel.
+///
+/// mirrors shaders/iterative.wgsl: tv_dual
+fn tv_dual_step<R: Real>(
+    q: &mut [Vec<R>],
+    x: &[R],
+    axes: &[usize],
+    dims: [usize; 3],
+    s: R,
+    radius: R,
+) {
+    let n = x.len();
+    let new: Vec<[R; 3]> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut v = [R::zero(); 3];
+            let mut len2 = R::zero();
+            for (f, &a) in axes.iter().enumerate() {
+                v[f] = q[f][i] + s * forward_difference(x, dims, a, i);
+                len2 = len2 + v[f] * v[f];
+            }
+            let len = len2.sqrt();
+            if len > radius {
+                let scale = if len > R::zero() {
+                    radius / len
+                } else {
+                    R::zero()
+                };
+                for c in v.iter_mut() {
+                    *c = *c * scale;
+                }
+            }
+            v
+        })
+        .collect();
+    for (f, field) in q.iter_mut().enumerate() {
+        field.par_iter_mut().zip(&new).for_each(|(d, v)| *d = v[f]);
+    }
+}
