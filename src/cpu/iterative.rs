@@ -30,58 +30,35 @@ use crate::real::Real;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// The iterative method.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    #[default]
-    Sirt,
-    Cgls,
-    OsSart,
-    Tv,
+crate::choice_enum! {
+    /// The iterative method.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum Method: "iterative method", default Sirt {
+        /// Simultaneous iterative reconstruction (ASTRA's and TIGRE's weights).
+        Sirt = "sirt",
+        /// Conjugate gradients on the normal equations (least squares).
+        Cgls = "cgls",
+        /// Ordered-subset SART: SIRT's update over one subset of the views at a time.
+        OsSart = "os-sart",
+        /// Least squares plus total variation (Chambolle–Pock).
+        Tv = "tv",
+    }
 }
 
 impl Method {
     /// Every method, in the order the docs list them.
     pub const ALL: [Method; 4] = [Method::Sirt, Method::Cgls, Method::OsSart, Method::Tv];
-
-    /// The name on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Sirt => "sirt",
-            Method::Cgls => "cgls",
-            Method::OsSart => "os-sart",
-            Method::Tv => "tv",
-        }
-    }
-
-    /// The method called `s`.
-    ///
-    /// # Errors
-    /// [`Error::Invalid`] naming the methods.
-    pub fn parse(s: &str) -> Result<Self> {
-        Method::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| {
-                Error::invalid(
-                    "--method",
-                    format!("'{s}': give fbp, sirt, cgls, os-sart or tv"),
-                )
-            })
-    }
 }
 
-/// The order in which OS-SART visits its subsets.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SubsetOrder {
-    /// 0, 1, 2, …, K − 1 in every iteration.
-    #[default]
-    Sequential,
-    /// A fresh permutation every iteration, from a fixed seed (the same run gives the
-    /// same order).
-    Random,
+crate::choice_enum! {
+    /// The order in which OS-SART visits its subsets.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum SubsetOrder: "subset order", default Sequential {
+        /// 0, 1, 2, …, K − 1 in every iteration.
+        Sequential = "sequential",
+        /// A fresh permutation every iteration, from a fixed seed (a run repeats).
+        Random = "random",
+    }
 }
 
 /// The options of [`solve`].

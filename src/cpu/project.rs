@@ -561,15 +561,30 @@ impl JosephFootprint<f64> {
         cols: usize,
         rows: usize,
     ) -> Option<(usize, usize, usize, usize)> {
+        self.pixels_box(x, [h; 3], cols, rows)
+    }
+
+    /// [`Self::pixels`] for the box of half-sizes `h` (per index axis) about `x`.
+    #[inline]
+    pub fn pixels_box(
+        &self,
+        x: [f64; 3],
+        h: [f64; 3],
+        cols: usize,
+        rows: usize,
+    ) -> Option<(usize, usize, usize, usize)> {
         let lin = |i: usize| {
             let q = &self.rows[i];
             let centre = q[0] * x[0] + q[1] * x[1] + q[2] * x[2] + q[3];
-            let half = h * (q[0].abs() + q[1].abs() + q[2].abs());
+            let half = h[0] * q[0].abs() + h[1] * q[1].abs() + h[2] * q[2].abs();
             (centre - half, centre + half)
         };
+        let parallel = self.rows[2] == [0.0, 0.0, 0.0, 1.0];
         let (dlo, dhi) = lin(2);
         let (full_c, full_r) = ((0.0, (cols - 1) as f64), (0.0, (rows - 1) as f64));
-        let ((clo, chi), (rlo, rhi)) = if dlo <= 1e-12 * dhi.abs().max(1.0) {
+        let ((clo, chi), (rlo, rhi)) = if parallel {
+            (lin(0), lin(1))
+        } else if dlo <= 1e-12 * dhi.abs().max(1.0) {
             (full_c, full_r)
         } else {
             let ratio = |(nlo, nhi): (f64, f64)| {
@@ -620,6 +635,10 @@ pub struct JosephPair<R> {
     pub rows: usize,
     pub views: Vec<JosephView<R>>,
     pub footprints: Vec<JosephFootprint<f64>>,
+    /// Per view, the driving axis when every ray of the view that meets the grid has
+    /// the same one (then a voxel's rays cross its own plane on that axis, and the
+    /// transpose bounds them by a square instead of a cube).
+    pub view_axis: Vec<Option<usize>>,
     table: Option<Vec<Option<JosephPlanes<R>>>>,
 }
 
@@ -652,6 +671,7 @@ impl<R: Real> JosephPair<R> {
             rows: g.rows,
             views,
             footprints,
+            view_axis: Vec::new(),
             table: None,
         };
         let rays = g.n_angles() * g.rows * g.cols;
@@ -663,6 +683,15 @@ impl<R: Real> JosephPair<R> {
                 .collect();
             pair.table = Some(table);
         }
+        let per_view = g.rows * g.cols;
+        pair.view_axis = (0..g.n_angles())
+            .into_par_iter()
+            .map(|k| {
+                let mut axes = (0..per_view).filter_map(|i| pair.planes(k, i).map(|p| p.m));
+                let first = axes.next()?;
+                axes.all(|m| m == first).then_some(first)
+            })
+            .collect();
         Ok(pair)
     }
 
@@ -747,11 +776,46 @@ impl<R: Real> JosephPair<R> {
             .enumerate()
             .for_each(|(line, dst)| {
                 let (j, k) = (line % dims[1], line / dims[1]);
-                for (i, v) in dst.iter_mut().enumerate() {
-                    *v = self.transpose_voxel(y, views, [i, j, k]);
+                // Views outside, voxels inside: every voxel still sums its views in
+                // order (the same sum as transpose_voxel), and one view's rays stay in
+                // cache along the line.
+                for (slot, &view) in views.iter().enumerate() {
+                    for (i, v) in dst.iter_mut().enumerate() {
+                        *v = *v + self.transpose_view(y, slot, view, [i, j, k]);
+                    }
                 }
             });
         out
+    }
+
+    /// The part of one voxel's [`Self::transpose`] sum from one view (`slot` = its
+    /// place in `y`).
+    #[inline(always)]
+    fn transpose_view(&self, y: &[R], slot: usize, k: usize, voxel: [usize; 3]) -> R {
+        let x = voxel.map(|v| v as f64);
+        let mut h = [FOOTPRINT_HALF; 3];
+        if let Some(m) = self.view_axis[k] {
+            h[m] = 0.0;
+        }
+        let Some((c0, c1, r0, r1)) = self.footprints[k].pixels_box(x, h, self.cols, self.rows)
+        else {
+            return R::zero();
+        };
+        let base = slot * self.per_view();
+        let mut acc = R::zero();
+        for row in r0..=r1 {
+            for col in c0..=c1 {
+                let pixel = row * self.cols + col;
+                let yv = y[base + pixel];
+                if yv == R::zero() {
+                    continue;
+                }
+                if let Some(p) = self.planes(k, pixel) {
+                    acc = acc + joseph_weight(&p, voxel) * yv;
+                }
+            }
+        }
+        acc
     }
 
     /// One voxel of [`Self::transpose`].
@@ -759,27 +823,9 @@ impl<R: Real> JosephPair<R> {
     /// mirrors shaders/project_transpose.wgsl: transpose_voxel
     #[inline]
     pub fn transpose_voxel(&self, y: &[R], views: &[usize], voxel: [usize; 3]) -> R {
-        let x = voxel.map(|v| v as f64);
         let mut acc = R::zero();
         for (slot, &k) in views.iter().enumerate() {
-            let Some((c0, c1, r0, r1)) =
-                self.footprints[k].pixels(x, FOOTPRINT_HALF, self.cols, self.rows)
-            else {
-                continue;
-            };
-            let base = slot * self.per_view();
-            for row in r0..=r1 {
-                for col in c0..=c1 {
-                    let pixel = row * self.cols + col;
-                    let yv = y[base + pixel];
-                    if yv == R::zero() {
-                        continue;
-                    }
-                    if let Some(p) = self.planes(k, pixel) {
-                        acc = acc + joseph_weight(&p, voxel) * yv;
-                    }
-                }
-            }
+            acc = acc + self.transpose_view(y, slot, k, voxel);
         }
         acc
     }

@@ -1,13 +1,17 @@
-//! `voxlab reconstruct`: filtered backprojection of a projection file. A scikit-image
-//! sinogram `(detector, angle)` or a parallel stack `(angle, row, col)` gives FBP
-//! images in scikit-image's orientation (as `iradon` with `circle=True` by default);
-//! a geometry JSON of a cone beam gives FDK on RTK's centred grid. See docs/ct.md; the
-//! algorithms are [`crate::cpu::fbp`] and [`crate::gpu::fbp`].
+//! `voxlab reconstruct`: filtered backprojection of a projection file, or an
+//! iterative method on Joseph's matched pair. A scikit-image sinogram
+//! `(detector, angle)` or a parallel stack `(angle, row, col)` gives images in
+//! scikit-image's orientation (as `iradon` with `circle=True` by default); a geometry
+//! JSON of a cone beam gives FDK (or an iterative volume) on RTK's centred grid. See
+//! docs/ct.md and docs/iterative.md; the algorithms are [`crate::cpu::fbp`],
+//! [`crate::gpu::fbp`] and [`crate::cpu::iterative`].
 
 use super::{Backend, Engine, Progress};
 use crate::cpu::fbp::{
     apply_circle_mask, fbp, parallel_stack_grid, rtk_grid, Grid, Reconstruction,
 };
+use crate::cpu::iterative::{IterativeOptions, Method, Problem, SubsetOrder};
+use crate::cpu::project::JosephPair;
 use crate::cpu::ramp::RampFilter;
 use crate::ct::{ct_to_phantom, Beam, Geometry, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
@@ -18,6 +22,58 @@ use crate::phantom::Phantom;
 use crate::volume::AnyVolume;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+
+crate::choice_enum! {
+    /// How `voxlab reconstruct` reconstructs.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum ReconstructMethod: "method", default Fbp {
+        /// Filtered backprojection (parallel) or Feldkamp (cone): one pass.
+        Fbp = "fbp",
+        /// SIRT on Joseph's matched pair (ASTRA's and TIGRE's weights).
+        Sirt = "sirt",
+        /// CGLS: conjugate gradients on the least-squares normal equations.
+        Cgls = "cgls",
+        /// OS-SART: SIRT's update over ordered subsets of the views.
+        OsSart = "os-sart",
+        /// Least squares + total variation (Chambolle–Pock).
+        Tv = "tv",
+    }
+}
+
+impl ReconstructMethod {
+    /// The iterative method, `None` for FBP/FDK.
+    pub fn iterative(self) -> Option<Method> {
+        match self {
+            ReconstructMethod::Fbp => None,
+            ReconstructMethod::Sirt => Some(Method::Sirt),
+            ReconstructMethod::Cgls => Some(Method::Cgls),
+            ReconstructMethod::OsSart => Some(Method::OsSart),
+            ReconstructMethod::Tv => Some(Method::Tv),
+        }
+    }
+
+    /// The iterations when none are asked for.
+    pub fn default_iterations(self) -> usize {
+        match self {
+            ReconstructMethod::Fbp => 0,
+            ReconstructMethod::Sirt => 100,
+            ReconstructMethod::Cgls => 30,
+            ReconstructMethod::OsSart => 20,
+            ReconstructMethod::Tv => 200,
+        }
+    }
+}
+
+crate::choice_enum! {
+    /// The image an iterative method starts from.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum Init: "initial image", default Zero {
+        /// Zero everywhere.
+        Zero = "zero",
+        /// The FBP/FDK reconstruction (with --filter) on the same grid.
+        Fbp = "fbp",
+    }
+}
 
 /// The `voxlab reconstruct` job.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -52,6 +108,56 @@ pub struct ReconstructRequest {
     pub truth: Option<String>,
     /// With `truth`: write |reconstruction − truth| of the central slice to this PNG.
     pub error_map: Option<PathBuf>,
+    /// FBP/FDK (default) or an iterative method (docs/iterative.md).
+    pub method: ReconstructMethod,
+    /// Iterative methods: iterations (`None`: sirt 100, cgls 30, os-sart 20, tv 200).
+    pub iterations: Option<usize>,
+    /// OS-SART: the number of subsets (`None`: 10, or the number of views if fewer).
+    pub subsets: Option<usize>,
+    /// OS-SART: the order of the subsets.
+    pub subset_order: SubsetOrder,
+    /// SIRT and OS-SART: the relaxation λ in (0, 2) (`None`: 1).
+    pub relaxation: Option<f64>,
+    /// TV: the weight of the total variation (`None`:
+    /// [`crate::cpu::iterative::DEFAULT_TV_WEIGHT`]).
+    pub tv_weight: Option<f64>,
+    /// SIRT, OS-SART, TV: keep every voxel ≥ 0.
+    pub nonnegative: bool,
+    /// Iterative methods: the initial image.
+    pub init: Init,
+    /// Iterative methods: stop once the objective falls by less than this fraction in
+    /// one iteration (0: run every iteration).
+    pub tolerance: f64,
+    /// Iterative methods: write `iteration,residual,objective` for every iteration to
+    /// this CSV file.
+    pub convergence: Option<PathBuf>,
+}
+
+/// How an iterative reconstruction went.
+#[derive(Clone, Debug)]
+pub struct IterationLog {
+    pub method: Method,
+    /// `‖b − A x_k‖` for `k = 0` (the initial image) … the last iteration.
+    pub residual: Vec<f64>,
+    /// The objective the method decreases, for the same iterates
+    /// ([`crate::cpu::iterative::Solution::objective`]).
+    pub objective: Vec<f64>,
+    pub iterations: usize,
+    /// Stopped by the tolerance.
+    pub converged: bool,
+    /// Wall-clock seconds per iteration (the matched pair's set-up excluded).
+    pub seconds_per_iteration: f64,
+}
+
+impl IterationLog {
+    /// The log as CSV: a header, then `iteration,residual,objective` lines.
+    pub fn csv(&self) -> String {
+        let mut s = String::from("iteration,residual,objective\n");
+        for (k, (r, o)) in self.residual.iter().zip(&self.objective).enumerate() {
+            s.push_str(&format!("{k},{r:.9e},{o:.9e}\n"));
+        }
+        s
+    }
 }
 
 /// The error against a phantom.
@@ -76,6 +182,8 @@ pub struct Reconstructed {
     pub truth: Option<TruthError>,
     /// Where the geometry came from when it was found beside the input.
     pub geometry_file: Option<PathBuf>,
+    /// Iterative methods: residuals and objectives per iteration.
+    pub iterative: Option<IterationLog>,
 }
 
 /// `angles`: a count (evenly over 180°) or a file.
@@ -224,6 +332,64 @@ fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
             ));
         }
     }
+    if a.method == ReconstructMethod::Fbp {
+        let given = [
+            ("--iterations", a.iterations.is_some()),
+            ("--subsets", a.subsets.is_some()),
+            ("--subset-order", a.subset_order != SubsetOrder::Sequential),
+            ("--relaxation", a.relaxation.is_some()),
+            ("--tv-weight", a.tv_weight.is_some()),
+            ("--nonnegative", a.nonnegative),
+            ("--init", a.init != Init::Zero),
+            ("--tolerance", a.tolerance != 0.0),
+            ("--convergence", a.convergence.is_some()),
+        ];
+        if let Some((flag, _)) = given.iter().find(|(_, g)| *g) {
+            return Err(Error::invalid(
+                *flag,
+                "goes with an iterative --method (sirt, cgls, os-sart, tv)",
+            ));
+        }
+    } else {
+        if a.short_scan {
+            return Err(Error::invalid(
+                "--short-scan",
+                "Parker's weights are for FDK: an iterative method handles a short scan \
+                 as it is",
+            ));
+        }
+        if let Some(c) = &a.convergence {
+            crate::io::check_output("--convergence", c, &["csv"])?;
+        }
+        let method = a.method.iterative().unwrap_or_default();
+        let only = |flag: &str, ok: bool, which: &str| -> Result<()> {
+            if ok {
+                Ok(())
+            } else {
+                Err(Error::invalid(flag, format!("goes with --method {which}")))
+            }
+        };
+        only(
+            "--subsets",
+            a.subsets.is_none() || method == Method::OsSart,
+            "os-sart",
+        )?;
+        only(
+            "--subset-order",
+            a.subset_order == SubsetOrder::Sequential || method == Method::OsSart,
+            "os-sart",
+        )?;
+        only(
+            "--relaxation",
+            a.relaxation.is_none() || matches!(method, Method::Sirt | Method::OsSart),
+            "sirt or os-sart",
+        )?;
+        only(
+            "--tv-weight",
+            a.tv_weight.is_none() || method == Method::Tv,
+            "tv",
+        )?;
+    }
     Ok(truth)
 }
 
@@ -258,74 +424,18 @@ pub fn reconstruct(
 ) -> Result<Reconstructed> {
     let truth = check_request(a)?;
     p.check_against(&g)?;
+    if let Some(method) = a.method.iterative() {
+        return iterative(a, method, p, g, geometry_file, truth, progress);
+    }
     let parallel = g.beam == Beam::Parallel;
-    let (p, g, grid) = if parallel {
-        let n = a.size.unwrap_or(p.cols);
-        check_size(n, 1 << 14)?;
-        let (p, g) = if a.no_circle {
-            (p, g)
-        } else {
-            pad_for_circle(&p, &g)?
-        };
-        let grid = scaled_parallel_grid(n, &g, a.spacing.unwrap_or(g.du));
-        (p, g, grid)
+    // The grid from the unpadded sinogram (padding keeps rows, spacing and centre).
+    let grid = reconstruction_grid(a, &g, progress)?;
+    check_grid(a, &grid, parallel, g.rows)?;
+    let (p, g) = if parallel && !a.no_circle {
+        pad_for_circle(&p, &g)?
     } else {
-        if a.no_circle {
-            return Err(Error::invalid(
-                "--no-circle",
-                "the circle mask is for parallel-beam images only",
-            ));
-        }
-        let Beam::Cone { sid, sdd } = g.beam else {
-            unreachable!("cone")
-        };
-        let n = a.size.unwrap_or(g.cols);
-        check_size(n, 2048)?;
-        let s = a.spacing.unwrap_or(g.du * sid / sdd);
-        let grid = rtk_grid([n; 3], [s; 3]);
-        // A source inside the reconstructed grid: refused; in its corners: a warning.
-        if let Some(w) = g.check_source_outside(
-            grid.affine,
-            grid.dims,
-            "geometry sid",
-            "the reconstruction grid",
-        )? {
-            progress.warn(&w);
-        }
-        (p, g, grid)
+        (p, g)
     };
-    let total = grid.dims.iter().product::<usize>();
-    if total > crate::volume::max_voxels() {
-        return Err(Error::too_large(
-            "--size",
-            format!(
-                "{}×{}×{} voxels (limit {})",
-                grid.dims[0],
-                grid.dims[1],
-                grid.dims[2],
-                crate::volume::max_voxels()
-            ),
-        ));
-    }
-    if let Some(out) = &a.out {
-        let png = extension(out).as_deref() == Some("png");
-        if !parallel && png {
-            return Err(Error::invalid(
-                "--out",
-                "a cone-beam reconstruction is a volume: write .npy or .nrrd (a .png is for a \
-                 2-D image)",
-            ));
-        }
-        if parallel && g.rows > 1 && png {
-            return Err(Error::invalid(
-                "--out",
-                format!(
-                    "{} detector rows give a stack of {} images: write .npy or .nrrd",
-                    g.rows, g.rows
-                ),
-            ));
-        }
-    }
 
     if a.short_scan {
         // Checked before any work: a clear error for a parallel beam or a wrong span.
@@ -377,9 +487,22 @@ pub fn reconstruct(
         what,
         truth,
         geometry_file,
+        iterative: None,
     };
+    finish(a, done)
+}
+
+/// Writes what the request asks for (`out`, `error_map`, `convergence`).
+fn finish(a: &ReconstructRequest, done: Reconstructed) -> Result<Reconstructed> {
     if let Some(out) = &a.out {
         done.write(out)?;
+    }
+    if let (Some(path), Some(log)) = (&a.convergence, &done.iterative) {
+        let text = log.csv();
+        crate::io::write_atomic(path, |w| {
+            w.write_all(text.as_bytes())
+                .map_err(|e| Error::io(path.clone(), e))
+        })?;
     }
     if let (Some(path), Some(t)) = (&a.error_map, &done.truth) {
         let hi = t.slice.data.iter().fold(0.0f64, |m, &v| m.max(v));
@@ -393,6 +516,233 @@ pub fn reconstruct(
         )?;
     }
     Ok(done)
+}
+
+/// The grid a reconstruction fills (from the unpadded geometry): parallel,
+/// `n × n × rows` voxels centred like scikit-image's (`n` = `size` or the detector
+/// count); cone, RTK's centred `N³`
+/// grid (a source inside it refused, in its corners a warning).
+fn reconstruction_grid(
+    a: &ReconstructRequest,
+    g: &Geometry,
+    progress: &dyn Progress,
+) -> Result<Grid> {
+    match g.beam {
+        Beam::Parallel => {
+            let n = a.size.unwrap_or(g.cols);
+            check_size(n, 1 << 14)?;
+            Ok(scaled_parallel_grid(n, g, a.spacing.unwrap_or(g.du)))
+        }
+        Beam::Cone { sid, sdd } => {
+            if a.no_circle {
+                return Err(Error::invalid(
+                    "--no-circle",
+                    "the circle mask is for parallel-beam images only",
+                ));
+            }
+            let n = a.size.unwrap_or(g.cols);
+            check_size(n, 2048)?;
+            let s = a.spacing.unwrap_or(g.du * sid / sdd);
+            let grid = rtk_grid([n; 3], [s; 3]);
+            if let Some(w) = g.check_source_outside(
+                grid.affine,
+                grid.dims,
+                "geometry sid",
+                "the reconstruction grid",
+            )? {
+                progress.warn(&w);
+            }
+            Ok(grid)
+        }
+    }
+}
+
+/// The grid's size against the voxel limit, and the output's kind against the grid.
+fn check_grid(a: &ReconstructRequest, grid: &Grid, parallel: bool, rows: usize) -> Result<()> {
+    let total = grid.dims.iter().product::<usize>();
+    if total > crate::volume::max_voxels() {
+        return Err(Error::too_large(
+            "--size",
+            format!(
+                "{}×{}×{} voxels (limit {})",
+                grid.dims[0],
+                grid.dims[1],
+                grid.dims[2],
+                crate::volume::max_voxels()
+            ),
+        ));
+    }
+    if let Some(out) = &a.out {
+        let png = extension(out).as_deref() == Some("png");
+        if !parallel && png {
+            return Err(Error::invalid(
+                "--out",
+                "a cone-beam reconstruction is a volume: write .npy or .nrrd (a .png is for a \
+                 2-D image)",
+            ));
+        }
+        if parallel && rows > 1 && png {
+            return Err(Error::invalid(
+                "--out",
+                format!("{rows} detector rows give a stack of {rows} images: write .npy or .nrrd"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The inscribed disc of every z-slice ([`apply_circle_mask`]'s rule) as a support.
+fn circle_support(dims: [usize; 3]) -> Vec<bool> {
+    let r = (dims[0] / 2) as i64;
+    (0..dims.iter().product::<usize>())
+        .map(|idx| {
+            let (i, j) = (
+                (idx % dims[0]) as i64 - r,
+                ((idx / dims[0]) % dims[1]) as i64 - r,
+            );
+            i * i + j * j <= r * r
+        })
+        .collect()
+}
+
+/// What one precision's solve gives back: the image in f64, and its log.
+type Solved = (Vec<f64>, IterationLog);
+
+/// [`crate::cpu::iterative::solve`] in precision `R`, reporting every iteration.
+fn solve_in<R: crate::real::Real>(
+    grid: &Grid,
+    g: &Geometry,
+    b: &[f64],
+    support: Option<&[bool]>,
+    x0: &[f64],
+    opts: &IterativeOptions,
+    progress: &dyn Progress,
+) -> Result<Solved> {
+    let pair = JosephPair::<R>::new(grid.dims, grid.affine, g)?;
+    let b: Vec<R> = b.iter().map(|&v| R::of(v)).collect();
+    let x0: Vec<R> = x0.iter().map(|&v| R::of(v)).collect();
+    let prob = Problem {
+        pair: &pair,
+        b: &b,
+        support,
+    };
+    let total = opts.iterations as u64;
+    let mut hook = |it: usize, _: &[R], _: f64| {
+        progress.advance(it as u64, total);
+        super::check_cancel(progress)
+    };
+    let t = std::time::Instant::now();
+    let sol = crate::cpu::iterative::solve(&prob, x0, opts, &mut hook)?;
+    let secs = t.elapsed().as_secs_f64();
+    Ok((
+        sol.x.iter().map(|v| v.f64()).collect(),
+        IterationLog {
+            method: opts.method,
+            residual: sol.residual,
+            objective: sol.objective,
+            iterations: sol.iterations,
+            converged: sol.converged,
+            seconds_per_iteration: secs / sol.iterations.max(1) as f64,
+        },
+    ))
+}
+
+/// The iterative path of [`reconstruct`]: the same grids as FBP/FDK (parallel: the
+/// `n × n` image per detector row, supported on the inscribed disc unless
+/// `no_circle`; cone: RTK's centred grid), Joseph's matched pair, and `method`.
+fn iterative(
+    a: &ReconstructRequest,
+    method: Method,
+    p: Projections<f64>,
+    g: Geometry,
+    geometry_file: Option<PathBuf>,
+    truth: Option<Phantom>,
+    progress: &dyn Progress,
+) -> Result<Reconstructed> {
+    let parallel = g.beam == Beam::Parallel;
+    let grid = reconstruction_grid(a, &g, progress)?;
+    check_grid(a, &grid, parallel, g.rows)?;
+    let support = (parallel && !a.no_circle).then(|| circle_support(grid.dims));
+    let iterations = a.iterations.unwrap_or(a.method.default_iterations());
+    let opts = IterativeOptions {
+        method,
+        iterations,
+        subsets: a.subsets.unwrap_or(10.min(g.n_angles())),
+        order: a.subset_order,
+        relaxation: a.relaxation.unwrap_or(1.0),
+        tv_weight: a
+            .tv_weight
+            .unwrap_or(crate::cpu::iterative::DEFAULT_TV_WEIGHT),
+        nonnegative: a.nonnegative,
+        tolerance: a.tolerance,
+    };
+    opts.check(g.n_angles())?;
+    let x0 = match a.init {
+        Init::Zero => vec![0.0; grid.dims.iter().product()],
+        Init::Fbp => {
+            let first = ReconstructRequest {
+                method: ReconstructMethod::Fbp,
+                out: None,
+                truth: None,
+                error_map: None,
+                convergence: None,
+                iterations: None,
+                subsets: None,
+                subset_order: SubsetOrder::Sequential,
+                relaxation: None,
+                tv_weight: None,
+                nonnegative: false,
+                init: Init::Zero,
+                tolerance: 0.0,
+                ..a.clone()
+            };
+            reconstruct(&first, p.clone(), g.clone(), None, progress)?
+                .reconstruction
+                .data
+        }
+    };
+    super::check_cancel(progress)?;
+    let engine = Engine::open(a.backend)?;
+    progress.begin(
+        &format!("{} iterations", method.name()),
+        "iterations",
+        iterations as u64,
+    );
+    let t = std::time::Instant::now();
+    let s = support.as_deref();
+    let ((data, log), what) = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(_ctx)) => {
+            return Err(Error::invalid("--backend", "GPU_PENDING"));
+        }
+        (Backend::CpuF32, _) => (
+            solve_in::<f32>(&grid, &g, &p.data, s, &x0, &opts, progress)?,
+            "cpu f32".to_string(),
+        ),
+        _ => (
+            solve_in::<f64>(&grid, &g, &p.data, s, &x0, &opts, progress)?,
+            "cpu f64".to_string(),
+        ),
+    };
+    progress.end(t.elapsed().as_secs_f64());
+    if log.converged {
+        progress.note(&format!(
+            "stopped after {} iterations: the objective fell by less than {} in the last",
+            log.iterations, a.tolerance
+        ));
+    }
+    let rec = Reconstruction { grid, data };
+    let truth = truth.map(|ph| truth_error(&rec, &ph, parallel && !a.no_circle));
+    finish(
+        a,
+        Reconstructed {
+            reconstruction: rec,
+            parallel,
+            what,
+            truth,
+            geometry_file,
+            iterative: Some(log),
+        },
+    )
 }
 
 impl Reconstructed {
