@@ -624,10 +624,12 @@ pub const FOOTPRINT_HALF: f64 = 1.0 - 1e-9;
 /// sum in a fixed order, whatever the thread count), and
 /// `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` holds to rounding (`tests/iterative.rs`).
 ///
-/// The transpose is voxel-driven (a gather): for every voxel and view, the
-/// detector pixels whose rays can touch the voxel ([`JosephFootprint::pixels`]),
-/// each weighted as the forward pass weighs it. The rays' [`JosephPlanes`] are
-/// kept in a table when it fits in [`RAY_TABLE_BYTES`].
+/// The rays' [`JosephPlanes`] are kept in a table when it fits in
+/// [`RAY_TABLE_BYTES`]; the transpose then runs ray by ray over index planes, as the
+/// forward pass does (`transpose_by_planes`). Without the table it is voxel-driven (a
+/// gather, [`Self::transpose_voxel`], the GPU's way): for every voxel and view, the
+/// detector pixels whose rays can touch the voxel ([`JosephFootprint::pixels`]), each
+/// weighted as the forward pass weighs it.
 pub struct JosephPair<R> {
     pub dims: [usize; 3],
     pub affine: DMat4,
@@ -770,6 +772,23 @@ impl<R: Real> JosephPair<R> {
             views.len() * self.per_view(),
             "JosephPair::transpose: projection size"
         );
+        match &self.table {
+            Some(table) => self.transpose_by_planes(table, y, views),
+            None => self.transpose_by_voxels(y, views),
+        }
+    }
+
+    /// The pair without its ray table: every ray is rebuilt where it is needed, and
+    /// [`Self::transpose`] gathers voxel by voxel (what it does when the table would
+    /// not fit; both ways give the same weights).
+    pub fn without_table(mut self) -> Self {
+        self.table = None;
+        self
+    }
+
+    /// [`Self::transpose`] as a gather: every voxel sums, view by view in order, the
+    /// rays of [`Self::transpose_voxel`].
+    fn transpose_by_voxels(&self, y: &[R], views: &[usize]) -> Vec<R> {
         let dims = self.dims;
         let mut out = vec![R::zero(); self.n_voxels()];
         out.par_chunks_mut(dims[0])
@@ -785,6 +804,97 @@ impl<R: Real> JosephPair<R> {
                     }
                 }
             });
+        out
+    }
+
+    /// [`Self::transpose`] ray by ray, plane by plane: for each driving axis `m` in
+    /// turn, every index plane `x_m = s` is one task that adds, for every ray (views in
+    /// order, then pixels in order) driven along `m` that crosses it, the ray's value
+    /// times each of its bilinear tap weights ([`joseph_weight`]'s numbers) into the
+    /// plane's voxels. A plane belongs to one task, so every voxel's sum runs in a
+    /// fixed order whatever the thread count; the work is the forward projection's.
+    fn transpose_by_planes(
+        &self,
+        table: &[Option<JosephPlanes<R>>],
+        y: &[R],
+        views: &[usize],
+    ) -> Vec<R> {
+        let dims = self.dims;
+        let pv = self.per_view();
+        let mut out = vec![R::zero(); self.n_voxels()];
+        let mut plane_buf = vec![R::zero(); self.n_voxels()];
+        for m in 0..3 {
+            // The rays driven along m with a non-zero value: (index into y, planes).
+            let rays: Vec<(usize, JosephPlanes<R>)> = views
+                .iter()
+                .enumerate()
+                .flat_map(|(slot, &k)| {
+                    (0..pv).filter_map(move |pixel| {
+                        let yi = slot * pv + pixel;
+                        match table[k * pv + pixel] {
+                            Some(p) if p.m == m && y[yi] != R::zero() => Some((yi, p)),
+                            _ => None,
+                        }
+                    })
+                })
+                .collect();
+            if rays.is_empty() {
+                continue;
+            }
+            let (a, b) = match m {
+                0 => (1, 2),
+                1 => (0, 2),
+                _ => (0, 1),
+            };
+            let (na, nb) = (dims[a], dims[b]);
+            plane_buf
+                .par_chunks_mut(na * nb)
+                .enumerate()
+                .for_each(|(s, plane)| {
+                    plane.iter_mut().for_each(|v| *v = R::zero());
+                    let sr = R::of(s as f64);
+                    for (yi, p) in &rays {
+                        if s < p.s0 || s > p.s1 {
+                            continue;
+                        }
+                        let (xa, xb) = (p.xa0 + sr * p.ka, p.xb0 + sr * p.kb);
+                        let (fa, fb) = (xa.floor(), xb.floor());
+                        let (ta, tb) = (xa - fa, xb - fb);
+                        let (ia, ib) = (
+                            fa.to_i64().unwrap_or(i64::MIN / 2),
+                            fb.to_i64().unwrap_or(i64::MIN / 2),
+                        );
+                        let yv = y[*yi];
+                        let one = R::one();
+                        for (da, wa) in [(0, one - ta), (1, ta)] {
+                            let ca = ia + da;
+                            if ca < 0 || ca >= na as i64 || wa == R::zero() {
+                                continue;
+                            }
+                            let ha = p.w * wa;
+                            for (db, wb) in [(0, one - tb), (1, tb)] {
+                                let cb = ib + db;
+                                if cb < 0 || cb >= nb as i64 {
+                                    continue;
+                                }
+                                let idx = ca as usize + na * cb as usize;
+                                plane[idx] = plane[idx] + ha * wb * yv;
+                            }
+                        }
+                    }
+                });
+            // Back into the grid's layout (x fastest).
+            out.par_chunks_mut(dims[0])
+                .enumerate()
+                .for_each(|(line, dst)| {
+                    let (j, k) = (line % dims[1], line / dims[1]);
+                    for (i, v) in dst.iter_mut().enumerate() {
+                        let c = [i, j, k];
+                        let idx = c[m] * na * nb + c[a] + na * c[b];
+                        *v = *v + plane_buf[idx];
+                    }
+                });
+        }
         out
     }
 
