@@ -143,6 +143,10 @@ fn options_that_do_not_fit_the_method_are_refused() {
             vec!["--nonnegative", "CGLS"],
         ),
         (
+            vec!["--method", "cgls", "--backend", "gpu"],
+            vec!["gpu", "cpu or cpu-f32"],
+        ),
+        (
             vec!["--method", "sirt", "--short-scan"],
             vec!["--short-scan", "FDK"],
         ),

@@ -424,8 +424,6 @@ fn sart<R: Real>(
 }
 
 /// `x ← x + λ·c·u`, then `max(x, 0)` when asked.
-///
-/// mirrors shaders/iterative.wgsl: sart_update
 fn update<R: Real>(x: &mut [R], u: &[R], c: &[R], lambda: R, nonneg: bool) {
     x.par_iter_mut()
         .zip(u.par_iter().zip(c))
@@ -505,8 +503,6 @@ fn live_axes(dims: [usize; 3]) -> Vec<usize> {
 }
 
 /// The forward difference of `x` along `axis` at voxel `i` (0 at the last voxel).
-///
-/// mirrors shaders/iterative.wgsl: forward_difference
 #[inline(always)]
 fn forward_difference<R: Real>(x: &[R], dims: [usize; 3], axis: usize, i: usize) -> R {
     let stride = [1, dims[0], dims[0] * dims[1]][axis];
@@ -530,8 +526,6 @@ pub fn total_variation<R: Real>(x: &[R], dims: [usize; 3]) -> f64 {
 }
 
 /// `−div q = ∇ᵀ q` at voxel `i`, `q` holding one field per axis in `axes` order.
-///
-/// mirrors shaders/iterative.wgsl: gradient_transpose
 #[inline(always)]
 fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i: usize) -> R {
     let strides = [1, dims[0], dims[0] * dims[1]];
@@ -692,8 +686,6 @@ fn tv<R: Real>(
 }
 
 /// `q ← proj_{|q(v)|₂ ≤ radius}(q + s·∇x)`, voxel by voxel.
-///
-/// mirrors shaders/iterative.wgsl: tv_dual
 fn tv_dual_step<R: Real>(
     q: &mut [Vec<R>],
     x: &[R],

@@ -335,8 +335,6 @@ pub struct JosephPlanes<R> {
 /// in index coordinates with `|d|` = one world mm; `None` when the ray takes no
 /// sample. The forward projector ([`joseph_ray`]) and its transpose
 /// ([`joseph_weight`]) both start here, so they use the very same numbers.
-///
-/// mirrors shaders/shared/joseph.wgsl: joseph_planes
 #[inline(always)]
 pub fn joseph_planes<R: Real>(
     dims: [usize; 3],
@@ -428,8 +426,6 @@ pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t
 /// bilinear tap weight of [`slice_bilinear`] (`1 − t` for the tap at `floor(x_a)`,
 /// `t` for the one after it) — the very number the forward sum multiplies the voxel
 /// by, so the transpose built from it is exact.
-///
-/// mirrors shaders/shared/joseph.wgsl: joseph_weight
 #[inline(always)]
 pub fn joseph_weight<R: Real>(p: &JosephPlanes<R>, voxel: [usize; 3]) -> R {
     let s = voxel[p.m];
@@ -507,8 +503,7 @@ pub fn project_volume<R: Real>(
 /// f64 from [`JosephView`]'s own rows. The transpose uses it only to bound the
 /// pixels it visits; their weights come from the rays themselves.
 ///
-/// Three rows of four numbers: the same bytes as WGSL's `JosephFootprint` in
-/// `shaders/shared/project_params.wgsl` (48 bytes).
+/// Three rows of four numbers (48 bytes in f32, ready for upload).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct JosephFootprint<R> {
@@ -552,8 +547,6 @@ impl JosephFootprint<f64> {
     /// `cols × rows`; `None` when no pixel can. Interval arithmetic on the rows:
     /// exact for a parallel beam, conservative for a cone beam, and the whole detector
     /// when the cube reaches the plane of the source.
-    ///
-    /// mirrors shaders/shared/joseph.wgsl: footprint_pixels
     pub fn pixels(
         &self,
         x: [f64; 3],
@@ -627,7 +620,7 @@ pub const FOOTPRINT_HALF: f64 = 1.0 - 1e-9;
 /// The rays' [`JosephPlanes`] are kept in a table when it fits in
 /// [`RAY_TABLE_BYTES`]; the transpose then runs ray by ray over index planes, as the
 /// forward pass does (`transpose_by_planes`). Without the table it is voxel-driven (a
-/// gather, [`Self::transpose_voxel`], the GPU's way): for every voxel and view, the
+/// gather, [`Self::transpose_voxel`]): for every voxel and view, the
 /// detector pixels whose rays can touch the voxel ([`JosephFootprint::pixels`]), each
 /// weighted as the forward pass weighs it.
 pub struct JosephPair<R> {
@@ -929,8 +922,6 @@ impl<R: Real> JosephPair<R> {
     }
 
     /// One voxel of [`Self::transpose`].
-    ///
-    /// mirrors shaders/project_transpose.wgsl: transpose_voxel
     #[inline]
     pub fn transpose_voxel(&self, y: &[R], views: &[usize], voxel: [usize; 3]) -> R {
         let mut acc = R::zero();

@@ -659,6 +659,15 @@ fn iterative(
     truth: Option<Phantom>,
     progress: &dyn Progress,
 ) -> Result<Reconstructed> {
+    // The iterative methods run on the CPU (f64 and f32); `auto` takes the f64 oracle.
+    let backend = match a.backend {
+        Backend::Auto => Backend::Cpu,
+        b => b,
+    };
+    backend.require(
+        &format!("reconstruct --method {}", method.name()),
+        &[Backend::Cpu, Backend::CpuF32],
+    )?;
     let parallel = g.beam == Beam::Parallel;
     let grid = reconstruction_grid(a, &g, progress)?;
     check_grid(a, &grid, parallel, g.rows)?;
@@ -702,7 +711,7 @@ fn iterative(
         }
     };
     super::check_cancel(progress)?;
-    let engine = Engine::open(a.backend)?;
+    let engine = Engine::open(backend)?;
     progress.begin(
         &format!("{} iterations", method.name()),
         "iterations",
@@ -711,9 +720,6 @@ fn iterative(
     let t = std::time::Instant::now();
     let s = support.as_deref();
     let ((data, log), what) = match (engine.backend(), engine.gpu()) {
-        (Backend::Gpu, Some(_ctx)) => {
-            return Err(Error::invalid("--backend", "GPU_PENDING"));
-        }
         (Backend::CpuF32, _) => (
             solve_in::<f32>(&grid, &g, &p.data, s, &x0, &opts, progress)?,
             "cpu f32".to_string(),
