@@ -156,6 +156,14 @@ fn reconstruct_stack(
         "parallel": rec.parallel,
         "what": rec.what,
         "truth_rms": rec.truth.as_ref().map(|t| t.rms),
+        "iterative": rec.iterative.as_ref().map(|l| serde_json::json!({
+            "method": l.method.name(),
+            "residual": l.residual,
+            "objective": l.objective,
+            "iterations": l.iterations,
+            "converged": l.converged,
+            "seconds_per_iteration": l.seconds_per_iteration,
+        })),
     });
     let r = rec.reconstruction;
     let d = r.grid.dims;

@@ -63,3 +63,40 @@ def test_bad_geometry_and_options_are_clear():
         vct.reconstruct(pr.projections, bad)
     with pytest.raises(voxlab.InvalidError, match="beam"):
         vct.project("phantom:sphere", beam="fan")
+
+
+def test_iterative_reconstruction_equals_the_command_line(tmp_path, cli):
+    p = tmp_path / "s.npy"
+    cli("project", "phantom:shepp-logan-modified", "--angles", "20", "--cols", "32", "--out", p)
+    pr = vct.project("phantom:shepp-logan-modified", angles=20, cols=32)
+    np.testing.assert_array_equal(pr.projections, np.load(p))
+    for method, extra, kw in [
+        ("sirt", ["--nonnegative"], {"nonnegative": True}),
+        ("cgls", [], {}),
+        ("os-sart", ["--subsets", "4", "--relaxation", "0.5"], {"subsets": 4, "relaxation": 0.5}),
+        ("tv", ["--tv-weight", "0.1"], {"tv_weight": 0.1}),
+    ]:
+        r, c = tmp_path / f"{method}.npy", tmp_path / f"{method}.csv"
+        cli("reconstruct", p, "--method", method, "--iterations", "6", *extra,
+            "--convergence", c, "--out", r)
+        rec = vct.reconstruct(pr.projections, pr.geometry, method=method, iterations=6, **kw)
+        assert rec.array.shape == (32, 32)
+        np.testing.assert_array_equal(rec.array.astype(np.float32), np.load(r))
+        log = rec.info["iterative"]
+        assert log["method"] == method and log["iterations"] == 6 and not log["converged"]
+        csv = np.loadtxt(c, delimiter=",", skiprows=1)
+        assert csv.shape == (7, 3)
+        np.testing.assert_allclose(log["residual"], csv[:, 1], rtol=2e-9)
+        np.testing.assert_allclose(log["objective"], csv[:, 2], rtol=2e-9)
+        # Every method lowers the misfit of the zero image.
+        assert log["residual"][-1] < 0.5 * log["residual"][0]
+
+
+def test_iterative_options_are_checked():
+    pr = vct.project("phantom:sphere", angles=8, cols=16)
+    with pytest.raises(voxlab.InvalidError, match="method"):
+        vct.reconstruct(pr.projections, pr.geometry, method="art")
+    with pytest.raises(voxlab.InvalidError, match="relaxation"):
+        vct.reconstruct(pr.projections, pr.geometry, method="sirt", relaxation=2.5)
+    with pytest.raises(voxlab.InvalidError, match="subsets"):
+        vct.reconstruct(pr.projections, pr.geometry, method="os-sart", subsets=9)

@@ -82,22 +82,48 @@ def reconstruct(
     circle: bool = True,
     short_scan: bool = False,
     backend: str = "cpu",
+    method: str = "fbp",
+    iterations: Optional[int] = None,
+    subsets: Optional[int] = None,
+    subset_order: str = "sequential",
+    relaxation: Optional[float] = None,
+    tv_weight: Optional[float] = None,
+    nonnegative: bool = False,
+    init: str = "zero",
+    tolerance: float = 0.0,
     progress: Optional[Callable[[str, int, int], Any]] = None,
 ) -> Volume:
     """FBP (parallel beam: scikit-image's images, ``circle`` as iradon's) or FDK (cone
     beam, RTK's centred grid) of ``projections`` with ``geometry`` (a dict, a JSON
-    string, or a :class:`Projected`'s ``geometry``): ``voxlab reconstruct`` in
-    memory. ``size``: the image side N (parallel; default the detector count) or the
-    volume N³ (cone; default the detector columns); ``spacing`` in mm; ``short_scan``:
-    Parker's weights for a cone beam over less than a full turn.
+    string, or a :class:`Projected`'s ``geometry``), or an iterative reconstruction
+    on the same grid: ``voxlab reconstruct`` in memory. ``size``: the image side N
+    (parallel; default the detector count) or the volume N³ (cone; default the
+    detector columns); ``spacing`` in mm; ``short_scan``: Parker's weights for a cone
+    beam over less than a full turn (FBP/FDK only).
+
+    ``method``: ``"fbp"`` (the default), or ``"sirt"``, ``"cgls"``, ``"os-sart"``,
+    ``"tv"`` on Joseph's matched projector pair (docs/iterative.md), with
+    ``iterations`` (default sirt 100, cgls 30, os-sart 20, tv 200), ``subsets`` and
+    ``subset_order`` (``"sequential"`` or ``"random"``; os-sart), ``relaxation``
+    (sirt, os-sart; in (0, 2), default 1), ``tv_weight`` (tv; default 0.2),
+    ``nonnegative`` (sirt, os-sart, tv), ``init`` (``"zero"`` or ``"fbp"``) and
+    ``tolerance`` (stop once the objective falls by less than this fraction in one
+    iteration). A parallel-beam image is supported on the inscribed disc when
+    ``circle``.
 
     Returns a :class:`voxlab.Volume` whose array is laid out as the command line's
     ``.npy`` (``(n, n)`` for one row, ``(rows, n, n)``, or ``(N, N, N)``) and whose
-    affine maps the grid into the CT frame (mm).
+    affine maps the grid into the CT frame (mm). Its ``info`` dict holds ``what``
+    computed it and, for an iterative method, ``iterative``: the ``residual``
+    ``‖b − Ax_k‖`` and the ``objective`` for k = 0 (the initial image) … the last
+    iteration, ``iterations``, ``converged`` and ``seconds_per_iteration``.
     """
     g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
     req = {"filter": filter, "size": size, "spacing": spacing, "no_circle": not circle,
-           "short_scan": bool(short_scan), "backend": backend}
+           "short_scan": bool(short_scan), "backend": backend, "method": method,
+           "iterations": iterations, "subsets": subsets, "subset_order": subset_order,
+           "relaxation": relaxation, "tv_weight": tv_weight,
+           "nonnegative": bool(nonnegative), "init": init, "tolerance": float(tolerance)}
     p = np.ascontiguousarray(np.asarray(projections, dtype=np.float64))
     arr, affine, meta = _voxlab.reconstruct_stack(p, g, _json.dumps(req), progress)
     v = Volume(arr, np.array(affine, dtype=np.float64), "reconstruction")
