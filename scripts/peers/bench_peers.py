@@ -823,35 +823,50 @@ def write_md(res, path):
         fh.write("\n".join(lines))
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="smaller sizes: FFT 128³ instead of 256³, no FDK 256³, DVR 128³ → 256²")
-    ap.add_argument("--out", default=os.path.join("docs", "bench", "peers-cpu.md"))
+def add_common_arguments(ap, out, merge_help, work_help):
+    """The options every peer script shares: --out, --runs, --merge, --md-only,
+    --no-venv, --work."""
+    ap.add_argument("--out", default=out)
     ap.add_argument("--runs", type=int, default=3, help="timed runs after one warm-up")
-    ap.add_argument("--only", default="fft,fbp,fdk,dvr",
-                    help="comma-separated subset of fft,fbp,fdk,dvr")
-    ap.add_argument("--merge", action="store_true",
-                    help="keep the other tasks' rows of an existing --out JSON")
+    ap.add_argument("--merge", action="store_true", help=merge_help)
     ap.add_argument("--md-only", action="store_true",
                     help="only rewrite the Markdown from the existing --out JSON")
     ap.add_argument("--no-venv", action="store_true",
                     help="run in this interpreter (the peers must be importable)")
     ap.add_argument("--work", default=os.path.join(ROOT, "target", "peers-bench"),
-                    help="scratch folder for inputs and outputs")
+                    help=work_help)
+
+
+def parse_and_enter(ap, script, write_md):
+    """Parses the options of `ap` (with add_common_arguments'); with --md-only rewrites
+    the page from its JSON and exits; otherwise re-runs `script` inside the peers'
+    venv (made, and the binaries built, when missing) unless --no-venv or already
+    there. Returns the options."""
     args = ap.parse_args()
     if args.runs < 3:
         ap.error("--runs must be at least 3")
-
     if args.md_only:
         write_md(json.load(open(os.path.splitext(args.out)[0] + ".json")), args.out)
-        return
+        sys.exit(0)
     in_venv = os.path.realpath(sys.prefix) == os.path.realpath(VENV)
     if not args.no_venv and not in_venv:
         ensure_venv()
         ensure_binaries()
         py = os.path.join(VENV, "bin", "python")
-        os.execv(py, [py, os.path.abspath(__file__), *sys.argv[1:]])
+        os.execv(py, [py, os.path.abspath(script), *sys.argv[1:]])
+    return args
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true",
+                    help="smaller sizes: FFT 128³ instead of 256³, no FDK 256³, DVR 128³ → 256²")
+    ap.add_argument("--only", default="fft,fbp,fdk,dvr",
+                    help="comma-separated subset of fft,fbp,fdk,dvr")
+    add_common_arguments(ap, os.path.join("docs", "bench", "peers-cpu.md"),
+                         "keep the other tasks' rows of an existing --out JSON",
+                         "scratch folder for inputs and outputs")
+    args = parse_and_enter(ap, __file__, write_md)
     install = json.load(open(STAMP))["install"] if os.path.exists(STAMP) else {}
     ensure_binaries()
 
