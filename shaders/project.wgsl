@@ -1,32 +1,22 @@
 // Joseph forward projection of a voxel grid, one invocation per detector pixel.
-// Mirrors src/cpu/project.rs: project_volume (per pixel: pixel_ray, then joseph_ray);
-// the host side is src/gpu/project.rs.
+// Mirrors src/cpu/project.rs: project_volume and JosephPair::forward (per pixel:
+// pixel_ray, then joseph_ray); the host sides are src/gpu/project.rs and
+// src/gpu/joseph_pair.rs.
 
 #import project_params
+#import joseph
 
 @group(0) @binding(0) var<uniform> p: ProjectParams;
 @group(0) @binding(1) var<storage, read> views: array<JosephView>;
 // [z][y][x]
 @group(0) @binding(2) var<storage, read> vol: array<f32>;
-// [view − view_offset][row][col]
+// [slot − view_offset][row][col]
 @group(0) @binding(3) var<storage, read_write> out: array<f32>;
+// The views to project, in output order (all of them for project_volume; a subset
+// for the iterative methods' JosephPair::forward).
+@group(0) @binding(4) var<storage, read> list: array<u32>;
 
 const WORKGROUP: u32 = 64u;
-
-struct Ray {
-    o: vec3<f32>,
-    d: vec3<f32>,
-    t_min: f32,
-}
-
-// mirrors src/cpu/project.rs: pixel_ray
-fn pixel_ray(v: JosephView, col: f32, row: f32) -> Ray {
-    let o = v.a0.xyz + col * v.a_u.xyz + row * v.a_v.xyz;
-    let e = v.d0.xyz + col * v.d_u.xyz + row * v.d_v.xyz;
-    let w = v.w0.xyz + col * v.w_u.xyz + row * v.w_v.xyz;
-    let inv_len = 1.0 / sqrt(w.x * w.x + w.y * w.y + w.z * w.z);
-    return Ray(o, e * inv_len, v.a0.w);
-}
 
 // Bilinear interpolation, continued by zeros, of the index plane starting at `base`.
 // mirrors src/cpu/project.rs: slice_bilinear
@@ -55,71 +45,22 @@ fn slice_bilinear(base: u32, sa: u32, na: u32, sb: u32, nb: u32, x: f32, y: f32)
     return top * (1.0 - ty) + bottom * ty;
 }
 
-// Narrows [lo, hi] (x, y of `range`) to where x0 + s·k lies in (−1, n).
-// mirrors src/cpu/project.rs: clip_planes
-fn clip_planes(x0: f32, k: f32, n: u32, range: ptr<function, vec2<f32>>) -> bool {
-    let nf = f32(n);
-    if abs(k) > 1e-20 {
-        let s1 = (-1.0 - x0) / k;
-        let s2 = (nf - x0) / k;
-        (*range).x = max((*range).x, min(s1, s2));
-        (*range).y = min((*range).y, max(s1, s2));
-    } else if !(x0 > -1.0 && x0 < nf) {
-        return false;
-    }
-    return (*range).x <= (*range).y;
-}
-
 // Joseph's line integral along o + t·d, t ≥ t_min (index frame, |d| = 1 world mm).
 // mirrors src/cpu/project.rs: joseph_ray
-fn joseph_ray(o3: vec3<f32>, d3: vec3<f32>, t_min: f32) -> f32 {
-    let o = array<f32, 3>(o3.x, o3.y, o3.z);
-    let d = array<f32, 3>(d3.x, d3.y, d3.z);
-    let dims = array<u32, 3>(p.nx, p.ny, p.nz);
+fn joseph_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32) -> f32 {
+    let pl = joseph_planes(vec3<u32>(p.nx, p.ny, p.nz), o, d, t_min);
+    if !pl.hit {
+        return 0.0;
+    }
     let stride = array<u32, 3>(1u, p.nx, p.nx * p.ny);
-    let ad = abs(d3);
-    var m = 2u;
-    var a = 0u;
-    var b = 1u;
-    if ad.x >= ad.y && ad.x >= ad.z {
-        m = 0u;
-        a = 1u;
-        b = 2u;
-    } else if ad.y >= ad.z {
-        m = 1u;
-        a = 0u;
-        b = 2u;
-    }
-    if ad[m] == 0.0 {
-        return 0.0;
-    }
-    let inv = 1.0 / d[m];
-    let ka = d[a] * inv;
-    let kb = d[b] * inv;
-    let xa0 = o[a] - o[m] * ka;
-    let xb0 = o[b] - o[m] * kb;
-    var range = vec2<f32>(0.0, f32(dims[m] - 1u));
-    if !clip_planes(xa0, ka, dims[a], &range) || !clip_planes(xb0, kb, dims[b], &range) {
-        return 0.0;
-    }
-    let s_min = o[m] + t_min * d[m];
-    if d[m] > 0.0 {
-        range.x = max(range.x, s_min);
-    } else {
-        range.y = min(range.y, s_min);
-    }
-    if range.x > range.y {
-        return 0.0;
-    }
-    let s0 = u32(ceil(range.x));
-    let s1 = u32(floor(range.y));
+    let dims = array<u32, 3>(p.nx, p.ny, p.nz);
     var sum = 0.0;
-    for (var s = s0; s <= s1; s++) {
+    for (var s = pl.s0; s <= pl.s1; s++) {
         let sr = f32(s);
-        sum += slice_bilinear(s * stride[m], stride[a], dims[a], stride[b], dims[b],
-                              xa0 + sr * ka, xb0 + sr * kb);
+        sum += slice_bilinear(s * stride[pl.m], stride[pl.a], dims[pl.a], stride[pl.b],
+                              dims[pl.b], pl.xa0 + sr * pl.ka, pl.xb0 + sr * pl.kb);
     }
-    return sum * abs(inv);
+    return sum * pl.w;
 }
 
 @compute @workgroup_size(WORKGROUP)
@@ -131,6 +72,6 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let k = id / per_view;
     let rem = id % per_view;
-    let r = pixel_ray(views[p.view_offset + k], f32(rem % p.cols), f32(rem / p.cols));
+    let r = pixel_ray(views[list[p.view_offset + k]], f32(rem % p.cols), f32(rem / p.cols));
     out[id] = joseph_ray(r.o, r.d, r.t_min);
 }

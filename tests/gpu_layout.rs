@@ -182,6 +182,43 @@ fn project_params_and_joseph_view_layouts_agree() {
 }
 
 #[test]
+fn transpose_params_and_joseph_footprint_layouts_agree() {
+    use voxlab::cpu::project::JosephFootprint;
+    use voxlab::gpu::joseph_pair::TransposeParams;
+    use voxlab::gpu::project::PARAMS_WGSL as PROJECT_WGSL;
+    let (span, members) = wgsl_struct_layout(PROJECT_WGSL, "TransposeParams");
+    assert_eq!(span as usize, size_of::<TransposeParams>());
+    let rust = [
+        ("nx", offset_of!(TransposeParams, nx)),
+        ("ny", offset_of!(TransposeParams, ny)),
+        ("nz", offset_of!(TransposeParams, nz)),
+        ("cols", offset_of!(TransposeParams, cols)),
+        ("rows", offset_of!(TransposeParams, rows)),
+        ("voxel_offset", offset_of!(TransposeParams, voxel_offset)),
+        ("n_voxels", offset_of!(TransposeParams, n_voxels)),
+        ("slot_lo", offset_of!(TransposeParams, slot_lo)),
+        ("slot_hi", offset_of!(TransposeParams, slot_hi)),
+        ("accumulate", offset_of!(TransposeParams, accumulate)),
+        ("row_stride", offset_of!(TransposeParams, row_stride)),
+        ("_pad", offset_of!(TransposeParams, _pad)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+    // JosephFootprint: three vec4<f32> rows, in the order of `JosephFootprint::rows`.
+    let (span, members) = wgsl_struct_layout(PROJECT_WGSL, "JosephFootprint");
+    assert_eq!(span as usize, size_of::<JosephFootprint<f32>>());
+    let names = ["c", "r", "t"];
+    assert_eq!(members.len(), names.len());
+    for (i, ((wname, woff), rname)) in members.iter().zip(names).enumerate() {
+        assert_eq!(wname, rname);
+        assert_eq!(*woff as usize, i * 16);
+    }
+}
+
+#[test]
 fn project_shader_validates() {
     let src = voxlab::gpu::project::shader_source();
     let module = naga::front::wgsl::parse_str(&src).expect("project.wgsl parses");

@@ -6,7 +6,7 @@
 mod common;
 
 use common::Rng;
-use glam::{DMat4, DQuat, DVec3};
+use glam::{DMat4, DVec3};
 use voxlab::cpu::fbp::{fbp, skimage_grid, Reconstruction};
 use voxlab::cpu::iterative::{
     dot, solve, subset_order, IterativeOptions, Method, Problem, Solution, SubsetOrder,
@@ -16,31 +16,8 @@ use voxlab::cpu::ramp::RampFilter;
 use voxlab::ct::Geometry;
 use voxlab::phantom::{Phantom, Primitive};
 
-/// The pair cases: the shared CT cases, plus an oblique grid in a cone beam with an
-/// offset detector and irregular angles (no view lines up with a grid axis).
 fn cases() -> Vec<(String, Geometry, [usize; 3], DMat4)> {
-    let mut v: Vec<_> = common::ct_cases(13, 9)
-        .into_iter()
-        .map(|(n, g, grid)| (n.to_string(), g, grid.dims, grid.affine))
-        .collect();
-    let mut cone = Geometry::cone_rtk(
-        250.0,
-        400.0,
-        23,
-        17,
-        1.3,
-        1.1,
-        vec![3.0, 47.5, 101.0, 188.8, 270.1, 333.3],
-    )
-    .unwrap();
-    cone.cu += 2.7;
-    cone.cv -= 1.9;
-    let q = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.6);
-    let affine = DMat4::from_quat(q)
-        * DMat4::from_scale(DVec3::new(1.2, 0.9, 1.1))
-        * DMat4::from_translation(DVec3::new(-7.5, -6.0, -6.5));
-    v.push(("oblique-cone".into(), cone, [16, 13, 14], affine));
-    v
+    common::joseph_pair_cases()
 }
 
 fn random(n: usize, seed: u64) -> Vec<f64> {

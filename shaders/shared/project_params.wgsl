@@ -32,3 +32,33 @@ struct JosephView {
     w_u: vec4<f32>,
     w_v: vec4<f32>,
 }
+
+// One dispatch of the transpose (shaders/project_transpose.wgsl). Rust twin:
+// src/gpu/joseph_pair.rs: TransposeParams (twelve u32, 48 bytes).
+struct TransposeParams {
+    nx: u32,
+    ny: u32,
+    nz: u32,
+    cols: u32,
+    rows: u32,
+    // The voxels of this dispatch: voxel_offset .. voxel_offset + n_voxels.
+    voxel_offset: u32,
+    n_voxels: u32,
+    // The slots (places in the view list and in the projections) it sums: lo .. hi.
+    slot_lo: u32,
+    slot_hi: u32,
+    // 1: add to what the output holds (a later slot range); 0: overwrite.
+    accumulate: u32,
+    // Invocations per row of the 2-D dispatch grid.
+    row_stride: u32,
+    _pad: u32,
+}
+
+// One view's footprint map (src/cpu/project.rs: JosephFootprint<f32>, three rows of
+// four f32, 48 bytes): parallel (c, r, ·) = rows · (X, 1) with t = (0, 0, 0, 1);
+// cone (t·c, t·r, t) = rows · (X, 1).
+struct JosephFootprint {
+    c: vec4<f32>,
+    r: vec4<f32>,
+    t: vec4<f32>,
+}

@@ -154,9 +154,55 @@ impl IterativeOptions {
     }
 }
 
+/// A projector `A` and its exact transpose `Aᵀ` over any subset of the views: what
+/// the methods need of Joseph's pair, on the CPU ([`JosephPair`]) or the GPU
+/// (`crate::gpu::joseph_pair::GpuJosephPair`). `forward(x, views)` gives
+/// `views.len() × per_view` values in the order of `views`; `transpose(y, views)` one
+/// value per voxel.
+pub trait MatchedPair<R> {
+    /// The grid's size in voxels (x fastest).
+    fn dims(&self) -> [usize; 3];
+    /// The number of views.
+    fn n_views(&self) -> usize;
+    /// Detector pixels per view.
+    fn per_view(&self) -> usize;
+    /// The number of voxels.
+    fn n_voxels(&self) -> usize {
+        self.dims().iter().product()
+    }
+    /// `A x` over `views`.
+    ///
+    /// # Errors
+    /// Device failures (a GPU pair).
+    fn forward(&self, x: &[R], views: &[usize]) -> Result<Vec<R>>;
+    /// `Aᵀ y` over `views`.
+    ///
+    /// # Errors
+    /// Device failures (a GPU pair).
+    fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>>;
+}
+
+impl<R: Real> MatchedPair<R> for JosephPair<R> {
+    fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    fn n_views(&self) -> usize {
+        JosephPair::n_views(self)
+    }
+    fn per_view(&self) -> usize {
+        JosephPair::per_view(self)
+    }
+    fn forward(&self, x: &[R], views: &[usize]) -> Result<Vec<R>> {
+        Ok(JosephPair::forward(self, x, views))
+    }
+    fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>> {
+        Ok(JosephPair::transpose(self, y, views))
+    }
+}
+
 /// What [`solve`] solves: `b ≈ A x` on the voxels of `support` (all when `None`).
 pub struct Problem<'a, R> {
-    pub pair: &'a JosephPair<R>,
+    pub pair: &'a dyn MatchedPair<R>,
     /// Projections, `n_views × rows × cols`, in view order.
     pub b: &'a [R],
     pub support: Option<&'a [bool]>,
@@ -303,26 +349,26 @@ pub fn solve<R: Real>(
 }
 
 /// All the views.
-fn all_views(pair: &JosephPair<impl Real>) -> Vec<usize> {
+fn all_views<R>(pair: &dyn MatchedPair<R>) -> Vec<usize> {
     (0..pair.n_views()).collect()
 }
 
 /// `b − A x` over `views` (`b` holds every view).
-fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Vec<R> {
+fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Result<Vec<R>> {
     let pv = prob.pair.per_view();
-    let mut r = prob.pair.forward(x, views);
+    let mut r = prob.pair.forward(x, views)?;
     r.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
         let src = &prob.b[views[slot] * pv..(views[slot] + 1) * pv];
         for (v, &bv) in img.iter_mut().zip(src) {
             *v = bv - *v;
         }
     });
-    r
+    Ok(r)
 }
 
 /// `Aᵀ y` on the support.
-fn transpose_masked<R: Real>(prob: &Problem<R>, y: &[R], views: &[usize]) -> Vec<R> {
-    masked(prob.pair.transpose(y, views), prob.support)
+fn transpose_masked<R: Real>(prob: &Problem<R>, y: &[R], views: &[usize]) -> Result<Vec<R>> {
+    Ok(masked(prob.pair.transpose(y, views)?, prob.support))
 }
 
 /// Has the objective stopped falling (by the tolerance)?
@@ -344,17 +390,17 @@ fn sart<R: Real>(
     let pair = prob.pair;
     let all = all_views(pair);
     let ones_x = masked(vec![R::one(); pair.n_voxels()], prob.support);
-    let row_w = reciprocal(pair.forward(&ones_x, &all));
+    let row_w = reciprocal(pair.forward(&ones_x, &all)?);
     let k = if subsets { opts.subsets } else { 1 };
     let groups: Vec<Vec<usize>> = (0..k).map(|s| subset_views(pair.n_views(), k, s)).collect();
     // Column weights per subset: kept while they fit, else recomputed.
     let keep = k == 1 || k.saturating_mul(pair.n_voxels()) * std::mem::size_of::<R>() <= 1 << 30;
     let col_w_of = |views: &[usize]| {
         let ones_y = vec![R::one(); views.len() * pair.per_view()];
-        reciprocal(transpose_masked(prob, &ones_y, views))
+        transpose_masked(prob, &ones_y, views).map(reciprocal)
     };
     let kept: Vec<Vec<R>> = if keep {
-        groups.iter().map(|v| col_w_of(v)).collect()
+        groups.iter().map(|v| col_w_of(v)).collect::<Result<_>>()?
     } else {
         Vec::new()
     };
@@ -372,7 +418,7 @@ fn sart<R: Real>(
     let mut iterations = 0;
     for it in 0..=opts.iterations {
         // The residual of the current iterate (the last pass only logs it).
-        let r = residual_of(prob, &x, &all);
+        let r = residual_of(prob, &x, &all)?;
         residual.push(norm(&r));
         objective.push(weighted(&r));
         if it > 0 {
@@ -391,25 +437,25 @@ fn sart<R: Real>(
             wr.par_iter_mut()
                 .zip(&row_w)
                 .for_each(|(v, &w)| *v = *v * w);
-            let upd = transpose_masked(prob, &wr, &all);
+            let upd = transpose_masked(prob, &wr, &all)?;
             let cw = &kept[0];
             update(&mut x, &upd, cw, lambda, opts.nonnegative);
             continue;
         }
         for s in subset_order(opts.order, k, it) {
             let views = &groups[s];
-            let mut wr = residual_of(prob, &x, views);
+            let mut wr = residual_of(prob, &x, views)?;
             wr.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
                 let w = &row_w[views[slot] * pv..(views[slot] + 1) * pv];
                 for (v, &wv) in img.iter_mut().zip(w) {
                     *v = *v * wv;
                 }
             });
-            let upd = transpose_masked(prob, &wr, views);
+            let upd = transpose_masked(prob, &wr, views)?;
             if keep {
                 update(&mut x, &upd, &kept[s], lambda, opts.nonnegative);
             } else {
-                update(&mut x, &upd, &col_w_of(views), lambda, opts.nonnegative);
+                update(&mut x, &upd, &col_w_of(views)?, lambda, opts.nonnegative);
             }
         }
     }
@@ -448,8 +494,8 @@ fn cgls<R: Real>(
     on_iteration: &mut OnIteration<R>,
 ) -> Result<Solution<R>> {
     let all = all_views(prob.pair);
-    let mut r = residual_of(prob, &x, &all);
-    let mut s = transpose_masked(prob, &r, &all);
+    let mut r = residual_of(prob, &x, &all)?;
+    let mut s = transpose_masked(prob, &r, &all)?;
     let mut p = s.clone();
     let mut gamma = dot(&s, &s);
     let mut residual = vec![norm(&r)];
@@ -461,7 +507,7 @@ fn cgls<R: Real>(
             converged = true;
             break;
         }
-        let q = prob.pair.forward(&p, &all);
+        let q = prob.pair.forward(&p, &all)?;
         let qq = dot(&q, &q);
         if qq == 0.0 {
             converged = true;
@@ -470,7 +516,7 @@ fn cgls<R: Real>(
         let alpha = gamma / qq;
         axpy(&mut x, R::of(alpha), &p);
         axpy(&mut r, R::of(-alpha), &q);
-        s = transpose_masked(prob, &r, &all);
+        s = transpose_masked(prob, &r, &all)?;
         let gamma_new = dot(&s, &s);
         let beta = R::of(gamma_new / gamma);
         gamma = gamma_new;
@@ -544,22 +590,22 @@ fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i
 }
 
 /// `‖A‖` by 20 power iterations on `AᵀA` (from the support's ones), raised by 1 %.
-fn operator_norm<R: Real>(prob: &Problem<R>) -> f64 {
+fn operator_norm<R: Real>(prob: &Problem<R>) -> Result<f64> {
     let all = all_views(prob.pair);
     let mut v = masked(vec![R::one(); prob.pair.n_voxels()], prob.support);
     let mut est = 0.0;
     for _ in 0..20 {
         let nv = norm(&v);
         if nv == 0.0 {
-            return 0.0;
+            return Ok(0.0);
         }
         let inv = R::of(1.0 / nv);
         v.par_iter_mut().for_each(|x| *x = *x * inv);
-        let w = transpose_masked(prob, &prob.pair.forward(&v, &all), &all);
+        let w = transpose_masked(prob, &prob.pair.forward(&v, &all)?, &all)?;
         est = norm(&w).sqrt();
         v = w;
     }
-    est * 1.01
+    Ok(est * 1.01)
 }
 
 /// Total variation by Chambolle–Pock (module docs).
@@ -570,10 +616,10 @@ fn tv<R: Real>(
     on_iteration: &mut OnIteration<R>,
 ) -> Result<Solution<R>> {
     let pair = prob.pair;
-    let dims = pair.dims;
+    let dims = pair.dims();
     let all = all_views(pair);
     let axes = live_axes(dims);
-    let norm_a = operator_norm(prob);
+    let norm_a = operator_norm(prob)?;
     // ‖∇‖² ≤ 4 per axis (forward differences).
     let norm_grad = (4.0 * axes.len().max(1) as f64).sqrt();
     let mu = if norm_a > 0.0 {
@@ -592,7 +638,7 @@ fn tv<R: Real>(
     let mut p = vec![R::zero(); prob.b.len()];
     let mut q: Vec<Vec<R>> = axes.iter().map(|_| vec![R::zero(); n]).collect();
     let mut xbar = x.clone();
-    let mut ax_prev = pair.forward(&x, &all);
+    let mut ax_prev = pair.forward(&x, &all)?;
     let objective_of = |x: &[R], ax: &[R]| {
         let data = 0.5
             * sum_by(ax.len(), |i| {
@@ -617,7 +663,7 @@ fn tv<R: Real>(
     let support = prob.support;
     for it in 1..=opts.iterations {
         // A x̄ = 2 A x_k − A x_{k−1}: one forward per iteration gives both.
-        let axbar = pair.forward(&xbar, &all);
+        let axbar = pair.forward(&xbar, &all)?;
         if it > 1 {
             // A x_{k} = (A x̄_k + A x_{k−1}) / 2: the objective of the last iterate.
             let ax: Vec<R> = axbar
@@ -642,7 +688,7 @@ fn tv<R: Real>(
         // Dual of TV: q ← proj_{|q| ≤ w/μ}(q + σ μ ∇x̄).
         tv_dual_step(&mut q, &xbar, &axes, dims, sigma * mu_r, radius);
         // Primal: x ← proj(x − τ(Aᵀp + μ ∇ᵀq)); x̄ ← 2x_new − x.
-        let atp = transpose_masked(prob, &p, &all);
+        let atp = transpose_masked(prob, &p, &all)?;
         let q_ref = &q;
         let axes_ref = &axes;
         let new: Vec<R> = (0..n)
@@ -666,7 +712,7 @@ fn tv<R: Real>(
         iterations = it;
     }
     if !converged && iterations == opts.iterations {
-        let ax = pair.forward(&x, &all);
+        let ax = pair.forward(&x, &all)?;
         let rn = resid_of(&ax);
         residual.push(rn);
         objective.push(objective_of(&x, &ax));

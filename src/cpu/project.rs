@@ -248,7 +248,7 @@ pub fn joseph_views<R: Real>(g: &Geometry, affine: DMat4) -> Vec<JosephView<R>> 
 /// The ray of detector pixel `(col, row)`: start `o` and direction `d` in index
 /// coordinates with `|d|` = one world mm, and the smallest ray parameter `t_min`.
 ///
-/// mirrors shaders/project.wgsl: pixel_ray
+/// mirrors shaders/shared/joseph.wgsl: pixel_ray
 #[inline(always)]
 pub fn pixel_ray<R: Real>(v: &JosephView<R>, col: R, row: R) -> ([R; 3], [R; 3], R) {
     let r = &v.rows;
@@ -298,6 +298,8 @@ pub fn slice_bilinear<R: Real>(
 
 /// Narrows the plane range `[lo, hi]` to where `x(s) = x0 + s·k` lies in `(−1, n)`,
 /// outside which every bilinear tap is zero. Returns `false` when nothing is left.
+///
+/// mirrors shaders/shared/joseph.wgsl: clip_planes
 #[inline(always)]
 fn clip_planes<R: Real>(x0: R, k: R, n: usize, lo: &mut R, hi: &mut R) -> bool {
     let n = R::of(n as f64);
@@ -335,6 +337,8 @@ pub struct JosephPlanes<R> {
 /// in index coordinates with `|d|` = one world mm; `None` when the ray takes no
 /// sample. The forward projector ([`joseph_ray`]) and its transpose
 /// ([`joseph_weight`]) both start here, so they use the very same numbers.
+///
+/// mirrors shaders/shared/joseph.wgsl: joseph_planes
 #[inline(always)]
 pub fn joseph_planes<R: Real>(
     dims: [usize; 3],
@@ -426,6 +430,8 @@ pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t
 /// bilinear tap weight of [`slice_bilinear`] (`1 − t` for the tap at `floor(x_a)`,
 /// `t` for the one after it) — the very number the forward sum multiplies the voxel
 /// by, so the transpose built from it is exact.
+///
+/// mirrors shaders/shared/joseph.wgsl: joseph_weight
 #[inline(always)]
 pub fn joseph_weight<R: Real>(p: &JosephPlanes<R>, voxel: [usize; 3]) -> R {
     let s = voxel[p.m];
@@ -558,6 +564,8 @@ impl JosephFootprint<f64> {
     }
 
     /// [`Self::pixels`] for the box of half-sizes `h` (per index axis) about `x`.
+    ///
+    /// mirrors shaders/project_transpose.wgsl: footprint_box
     #[inline]
     pub fn pixels_box(
         &self,
@@ -637,6 +645,28 @@ pub struct JosephPair<R> {
     table: Option<Vec<Option<JosephPlanes<R>>>>,
 }
 
+/// Per view, the driving axis ([`JosephPlanes::m`]) when every ray of the view that
+/// meets a grid of `dims` has the same one, else `None` (a `cols × rows` detector).
+pub fn view_axes<R: Real>(
+    dims: [usize; 3],
+    views: &[JosephView<R>],
+    cols: usize,
+    rows: usize,
+) -> Vec<Option<usize>> {
+    views
+        .par_iter()
+        .map(|v| {
+            let mut axes = (0..rows * cols).filter_map(|i| {
+                let (col, row) = (R::of((i % cols) as f64), R::of((i / cols) as f64));
+                let (o, d, t_min) = pixel_ray(v, col, row);
+                joseph_planes(dims, o, d, t_min).map(|p| p.m)
+            });
+            let first = axes.next()?;
+            axes.all(|m| m == first).then_some(first)
+        })
+        .collect()
+}
+
 /// The largest ray table a [`JosephPair`] keeps (bytes).
 pub const RAY_TABLE_BYTES: usize = 512 << 20;
 
@@ -678,15 +708,7 @@ impl<R: Real> JosephPair<R> {
                 .collect();
             pair.table = Some(table);
         }
-        let per_view = g.rows * g.cols;
-        pair.view_axis = (0..g.n_angles())
-            .into_par_iter()
-            .map(|k| {
-                let mut axes = (0..per_view).filter_map(|i| pair.planes(k, i).map(|p| p.m));
-                let first = axes.next()?;
-                axes.all(|m| m == first).then_some(first)
-            })
-            .collect();
+        pair.view_axis = view_axes(dims, &pair.views, g.cols, g.rows);
         Ok(pair)
     }
 
@@ -922,6 +944,8 @@ impl<R: Real> JosephPair<R> {
     }
 
     /// One voxel of [`Self::transpose`].
+    ///
+    /// mirrors shaders/project_transpose.wgsl: transpose
     #[inline]
     pub fn transpose_voxel(&self, y: &[R], views: &[usize], voxel: [usize; 3]) -> R {
         let mut acc = R::zero();

@@ -61,6 +61,104 @@ pub struct ProjectTimings {
     pub total: f64,
 }
 
+/// The views one dispatch of `shaders/project.wgsl: project` may cover: about
+/// [`SAMPLES_PER_DISPATCH`] samples (a grid of `dims`, `per_view` pixels per view), and
+/// no more than a storage binding of `limit` bytes holds; at least one.
+pub fn views_per_dispatch(dims: [usize; 3], per_view: usize, limit: u64) -> usize {
+    let longest = dims.iter().copied().max().unwrap_or(1);
+    let by_work = SAMPLES_PER_DISPATCH / (per_view * longest).max(1);
+    let by_bytes = (limit / (per_view as u64 * 4).max(1)) as usize;
+    by_work.min(by_bytes).max(1)
+}
+
+/// `shaders/project.wgsl: project`, compiled once; [`Self::dispatch`] projects a run
+/// of a view list. Shared by [`project_volume`] and the iterative methods' GPU pair
+/// (`gpu::joseph_pair`).
+pub struct ForwardKernel {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl ForwardKernel {
+    /// Compiles the kernel.
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the shader does not compile.
+    pub fn new(ctx: &GpuContext) -> Result<Self> {
+        let module = ctx.shader("project.wgsl", &shader_source())?;
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("project"),
+                layout: None,
+                module: &module,
+                entry_point: Some("project"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let layout = pipeline.get_bind_group_layout(0);
+        Ok(ForwardKernel { pipeline, layout })
+    }
+
+    /// Submits the projection of slots `first .. first + n` of the view list: `shape`
+    /// is the grid's `nx, ny, nz` and the detector's `cols, rows`; `buffers` are the
+    /// views ([`JosephView<f32>`]), the grid, the list (u32 view indices) and the
+    /// output, which receives `[slot − first][row][col]` from its start.
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        shape: [usize; 5],
+        first: usize,
+        n: usize,
+        buffers: [&wgpu::Buffer; 4],
+    ) {
+        let dev = &ctx.device;
+        let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
+        let invocations = (n * shape[3] * shape[4]) as u32;
+        let groups = invocations.div_ceil(WORKGROUP).max(1);
+        let x = groups.min(max_x);
+        let y = groups.div_ceil(x);
+        let params = ProjectParams {
+            nx: shape[0] as u32,
+            ny: shape[1] as u32,
+            nz: shape[2] as u32,
+            cols: shape[3] as u32,
+            rows: shape[4] as u32,
+            view_offset: first as u32,
+            n_views: n as u32,
+            row_stride: x * WORKGROUP,
+        };
+        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("project params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let [views, vol, list, out] = buffers;
+        let bind = ctx.bind_group(
+            "project",
+            &self.layout,
+            &[
+                ubuf.as_entire_binding(),
+                views.as_entire_binding(),
+                vol.as_entire_binding(),
+                out.as_entire_binding(),
+                list.as_entire_binding(),
+            ],
+        );
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("project"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        ctx.queue.submit([enc.finish()]);
+    }
+}
+
 /// [`crate::cpu::project::project_volume`] on the GPU, in f32: the same projections
 /// within the tolerance `tests/gpu_ct_project.rs` states.
 ///
@@ -115,23 +213,17 @@ pub fn project_volume_timed<R: Real>(
         contents: bytemuck::cast_slice(&views),
         usage: wgpu::BufferUsages::STORAGE,
     });
-    let module = ctx.shader("project.wgsl", &shader_source())?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("project"),
-        layout: None,
-        module: &module,
-        entry_point: Some("project"),
-        compilation_options: Default::default(),
-        cache: None,
+    let all: Vec<u32> = (0..g.n_angles() as u32).collect();
+    let list = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("view list"),
+        contents: bytemuck::cast_slice(&all),
+        usage: wgpu::BufferUsages::STORAGE,
     });
-    let layout = pipeline.get_bind_group_layout(0);
+    let kernel = ForwardKernel::new(ctx)?;
 
     // Views per dispatch: bounded by the sample budget and the output binding.
     let per_view = g.rows * g.cols;
-    let longest = grid.dims.iter().copied().max().unwrap_or(1);
-    let by_work = SAMPLES_PER_DISPATCH / (per_view * longest).max(1);
-    let by_bytes = (limit / (per_view as u64 * 4).max(1)) as usize;
-    let chunk = by_work.min(by_bytes).clamp(1, g.n_angles());
+    let chunk = views_per_dispatch(grid.dims, per_view, limit).min(g.n_angles());
     if per_view as u64 * 4 > limit {
         return Err(Error::too_large(
             "GPU projection",
@@ -146,50 +238,11 @@ pub fn project_volume_timed<R: Real>(
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
     let mut k0 = 0;
     while k0 < g.n_angles() {
         let n = chunk.min(g.n_angles() - k0);
-        let invocations = (n * per_view) as u32;
-        let groups = invocations.div_ceil(WORKGROUP).max(1);
-        let x = groups.min(max_x);
-        let y = groups.div_ceil(x);
-        let params = ProjectParams {
-            nx: grid.dims[0] as u32,
-            ny: grid.dims[1] as u32,
-            nz: grid.dims[2] as u32,
-            cols: g.cols as u32,
-            rows: g.rows as u32,
-            view_offset: k0 as u32,
-            n_views: n as u32,
-            row_stride: x * WORKGROUP,
-        };
-        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("project params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let bind = ctx.bind_group(
-            "project",
-            &layout,
-            &[
-                ubuf.as_entire_binding(),
-                vbuf.as_entire_binding(),
-                vol.as_entire_binding(),
-                out.as_entire_binding(),
-            ],
-        );
-        let mut enc = dev.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("project"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(x, y, 1);
-        }
-        ctx.queue.submit([enc.finish()]);
+        let shape = [grid.dims[0], grid.dims[1], grid.dims[2], g.cols, g.rows];
+        kernel.dispatch(ctx, shape, k0, n, [&vbuf, &vol, &list, &out]);
         let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
         result.data[k0 * per_view..(k0 + n) * per_view]
             .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));

@@ -10,12 +10,14 @@ use super::{Backend, Engine, Progress};
 use crate::cpu::fbp::{
     apply_circle_mask, fbp, parallel_stack_grid, rtk_grid, Grid, Reconstruction,
 };
+use crate::cpu::iterative::MatchedPair;
 use crate::cpu::iterative::{IterativeOptions, Method, Problem, SubsetOrder};
 use crate::cpu::project::JosephPair;
 use crate::cpu::ramp::RampFilter;
 use crate::ct::{ct_to_phantom, Beam, Geometry, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::gpu::joseph_pair::GpuJosephPair;
 use crate::io::projections::{geometry_path, read_angles_txt, read_geometry, read_projections};
 use crate::io::{write_frame, PngOptions};
 use crate::phantom::Phantom;
@@ -610,19 +612,17 @@ type Solved = (Vec<f64>, IterationLog);
 
 /// [`crate::cpu::iterative::solve`] in precision `R`, reporting every iteration.
 fn solve_in<R: crate::real::Real>(
-    grid: &Grid,
-    g: &Geometry,
+    pair: &dyn MatchedPair<R>,
     b: &[f64],
     support: Option<&[bool]>,
     x0: &[f64],
     opts: &IterativeOptions,
     progress: &dyn Progress,
 ) -> Result<Solved> {
-    let pair = JosephPair::<R>::new(grid.dims, grid.affine, g)?;
     let b: Vec<R> = b.iter().map(|&v| R::of(v)).collect();
     let x0: Vec<R> = x0.iter().map(|&v| R::of(v)).collect();
     let prob = Problem {
-        pair: &pair,
+        pair,
         b: &b,
         support,
     };
@@ -659,15 +659,11 @@ fn iterative(
     truth: Option<Phantom>,
     progress: &dyn Progress,
 ) -> Result<Reconstructed> {
-    // The iterative methods run on the CPU (f64 and f32); `auto` takes the f64 oracle.
+    // `auto` takes the f64 oracle; the GPU pair runs only when asked for.
     let backend = match a.backend {
         Backend::Auto => Backend::Cpu,
         b => b,
     };
-    backend.require(
-        &format!("reconstruct --method {}", method.name()),
-        &[Backend::Cpu, Backend::CpuF32],
-    )?;
     let parallel = g.beam == Beam::Parallel;
     let grid = reconstruction_grid(a, &g, progress)?;
     check_grid(a, &grid, parallel, g.rows)?;
@@ -719,15 +715,29 @@ fn iterative(
     );
     let t = std::time::Instant::now();
     let s = support.as_deref();
+    let (dims, affine) = (grid.dims, grid.affine);
     let ((data, log), what) = match (engine.backend(), engine.gpu()) {
-        (Backend::CpuF32, _) => (
-            solve_in::<f32>(&grid, &g, &p.data, s, &x0, &opts, progress)?,
-            "cpu f32".to_string(),
-        ),
-        _ => (
-            solve_in::<f64>(&grid, &g, &p.data, s, &x0, &opts, progress)?,
-            "cpu f64".to_string(),
-        ),
+        (Backend::Gpu, Some(ctx)) => {
+            let pair = GpuJosephPair::new(ctx, dims, affine, &g)?;
+            (
+                solve_in::<f32>(&pair, &p.data, s, &x0, &opts, progress)?,
+                format!("gpu ({}), f32", ctx.summary.name),
+            )
+        }
+        (Backend::CpuF32, _) => {
+            let pair = JosephPair::<f32>::new(dims, affine, &g)?;
+            (
+                solve_in::<f32>(&pair, &p.data, s, &x0, &opts, progress)?,
+                "cpu f32".to_string(),
+            )
+        }
+        _ => {
+            let pair = JosephPair::<f64>::new(dims, affine, &g)?;
+            (
+                solve_in::<f64>(&pair, &p.data, s, &x0, &opts, progress)?,
+                "cpu f64".to_string(),
+            )
+        }
     };
     progress.end(t.elapsed().as_secs_f64());
     if log.converged {

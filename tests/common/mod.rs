@@ -344,6 +344,40 @@ pub fn ct_cases(
     ]
 }
 
+/// The cases of Joseph's matched pair (tests/iterative.rs, tests/gpu_iterative.rs):
+/// the shared CT cases ([`ct_cases`]), plus an oblique grid in a cone beam with an
+/// offset detector and irregular angles (no view lines up with a grid axis).
+pub fn joseph_pair_cases() -> Vec<(String, voxlab::ct::Geometry, [usize; 3], DMat4)> {
+    use glam::{DQuat, DVec3};
+    let mut v: Vec<_> = ct_cases(13, 9)
+        .into_iter()
+        .map(|(n, g, grid)| (n.to_string(), g, grid.dims, grid.affine))
+        .collect();
+    let mut cone = voxlab::ct::Geometry::cone_rtk(
+        250.0,
+        400.0,
+        23,
+        17,
+        1.3,
+        1.1,
+        vec![3.0, 47.5, 101.0, 188.8, 270.1, 333.3],
+    )
+    .unwrap();
+    cone.cu += 2.7;
+    cone.cv -= 1.9;
+    let q = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.6);
+    let affine = DMat4::from_quat(q)
+        * DMat4::from_scale(DVec3::new(1.2, 0.9, 1.1))
+        * DMat4::from_translation(DVec3::new(-7.5, -6.0, -6.5));
+    v.push(("oblique-cone".into(), cone, [16, 13, 14], affine));
+    v
+}
+
+/// `max |port − oracle| / max |oracle|` ([`voxlab::metrics::ErrorStats::max_abs_rel`]).
+pub fn max_rel(port: &[f64], oracle: &[f64]) -> f64 {
+    voxlab::metrics::error_stats(oracle, port, f64::INFINITY).max_abs_rel
+}
+
 // ---------------------------------------------------------------------------------
 // Scenes
 // ---------------------------------------------------------------------------------

@@ -45,7 +45,8 @@ pub struct ReconstructArgs {
     /// projections with Parker's short-scan weights before filtering (docs/ct.md).
     #[arg(long)]
     pub short_scan: bool,
-    /// Who computes: cpu (f64), cpu-f32, gpu (f32 backprojection), or auto.
+    /// Who computes: cpu (f64), cpu-f32, gpu (f32: FBP/FDK backprojection, or the
+    /// iterative methods on Joseph's pair), or auto (iterative methods: cpu).
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
     pub backend: Backend,
     /// Output: .npy (float32; (n, n), (rows, n, n) or (N, N, N)), .nrrd/.nhdr (volume

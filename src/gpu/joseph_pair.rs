@@ -1,0 +1,356 @@
+//! Joseph's matched pair on the GPU: the port of [`crate::cpu::project::JosephPair`]
+//! for the iterative methods ([`crate::cpu::iterative`]), in f32.
+//!
+//! `forward` is `shaders/project.wgsl: project` over the requested views (the same
+//! kernel as [`super::project::project_volume`]); `transpose` is
+//! `shaders/project_transpose.wgsl: transpose`, the voxel-driven gather of
+//! [`JosephPair::transpose_voxel`]: every voxel sums, view by view in order, the
+//! pixels of its footprint box ([`JosephFootprint`], built in f64 on the host and
+//! widened by one pixel against f32 rounding), each weighted by `joseph_weight` from
+//! the ray's own `joseph_planes` — the numbers the forward pass uses, so the pair
+//! stays matched in f32 (`tests/gpu_iterative.rs` checks `⟨Ax, y⟩ = ⟨x, Aᵀy⟩`).
+//!
+//! The grid, the view rays, the footprints and the buffers are made once; every
+//! call uploads its input (a grid or projections), runs dispatches of bounded work
+//! (a slow software device must never run one dispatch for many seconds) and reads
+//! the result back. The methods' vector updates (`O(voxels)` per iteration, against
+//! `O(voxels × views)` for each projection) run on the host, in the solver's own
+//! code ([`crate::cpu::iterative::solve`]).
+//!
+//! [`JosephPair`]: crate::cpu::project::JosephPair
+//! [`JosephPair::transpose_voxel`]: crate::cpu::project::JosephPair::transpose_voxel
+
+use super::context::GpuContext;
+use super::project::{views_per_dispatch, ForwardKernel, SAMPLES_PER_DISPATCH};
+use crate::cpu::iterative::MatchedPair;
+use crate::cpu::project::{joseph_views, view_axes, JosephFootprint, JosephView};
+use crate::ct::Geometry;
+use crate::error::{Error, Result};
+use glam::{DMat3, DMat4};
+use wgpu::util::DeviceExt;
+
+/// Invocations per workgroup (`WORKGROUP` in `shaders/project_transpose.wgsl`).
+const WORKGROUP: u32 = 64;
+
+/// Footprint pixels one voxel visits per view, for sizing dispatches (a voxel about a
+/// detector pixel wide, widened by one pixel on every side).
+const PIXELS_PER_VOXEL_VIEW: usize = 16;
+
+/// Parameters of one transpose dispatch, shared with
+/// `shaders/shared/project_params.wgsl: TransposeParams` (twelve u32, 48 bytes;
+/// `tests/gpu_layout.rs` checks the layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TransposeParams {
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub cols: u32,
+    pub rows: u32,
+    pub voxel_offset: u32,
+    pub n_voxels: u32,
+    pub slot_lo: u32,
+    pub slot_hi: u32,
+    pub accumulate: u32,
+    pub row_stride: u32,
+    pub _pad: u32,
+}
+
+/// The complete WGSL module of the transpose: `shaders/project_transpose.wgsl` and its
+/// imports.
+pub fn transpose_source() -> String {
+    super::shaders::resolve("project_transpose")
+}
+
+/// Joseph's projector and its exact transpose on one GPU (module docs).
+pub struct GpuJosephPair<'c> {
+    ctx: &'c GpuContext,
+    dims: [usize; 3],
+    cols: usize,
+    rows: usize,
+    n_views: usize,
+    forward_kernel: ForwardKernel,
+    transpose_pipeline: wgpu::ComputePipeline,
+    transpose_layout: wgpu::BindGroupLayout,
+    views: wgpu::Buffer,
+    footprints: wgpu::Buffer,
+    axes: wgpu::Buffer,
+    list: wgpu::Buffer,
+    grid: wgpu::Buffer,
+    projections: wgpu::Buffer,
+    grid_out: wgpu::Buffer,
+    projections_out: wgpu::Buffer,
+}
+
+impl<'c> GpuJosephPair<'c> {
+    /// The pair for a grid of `dims` voxels with index-to-world `affine`, seen in
+    /// geometry `g`, on `ctx`.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for an invalid geometry or affine; [`Error::TooLarge`] when
+    /// the grid or all the projections do not fit one storage binding (or u32
+    /// indices); [`Error::Gpu`] on device failure.
+    pub fn new(ctx: &'c GpuContext, dims: [usize; 3], affine: DMat4, g: &Geometry) -> Result<Self> {
+        g.validate()?;
+        let det = DMat3::from_mat4(affine).determinant();
+        if !affine.is_finite() || !det.is_finite() || det.abs() < 1e-300 {
+            return Err(Error::invalid(
+                "reconstruction grid",
+                "the index-to-world affine must be finite and invertible",
+            ));
+        }
+        let n_voxels: usize = dims.iter().product();
+        let per_view = g.cols * g.rows;
+        let rays = g.n_angles() * per_view;
+        let limit = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        for (what, count) in [("grid", n_voxels), ("projections", rays)] {
+            let bytes = (count as u64).saturating_mul(4);
+            if bytes > limit || count > u32::MAX as usize {
+                return Err(Error::too_large(
+                    "GPU iterative reconstruction",
+                    format!(
+                        "the {what} ({count} f32 values, {bytes} bytes) exceed the adapter's \
+                         storage-binding limit of {limit} bytes: use a smaller grid, fewer \
+                         views or --backend cpu-f32"
+                    ),
+                ));
+            }
+        }
+        let dev = &ctx.device;
+        let init = |label: &str, contents: &[u8]| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let views32: Vec<JosephView<f32>> = joseph_views(g, affine);
+        let views64: Vec<JosephView<f64>> = joseph_views(g, affine);
+        let foot: Vec<JosephFootprint<f32>> = views64
+            .iter()
+            .map(|v| {
+                let f = JosephFootprint::new(v);
+                JosephFootprint {
+                    rows: f.rows.map(|r| r.map(|x| x as f32)),
+                }
+            })
+            .collect();
+        let axes: Vec<u32> = view_axes(dims, &views32, g.cols, g.rows)
+            .into_iter()
+            .map(|a| a.map_or(3, |m| m as u32))
+            .collect();
+        let views = init("joseph views", bytemuck::cast_slice(&views32));
+        let footprints = init("joseph footprints", bytemuck::cast_slice(&foot));
+        let axes = init("joseph view axes", bytemuck::cast_slice(&axes));
+        let buffer = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
+            dev.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (bytes as u64).max(4),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let input = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let list = buffer("view list", g.n_angles() * 4, input);
+        let grid = buffer("grid in", n_voxels * 4, input);
+        let projections = buffer("projections in", rays * 4, input);
+        let grid_out = ctx.storage_buffer("grid out", (n_voxels * 4) as u64)?;
+        let projections_out = ctx.storage_buffer("projections out", (rays * 4) as u64)?;
+        let module = ctx.shader("project_transpose.wgsl", &transpose_source())?;
+        let transpose_pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("project transpose"),
+            layout: None,
+            module: &module,
+            entry_point: Some("transpose"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let transpose_layout = transpose_pipeline.get_bind_group_layout(0);
+        Ok(GpuJosephPair {
+            ctx,
+            dims,
+            cols: g.cols,
+            rows: g.rows,
+            n_views: g.n_angles(),
+            forward_kernel: ForwardKernel::new(ctx)?,
+            transpose_pipeline,
+            transpose_layout,
+            views,
+            footprints,
+            axes,
+            list,
+            grid,
+            projections,
+            grid_out,
+            projections_out,
+        })
+    }
+
+    /// Uploads the view list, checking every index.
+    fn upload_list(&self, views: &[usize]) -> Result<()> {
+        if views.len() > self.n_views || views.iter().any(|&k| k >= self.n_views) {
+            return Err(Error::invalid(
+                "views",
+                format!("a list of up to {} view indices below that", self.n_views),
+            ));
+        }
+        let list: Vec<u32> = views.iter().map(|&k| k as u32).collect();
+        if !list.is_empty() {
+            self.ctx
+                .queue
+                .write_buffer(&self.list, 0, bytemuck::cast_slice(&list));
+        }
+        Ok(())
+    }
+
+    fn read(&self, buf: &wgpu::Buffer, n: usize) -> Result<Vec<f32>> {
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let bytes = self.ctx.read_buffer(buf, (n * 4) as u64)?;
+        Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&bytes))
+    }
+
+    /// One transpose dispatch: voxels `v0 .. v0 + nv`, slots `s0 .. s1`.
+    fn dispatch_transpose(&self, v0: usize, nv: usize, s0: usize, s1: usize) {
+        let dev = &self.ctx.device;
+        let max_x = self.ctx.limits.max_compute_workgroups_per_dimension.max(1);
+        let groups = (nv as u32).div_ceil(WORKGROUP).max(1);
+        let x = groups.min(max_x);
+        let y = groups.div_ceil(x);
+        let params = TransposeParams {
+            nx: self.dims[0] as u32,
+            ny: self.dims[1] as u32,
+            nz: self.dims[2] as u32,
+            cols: self.cols as u32,
+            rows: self.rows as u32,
+            voxel_offset: v0 as u32,
+            n_voxels: nv as u32,
+            slot_lo: s0 as u32,
+            slot_hi: s1 as u32,
+            accumulate: u32::from(s0 > 0),
+            row_stride: x * WORKGROUP,
+            _pad: 0,
+        };
+        let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("transpose params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind = self.ctx.bind_group(
+            "project transpose",
+            &self.transpose_layout,
+            &[
+                ubuf.as_entire_binding(),
+                self.views.as_entire_binding(),
+                self.footprints.as_entire_binding(),
+                self.axes.as_entire_binding(),
+                self.list.as_entire_binding(),
+                self.projections.as_entire_binding(),
+                self.grid_out.as_entire_binding(),
+            ],
+        );
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("project transpose"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.transpose_pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        self.ctx.queue.submit([enc.finish()]);
+    }
+}
+
+impl MatchedPair<f32> for GpuJosephPair<'_> {
+    fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    fn n_views(&self) -> usize {
+        self.n_views
+    }
+
+    fn per_view(&self) -> usize {
+        self.cols * self.rows
+    }
+
+    fn forward(&self, x: &[f32], views: &[usize]) -> Result<Vec<f32>> {
+        if x.len() != self.n_voxels() {
+            return Err(Error::invalid(
+                "grid",
+                format!("{} values for {} voxels", x.len(), self.n_voxels()),
+            ));
+        }
+        self.upload_list(views)?;
+        self.ctx
+            .queue
+            .write_buffer(&self.grid, 0, bytemuck::cast_slice(x));
+        let pv = self.per_view();
+        let limit = self.ctx.limits.max_storage_buffer_binding_size;
+        let chunk = views_per_dispatch(self.dims, pv, limit);
+        let shape = [
+            self.dims[0],
+            self.dims[1],
+            self.dims[2],
+            self.cols,
+            self.rows,
+        ];
+        let mut out = Vec::with_capacity(views.len() * pv);
+        let mut k0 = 0;
+        while k0 < views.len() {
+            let n = chunk.min(views.len() - k0);
+            let bufs = [&self.views, &self.grid, &self.list, &self.projections_out];
+            self.forward_kernel.dispatch(self.ctx, shape, k0, n, bufs);
+            out.extend(self.read(&self.projections_out, n * pv)?);
+            k0 += n;
+        }
+        Ok(out)
+    }
+
+    fn transpose(&self, y: &[f32], views: &[usize]) -> Result<Vec<f32>> {
+        let pv = self.per_view();
+        if y.len() != views.len() * pv {
+            return Err(Error::invalid(
+                "projections",
+                format!(
+                    "{} values for {} views of {pv} pixels",
+                    y.len(),
+                    views.len()
+                ),
+            ));
+        }
+        let n = self.n_voxels();
+        if views.is_empty() {
+            return Ok(vec![0.0; n]);
+        }
+        self.upload_list(views)?;
+        self.ctx
+            .queue
+            .write_buffer(&self.projections, 0, bytemuck::cast_slice(y));
+        // Bounded work per dispatch: voxels × slots × footprint pixels. Slots outside
+        // (each later range adds to the sums), so every voxel sums its views in order.
+        let budget = SAMPLES_PER_DISPATCH / PIXELS_PER_VOXEL_VIEW;
+        let voxels = n.min(budget).max(1);
+        let slots = (budget / voxels).clamp(1, crate::gpu::context::LLVMPIPE_LOOP_LIMIT);
+        let mut s0 = 0;
+        while s0 < views.len() {
+            let s1 = (s0 + slots).min(views.len());
+            let mut v0 = 0;
+            while v0 < n {
+                let nv = voxels.min(n - v0);
+                self.dispatch_transpose(v0, nv, s0, s1);
+                v0 += nv;
+            }
+            // One wait per slot range keeps the queue short on a software device.
+            self.ctx.wait()?;
+            s0 = s1;
+        }
+        self.read(&self.grid_out, n)
+    }
+}
