@@ -758,19 +758,44 @@ impl<R: Real> JosephPair<R> {
                         continue;
                     };
                     let mut sum = R::zero();
-                    for s in p.s0..=p.s1 {
-                        let sr = R::of(s as f64);
-                        sum = sum
-                            + slice_bilinear(
-                                x,
-                                s * stride[p.m],
-                                stride[p.a],
-                                dims[p.a],
-                                stride[p.b],
-                                dims[p.b],
-                                p.xa0 + sr * p.ka,
-                                p.xb0 + sr * p.kb,
-                            );
+                    if dims[p.b] == 1 && p.kb == R::zero() && p.xb0 == R::zero() {
+                        // A one-voxel-thick grid with the ray in its plane (2-D): the
+                        // taps at y = 1 are outside and ty = 0, so slice_bilinear is
+                        // its top row plus zero — the same value, without the empty
+                        // taps.
+                        let (sa, na) = (stride[p.a], dims[p.a] as i64);
+                        for s in p.s0..=p.s1 {
+                            let sr = R::of(s as f64);
+                            let xa = p.xa0 + sr * p.ka;
+                            let fx = xa.floor();
+                            let tx = xa - fx;
+                            let ix = fx.to_i64().unwrap_or(-2);
+                            let base = s * stride[p.m];
+                            let at = |i: i64| {
+                                if i < 0 || i >= na {
+                                    R::zero()
+                                } else {
+                                    x[base + i as usize * sa]
+                                }
+                            };
+                            let top = at(ix) * (R::one() - tx) + at(ix + 1) * tx;
+                            sum = sum + (top * R::one() + R::zero());
+                        }
+                    } else {
+                        for s in p.s0..=p.s1 {
+                            let sr = R::of(s as f64);
+                            sum = sum
+                                + slice_bilinear(
+                                    x,
+                                    s * stride[p.m],
+                                    stride[p.a],
+                                    dims[p.a],
+                                    stride[p.b],
+                                    dims[p.b],
+                                    p.xa0 + sr * p.ka,
+                                    p.xb0 + sr * p.kb,
+                                );
+                        }
                     }
                     *v = sum * p.w;
                 }
