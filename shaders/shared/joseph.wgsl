@@ -1,6 +1,6 @@
 // Joseph's rays on the GPU: a detector pixel's ray in the grid's index frame, the
 // planes of Joseph's sum along it and one voxel's weight in that sum. The forward
-// projector (shaders/project.wgsl) and its transpose (shaders/project_transpose.wgsl)
+// projector (shaders/project.wgsl) and its transpose (shaders/joseph_pair_transpose.wgsl)
 // both start from joseph_planes, so they use the very same numbers.
 // Reads nothing of the stage; needs JosephView (#import project_params).
 

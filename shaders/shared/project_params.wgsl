@@ -33,7 +33,7 @@ struct JosephView {
     w_v: vec4<f32>,
 }
 
-// One dispatch of the transpose (shaders/project_transpose.wgsl). Rust twin:
+// One dispatch of the transpose (shaders/joseph_pair_transpose.wgsl). Rust twin:
 // src/gpu/joseph_pair.rs: TransposeParams (twelve u32, 48 bytes).
 struct TransposeParams {
     nx: u32,

@@ -403,24 +403,53 @@ pub fn joseph_planes<R: Real>(
 ///
 /// mirrors shaders/project.wgsl: joseph_ray
 pub fn joseph_ray<R: Real>(data: &[R], dims: [usize; 3], o: [R; 3], d: [R; 3], t_min: R) -> R {
-    let Some(p) = joseph_planes(dims, o, d, t_min) else {
-        return R::zero();
-    };
+    match joseph_planes(dims, o, d, t_min) {
+        Some(p) => joseph_sum(data, dims, &p),
+        None => R::zero(),
+    }
+}
+
+/// Joseph's sum over the planes `p` of one ray: [`slice_bilinear`] on every plane
+/// `s0..=s1`, times the length `w` between two planes. For a one-voxel-thick grid with
+/// the ray in its plane (2-D) the taps at `y = 1` are outside and `ty = 0`, so each
+/// sample is its top row plus zero: the same value without the empty taps.
+#[inline(always)]
+pub fn joseph_sum<R: Real>(data: &[R], dims: [usize; 3], p: &JosephPlanes<R>) -> R {
     let stride = [1, dims[0], dims[0] * dims[1]];
     let mut sum = R::zero();
-    for s in p.s0..=p.s1 {
-        let sr = R::of(s as f64);
-        sum = sum
-            + slice_bilinear(
-                data,
-                s * stride[p.m],
-                stride[p.a],
-                dims[p.a],
-                stride[p.b],
-                dims[p.b],
-                p.xa0 + sr * p.ka,
-                p.xb0 + sr * p.kb,
-            );
+    if dims[p.b] == 1 && p.kb == R::zero() && p.xb0 == R::zero() {
+        let (sa, na) = (stride[p.a], dims[p.a] as i64);
+        for s in p.s0..=p.s1 {
+            let xa = p.xa0 + R::of(s as f64) * p.ka;
+            let fx = xa.floor();
+            let tx = xa - fx;
+            let ix = fx.to_i64().unwrap_or(-2);
+            let base = s * stride[p.m];
+            let at = |i: i64| {
+                if i < 0 || i >= na {
+                    R::zero()
+                } else {
+                    data[base + i as usize * sa]
+                }
+            };
+            let top = at(ix) * (R::one() - tx) + at(ix + 1) * tx;
+            sum = sum + (top * R::one() + R::zero());
+        }
+    } else {
+        for s in p.s0..=p.s1 {
+            let sr = R::of(s as f64);
+            sum = sum
+                + slice_bilinear(
+                    data,
+                    s * stride[p.m],
+                    stride[p.a],
+                    dims[p.a],
+                    stride[p.b],
+                    dims[p.b],
+                    p.xa0 + sr * p.ka,
+                    p.xb0 + sr * p.kb,
+                );
+        }
     }
     sum * p.w
 }
@@ -565,7 +594,7 @@ impl JosephFootprint<f64> {
 
     /// [`Self::pixels`] for the box of half-sizes `h` (per index axis) about `x`.
     ///
-    /// mirrors shaders/project_transpose.wgsl: footprint_box
+    /// mirrors shaders/joseph_pair_transpose.wgsl: footprint_box
     #[inline]
     pub fn pixels_box(
         &self,
@@ -746,7 +775,6 @@ impl<R: Real> JosephPair<R> {
     pub fn forward(&self, x: &[R], views: &[usize]) -> Vec<R> {
         assert_eq!(x.len(), self.n_voxels(), "JosephPair::forward: grid size");
         let dims = self.dims;
-        let stride = [1, dims[0], dims[0] * dims[1]];
         let mut out = vec![R::zero(); views.len() * self.per_view()];
         out.par_chunks_mut(self.cols)
             .enumerate()
@@ -757,47 +785,7 @@ impl<R: Real> JosephPair<R> {
                         *v = R::zero();
                         continue;
                     };
-                    let mut sum = R::zero();
-                    if dims[p.b] == 1 && p.kb == R::zero() && p.xb0 == R::zero() {
-                        // A one-voxel-thick grid with the ray in its plane (2-D): the
-                        // taps at y = 1 are outside and ty = 0, so slice_bilinear is
-                        // its top row plus zero — the same value, without the empty
-                        // taps.
-                        let (sa, na) = (stride[p.a], dims[p.a] as i64);
-                        for s in p.s0..=p.s1 {
-                            let sr = R::of(s as f64);
-                            let xa = p.xa0 + sr * p.ka;
-                            let fx = xa.floor();
-                            let tx = xa - fx;
-                            let ix = fx.to_i64().unwrap_or(-2);
-                            let base = s * stride[p.m];
-                            let at = |i: i64| {
-                                if i < 0 || i >= na {
-                                    R::zero()
-                                } else {
-                                    x[base + i as usize * sa]
-                                }
-                            };
-                            let top = at(ix) * (R::one() - tx) + at(ix + 1) * tx;
-                            sum = sum + (top * R::one() + R::zero());
-                        }
-                    } else {
-                        for s in p.s0..=p.s1 {
-                            let sr = R::of(s as f64);
-                            sum = sum
-                                + slice_bilinear(
-                                    x,
-                                    s * stride[p.m],
-                                    stride[p.a],
-                                    dims[p.a],
-                                    stride[p.b],
-                                    dims[p.b],
-                                    p.xa0 + sr * p.ka,
-                                    p.xb0 + sr * p.kb,
-                                );
-                        }
-                    }
-                    *v = sum * p.w;
+                    *v = joseph_sum(x, dims, &p);
                 }
             });
         out
@@ -970,7 +958,7 @@ impl<R: Real> JosephPair<R> {
 
     /// One voxel of [`Self::transpose`].
     ///
-    /// mirrors shaders/project_transpose.wgsl: transpose
+    /// mirrors shaders/joseph_pair_transpose.wgsl: transpose
     #[inline]
     pub fn transpose_voxel(&self, y: &[R], views: &[usize], voxel: [usize; 3]) -> R {
         let mut acc = R::zero();

@@ -3,7 +3,7 @@
 //!
 //! `forward` is `shaders/project.wgsl: project` over the requested views (the same
 //! kernel as [`super::project::project_volume`]); `transpose` is
-//! `shaders/project_transpose.wgsl: transpose`, the voxel-driven gather of
+//! `shaders/joseph_pair_transpose.wgsl: transpose`, the voxel-driven gather of
 //! [`JosephPair::transpose_voxel`]: every voxel sums, view by view in order, the
 //! pixels of its footprint box ([`JosephFootprint`], built in f64 on the host and
 //! widened by one pixel against f32 rounding), each weighted by `joseph_weight` from
@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use glam::{DMat3, DMat4};
 use wgpu::util::DeviceExt;
 
-/// Invocations per workgroup (`WORKGROUP` in `shaders/project_transpose.wgsl`).
+/// Invocations per workgroup (`WORKGROUP` in `shaders/joseph_pair_transpose.wgsl`).
 const WORKGROUP: u32 = 64;
 
 /// Footprint pixels one voxel visits per view, for sizing dispatches (a voxel about a
@@ -56,10 +56,10 @@ pub struct TransposeParams {
     pub _pad: u32,
 }
 
-/// The complete WGSL module of the transpose: `shaders/project_transpose.wgsl` and its
+/// The complete WGSL module of the transpose: `shaders/joseph_pair_transpose.wgsl` and its
 /// imports.
 pub fn transpose_source() -> String {
-    super::shaders::resolve("project_transpose")
+    super::shaders::resolve("joseph_pair_transpose")
 }
 
 /// Joseph's projector and its exact transpose on one GPU (module docs).
@@ -159,7 +159,7 @@ impl<'c> GpuJosephPair<'c> {
         let projections = buffer("projections in", rays * 4, input);
         let grid_out = ctx.storage_buffer("grid out", (n_voxels * 4) as u64)?;
         let projections_out = ctx.storage_buffer("projections out", (rays * 4) as u64)?;
-        let module = ctx.shader("project_transpose.wgsl", &transpose_source())?;
+        let module = ctx.shader("joseph_pair_transpose.wgsl", &transpose_source())?;
         let transpose_pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("project transpose"),
             layout: None,
