@@ -10,7 +10,7 @@
 @group(0) @binding(1) var<storage, read> views: array<JosephView>;
 // [z][y][x]
 @group(0) @binding(2) var<storage, read> vol: array<f32>;
-// [slot − view_offset][row][col]
+// [out_offset + (slot − view_offset)·rows·cols + row·cols + col]
 @group(0) @binding(3) var<storage, read_write> out: array<f32>;
 // The views to project, in output order (all of them for project_volume; a subset
 // for the iterative methods' JosephPair::forward).
@@ -73,5 +73,5 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = id / per_view;
     let rem = id % per_view;
     let r = pixel_ray(views[list[p.view_offset + k]], f32(rem % p.cols), f32(rem / p.cols));
-    out[id] = joseph_ray(r.o, r.d, r.t_min);
+    out[p.out_offset + id] = joseph_ray(r.o, r.d, r.t_min);
 }

@@ -164,6 +164,10 @@ fn project_params_and_joseph_view_layouts_agree() {
         ("view_offset", offset_of!(ProjectParams, view_offset)),
         ("n_views", offset_of!(ProjectParams, n_views)),
         ("row_stride", offset_of!(ProjectParams, row_stride)),
+        ("out_offset", offset_of!(ProjectParams, out_offset)),
+        ("_pad0", offset_of!(ProjectParams, _pad0)),
+        ("_pad1", offset_of!(ProjectParams, _pad1)),
+        ("_pad2", offset_of!(ProjectParams, _pad2)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
@@ -463,4 +467,38 @@ fn every_resolved_stage_validates() {
             .count()
             - 3
     );
+}
+
+#[test]
+fn solve_params_layout_agrees() {
+    use voxlab::gpu::iterative::{SolveParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "SolveParams");
+    assert_eq!(span as usize, size_of::<SolveParams>());
+    let rust = [
+        ("n", offset_of!(SolveParams, n)),
+        ("per_view", offset_of!(SolveParams, per_view)),
+        ("row_stride", offset_of!(SolveParams, row_stride)),
+        ("term", offset_of!(SolveParams, term)),
+        ("nx", offset_of!(SolveParams, nx)),
+        ("ny", offset_of!(SolveParams, ny)),
+        ("nz", offset_of!(SolveParams, nz)),
+        ("n_axes", offset_of!(SolveParams, n_axes)),
+        ("axis0", offset_of!(SolveParams, axis0)),
+        ("axis1", offset_of!(SolveParams, axis1)),
+        ("axis2", offset_of!(SolveParams, axis2)),
+        ("nonnegative", offset_of!(SolveParams, nonnegative)),
+        ("slot0", offset_of!(SolveParams, slot0)),
+        ("slot1", offset_of!(SolveParams, slot1)),
+        ("slot2", offset_of!(SolveParams, slot2)),
+        ("_pad0", offset_of!(SolveParams, _pad0)),
+        ("f0", offset_of!(SolveParams, f0)),
+        ("f1", offset_of!(SolveParams, f1)),
+        ("f2", offset_of!(SolveParams, f2)),
+        ("_pad1", offset_of!(SolveParams, _pad1)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
 }

@@ -1,5 +1,5 @@
 // Joseph forward projection: the dispatch parameters and one view's rays.
-// Rust twins: src/gpu/project.rs: ProjectParams (eight u32, 32 bytes) and
+// Rust twins: src/gpu/project.rs: ProjectParams (twelve u32, 48 bytes) and
 // src/cpu/project.rs: JosephView<f32> (nine rows of four f32, 144 bytes), both
 // #[repr(C)] bytemuck; tests/gpu_layout.rs checks the layouts with naga.
 
@@ -16,6 +16,11 @@ struct ProjectParams {
     n_views: u32,
     // Invocations per row of the 2-D dispatch grid (workgroups along x × 64).
     row_stride: u32,
+    // Where in the output the first view of this dispatch goes (values).
+    out_offset: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // One view's rays in the grid's index frame, affine in the detector indices (c, r):

@@ -234,6 +234,7 @@ pub type OnIteration<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + 'a;
 const CHUNK: usize = 4096;
 
 /// `Σ f(i)` over `0..n` in fixed chunks, the chunk sums added in order (f64).
+/// Mirrors shaders/iterative.wgsl: partials, finish (the device-resident port, src/gpu/iterative.rs).
 fn sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
     let parts: Vec<f64> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
@@ -260,6 +261,7 @@ pub fn norm<R: Real>(a: &[R]) -> f64 {
 }
 
 /// `1/v` where `v > ε`, else 0 (the weights of SIRT and OS-SART).
+/// Mirrors shaders/iterative.wgsl: reciprocal (the device-resident port, src/gpu/iterative.rs).
 fn reciprocal<R: Real>(v: Vec<R>) -> Vec<R> {
     v.into_par_iter()
         .map(|s| {
@@ -273,6 +275,7 @@ fn reciprocal<R: Real>(v: Vec<R>) -> Vec<R> {
 }
 
 /// `x` with the voxels outside `support` set to 0.
+/// Mirrors shaders/iterative.wgsl: mask (the device-resident port, src/gpu/iterative.rs).
 fn masked<R: Real>(mut x: Vec<R>, support: Option<&[bool]>) -> Vec<R> {
     if let Some(m) = support {
         x.par_iter_mut().zip(m).for_each(|(v, &keep)| {
@@ -320,14 +323,30 @@ pub fn solve<R: Real>(
     opts: &IterativeOptions,
     on_iteration: &mut OnIteration<R>,
 ) -> Result<Solution<R>> {
+    check_problem(prob, x0.len(), opts)?;
+    let x0 = masked(x0, prob.support);
+    match opts.method {
+        Method::Sirt => sart(prob, x0, opts, false, on_iteration),
+        Method::OsSart => sart(prob, x0, opts, true, on_iteration),
+        Method::Cgls => cgls(prob, x0, opts, on_iteration),
+        Method::Tv => tv(prob, x0, opts, on_iteration),
+    }
+}
+
+/// Checks the options and the sizes of a problem and its initial image (`n_x0`
+/// values), for every port of [`solve`].
+///
+/// # Errors
+/// [`Error::Invalid`] naming the option or the array.
+pub fn check_problem<R>(prob: &Problem<R>, n_x0: usize, opts: &IterativeOptions) -> Result<()> {
     let pair = prob.pair;
     opts.check(pair.n_views())?;
     let n = pair.n_voxels();
     let rays = pair.n_views() * pair.per_view();
-    if x0.len() != n {
+    if n_x0 != n {
         return Err(Error::invalid(
             "initial image",
-            format!("{} values for a grid of {n} voxels", x0.len()),
+            format!("{n_x0} values for a grid of {n} voxels"),
         ));
     }
     if prob.b.len() != rays {
@@ -339,13 +358,13 @@ pub fn solve<R: Real>(
     if prob.support.is_some_and(|m| m.len() != n) {
         return Err(Error::invalid("support", "one flag per voxel"));
     }
-    let x0 = masked(x0, prob.support);
-    match opts.method {
-        Method::Sirt => sart(prob, x0, opts, false, on_iteration),
-        Method::OsSart => sart(prob, x0, opts, true, on_iteration),
-        Method::Cgls => cgls(prob, x0, opts, on_iteration),
-        Method::Tv => tv(prob, x0, opts, on_iteration),
-    }
+    Ok(())
+}
+
+/// OS-SART keeps the column weights of its `k` subsets (`n` voxels of `bytes` each)
+/// while they take at most 1 GiB, else recomputes them per subset.
+pub fn keeps_column_weights(k: usize, n: usize, bytes: usize) -> bool {
+    k == 1 || k.saturating_mul(n).saturating_mul(bytes) <= 1 << 30
 }
 
 /// All the views.
@@ -354,6 +373,7 @@ fn all_views<R>(pair: &dyn MatchedPair<R>) -> Vec<usize> {
 }
 
 /// `b − A x` over `views` (`b` holds every view).
+/// Mirrors shaders/iterative.wgsl: residual (the device-resident port, src/gpu/iterative.rs).
 fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Result<Vec<R>> {
     let pv = prob.pair.per_view();
     let mut r = prob.pair.forward(x, views)?;
@@ -372,6 +392,7 @@ fn transpose_masked<R: Real>(prob: &Problem<R>, y: &[R], views: &[usize]) -> Res
 }
 
 /// Has the objective stopped falling (by the tolerance)?
+/// Mirrors shaders/iterative.wgsl: log_entry (the device-resident port, src/gpu/iterative.rs).
 fn stalled(opts: &IterativeOptions, objective: &[f64]) -> bool {
     let k = objective.len();
     opts.tolerance > 0.0
@@ -380,6 +401,7 @@ fn stalled(opts: &IterativeOptions, objective: &[f64]) -> bool {
 }
 
 /// SIRT (`subsets = false`) and OS-SART.
+/// Mirrors shaders/iterative.wgsl: weight_rows (the device-resident port, src/gpu/iterative.rs).
 fn sart<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
@@ -394,7 +416,7 @@ fn sart<R: Real>(
     let k = if subsets { opts.subsets } else { 1 };
     let groups: Vec<Vec<usize>> = (0..k).map(|s| subset_views(pair.n_views(), k, s)).collect();
     // Column weights per subset: kept while they fit, else recomputed.
-    let keep = k == 1 || k.saturating_mul(pair.n_voxels()) * std::mem::size_of::<R>() <= 1 << 30;
+    let keep = keeps_column_weights(k, pair.n_voxels(), std::mem::size_of::<R>());
     let col_w_of = |views: &[usize]| {
         let ones_y = vec![R::one(); views.len() * pair.per_view()];
         transpose_masked(prob, &ones_y, views).map(reciprocal)
@@ -470,6 +492,7 @@ fn sart<R: Real>(
 }
 
 /// `x ← x + λ·c·u`, then `max(x, 0)` when asked.
+/// Mirrors shaders/iterative.wgsl: sart_update (the device-resident port, src/gpu/iterative.rs).
 fn update<R: Real>(x: &mut [R], u: &[R], c: &[R], lambda: R, nonneg: bool) {
     x.par_iter_mut()
         .zip(u.par_iter().zip(c))
@@ -480,6 +503,7 @@ fn update<R: Real>(x: &mut [R], u: &[R], c: &[R], lambda: R, nonneg: bool) {
 }
 
 /// `y ← y + α·x` (in place).
+/// Mirrors shaders/iterative.wgsl: axpy (the device-resident port, src/gpu/iterative.rs).
 fn axpy<R: Real>(y: &mut [R], alpha: R, x: &[R]) {
     y.par_iter_mut()
         .zip(x)
@@ -487,6 +511,7 @@ fn axpy<R: Real>(y: &mut [R], alpha: R, x: &[R]) {
 }
 
 /// CGLS (Hestenes–Stiefel on the normal equations).
+/// Mirrors shaders/iterative.wgsl: cgls_alpha, cgls_beta, direction (the device-resident port, src/gpu/iterative.rs).
 fn cgls<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
@@ -543,12 +568,8 @@ fn cgls<R: Real>(
     })
 }
 
-/// The axes of `dims` longer than one voxel.
-fn live_axes(dims: [usize; 3]) -> Vec<usize> {
-    (0..3).filter(|&a| dims[a] > 1).collect()
-}
-
 /// The forward difference of `x` along `axis` at voxel `i` (0 at the last voxel).
+/// Mirrors shaders/iterative.wgsl: forward_difference (the device-resident port, src/gpu/iterative.rs).
 #[inline(always)]
 fn forward_difference<R: Real>(x: &[R], dims: [usize; 3], axis: usize, i: usize) -> R {
     let stride = [1, dims[0], dims[0] * dims[1]][axis];
@@ -572,6 +593,7 @@ pub fn total_variation<R: Real>(x: &[R], dims: [usize; 3]) -> f64 {
 }
 
 /// `−div q = ∇ᵀ q` at voxel `i`, `q` holding one field per axis in `axes` order.
+/// Mirrors shaders/iterative.wgsl: gradient_transpose (the device-resident port, src/gpu/iterative.rs).
 #[inline(always)]
 fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i: usize) -> R {
     let strides = [1, dims[0], dims[0] * dims[1]];
@@ -590,6 +612,7 @@ fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i
 }
 
 /// `‖A‖` by 20 power iterations on `AᵀA` (from the support's ones), raised by 1 %.
+/// Mirrors shaders/iterative.wgsl: normalise (the device-resident port, src/gpu/iterative.rs).
 fn operator_norm<R: Real>(prob: &Problem<R>) -> Result<f64> {
     let all = all_views(prob.pair);
     let mut v = masked(vec![R::one(); prob.pair.n_voxels()], prob.support);
@@ -608,7 +631,45 @@ fn operator_norm<R: Real>(prob: &Problem<R>) -> Result<f64> {
     Ok(est * 1.01)
 }
 
+/// The constants of Chambolle–Pock's TV iteration (module docs), from `‖A‖`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TvSteps {
+    /// `μ = ‖A‖ / ‖∇‖` (1 when `‖A‖` is 0).
+    pub mu: f64,
+    /// `σ = τ = 0.99 / ‖K‖`.
+    pub step: f64,
+    /// The dual ball's radius `w / μ`.
+    pub radius: f64,
+}
+
+impl TvSteps {
+    /// The constants for `‖A‖ = norm_a`, `n_axes` live axes and TV weight `w`.
+    pub fn new(norm_a: f64, n_axes: usize, w: f64) -> Self {
+        // ‖∇‖² ≤ 4 per axis (forward differences).
+        let norm_grad = (4.0 * n_axes.max(1) as f64).sqrt();
+        let mu = if norm_a > 0.0 {
+            norm_a / norm_grad
+        } else {
+            1.0
+        };
+        let k_norm = (norm_a * norm_a + mu * mu * norm_grad * norm_grad)
+            .sqrt()
+            .max(1e-30);
+        TvSteps {
+            mu,
+            step: 0.99 / k_norm,
+            radius: w / mu,
+        }
+    }
+}
+
+/// The axes of `dims` longer than one voxel.
+pub fn live_axes(dims: [usize; 3]) -> Vec<usize> {
+    (0..3).filter(|&a| dims[a] > 1).collect()
+}
+
 /// Total variation by Chambolle–Pock (module docs).
+/// Mirrors shaders/iterative.wgsl: midpoint, dual_data, primal (the device-resident port, src/gpu/iterative.rs).
 fn tv<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
@@ -620,20 +681,10 @@ fn tv<R: Real>(
     let all = all_views(pair);
     let axes = live_axes(dims);
     let norm_a = operator_norm(prob)?;
-    // ‖∇‖² ≤ 4 per axis (forward differences).
-    let norm_grad = (4.0 * axes.len().max(1) as f64).sqrt();
-    let mu = if norm_a > 0.0 {
-        norm_a / norm_grad
-    } else {
-        1.0
-    };
-    let k_norm = (norm_a * norm_a + mu * mu * norm_grad * norm_grad)
-        .sqrt()
-        .max(1e-30);
-    let step = 0.99 / k_norm;
-    let (sigma, tau) = (R::of(step), R::of(step));
-    let radius = R::of(opts.tv_weight / mu);
-    let mu_r = R::of(mu);
+    let steps = TvSteps::new(norm_a, axes.len(), opts.tv_weight);
+    let (sigma, tau) = (R::of(steps.step), R::of(steps.step));
+    let radius = R::of(steps.radius);
+    let mu_r = R::of(steps.mu);
     let n = pair.n_voxels();
     let mut p = vec![R::zero(); prob.b.len()];
     let mut q: Vec<Vec<R>> = axes.iter().map(|_| vec![R::zero(); n]).collect();
@@ -732,6 +783,7 @@ fn tv<R: Real>(
 }
 
 /// `q ← proj_{|q(v)|₂ ≤ radius}(q + s·∇x)`, voxel by voxel.
+/// Mirrors shaders/iterative.wgsl: dual_gradient (the device-resident port, src/gpu/iterative.rs).
 fn tv_dual_step<R: Real>(
     q: &mut [Vec<R>],
     x: &[R],

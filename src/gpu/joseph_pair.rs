@@ -10,12 +10,14 @@
 //! the ray's own `joseph_planes` — the numbers the forward pass uses, so the pair
 //! stays matched in f32 (`tests/gpu_iterative.rs` checks `⟨Ax, y⟩ = ⟨x, Aᵀy⟩`).
 //!
-//! The grid, the view rays, the footprints and the buffers are made once; every
-//! call uploads its input (a grid or projections), runs dispatches of bounded work
-//! (a slow software device must never run one dispatch for many seconds) and reads
-//! the result back. The methods' vector updates (`O(voxels)` per iteration, against
-//! `O(voxels × views)` for each projection) run on the host, in the solver's own
-//! code ([`crate::cpu::iterative::solve`]).
+//! The grid, the view rays, the footprints and the buffers are made once. Two ways
+//! in: [`MatchedPair`] (upload the input, project, read the result back: what
+//! [`crate::cpu::iterative::solve`] calls, and the parity tests), and
+//! [`GpuJosephPair::enqueue_forward`] / [`GpuJosephPair::enqueue_transpose`], which
+//! only queue the dispatches between device buffers (what the device-resident
+//! solver [`super::iterative`] calls, so that no iteration waits for the host).
+//! Either way every dispatch does bounded work (a slow software device must never
+//! run one dispatch for many seconds).
 //!
 //! [`JosephPair`]: crate::cpu::project::JosephPair
 //! [`JosephPair::transpose_voxel`]: crate::cpu::project::JosephPair::transpose_voxel
@@ -189,14 +191,48 @@ impl<'c> GpuJosephPair<'c> {
         })
     }
 
-    /// Uploads the view list, checking every index.
-    fn upload_list(&self, views: &[usize]) -> Result<()> {
+    /// The device this pair runs on.
+    pub fn context(&self) -> &'c GpuContext {
+        self.ctx
+    }
+
+    /// Checks a view list: at most every view, each index below the count.
+    fn check_views(&self, views: &[usize]) -> Result<()> {
         if views.len() > self.n_views || views.iter().any(|&k| k >= self.n_views) {
             return Err(Error::invalid(
                 "views",
                 format!("a list of up to {} view indices below that", self.n_views),
             ));
         }
+        Ok(())
+    }
+
+    /// A device view list for [`Self::enqueue_forward`] and
+    /// [`Self::enqueue_transpose`], checking every index.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for a view out of range.
+    pub fn view_list(&self, views: &[usize]) -> Result<wgpu::Buffer> {
+        self.check_views(views)?;
+        let list: Vec<u32> = views.iter().map(|&k| k as u32).collect();
+        let bytes: &[u8] = if list.is_empty() {
+            &[0; 4]
+        } else {
+            bytemuck::cast_slice(&list)
+        };
+        Ok(self
+            .ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("view list"),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE,
+            }))
+    }
+
+    /// Uploads the view list, checking every index.
+    fn upload_list(&self, views: &[usize]) -> Result<()> {
+        self.check_views(views)?;
         let list: Vec<u32> = views.iter().map(|&k| k as u32).collect();
         if !list.is_empty() {
             self.ctx
@@ -214,8 +250,81 @@ impl<'c> GpuJosephPair<'c> {
         Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&bytes))
     }
 
-    /// One transpose dispatch: voxels `v0 .. v0 + nv`, slots `s0 .. s1`.
-    fn dispatch_transpose(&self, v0: usize, nv: usize, s0: usize, s1: usize) {
+    /// Queues `out ← A x` over the first `n` views of `list`: `x` one f32 per voxel,
+    /// `out` at least `n × per_view` values (`[slot][row][col]`). Nothing waits.
+    pub fn enqueue_forward(
+        &self,
+        x: &wgpu::Buffer,
+        list: &wgpu::Buffer,
+        n: usize,
+        out: &wgpu::Buffer,
+    ) {
+        let pv = self.per_view();
+        let limit = self.ctx.limits.max_storage_buffer_binding_size;
+        let chunk = views_per_dispatch(self.dims, pv, limit);
+        let shape = [
+            self.dims[0],
+            self.dims[1],
+            self.dims[2],
+            self.cols,
+            self.rows,
+        ];
+        let mut k0 = 0;
+        while k0 < n {
+            let m = chunk.min(n - k0);
+            let bufs = [&self.views, x, list, out];
+            self.forward_kernel
+                .dispatch(self.ctx, shape, (k0, m), k0 * pv, bufs);
+            k0 += m;
+        }
+    }
+
+    /// Queues `out ← Aᵀ y` over the first `n` views of `list` (`n ≥ 1`): `y` holds
+    /// `n × per_view` values in the list's order, `out` one per voxel. With `pace`,
+    /// waits for the device after every range of views (keeps a software device's
+    /// queue short when nothing else bounds it).
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when a wait fails.
+    pub fn enqueue_transpose(
+        &self,
+        y: &wgpu::Buffer,
+        list: &wgpu::Buffer,
+        n: usize,
+        out: &wgpu::Buffer,
+        pace: bool,
+    ) -> Result<()> {
+        // Bounded work per dispatch: voxels × slots × footprint pixels. Slots outside
+        // (each later range adds to the sums), so every voxel sums its views in order.
+        let nvox = self.n_voxels();
+        let budget = SAMPLES_PER_DISPATCH / PIXELS_PER_VOXEL_VIEW;
+        let voxels = nvox.min(budget).max(1);
+        let slots = (budget / voxels).clamp(1, crate::gpu::context::LLVMPIPE_LOOP_LIMIT);
+        let mut s0 = 0;
+        while s0 < n {
+            let s1 = (s0 + slots).min(n);
+            let mut v0 = 0;
+            while v0 < nvox {
+                let nv = voxels.min(nvox - v0);
+                self.dispatch_transpose((v0, nv), (s0, s1), [list, y, out]);
+                v0 += nv;
+            }
+            if pace {
+                self.ctx.wait()?;
+            }
+            s0 = s1;
+        }
+        Ok(())
+    }
+
+    /// One transpose dispatch: voxels `v0 .. v0 + nv`, slots `s0 .. s1`; `buffers`
+    /// are the view list, the projections and the output grid.
+    fn dispatch_transpose(
+        &self,
+        (v0, nv): (usize, usize),
+        (s0, s1): (usize, usize),
+        [list, proj, out]: [&wgpu::Buffer; 3],
+    ) {
         let dev = &self.ctx.device;
         let max_x = self.ctx.limits.max_compute_workgroups_per_dimension.max(1);
         let groups = (nv as u32).div_ceil(WORKGROUP).max(1);
@@ -248,9 +357,9 @@ impl<'c> GpuJosephPair<'c> {
                 self.views.as_entire_binding(),
                 self.footprints.as_entire_binding(),
                 self.axes.as_entire_binding(),
-                self.list.as_entire_binding(),
-                self.projections.as_entire_binding(),
-                self.grid_out.as_entire_binding(),
+                list.as_entire_binding(),
+                proj.as_entire_binding(),
+                out.as_entire_binding(),
             ],
         );
         let mut enc = dev.create_command_encoder(&Default::default());
@@ -291,6 +400,7 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
         self.ctx
             .queue
             .write_buffer(&self.grid, 0, bytemuck::cast_slice(x));
+        // One binding's worth of views at a time, each read back as it finishes.
         let pv = self.per_view();
         let limit = self.ctx.limits.max_storage_buffer_binding_size;
         let chunk = views_per_dispatch(self.dims, pv, limit);
@@ -306,7 +416,8 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
         while k0 < views.len() {
             let n = chunk.min(views.len() - k0);
             let bufs = [&self.views, &self.grid, &self.list, &self.projections_out];
-            self.forward_kernel.dispatch(self.ctx, shape, k0, n, bufs);
+            self.forward_kernel
+                .dispatch(self.ctx, shape, (k0, n), 0, bufs);
             out.extend(self.read(&self.projections_out, n * pv)?);
             k0 += n;
         }
@@ -333,24 +444,13 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
         self.ctx
             .queue
             .write_buffer(&self.projections, 0, bytemuck::cast_slice(y));
-        // Bounded work per dispatch: voxels × slots × footprint pixels. Slots outside
-        // (each later range adds to the sums), so every voxel sums its views in order.
-        let budget = SAMPLES_PER_DISPATCH / PIXELS_PER_VOXEL_VIEW;
-        let voxels = n.min(budget).max(1);
-        let slots = (budget / voxels).clamp(1, crate::gpu::context::LLVMPIPE_LOOP_LIMIT);
-        let mut s0 = 0;
-        while s0 < views.len() {
-            let s1 = (s0 + slots).min(views.len());
-            let mut v0 = 0;
-            while v0 < n {
-                let nv = voxels.min(n - v0);
-                self.dispatch_transpose(v0, nv, s0, s1);
-                v0 += nv;
-            }
-            // One wait per slot range keeps the queue short on a software device.
-            self.ctx.wait()?;
-            s0 = s1;
-        }
+        self.enqueue_transpose(
+            &self.projections,
+            &self.list,
+            views.len(),
+            &self.grid_out,
+            true,
+        )?;
         self.read(&self.grid_out, n)
     }
 }

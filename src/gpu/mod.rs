@@ -28,6 +28,7 @@ pub mod fbp;
 pub mod fft;
 pub mod fvr;
 pub mod gradient;
+pub mod iterative;
 pub mod joseph_pair;
 pub mod multi;
 pub mod params;

@@ -35,7 +35,7 @@ pub fn shader_source() -> String {
 }
 
 /// Parameters of one dispatch, shared with
-/// `shaders/shared/project_params.wgsl: ProjectParams` (eight u32, 32 bytes;
+/// `shaders/shared/project_params.wgsl: ProjectParams` (twelve u32, 48 bytes;
 /// `tests/gpu_layout.rs` checks the layout).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -48,6 +48,11 @@ pub struct ProjectParams {
     pub view_offset: u32,
     pub n_views: u32,
     pub row_stride: u32,
+    /// Where the dispatch's first view goes in the output (values).
+    pub out_offset: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// Where the time of a GPU projection went, in seconds (wall clock).
@@ -103,13 +108,13 @@ impl ForwardKernel {
     /// Submits the projection of slots `first .. first + n` of the view list: `shape`
     /// is the grid's `nx, ny, nz` and the detector's `cols, rows`; `buffers` are the
     /// views ([`JosephView<f32>`]), the grid, the list (u32 view indices) and the
-    /// output, which receives `[slot − first][row][col]` from its start.
+    /// output, which receives `[slot − first][row][col]` from value `out_offset` on.
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
         shape: [usize; 5],
-        first: usize,
-        n: usize,
+        (first, n): (usize, usize),
+        out_offset: usize,
         buffers: [&wgpu::Buffer; 4],
     ) {
         let dev = &ctx.device;
@@ -127,6 +132,8 @@ impl ForwardKernel {
             view_offset: first as u32,
             n_views: n as u32,
             row_stride: x * WORKGROUP,
+            out_offset: out_offset as u32,
+            ..Default::default()
         };
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("project params"),
@@ -242,7 +249,7 @@ pub fn project_volume_timed<R: Real>(
     while k0 < g.n_angles() {
         let n = chunk.min(g.n_angles() - k0);
         let shape = [grid.dims[0], grid.dims[1], grid.dims[2], g.cols, g.rows];
-        kernel.dispatch(ctx, shape, k0, n, [&vbuf, &vol, &list, &out]);
+        kernel.dispatch(ctx, shape, (k0, n), 0, [&vbuf, &vol, &list, &out]);
         let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
         result.data[k0 * per_view..(k0 + n) * per_view]
             .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));

@@ -633,8 +633,16 @@ fn solve_in<R: crate::real::Real>(
     };
     let t = std::time::Instant::now();
     let sol = crate::cpu::iterative::solve(&prob, x0, opts, &mut hook)?;
-    let secs = t.elapsed().as_secs_f64();
-    Ok((
+    Ok(solved(opts, sol, t.elapsed().as_secs_f64()))
+}
+
+/// The image in f64 and the log of a solution that took `secs`.
+fn solved<R: crate::real::Real>(
+    opts: &IterativeOptions,
+    sol: crate::cpu::iterative::Solution<R>,
+    secs: f64,
+) -> Solved {
+    (
         sol.x.iter().map(|v| v.f64()).collect(),
         IterationLog {
             method: opts.method,
@@ -644,7 +652,30 @@ fn solve_in<R: crate::real::Real>(
             converged: sol.converged,
             seconds_per_iteration: secs / sol.iterations.max(1) as f64,
         },
-    ))
+    )
+}
+
+/// [`crate::gpu::iterative::solve`]: the whole iteration on the device, reporting
+/// every batch of iterations.
+fn solve_on_device(
+    pair: &GpuJosephPair,
+    b: &[f64],
+    support: Option<&[bool]>,
+    x0: &[f64],
+    opts: &IterativeOptions,
+    progress: &dyn Progress,
+) -> Result<Solved> {
+    let b: Vec<f32> = b.iter().map(|&v| v as f32).collect();
+    let x0: Vec<f32> = x0.iter().map(|&v| v as f32).collect();
+    let total = opts.iterations as u64;
+    let mut hook = |it: usize, _: f64| {
+        progress.advance(it as u64, total);
+        super::check_cancel(progress)
+    };
+    let t = std::time::Instant::now();
+    let batch = crate::gpu::iterative::Batch::Auto;
+    let (sol, _) = crate::gpu::iterative::solve(pair, &b, support, &x0, opts, batch, &mut hook)?;
+    Ok(solved(opts, sol, t.elapsed().as_secs_f64()))
 }
 
 /// The iterative path of [`reconstruct`]: the same grids as FBP/FDK (parallel: the
@@ -720,7 +751,7 @@ fn iterative(
         (Backend::Gpu, Some(ctx)) => {
             let pair = GpuJosephPair::new(ctx, dims, affine, &g)?;
             (
-                solve_in::<f32>(&pair, &p.data, s, &x0, &opts, progress)?,
+                solve_on_device(&pair, &p.data, s, &x0, &opts, progress)?,
                 format!("gpu ({}), f32", ctx.summary.name),
             )
         }
