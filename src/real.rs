@@ -26,6 +26,11 @@ pub trait Real:
     /// f64, [`pow01::pow01`] in f32 (which vector lanes reproduce bit for
     /// bit).
     fn pow01(self, e: Self) -> Self;
+    /// `⌊self⌋` and, when it fits, the same as an integer: exact, and without a
+    /// libm call where the value fits the hardware's truncating conversion (baseline
+    /// x86-64 has no rounding instruction, so `floor` is a function call there, and
+    /// the projectors take one per sample).
+    fn floor_index(self) -> (Self, Option<i64>);
 }
 
 impl Real for f32 {
@@ -42,6 +47,24 @@ impl Real for f32 {
     fn pow01(self, e: Self) -> Self {
         pow01::pow01(self, e)
     }
+    #[inline(always)]
+    fn floor_index(self) -> (Self, Option<i64>) {
+        if self.abs() < 2_147_483_648.0 {
+            // Truncation towards zero, one down where that rounded up.
+            // SAFETY: |self| < 2^31 and not NaN (the comparison fails for NaN), so
+            // the truncated value fits an i32.
+            let t: i32 = unsafe { self.to_int_unchecked() };
+            let tf = t as f32;
+            if tf > self {
+                (tf - 1.0, Some(i64::from(t) - 1))
+            } else {
+                (tf, Some(i64::from(t)))
+            }
+        } else {
+            let f = self.floor();
+            (f, num_traits::ToPrimitive::to_i64(&f))
+        }
+    }
 }
 
 impl Real for f64 {
@@ -57,6 +80,22 @@ impl Real for f64 {
     #[inline]
     fn pow01(self, e: Self) -> Self {
         self.powf(e)
+    }
+    #[inline(always)]
+    fn floor_index(self) -> (Self, Option<i64>) {
+        if self.abs() < 4_611_686_018_427_387_904.0 {
+            // SAFETY: |self| < 2^62 and not NaN, so the truncated value fits an i64.
+            let t: i64 = unsafe { self.to_int_unchecked() };
+            let tf = t as f64;
+            if tf > self {
+                (tf - 1.0, Some(t - 1))
+            } else {
+                (tf, Some(t))
+            }
+        } else {
+            let f = self.floor();
+            (f, num_traits::ToPrimitive::to_i64(&f))
+        }
     }
 }
 

@@ -100,6 +100,73 @@ fn the_forward_half_is_project_volume() {
     }
 }
 
+/// The flat 2-D layout (`JosephPair::is_flat`) gives the numbers of the ray-by-ray
+/// forward pass and of the transpose by planes bit for bit, in f64 and f32, on all
+/// views and on subsets out of order: 2-D parallel problems with odd and even sizes,
+/// views on the axes and the diagonals; 3-D problems do not take it.
+#[test]
+fn the_flat_layout_gives_the_same_numbers_bit_for_bit() {
+    fn check<R: voxlab::real::Real>(name: &str, g: &Geometry, dims: [usize; 3], affine: DMat4) {
+        let flat = JosephPair::<R>::new(dims, affine, g).unwrap();
+        assert!(
+            flat.is_flat(),
+            "{name}: a 2-D problem takes the flat layout"
+        );
+        let rays = JosephPair::<R>::new(dims, affine, g)
+            .unwrap()
+            .without_flat();
+        let (nv, pv) = (flat.n_views(), flat.per_view());
+        let x: Vec<R> = random(flat.n_voxels(), 5).into_iter().map(R::of).collect();
+        let mut y: Vec<R> = random(nv * pv, 9).into_iter().map(R::of).collect();
+        // Zeros in y are skipped by both transposes.
+        for v in y.iter_mut().step_by(7) {
+            *v = R::zero();
+        }
+        let views = all(nv);
+        assert_eq!(
+            flat.forward(&x, &views),
+            rays.forward(&x, &views),
+            "{name} forward"
+        );
+        assert_eq!(
+            flat.transpose(&y, &views),
+            rays.transpose(&y, &views),
+            "{name} transpose"
+        );
+        let sub = [nv - 1, nv / 2, 0, 1];
+        let ys = &y[..sub.len() * pv];
+        assert_eq!(
+            flat.forward(&x, &sub),
+            rays.forward(&x, &sub),
+            "{name} subset forward"
+        );
+        assert_eq!(
+            flat.transpose(ys, &sub),
+            rays.transpose(ys, &sub),
+            "{name} subset transpose"
+        );
+    }
+    let mut flat_cases = Vec::new();
+    for (n, bins, views) in [(41, 41, 9), (32, 46, 8), (17, 23, 180), (64, 64, 4)] {
+        let g = Geometry::parallel_skimage(bins, Geometry::even_angles(views, 180.0)).unwrap();
+        let grid = skimage_grid(n);
+        flat_cases.push((
+            format!("parallel {n}² from {views} views of {bins}"),
+            g,
+            grid.dims,
+            grid.affine,
+        ));
+    }
+    for (name, g, dims, affine) in &flat_cases {
+        check::<f64>(name, g, *dims, *affine);
+        check::<f32>(name, g, *dims, *affine);
+    }
+    for (name, g, dims, affine) in cases() {
+        let flat = JosephPair::<f64>::new(dims, affine, &g).unwrap().is_flat();
+        assert_eq!(flat, name == "parallel", "{name}");
+    }
+}
+
 /// Runs `f` in a rayon pool of `threads` threads.
 fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
     rayon::ThreadPoolBuilder::new()

@@ -278,12 +278,12 @@ pub fn slice_bilinear<R: Real>(
     x: R,
     y: R,
 ) -> R {
-    let (fx, fy) = (x.floor(), y.floor());
+    let ((fx, ix), (fy, iy)) = (x.floor_index(), y.floor_index());
     if !(fx >= -R::one() && fx < R::of(na as f64) && fy >= -R::one() && fy < R::of(nb as f64)) {
         return R::zero();
     }
     let (tx, ty) = (x - fx, y - fy);
-    let (ix, iy) = (fx.to_i64().unwrap_or(-2), fy.to_i64().unwrap_or(-2));
+    let (ix, iy) = (ix.unwrap_or(-2), iy.unwrap_or(-2));
     let at = |i: i64, j: i64| -> R {
         if i < 0 || j < 0 || i >= na as i64 || j >= nb as i64 {
             R::zero()
@@ -421,9 +421,9 @@ pub fn joseph_sum<R: Real>(data: &[R], dims: [usize; 3], p: &JosephPlanes<R>) ->
         let (sa, na) = (stride[p.a], dims[p.a] as i64);
         for s in p.s0..=p.s1 {
             let xa = p.xa0 + R::of(s as f64) * p.ka;
-            let fx = xa.floor();
+            let (fx, ix) = xa.floor_index();
             let tx = xa - fx;
-            let ix = fx.to_i64().unwrap_or(-2);
+            let ix = ix.unwrap_or(-2);
             let base = s * stride[p.m];
             let at = |i: i64| {
                 if i < 0 || i >= na {
@@ -469,7 +469,7 @@ pub fn joseph_weight<R: Real>(p: &JosephPlanes<R>, voxel: [usize; 3]) -> R {
     }
     let sr = R::of(s as f64);
     let tap = |x: R, i: usize| -> R {
-        let f = x.floor();
+        let f = x.floor_index().0;
         let t = x - f;
         let fi = R::of(i as f64);
         if f == fi {
@@ -659,7 +659,11 @@ pub const FOOTPRINT_HALF: f64 = 1.0 - 1e-9;
 /// forward pass does (`transpose_by_planes`). Without the table it is voxel-driven (a
 /// gather, [`Self::transpose_voxel`]): for every voxel and view, the
 /// detector pixels whose rays can touch the voxel ([`JosephFootprint::pixels`]), each
-/// weighted as the forward pass weighs it.
+/// weighted as the forward pass weighs it. On a 2-D problem (a one-voxel-thick grid
+/// seen in its plane, as scikit-image's geometry) the table is also laid out view by
+/// view (`FlatRays`; [`Self::is_flat`]), and both passes run over that layout plane by plane: the
+/// same numbers in the same order, with a view's rays contiguous and a block of
+/// planes per task.
 pub struct JosephPair<R> {
     pub dims: [usize; 3],
     pub affine: DMat4,
@@ -672,6 +676,65 @@ pub struct JosephPair<R> {
     /// transpose bounds them by a square instead of a cube).
     pub view_axis: Vec<Option<usize>>,
     table: Option<Vec<Option<JosephPlanes<R>>>>,
+    flat: Option<FlatRays<R>>,
+}
+
+/// The ray table of a 2-D problem laid out per view: when every ray that meets the
+/// grid takes [`joseph_sum`]'s 2-D path (a one-voxel-thick grid, the ray in its
+/// plane) and every view drives along one axis, the forward pass and the transpose
+/// run view by view and plane by plane over these arrays ([`JosephPair::forward`],
+/// `transpose_flat`) — the very numbers of the table, summed in the very same order,
+/// so the results are bit for bit those of the ray-by-ray loops, with a view's rays
+/// contiguous in memory.
+struct FlatRays<R> {
+    /// Per view: the driving axis `m` and the in-plane axis `a`.
+    axes: Vec<(usize, usize)>,
+    /// Per ray (view-major): `xa0`, `ka`, `w` of its [`JosephPlanes`], and its planes
+    /// `s0..=s1` (`1..=0` for a ray that misses the grid, with `w = 0`).
+    xa0: Vec<R>,
+    ka: Vec<R>,
+    w: Vec<R>,
+    s0: Vec<u32>,
+    s1: Vec<u32>,
+}
+
+impl<R: Real> FlatRays<R> {
+    /// The layout of `table` (rays of `per_view` pixels per view), or `None` when a
+    /// ray does not take the 2-D path or a view has no single driving axis.
+    fn new(
+        dims: [usize; 3],
+        table: &[Option<JosephPlanes<R>>],
+        view_axis: &[Option<usize>],
+        per_view: usize,
+    ) -> Option<Self> {
+        let n = table.len();
+        let mut flat = FlatRays {
+            axes: Vec::with_capacity(view_axis.len()),
+            xa0: vec![R::zero(); n],
+            ka: vec![R::zero(); n],
+            w: vec![R::zero(); n],
+            s0: vec![1; n],
+            s1: vec![0; n],
+        };
+        for (k, axis) in view_axis.iter().enumerate() {
+            let m = (*axis)?;
+            let mut a = None;
+            let first = k * per_view;
+            for (i, ray) in table[first..first + per_view].iter().enumerate() {
+                let i = first + i;
+                let Some(p) = *ray else { continue };
+                let two_d = dims[p.b] == 1 && p.kb == R::zero() && p.xb0 == R::zero();
+                if !two_d || p.m != m || a.is_some_and(|a| a != p.a) || p.s1 > u32::MAX as usize {
+                    return None;
+                }
+                a = Some(p.a);
+                (flat.xa0[i], flat.ka[i], flat.w[i]) = (p.xa0, p.ka, p.w);
+                (flat.s0[i], flat.s1[i]) = (p.s0 as u32, p.s1 as u32);
+            }
+            flat.axes.push((m, a.unwrap_or((m + 1) % 3)));
+        }
+        Some(flat)
+    }
 }
 
 /// Per view, the driving axis ([`JosephPlanes::m`]) when every ray of the view that
@@ -695,6 +758,112 @@ pub fn view_axes<R: Real>(
         })
         .collect()
 }
+
+/// One view's line integrals over the flat layout: plane by plane, every ray of the
+/// view that crosses the plane adds its sample — for each ray the terms of
+/// [`joseph_sum`]'s 2-D path in the same order, so the same sum bit for bit.
+fn forward_flat<R: Real>(flat: &FlatRays<R>, x: &[R], dims: [usize; 3], k: usize, dst: &mut [R]) {
+    let pv = dst.len();
+    let rays = k * pv..(k + 1) * pv;
+    let (s0, s1) = (&flat.s0[rays.clone()], &flat.s1[rays.clone()]);
+    let (xa0, ka) = (&flat.xa0[rays.clone()], &flat.ka[rays.clone()]);
+    let (m, a) = flat.axes[k];
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let (sm, sa, na) = (stride[m], stride[a], dims[a] as i64);
+    let lo = s0
+        .iter()
+        .zip(s1)
+        .filter(|(a, b)| a <= b)
+        .map(|(a, _)| *a)
+        .min();
+    let hi = s1
+        .iter()
+        .zip(s0)
+        .filter(|(b, a)| a <= b)
+        .map(|(b, _)| *b)
+        .max();
+    let (Some(lo), Some(hi)) = (lo, hi) else {
+        return;
+    };
+    for s in lo..=hi {
+        let sr = R::of(s as f64);
+        let base = s as usize * sm;
+        for c in 0..pv {
+            if s < s0[c] || s > s1[c] {
+                continue;
+            }
+            let xa = xa0[c] + sr * ka[c];
+            let (fx, ix) = xa.floor_index();
+            let tx = xa - fx;
+            let ix = ix.unwrap_or(-2);
+            let at = |i: i64| {
+                if i < 0 || i >= na {
+                    R::zero()
+                } else {
+                    x[base + i as usize * sa]
+                }
+            };
+            let top = at(ix) * (R::one() - tx) + at(ix + 1) * tx;
+            dst[c] = dst[c] + (top * R::one() + R::zero());
+        }
+    }
+    for (v, &w) in dst.iter_mut().zip(&flat.w[rays]) {
+        *v = *v * w;
+    }
+}
+
+/// Planes `first ..` of the flat transpose (`planes` holds whole planes of `na`
+/// values): every ray of `class` (slot, view) crossing one of them adds `w·h_a·y` into
+/// its two taps, as [`JosephPair::transpose_by_planes`] does; a block of planes
+/// shares one pass over the rays (each voxel still sums its rays in their order).
+fn transpose_flat_planes<R: Real>(
+    flat: &FlatRays<R>,
+    y: &[R],
+    class: &[(usize, usize)],
+    pv: usize,
+    (first, na): (usize, usize),
+    planes: &mut [R],
+) {
+    let last = (first + planes.len() / na) as u32 - 1;
+    let first = first as u32;
+    let one = R::one();
+    for &(slot, k) in class {
+        let ys = &y[slot * pv..(slot + 1) * pv];
+        let rays = k * pv..(k + 1) * pv;
+        let (s0, s1) = (&flat.s0[rays.clone()], &flat.s1[rays.clone()]);
+        let (xa0, ka, w) = (
+            &flat.xa0[rays.clone()],
+            &flat.ka[rays.clone()],
+            &flat.w[rays],
+        );
+        for c in 0..pv {
+            let yv = ys[c];
+            if yv == R::zero() {
+                continue;
+            }
+            for s in s0[c].max(first)..=s1[c].min(last) {
+                let plane = &mut planes[(s - first) as usize * na..][..na];
+                let xa = xa0[c] + R::of(s as f64) * ka[c];
+                let (fa, ia) = xa.floor_index();
+                let ta = xa - fa;
+                let ia = ia.unwrap_or(i64::MIN / 2);
+                for (da, wa) in [(0, one - ta), (1, ta)] {
+                    let ca = ia + da;
+                    if ca < 0 || ca >= na as i64 || wa == R::zero() {
+                        continue;
+                    }
+                    // `ha · wb · y` with the 2-D path's wb = 1.
+                    let ha = w[c] * wa;
+                    plane[ca as usize] = plane[ca as usize] + ha * one * yv;
+                }
+            }
+        }
+    }
+}
+
+/// Index planes per task of the flat transpose (a block of planes shares one pass
+/// over the rays).
+const PLANES_PER_TASK: usize = 8;
 
 /// The largest ray table a [`JosephPair`] keeps (bytes).
 pub const RAY_TABLE_BYTES: usize = 512 << 20;
@@ -727,6 +896,7 @@ impl<R: Real> JosephPair<R> {
             footprints,
             view_axis: Vec::new(),
             table: None,
+            flat: None,
         };
         let rays = g.n_angles() * g.rows * g.cols;
         if rays.saturating_mul(std::mem::size_of::<Option<JosephPlanes<R>>>()) <= RAY_TABLE_BYTES {
@@ -738,6 +908,9 @@ impl<R: Real> JosephPair<R> {
             pair.table = Some(table);
         }
         pair.view_axis = view_axes(dims, &pair.views, g.cols, g.rows);
+        if let Some(table) = &pair.table {
+            pair.flat = FlatRays::new(dims, table, &pair.view_axis, g.rows * g.cols);
+        }
         Ok(pair)
     }
 
@@ -776,6 +949,13 @@ impl<R: Real> JosephPair<R> {
         assert_eq!(x.len(), self.n_voxels(), "JosephPair::forward: grid size");
         let dims = self.dims;
         let mut out = vec![R::zero(); views.len() * self.per_view()];
+        if let Some(flat) = &self.flat {
+            let pv = self.per_view();
+            out.par_chunks_mut(pv)
+                .zip(views)
+                .for_each(|(dst, &k)| forward_flat(flat, x, dims, k, dst));
+            return out;
+        }
         out.par_chunks_mut(self.cols)
             .enumerate()
             .for_each(|(line, dst)| {
@@ -801,9 +981,24 @@ impl<R: Real> JosephPair<R> {
             "JosephPair::transpose: projection size"
         );
         match &self.table {
+            Some(_) if self.flat.is_some() => self.transpose_flat(y, views),
             Some(table) => self.transpose_by_planes(table, y, views),
             None => self.transpose_by_voxels(y, views),
         }
+    }
+
+    /// The pair without the flat 2-D layout: the forward pass ray by ray and the
+    /// transpose by planes over the ray table (the same numbers, bit for bit; kept
+    /// for the tests that say so).
+    pub fn without_flat(mut self) -> Self {
+        self.flat = None;
+        self
+    }
+
+    /// Whether the forward pass and the transpose run over the flat 2-D layout
+    /// (every ray on [`joseph_sum`]'s 2-D path, one driving axis per view).
+    pub fn is_flat(&self) -> bool {
+        self.flat.is_some()
     }
 
     /// The pair without its ray table: every ray is rebuilt where it is needed, and
@@ -811,6 +1006,7 @@ impl<R: Real> JosephPair<R> {
     /// not fit; both ways give the same weights).
     pub fn without_table(mut self) -> Self {
         self.table = None;
+        self.flat = None;
         self
     }
 
@@ -832,6 +1028,47 @@ impl<R: Real> JosephPair<R> {
                     }
                 }
             });
+        out
+    }
+
+    /// [`Self::transpose_by_planes`] over the flat layout ([`FlatRays`]): the same
+    /// tasks (one per index plane), rays (views in order, then pixels) and sums.
+    fn transpose_flat(&self, y: &[R], views: &[usize]) -> Vec<R> {
+        let Some(flat) = &self.flat else {
+            unreachable!("transpose_flat without the flat layout")
+        };
+        let dims = self.dims;
+        let pv = self.per_view();
+        let mut out = vec![R::zero(); self.n_voxels()];
+        for m in 0..3 {
+            let class: Vec<(usize, usize)> = views
+                .iter()
+                .enumerate()
+                .filter(|&(_, &k)| flat.axes[k].0 == m)
+                .map(|(slot, &k)| (slot, k))
+                .collect();
+            let Some(&(_, k0)) = class.first() else {
+                continue;
+            };
+            let a = flat.axes[k0].1;
+            let (na, sa) = (dims[a], [1, dims[0], dims[0] * dims[1]][a]);
+            let sm = [1, dims[0], dims[0] * dims[1]][m];
+            let mut planes = vec![R::zero(); na * dims[m]];
+            planes
+                .par_chunks_mut(na * PLANES_PER_TASK)
+                .enumerate()
+                .for_each(|(b, block)| {
+                    let first = b * PLANES_PER_TASK;
+                    transpose_flat_planes(flat, y, &class, pv, (first, na), block);
+                });
+            // Back into the grid's layout: voxel (plane s, in-plane i) of a 2-D grid.
+            for (s, plane) in planes.chunks(na).enumerate() {
+                for (i, &v) in plane.iter().enumerate() {
+                    let idx = s * sm + i * sa;
+                    out[idx] = out[idx] + v;
+                }
+            }
+        }
         out
     }
 
@@ -886,12 +1123,9 @@ impl<R: Real> JosephPair<R> {
                             continue;
                         }
                         let (xa, xb) = (p.xa0 + sr * p.ka, p.xb0 + sr * p.kb);
-                        let (fa, fb) = (xa.floor(), xb.floor());
+                        let ((fa, ia), (fb, ib)) = (xa.floor_index(), xb.floor_index());
                         let (ta, tb) = (xa - fa, xb - fb);
-                        let (ia, ib) = (
-                            fa.to_i64().unwrap_or(i64::MIN / 2),
-                            fb.to_i64().unwrap_or(i64::MIN / 2),
-                        );
+                        let (ia, ib) = (ia.unwrap_or(i64::MIN / 2), ib.unwrap_or(i64::MIN / 2));
                         let yv = y[*yi];
                         let one = R::one();
                         for (da, wa) in [(0, one - ta), (1, ta)] {
