@@ -250,6 +250,14 @@ impl<'c> GpuJosephPair<'c> {
         Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&bytes))
     }
 
+    /// The views per forward dispatch and the kernel's shape (grid, detector).
+    fn forward_plan(&self) -> (usize, [usize; 5]) {
+        let limit = self.ctx.limits.max_storage_buffer_binding_size;
+        let chunk = views_per_dispatch(self.dims, self.per_view(), limit);
+        let [nx, ny, nz] = self.dims;
+        (chunk, [nx, ny, nz, self.cols, self.rows])
+    }
+
     /// Queues `out ← A x` over the first `n` views of `list`: `x` one f32 per voxel,
     /// `out` at least `n × per_view` values (`[slot][row][col]`). Nothing waits.
     pub fn enqueue_forward(
@@ -260,15 +268,7 @@ impl<'c> GpuJosephPair<'c> {
         out: &wgpu::Buffer,
     ) {
         let pv = self.per_view();
-        let limit = self.ctx.limits.max_storage_buffer_binding_size;
-        let chunk = views_per_dispatch(self.dims, pv, limit);
-        let shape = [
-            self.dims[0],
-            self.dims[1],
-            self.dims[2],
-            self.cols,
-            self.rows,
-        ];
+        let (chunk, shape) = self.forward_plan();
         let mut k0 = 0;
         while k0 < n {
             let m = chunk.min(n - k0);
@@ -402,15 +402,7 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
             .write_buffer(&self.grid, 0, bytemuck::cast_slice(x));
         // One binding's worth of views at a time, each read back as it finishes.
         let pv = self.per_view();
-        let limit = self.ctx.limits.max_storage_buffer_binding_size;
-        let chunk = views_per_dispatch(self.dims, pv, limit);
-        let shape = [
-            self.dims[0],
-            self.dims[1],
-            self.dims[2],
-            self.cols,
-            self.rows,
-        ];
+        let (chunk, shape) = self.forward_plan();
         let mut out = Vec::with_capacity(views.len() * pv);
         let mut k0 = 0;
         while k0 < views.len() {
