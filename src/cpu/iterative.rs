@@ -159,7 +159,7 @@ impl IterativeOptions {
 /// (`crate::gpu::joseph_pair::GpuJosephPair`). `forward(x, views)` gives
 /// `views.len() × per_view` values in the order of `views`; `transpose(y, views)` one
 /// value per voxel.
-pub trait MatchedPair<R> {
+pub trait MatchedPair<R>: Sync {
     /// The grid's size in voxels (x fastest).
     fn dims(&self) -> [usize; 3];
     /// The number of views.
@@ -228,7 +228,7 @@ pub struct Solution<R> {
 
 /// Called after every iteration with its number (1-based), the image and its
 /// residual; an error (e.g. [`Error::Cancelled`]) stops the run.
-pub type OnIteration<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + 'a;
+pub type OnIteration<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + Send + 'a;
 
 /// Values per chunk of every deterministic sum.
 const CHUNK: usize = 4096;
@@ -324,13 +324,18 @@ pub fn solve<R: Real>(
     on_iteration: &mut OnIteration<R>,
 ) -> Result<Solution<R>> {
     check_problem(prob, x0.len(), opts)?;
-    let x0 = masked(x0, prob.support);
-    match opts.method {
-        Method::Sirt => sart(prob, x0, opts, false, on_iteration),
-        Method::OsSart => sart(prob, x0, opts, true, on_iteration),
-        Method::Cgls => cgls(prob, x0, opts, on_iteration),
-        Method::Tv => tv(prob, x0, opts, on_iteration),
-    }
+    // The whole run on a worker of the thread pool: the many short parallel loops of
+    // an OS-SART pass then start from inside the pool instead of each being handed
+    // over (and waited for) by an outside thread.
+    rayon::scope(|_| {
+        let x0 = masked(x0, prob.support);
+        match opts.method {
+            Method::Sirt => sart(prob, x0, opts, false, on_iteration),
+            Method::OsSart => sart(prob, x0, opts, true, on_iteration),
+            Method::Cgls => cgls(prob, x0, opts, on_iteration),
+            Method::Tv => tv(prob, x0, opts, on_iteration),
+        }
+    })
 }
 
 /// Checks the options and the sizes of a problem and its initial image (`n_x0`
@@ -459,9 +464,15 @@ fn sart<R: Real>(
             wr.par_iter_mut()
                 .zip(&row_w)
                 .for_each(|(v, &w)| *v = *v * w);
-            let upd = transpose_masked(prob, &wr, &all)?;
-            let cw = &kept[0];
-            update(&mut x, &upd, cw, lambda, opts.nonnegative);
+            let upd = prob.pair.transpose(&wr, &all)?;
+            update(
+                &mut x,
+                &upd,
+                &kept[0],
+                lambda,
+                opts.nonnegative,
+                prob.support,
+            );
             continue;
         }
         for s in subset_order(opts.order, k, it) {
@@ -473,12 +484,15 @@ fn sart<R: Real>(
                     *v = *v * wv;
                 }
             });
-            let upd = transpose_masked(prob, &wr, views)?;
-            if keep {
-                update(&mut x, &upd, &kept[s], lambda, opts.nonnegative);
+            let upd = prob.pair.transpose(&wr, views)?;
+            let fresh;
+            let cw = if keep {
+                &kept[s]
             } else {
-                update(&mut x, &upd, &col_w_of(views)?, lambda, opts.nonnegative);
-            }
+                fresh = col_w_of(views)?;
+                &fresh
+            };
+            update(&mut x, &upd, cw, lambda, opts.nonnegative, prob.support);
         }
     }
     Ok(Solution {
@@ -491,15 +505,48 @@ fn sart<R: Real>(
     })
 }
 
-/// `x ← x + λ·c·u`, then `max(x, 0)` when asked.
-/// Mirrors shaders/iterative.wgsl: sart_update (the device-resident port, src/gpu/iterative.rs).
-fn update<R: Real>(x: &mut [R], u: &[R], c: &[R], lambda: R, nonneg: bool) {
-    x.par_iter_mut()
-        .zip(u.par_iter().zip(c))
-        .for_each(|(xv, (&uv, &cv))| {
-            let v = *xv + lambda * cv * uv;
-            *xv = if nonneg { v.max(R::zero()) } else { v };
-        });
+/// `x ← x + λ·c·u` with `u` set to 0 off the support (one pass for [`masked`]
+/// and the update), then `max(x, 0)` when asked.
+/// Mirrors shaders/iterative.wgsl: mask, sart_update (the device-resident port, src/gpu/iterative.rs).
+fn update<R: Real>(
+    x: &mut [R],
+    u: &[R],
+    c: &[R],
+    lambda: R,
+    nonneg: bool,
+    support: Option<&[bool]>,
+) {
+    // Chunks with straight loops (one per case), which the compiler vectorises.
+    x.par_chunks_mut(CHUNK).enumerate().for_each(|(k, xs)| {
+        let r = k * CHUNK..k * CHUNK + xs.len();
+        let (us, cs) = (&u[r.clone()], &c[r.clone()]);
+        let ms = support.map(|m| &m[r]);
+        match (ms, nonneg) {
+            (Some(ms), true) => update_chunk::<R, true, true>(xs, us, cs, ms, lambda),
+            (Some(ms), false) => update_chunk::<R, true, false>(xs, us, cs, ms, lambda),
+            (None, true) => update_chunk::<R, false, true>(xs, us, cs, &[], lambda),
+            (None, false) => update_chunk::<R, false, false>(xs, us, cs, &[], lambda),
+        }
+    });
+}
+
+/// [`update`] on one chunk (`ms` the support's flags there when `MASK`).
+#[inline(always)]
+fn update_chunk<R: Real, const MASK: bool, const NONNEG: bool>(
+    xs: &mut [R],
+    us: &[R],
+    cs: &[R],
+    ms: &[bool],
+    lambda: R,
+) {
+    let n = xs.len();
+    assert!(us.len() == n && cs.len() == n && (!MASK || ms.len() == n));
+    let zero = R::zero();
+    for (j, xv) in xs.iter_mut().enumerate() {
+        let uv = if MASK && !ms[j] { zero } else { us[j] };
+        let v = *xv + lambda * cs[j] * uv;
+        *xv = if NONNEG { v.max(zero) } else { v };
+    }
 }
 
 /// `y ← y + α·x` (in place).

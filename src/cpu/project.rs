@@ -689,6 +689,8 @@ pub struct JosephPair<R> {
 struct FlatRays<R> {
     /// Per view: the driving axis `m` and the in-plane axis `a`.
     axes: Vec<(usize, usize)>,
+    /// Rays per view.
+    per_view: usize,
     /// Per ray (view-major): `xa0`, `ka`, `w` of its [`JosephPlanes`], and its planes
     /// `s0..=s1` (`1..=0` for a ray that misses the grid, with `w = 0`).
     xa0: Vec<R>,
@@ -710,6 +712,7 @@ impl<R: Real> FlatRays<R> {
         let n = table.len();
         let mut flat = FlatRays {
             axes: Vec::with_capacity(view_axis.len()),
+            per_view,
             xa0: vec![R::zero(); n],
             ka: vec![R::zero(); n],
             w: vec![R::zero(); n],
@@ -762,14 +765,21 @@ pub fn view_axes<R: Real>(
 /// One view's line integrals over the flat layout: plane by plane, every ray of the
 /// view that crosses the plane adds its sample — for each ray the terms of
 /// [`joseph_sum`]'s 2-D path in the same order, so the same sum bit for bit.
-fn forward_flat<R: Real>(flat: &FlatRays<R>, x: &[R], dims: [usize; 3], k: usize, dst: &mut [R]) {
-    let pv = dst.len();
-    let rays = k * pv..(k + 1) * pv;
+fn forward_flat<R: Real>(
+    flat: &FlatRays<R>,
+    x: &[R],
+    dims: [usize; 3],
+    (k, first): (usize, usize),
+    dst: &mut [R],
+) {
+    let pv = flat.per_view;
+    let rays = k * pv + first..k * pv + first + dst.len();
     let (s0, s1) = (&flat.s0[rays.clone()], &flat.s1[rays.clone()]);
     let (xa0, ka) = (&flat.xa0[rays.clone()], &flat.ka[rays.clone()]);
     let (m, a) = flat.axes[k];
     let stride = [1, dims[0], dims[0] * dims[1]];
     let (sm, sa, na) = (stride[m], stride[a], dims[a] as i64);
+    let view = FlatView { s0, s1, xa0, ka };
     let lo = s0
         .iter()
         .zip(s1)
@@ -785,10 +795,22 @@ fn forward_flat<R: Real>(flat: &FlatRays<R>, x: &[R], dims: [usize; 3], k: usize
     let (Some(lo), Some(hi)) = (lo, hi) else {
         return;
     };
+    #[cfg(target_arch = "x86_64")]
+    if let (Some(view), Some(x), Some(out)) = (view.as_f32(), as_f32(x), as_f32_mut(dst)) {
+        if avx512_fits(x.len(), [dims[a], hi as usize + 1]) {
+            // SAFETY: the CPU has AVX-512F (avx512_fits), indices fit an i32.
+            unsafe { forward_flat_f32x16(view, x, (sm, sa, dims[a]), (lo, hi), out) };
+            for (v, &w) in dst.iter_mut().zip(&flat.w[rays]) {
+                *v = *v * w;
+            }
+            return;
+        }
+    }
+    let _ = view;
     for s in lo..=hi {
         let sr = R::of(s as f64);
         let base = s as usize * sm;
-        for c in 0..pv {
+        for c in 0..dst.len() {
             if s < s0[c] || s > s1[c] {
                 continue;
             }
@@ -825,6 +847,28 @@ fn transpose_flat_planes<R: Real>(
     planes: &mut [R],
 ) {
     let last = (first + planes.len() / na) as u32 - 1;
+    #[cfg(target_arch = "x86_64")]
+    if let (Some(y), Some(out)) = (as_f32(y), as_f32_mut(planes)) {
+        let n = out.len() / na;
+        if n <= 16 && avx512_fits(out.len(), [na, last as usize + 1]) {
+            for &(slot, k) in class {
+                let rays = k * pv..(k + 1) * pv;
+                let view = FlatView {
+                    s0: &flat.s0[rays.clone()],
+                    s1: &flat.s1[rays.clone()],
+                    xa0: &flat.xa0[rays.clone()],
+                    ka: &flat.ka[rays.clone()],
+                };
+                let (Some(view), Some(w)) = (view.as_f32(), as_f32(&flat.w[rays])) else {
+                    unreachable!("f32 planes with another ray table")
+                };
+                let ys = &y[slot * pv..(slot + 1) * pv];
+                // SAFETY: the CPU has AVX-512F, at most 16 planes, indices fit an i32.
+                unsafe { transpose_flat_planes_f32x16(view, w, ys, (first, na), out) };
+            }
+            return;
+        }
+    }
     let first = first as u32;
     let one = R::one();
     for &(slot, k) in class {
@@ -862,8 +906,199 @@ fn transpose_flat_planes<R: Real>(
 }
 
 /// Index planes per task of the flat transpose (a block of planes shares one pass
-/// over the rays).
-const PLANES_PER_TASK: usize = 8;
+/// over the rays; sixteen, one per lane of [`transpose_flat_planes_f32x16`]).
+const PLANES_PER_TASK: usize = 16;
+
+/// One view's rays in the flat layout ([`FlatRays`]).
+#[derive(Clone, Copy)]
+struct FlatView<'a, R> {
+    s0: &'a [u32],
+    s1: &'a [u32],
+    xa0: &'a [R],
+    ka: &'a [R],
+}
+
+impl<'a, R: Real> FlatView<'a, R> {
+    fn as_f32(&self) -> Option<FlatView<'a, f32>> {
+        Some(FlatView {
+            s0: self.s0,
+            s1: self.s1,
+            xa0: as_f32(self.xa0)?,
+            ka: as_f32(self.ka)?,
+        })
+    }
+}
+
+/// `v` as `f32` values when `R` is `f32`.
+fn as_f32<R: Real>(v: &[R]) -> Option<&[f32]> {
+    // SAFETY: R is f32 (checked), so the slice has its layout.
+    (std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>())
+        .then(|| unsafe { &*(v as *const [R] as *const [f32]) })
+}
+
+/// `v` as `f32` values when `R` is `f32`.
+fn as_f32_mut<R: Real>(v: &mut [R]) -> Option<&mut [f32]> {
+    if std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>() {
+        // SAFETY: R is f32 (checked), so the slice has its layout.
+        Some(unsafe { &mut *(v as *mut [R] as *mut [f32]) })
+    } else {
+        None
+    }
+}
+
+/// Whether the AVX-512 kernels of the flat layout run: the CPU has AVX-512F, the
+/// array of `len` values is indexed by an i32, and the counts `small` (the in-plane
+/// size and the planes) are exact in f32 (below 2²⁴).
+#[cfg(target_arch = "x86_64")]
+fn avx512_fits(len: usize, small: [usize; 2]) -> bool {
+    len < i32::MAX as usize
+        && small.iter().all(|&n| n < 1 << 24)
+        && std::arch::is_x86_feature_detected!("avx512f")
+}
+
+/// [`forward_flat`]'s plane loop for f32, sixteen rays at a time with AVX-512
+/// (before the weights): the same operations in the same order for every ray, so the
+/// same sums bit for bit. A tap outside the in-plane range reads 0 (a masked gather),
+/// a ray outside its planes `s0..=s1` keeps its sum (a masked add).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn forward_flat_f32x16(
+    view: FlatView<f32>,
+    x: &[f32],
+    (sm, sa, na): (usize, usize, usize),
+    (lo, hi): (u32, u32),
+    dst: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let pv = dst.len();
+    assert!(view.s0.len() == pv && view.s1.len() == pv);
+    assert!(view.xa0.len() == pv && view.ka.len() == pv);
+    let set = _mm512_set1_ps;
+    let (one, zero) = (set(1.0), _mm512_setzero_ps());
+    let (max0, min1, max1) = (set(na as f32 - 1.0), set(-1.0), set(na as f32 - 2.0));
+    let vsa = _mm512_set1_epi32(sa as i32);
+    for s in lo..=hi {
+        let (sr, vs) = (set(s as f32), _mm512_set1_epi32(s as i32));
+        let base = _mm512_set1_epi32((s as usize * sm) as i32);
+        let mut c = 0;
+        while c < pv {
+            let m: __mmask16 = if pv - c >= 16 {
+                0xffff
+            } else {
+                ((1u32 << (pv - c)) - 1) as u16
+            };
+            // SAFETY: lanes at or past pv are masked off every load and store; the
+            // gathered indices lie in x (the masks keep 0 ≤ in-plane index < na, and
+            // s·sm + i·sa indexes the grid).
+            unsafe {
+                let s0 = _mm512_maskz_loadu_epi32(m, view.s0.as_ptr().add(c) as *const i32);
+                let s1 = _mm512_maskz_loadu_epi32(m, view.s1.as_ptr().add(c) as *const i32);
+                let active = m & _mm512_cmple_epu32_mask(s0, vs) & _mm512_cmple_epu32_mask(vs, s1);
+                if active != 0 {
+                    let xa0 = _mm512_maskz_loadu_ps(m, view.xa0.as_ptr().add(c));
+                    let ka = _mm512_maskz_loadu_ps(m, view.ka.as_ptr().add(c));
+                    let xa = _mm512_add_ps(xa0, _mm512_mul_ps(sr, ka));
+                    let fx =
+                        _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
+                    let tx = _mm512_sub_ps(xa, fx);
+                    let ok0 = active
+                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, zero)
+                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max0);
+                    let ok1 = active
+                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, min1)
+                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max1);
+                    let ix = _mm512_cvttps_epi32(fx);
+                    let i0 = _mm512_add_epi32(base, _mm512_mullo_epi32(ix, vsa));
+                    let i1 = _mm512_add_epi32(i0, vsa);
+                    let v0 = _mm512_mask_i32gather_ps::<4>(zero, ok0, i0, x.as_ptr());
+                    let v1 = _mm512_mask_i32gather_ps::<4>(zero, ok1, i1, x.as_ptr());
+                    let top = _mm512_add_ps(
+                        _mm512_mul_ps(v0, _mm512_sub_ps(one, tx)),
+                        _mm512_mul_ps(v1, tx),
+                    );
+                    let q = dst.as_mut_ptr().add(c);
+                    let d = _mm512_maskz_loadu_ps(m, q);
+                    let d = _mm512_mask_add_ps(d, active, d, _mm512_add_ps(top, zero));
+                    _mm512_mask_storeu_ps(q, m, d);
+                }
+            }
+            c += 16;
+        }
+    }
+}
+
+/// [`transpose_flat_planes`] for f32 and one view, with AVX-512: the block's planes
+/// (at most sixteen) are the lanes, so every ray adds into sixteen distinct voxels
+/// at once (a gather, an add, a scatter per tap) — for every voxel the same terms in
+/// the same order, so the same sums bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose_flat_planes_f32x16(
+    view: FlatView<f32>,
+    w: &[f32],
+    ys: &[f32],
+    (first, na): (usize, usize),
+    planes: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let pv = ys.len();
+    assert!(view.s0.len() == pv && view.s1.len() == pv && w.len() == pv);
+    assert!(view.xa0.len() == pv && view.ka.len() == pv);
+    let n = planes.len() / na;
+    assert!((1..=16).contains(&n) && planes.len() == n * na);
+    let last = (first + n - 1) as u32;
+    let lanes: __mmask16 = ((1u32 << n) - 1) as u16;
+    let lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    let vs = _mm512_add_epi32(_mm512_set1_epi32(first as i32), lane);
+    let sf = _mm512_cvtepi32_ps(vs);
+    let row = _mm512_mullo_epi32(lane, _mm512_set1_epi32(na as i32));
+    let set = _mm512_set1_ps;
+    let (one, zero) = (set(1.0), _mm512_setzero_ps());
+    let (max0, min1, max1) = (set(na as f32 - 1.0), set(-1.0), set(na as f32 - 2.0));
+    let out = planes.as_mut_ptr();
+    for c in 0..pv {
+        let yv = ys[c];
+        let (s0, s1) = (view.s0[c], view.s1[c]);
+        if yv == 0.0 || s0.max(first as u32) > s1.min(last) {
+            continue;
+        }
+        let active = lanes
+            & _mm512_cmple_epu32_mask(_mm512_set1_epi32(s0 as i32), vs)
+            & _mm512_cmple_epu32_mask(vs, _mm512_set1_epi32(s1 as i32));
+        let xa = _mm512_add_ps(set(view.xa0[c]), _mm512_mul_ps(sf, set(view.ka[c])));
+        let fa = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
+        let ta = _mm512_sub_ps(xa, fa);
+        let i0 = _mm512_add_epi32(row, _mm512_cvttps_epi32(fa));
+        let (wc, yc) = (set(w[c]), set(yv));
+        for (i, wa, ok) in [
+            (
+                i0,
+                _mm512_sub_ps(one, ta),
+                _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fa, zero)
+                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fa, max0),
+            ),
+            (
+                _mm512_add_epi32(i0, _mm512_set1_epi32(1)),
+                ta,
+                _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fa, min1)
+                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fa, max1),
+            ),
+        ] {
+            let ok = active & ok & _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(wa, zero);
+            // `ha · wb · y` with the 2-D path's wb = 1 (`ha · 1` is `ha`).
+            let add = _mm512_mul_ps(_mm512_mul_ps(wc, wa), yc);
+            // SAFETY: the masked lanes index plane (s − first) < n at 0 ≤ i < na.
+            unsafe {
+                let p = _mm512_mask_i32gather_ps::<4>(zero, ok, i, out);
+                _mm512_mask_i32scatter_ps::<4>(out, ok, i, _mm512_add_ps(p, add));
+            }
+        }
+    }
+}
+
+/// Below this many views the flat forward pass splits each view into this many
+/// pieces of rays (one task each).
+const FORWARD_PIECES: usize = 4;
 
 /// The largest ray table a [`JosephPair`] keeps (bytes).
 pub const RAY_TABLE_BYTES: usize = 512 << 20;
@@ -951,9 +1186,17 @@ impl<R: Real> JosephPair<R> {
         let mut out = vec![R::zero(); views.len() * self.per_view()];
         if let Some(flat) = &self.flat {
             let pv = self.per_view();
-            out.par_chunks_mut(pv)
-                .zip(views)
-                .for_each(|(dst, &k)| forward_flat(flat, x, dims, k, dst));
+            // A few views (an OS-SART subset) split into pieces of rays too.
+            let piece = if views.len() >= FORWARD_PIECES {
+                pv
+            } else {
+                pv.div_ceil(FORWARD_PIECES).max(64)
+            };
+            out.par_chunks_mut(pv).zip(views).for_each(|(dst, &k)| {
+                dst.par_chunks_mut(piece)
+                    .enumerate()
+                    .for_each(|(j, d)| forward_flat(flat, x, dims, (k, j * piece), d));
+            });
             return out;
         }
         out.par_chunks_mut(self.cols)
@@ -1053,19 +1296,47 @@ impl<R: Real> JosephPair<R> {
             let a = flat.axes[k0].1;
             let (na, sa) = (dims[a], [1, dims[0], dims[0] * dims[1]][a]);
             let sm = [1, dims[0], dims[0] * dims[1]][m];
-            let mut planes = vec![R::zero(); na * dims[m]];
-            planes
-                .par_chunks_mut(na * PLANES_PER_TASK)
-                .enumerate()
-                .for_each(|(b, block)| {
-                    let first = b * PLANES_PER_TASK;
-                    transpose_flat_planes(flat, y, &class, pv, (first, na), block);
+            let (nm, block) = (dims[m], na * PLANES_PER_TASK);
+            let planes_of = |b: usize, len: usize| {
+                let mut planes = vec![R::zero(); len];
+                transpose_flat_planes(flat, y, &class, pv, (b * PLANES_PER_TASK, na), &mut planes);
+                planes
+            };
+            // Back into the grid's layout (voxel (plane s, in-plane i) at s·sm + i·sa
+            // of a 2-D grid), each voxel once: `out + plane value`.
+            if sa == 1 && sm == na {
+                // The planes are the grid's lines: blocks of them are chunks of it.
+                out.par_chunks_mut(block).enumerate().for_each(|(b, dst)| {
+                    let planes = planes_of(b, dst.len());
+                    for (o, v) in dst.iter_mut().zip(planes) {
+                        *o = *o + v;
+                    }
                 });
-            // Back into the grid's layout: voxel (plane s, in-plane i) of a 2-D grid.
-            for (s, plane) in planes.chunks(na).enumerate() {
-                for (i, &v) in plane.iter().enumerate() {
-                    let idx = s * sm + i * sa;
-                    out[idx] = out[idx] + v;
+            } else if sm == 1 && sa == nm {
+                // The planes are the grid's columns: lines of the grid gather them.
+                let blocks: Vec<Vec<R>> = (0..nm.div_ceil(PLANES_PER_TASK))
+                    .into_par_iter()
+                    .map(|b| planes_of(b, na * PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK)))
+                    .collect();
+                out.par_chunks_mut(sa).enumerate().for_each(|(i, line)| {
+                    for (dst, block) in line.chunks_mut(PLANES_PER_TASK).zip(&blocks) {
+                        for (l, o) in dst.iter_mut().enumerate() {
+                            *o = *o + block[l * na + i];
+                        }
+                    }
+                });
+            } else {
+                let planes: Vec<R> = (0..nm.div_ceil(PLANES_PER_TASK))
+                    .into_par_iter()
+                    .flat_map_iter(|b| {
+                        planes_of(b, na * PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK))
+                    })
+                    .collect();
+                for (s, plane) in planes.chunks(na).enumerate() {
+                    for (i, &v) in plane.iter().enumerate() {
+                        let idx = s * sm + i * sa;
+                        out[idx] = out[idx] + v;
+                    }
                 }
             }
         }
