@@ -543,7 +543,9 @@ fn update_chunk<R: Real, const MASK: bool, const NONNEG: bool>(
     assert!(us.len() == n && cs.len() == n && (!MASK || ms.len() == n));
     let zero = R::zero();
     for (j, xv) in xs.iter_mut().enumerate() {
-        let uv = if MASK && !ms[j] { zero } else { us[j] };
+        // Both loads first, then a select: a branch-free loop.
+        let uv = us[j];
+        let uv = if MASK && !ms[j] { zero } else { uv };
         let v = *xv + lambda * cs[j] * uv;
         *xv = if NONNEG { v.max(zero) } else { v };
     }

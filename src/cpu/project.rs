@@ -844,9 +844,11 @@ fn transpose_flat_planes<R: Real>(
     class: &[(usize, usize)],
     pv: usize,
     (first, na): (usize, usize),
+    layout: BlockLayout,
     planes: &mut [R],
 ) {
     let last = (first + planes.len() / na) as u32 - 1;
+    let (ls, is) = layout.strides(na, planes.len() / na);
     #[cfg(target_arch = "x86_64")]
     if let (Some(y), Some(out)) = (as_f32(y), as_f32_mut(planes)) {
         let n = out.len() / na;
@@ -864,7 +866,7 @@ fn transpose_flat_planes<R: Real>(
                 };
                 let ys = &y[slot * pv..(slot + 1) * pv];
                 // SAFETY: the CPU has AVX-512F, at most 16 planes, indices fit an i32.
-                unsafe { transpose_flat_planes_f32x16(view, w, ys, (first, na), out) };
+                unsafe { transpose_flat_planes_f32x16(view, w, ys, (first, na), (ls, is), out) };
             }
             return;
         }
@@ -886,7 +888,7 @@ fn transpose_flat_planes<R: Real>(
                 continue;
             }
             for s in s0[c].max(first)..=s1[c].min(last) {
-                let plane = &mut planes[(s - first) as usize * na..][..na];
+                let at = (s - first) as usize * ls;
                 let xa = xa0[c] + R::of(s as f64) * ka[c];
                 let (fa, ia) = xa.floor_index();
                 let ta = xa - fa;
@@ -898,9 +900,30 @@ fn transpose_flat_planes<R: Real>(
                     }
                     // `ha · wb · y` with the 2-D path's wb = 1.
                     let ha = w[c] * wa;
-                    plane[ca as usize] = plane[ca as usize] + ha * one * yv;
+                    let i = at + ca as usize * is;
+                    planes[i] = planes[i] + ha * one * yv;
                 }
             }
+        }
+    }
+}
+
+/// How a block of the flat transpose holds its `n` planes of `na` values: plane
+/// after plane (`Planes`), or in-plane index after in-plane index, the `n` planes'
+/// values side by side (`Lines`: a block of the grid's columns, laid out as its
+/// lines).
+#[derive(Clone, Copy, PartialEq)]
+enum BlockLayout {
+    Planes,
+    Lines,
+}
+
+impl BlockLayout {
+    /// The strides of (plane, in-plane index).
+    fn strides(self, na: usize, n: usize) -> (usize, usize) {
+        match self {
+            BlockLayout::Planes => (na, 1),
+            BlockLayout::Lines => (1, n),
         }
     }
 }
@@ -1038,6 +1061,7 @@ unsafe fn transpose_flat_planes_f32x16(
     w: &[f32],
     ys: &[f32],
     (first, na): (usize, usize),
+    (ls, is): (usize, usize),
     planes: &mut [f32],
 ) {
     use std::arch::x86_64::*;
@@ -1051,7 +1075,8 @@ unsafe fn transpose_flat_planes_f32x16(
     let lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     let vs = _mm512_add_epi32(_mm512_set1_epi32(first as i32), lane);
     let sf = _mm512_cvtepi32_ps(vs);
-    let row = _mm512_mullo_epi32(lane, _mm512_set1_epi32(na as i32));
+    let row = _mm512_mullo_epi32(lane, _mm512_set1_epi32(ls as i32));
+    let vis = _mm512_set1_epi32(is as i32);
     let set = _mm512_set1_ps;
     let (one, zero) = (set(1.0), _mm512_setzero_ps());
     let (max0, min1, max1) = (set(na as f32 - 1.0), set(-1.0), set(na as f32 - 2.0));
@@ -1068,7 +1093,7 @@ unsafe fn transpose_flat_planes_f32x16(
         let xa = _mm512_add_ps(set(view.xa0[c]), _mm512_mul_ps(sf, set(view.ka[c])));
         let fa = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
         let ta = _mm512_sub_ps(xa, fa);
-        let i0 = _mm512_add_epi32(row, _mm512_cvttps_epi32(fa));
+        let i0 = _mm512_add_epi32(row, _mm512_mullo_epi32(_mm512_cvttps_epi32(fa), vis));
         let (wc, yc) = (set(w[c]), set(yv));
         for (i, wa, ok) in [
             (
@@ -1078,7 +1103,7 @@ unsafe fn transpose_flat_planes_f32x16(
                     & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fa, max0),
             ),
             (
-                _mm512_add_epi32(i0, _mm512_set1_epi32(1)),
+                _mm512_add_epi32(i0, vis),
                 ta,
                 _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fa, min1)
                     & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fa, max1),
@@ -1297,9 +1322,10 @@ impl<R: Real> JosephPair<R> {
             let (na, sa) = (dims[a], [1, dims[0], dims[0] * dims[1]][a]);
             let sm = [1, dims[0], dims[0] * dims[1]][m];
             let (nm, block) = (dims[m], na * PLANES_PER_TASK);
-            let planes_of = |b: usize, len: usize| {
+            let planes_of = |b: usize, len: usize, layout: BlockLayout| {
                 let mut planes = vec![R::zero(); len];
-                transpose_flat_planes(flat, y, &class, pv, (b * PLANES_PER_TASK, na), &mut planes);
+                let first = b * PLANES_PER_TASK;
+                transpose_flat_planes(flat, y, &class, pv, (first, na), layout, &mut planes);
                 planes
             };
             // Back into the grid's layout (voxel (plane s, in-plane i) at s·sm + i·sa
@@ -1307,21 +1333,27 @@ impl<R: Real> JosephPair<R> {
             if sa == 1 && sm == na {
                 // The planes are the grid's lines: blocks of them are chunks of it.
                 out.par_chunks_mut(block).enumerate().for_each(|(b, dst)| {
-                    let planes = planes_of(b, dst.len());
+                    let planes = planes_of(b, dst.len(), BlockLayout::Planes);
                     for (o, v) in dst.iter_mut().zip(planes) {
                         *o = *o + v;
                     }
                 });
             } else if sm == 1 && sa == nm {
                 // The planes are the grid's columns: lines of the grid gather them.
+                // Each block is held as lines (BlockLayout::Lines), so a line of the
+                // grid copies a run of values from every block.
                 let blocks: Vec<Vec<R>> = (0..nm.div_ceil(PLANES_PER_TASK))
                     .into_par_iter()
-                    .map(|b| planes_of(b, na * PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK)))
+                    .map(|b| {
+                        let n = PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK);
+                        planes_of(b, na * n, BlockLayout::Lines)
+                    })
                     .collect();
                 out.par_chunks_mut(sa).enumerate().for_each(|(i, line)| {
                     for (dst, block) in line.chunks_mut(PLANES_PER_TASK).zip(&blocks) {
-                        for (l, o) in dst.iter_mut().enumerate() {
-                            *o = *o + block[l * na + i];
+                        let n = dst.len();
+                        for (o, &v) in dst.iter_mut().zip(&block[i * n..(i + 1) * n]) {
+                            *o = *o + v;
                         }
                     }
                 });
@@ -1329,7 +1361,8 @@ impl<R: Real> JosephPair<R> {
                 let planes: Vec<R> = (0..nm.div_ceil(PLANES_PER_TASK))
                     .into_par_iter()
                     .flat_map_iter(|b| {
-                        planes_of(b, na * PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK))
+                        let n = PLANES_PER_TASK.min(nm - b * PLANES_PER_TASK);
+                        planes_of(b, na * n, BlockLayout::Planes)
                     })
                     .collect();
                 for (s, plane) in planes.chunks(na).enumerate() {
