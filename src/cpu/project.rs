@@ -767,7 +767,7 @@ pub fn view_axes<R: Real>(
 /// [`joseph_sum`]'s 2-D path in the same order, so the same sum bit for bit.
 fn forward_flat<R: Real>(
     flat: &FlatRays<R>,
-    x: &[R],
+    (x, lines): (&[R], Option<&[R]>),
     dims: [usize; 3],
     (k, first): (usize, usize),
     dst: &mut [R],
@@ -778,7 +778,12 @@ fn forward_flat<R: Real>(
     let (xa0, ka) = (&flat.xa0[rays.clone()], &flat.ka[rays.clone()]);
     let (m, a) = flat.axes[k];
     let stride = [1, dims[0], dims[0] * dims[1]];
-    let (sm, sa, na) = (stride[m], stride[a], dims[a] as i64);
+    let (mut sm, mut sa, na) = (stride[m], stride[a], dims[a] as i64);
+    let mut x = x;
+    if let Some(lines) = lines.filter(|_| sm == 1 && sa == dims[m]) {
+        // The view's planes are the grid's columns: read them from the copy.
+        (x, sm, sa) = (lines, dims[a], 1);
+    }
     let view = FlatView { s0, s1, xa0, ka };
     let lo = s0
         .iter()
@@ -799,7 +804,7 @@ fn forward_flat<R: Real>(
     if let (Some(view), Some(x), Some(out)) = (view.as_f32(), as_f32(x), as_f32_mut(dst)) {
         if avx512_fits(x.len(), [dims[a], hi as usize + 1]) {
             // SAFETY: the CPU has AVX-512F (avx512_fits), indices fit an i32.
-            unsafe { forward_flat_f32x16(view, x, (sm, sa, dims[a]), (lo, hi), out) };
+            unsafe { forward_flat_f32x16(view, x, (sm, sa, dims[a]), out) };
             for (v, &w) in dst.iter_mut().zip(&flat.w[rays]) {
                 *v = *v * w;
             }
@@ -980,16 +985,16 @@ fn avx512_fits(len: usize, small: [usize; 2]) -> bool {
 }
 
 /// [`forward_flat`]'s plane loop for f32, sixteen rays at a time with AVX-512
-/// (before the weights): the same operations in the same order for every ray, so the
-/// same sums bit for bit. A tap outside the in-plane range reads 0 (a masked gather),
-/// a ray outside its planes `s0..=s1` keeps its sum (a masked add).
+/// (before the weights): sixteen rays keep their sums in one register while they
+/// walk their planes, with the same operations in the same order for every ray, so
+/// the same sums bit for bit. A tap outside the in-plane range reads 0 (masked), a
+/// ray outside its planes `s0..=s1` keeps its sum (a masked add).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 unsafe fn forward_flat_f32x16(
     view: FlatView<f32>,
     x: &[f32],
     (sm, sa, na): (usize, usize, usize),
-    (lo, hi): (u32, u32),
     dst: &mut [f32],
 ) {
     use std::arch::x86_64::*;
@@ -1000,53 +1005,85 @@ unsafe fn forward_flat_f32x16(
     let (one, zero) = (set(1.0), _mm512_setzero_ps());
     let (max0, min1, max1) = (set(na as f32 - 1.0), set(-1.0), set(na as f32 - 2.0));
     let vsa = _mm512_set1_epi32(sa as i32);
-    for s in lo..=hi {
-        let (sr, vs) = (set(s as f32), _mm512_set1_epi32(s as i32));
-        let base = _mm512_set1_epi32((s as usize * sm) as i32);
-        let mut c = 0;
-        while c < pv {
-            let m: __mmask16 = if pv - c >= 16 {
-                0xffff
-            } else {
-                ((1u32 << (pv - c)) - 1) as u16
-            };
-            // SAFETY: lanes at or past pv are masked off every load and store; the
-            // gathered indices lie in x (the masks keep 0 ≤ in-plane index < na, and
-            // s·sm + i·sa indexes the grid).
-            unsafe {
-                let s0 = _mm512_maskz_loadu_epi32(m, view.s0.as_ptr().add(c) as *const i32);
-                let s1 = _mm512_maskz_loadu_epi32(m, view.s1.as_ptr().add(c) as *const i32);
-                let active = m & _mm512_cmple_epu32_mask(s0, vs) & _mm512_cmple_epu32_mask(vs, s1);
-                if active != 0 {
-                    let xa0 = _mm512_maskz_loadu_ps(m, view.xa0.as_ptr().add(c));
-                    let ka = _mm512_maskz_loadu_ps(m, view.ka.as_ptr().add(c));
-                    let xa = _mm512_add_ps(xa0, _mm512_mul_ps(sr, ka));
-                    let fx =
-                        _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
-                    let tx = _mm512_sub_ps(xa, fx);
-                    let ok0 = active
-                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, zero)
-                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max0);
-                    let ok1 = active
-                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, min1)
-                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max1);
-                    let ix = _mm512_cvttps_epi32(fx);
-                    let i0 = _mm512_add_epi32(base, _mm512_mullo_epi32(ix, vsa));
-                    let i1 = _mm512_add_epi32(i0, vsa);
-                    let v0 = _mm512_mask_i32gather_ps::<4>(zero, ok0, i0, x.as_ptr());
-                    let v1 = _mm512_mask_i32gather_ps::<4>(zero, ok1, i1, x.as_ptr());
-                    let top = _mm512_add_ps(
-                        _mm512_mul_ps(v0, _mm512_sub_ps(one, tx)),
-                        _mm512_mul_ps(v1, tx),
-                    );
-                    let q = dst.as_mut_ptr().add(c);
-                    let d = _mm512_maskz_loadu_ps(m, q);
-                    let d = _mm512_mask_add_ps(d, active, d, _mm512_add_ps(top, zero));
-                    _mm512_mask_storeu_ps(q, m, d);
-                }
-            }
+    let mut c = 0;
+    while c < pv {
+        let n = (pv - c).min(16);
+        let m: __mmask16 = ((1u32 << n) - 1) as u16;
+        // The planes any of the sixteen rays crosses.
+        let (s0s, s1s) = (&view.s0[c..c + n], &view.s1[c..c + n]);
+        let crossing = s0s.iter().zip(s1s).filter(|(a, b)| a <= b);
+        let lo = crossing.clone().map(|(a, _)| *a).min();
+        let hi = crossing.map(|(_, b)| *b).max();
+        let (Some(lo), Some(hi)) = (lo, hi) else {
             c += 16;
+            continue;
+        };
+        // SAFETY: lanes at or past pv are masked off every load and store; every
+        // value read lies in x (the masks keep 0 ≤ in-plane index < na, s·sm + i·sa
+        // indexes the grid, and a window is read only where it lies in x).
+        unsafe {
+            let s0 = _mm512_maskz_loadu_epi32(m, view.s0.as_ptr().add(c) as *const i32);
+            let s1 = _mm512_maskz_loadu_epi32(m, view.s1.as_ptr().add(c) as *const i32);
+            let xa0 = _mm512_maskz_loadu_ps(m, view.xa0.as_ptr().add(c));
+            let ka = _mm512_maskz_loadu_ps(m, view.ka.as_ptr().add(c));
+            let q = dst.as_mut_ptr().add(c);
+            let mut d = _mm512_maskz_loadu_ps(m, q);
+            for s in lo..=hi {
+                let vs = _mm512_set1_epi32(s as i32);
+                let active = m & _mm512_cmple_epu32_mask(s0, vs) & _mm512_cmple_epu32_mask(vs, s1);
+                let xa = _mm512_add_ps(xa0, _mm512_mul_ps(set(s as f32), ka));
+                let fx = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
+                let tx = _mm512_sub_ps(xa, fx);
+                let ok0 = active
+                    & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, zero)
+                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max0);
+                let ok1 = active
+                    & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, min1)
+                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max1);
+                let ix = _mm512_cvttps_epi32(fx);
+                let any = ok0 | ok1;
+                let base = s as usize * sm;
+                // Contiguous planes and taps within a window of 32 values: two loads
+                // and two permutes instead of two gathers. The window starts one
+                // below the truncated position of the first or the last ray (where
+                // the rays' positions are monotone, every tap lies between them);
+                // the lanes' own indices decide whether it holds them all.
+                let sf = s as f32;
+                let ends = [
+                    view.xa0[c] + sf * view.ka[c],
+                    view.xa0[c + n - 1] + sf * view.ka[c + n - 1],
+                ];
+                let wlo = (ends[0].min(ends[1]) as i32).saturating_sub(1);
+                let at = base as i64 + i64::from(wlo);
+                let i0 = _mm512_sub_epi32(ix, _mm512_set1_epi32(wlo));
+                let inside = _mm512_mask_cmple_epu32_mask(any, i0, _mm512_set1_epi32(30));
+                let (v0, v1) = if sa == 1 && inside == any && at >= 0 && at as usize + 32 <= x.len()
+                {
+                    let p = x.as_ptr().add(at as usize);
+                    let (w0, w1) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
+                    let i1 = _mm512_add_epi32(i0, _mm512_set1_epi32(1));
+                    (
+                        _mm512_maskz_permutex2var_ps(ok0, w0, i0, w1),
+                        _mm512_maskz_permutex2var_ps(ok1, w0, i1, w1),
+                    )
+                } else {
+                    let vb = _mm512_set1_epi32(base as i32);
+                    let i0 = _mm512_add_epi32(vb, _mm512_mullo_epi32(ix, vsa));
+                    let i1 = _mm512_add_epi32(i0, vsa);
+                    (
+                        _mm512_mask_i32gather_ps::<4>(zero, ok0, i0, x.as_ptr()),
+                        _mm512_mask_i32gather_ps::<4>(zero, ok1, i1, x.as_ptr()),
+                    )
+                };
+                let top = _mm512_add_ps(
+                    _mm512_mul_ps(v0, _mm512_sub_ps(one, tx)),
+                    _mm512_mul_ps(v1, tx),
+                );
+                d = _mm512_mask_add_ps(d, active, d, _mm512_add_ps(top, zero));
+            }
+            _mm512_mask_storeu_ps(q, m, d);
         }
+        c += 16;
     }
 }
 
@@ -1093,8 +1130,9 @@ unsafe fn transpose_flat_planes_f32x16(
         let xa = _mm512_add_ps(set(view.xa0[c]), _mm512_mul_ps(sf, set(view.ka[c])));
         let fa = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
         let ta = _mm512_sub_ps(xa, fa);
-        let i0 = _mm512_add_epi32(row, _mm512_mullo_epi32(_mm512_cvttps_epi32(fa), vis));
+        let ia = _mm512_cvttps_epi32(fa);
         let (wc, yc) = (set(w[c]), set(yv));
+        let i0 = _mm512_add_epi32(row, _mm512_mullo_epi32(ia, vis));
         for (i, wa, ok) in [
             (
                 i0,
@@ -1119,6 +1157,32 @@ unsafe fn transpose_flat_planes_f32x16(
             }
         }
     }
+}
+
+/// From this many views on, the flat forward pass reads a grid whose planes are
+/// its columns from a copy laid out as lines ([`columns_as_lines`]).
+const LINES_COPY_VIEWS: usize = 16;
+
+/// A 2-D grid (one axis of size 1) with its two other axes swapped, so that column
+/// `s` of the grid is line `s` of the copy: `copy[s·n + i] = x[s + i·m]` for the
+/// `m × n` grid; `None` for a 3-D grid.
+fn columns_as_lines<R: Real>(x: &[R], dims: [usize; 3]) -> Option<Vec<R>> {
+    let live: Vec<usize> = dims.iter().copied().filter(|&n| n > 1).collect();
+    let &[m, n] = live.as_slice() else {
+        return None;
+    };
+    let mut copy = vec![R::zero(); x.len()];
+    copy.par_chunks_mut(n * 16)
+        .enumerate()
+        .for_each(|(b, lines)| {
+            for (l, line) in lines.chunks_mut(n).enumerate() {
+                let s = b * 16 + l;
+                for (i, v) in line.iter_mut().enumerate() {
+                    *v = x[s + i * m];
+                }
+            }
+        });
+    Some(copy)
 }
 
 /// Below this many views the flat forward pass splits each view into this many
@@ -1217,10 +1281,16 @@ impl<R: Real> JosephPair<R> {
             } else {
                 pv.div_ceil(FORWARD_PIECES).max(64)
             };
+            // Many views: the grid also as lines along the other axis, so that every
+            // view's planes are contiguous (the same values, read in another layout).
+            let lines = (views.len() >= LINES_COPY_VIEWS)
+                .then(|| columns_as_lines(x, dims))
+                .flatten();
+            let lines = lines.as_deref();
             out.par_chunks_mut(pv).zip(views).for_each(|(dst, &k)| {
                 dst.par_chunks_mut(piece)
                     .enumerate()
-                    .for_each(|(j, d)| forward_flat(flat, x, dims, (k, j * piece), d));
+                    .for_each(|(j, d)| forward_flat(flat, (x, lines), dims, (k, j * piece), d));
             });
             return out;
         }
