@@ -99,6 +99,24 @@ impl Real for f64 {
     }
 }
 
+/// `v` as `f32` values when `R` is `f32` (for the f32 vector kernels of generic
+/// code), else `None`.
+pub fn as_f32<R: Real>(v: &[R]) -> Option<&[f32]> {
+    // SAFETY: R is f32 (checked), so the slice has its layout.
+    (std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>())
+        .then(|| unsafe { &*(v as *const [R] as *const [f32]) })
+}
+
+/// [`as_f32`] for a mutable slice.
+pub fn as_f32_mut<R: Real>(v: &mut [R]) -> Option<&mut [f32]> {
+    if std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>() {
+        // SAFETY: R is f32 (checked), so the slice has its layout.
+        Some(unsafe { &mut *(v as *mut [R] as *mut [f32]) })
+    } else {
+        None
+    }
+}
+
 /// A 3-vector in the working precision `R` (glam only offers concrete `f32`/`f64`
 /// types, and the oracle must be generic).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -47,7 +47,7 @@
 use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
 use crate::ct::{bilinear_zero, Beam, Geometry, Projections, ViewMatrix};
 use crate::error::{Error, Result};
-use crate::real::Real;
+use crate::real::{as_f32, as_f32_mut, Real};
 use crate::volume::{check_dims, Volume};
 use glam::{DMat4, DVec3, DVec4};
 use rayon::prelude::*;
@@ -447,37 +447,29 @@ fn column_line<R: Real>(out: &mut [R], p: ColumnPair<R>, rows: usize, n1: R, c1:
     assert!(p.c0.len() >= rows + 2 + 32 && p.c1.len() >= rows + 2 + 32);
     #[cfg(target_arch = "x86_64")]
     {
-        use std::any::TypeId;
-        if TypeId::of::<R>() == TypeId::of::<f32>()
-            && std::arch::is_x86_feature_detected!("avx2")
-            && p.c0.len().max(p.c1.len()) < i32::MAX as usize
-        {
-            // SAFETY: R is f32 (checked above), so the slices and values have its layout.
-            let (o32, c0, c1v) = unsafe {
-                (
-                    &mut *(out as *mut [R] as *mut [f32]),
-                    &*(p.c0 as *const [R] as *const [f32]),
-                    &*(p.c1 as *const [R] as *const [f32]),
-                )
-            };
-            let f = |x: R| x.f64() as f32;
-            let q = ColumnPair {
-                c0,
-                c1: c1v,
-                tx: f(p.tx),
-                w2: f(p.w2),
-            };
-            let (n1, c1, inv) = (f(n1), f(c1), f(inv));
-            // SAFETY: the CPU has the features each function is compiled for.
-            let done = unsafe {
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    column_line_f32x16(o32, q, rows, n1, c1, inv)
-                } else {
-                    column_line_f32x8(o32, q, rows, n1, c1, inv)
-                }
-            };
-            column_line_from(o32, done, q, rows, n1, c1, inv);
-            return;
+        if let (Some(o32), Some(c0), Some(c1v)) = (as_f32_mut(out), as_f32(p.c0), as_f32(p.c1)) {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && p.c0.len().max(p.c1.len()) < i32::MAX as usize
+            {
+                let f = |x: R| x.f64() as f32;
+                let q = ColumnPair {
+                    c0,
+                    c1: c1v,
+                    tx: f(p.tx),
+                    w2: f(p.w2),
+                };
+                let (n1, c1, inv) = (f(n1), f(c1), f(inv));
+                // SAFETY: the CPU has the features each function is compiled for.
+                let done = unsafe {
+                    if std::arch::is_x86_feature_detected!("avx512f") {
+                        column_line_f32x16(o32, q, rows, n1, c1, inv)
+                    } else {
+                        column_line_f32x8(o32, q, rows, n1, c1, inv)
+                    }
+                };
+                column_line_from(o32, done, q, rows, n1, c1, inv);
+                return;
+            }
         }
     }
     column_line_from(out, 0, p, rows, n1, c1, inv);
@@ -750,15 +742,7 @@ fn accumulate_run<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: R) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn accumulate_run_avx2<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: R) {
-    use std::any::TypeId;
-    if TypeId::of::<R>() == TypeId::of::<f32>() {
-        // SAFETY: R is f32 (checked above), so the slices and values have its layout.
-        let (out, line) = unsafe {
-            (
-                &mut *(out as *mut [R] as *mut [f32]),
-                &*(line as *const [R] as *const [f32]),
-            )
-        };
+    if let (Some(out), Some(line)) = (as_f32_mut(out), as_f32(line)) {
         let (a1, b) = (a1.f64() as f32, b.f64() as f32);
         let done = unsafe { accumulate_run_f32x8(out, line, lo, a1, b) };
         let (out, line) = (&mut out[done..], line);
@@ -857,15 +841,8 @@ unsafe fn cone_line_avx2<R: Real>(
     b: [R; 3],
     r30: R,
 ) {
-    use std::any::TypeId;
-    if TypeId::of::<R>() == TypeId::of::<f32>() && img.len() < i32::MAX as usize {
-        // SAFETY: R is f32 (checked above), so the slices and values have its layout.
-        let (out, img) = unsafe {
-            (
-                &mut *(out as *mut [R] as *mut [f32]),
-                &*(img as *const [R] as *const [f32]),
-            )
-        };
+    let short = img.len() < i32::MAX as usize;
+    if let (true, Some(out), Some(img)) = (short, as_f32_mut(out), as_f32(img)) {
         let f = |v: [R; 3]| v.map(|x| x.f64() as f32);
         let (a, b, r30) = (f(a), f(b), r30.f64() as f32);
         let done = if std::arch::is_x86_feature_detected!("avx512f") {

@@ -33,7 +33,7 @@
 use crate::ct::{ct_to_phantom, phantom_to_ct, Beam, Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::phantom::{index_to_phantom, Phantom};
-use crate::real::Real;
+use crate::real::{as_f32, as_f32_mut, Real};
 use crate::volume::{check_dims, Volume, Voxel};
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
@@ -954,23 +954,6 @@ impl<'a, R: Real> FlatView<'a, R> {
             xa0: as_f32(self.xa0)?,
             ka: as_f32(self.ka)?,
         })
-    }
-}
-
-/// `v` as `f32` values when `R` is `f32`.
-fn as_f32<R: Real>(v: &[R]) -> Option<&[f32]> {
-    // SAFETY: R is f32 (checked), so the slice has its layout.
-    (std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>())
-        .then(|| unsafe { &*(v as *const [R] as *const [f32]) })
-}
-
-/// `v` as `f32` values when `R` is `f32`.
-fn as_f32_mut<R: Real>(v: &mut [R]) -> Option<&mut [f32]> {
-    if std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>() {
-        // SAFETY: R is f32 (checked), so the slice has its layout.
-        Some(unsafe { &mut *(v as *mut [R] as *mut [f32]) })
-    } else {
-        None
     }
 }
 
