@@ -66,6 +66,15 @@ impl Error {
         }
     }
 
+    /// An [`Error::Invalid`] found in a file's contents, as the [`Error::Format`] that
+    /// names the file (the field is the invalid value's name); other errors unchanged.
+    pub fn in_file(self, path: &std::path::Path) -> Self {
+        match self {
+            Error::Invalid { what, message } => Error::format(path, what, message),
+            e => e,
+        }
+    }
+
     /// Shorthand for [`Error::Format`].
     pub fn format(
         path: impl Into<PathBuf>,

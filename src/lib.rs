@@ -22,7 +22,7 @@
 //! ## The shape of the crate
 //!
 //! Dependencies point one way: the leaves ([`error`], [`real`], [`choice`], [`source`], [`json`]) → the model
-//! ([`volume`], [`camera`], [`transfer`], [`transfer2d`], [`settings`], [`phantom`],
+//! ([`volume`], [`camera`], [`transfer`], [`transfer2d`], [`editor`], [`settings`], [`phantom`],
 //! [`ct`], [`frame`], [`multi`]) → [`io`] → [`cpu`] (the oracle) → [`gpu`] (the port)
 //! → [`jobs`] (one function per user task: what `voxlab render`, `reconstruct`, `fvr`
 //! … do) → [`bench`](mod@bench) → the `voxlab` binary, a thin shell over the jobs.
@@ -72,6 +72,7 @@ pub mod camera;
 pub mod choice;
 pub mod cpu;
 pub mod ct;
+pub mod editor;
 pub mod error;
 pub mod frame;
 pub mod gpu;

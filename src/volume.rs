@@ -346,6 +346,26 @@ pub struct Histogram {
     pub counts: Vec<u64>,
 }
 
+/// Bar heights in [0, 1] for drawing `counts` on a logarithmic axis, `ln(1 + c)` over
+/// the largest (all 0 for an empty histogram): what `voxlab info --plot` and the lab's
+/// editors draw, so that long tails stay visible beside the background's peak.
+pub fn log_heights(counts: &[u64]) -> Vec<f64> {
+    let top = counts
+        .iter()
+        .map(|&c| (1.0 + c as f64).ln())
+        .fold(0.0, f64::max);
+    counts
+        .iter()
+        .map(|&c| {
+            if top > 0.0 {
+                (1.0 + c as f64).ln() / top
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 impl Histogram {
     /// Draws a histogram as an RGBA frame of `width` × `height` pixels: one bar per bin,
     /// heights on a logarithmic count axis (log(1 + count), so that the long tails of CT
@@ -373,20 +393,11 @@ impl Histogram {
         let (margin, base) = (8, height - 8);
         let plot_w = width - 2 * margin;
         let plot_h = base - margin;
-        let top = h
-            .counts
-            .iter()
-            .map(|&c| (1.0 + c as f64).ln())
-            .fold(0.0, f64::max);
+        let heights = log_heights(&h.counts);
         let bins = h.counts.len().max(1);
         for col in 0..plot_w {
             let b = (col * bins / plot_w).min(bins - 1);
-            let c = h.counts.get(b).copied().unwrap_or(0);
-            let frac = if top > 0.0 {
-                (1.0 + c as f64).ln() / top
-            } else {
-                0.0
-            };
+            let frac = heights.get(b).copied().unwrap_or(0.0);
             let bar = (frac * plot_h as f64).round() as usize;
             for r in 0..bar.min(plot_h) {
                 set(&mut f, margin + col, base - 1 - r, [0.55, 0.75, 0.95]);

@@ -107,6 +107,12 @@ pub fn list_adapters() -> Vec<AdapterSummary> {
 }
 
 impl GpuContext {
+    /// The process's wgpu instance, which every context's adapter comes from: for a
+    /// window that presents on the same device (`voxlab view`).
+    pub fn instance() -> &'static wgpu::Instance {
+        instance()
+    }
+
     /// The process-wide context: opened on first use, then shared by every caller and
     /// never closed. Prefer it to [`GpuContext::new`] where many computations run in
     /// one process (tests, benchmarks): drivers cap how many devices a process may

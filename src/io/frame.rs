@@ -41,6 +41,25 @@ fn quantised(frame: &Frame, opts: PngOptions) -> Vec<u16> {
         .collect()
 }
 
+/// The frame as 8-bit RGBA, quantised as an 8-bit PNG of it is (a scalar frame's grey
+/// repeated in red, green and blue, opaque): what a window shows.
+pub fn rgba8(frame: &Frame, range: Option<(f64, f64)>) -> Vec<u8> {
+    let q = quantised(
+        frame,
+        PngOptions {
+            sixteen_bit: false,
+            range,
+        },
+    );
+    match frame.channels {
+        1 => q
+            .iter()
+            .flat_map(|&v| [v as u8, v as u8, v as u8, 255])
+            .collect(),
+        _ => q.iter().map(|&v| v as u8).collect(),
+    }
+}
+
 /// Encodes as PNG bytes: gray for scalar frames, RGBA for RGBA frames.
 pub fn png_bytes(frame: &Frame, opts: PngOptions) -> Result<Vec<u8>> {
     use image::{ImageBuffer, ImageFormat, Luma, Rgba};

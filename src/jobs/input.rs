@@ -2,7 +2,8 @@
 //! phantom, named by one string, and the rule for NaN and infinite voxels.
 //!
 //! `phantom:NAME[:N | :NX,NY,NZ]` samples a phantom ([`crate::phantom::parse_spec`]);
-//! anything else is a path, told apart by its magic number or extension
+//! `embedded:microct-bone` and `embedded:mr-brain` are the two scans built into the
+//! binary (the demo's and the lab's defaults, [`super::demo`]); anything else is a path, told apart by its magic number or extension
 //! ([`crate::io::read_volume`]), or raw samples when [`LoadOptions::raw`] describes
 //! them. A volume already in memory (a NumPy array, the lab's current volume) is given
 //! with [`VolumeInput::memory`].
@@ -151,6 +152,8 @@ impl VolumeInput {
             Ok("array in memory")
         } else if self.is_phantom() {
             Ok("analytic phantom")
+        } else if self.source.starts_with("embedded:") {
+            Ok("embedded scan")
         } else if self.load.raw.is_some() {
             Ok(crate::io::Format::Raw.name())
         } else {
@@ -165,6 +168,16 @@ impl VolumeInput {
     pub fn read(&self) -> Result<AnyVolume> {
         if let Some(v) = &self.memory {
             return Ok(v.as_ref().clone());
+        }
+        if let Some(name) = self.source.strip_prefix("embedded:") {
+            return match name {
+                "microct-bone" => super::demo::microct_bone(),
+                "mr-brain" => super::demo::mr_brain(),
+                _ => Err(Error::invalid(
+                    "input",
+                    format!("'{name}' is not an embedded scan (microct-bone, mr-brain)"),
+                )),
+            };
         }
         if let Some(spec) = self.source.strip_prefix("phantom:") {
             let (phantom, dims) = crate::phantom::parse_spec(spec, self.load.phantom_size)?;

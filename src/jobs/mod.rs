@@ -26,6 +26,7 @@
 //! | `voxlab process` | [`process::run`] |
 //! | `voxlab adaptive` | [`adaptive::run`] |
 //! | `voxlab demo` | [`demo::run`] |
+//! | `voxlab view` (the lab) | [`view::ViewState`] (`render --state` draws it) |
 //! | `voxlab bench` | [`crate::bench::job::run`] |
 //!
 //! Inputs name a volume file or a phantom with [`input::VolumeInput`]; the algorithms
@@ -51,6 +52,7 @@ pub mod renderer;
 pub mod slice;
 pub mod stereo;
 pub mod tf;
+pub mod view;
 
 use crate::error::{Error, Result};
 use crate::gpu::GpuContext;

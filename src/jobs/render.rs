@@ -208,6 +208,10 @@ pub struct SceneRequest {
     /// Render settings from a JSON file instead of the fields above (the fields of
     /// [`RenderSettings`]).
     pub settings_file: Option<PathBuf>,
+    /// A view state of the lab (`voxlab view --save-state`, [`super::view::ViewState`]):
+    /// its input, camera, image size, settings and transfer functions replace every
+    /// field above (`accel` still applies to it).
+    pub state_file: Option<PathBuf>,
     /// GPU only: trilinear filtering by the texture unit.
     pub hardware_filtering: bool,
     pub accel: AccelRequest,
@@ -254,6 +258,7 @@ impl Default for SceneRequest {
             light: None,
             background: [0.0, 0.0, 0.0, 1.0],
             settings_file: None,
+            state_file: None,
             hardware_filtering: false,
             accel: AccelRequest::default(),
             transfer: None,
@@ -285,6 +290,23 @@ fn window_of(a: &SceneRequest) -> Result<Option<[f64; 2]>> {
     Ok(Some([w, c]))
 }
 
+/// The transfer function `--tf auto` gives `volume` read from `input`: the `phantom`
+/// preset for phantoms, `microct-bone` for the embedded micro-CT; for other volumes, a
+/// soft grayscale ramp over the value range.
+///
+/// # Errors
+/// None in practice (the preset is built in).
+pub fn auto_transfer(input: &VolumeInput, volume: &AnyVolume) -> Result<TransferFunction> {
+    if input.is_phantom() {
+        TransferFunction::preset("phantom")
+    } else if input.memory.is_none() && input.source == "embedded:microct-bone" {
+        TransferFunction::preset("microct-bone")
+    } else {
+        let r = volume.value_range();
+        Ok(TransferFunction::auto_for_range(r.min, r.max))
+    }
+}
+
 /// Loads the input and builds the scene (volume, transfer function, camera) and the
 /// settings (with sample counts when `sample_count`), checked; not yet the
 /// acceleration fields ([`AccelRequest::apply`]).
@@ -296,17 +318,18 @@ pub fn build_scene(
     sample_count: bool,
     progress: &dyn Progress,
 ) -> Result<(Scene, RenderSettings)> {
+    if let Some(path) = &a.state_file {
+        let state = super::view::ViewState::load(path)?;
+        let (scene, mut settings) = state.scene(state.input.load(progress)?)?;
+        settings.sample_count = sample_count;
+        return Ok((scene, settings));
+    }
     let volume = a.input.load(progress)?;
     let mut tf = if let Some(t) = &a.transfer {
         t.validate()?;
         t.clone()
     } else if a.tf == "auto" {
-        if a.input.is_phantom() {
-            TransferFunction::preset("phantom")?
-        } else {
-            let r = volume.value_range();
-            TransferFunction::auto_for_range(r.min, r.max)
-        }
+        auto_transfer(&a.input, &volume)?
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };

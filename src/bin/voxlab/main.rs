@@ -4,6 +4,8 @@
 
 mod cli;
 mod cmd;
+#[cfg(feature = "lab")]
+mod lab;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -91,6 +93,11 @@ enum Command {
     Adaptive(Box<cmd::adaptive::AdaptiveArgs>),
     /// List the built-in transfer-function presets, or print one as JSON.
     Tf(cmd::tf::TfArgs),
+    /// The interactive lab: a window that renders INPUT (default: an embedded micro-CT
+    /// of bone) on the GPU while you orbit, edit the transfer functions (1-D and 2-D,
+    /// over the volume's histograms) and change every render setting, with the CPU
+    /// oracle and the difference beside it. Keys: H.
+    View(Box<cmd::view::ViewArgs>),
 }
 
 fn main() -> ExitCode {
@@ -157,5 +164,6 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Process(a) => cmd::process::run(*a),
         Command::Adaptive(a) => cmd::adaptive::run(*a),
         Command::Tf(a) => cmd::tf::run(a),
+        Command::View(a) => cmd::view::run(*a),
     }
 }

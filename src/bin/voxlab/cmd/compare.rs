@@ -38,7 +38,12 @@ pub fn run(c: CompareArgs) -> Result<ExitCode> {
     let term = Terminal::bars();
     let cmp = voxlab::jobs::compare::run(&req, &term)?;
     drop(term);
-    cmp.write_evidence(&c.out_dir, &c.scene.input, c.max_abs, c.rmse)?;
+    let input = match (&c.scene.input, &c.scene.state) {
+        (Some(i), _) => i.clone(),
+        (None, Some(state)) => format!("the input of {}", state.display()),
+        (None, None) => String::new(),
+    };
+    cmp.write_evidence(&c.out_dir, &input, c.max_abs, c.rmse)?;
     let (s, t) = (&cmp.report.stats, &cmp.gpu_timings);
     println!("oracle  cpu f64, {:.3} s", cmp.cpu_seconds);
     println!(

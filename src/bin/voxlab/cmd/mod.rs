@@ -17,3 +17,4 @@ pub mod reconstruct;
 pub mod render;
 pub mod slice;
 pub mod tf;
+pub mod view;

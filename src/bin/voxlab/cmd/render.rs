@@ -22,18 +22,26 @@ use voxlab::{Error, Result};
 pub struct SceneArgs {
     /// A volume: a file (NRRD, NIfTI, DICOM, PVM, VolPack .den, TIFF stack, .npy of
     /// shape (nz, ny, nx), or raw with --raw-*), a DICOM directory, or a phantom:
-    /// phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128.
-    pub input: String,
+    /// phantom:NAME[:N | :NX,NY,NZ], e.g. phantom:shepp-logan-modified:128, or an
+    /// embedded scan (embedded:microct-bone, embedded:mr-brain). Not with --state.
+    #[arg(required_unless_present = "state")]
+    pub input: Option<String>,
     #[command(flatten)]
     pub load: LoadArgs,
+    /// A view state written by `voxlab view --save-state` (or its menu): its input,
+    /// camera, image size, settings and transfer functions, rendered exactly as the
+    /// lab shows them. Replaces INPUT and every scene option; --backend and the output
+    /// options still apply.
+    #[arg(long, conflicts_with = "input")]
+    pub state: Option<PathBuf>,
     /// What rays compute: dvr (colour and opacity through the transfer function), mip,
     /// minip, xray (line integral, value × mm), mida (maximum intensity difference
     /// accumulation, see --mida-gamma), iso (iso-surfaces only, see --iso).
     #[arg(long, value_parser = choice::<Mode>(), default_value = "dvr")]
     pub mode: Mode,
     /// Transfer function: a preset name (see `voxlab tf`), a JSON file, or auto (the
-    /// `phantom` preset for phantoms; for files, a soft grayscale ramp over the volume's
-    /// value range).
+    /// `phantom` preset for phantoms, `microct-bone` for embedded:microct-bone; for
+    /// files, a soft grayscale ramp over the volume's value range).
     #[arg(long, default_value = "auto")]
     pub tf: String,
     /// Window in raw data units, as WIDTH (with --level) or WIDTH,CENTRE. MIP and MinIP:
@@ -341,7 +349,7 @@ impl SceneArgs {
     /// The library's scene request, with the acceleration flags.
     pub fn request(&self, accel: &AccelArgs) -> Result<SceneRequest> {
         Ok(SceneRequest {
-            input: self.load.input(&self.input),
+            input: self.load.input(self.input.as_deref().unwrap_or_default()),
             mode: self.mode,
             tf: self.tf.clone(),
             tf2d: self.tf2d.clone(),
@@ -376,6 +384,7 @@ impl SceneArgs {
             light: self.light,
             background: self.background,
             settings_file: self.settings.clone(),
+            state_file: self.state.clone(),
             hardware_filtering: self.hardware_filtering,
             accel: accel.request(),
             transfer: None,

@@ -1,0 +1,119 @@
+//! `voxlab view`: the interactive lab, a window over the render job
+//! ([`voxlab::jobs::view::ViewState`], `crate::lab`).
+
+use crate::cli::{choice, LoadArgs, Terminal};
+use clap::Args;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use voxlab::io::check_output;
+use voxlab::jobs::view::ViewState;
+use voxlab::jobs::Backend;
+use voxlab::Result;
+
+/// The scan `voxlab view` opens without INPUT.
+pub const DEFAULT_INPUT: &str = "embedded:microct-bone";
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// A volume (any file `voxlab render` reads, a DICOM directory, phantom:NAME[:N])
+    /// or an embedded scan (embedded:microct-bone, embedded:mr-brain). Default: the
+    /// embedded micro-CT of bone.
+    pub input: Option<String>,
+    #[command(flatten)]
+    pub load: LoadArgs,
+    /// Start from a view state written by --save-state or the lab's Save state
+    /// (replaces INPUT and the image size).
+    #[arg(long, conflicts_with = "input")]
+    pub state: Option<PathBuf>,
+    /// Who renders the interactive view: gpu (the WGSL port, sharing the window's
+    /// device), cpu-f32 or cpu (the f64 oracle; slow, for small volumes).
+    #[arg(long, value_parser = choice::<Backend>(), default_value = "gpu")]
+    pub backend: Backend,
+    /// Image size of the 3-D view in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: usize,
+    #[arg(long, default_value_t = 512)]
+    pub height: usize,
+    /// Where Save state (key S) writes, and the state written on exit when given.
+    #[arg(long)]
+    pub save_state: Option<PathBuf>,
+    /// Where Screenshot (key P) writes the 3-D view, at the render's resolution (.png,
+    /// or .npy for the float32 RGBA values); written on exit when given.
+    #[arg(long)]
+    pub screenshot: Option<PathBuf>,
+    /// Exit after this many frames (for scripts and tests); the state and the
+    /// screenshots are written first (with --compare, once the reference is done).
+    #[arg(long)]
+    pub frames: Option<u64>,
+    /// Write a PNG of the whole window (panels and editors included) on exit.
+    #[arg(long)]
+    pub window_screenshot: Option<PathBuf>,
+    /// Open on the difference view: the interactive frame against the CPU oracle.
+    #[arg(long)]
+    pub compare: bool,
+}
+
+pub fn run(a: ViewArgs) -> Result<ExitCode> {
+    if let Some(p) = &a.screenshot {
+        check_output("--screenshot", p, &["png", "npy"])?;
+    }
+    if let Some(p) = &a.save_state {
+        check_output("--save-state", p, &["json"])?;
+    }
+    if let Some(p) = &a.window_screenshot {
+        check_output("--window-screenshot", p, &["png"])?;
+    }
+    let term = Terminal::bars();
+    let (state, volume) = match &a.state {
+        Some(path) => {
+            let state = ViewState::load(path)?;
+            let volume = state.input.load(&term)?;
+            (state, volume)
+        }
+        None => {
+            let input = a.load.input(a.input.as_deref().unwrap_or(DEFAULT_INPUT));
+            let volume = input.load(&term)?;
+            (ViewState::new(input, &volume, a.width, a.height)?, volume)
+        }
+    };
+    drop(term);
+    let options = Options {
+        state,
+        volume,
+        backend: a.backend,
+        save_state: a.save_state,
+        screenshot: a.screenshot,
+        frames: a.frames,
+        window_screenshot: a.window_screenshot,
+        compare: a.compare,
+    };
+    open(options)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What the window starts with.
+pub struct Options {
+    pub state: ViewState,
+    pub volume: voxlab::AnyVolume,
+    pub backend: Backend,
+    pub save_state: Option<PathBuf>,
+    pub screenshot: Option<PathBuf>,
+    pub frames: Option<u64>,
+    pub window_screenshot: Option<PathBuf>,
+    pub compare: bool,
+}
+
+#[cfg(feature = "lab")]
+fn open(options: Options) -> Result<()> {
+    crate::lab::run(options)
+}
+
+#[cfg(not(feature = "lab"))]
+fn open(_: Options) -> Result<()> {
+    Err(voxlab::Error::unsupported(
+        "view",
+        "this build",
+        "voxlab was built without the lab (feature `lab`); build it with \
+         `cargo build --release --features lab`",
+    ))
+}
