@@ -3,7 +3,8 @@
 #
 # GPU tests need a Vulkan (or Metal/DX12) adapter. When none is found and this runs as
 # root on a Debian/Ubuntu machine, Mesa's software Vulkan driver (lavapipe, package
-# mesa-vulkan-drivers) is installed first, so the GPU tests really run. Without an
+# mesa-vulkan-drivers) is installed first, so the GPU tests really run; likewise Xvfb for
+# the lab's window test. Without an
 # adapter they fail, unless VOXLAB_ALLOW_NO_GPU=1, in which case they say loudly that
 # they skipped.
 set -euo pipefail
@@ -28,6 +29,26 @@ if [ "$(uname -s)" = "Linux" ] && ! have_vulkan_driver; then
     else
         echo "test.sh: no Vulkan driver found and cannot install one (needs root and apt-get)."
         echo "test.sh: install mesa-vulkan-drivers, or set VOXLAB_ALLOW_NO_GPU=1 to skip GPU tests."
+    fi
+fi
+
+# The lab's window test (tests/lab_window.rs) needs an X server: without $DISPLAY, a
+# virtual one (Xvfb through xvfb-run), and the X11 client libraries the window loads.
+have_x11_libs() {
+    local n
+    n=$(ldconfig -p 2>/dev/null | grep -c 'libxkbcommon-x11\.so\.0\|libXcursor\.so\.1\|libXi\.so\.6\|libXrandr\.so\.2' || true)
+    [ "${n:-0}" -ge 4 ]
+}
+if [ "$(uname -s)" = "Linux" ] && { { [ -z "${DISPLAY:-}" ] && ! command -v xvfb-run >/dev/null 2>&1; } || ! have_x11_libs; }; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "test.sh: installing Xvfb and the X11 libraries for the lab's window test…"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update -qq
+        apt-get install -y -qq --no-install-recommends xvfb xauth libxkbcommon-x11-0 \
+            libxcursor1 libxrandr2 libxi6 libx11-xcb1 >/dev/null
+    else
+        echo "test.sh: no X server and cannot install Xvfb (needs root and apt-get):"
+        echo "test.sh: install xvfb, xauth and libxkbcommon-x11-0, or the lab's window test fails."
     fi
 fi
 

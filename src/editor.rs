@@ -74,8 +74,8 @@ pub fn delete_point(tf: &mut TransferFunction, i: usize) -> Result<()> {
 pub fn set_colour(tf: &mut TransferFunction, i: usize, rgb: [f64; 3]) -> Result<()> {
     check_point(tf, i)?;
     let p = &mut tf.points[i];
-    for c in 0..3 {
-        p.rgba[c] = rgb[c].clamp(0.0, 1.0);
+    for (c, v) in p.rgba.iter_mut().zip(rgb) {
+        *c = v.clamp(0.0, 1.0);
     }
     Ok(())
 }

@@ -419,7 +419,7 @@ pub struct JointHistogram {
 /// `bins = [value bins, gradient bins]` (each clamped to 1 … 1024).
 ///
 /// # Errors
-/// A transfer function [`TransferFunction2D::validate`] refuses.
+/// A transfer function [`crate::transfer2d::TransferFunction2D::validate`] refuses.
 pub fn joint_histogram(
     volume: &AnyVolume,
     tf: &crate::transfer2d::TransferFunction2D,

@@ -58,7 +58,7 @@ impl EditorState {
         );
         ui.heading("Transfer function");
         self.presets(ui, c.state);
-        self.editor_1d(ui, &c.histogram, c.histogram_range, c.state);
+        self.editor_1d(ui, c.histogram, c.histogram_range, c.state);
         self.files(ui, c.state, message);
         ui.separator();
         let mut two = c.state.settings.transfer_2d.is_some();

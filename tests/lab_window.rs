@@ -1,0 +1,149 @@
+//! `voxlab view` in a real window: under the X server of `$DISPLAY`, or a virtual one
+//! (`xvfb-run`, which the test command installs), on the GPU (lavapipe in CI). The lab
+//! draws a few frames, writes its screenshot and its state and exits; `voxlab render
+//! --state` of that state must give the screenshot's image.
+
+mod common;
+
+use common::{gpu, s, scratch, stderr, voxlab_command};
+use std::process::Command;
+use voxlab::jobs::view::ViewState;
+use voxlab::metrics::error_stats;
+
+/// The lab's command line, under a virtual X server unless one is given.
+fn view_command(test: &str, args: &[&str]) -> Option<Command> {
+    gpu(test)?;
+    if std::env::var_os("DISPLAY").is_some() {
+        let mut c = voxlab_command(&["view"]);
+        c.args(args);
+        return Some(c);
+    }
+    let xvfb = Command::new("sh")
+        .args(["-c", "command -v xvfb-run"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    assert!(
+        xvfb,
+        "{test}: no X server ($DISPLAY unset) and no xvfb-run; the test command installs \
+         xvfb as root, or install it (apt-get install xvfb xauth)"
+    );
+    let mut x = Command::new("xvfb-run");
+    x.args([
+        "-a",
+        "-s",
+        "-screen 0 1400x900x24",
+        env!("CARGO_BIN_EXE_voxlab"),
+        "view",
+    ])
+    .args(args)
+    .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+    .env_remove("VOXLAB_MAX_VOXELS");
+    Some(x)
+}
+
+fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f32>) {
+    voxlab::io::npy::read_npy_f32(path).unwrap()
+}
+
+#[test]
+fn the_lab_screenshot_is_what_render_state_draws() {
+    let dir = scratch("lab-window");
+    let (shot, state) = (dir.join("shot.npy"), dir.join("state.json"));
+    let window = dir.join("window.png");
+    let Some(mut cmd) = view_command(
+        "lab window",
+        &[
+            "phantom:shepp-logan-modified:48",
+            "--width",
+            "96",
+            "--height",
+            "80",
+            "--frames",
+            "4",
+            "--compare",
+            "--screenshot",
+            s(&shot),
+            "--save-state",
+            s(&state),
+            "--window-screenshot",
+            s(&window),
+        ],
+    ) else {
+        return;
+    };
+    let o = cmd.output().expect("the lab runs");
+    assert!(o.status.success(), "voxlab view failed: {}", stderr(&o));
+
+    // The state is the lab's default view of the phantom at the asked size.
+    let st = ViewState::load(&state).unwrap();
+    assert_eq!((st.width, st.height), (96, 80));
+    assert_eq!(st.input.source, "phantom:shepp-logan-modified:48");
+
+    // The window's own picture was written, at the window's size.
+    let png = image::open(&window).unwrap();
+    assert!(
+        png.width() >= 1000 && png.height() >= 700,
+        "{}×{}",
+        png.width(),
+        png.height()
+    );
+
+    // `render --state` on the GPU gives the screenshot; the CPU oracle gives it within
+    // the ray caster's GPU tolerance.
+    let (shape, lab) = npy(&shot);
+    assert_eq!(shape, vec![80, 96, 4]);
+    for (backend, exact) in [("gpu", true), ("cpu", false)] {
+        let out = dir.join(format!("{backend}.npy"));
+        let o = voxlab_command(&[
+            "render",
+            "--state",
+            s(&state),
+            "--backend",
+            backend,
+            "--out",
+            s(&out),
+        ])
+        .output()
+        .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (shape2, img) = npy(&out);
+        assert_eq!(shape2, shape);
+        let stats = error_stats(&img, &lab, 0.0);
+        if exact {
+            assert_eq!(
+                stats.max_abs, 0.0,
+                "GPU render of the state vs the screenshot"
+            );
+        } else {
+            let (_, tol) = voxlab::bench::raycast::raycast_tolerances(&st.settings);
+            assert!(
+                tol.admits(&stats),
+                "CPU oracle vs the lab's screenshot: {:?} outside {:?}",
+                stats,
+                tol
+            );
+            assert!(stats.max_abs > 0.0 || img.iter().all(|&x| x == 0.0));
+        }
+    }
+}
+
+#[test]
+fn the_lab_refuses_bad_outputs_before_opening() {
+    let dir = scratch("lab-window-bad");
+    let o = voxlab_command(&[
+        "view",
+        "phantom:sphere:8",
+        "--screenshot",
+        s(&dir.join("x.gif")),
+    ])
+    .output()
+    .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--screenshot"), "{}", stderr(&o));
+    let o = voxlab_command(&["view", "--state", s(&dir.join("missing.json"))])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("missing.json"), "{}", stderr(&o));
+}
