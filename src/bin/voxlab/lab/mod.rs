@@ -488,6 +488,74 @@ impl Lab {
         if s.mode == Mode::Mida {
             ui.add(egui::Slider::new(&mut s.mida_gamma, -1.0..=1.0).text("MIDA γ"));
         }
+        let range = self.volume.value_range();
+        if matches!(s.mode, Mode::Mip | Mode::Minip) {
+            let mut on = s.window.is_some();
+            ui.checkbox(&mut on, "grey window (else the value range)");
+            match (on, &mut s.window) {
+                (true, None) => {
+                    s.window = Some([range.max - range.min, 0.5 * (range.max + range.min)])
+                }
+                (false, Some(_)) => s.window = None,
+                _ => {}
+            }
+            if let Some([w, c]) = &mut s.window {
+                let speed = ((range.max - range.min) / 300.0).max(1e-9);
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::DragValue::new(w)
+                            .speed(speed)
+                            .range(1e-9..=f64::MAX)
+                            .prefix("width "),
+                    );
+                    ui.add(egui::DragValue::new(c).speed(speed).prefix("centre "));
+                });
+            }
+        }
+        if matches!(s.mode, Mode::Iso | Mode::Dvr) {
+            ui.label("iso-surfaces (drawn by iso, and with DVR)");
+            let mut remove = None;
+            let speed = ((range.max - range.min) / 300.0).max(1e-9);
+            for (k, iso) in s.iso_surfaces.iter_mut().enumerate() {
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::DragValue::new(&mut iso.value)
+                            .speed(speed)
+                            .prefix("value "),
+                    );
+                    let mut c = iso.color.map(|x| x as f32);
+                    if ui.color_edit_button_rgb(&mut c).changed() {
+                        iso.color = c.map(f64::from);
+                    }
+                    ui.add(
+                        egui::DragValue::new(&mut iso.opacity)
+                            .speed(0.01)
+                            .range(0.0..=1.0)
+                            .prefix("α "),
+                    );
+                    if ui.small_button("×").clicked() {
+                        remove = Some(k);
+                    }
+                });
+            }
+            if let Some(k) = remove {
+                s.iso_surfaces.remove(k);
+            }
+            ui.horizontal(|ui| {
+                if s.iso_surfaces.len() < voxlab::settings::MAX_ISO_SURFACES
+                    && ui.button("+ iso-surface").clicked()
+                {
+                    s.iso_surfaces.push(voxlab::settings::IsoSurface {
+                        value: 0.5 * (range.min + range.max),
+                        color: [0.9, 0.8, 0.6],
+                        opacity: 1.0,
+                    });
+                }
+                ui.checkbox(&mut s.iso_opaque, "opaque");
+                ui.checkbox(&mut s.iso_shadows, "shadows");
+                ui.checkbox(&mut s.iso_refine, "refine");
+            });
+        }
         let mut clip = s.clip_box.is_some();
         ui.checkbox(&mut clip, "clip box (voxels)");
         let dims = self.volume.dims();
