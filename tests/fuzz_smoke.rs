@@ -19,6 +19,7 @@ const FORMATS: &[(Format, &str)] = &[
     (Format::Nifti, "nifti"),
     (Format::Pvm, "pvm"),
     (Format::Den, "den"),
+    (Format::MetaImage, "metaimage"),
 ];
 
 /// Mutations per seed.

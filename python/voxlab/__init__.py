@@ -182,7 +182,8 @@ def _as_volume(v: Any, spacing: Any = None, affine: Any = None) -> Tuple[np.ndar
 def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] = None) -> Volume:
     """Reads a volume: every format ``voxlab info`` reads (NRRD attached/detached,
     NIfTI-1 ``.nii``/``.nii.gz``, DICOM file or series directory, PVM, VolPack
-    ``.den``, multi-page TIFF, ``.npy``), a ``phantom:NAME[:SIZE]`` spec, or raw
+    ``.den``, multi-page TIFF, ``.npy``, MetaImage ``.mha``/``.mhd``), a
+    ``phantom:NAME[:SIZE]`` or ``embedded:NAME`` spec, or raw
     samples described by ``raw={"dims": [nx, ny, nz], "sample": "u16", "endian":
     "little", "spacing": [sx, sy, sz], "offset": 0}``.
 
@@ -215,8 +216,9 @@ def write(
     affine: Any = None,
 ) -> None:
     """Writes a volume by extension, atomically: ``.nrrd`` (gzip), ``.nhdr`` (detached,
-    data in ``<stem>.raw.gz``), ``.nii``/``.nii.gz`` (affine as sform and qform) or
-    ``.npy`` (shape ``(nz, ny, nx)``, no geometry).
+    data in ``<stem>.raw.gz``), ``.nii``/``.nii.gz`` (affine as sform and qform),
+    ``.mha``/``.mhd`` (MetaImage, ITK's affine convention; ``.mhd`` keeps the data in
+    ``<stem>.raw``) or ``.npy`` (shape ``(nz, ny, nx)``, no geometry).
 
     ``volume`` is a :class:`Volume` (its affine is written) or an array with
     ``spacing=(sx, sy, sz)`` mm or a 4x4 ``affine`` (default: 1 mm voxels at the

@@ -42,6 +42,7 @@ pub mod den;
 pub mod dicom;
 pub mod frame;
 pub mod mesh;
+pub mod metaimage;
 pub mod nifti;
 pub mod npy;
 pub mod nrrd;
@@ -79,6 +80,8 @@ pub enum Format {
     Den,
     /// A multi-page TIFF stack (one page per slice).
     Tiff,
+    /// MetaImage (`.mha`, `.mhd`), ITK's and RTK's format.
+    MetaImage,
     /// Headerless raw samples, described on the command line ([`raw::RawSpec`]).
     Raw,
 }
@@ -94,6 +97,7 @@ impl Format {
             Format::Pvm => "PVM",
             Format::Den => "VolPack .den",
             Format::Tiff => "TIFF stack",
+            Format::MetaImage => "MetaImage",
             Format::Raw => "raw",
         }
     }
@@ -160,12 +164,16 @@ pub fn check_volume_output(what: &str, path: &Path) -> Result<()> {
         return Err(Error::invalid(
             what,
             format!(
-                "{}: volumes are written as .nrrd, .nhdr, .npy, .nii or .nii.gz",
+                "{}: volumes are written as .nrrd, .nhdr, .npy, .nii, .nii.gz, .mha or .mhd",
                 path.display()
             ),
         ));
     }
-    check_output(what, path, &["nrrd", "nhdr", "npy", "nii", "gz"])
+    check_output(
+        what,
+        path,
+        &["nrrd", "nhdr", "npy", "nii", "gz", "mha", "mhd"],
+    )
 }
 
 /// Fails early on an output folder `what` that cannot be made or written: a path one
@@ -249,6 +257,7 @@ pub fn detect_format(path: &Path) -> Result<Format> {
         Some("pvm") => Format::Pvm,
         Some("den") => Format::Den,
         Some("tif") | Some("tiff") => Format::Tiff,
+        Some("mha") | Some("mhd") => Format::MetaImage,
         Some("raw") => {
             return Err(Error::invalid(
                 "volume file",
@@ -315,6 +324,8 @@ fn sniff(head: &[u8]) -> Option<Format> {
         Some(Format::Dicom)
     } else if head.len() >= 348 && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0") {
         Some(Format::Nifti)
+    } else if starts(b"ObjectType") {
+        Some(Format::MetaImage)
     } else {
         None
     }
@@ -361,6 +372,7 @@ pub fn read_volume_as_with(
         Format::Den => den::read_den(path),
         Format::Tiff if path.is_dir() => tiff::read_tiff_dir(path),
         Format::Tiff => tiff::read_tiff(path),
+        Format::MetaImage => metaimage::read_metaimage_with(path, options),
         Format::Raw => Err(Error::invalid(
             "volume file",
             format!(
@@ -383,6 +395,7 @@ pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<An
         Format::Pvm => pvm::read_pvm_bytes(bytes, path),
         Format::Den => den::read_den_bytes(bytes, path),
         Format::Tiff => tiff::read_tiff_bytes(bytes, path),
+        Format::MetaImage => metaimage::read_metaimage_bytes(bytes, path),
         other => Err(Error::invalid(
             "in-memory volume",
             format!("{} files are read from disk only", other.name()),
@@ -395,7 +408,8 @@ pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<An
 /// - `.nhdr`: a detached header, with the gzip-compressed data in `<stem>.raw.gz`
 ///   beside it;
 /// - `.npy`: shape `(nz, ny, nx)`, little-endian (the geometry is not stored);
-/// - `.nii` / `.nii.gz`: NIfTI-1 with the affine as sform and qform.
+/// - `.nii` / `.nii.gz`: NIfTI-1 with the affine as sform and qform;
+/// - `.mha` / `.mhd`: MetaImage, the data after the header or in `<stem>.raw`.
 pub fn write_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
     let name = path
         .file_name()
@@ -415,10 +429,13 @@ pub fn write_volume(path: &Path, vol: &AnyVolume) -> Result<()> {
         Some("npy") => npy::write_npy_volume(path, vol),
         Some("nii") => nifti::write_nifti(path, vol),
         Some("gz") if name.ends_with(".nii.gz") => nifti::write_nifti(path, vol),
+        Some("mha") | Some("mhd") => {
+            metaimage::write_metaimage(path, vol, metaimage::MetaImageWriteOptions::default())
+        }
         _ => Err(Error::invalid(
             "output volume file",
             format!(
-                "{}: unsupported extension; volumes are written as .nrrd, .nhdr, .npy, .nii or .nii.gz",
+                "{}: unsupported extension; volumes are written as .nrrd, .nhdr, .npy, .nii, .nii.gz, .mha or .mhd",
                 path.display()
             ),
         )),
@@ -438,7 +455,8 @@ fn unsupported_extension(path: &Path) -> Error {
         format!(
             "{}: unknown format; voxlab reads NRRD (.nrrd, .nhdr), NumPy (.npy), NIfTI-1 \
              (.nii, .nii.gz), DICOM (a file or a directory), PVM (.pvm), VolPack (.den), \
-             TIFF stacks (.tif, .tiff) and raw files (with --raw-* options)",
+             TIFF stacks (.tif, .tiff), MetaImage (.mha, .mhd) and raw files (with --raw-* \
+             options)",
             path.display()
         ),
     )
@@ -693,6 +711,30 @@ impl Samples {
         })
     }
 
+    /// These samples followed by `more` (of the same stored type, so the same variant;
+    /// else both as f32).
+    pub(crate) fn append(self, more: Samples) -> Samples {
+        match (self, more) {
+            (Samples::U8(mut a), Samples::U8(b)) => {
+                a.extend(b);
+                Samples::U8(a)
+            }
+            (Samples::U16(mut a), Samples::U16(b)) => {
+                a.extend(b);
+                Samples::U16(a)
+            }
+            (Samples::I16(mut a), Samples::I16(b)) => {
+                a.extend(b);
+                Samples::I16(a)
+            }
+            (a, b) => {
+                let mut a = a.into_f32();
+                a.extend(b.into_f32());
+                Samples::F32(a)
+            }
+        }
+    }
+
     /// The values as f32 (exact: u8, u16 and i16 all fit in f32).
     pub(crate) fn into_f32(self) -> Vec<f32> {
         match self {
@@ -767,6 +809,56 @@ pub(crate) fn truncated_header(path: &Path, got: usize, len: usize) -> Error {
         "header",
         format!("the header is truncated: {got} of {len} bytes"),
     )
+}
+
+/// Refuses a data file `name` (at `data`) that a header names outside the header's
+/// folder `dir` (after following links and `..`): `--confine-data-files`.
+pub(crate) fn confine(header: &Path, dir: &Path, data: &Path, name: &str) -> Result<()> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let outside = || {
+        Error::format(
+            header,
+            "data file",
+            format!(
+                "'{}' lies outside the header's folder {}; data files are confined to it \
+                 (--confine-data-files)",
+                snippet(name),
+                dir.display()
+            ),
+        )
+    };
+    let base = std::fs::canonicalize(dir).map_err(|e| Error::io(dir, e))?;
+    match std::fs::canonicalize(data) {
+        Ok(real) if real.starts_with(&base) => Ok(()),
+        Ok(_) => Err(outside()),
+        // A file that does not exist is reported by the reader; one reached by a
+        // path that leaves the folder is refused either way.
+        Err(_) if Path::new(name).is_absolute() || name.split(['/', '\\']).any(|c| c == "..") => {
+            Err(outside())
+        }
+        Err(_) => Ok(()),
+    }
+}
+
+/// Opens a data file a header names; a failure is the header's error (field `data
+/// file`), saying why.
+pub(crate) fn open_data_file(header: &Path, data: &Path) -> Result<(File, u64)> {
+    open(data).map_err(|e| {
+        let why = match e {
+            Error::Io { source, .. } => source.to_string(),
+            Error::Invalid { message, .. } => message,
+            other => other.to_string(),
+        };
+        Error::format(
+            header,
+            "data file",
+            format!("cannot open {}: {why}", data.display()),
+        )
+    })
 }
 
 /// Reserves room for `n` values, reporting an allocation failure as an error instead

@@ -160,20 +160,9 @@ pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVo
             let dir = path.parent().unwrap_or(Path::new(""));
             let data_path = dir.join(name);
             if options.confine_data_files {
-                confine(path, dir, &data_path, name)?;
+                super::confine(path, dir, &data_path, name)?;
             }
-            let (file, len) = open(&data_path).map_err(|e| {
-                let why = match e {
-                    Error::Io { source, .. } => source.to_string(),
-                    Error::Invalid { message, .. } => message,
-                    other => other.to_string(),
-                };
-                Error::format(
-                    path,
-                    "data file",
-                    format!("cannot open {}: {why}", data_path.display()),
-                )
-            })?;
+            let (file, len) = super::open_data_file(path, &data_path)?;
             let mismatch = |what: String| {
                 Error::format(
                     path,
@@ -230,38 +219,6 @@ pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVo
         }
     };
     samples.into_volume(header.dims, header.affine)
-}
-
-/// Refuses a data file outside the header's folder (after following links and `..`).
-fn confine(header: &Path, dir: &Path, data: &Path, name: &str) -> Result<()> {
-    let dir = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let outside = || {
-        Error::format(
-            header,
-            "data file",
-            format!(
-                "'{}' lies outside the header's folder {}; data files are confined to it \
-                 (--confine-data-files)",
-                super::snippet(name),
-                dir.display()
-            ),
-        )
-    };
-    let base = std::fs::canonicalize(dir).map_err(|e| Error::io(dir, e))?;
-    match std::fs::canonicalize(data) {
-        Ok(real) if real.starts_with(&base) => Ok(()),
-        Ok(_) => Err(outside()),
-        // A file that does not exist is reported by the reader; one reached by a
-        // path that leaves the folder is refused either way.
-        Err(_) if Path::new(name).is_absolute() || name.split(['/', '\\']).any(|c| c == "..") => {
-            Err(outside())
-        }
-        Err(_) => Ok(()),
-    }
 }
 
 /// Reads an attached-header NRRD file held in memory (`path` only names it in

@@ -19,7 +19,7 @@ use voxlab::{Error, Result};
     long_about = "voxlab renders volumes (CT, MRI, analytic phantoms) by ray casting: direct volume \
 rendering with transfer functions and shading, maximum/minimum intensity projection, and X-ray \
 line integrals. Every algorithm has an exact f64 CPU implementation (the oracle) and an f32 twin.\n\n\
-It reads NRRD, NIfTI-1, DICOM (files and series), PVM, VolPack .den, TIFF stacks, .npy and \
+It reads NRRD, NIfTI-1, DICOM (files and series), PVM, VolPack .den, TIFF stacks, MetaImage, .npy and \
 raw volumes, and refuses broken files with an error naming the file and the field.\n\n\
 Start with `voxlab demo`, which renders a gallery from two embedded real scans and the \
 built-in phantoms."
@@ -44,7 +44,7 @@ enum Command {
     /// error statistics and timings. Takes the options of `render`.
     Compare(Box<cmd::compare::CompareArgs>),
     /// Write an analytic phantom sampled on a grid to a volume file (.nrrd, .nhdr, .npy,
-    /// .nii or .nii.gz).
+    /// .nii, .nii.gz, .mha or .mhd).
     Phantom(cmd::phantom::PhantomArgs),
     /// Describe a volume (format, dimensions, spacing, orientation, type, value range,
     /// NaN/inf counts, histogram; --plot draws it), or the GPU.
@@ -85,7 +85,7 @@ enum Command {
     /// Volume processing: resample a box to other dimensions or spacing (any
     /// reconstruction filter), Gaussian smoothing, 3-D median filter, or the
     /// gradient-magnitude field (value per mm); CPU f64/f32 or GPU; writes a float32
-    /// volume (.nrrd, .nhdr, .npy, .nii, .nii.gz).
+    /// volume (.nrrd, .nhdr, .npy, .nii, .nii.gz, .mha, .mhd).
     Process(Box<cmd::process::ProcessArgs>),
     /// Regular, direct and spectral adaptive sampling of one scene side by side: samples
     /// per pixel, time per frame and image error against regular sampling (Markdown and

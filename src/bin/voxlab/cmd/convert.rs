@@ -13,7 +13,7 @@ use voxlab::Result;
 pub struct ConvertArgs {
     /// Input volume (any format `info` reads, or a phantom).
     pub input: String,
-    /// Output volume: .nrrd, .nhdr, .npy, .nii or .nii.gz.
+    /// Output volume: .nrrd, .nhdr, .npy, .nii, .nii.gz, .mha or .mhd.
     pub output: PathBuf,
     #[command(flatten)]
     pub load: LoadArgs,

@@ -11,7 +11,7 @@ pub struct PhantomArgs {
     /// Phantom and size: NAME, NAME:N or NAME:NX,NY,NZ. Names: shepp-logan,
     /// shepp-logan-modified, marschner-lobb, sphere, spheres, ellipsoid, slab.
     pub spec: String,
-    /// Output volume file (.nrrd, .nhdr, .npy, .nii or .nii.gz).
+    /// Output volume file (.nrrd, .nhdr, .npy, .nii, .nii.gz, .mha or .mhd).
     #[arg(long)]
     pub out: PathBuf,
 }

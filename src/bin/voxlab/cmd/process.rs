@@ -20,7 +20,7 @@ pub struct ProcessArgs {
     /// The operation.
     #[arg(long, value_parser = choice::<Op>())]
     pub op: Op,
-    /// Output volume (float32): .nrrd, .nhdr, .npy, .nii or .nii.gz; written atomically.
+    /// Output volume (float32): .nrrd, .nhdr, .npy, .nii, .nii.gz, .mha or .mhd; written atomically.
     #[arg(long)]
     pub out: PathBuf,
     /// cpu (f64 oracle), cpu-f32, gpu or auto.
