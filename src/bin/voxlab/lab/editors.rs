@@ -256,24 +256,19 @@ impl EditorState {
     }
 
     fn files(&mut self, ui: &mut egui::Ui, state: &mut ViewState, message: &mut String) {
-        ui.horizontal(|ui| {
-            ui.add(egui::TextEdit::singleline(&mut self.tf_path).desired_width(180.0));
-            if ui.button("save").clicked() {
-                *message = match state.transfer.save(std::path::Path::new(&self.tf_path)) {
-                    Ok(()) => format!("wrote {} (voxlab render --tf reads it)", self.tf_path),
-                    Err(e) => e.to_string(),
-                };
-            }
-            if ui.button("load").clicked() {
-                match TransferFunction::load(std::path::Path::new(&self.tf_path)) {
-                    Ok(t) => {
-                        state.transfer = t;
-                        self.selected = None;
-                    }
-                    Err(e) => *message = e.to_string(),
-                }
-            }
-        });
+        let tf = &state.transfer;
+        let loaded = file_row(
+            ui,
+            &mut self.tf_path,
+            "--tf",
+            |p| tf.save(p),
+            TransferFunction::load,
+            message,
+        );
+        if let Some(t) = loaded {
+            state.transfer = t;
+            self.selected = None;
+        }
     }
 
     fn editor_2d(
@@ -474,25 +469,50 @@ impl EditorState {
                 }
             });
         }
-        ui.horizontal(|ui| {
-            ui.add(egui::TextEdit::singleline(&mut self.tf2d_path).desired_width(180.0));
-            if ui.button("save").clicked() {
-                *message = match tf.save(std::path::Path::new(&self.tf2d_path)) {
-                    Ok(()) => format!("wrote {} (voxlab render --tf2d reads it)", self.tf2d_path),
-                    Err(e) => e.to_string(),
-                };
-            }
-            if ui.button("load").clicked() {
-                match TransferFunction2D::load(std::path::Path::new(&self.tf2d_path)) {
-                    Ok(t) => {
-                        *tf = t;
-                        self.selected_widget = None;
-                    }
-                    Err(e) => *message = e.to_string(),
-                }
-            }
-        });
+        let current = tf.clone();
+        let loaded = file_row(
+            ui,
+            &mut self.tf2d_path,
+            "--tf2d",
+            |p| current.save(p),
+            TransferFunction2D::load,
+            message,
+        );
+        if let Some(t) = loaded {
+            *tf = t;
+            self.selected_widget = None;
+        }
     }
+}
+
+/// A path field with save and load buttons: what was loaded, if anything; what
+/// happened goes to `message` (`flag` is the `voxlab render` option that reads the file).
+fn file_row<T>(
+    ui: &mut egui::Ui,
+    path: &mut String,
+    flag: &str,
+    save: impl FnOnce(&std::path::Path) -> voxlab::Result<()>,
+    load: impl FnOnce(&std::path::Path) -> voxlab::Result<T>,
+    message: &mut String,
+) -> Option<T> {
+    ui.horizontal(|ui| {
+        ui.add(egui::TextEdit::singleline(path).desired_width(180.0));
+        let p = std::path::Path::new(path.as_str());
+        if ui.button("save").clicked() {
+            *message = match save(p) {
+                Ok(()) => format!("wrote {} (voxlab render {flag} reads it)", p.display()),
+                Err(e) => e.to_string(),
+            };
+        }
+        if ui.button("load").clicked() {
+            match load(p) {
+                Ok(t) => return Some(t),
+                Err(e) => *message = e.to_string(),
+            }
+        }
+        None
+    })
+    .inner
 }
 
 fn rgb(c: [f64; 4]) -> Color32 {
