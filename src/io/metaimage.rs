@@ -506,7 +506,7 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
             } else {
                 h.header_size as u64
             };
-            skip_bytes(&mut r, skip, &data_path)?;
+            skip_bytes(&mut r, skip, path, &data_path)?;
             read_body(&mut r, &h, h.n(), &data_path)?
         }
         DataFile::List(names) => {
@@ -514,7 +514,7 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
             let mut all: Option<Samples> = None;
             for name in names {
                 let (mut r, _, data_path) = data_file(name)?;
-                skip_bytes(&mut r, h.header_size.max(0) as u64, &data_path)?;
+                skip_bytes(&mut r, h.header_size.max(0) as u64, path, &data_path)?;
                 let s = read_body(&mut r, &h, per, &data_path)?;
                 all = Some(match all {
                     None => s,
@@ -542,14 +542,18 @@ pub fn read_metaimage_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
     read_body(&mut reader, &h, h.n(), path)?.into_volume(h.dims, h.affine)
 }
 
-fn skip_bytes(reader: &mut dyn Read, n: u64, path: &Path) -> Result<()> {
+/// Skips the `HeaderSize` bytes of `data`, a data file `header` names.
+fn skip_bytes(reader: &mut dyn Read, n: u64, header: &Path, data: &Path) -> Result<()> {
     let skipped = std::io::copy(&mut reader.take(n), &mut std::io::sink())
-        .map_err(|e| read_error(path, e))?;
+        .map_err(|e| read_error(data, e))?;
     if skipped < n {
         return Err(field(
-            path,
+            header,
             "HeaderSize",
-            format!("skips {n} bytes, but the file holds only {skipped}"),
+            format!(
+                "skips {n} bytes, but {} holds only {skipped}",
+                data.display()
+            ),
         ));
     }
     Ok(())

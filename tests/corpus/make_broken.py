@@ -177,6 +177,23 @@ put("nrrd-gzip-extra-data.nrrd", nrrd(base[:3] + [("encoding", "gzip")], gzip.co
     "format", "data", "1 bytes more than")
 put("nifti-vox-offset-huge.nii", nifti(vox_offset=3e38), "format", "vox_offset", "past the end of any file")
 
+# --- MetaImage -------------------------------------------------------------------
+def mha(extra, data=b"", dims="4 4 4", etype="MET_UCHAR", datafile="LOCAL"):
+    h = ("ObjectType = Image\nNDims = 3\nDimSize = %s\nElementType = %s\n%sElementDataFile = %s\n"
+         % (dims, etype, extra, datafile))
+    return h.encode() + data
+
+
+put("mha-truncated-data.mha", mha("", bytes(63)), "format", "data", "expected 64 bytes, found 63")
+put("mha-over-voxel-limit.mha", mha("", bytes(16), dims="2048 2048 1024"), "format", "DimSize", "limit")
+put("mha-unknown-type.mha", mha("", bytes(64), etype="MET_UCHAR_ARRAY"), "format", "ElementType", "MET_UCHAR_ARRAY")
+put("mha-corrupt-zlib.mha", mha("CompressedData = True\n", b"\x78\x9cgarbage"), "format", "data", "decoded")
+put("mha-nan-spacing.mha", mha("ElementSpacing = 1 nan 1\n", bytes(64)), "format", "ElementSpacing", "finite")
+put("mha-missing-data-file.mhd", mha("", datafile="no-such-file.raw"), "format", "data file", "no-such-file.raw")
+put("mha-data-dev-zero.mhd", mha("", datafile="/dev/zero"), "format", "data file", "character device")
+put("mha-header-size-past-end.mhd", mha("HeaderSize = 100000\n", datafile="mha-truncated-data.mha"),
+    "format", "HeaderSize", "100000")
+
 with open(os.path.join(HERE, "EXPECTED.tsv"), "w") as f:
     f.write("# file\terror kind\tfield (empty: any)\twords the message must contain (empty: none)\n")
     for row in expected:
