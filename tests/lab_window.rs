@@ -141,6 +141,15 @@ fn the_lab_refuses_bad_outputs_before_opening() {
     .unwrap();
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--screenshot"), "{}", stderr(&o));
+    // No display: the error says how to run the lab without one.
+    let o = voxlab_command(&["view", "phantom:sphere:8", "--backend", "cpu-f32"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("xvfb-run"), "{}", stderr(&o));
     let o = voxlab_command(&["view", "--state", s(&dir.join("missing.json"))])
         .output()
         .unwrap();

@@ -56,7 +56,15 @@ pub fn run(options: Options) -> Result<()> {
     if let Some(e) = failure.lock().expect("not poisoned").take() {
         return Err(e);
     }
-    result.map_err(|e| Error::unsupported("view", "the window", e.to_string()))
+    result.map_err(|e| {
+        Error::invalid(
+            "window",
+            format!(
+                "cannot open a window: {e}; on a machine without a display, run the lab \
+                 under a virtual X server: xvfb-run -a voxlab view …"
+            ),
+        )
+    })
 }
 
 /// What the central panel shows.
