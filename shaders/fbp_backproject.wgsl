@@ -27,7 +27,9 @@ fn backproject_point(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let i = f32(idx % nx);
     let j = f32((idx / nx) % ny);
-    let k = f32(idx / (nx * ny));
+    // The slab's slices are the grid's slices slab.x …: the same voxel position, bit
+    // for bit, as the unsplit volume's.
+    let k = f32(idx / (nx * ny) + params.slab.x);
     let p = params.origin.xyz + i * params.step_i.xyz + j * params.step_j.xyz + k * params.step_k.xyz;
     let cols = params.det.x;
     let rows = params.det.y;
@@ -35,7 +37,7 @@ fn backproject_point(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var v = params.det.z; v < params.det.z + params.det.w; v++) {
         let r = project_point(views[v], p);
         if r.w > 0.0 {
-            acc += r.z * bilinear_zero(v * cols * rows, cols, rows, r.x, r.y);
+            acc += r.z * bilinear_zero((v - params.slab.y) * cols * rows, cols, rows, r.x, r.y);
         }
     }
     out_vol[idx] += acc * params.scale.x;

@@ -147,3 +147,92 @@ fn gpu_ramp_filter_matches_the_f64_oracle() {
         }
     }
 }
+
+/// The split plans the tests run: (slices per slab, views per batch). Batches of a
+/// multiple of 32 views keep the unsplit path's per-dispatch sums; 7 regroups them.
+const SPLITS: [(usize, usize); 5] = [(1, 1000), (4, 32), (5, 64), (1000, 32), (3, 7)];
+
+#[test]
+fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
+    use voxlab::gpu::fbp::{backproject_planned, BackprojectionPlan};
+    use voxlab::gpu::plan::Pieces;
+    let Some(ctx) = common::gpu("gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one")
+    else {
+        return;
+    };
+    for (name, g, grid) in common::ct_cases(75, 70) {
+        let mut rng = common::Rng(11);
+        let q = Projections::<f32>::new(
+            g.n_angles(),
+            g.rows,
+            g.cols,
+            (0..g.n_angles() * g.rows * g.cols)
+                .map(|_| (rng.unit() * 10.0 - 3.0) as f32)
+                .collect(),
+        )
+        .unwrap();
+        let whole = voxlab::gpu::fbp::backproject(ctx, &q, &g, &grid).unwrap();
+        assert!(!BackprojectionPlan::new(&ctx.limits, &g, &grid)
+            .unwrap()
+            .is_split());
+        let scale = whole.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (slices, views) in SPLITS {
+            let plan = BackprojectionPlan {
+                slabs: Pieces {
+                    total: grid.dims[2],
+                    per_piece: slices.min(grid.dims[2]),
+                },
+                batches: Pieces {
+                    total: g.n_angles(),
+                    per_piece: views.min(g.n_angles()),
+                },
+                device_bytes: 0,
+            };
+            let got = backproject_planned(ctx, &q, &g, &grid, &plan).unwrap();
+            let what = format!("{name}: {}", plan.describe());
+            if views % 32 == 0 {
+                let first = got.data.iter().zip(&whole.data).position(|(a, b)| a != b);
+                assert_eq!(first, None, "{what}: differs from the unsplit volume");
+            } else {
+                // Sums of 7 views instead of 32: a reassociation of f32 additions.
+                let worst = got
+                    .data
+                    .iter()
+                    .zip(&whole.data)
+                    .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                assert!(worst <= 1e-5 * scale, "{what}: {worst} of {scale}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_backprojection_plan_cuts_what_exceeds_a_binding_and_refuses_what_cannot_fit() {
+    use voxlab::gpu::fbp::BackprojectionPlan;
+    // 40 × 30 detector, 100 views; a 21 × 15 × 18 grid: slices of 1,260 bytes, views
+    // of 4,800 bytes.
+    let (_, g, grid) = common::ct_cases(10, 100).remove(2);
+    let limits = |bytes: u64| wgpu::Limits {
+        max_storage_buffer_binding_size: bytes,
+        ..wgpu::Limits::default()
+    };
+    let whole = BackprojectionPlan::new(&limits(1 << 27), &g, &grid).unwrap();
+    assert!(!whole.is_split());
+    // 40 views fit 192,000 bytes: batches of 32 (aligned), slabs of all 18 slices.
+    let p = BackprojectionPlan::new(&limits(192_000), &g, &grid).unwrap();
+    assert_eq!((p.batches.per_piece, p.batches.count()), (32, 4));
+    assert_eq!((p.slabs.per_piece, p.slabs.count()), (18, 1));
+    // 12,600 bytes: 10 slices per slab, 2 slabs; 2 views per batch (fewer than 32).
+    let p = BackprojectionPlan::new(&limits(12_600), &g, &grid).unwrap();
+    assert_eq!((p.slabs.per_piece, p.slabs.count()), (10, 2));
+    assert_eq!((p.batches.per_piece, p.batches.count()), (2, 50));
+    assert_eq!(
+        p.describe(),
+        "backprojection in 2 slabs of 10 slices × 50 batches of 2 views"
+    );
+    // One view (4,800 bytes) no longer fits.
+    let e = BackprojectionPlan::new(&limits(4_000), &g, &grid).unwrap_err();
+    assert!(e.to_string().contains("one view (4800 bytes)"), "{e}");
+    let e = BackprojectionPlan::new(&limits(1_000), &g, &grid).unwrap_err();
+    assert!(e.to_string().contains("slice of the volume"), "{e}");
+}

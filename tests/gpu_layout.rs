@@ -247,6 +247,7 @@ fn fbp_params_layout_agrees() {
         ("dims", offset_of!(FbpParams, dims)),
         ("det", offset_of!(FbpParams, det)),
         ("scale", offset_of!(FbpParams, scale)),
+        ("slab", offset_of!(FbpParams, slab)),
     ];
     for ((name, off), (wname, woff)) in rust.iter().zip(&members) {
         assert_eq!((*name, *off as u32), (wname.as_str(), *woff));

@@ -6,7 +6,9 @@
 //!   contains the substring (case-insensitive); otherwise discrete GPUs come first,
 //!   then integrated, then virtual, then CPU (lavapipe).
 //! - Limits: the adapter's own (`adapter.limits()`), not wgpu's conservative defaults
-//!   (which cap storage bindings at 128 MiB).
+//!   (which cap storage bindings at 128 MiB). The device is opened with them; the
+//!   context's [`GpuContext::limits`], which every job plans against, are those lowered
+//!   by `VOXLAB_GPU_MAX_BINDING` and `VOXLAB_GPU_MAX_TEXTURE_3D` ([`super::plan`]).
 //! - Optional features requested when present: `FLOAT32_FILTERABLE` (hardware
 //!   filtering of R32Float textures), `TEXTURE_FORMAT_16BIT_NORM`, `TIMESTAMP_QUERY`.
 //! - No adapter ⇒ [`Error::NoAdapter`] whose message says how to get one.
@@ -70,7 +72,13 @@ pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub summary: AdapterSummary,
+    /// The limits jobs plan against: the adapter's, lowered by the planner's
+    /// environment variables ([`super::plan::lowered_limits`]).
     pub limits: wgpu::Limits,
+    /// The adapter's own limits, which the device was opened with.
+    pub adapter_limits: wgpu::Limits,
+    /// One line per limit the environment lowered (empty when none).
+    pub lowered: Vec<String>,
     pub features: wgpu::Features,
 }
 
@@ -157,11 +165,13 @@ impl GpuContext {
             & (wgpu::Features::FLOAT32_FILTERABLE
                 | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
                 | wgpu::Features::TIMESTAMP_QUERY);
-        let limits = adapter.limits();
+        let adapter_limits = adapter.limits();
+        let (limits, lowered) =
+            super::plan::lowered_limits(&adapter_limits, |k| std::env::var(k).ok())?;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("voxlab"),
             required_features: features,
-            required_limits: limits.clone(),
+            required_limits: adapter_limits.clone(),
             ..Default::default()
         }))
         .map_err(|e| Error::Gpu(format!("could not open the device: {e}")))?;
@@ -172,6 +182,8 @@ impl GpuContext {
             queue,
             summary,
             limits,
+            adapter_limits,
+            lowered,
             features,
         })
     }
@@ -213,7 +225,11 @@ impl GpuContext {
             f(wgpu::Features::FLOAT32_FILTERABLE),
             f(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM),
             f(wgpu::Features::TIMESTAMP_QUERY),
-        )
+        ) + &self
+            .lowered
+            .iter()
+            .map(|l| format!("\nplanner:      {l}"))
+            .collect::<String>()
     }
 
     /// Compiles WGSL, turning validation errors into [`Error::Gpu`] with the message.

@@ -33,6 +33,7 @@ pub mod joseph_pair;
 pub mod multi;
 pub mod params;
 pub mod parker;
+pub mod plan;
 pub mod preintegrate;
 pub mod probe;
 pub mod process;

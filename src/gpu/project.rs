@@ -12,6 +12,7 @@
 //! finishes.
 
 use super::context::GpuContext;
+use super::plan::{binding_limit, count_of, Pieces};
 use crate::cpu::project::{joseph_views, Grid, JosephView, ProjectOptions};
 use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
@@ -166,12 +167,91 @@ impl ForwardKernel {
     }
 }
 
+/// How [`project_volume`] cuts a job to fit the planner's limits
+/// ([`crate::gpu::plan`]): the grid in z-slabs, the output in chunks of views.
+///
+/// Each slab is projected as a grid of its own (its affine moved to its first slice)
+/// whose taps outside it count zero, and the slabs' projections are summed: every
+/// bilinear tap of Joseph's sum belongs to exactly one slab, so a split projection is
+/// the unsplit one up to the order of its f32 additions (and the rounding of the
+/// moved ray origins).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProjectionPlan {
+    /// Slices of the grid per slab.
+    pub slabs: Pieces,
+    /// Views per dispatch (and per output buffer).
+    pub views_per_dispatch: usize,
+    /// The largest device allocation at once: one slab, the output chunk and the
+    /// views (bytes).
+    pub device_bytes: u64,
+}
+
+impl ProjectionPlan {
+    /// The plan for `g` through a grid of `dims` under `limits`.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] when one projection or one slice of the grid alone exceeds a
+    /// binding.
+    pub fn new(limits: &wgpu::Limits, g: &Geometry, dims: [usize; 3]) -> Result<Self> {
+        let limit = binding_limit(limits).min(u32::MAX as u64 / 4 * 4);
+        let per_view = g.rows * g.cols;
+        if per_view as u64 * 4 > limit {
+            return Err(Error::too_large(
+                "GPU projection",
+                format!(
+                    "one {}×{} projection ({} bytes) exceeds the storage-binding limit of \
+                     {limit} bytes",
+                    g.cols,
+                    g.rows,
+                    per_view * 4
+                ),
+            ));
+        }
+        let [nx, ny, nz] = dims;
+        let slice_bytes = (nx * ny) as u64 * 4;
+        let slabs = Pieces::plan(
+            "GPU projection grid",
+            "slice of the grid",
+            nz,
+            slice_bytes,
+            limit,
+            1,
+        )?;
+        let chunk = views_per_dispatch([nx, ny, slabs.per_piece], per_view, limit)
+            .min(g.n_angles())
+            .max(1);
+        let views = (g.n_angles() * (size_of::<JosephView<f32>>() + 4)) as u64;
+        Ok(ProjectionPlan {
+            slabs,
+            views_per_dispatch: chunk,
+            device_bytes: slabs.per_piece as u64 * slice_bytes
+                + (chunk * per_view * 4) as u64
+                + views,
+        })
+    }
+
+    /// Whether the grid is cut at all.
+    pub fn is_split(&self) -> bool {
+        self.slabs.is_split()
+    }
+
+    /// One line for the user: "projection in 4 slabs of 16 slices".
+    pub fn describe(&self) -> String {
+        format!(
+            "projection in {} of {}",
+            count_of(self.slabs.count(), "slab"),
+            count_of(self.slabs.per_piece, "slice")
+        )
+    }
+}
+
 /// [`crate::cpu::project::project_volume`] on the GPU, in f32: the same projections
-/// within the tolerance `tests/gpu_ct_project.rs` states.
+/// within the tolerance `tests/gpu_ct_project.rs` states, in the pieces of
+/// [`ProjectionPlan::new`] under the context's limits.
 ///
 /// # Errors
-/// [`Error::Invalid`] for an invalid geometry; [`Error::TooLarge`] when the grid does
-/// not fit one storage binding; [`Error::Gpu`] on device failure.
+/// [`Error::Invalid`] for an invalid geometry; [`Error::TooLarge`] as
+/// [`ProjectionPlan::new`]; [`Error::Gpu`] on device failure.
 pub fn project_volume<R: Real>(
     ctx: &GpuContext,
     grid: &Grid<R>,
@@ -191,35 +271,38 @@ pub fn project_volume_timed<R: Real>(
     g: &Geometry,
     options: &ProjectOptions,
 ) -> Result<(Projections<f32>, ProjectTimings)> {
+    g.validate()?;
+    let plan = ProjectionPlan::new(&ctx.limits, g, grid.dims)?;
+    project_volume_planned(ctx, grid, g, options, &plan)
+}
+
+/// [`project_volume_timed`] in the pieces of `plan` (a plan under lower limits than
+/// the context's splits the grid further).
+///
+/// # Errors
+/// As [`project_volume`]; [`Error::Invalid`] for a plan made for another grid.
+pub fn project_volume_planned<R: Real>(
+    ctx: &GpuContext,
+    grid: &Grid<R>,
+    g: &Geometry,
+    options: &ProjectOptions,
+    plan: &ProjectionPlan,
+) -> Result<(Projections<f32>, ProjectTimings)> {
     let t0 = Instant::now();
     g.validate()?;
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
-    let vol_bytes = (grid.data.len() as u64).saturating_mul(4);
-    if vol_bytes > limit || grid.data.len() > u32::MAX as usize {
-        return Err(Error::too_large(
-            "GPU projection grid",
+    let [nx, ny, nz] = grid.dims;
+    if plan.slabs.total != nz || grid.data.len() != nx * ny * nz {
+        return Err(Error::invalid(
+            "projection plan",
             format!(
-                "{:?} f32 voxels ({vol_bytes} bytes) exceed the adapter's storage-binding \
-                 limit of {limit} bytes: use a smaller volume or --backend cpu",
-                grid.dims
+                "made for {} slices, not a grid of {:?} with {} values",
+                plan.slabs.total,
+                grid.dims,
+                grid.data.len()
             ),
         ));
     }
     let dev = &ctx.device;
-    let vol = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("projection grid"),
-        contents: bytemuck::cast_slice(&grid.to_f32()),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    let views: Vec<JosephView<f32>> = joseph_views(g, grid.affine);
-    let vbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("joseph views"),
-        contents: bytemuck::cast_slice(&views),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
     let all: Vec<u32> = (0..g.n_angles() as u32).collect();
     let list = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("view list"),
@@ -227,36 +310,59 @@ pub fn project_volume_timed<R: Real>(
         usage: wgpu::BufferUsages::STORAGE,
     });
     let kernel = ForwardKernel::new(ctx)?;
-
-    // Views per dispatch: bounded by the sample budget and the output binding.
     let per_view = g.rows * g.cols;
-    let chunk = views_per_dispatch(grid.dims, per_view, limit).min(g.n_angles());
-    if per_view as u64 * 4 > limit {
-        return Err(Error::too_large(
-            "GPU projection",
-            format!(
-                "one {}×{} projection exceeds the adapter's storage-binding limit",
-                g.cols, g.rows
-            ),
-        ));
-    }
+    let chunk = plan.views_per_dispatch.max(1);
     let out = ctx.storage_buffer("projections", (chunk * per_view * 4) as u64)?;
     let mut result = Projections::<f32>::zeros(g)?;
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let mut k0 = 0;
-    while k0 < g.n_angles() {
-        let n = chunk.min(g.n_angles() - k0);
-        let shape = [grid.dims[0], grid.dims[1], grid.dims[2], g.cols, g.rows];
-        kernel.dispatch(ctx, shape, (k0, n), 0, [&vbuf, &vol, &list, &out]);
-        let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
-        result.data[k0 * per_view..(k0 + n) * per_view]
-            .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
-        if let Some(f) = options.on_view {
-            (0..n).for_each(|_| f());
+    let slice = nx * ny;
+    let last = plan.slabs.count() - 1;
+    for (s, slab) in plan.slabs.ranges().enumerate() {
+        // The slab as a grid of its own: its index frame starts at its first slice.
+        let affine = if slab.start == 0 {
+            grid.affine
+        } else {
+            grid.affine
+                * glam::DMat4::from_translation(glam::DVec3::new(0.0, 0.0, slab.start as f64))
+        };
+        let data: Vec<f32> = grid.data[slab.start * slice..slab.end * slice]
+            .iter()
+            .map(|v| v.f64() as f32)
+            .collect();
+        let vol = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("projection grid slab"),
+            contents: bytemuck::cast_slice(&data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        drop(data);
+        let views: Vec<JosephView<f32>> = joseph_views(g, affine);
+        let vbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("joseph views"),
+            contents: bytemuck::cast_slice(&views),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let mut k0 = 0;
+        while k0 < g.n_angles() {
+            let n = chunk.min(g.n_angles() - k0);
+            let shape = [nx, ny, slab.len(), g.cols, g.rows];
+            kernel.dispatch(ctx, shape, (k0, n), 0, [&vbuf, &vol, &list, &out]);
+            let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
+            let got: Vec<f32> = bytemuck::pod_collect_to_vec::<u8, f32>(&bytes);
+            let dst = &mut result.data[k0 * per_view..(k0 + n) * per_view];
+            if s == 0 {
+                dst.copy_from_slice(&got);
+            } else {
+                dst.iter_mut().zip(&got).for_each(|(d, v)| *d += v);
+            }
+            if s == last {
+                if let Some(f) = options.on_view {
+                    (0..n).for_each(|_| f());
+                }
+            }
+            k0 += n;
         }
-        k0 += n;
     }
     let project = t.elapsed().as_secs_f64();
     Ok((

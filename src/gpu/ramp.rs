@@ -34,6 +34,57 @@ use crate::gpu::fft::{GpuFftPlan, GpuFftVariant};
 use crate::gpu::GpuContext;
 use wgpu::util::DeviceExt;
 
+/// How [`filter_projections`] cuts the views into chunks whose packed lines fit one
+/// storage binding of the planner's limits ([`crate::gpu::plan`]). Each line is
+/// filtered alone, so chunking never changes a value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RampPlan {
+    /// Views per chunk (the last may hold fewer).
+    pub views_per_chunk: usize,
+    /// The device bytes of one chunk: its lines, their packed complex lines and the
+    /// response.
+    pub device_bytes: u64,
+}
+
+impl RampPlan {
+    /// The chunks for `g` under `limits`: all views, halved until the packed lines of
+    /// a chunk fit one binding.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] when one view's padded lines alone exceed a binding.
+    pub fn new(limits: &wgpu::Limits, g: &Geometry) -> Result<Self> {
+        let (cols, rows, views) = (g.cols, g.rows, g.n_angles().max(1));
+        let pl = padded_length(cols);
+        let limit = crate::gpu::plan::binding_limit(limits);
+        // Packed bytes of `v` views: ⌈v·rows/2⌉ complex lines of P values of 8 bytes.
+        let packed_bytes = |v: usize| ((v * rows).div_ceil(2) * pl * 8) as u64;
+        if packed_bytes(1) > limit {
+            return Err(Error::too_large(
+                "GPU ramp filter",
+                format!(
+                    "one view's padded lines ({} bytes) exceed one storage binding ({limit} bytes)",
+                    packed_bytes(1)
+                ),
+            ));
+        }
+        let mut per_chunk = views;
+        while packed_bytes(per_chunk) > limit {
+            per_chunk = per_chunk.div_ceil(2);
+        }
+        Ok(RampPlan {
+            views_per_chunk: per_chunk,
+            device_bytes: packed_bytes(per_chunk)
+                + (per_chunk * rows * cols * 4) as u64
+                + (pl * 4) as u64,
+        })
+    }
+
+    /// The number of chunks for `views` views.
+    pub fn chunks(&self, views: usize) -> usize {
+        views.div_ceil(self.views_per_chunk).max(1)
+    }
+}
+
 /// The shader's uniform block.
 ///
 /// mirrors shaders/shared/ramp_params.wgsl: RampParams
@@ -99,31 +150,13 @@ pub fn filter_projections(
             "contain NaN or infinite values",
         ));
     }
-    let (cols, rows, views) = (g.cols, g.rows, g.n_angles());
+    let (cols, rows) = (g.cols, g.rows);
     let pl = padded_length(cols);
     let mut out = projections.data.clone();
     if out.is_empty() {
         return Projections::new(projections.angles, rows, cols, out);
     }
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
-    // Packed bytes of `v` views: ⌈v·rows/2⌉ complex lines of P values of 8 bytes.
-    let packed_bytes = |v: usize| ((v * rows).div_ceil(2) * pl * 8) as u64;
-    if packed_bytes(1) > limit {
-        return Err(Error::too_large(
-            "GPU ramp filter",
-            format!(
-                "one view's padded lines ({} bytes) exceed one storage binding ({limit} bytes)",
-                packed_bytes(1)
-            ),
-        ));
-    }
-    let mut per_chunk = views;
-    while packed_bytes(per_chunk) > limit {
-        per_chunk = per_chunk.div_ceil(2);
-    }
+    let per_chunk = RampPlan::new(&ctx.limits, g)?.views_per_chunk;
 
     let inv_spacing = 1.0 / isocentre_spacing(g);
     let resp: Vec<f32> = effective_response(pl, filter)

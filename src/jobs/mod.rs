@@ -43,6 +43,7 @@ pub mod fvr;
 pub mod info;
 pub mod input;
 pub mod phantom;
+pub mod plan;
 pub mod process;
 pub mod project;
 pub mod radon;

@@ -260,7 +260,18 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                     let engine = Engine::open(a.backend)?;
                     match (engine.backend(), engine.gpu()) {
                         (Backend::Gpu, Some(ctx)) => {
-                            let p = crate::gpu::project::project_volume(ctx, &grid, &g, &options)?;
+                            let plan = crate::gpu::project::ProjectionPlan::new(
+                                &ctx.limits,
+                                &g,
+                                grid.dims,
+                            )?;
+                            if plan.is_split() {
+                                progress.note(&plan.describe());
+                            }
+                            let p = crate::gpu::project::project_volume_planned(
+                                ctx, &grid, &g, &options, &plan,
+                            )?
+                            .0;
                             (
                                 format!("{name} joseph, gpu ({})", ctx.summary.name),
                                 p.widen(),

@@ -6,6 +6,7 @@
 //! docs/ct.md and docs/iterative.md; the algorithms are [`crate::cpu::fbp`],
 //! [`crate::gpu::fbp`] and [`crate::cpu::iterative`].
 
+use super::plan::{DevicePlan, MemoryPlan};
 use super::{Backend, Engine, Progress};
 use crate::cpu::fbp::{
     apply_circle_mask, fbp, parallel_stack_grid, rtk_grid, Grid, Reconstruction,
@@ -430,19 +431,7 @@ pub fn reconstruct(
         return iterative(a, method, p, g, geometry_file, truth, progress);
     }
     let parallel = g.beam == Beam::Parallel;
-    // The grid from the unpadded sinogram (padding keeps rows, spacing and centre).
-    let grid = reconstruction_grid(a, &g, progress)?;
-    check_grid(a, &grid, parallel, g.rows)?;
-    let (p, g) = if parallel && !a.no_circle {
-        pad_for_circle(&p, &g)?
-    } else {
-        (p, g)
-    };
-
-    if a.short_scan {
-        // Checked before any work: a clear error for a parallel beam or a wrong span.
-        crate::cpu::parker::short_scan(&g)?;
-    }
+    let (grid, p, g) = fbp_problem(a, p, g, progress)?;
     super::check_cancel(progress)?;
     progress.begin("reconstructing", "voxel lines", 0);
     let t = std::time::Instant::now();
@@ -455,7 +444,13 @@ pub fn reconstruct(
                 if a.short_scan {
                     p32 = crate::gpu::parker::weigh(ctx, &p32, &g)?;
                 }
-                let r = crate::gpu::fbp::fbp(ctx, &p32, &g, a.filter, &grid)?;
+                let ramp = crate::gpu::ramp::RampPlan::new(&ctx.limits, &g)?;
+                let plan = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &g, &grid)?;
+                for line in gpu_split_lines(&ramp, &plan, g.n_angles()) {
+                    progress.note(&line);
+                }
+                let q = crate::gpu::ramp::filter_projections(ctx, &p32, &g, a.filter)?;
+                let r = crate::gpu::fbp::backproject_planned(ctx, &q, &g, &grid, &plan)?;
                 (widen(r), format!("gpu ({})", ctx.summary.name))
             }
             (Backend::CpuF32, _) => {
@@ -493,6 +488,166 @@ pub fn reconstruct(
     };
     finish(a, done)
 }
+
+/// The grid of an FBP/FDK job and the projections it backprojects: the grid from the
+/// unpadded sinogram (padding keeps rows, spacing and centre), then a parallel
+/// sinogram padded to the inscribed circle's diagonal unless `no_circle`; a short scan
+/// checked before any work.
+fn fbp_problem(
+    a: &ReconstructRequest,
+    p: Projections<f64>,
+    g: Geometry,
+    progress: &dyn Progress,
+) -> Result<(Grid, Projections<f64>, Geometry)> {
+    let parallel = g.beam == Beam::Parallel;
+    let grid = reconstruction_grid(a, &g, progress)?;
+    check_grid(a, &grid, parallel, g.rows)?;
+    let (p, g) = if parallel && !a.no_circle {
+        pad_for_circle(&p, &g)?
+    } else {
+        (p, g)
+    };
+    if a.short_scan {
+        // A clear error for a parallel beam or a wrong span.
+        crate::cpu::parker::short_scan(&g)?;
+    }
+    Ok((grid, p, g))
+}
+
+/// `voxlab reconstruct --dry-run`: the memory plan of [`run`] — host bytes, device
+/// bytes against the planner's limits and the split the GPU backprojection would use —
+/// after reading the input and checking the request, without reconstructing or
+/// writing anything.
+///
+/// # Errors
+/// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
+/// split.
+pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPlan> {
+    check_request(a)?;
+    let p = read_projections::<f64>(&a.input)?;
+    let (g, _) = geometry_for(a, &p)?;
+    p.check_against(&g)?;
+    let mut writes: Vec<String> = a.out.iter().map(|o| o.display().to_string()).collect();
+    writes.extend(a.error_map.iter().map(|o| o.display().to_string()));
+    writes.extend(a.convergence.iter().map(|o| o.display().to_string()));
+    let read = (p.data.len() * 8) as u64;
+    if let Some(method) = a.method.iterative() {
+        let grid = reconstruction_grid(a, &g, progress)?;
+        let voxels = grid.dims.iter().product::<usize>() as u64;
+        // The projections and their residual, the image and the solver's vectors
+        // (SIRT/CGLS/OS-SART keep three image-sized ones, TV its dual field too).
+        let vectors = if method == Method::Tv { 7 } else { 4 };
+        let host = 2 * read + vectors * voxels * 8;
+        let (backend, device) = match a.backend {
+            Backend::Gpu => {
+                let engine = Engine::open(Backend::Gpu)?;
+                let ctx = engine
+                    .gpu()
+                    .ok_or_else(|| Error::NoAdapter(NO_GPU.into()))?;
+                let rays = (p.data.len() * 4) as u64;
+                let largest = rays.max(voxels * 4 * if method == Method::Tv { 3 } else { 1 });
+                let dev = DevicePlan::on(ctx, 2 * rays + vectors * voxels * 4, largest);
+                (format!("gpu ({})", ctx.summary.name), Some(dev))
+            }
+            Backend::CpuF32 => ("cpu f32".into(), None),
+            _ => ("cpu f64".into(), None),
+        };
+        let split = match &device {
+            Some(d) if d.largest_buffer_bytes > d.max_binding_bytes => {
+                return Err(Error::too_large(
+                    "GPU iterative reconstruction",
+                    format!(
+                        "a vector of {} exceeds the storage binding of {}, and the GPU \
+                         solver holds its problem whole: use --backend cpu-f32",
+                        crate::gpu::plan::human_bytes(d.largest_buffer_bytes),
+                        crate::gpu::plan::human_bytes(d.max_binding_bytes)
+                    ),
+                ))
+            }
+            _ => Vec::new(),
+        };
+        return Ok(MemoryPlan {
+            job: format!("reconstruct {method:?}").to_lowercase(),
+            backend,
+            host_bytes: host,
+            device,
+            split,
+            writes,
+        });
+    }
+    let (grid, p, g) = fbp_problem(a, p, g, progress)?;
+    let values = p.data.len() as u64;
+    let voxels = grid.dims.iter().product::<usize>() as u64;
+    let padded = if values * 8 != read { values * 8 } else { 0 };
+    let method = match g.beam {
+        Beam::Parallel => "fbp",
+        Beam::Cone { .. } => "fdk",
+    };
+    let engine = Engine::open(a.backend)?;
+    let (backend, host, device, split) = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            let ramp = crate::gpu::ramp::RampPlan::new(&ctx.limits, &g)?;
+            let bp = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &g, &grid)?;
+            let split = gpu_split_lines(&ramp, &bp, g.n_angles());
+            let largest = (bp.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;
+            let largest = largest.max((bp.batches.per_piece * g.rows * g.cols * 4) as u64);
+            let device = DevicePlan::on(ctx, ramp.device_bytes.max(bp.device_bytes), largest);
+            // f64 input (and its padded copy), f32 copy and filtered f32, the f32
+            // result and its f64 widening.
+            let host = read + padded + values * 8 + voxels * 12;
+            (
+                format!("gpu ({})", ctx.summary.name),
+                host,
+                Some(device),
+                split,
+            )
+        }
+        (Backend::CpuF32, _) => (
+            "cpu f32".to_string(),
+            read + padded + values * 8 + voxels * 12,
+            None,
+            Vec::new(),
+        ),
+        _ => (
+            "cpu f64".to_string(),
+            read + padded + values * 8 + voxels * 8,
+            None,
+            Vec::new(),
+        ),
+    };
+    Ok(MemoryPlan {
+        job: format!("reconstruct {method}"),
+        backend,
+        host_bytes: host,
+        device,
+        split,
+        writes,
+    })
+}
+
+/// The lines a split GPU FBP/FDK prints (none when it runs in one piece).
+fn gpu_split_lines(
+    ramp: &crate::gpu::ramp::RampPlan,
+    bp: &crate::gpu::fbp::BackprojectionPlan,
+    views: usize,
+) -> Vec<String> {
+    let mut split = Vec::new();
+    let chunks = ramp.chunks(views);
+    if chunks > 1 {
+        split.push(format!(
+            "ramp filter in {} of {}",
+            crate::gpu::plan::count_of(chunks, "chunk"),
+            crate::gpu::plan::count_of(ramp.views_per_chunk, "view")
+        ));
+    }
+    if bp.is_split() {
+        split.push(bp.describe());
+    }
+    split
+}
+
+/// Why a GPU plan has no device.
+const NO_GPU: &str = "the GPU backend opened no device";
 
 /// Writes what the request asks for (`out`, `error_map`, `convergence`).
 fn finish(a: &ReconstructRequest, done: Reconstructed) -> Result<Reconstructed> {

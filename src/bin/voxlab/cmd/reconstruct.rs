@@ -97,6 +97,10 @@ pub struct ReconstructArgs {
     /// Iterative methods: write iteration,residual,objective per iteration to this CSV.
     #[arg(long)]
     pub convergence: Option<PathBuf>,
+    /// Print the memory plan (host bytes, device bytes against the adapter's limits,
+    /// and the split the GPU would use) after reading the input, and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
@@ -125,6 +129,12 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         convergence: a.convergence.clone(),
     };
     let term = Terminal::bars();
+    if a.dry_run {
+        let plan = voxlab::jobs::reconstruct::plan(&req, &term)?;
+        drop(term);
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let r = voxlab::jobs::reconstruct::run(&req, &term)?;
     drop(term);
     let d = r.reconstruction.grid.dims;

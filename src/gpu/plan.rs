@@ -1,0 +1,259 @@
+//! The memory planner: the limits a GPU job plans against, and the one way a job cuts
+//! an axis into pieces that each fit them.
+//!
+//! # Limits
+//! The planner's limits are the adapter's own (`adapter.limits()`), lowered by two
+//! environment variables so that a small machine (lavapipe, 128 MiB per binding)
+//! exercises every split a large volume would need on a real GPU:
+//!
+//! | variable | lowers | value |
+//! |---|---|---|
+//! | `VOXLAB_GPU_MAX_BINDING` | `max_storage_buffer_binding_size` | bytes, or with a `KiB`/`MiB`/`GiB` suffix |
+//! | `VOXLAB_GPU_MAX_TEXTURE_3D` | `max_texture_dimension_3d` | texels per axis |
+//!
+//! They only ever lower a limit (a value above the adapter's is the adapter's), and they
+//! are read once, when the process opens its device ([`GpuContext::new`]); the device
+//! itself is opened with the adapter's full limits. A value that is not a positive
+//! number is refused with an error that names the variable.
+//!
+//! # Pieces
+//! [`Pieces::plan`] cuts `total` units (slices of a slab, views of a batch) into
+//! consecutive runs of at most `per_piece` units, where `per_piece` is the most whose
+//! bytes fit the limit, rounded down to a multiple of `align` where at least `align`
+//! fit (so that a split keeps the unsplit path's dispatch boundaries, and with them its
+//! rounding). Every piece but the last has `per_piece` units.
+//!
+//! [`GpuContext::new`]: super::GpuContext::new
+
+use crate::error::{Error, Result};
+use std::ops::Range;
+
+/// The environment variable that lowers the planner's storage-binding limit (bytes).
+pub const MAX_BINDING_ENV: &str = "VOXLAB_GPU_MAX_BINDING";
+/// The environment variable that lowers the planner's 3-D texture limit (texels/axis).
+pub const MAX_TEXTURE_3D_ENV: &str = "VOXLAB_GPU_MAX_TEXTURE_3D";
+
+/// Parses a byte count: digits, optionally followed by `K`/`KiB`, `M`/`MiB`, `G`/`GiB`
+/// (powers of 1024), case-insensitive. `None` for anything else or for zero.
+pub fn parse_bytes(text: &str) -> Option<u64> {
+    let t = text.trim();
+    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
+    let (digits, suffix) = t.split_at(split);
+    let n: u64 = digits.parse().ok()?;
+    let shift = match suffix.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 0,
+        "k" | "kib" => 10,
+        "m" | "mib" => 20,
+        "g" | "gib" => 30,
+        _ => return None,
+    };
+    n.checked_mul(1u64 << shift).filter(|&v| v > 0)
+}
+
+/// The adapter's limits lowered by [`MAX_BINDING_ENV`] and [`MAX_TEXTURE_3D_ENV`] as
+/// `var` returns them (`std::env::var(..).ok()` in a process), and a line for each
+/// limit it lowered (for `voxlab devices` and the jobs' plans).
+///
+/// # Errors
+/// [`Error::Invalid`] naming the variable when its value is not a positive number.
+pub fn lowered_limits(
+    adapter: &wgpu::Limits,
+    var: impl Fn(&str) -> Option<String>,
+) -> Result<(wgpu::Limits, Vec<String>)> {
+    let mut limits = adapter.clone();
+    let mut lowered = Vec::new();
+    if let Some(text) = var(MAX_BINDING_ENV).filter(|s| !s.trim().is_empty()) {
+        let bytes = parse_bytes(&text).ok_or_else(|| {
+            Error::invalid(
+                MAX_BINDING_ENV,
+                format!("'{text}' is not a positive byte count (for example 8MiB or 8388608)"),
+            )
+        })?;
+        // Bindings are sized in whole f32/u32 words.
+        let bytes = (bytes & !3).max(4);
+        if bytes < limits.max_storage_buffer_binding_size {
+            limits.max_storage_buffer_binding_size = bytes;
+            lowered.push(format!(
+                "storage binding lowered to {bytes} bytes by {MAX_BINDING_ENV} \
+                 (the adapter's: {})",
+                adapter.max_storage_buffer_binding_size
+            ));
+        }
+    }
+    if let Some(text) = var(MAX_TEXTURE_3D_ENV).filter(|s| !s.trim().is_empty()) {
+        let texels = text
+            .trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| {
+                Error::invalid(
+                    MAX_TEXTURE_3D_ENV,
+                    format!("'{text}' is not a positive number of texels per axis"),
+                )
+            })?;
+        if texels < limits.max_texture_dimension_3d {
+            limits.max_texture_dimension_3d = texels;
+            lowered.push(format!(
+                "3-D texture lowered to {texels} texels per axis by {MAX_TEXTURE_3D_ENV} \
+                 (the adapter's: {})",
+                adapter.max_texture_dimension_3d
+            ));
+        }
+    }
+    Ok((limits, lowered))
+}
+
+/// The planner's per-buffer limit: one storage binding, and one buffer.
+pub fn binding_limit(limits: &wgpu::Limits) -> u64 {
+    limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+}
+
+/// An axis of `total` units cut into consecutive pieces of at most `per_piece` units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pieces {
+    pub total: usize,
+    pub per_piece: usize,
+}
+
+impl Pieces {
+    /// The most units of `unit_bytes` bytes each that fit `limit` bytes (and at most
+    /// `max_units`, for 32-bit indices), rounded down to a multiple of `align` where at
+    /// least `align` fit; at most `total`.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] naming `what` when one unit alone exceeds the limit.
+    pub fn plan(
+        what: &str,
+        unit: &str,
+        total: usize,
+        unit_bytes: u64,
+        limit: u64,
+        align: usize,
+    ) -> Result<Pieces> {
+        let fit = limit.checked_div(unit_bytes).unwrap_or(u64::MAX);
+        let fit = usize::try_from(fit).unwrap_or(usize::MAX);
+        if fit == 0 {
+            return Err(Error::too_large(
+                what,
+                format!(
+                    "one {unit} ({unit_bytes} bytes) exceeds the storage-binding limit of \
+                     {limit} bytes, so no split can fit it"
+                ),
+            ));
+        }
+        let align = align.max(1);
+        let per = if fit >= align { fit - fit % align } else { fit };
+        Ok(Pieces {
+            total,
+            per_piece: per.min(total).max(1),
+        })
+    }
+
+    /// The number of pieces (1 for an empty axis).
+    pub fn count(&self) -> usize {
+        self.total.div_ceil(self.per_piece).max(1)
+    }
+
+    /// Whether the axis is cut at all.
+    pub fn is_split(&self) -> bool {
+        self.count() > 1
+    }
+
+    /// The pieces, in order.
+    pub fn ranges(&self) -> impl Iterator<Item = Range<usize>> + '_ {
+        (0..self.total)
+            .step_by(self.per_piece)
+            .map(|s| s..(s + self.per_piece).min(self.total))
+    }
+}
+
+/// `n` with its unit, plural when `n != 1`: "1 slab", "4 slabs".
+pub fn count_of(n: usize, unit: &str) -> String {
+    if n == 1 {
+        format!("1 {unit}")
+    } else {
+        format!("{n} {unit}s")
+    }
+}
+
+/// Bytes for people: "512 B", "3.0 KiB", "128.0 MiB", "2.50 GiB".
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    if bytes < 1 << 10 {
+        format!("{bytes} B")
+    } else if bytes < 1 << 20 {
+        format!("{:.1} KiB", b / 1024.0)
+    } else if bytes < 1 << 30 {
+        format!("{:.1} MiB", b / (1 << 20) as f64)
+    } else {
+        format!("{:.2} GiB", b / (1u64 << 30) as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn byte_counts_parse_with_binary_suffixes_and_refuse_the_rest() {
+        assert_eq!(parse_bytes("4096"), Some(4096));
+        assert_eq!(parse_bytes("8MiB"), Some(8 << 20));
+        assert_eq!(parse_bytes(" 2 k "), Some(2048));
+        assert_eq!(parse_bytes("1GiB"), Some(1 << 30));
+        for bad in ["", "0", "-1", "1.5M", "12 parsecs", "99999999999999999999"] {
+            assert_eq!(parse_bytes(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn the_variables_only_lower_the_limits_and_name_themselves_when_wrong() {
+        let adapter = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 27,
+            max_texture_dimension_3d: 2048,
+            ..wgpu::Limits::default()
+        };
+        let env = |b: &'static str, t: &'static str| {
+            move |k: &str| match k {
+                MAX_BINDING_ENV => Some(b.to_string()),
+                MAX_TEXTURE_3D_ENV => Some(t.to_string()),
+                _ => None,
+            }
+        };
+        let (l, notes) = lowered_limits(&adapter, env("1MiB", "64")).unwrap();
+        assert_eq!(l.max_storage_buffer_binding_size, 1 << 20);
+        assert_eq!(l.max_texture_dimension_3d, 64);
+        assert_eq!(notes.len(), 2);
+        let (l, notes) = lowered_limits(&adapter, env("1GiB", "4096")).unwrap();
+        assert_eq!(l.max_storage_buffer_binding_size, 1 << 27);
+        assert_eq!(l.max_texture_dimension_3d, 2048);
+        assert!(notes.is_empty());
+        // Rounded down to whole words.
+        let (l, _) = lowered_limits(&adapter, env("1023", "")).unwrap();
+        assert_eq!(l.max_storage_buffer_binding_size, 1020);
+        let e = lowered_limits(&adapter, env("lots", "")).unwrap_err();
+        assert!(e.to_string().contains(MAX_BINDING_ENV), "{e}");
+        let e = lowered_limits(&adapter, env("", "0")).unwrap_err();
+        assert!(e.to_string().contains(MAX_TEXTURE_3D_ENV), "{e}");
+    }
+
+    #[test]
+    fn pieces_cover_the_axis_in_order_and_keep_the_alignment() {
+        let p = Pieces::plan("x", "view", 100, 10, 350, 32).unwrap();
+        // 35 fit, rounded down to 32.
+        assert_eq!(p.per_piece, 32);
+        let r: Vec<_> = p.ranges().collect();
+        assert_eq!(r, vec![0..32, 32..64, 64..96, 96..100]);
+        assert_eq!(p.count(), 4);
+        // Fewer than the alignment fit: as many as fit.
+        let p = Pieces::plan("x", "view", 100, 10, 250, 32).unwrap();
+        assert_eq!(p.per_piece, 25);
+        // Everything fits: one piece.
+        let p = Pieces::plan("x", "view", 7, 10, 1 << 20, 32).unwrap();
+        assert_eq!((p.count(), p.is_split()), (1, false));
+        let e = Pieces::plan("GPU volume", "slice", 7, 100, 99, 1).unwrap_err();
+        assert!(e.to_string().contains("GPU volume"), "{e}");
+    }
+}
