@@ -520,7 +520,11 @@ fn a_split_gpu_fdk_equals_the_unsplit_one_and_says_so() {
         "{}",
         stderr(&o)
     );
-    assert!(stderr(&o).contains("ramp filter in 8 chunks of 8 views"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("ramp filter in 8 chunks of 8 views"),
+        "{}",
+        stderr(&o)
+    );
     // Bit for bit: the same per-voxel sums in the same order.
     assert_eq!(
         std::fs::read(&whole).unwrap(),

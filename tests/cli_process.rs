@@ -190,3 +190,51 @@ fn process_on_the_gpu_matches_the_oracle() {
         }
     }
 }
+
+#[test]
+fn a_split_gpu_gaussian_says_so_and_writes_the_unsplit_volume() {
+    if common::gpu("a_split_gpu_gaussian_says_so_and_writes_the_unsplit_volume").is_none() {
+        return;
+    }
+    let dir = scratch("split");
+    let input = voxlab::phantom::Phantom::shepp_logan()
+        .sample([16, 16, 16])
+        .unwrap();
+    let src = dir.join("in.nrrd");
+    voxlab::io::write_volume(&src, &input.into()).unwrap();
+    let run = |out: &std::path::Path, binding: Option<&str>| {
+        let args = [
+            "process",
+            s(&src),
+            "--op",
+            "gaussian",
+            "--sigma",
+            "1",
+            "--backend",
+            "gpu",
+            "--out",
+            s(out),
+        ];
+        let mut c = common::voxlab_command(&args);
+        match binding {
+            // 16 × 16 slices of 1,024 bytes: 10 fit, 4 ghosts on either side.
+            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
+            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
+        };
+        c.output().unwrap()
+    };
+    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
+    let o = run(&whole, None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&split, Some("10240"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("processing in 8 slabs of 2 slices (4 ghost slices on either side)"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&split).unwrap()
+    );
+}

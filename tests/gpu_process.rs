@@ -179,3 +179,74 @@ fn gpu_refusals_are_clear_errors() {
     };
     assert_eq!(invalid(gp::resample(ctx, &v, &empty)), "resampling box");
 }
+
+#[test]
+fn gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit() {
+    use voxlab::gpu::plan::Pieces;
+    let Some(ctx) = common::gpu("gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit")
+    else {
+        return;
+    };
+    let v = input();
+    let dims = v.dims();
+    for (name, case) in cases(&v) {
+        let plan = match &case {
+            Case::Resample(_) => continue,
+            Case::Gaussian(s) => gp::ProcessPlan::gaussian(&ctx.limits, dims, *s),
+            Case::Median(k) => gp::ProcessPlan::median(&ctx.limits, dims, *k),
+            Case::Gradient => gp::ProcessPlan::gradient_magnitude(&ctx.limits, dims),
+        }
+        .unwrap();
+        assert!(!plan.is_split(), "{name}");
+        let (_, whole) = run_case(ctx, &v, &case);
+        // Slabs of 1, 3 and 5 slices (16 = 3·5 + 1: a short last slab).
+        for per_piece in [1, 3, 5] {
+            let plan = gp::ProcessPlan {
+                slabs: Pieces {
+                    total: dims[2],
+                    per_piece,
+                },
+                ..plan
+            };
+            let split = match &case {
+                Case::Gaussian(s) => gp::gaussian_planned(ctx, &v, *s, &plan),
+                Case::Median(k) => gp::median_planned(ctx, &v, *k, &plan),
+                Case::Gradient => gp::gradient_magnitude_planned(ctx, &v, &plan),
+                Case::Resample(_) => unreachable!(),
+            }
+            .unwrap();
+            let first = split
+                .grid
+                .data
+                .iter()
+                .zip(&whole.grid.data)
+                .position(|(a, b)| a != b);
+            assert_eq!(first, None, "{name}, {}", plan.describe());
+            assert_eq!(split.affine, whole.affine);
+        }
+    }
+}
+
+#[test]
+fn a_processing_plan_keeps_the_ghost_slices_within_one_binding() {
+    let limits = |bytes: u64| wgpu::Limits {
+        max_storage_buffer_binding_size: bytes,
+        ..wgpu::Limits::default()
+    };
+    // 20 × 18 slices of 1,440 bytes; 14,400 bytes hold 10 slices.
+    let p = gp::ProcessPlan::gaussian(&limits(14_400), [20, 18, 16], [1.0, 1.0, 1.0]).unwrap();
+    // σ = 1: 4 ghost slices on either side leave 2 output slices per slab.
+    assert_eq!((p.ghost, p.slabs.per_piece, p.slabs.count()), (4, 2, 8));
+    assert_eq!(
+        p.describe(),
+        "processing in 8 slabs of 2 slices (4 ghost slices on either side)"
+    );
+    let p = gp::ProcessPlan::gradient_magnitude(&limits(14_400), [20, 18, 16]).unwrap();
+    assert_eq!((p.slabs.per_piece, p.slabs.count()), (8, 2));
+    // σ = 1.4 along z reaches 6 slices: 13 slices exceed 10.
+    let e = gp::ProcessPlan::gaussian(&limits(14_400), [20, 18, 16], [1.0, 1.0, 1.4]).unwrap_err();
+    assert!(e.to_string().contains("12 ghost slices"), "{e}");
+    // Everything fits: one slab, whatever the reach.
+    let p = gp::ProcessPlan::median(&limits(1 << 20), [20, 18, 16], 5).unwrap();
+    assert!(!p.is_split());
+}

@@ -21,10 +21,15 @@
 //! - median: windows up to `k = 5` (125 values per voxel, held in registers);
 //! - gradient magnitude: the clamped central differences and `L⁻ᵀ`.
 //!
-//! Volumes are limited by the adapter's storage-binding size
-//! (`max_storage_buffer_binding_size`, 128 MiB = 32 Mi voxels on lavapipe).
+//! Gaussian smoothing, the median and the gradient magnitude split a volume past one
+//! storage binding of the planner's limits ([`crate::gpu::plan`]; 128 MiB = 32 Mi
+//! voxels on lavapipe) into z-slabs ([`ProcessPlan`]), each read with the filter's
+//! radius of ghost slices on either side, so that every output voxel sees the very
+//! values it sees unsplit: a split result equals the unsplit one bit for bit.
+//! Resampling is not split yet: its output must fit one binding.
 
 use super::context::GpuContext;
+use super::plan::{binding_limit, count_of, Pieces};
 use crate::cpu::filter::prepare;
 use crate::cpu::grid::Grid;
 use crate::cpu::process::{
@@ -279,7 +284,7 @@ pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Res
 /// # Errors
 /// As the CPU version; also [`Error::TooLarge`] past the storage-binding limit,
 /// [`Error::Gpu`] on device failure.
-pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
+fn gaussian_whole(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
     check_sigma(sigma)?;
     let dims = vol.dims();
     let n = vol.len();
@@ -307,7 +312,7 @@ pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<
 /// # Errors
 /// [`Error::Invalid`] for an even `k` or `k` > 5; [`Error::TooLarge`] past the
 /// storage-binding limit; [`Error::Gpu`] on device failure.
-pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
+fn median_whole(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
     check_median_size(k, MAX_MEDIAN_SIZE_GPU).map_err(|_| {
         Error::invalid(
             "median window size",
@@ -336,7 +341,7 @@ pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32
 ///
 /// # Errors
 /// [`Error::TooLarge`] past the storage-binding limit; [`Error::Gpu`] on device failure.
-pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
+fn gradient_magnitude_whole(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
     let dims = vol.dims();
     let n = vol.len();
     let src = upload(ctx, "volume", vol.data())?;
@@ -352,4 +357,203 @@ pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f
     };
     Op::new(ctx, "process_gradient", "gradient_magnitude")?.run(ctx, p, &src, &dst, None, 7)?;
     Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
+}
+
+/// How a neighbourhood operation (Gaussian, median, gradient magnitude) is cut to fit
+/// the planner's limits: output z-slabs of `slabs.per_piece` slices, each computed from
+/// an input slab with `ghost` more slices on either side (fewer at the volume's ends).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProcessPlan {
+    /// Output slices per slab.
+    pub slabs: Pieces,
+    /// The slices read past a slab on either side: the operation's reach along z.
+    pub ghost: usize,
+}
+
+impl ProcessPlan {
+    /// The plan for a volume of `dims` whose operation reaches `ghost` slices along z.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] when one binding cannot hold one output slice and its
+    /// `2·ghost` ghost slices.
+    pub fn new(limits: &wgpu::Limits, dims: [usize; 3], ghost: usize) -> Result<Self> {
+        let [nx, ny, nz] = dims;
+        let limit = binding_limit(limits);
+        let slice_bytes = (nx * ny) as u64 * 4;
+        let fit = Pieces::plan(
+            "GPU processing volume",
+            "slice of the volume",
+            nz,
+            slice_bytes,
+            limit,
+            1,
+        )?
+        .per_piece;
+        let per = if fit >= nz {
+            nz
+        } else if fit > 2 * ghost {
+            fit - 2 * ghost
+        } else {
+            return Err(Error::too_large(
+                "GPU processing volume",
+                format!(
+                    "a slab needs one slice and {} ghost slices of {slice_bytes} bytes, more \
+                     than the storage-binding limit of {limit} bytes: use --backend cpu",
+                    2 * ghost
+                ),
+            ));
+        };
+        Ok(ProcessPlan {
+            slabs: Pieces {
+                total: nz,
+                per_piece: per.max(1),
+            },
+            ghost,
+        })
+    }
+
+    /// The plan of [`gaussian`]: the z radius of the kernel.
+    ///
+    /// # Errors
+    /// As [`ProcessPlan::new`].
+    pub fn gaussian(limits: &wgpu::Limits, dims: [usize; 3], sigma: [f64; 3]) -> Result<Self> {
+        Self::new(limits, dims, crate::cpu::process::gaussian_radius(sigma[2]))
+    }
+
+    /// The plan of [`median`]: half the window.
+    ///
+    /// # Errors
+    /// As [`ProcessPlan::new`].
+    pub fn median(limits: &wgpu::Limits, dims: [usize; 3], k: usize) -> Result<Self> {
+        Self::new(limits, dims, k / 2)
+    }
+
+    /// The plan of [`gradient_magnitude`]: one neighbour.
+    ///
+    /// # Errors
+    /// As [`ProcessPlan::new`].
+    pub fn gradient_magnitude(limits: &wgpu::Limits, dims: [usize; 3]) -> Result<Self> {
+        Self::new(limits, dims, 1)
+    }
+
+    /// Whether the volume is cut at all.
+    pub fn is_split(&self) -> bool {
+        self.slabs.is_split()
+    }
+
+    /// One line for the user: "processing in 4 slabs of 16 slices (3 ghost slices on
+    /// either side)".
+    pub fn describe(&self) -> String {
+        format!(
+            "processing in {} of {} ({} on either side)",
+            count_of(self.slabs.count(), "slab"),
+            count_of(self.slabs.per_piece, "slice"),
+            count_of(self.ghost, "ghost slice")
+        )
+    }
+
+    /// Runs `op` on each input slab of `vol` and gathers the output slabs.
+    fn run(
+        &self,
+        vol: &Volume<f32>,
+        op: impl Fn(&Volume<f32>) -> Result<Field<f32>>,
+    ) -> Result<Field<f32>> {
+        let [nx, ny, nz] = vol.dims();
+        if self.slabs.total != nz {
+            return Err(Error::invalid(
+                "processing plan",
+                format!("made for {} slices, not {nz}", self.slabs.total),
+            ));
+        }
+        if !self.is_split() {
+            return op(vol);
+        }
+        let slice = nx * ny;
+        let mut data = vec![0f32; vol.len()];
+        for slab in self.slabs.ranges() {
+            let lo = slab.start.saturating_sub(self.ghost);
+            let hi = (slab.end + self.ghost).min(nz);
+            let part = Volume::with_affine(
+                [nx, ny, hi - lo],
+                vol.affine(),
+                vol.data()[lo * slice..hi * slice].to_vec(),
+            )?;
+            let out = op(&part)?;
+            let from = (slab.start - lo) * slice;
+            data[slab.start * slice..slab.end * slice]
+                .copy_from_slice(&out.grid.data[from..from + slab.len() * slice]);
+        }
+        Ok(field(vol.dims(), data, vol.affine()))
+    }
+}
+
+/// [`crate::cpu::process::gaussian`] on the GPU (f32): three separable passes, in the
+/// slabs of [`ProcessPlan::gaussian`] under the context's limits.
+///
+/// # Errors
+/// As the CPU version; also [`Error::TooLarge`] as [`ProcessPlan::new`],
+/// [`Error::Gpu`] on device failure.
+pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
+    check_sigma(sigma)?;
+    let plan = ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
+    gaussian_planned(ctx, vol, sigma, &plan)
+}
+
+/// [`gaussian`] in the slabs of `plan`.
+///
+/// # Errors
+/// As [`gaussian`].
+pub fn gaussian_planned(
+    ctx: &GpuContext,
+    vol: &Volume<f32>,
+    sigma: [f64; 3],
+    plan: &ProcessPlan,
+) -> Result<Field<f32>> {
+    plan.run(vol, |v| gaussian_whole(ctx, v, sigma))
+}
+
+/// [`crate::cpu::process::median`] on the GPU (f32), windows up to
+/// [`MAX_MEDIAN_SIZE_GPU`], in the slabs of [`ProcessPlan::median`].
+///
+/// # Errors
+/// [`Error::Invalid`] for an even `k` or `k` > 5; [`Error::TooLarge`] as
+/// [`ProcessPlan::new`]; [`Error::Gpu`] on device failure.
+pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
+    let plan = ProcessPlan::median(&ctx.limits, vol.dims(), k)?;
+    median_planned(ctx, vol, k, &plan)
+}
+
+/// [`median`] in the slabs of `plan`.
+///
+/// # Errors
+/// As [`median`].
+pub fn median_planned(
+    ctx: &GpuContext,
+    vol: &Volume<f32>,
+    k: usize,
+    plan: &ProcessPlan,
+) -> Result<Field<f32>> {
+    plan.run(vol, |v| median_whole(ctx, v, k))
+}
+
+/// [`crate::cpu::process::gradient_magnitude`] on the GPU (f32), in the slabs of
+/// [`ProcessPlan::gradient_magnitude`].
+///
+/// # Errors
+/// [`Error::TooLarge`] as [`ProcessPlan::new`]; [`Error::Gpu`] on device failure.
+pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
+    let plan = ProcessPlan::gradient_magnitude(&ctx.limits, vol.dims())?;
+    gradient_magnitude_planned(ctx, vol, &plan)
+}
+
+/// [`gradient_magnitude`] in the slabs of `plan`.
+///
+/// # Errors
+/// As [`gradient_magnitude`].
+pub fn gradient_magnitude_planned(
+    ctx: &GpuContext,
+    vol: &Volume<f32>,
+    plan: &ProcessPlan,
+) -> Result<Field<f32>> {
+    plan.run(vol, |v| gradient_magnitude_whole(ctx, v))
 }

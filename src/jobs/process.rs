@@ -199,9 +199,22 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
                 use crate::gpu::process as gp;
                 match a.op {
                     Op::Resample => gp::resample(ctx, &vol, &spec.expect("spec")),
-                    Op::Gaussian => gp::gaussian(ctx, &vol, sigma.expect("sigma")),
-                    Op::Median => gp::median(ctx, &vol, a.size),
-                    Op::GradientMagnitude => gp::gradient_magnitude(ctx, &vol),
+                    Op::Gaussian => {
+                        let sigma = sigma.expect("sigma");
+                        let plan = gp::ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
+                        note_split(progress, &plan);
+                        gp::gaussian_planned(ctx, &vol, sigma, &plan)
+                    }
+                    Op::Median => {
+                        let plan = gp::ProcessPlan::median(&ctx.limits, vol.dims(), a.size)?;
+                        note_split(progress, &plan);
+                        gp::median_planned(ctx, &vol, a.size, &plan)
+                    }
+                    Op::GradientMagnitude => {
+                        let plan = gp::ProcessPlan::gradient_magnitude(&ctx.limits, vol.dims())?;
+                        note_split(progress, &plan);
+                        gp::gradient_magnitude_planned(ctx, &vol, &plan)
+                    }
                 }
             }
             (Backend::CpuF32, _) => match a.op {
@@ -226,4 +239,11 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
         seconds: t.elapsed().as_secs_f64(),
         engine,
     })
+}
+
+/// Tells the user how a split GPU operation is cut.
+fn note_split(progress: &dyn Progress, plan: &crate::gpu::process::ProcessPlan) {
+    if plan.is_split() {
+        progress.note(&plan.describe());
+    }
 }
