@@ -180,3 +180,47 @@ fn fft_check_library_parses_shapes_and_sets_tolerances() {
     assert!(r.passed && r.adapter.is_none());
     assert!(run(&[vec![3]], backends, 0, None, &mut |_| {}).is_err());
 }
+
+#[test]
+fn a_gpu_fft_past_a_lowered_binding_is_split_and_gives_the_same_numbers() {
+    if common::gpu("a_gpu_fft_past_a_lowered_binding_is_split_and_gives_the_same_numbers").is_none()
+    {
+        return;
+    }
+    let d = scratch("cli-fft-split");
+    let run = |json: &std::path::Path, binding: Option<&str>| {
+        let args = [
+            "fft",
+            "64x32",
+            "32x16x8",
+            "--backend",
+            "gpu",
+            "--runs",
+            "1",
+            "--json",
+            s(json),
+        ];
+        let mut c = common::voxlab_command(&args);
+        match binding {
+            // 64 × 32 and 32 × 16 × 8 complex values are 16 and 32 KiB.
+            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
+            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
+        };
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+        assert_eq!(r["passed"], true);
+        r["cases"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| (c["backend"].to_string(), c["rel_l2"].as_f64().unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let whole = run(&d.join("whole.json"), None);
+    let split = run(&d.join("split.json"), Some("4KiB"));
+    assert_eq!(whole.len(), 4, "{whole:?}");
+    // The same transforms bit for bit, so the same errors against the exact DFT.
+    assert_eq!(whole, split);
+}

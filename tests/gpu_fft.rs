@@ -607,3 +607,62 @@ large_cases! {
     large_2d_1024x1024: &[1024, 1024];
     large_3d_256x256x256: &[256, 256, 256];
 }
+
+/// Shapes and split plans (slabs along axis 1 for axis 0's lines, slabs along axis 0
+/// for the other axes), remainders included.
+const SPLITS: [(&[usize], usize, usize); 4] = [
+    (&[64, 32], 5, 7),
+    (&[16, 8, 32], 3, 5),
+    (&[8, 64, 4], 64, 1),
+    (&[32, 16, 16], 1, 32),
+];
+
+#[test]
+fn an_fft_in_slabs_equals_the_unsplit_one_bit_for_bit() {
+    use voxlab::gpu::plan::Pieces;
+    let Some(ctx) = common::gpu("an_fft_in_slabs_equals_the_unsplit_one_bit_for_bit") else {
+        return;
+    };
+    let mut rng = common::Rng(5);
+    for (shape, band, slab) in SPLITS {
+        let x = to_f32(&random_complex(&mut rng, shape.iter().product()));
+        let plan = fft::FftSplitPlan {
+            axis0_lines: Pieces {
+                total: shape[1],
+                per_piece: band,
+            },
+            other_axes: Pieces {
+                total: shape[0],
+                per_piece: slab,
+            },
+        };
+        for variant in [GpuFftVariant::Stockham, GpuFftVariant::SplitStream] {
+            for (dir, norm) in [
+                (Direction::Forward, Normalization::Unnormalized),
+                (Direction::Inverse, Normalization::Unnormalized),
+                (Direction::Forward, Normalization::Unitary),
+            ] {
+                let whole = fft::fft_nd(ctx, &x, shape, dir, norm, variant).unwrap();
+                let split = fft::fft_nd_planned(ctx, &x, shape, dir, norm, variant, &plan)
+                    .unwrap()
+                    .data;
+                let first = split.iter().zip(&whole).position(|(a, b)| a != b);
+                assert_eq!(
+                    first,
+                    None,
+                    "{shape:?} {variant:?} {dir:?} {norm:?}: {}",
+                    plan.describe()
+                );
+            }
+        }
+    }
+    // The plan under a small binding: [64, 32] complex values, 8 bytes each.
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 4096,
+        ..wgpu::Limits::default()
+    };
+    let p = fft::FftSplitPlan::new(&limits, &[64, 32]).unwrap();
+    // 8 columns of 64 values (512 bytes each) and 16 rows of 32 values (256 bytes).
+    assert_eq!((p.axis0_lines.per_piece, p.axis0_lines.count()), (8, 4));
+    assert_eq!((p.other_axes.per_piece, p.other_axes.count()), (16, 4));
+}

@@ -69,6 +69,7 @@
 )]
 
 use super::context::GpuContext;
+use super::plan::Pieces;
 use crate::cpu::dft::{twiddle, Direction, Normalization};
 use crate::error::{Error, Result};
 use rustfft::num_complex::Complex;
@@ -532,7 +533,176 @@ pub fn fft_nd_timed(
     variant: GpuFftVariant,
 ) -> Result<GpuFftOutput> {
     let axes: Vec<usize> = (0..shape.len()).collect();
-    transform(ctx, Input::Host(data), shape, &axes, dir, norm, variant)
+    if !too_large_for_one_binding(ctx, data.len()) {
+        return transform(ctx, Input::Host(data), shape, &axes, dir, norm, variant);
+    }
+    let plan = FftSplitPlan::new(&ctx.limits, shape)?;
+    fft_nd_planned(ctx, data, shape, dir, norm, variant, &plan)
+}
+
+/// Whether `len` complex values exceed one binding of the planner's limits (or the
+/// shader's 32-bit indices).
+fn too_large_for_one_binding(ctx: &GpuContext, len: usize) -> bool {
+    (len as u64).saturating_mul(8) > super::plan::binding_limit(&ctx.limits)
+        || len > u32::MAX as usize / 4
+}
+
+/// How [`fft_nd_timed`] transforms an array past one binding of the planner's limits
+/// ([`crate::gpu::plan`]), in two phases that keep the unsplit order of the axes:
+/// first the lines along axis 0, in slabs of the array cut along axis 1 (gathered on
+/// the host); then every other axis, in slabs cut along axis 0 (contiguous). Both
+/// phases run unscaled and the host applies the transform's factor once, as the
+/// unsplit path's last pass does, so each line sees the same operations: a split
+/// transform equals the unsplit one bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FftSplitPlan {
+    /// Phase 1: slices along axis 1 per slab.
+    pub axis0_lines: Pieces,
+    /// Phase 2: slices along axis 0 per slab.
+    pub other_axes: Pieces,
+}
+
+impl FftSplitPlan {
+    /// The plan for `shape` under `limits`.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] for a 1-D array past one binding, or when one slab's slice
+    /// alone exceeds a binding.
+    pub fn new(limits: &wgpu::Limits, shape: &[usize]) -> Result<Self> {
+        // The shaders index values in 32 bits (at most u32::MAX / 4 values per buffer).
+        let limit = super::plan::binding_limit(limits).min(u32::MAX as u64 / 4 * 8);
+        if shape.len() < 2 {
+            return Err(Error::too_large(
+                "GPU FFT data",
+                format!(
+                    "a 1-D transform of {} values cannot be split across storage bindings \
+                     of {limit} bytes (max_storage_buffer_binding_size): use cpu::fft::fft_nd",
+                    shape.first().copied().unwrap_or(0)
+                ),
+            ));
+        }
+        let inner: usize = shape[2..].iter().product();
+        let axis0_lines = Pieces::plan(
+            "GPU FFT data",
+            "column of lines along axis 0",
+            shape[1],
+            (shape[0] * inner) as u64 * 8,
+            limit,
+            1,
+        )?;
+        let other_axes = Pieces::plan(
+            "GPU FFT data",
+            "slice across axis 0",
+            shape[0],
+            (shape[1] * inner) as u64 * 8,
+            limit,
+            1,
+        )?;
+        Ok(FftSplitPlan {
+            axis0_lines,
+            other_axes,
+        })
+    }
+
+    /// One line for the user: "FFT in 4 slabs along axis 1, then 4 along axis 0".
+    pub fn describe(&self) -> String {
+        format!(
+            "FFT in {} along axis 1 (axis 0's lines), then {} along axis 0 (the other axes)",
+            super::plan::count_of(self.axis0_lines.count(), "slab"),
+            super::plan::count_of(self.other_axes.count(), "slab"),
+        )
+    }
+}
+
+/// [`fft_nd_timed`] in the slabs of `plan` (any plan for `shape`, split or not).
+///
+/// # Errors
+/// As [`fft_nd`]; [`Error::Invalid`] for a plan made for another shape.
+pub fn fft_nd_planned(
+    ctx: &GpuContext,
+    data: &[Complex<f32>],
+    shape: &[usize],
+    dir: Direction,
+    norm: Normalization,
+    variant: GpuFftVariant,
+    plan: &FftSplitPlan,
+) -> Result<GpuFftOutput> {
+    let t_start = Instant::now();
+    if shape.len() < 2
+        || plan.axis0_lines.total != shape[1]
+        || plan.other_axes.total != shape[0]
+        || shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n)) != Some(data.len())
+    {
+        return Err(Error::invalid(
+            "fft split plan",
+            format!("does not fit shape {shape:?} with {} values", data.len()),
+        ));
+    }
+    let (n0, n1) = (shape[0], shape[1]);
+    let inner: usize = shape[2..].iter().product();
+    let others: Vec<usize> = (1..shape.len()).collect();
+    let mut timings = FftTimings {
+        kernel_from_timestamps: true,
+        ..Default::default()
+    };
+    let mut add = |t: &FftTimings| {
+        timings.setup += t.setup;
+        timings.upload += t.upload;
+        timings.kernel += t.kernel;
+        timings.readback += t.readback;
+        timings.kernel_from_timestamps &= t.kernel_from_timestamps;
+    };
+    let mut work = data.to_vec();
+    // Phase 1: axis 0's lines, a band of axis-1 indices at a time.
+    let row = n1 * inner;
+    for band in plan.axis0_lines.ranges() {
+        let w = band.len() * inner;
+        let mut sub = Vec::with_capacity(n0 * w);
+        for i in 0..n0 {
+            sub.extend_from_slice(&work[i * row + band.start * inner..][..w]);
+        }
+        let mut sub_shape = shape.to_vec();
+        sub_shape[1] = band.len();
+        let out = transform(
+            ctx,
+            Input::Host(&sub),
+            &sub_shape,
+            &[0],
+            dir,
+            Normalization::None,
+            variant,
+        )?;
+        add(&out.timings);
+        for i in 0..n0 {
+            work[i * row + band.start * inner..][..w].copy_from_slice(&out.data[i * w..][..w]);
+        }
+    }
+    // Phase 2: the other axes, a contiguous slab of axis-0 indices at a time.
+    for slab in plan.other_axes.ranges() {
+        let part = &mut work[slab.start * row..slab.end * row];
+        let mut sub_shape = shape.to_vec();
+        sub_shape[0] = slab.len();
+        let out = transform(
+            ctx,
+            Input::Host(part),
+            &sub_shape,
+            &others,
+            dir,
+            Normalization::None,
+            variant,
+        )?;
+        add(&out.timings);
+        part.copy_from_slice(&out.data);
+    }
+    let factor = norm.apply(1.0, data.len(), dir) as f32;
+    if factor != 1.0 {
+        work.iter_mut().for_each(|v| *v *= factor);
+    }
+    timings.total = t_start.elapsed().as_secs_f64();
+    Ok(GpuFftOutput {
+        data: work,
+        timings,
+    })
 }
 
 /// [`fft_nd_timed`] of complex f32 values (`[re, im]` pairs) already on the device:
