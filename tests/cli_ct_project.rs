@@ -236,3 +236,70 @@ fn bad_arguments_are_clear_errors() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn a_split_gpu_projection_says_so_and_matches_the_unsplit_one() {
+    if common::gpu("a_split_gpu_projection_says_so_and_matches_the_unsplit_one").is_none() {
+        return;
+    }
+    let d = scratch("project-split");
+    let run = |out: &std::path::Path, binding: Option<&str>, dry: bool| {
+        let mut args = vec![
+            "project",
+            "phantom:shepp-logan:32",
+            "--geometry",
+            "cone",
+            "--angles",
+            "12",
+            "--cols",
+            "40",
+            "--rows",
+            "30",
+            "--du",
+            "8",
+            "--method",
+            "joseph",
+            "--backend",
+            "gpu",
+            "--out",
+            s(out),
+        ];
+        if dry {
+            args.push("--dry-run");
+        }
+        let mut c = common::voxlab_command(&args);
+        match binding {
+            // 32 × 32 slices of 4 KiB: 5 per slab in 20 KiB.
+            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
+            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
+        };
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        o
+    };
+    let (whole, split) = (d.join("whole.npy"), d.join("split.npy"));
+    run(&whole, None, false);
+    let o = run(&split, Some("20KiB"), false);
+    assert!(
+        stderr(&o).contains("projection in 7 slabs of 5 slices"),
+        "{}",
+        stderr(&o)
+    );
+    let (_, a, _) = read_npy_f64(&whole).unwrap();
+    let (_, b, _) = read_npy_f64(&split).unwrap();
+    let peak = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = a
+        .iter()
+        .zip(&b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    // The slabs' sums in another order (tests/gpu_ct_project.rs: within 1.7e-6).
+    assert!(peak > 1.0 && worst <= 1e-5 * peak, "{worst:e} of {peak:e}");
+    let never = d.join("never.npy");
+    let o = run(&never, Some("20KiB"), true);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("split:  projection in 7 slabs of 5 slices"),
+        "{text}"
+    );
+    assert!(!never.exists());
+}

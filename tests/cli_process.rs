@@ -238,3 +238,46 @@ fn a_split_gpu_gaussian_says_so_and_writes_the_unsplit_volume() {
         std::fs::read(&split).unwrap()
     );
 }
+
+#[test]
+fn process_dry_run_prints_the_slabs_and_writes_nothing() {
+    if common::gpu("process_dry_run_prints_the_slabs_and_writes_nothing").is_none() {
+        return;
+    }
+    let dir = scratch("dry-run");
+    let input = voxlab::phantom::Phantom::shepp_logan()
+        .sample([16, 16, 16])
+        .unwrap();
+    let src = dir.join("in.nrrd");
+    voxlab::io::write_volume(&src, &input.into()).unwrap();
+    let out = dir.join("never.nrrd");
+    let args = [
+        "process",
+        s(&src),
+        "--op",
+        "median",
+        "--size",
+        "5",
+        "--backend",
+        "gpu",
+        "--out",
+        s(&out),
+        "--dry-run",
+    ];
+    // Slices of 1 KiB: 8 fit 8 KiB, 2 ghosts on either side leave 4 per slab.
+    let o = common::voxlab_command(&args)
+        .env("VOXLAB_GPU_MAX_BINDING", "8KiB")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    for want in [
+        "dry run: process: median 5³ on gpu",
+        // 16³ f32 in and out.
+        "host:   32.0 KiB at the peak",
+        "split:  processing in 4 slabs of 4 slices (2 ghost slices on either side)",
+    ] {
+        assert!(text.contains(want), "no '{want}' in:\n{text}");
+    }
+    assert!(!out.exists());
+}

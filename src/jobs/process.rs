@@ -162,11 +162,13 @@ fn to_f32(f: Field<f64>) -> Field<f32> {
     }
 }
 
-/// Runs the operation.
-///
-/// # Errors
-/// Bad options or input; GPU errors; [`Error::Cancelled`].
-pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
+/// The input volume and the operation's parameters: σ for the Gaussian, the
+/// resampling spec, and the stage's name.
+#[allow(clippy::type_complexity)]
+fn prepare(
+    a: &ProcessRequest,
+    progress: &dyn Progress,
+) -> Result<(Volume<f32>, Option<[f64; 3]>, Option<ResampleSpec>, String)> {
     let vol = a.input.load(progress)?.to_f32();
     let sigma = match (&a.sigma, a.op) {
         (Some(s), _) => Some(three(s, "--sigma")?),
@@ -191,6 +193,94 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
         Op::Median => format!("median {}³", a.size),
         Op::GradientMagnitude => "gradient magnitude".to_string(),
     };
+    Ok((vol, sigma, spec, what))
+}
+
+/// `voxlab process --dry-run`: the memory plan of [`run`] (host bytes, device bytes
+/// against the planner's limits, the slabs the GPU would use) after reading the input
+/// and checking the options, without computing or writing anything.
+///
+/// # Errors
+/// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
+/// split.
+pub fn plan(a: &ProcessRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    use crate::gpu::process::ProcessPlan;
+    let (vol, sigma, spec, what) = prepare(a, progress)?;
+    let voxels = vol.len() as u64;
+    let out_voxels = spec.map_or(voxels, |s| s.dims.iter().product::<usize>() as u64);
+    let engine = Engine::open(a.backend)?;
+    // The request writes nothing itself: the caller adds its output.
+    let writes = Vec::new();
+    let (backend, device, split) = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            let plan = match a.op {
+                Op::Resample => None,
+                Op::Gaussian => Some(ProcessPlan::gaussian(
+                    &ctx.limits,
+                    vol.dims(),
+                    sigma.expect("sigma"),
+                )?),
+                Op::Median => Some(ProcessPlan::median(&ctx.limits, vol.dims(), a.size)?),
+                Op::GradientMagnitude => {
+                    Some(ProcessPlan::gradient_magnitude(&ctx.limits, vol.dims())?)
+                }
+            };
+            let slice = (vol.dims()[0] * vol.dims()[1]) as u64 * 4;
+            let (peak, largest, split) = match plan {
+                // Resampling: the input and the output whole.
+                None => {
+                    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+                    let largest = (voxels * 4).max(out_voxels * 4);
+                    if largest > limit {
+                        return Err(Error::too_large(
+                            "GPU resampling",
+                            format!(
+                                "{} in one buffer exceed the storage binding of {} (resampling \
+                                 is not split): use --backend cpu",
+                                crate::gpu::plan::human_bytes(largest),
+                                crate::gpu::plan::human_bytes(limit)
+                            ),
+                        ));
+                    }
+                    ((voxels + out_voxels) * 4, largest, Vec::new())
+                }
+                Some(p) => {
+                    let input = (p.slabs.per_piece + 2 * p.ghost).min(p.slabs.total) as u64 * slice;
+                    let split = if p.is_split() {
+                        vec![p.describe()]
+                    } else {
+                        Vec::new()
+                    };
+                    (2 * input, input, split)
+                }
+            };
+            (
+                format!("gpu ({})", ctx.summary.name),
+                Some(super::plan::DevicePlan::on(ctx, peak, largest)),
+                split,
+            )
+        }
+        (Backend::CpuF32, _) => ("cpu f32".to_string(), None, Vec::new()),
+        _ => ("cpu f64".to_string(), None, Vec::new()),
+    };
+    // The f32 input, the result, and (f64 backend) its f64 field.
+    let wide = if backend == "cpu f64" { 8 } else { 0 };
+    Ok(super::plan::MemoryPlan {
+        job: format!("process: {what}"),
+        backend,
+        host_bytes: voxels * 4 + out_voxels * (4 + wide),
+        device,
+        split,
+        writes,
+    })
+}
+
+/// Runs the operation.
+///
+/// # Errors
+/// Bad options or input; GPU errors; [`Error::Cancelled`].
+pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
+    let (vol, sigma, spec, what) = prepare(a, progress)?;
     let engine = Engine::open(a.backend)?;
     let t = std::time::Instant::now();
     let field = stage(progress, &what, "step", 0, || {

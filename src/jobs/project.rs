@@ -167,6 +167,83 @@ pub fn geometry(a: &ProjectRequest) -> Result<Geometry> {
     }
 }
 
+/// `voxlab project --dry-run`: the memory plan of [`run`] (host bytes, device bytes
+/// against the planner's limits, the slabs the GPU projection would use) after
+/// checking the geometry and reading the input's size, without projecting or writing.
+///
+/// # Errors
+/// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
+/// split.
+pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    let g = geometry(a)?;
+    let phantom = match a.input.source.strip_prefix("phantom:") {
+        Some(spec) if a.input.memory.is_none() => {
+            Some(crate::phantom::parse_spec(spec, a.input.load.phantom_size)?)
+        }
+        _ => None,
+    };
+    let method = a.method.unwrap_or(if phantom.is_some() {
+        Method::Analytic
+    } else {
+        Method::Joseph
+    });
+    let values = (g.n_angles() * g.rows * g.cols) as u64;
+    let plan = |backend: String, host: u64, device, split| super::plan::MemoryPlan {
+        job: format!(
+            "project {}",
+            if method == Method::Analytic {
+                "analytic"
+            } else {
+                "joseph"
+            }
+        ),
+        backend,
+        host_bytes: host,
+        device,
+        split,
+        writes: Vec::new(),
+    };
+    if method == Method::Analytic {
+        return Ok(plan("cpu f64".into(), values * 8, None, Vec::new()));
+    }
+    let dims = match &phantom {
+        Some((_, dims)) => *dims,
+        None => a.input.load(progress)?.dims(),
+    };
+    let voxels = dims.iter().product::<usize>() as u64;
+    let engine = Engine::open(a.backend)?;
+    Ok(match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            let p = crate::gpu::project::ProjectionPlan::new(&ctx.limits, &g, dims)?;
+            let slab = (p.slabs.per_piece * dims[0] * dims[1] * 4) as u64;
+            let chunk = (p.views_per_dispatch * g.rows * g.cols * 4) as u64;
+            let split = if p.is_split() {
+                vec![p.describe()]
+            } else {
+                Vec::new()
+            };
+            // The f64 grid and one f32 slab; the f32 projections and their f64 copy.
+            plan(
+                format!("gpu ({})", ctx.summary.name),
+                voxels * 8 + slab + values * 12,
+                Some(super::plan::DevicePlan::on(
+                    ctx,
+                    p.device_bytes,
+                    slab.max(chunk),
+                )),
+                split,
+            )
+        }
+        (Backend::CpuF32, _) => plan(
+            "cpu f32".into(),
+            voxels * 12 + values * 12,
+            None,
+            Vec::new(),
+        ),
+        _ => plan("cpu f64".into(), voxels * 8 + values * 8, None, Vec::new()),
+    })
+}
+
 /// Projects.
 ///
 /// # Errors

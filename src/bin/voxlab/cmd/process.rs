@@ -50,6 +50,10 @@ pub struct ProcessArgs {
     /// median: window side k (odd; at most 5 on the GPU).
     #[arg(long, default_value_t = 3)]
     pub size: usize,
+    /// Print the memory plan (host bytes, device bytes against the adapter's limits,
+    /// and the slabs the GPU would use) after reading the input, and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: ProcessArgs) -> Result<ExitCode> {
@@ -67,6 +71,13 @@ pub fn run(a: ProcessArgs) -> Result<ExitCode> {
         size: a.size,
     };
     let term = Terminal::bars();
+    if a.dry_run {
+        let mut plan = voxlab::jobs::process::plan(&req, &term)?;
+        drop(term);
+        plan.writes.push(a.out.display().to_string());
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let p = voxlab::jobs::process::run(&req, &term)?;
     drop(term);
     eprintln!("{}: {:.2} s", p.what, p.seconds);

@@ -73,6 +73,10 @@ pub struct ProjectArgs {
     /// down, angle across, as scikit-image examples show it.
     #[arg(long)]
     pub png: Option<PathBuf>,
+    /// Print the memory plan (host bytes, device bytes against the adapter's limits,
+    /// and the slabs the GPU would use) after checking the geometry, and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: ProjectArgs) -> Result<ExitCode> {
@@ -111,6 +115,15 @@ pub fn run(a: ProjectArgs) -> Result<ExitCode> {
         layout: a.layout,
     };
     let term = Terminal::bars();
+    if a.dry_run {
+        let mut plan = voxlab::jobs::project::plan(&req, &term)?;
+        drop(term);
+        plan.writes.push(a.out.display().to_string());
+        plan.writes
+            .extend(a.png.iter().map(|p| p.display().to_string()));
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let p = voxlab::jobs::project::run(&req, &term)?;
     drop(term);
     let gpath = p.write(&a.out)?;
