@@ -267,13 +267,8 @@ fn a_split_gpu_projection_says_so_and_matches_the_unsplit_one() {
         if dry {
             args.push("--dry-run");
         }
-        let mut c = common::voxlab_command(&args);
-        match binding {
-            // 32 × 32 slices of 4 KiB: 5 per slab in 20 KiB.
-            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
-            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
-        };
-        let o = c.output().unwrap();
+        // 32 × 32 slices of 4 KiB: 5 per slab in 20 KiB.
+        let o = common::voxlab_with_binding(&args, binding);
         assert!(o.status.success(), "{}", stderr(&o));
         o
     };

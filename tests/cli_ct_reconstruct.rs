@@ -493,12 +493,7 @@ fn rtk_on_the_gpu(out: &std::path::Path, binding: Option<&str>, extra: &[&str]) 
     ];
     args.extend(extra.iter().map(|a| a.to_string()));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let mut c = common::voxlab_command(&args);
-    match binding {
-        Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
-        None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
-    };
-    c.output().expect("the voxlab binary runs")
+    common::voxlab_with_binding(&args, binding)
 }
 
 use std::process::Output;
@@ -556,11 +551,12 @@ fn dry_run_prints_the_memory_plan_and_writes_nothing() {
         assert!(text.contains(want), "no '{want}' in:\n{text}");
     }
     assert!(!out.exists(), "a dry run wrote {}", out.display());
-    // Nothing fits a binding smaller than one slice: refused before any allocation.
+    // Nothing fits a binding smaller than one view's padded lines (20 rows of 128
+    // complex values, paired: 20,480 bytes): refused before any allocation.
     let o = rtk_on_the_gpu(&out, Some("8KiB"), &[]);
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("one slice of the volume (16384 bytes) exceeds"),
+        stderr(&o).contains("one view's padded lines (20480 bytes) exceed"),
         "{}",
         stderr(&o)
     );

@@ -200,13 +200,8 @@ fn a_gpu_fft_past_a_lowered_binding_is_split_and_gives_the_same_numbers() {
             "--json",
             s(json),
         ];
-        let mut c = common::voxlab_command(&args);
-        match binding {
-            // 64 × 32 and 32 × 16 × 8 complex values are 16 and 32 KiB.
-            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
-            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
-        };
-        let o = c.output().unwrap();
+        // 64 × 32 and 32 × 16 × 8 complex values are 16 and 32 KiB.
+        let o = common::voxlab_with_binding(&args, binding);
         assert!(o.status.success(), "{}", stderr(&o));
         let r: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();

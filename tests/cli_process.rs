@@ -215,13 +215,8 @@ fn a_split_gpu_gaussian_says_so_and_writes_the_unsplit_volume() {
             "--out",
             s(out),
         ];
-        let mut c = common::voxlab_command(&args);
-        match binding {
-            // 16 × 16 slices of 1,024 bytes: 10 fit, 4 ghosts on either side.
-            Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
-            None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
-        };
-        c.output().unwrap()
+        // 16 × 16 slices of 1,024 bytes: 10 fit, 4 ghosts on either side.
+        common::voxlab_with_binding(&args, binding)
     };
     let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
     let o = run(&whole, None);
@@ -265,10 +260,7 @@ fn process_dry_run_prints_the_slabs_and_writes_nothing() {
         "--dry-run",
     ];
     // Slices of 1 KiB: 8 fit 8 KiB, 2 ghosts on either side leave 4 per slab.
-    let o = common::voxlab_command(&args)
-        .env("VOXLAB_GPU_MAX_BINDING", "8KiB")
-        .output()
-        .unwrap();
+    let o = common::voxlab_with_binding(&args, Some("8KiB"));
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     for want in [

@@ -167,15 +167,12 @@ pub fn geometry(a: &ProjectRequest) -> Result<Geometry> {
     }
 }
 
-/// `voxlab project --dry-run`: the memory plan of [`run`] (host bytes, device bytes
-/// against the planner's limits, the slabs the GPU projection would use) after
-/// checking the geometry and reading the input's size, without projecting or writing.
-///
-/// # Errors
-/// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
-/// split.
-pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
-    let g = geometry(a)?;
+/// A phantom and the grid it is sampled on.
+type NamedPhantom = (crate::phantom::Phantom, [usize; 3]);
+
+/// The phantom the input names (`phantom:SPEC`, with its grid size) and the method:
+/// `analytic` for a phantom, `joseph` for a volume, unless the request says.
+fn phantom_and_method(a: &ProjectRequest) -> Result<(Option<NamedPhantom>, Method)> {
     let phantom = match a.input.source.strip_prefix("phantom:") {
         Some(spec) if a.input.memory.is_none() => {
             Some(crate::phantom::parse_spec(spec, a.input.load.phantom_size)?)
@@ -187,6 +184,19 @@ pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::
     } else {
         Method::Joseph
     });
+    Ok((phantom, method))
+}
+
+/// `voxlab project --dry-run`: the memory plan of [`run`] (host bytes, device bytes
+/// against the planner's limits, the slabs the GPU projection would use) after
+/// checking the geometry and reading the input's size, without projecting or writing.
+///
+/// # Errors
+/// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
+/// split.
+pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    let g = geometry(a)?;
+    let (phantom, method) = phantom_and_method(a)?;
     let values = (g.n_angles() * g.rows * g.cols) as u64;
     let plan = |backend: String, host: u64, device, split| super::plan::MemoryPlan {
         job: format!(
@@ -263,17 +273,7 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
             format!("a (detector, angle) sinogram has one row, not {}", g.rows),
         ));
     }
-    let phantom = match a.input.source.strip_prefix("phantom:") {
-        Some(spec) if a.input.memory.is_none() => {
-            Some(crate::phantom::parse_spec(spec, a.input.load.phantom_size)?)
-        }
-        _ => None,
-    };
-    let method = a.method.unwrap_or(if phantom.is_some() {
-        Method::Analytic
-    } else {
-        Method::Joseph
-    });
+    let (phantom, method) = phantom_and_method(a)?;
 
     let views = g.n_angles();
     let done = std::sync::atomic::AtomicUsize::new(0);

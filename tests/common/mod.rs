@@ -125,6 +125,17 @@ pub fn voxlab_command(args: &[&str]) -> Command {
     c
 }
 
+/// Runs `voxlab` with `args` (see [`voxlab_command`]) under the planner's binding limit
+/// `binding` (`VOXLAB_GPU_MAX_BINDING`; `None`: the adapter's own).
+pub fn voxlab_with_binding(args: &[&str], binding: Option<&str>) -> Output {
+    let mut c = voxlab_command(args);
+    match binding {
+        Some(b) => c.env("VOXLAB_GPU_MAX_BINDING", b),
+        None => c.env_remove("VOXLAB_GPU_MAX_BINDING"),
+    };
+    c.output().expect("the voxlab binary runs")
+}
+
 /// Runs `voxlab` with `args` (see [`voxlab_command`]).
 pub fn voxlab(args: &[&str]) -> Output {
     voxlab_command(args)
