@@ -170,6 +170,18 @@ pub fn backproject_planned(
             ),
         ));
     }
+    let limit = binding_limit(&ctx.limits);
+    let batch_bytes = (plan.batches.per_piece * g.rows * g.cols * 4) as u64;
+    let slab_bytes = (plan.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;
+    if batch_bytes.max(slab_bytes) > limit {
+        return Err(Error::too_large(
+            "backprojection plan",
+            format!(
+                "a batch of {batch_bytes} bytes or a slab of {slab_bytes} bytes exceeds the \
+                 storage-binding limit of {limit} bytes: use BackprojectionPlan::new"
+            ),
+        ));
+    }
     let dev = &ctx.device;
     let views = g.view_matrices::<f32>();
     let vbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -1,8 +1,8 @@
 //! The GPU side: wgpu on Vulkan, Metal or DX12 (never the GL backend), with WGSL
 //! compute shaders under `shaders/`.
 //!
-//! Three shared layers, then one file per family. Dependencies point one way: the
-//! families import `context`, `shaders` and `params`, and a family that builds on
+//! Four shared layers, then one file per family. Dependencies point one way: the
+//! families import `context`, `shaders`, `params` and `plan`, and a family that builds on
 //! another (the ray caster on `skip` and `clipmesh`, D²VR and the multi-volume caster
 //! on `raycast`, `adaptive` on `preintegrate`, FVR and ramp filtering on `fft`) imports
 //! it, never the other way round.
@@ -14,6 +14,10 @@
 //! - `shaders` is the one place that assembles WGSL: every `.wgsl` file registered once,
 //!   `#import NAME` resolved there, generated code passed in as named modules.
 //! - `params` holds the `#[repr(C)]` parameter blocks that several families share.
+//! - `plan` holds the limits jobs plan against (the adapter's, lowered by
+//!   `VOXLAB_GPU_MAX_BINDING` and `VOXLAB_GPU_MAX_TEXTURE_3D`) and the one way a job
+//!   cuts an axis into pieces that fit them; `context` applies the limits when it opens
+//!   the device.
 //!
 //! `probe` is the smallest end-to-end check that a device really computes: upload,
 //! dispatch, read back, compare. `fft` is the power-of-two FFT (split-stream and
@@ -73,8 +77,8 @@ mod tests {
     }
 
     /// Dependencies among the files of `gpu` point one way: no file reaches itself
-    /// through the files it uses (shared pieces live in `context`, `shaders` and
-    /// `params`, below every family).
+    /// through the files it uses (shared pieces live in `context`, `shaders`, `params`
+    /// and `plan`, below every family; `context` uses only `plan`).
     #[test]
     fn gpu_files_import_one_way() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/gpu");
@@ -118,12 +122,19 @@ mod tests {
         for f in graph.keys() {
             visit(f, &graph, &mut Vec::new(), &mut done);
         }
-        for shared in ["context", "shaders", "params"] {
+        for shared in ["plan", "shaders", "params"] {
             assert!(
                 graph[shared].is_empty(),
                 "{shared} uses {:?}",
                 graph[shared]
             );
         }
+        // The device is opened under the planner's limits, and nothing else.
+        assert_eq!(
+            graph["context"],
+            ["plan"],
+            "context uses {:?}",
+            graph["context"]
+        );
     }
 }

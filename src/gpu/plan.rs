@@ -152,9 +152,9 @@ impl Pieces {
         })
     }
 
-    /// The number of pieces (1 for an empty axis).
+    /// The number of pieces (1 for an empty axis; a `per_piece` of 0 counts as 1).
     pub fn count(&self) -> usize {
-        self.total.div_ceil(self.per_piece).max(1)
+        self.total.div_ceil(self.per_piece.max(1)).max(1)
     }
 
     /// Whether the axis is cut at all.
@@ -164,9 +164,10 @@ impl Pieces {
 
     /// The pieces, in order.
     pub fn ranges(&self) -> impl Iterator<Item = Range<usize>> + '_ {
+        let per = self.per_piece.max(1);
         (0..self.total)
-            .step_by(self.per_piece)
-            .map(|s| s..(s + self.per_piece).min(self.total))
+            .step_by(per)
+            .map(move |s| s..(s + per).min(self.total))
     }
 }
 

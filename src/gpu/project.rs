@@ -302,6 +302,17 @@ pub fn project_volume_planned<R: Real>(
             ),
         ));
     }
+    let limit = binding_limit(&ctx.limits);
+    let slab_bytes = (plan.slabs.per_piece * nx * ny * 4) as u64;
+    if slab_bytes > limit {
+        return Err(Error::too_large(
+            "projection plan",
+            format!(
+                "a slab of {slab_bytes} bytes exceeds the storage-binding limit of {limit} \
+                 bytes: use ProjectionPlan::new"
+            ),
+        ));
+    }
     let dev = &ctx.device;
     let all: Vec<u32> = (0..g.n_angles() as u32).collect();
     let list = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
