@@ -259,10 +259,7 @@ pub fn render_d2vr(
             })
             .collect(),
     };
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
     if words.len() as u64 * 4 > limit {
         return Err(Error::too_large(
             "D²VR projections",

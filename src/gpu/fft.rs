@@ -785,10 +785,7 @@ fn validate(ctx: &GpuContext, len: usize, shape: &[usize], axes: &[usize]) -> Re
         ));
     }
     let bytes = (len as u64).saturating_mul(8);
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
     if bytes > limit || len > u32::MAX as usize / 4 {
         return Err(Error::too_large(
             "GPU FFT data",

@@ -157,10 +157,7 @@ impl<'a> GpuFvrSpectrum<'a> {
     /// # Errors
     /// As [`GpuFvrSpectrum::upload_in_slabs`].
     pub fn upload(ctx: &GpuContext, spectrum: &'a FvrSpectrum) -> Result<Self> {
-        let limit = ctx
-            .limits
-            .max_storage_buffer_binding_size
-            .min(ctx.limits.max_buffer_size);
+        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
         Self::upload_in_slabs(ctx, spectrum, limit)
     }
 

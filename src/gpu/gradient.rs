@@ -123,11 +123,7 @@ pub fn precompute_gradients_in_slabs(
     }
     // Slices per slab: three f32 components of a slab must fit one storage binding.
     let slice_bytes = (3 * 4 * nx * ny) as u64;
-    let binding = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size)
-        .min(max_slab_bytes);
+    let binding = crate::gpu::plan::binding_limit(&ctx.limits).min(max_slab_bytes);
     let per_slab = (binding / slice_bytes).min(nz as u64) as usize;
     if per_slab == 0 {
         return Err(Error::too_large(

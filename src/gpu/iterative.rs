@@ -392,10 +392,7 @@ impl<'c> Steps<'c> {
 /// past one storage binding.
 fn vector(ctx: &GpuContext, label: &str, n: usize) -> Result<wgpu::Buffer> {
     let bytes = (n.max(1) * 4) as u64;
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
     if bytes > limit {
         return Err(Error::too_large(
             label,

@@ -104,10 +104,7 @@ impl<'c> GpuJosephPair<'c> {
         let n_voxels: usize = dims.iter().product();
         let per_view = g.cols * g.rows;
         let rays = g.n_angles() * per_view;
-        let limit = ctx
-            .limits
-            .max_storage_buffer_binding_size
-            .min(ctx.limits.max_buffer_size);
+        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
         for (what, count) in [("grid", n_voxels), ("projections", rays)] {
             let bytes = (count as u64).saturating_mul(4);
             if bytes > limit || count > u32::MAX as usize {

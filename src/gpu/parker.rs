@@ -59,10 +59,7 @@ pub fn weigh(ctx: &GpuContext, p: &Projections<f32>, g: &Geometry) -> Result<Pro
     if per_view == 0 {
         return Projections::new(views, rows, cols, out);
     }
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
     let view_bytes = (per_view * 4) as u64;
     if view_bytes > limit {
         return Err(Error::too_large(

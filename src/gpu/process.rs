@@ -97,10 +97,7 @@ fn rows(m: DMat4) -> [[f32; 4]; 3] {
 /// Checks that `voxels` f32 values fit one storage binding.
 fn check_binding(ctx: &GpuContext, what: &str, voxels: usize) -> Result<u64> {
     let bytes = (voxels as u64).saturating_mul(4);
-    let limit = ctx
-        .limits
-        .max_storage_buffer_binding_size
-        .min(ctx.limits.max_buffer_size);
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
     if bytes > limit {
         return Err(Error::too_large(
             what,
