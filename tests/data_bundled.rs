@@ -70,17 +70,17 @@ fn in_memory_readers_match_the_file_readers() {
 #[test]
 fn the_demo_embeds_the_bundled_files() {
     assert_eq!(
-        voxlab::jobs::demo::MICROCT_BONE_TIFF,
+        voxlab::jobs::embedded::MICROCT_BONE_TIFF,
         &std::fs::read(data("microct-bone/bone_128x128x128.tif")).unwrap()[..]
     );
     assert_eq!(
-        voxlab::jobs::demo::MR_BRAIN_DEN,
+        voxlab::jobs::embedded::MR_BRAIN_DEN,
         &std::fs::read(data("mr-brain-volpack/brainsmall.den")).unwrap()[..]
     );
-    let bone = voxlab::jobs::demo::microct_bone().unwrap();
+    let bone = voxlab::jobs::embedded::microct_bone().unwrap();
     assert!(bone == read_volume(&data("microct-bone/bone_128x128x128.tif")).unwrap());
     // The brain keeps its values; only its affine is set upright (a rotation).
-    let brain = voxlab::jobs::demo::mr_brain().unwrap();
+    let brain = voxlab::jobs::embedded::mr_brain().unwrap();
     let file = read_volume(&data("mr-brain-volpack/brainsmall.den")).unwrap();
     assert_eq!(brain.values_f64(), file.values_f64());
     let m = glam::DMat3::from_mat4(brain.affine());

@@ -10,6 +10,7 @@
 
 use super::Progress;
 use crate::error::{Error, Result};
+use crate::transfer::TransferFunction;
 use crate::volume::AnyVolume;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -171,8 +172,8 @@ impl VolumeInput {
         }
         if let Some(name) = self.source.strip_prefix("embedded:") {
             return match name {
-                "microct-bone" => super::demo::microct_bone(),
-                "mr-brain" => super::demo::mr_brain(),
+                "microct-bone" => super::embedded::microct_bone(),
+                "mr-brain" => super::embedded::mr_brain(),
                 _ => Err(Error::invalid(
                     "input",
                     format!("'{name}' is not an embedded scan (microct-bone, mr-brain)"),
@@ -250,4 +251,21 @@ pub fn volume_center(v: &AnyVolume) -> glam::DVec3 {
 pub fn volume_extent(v: &AnyVolume) -> [f64; 3] {
     let (d, s) = (v.dims(), v.spacing());
     [d[0] as f64 * s[0], d[1] as f64 * s[1], d[2] as f64 * s[2]]
+}
+
+/// The transfer function `--tf auto` gives `volume` read from `input`: the `phantom`
+/// preset for phantoms, `microct-bone` for the embedded micro-CT; for other volumes, a
+/// soft grayscale ramp over the value range.
+///
+/// # Errors
+/// None in practice (the preset is built in).
+pub fn auto_transfer(input: &VolumeInput, volume: &AnyVolume) -> Result<TransferFunction> {
+    if input.is_phantom() {
+        TransferFunction::preset("phantom")
+    } else if input.memory.is_none() && input.source == "embedded:microct-bone" {
+        TransferFunction::preset("microct-bone")
+    } else {
+        let r = volume.value_range();
+        Ok(TransferFunction::auto_for_range(r.min, r.max))
+    }
 }

@@ -290,23 +290,6 @@ fn window_of(a: &SceneRequest) -> Result<Option<[f64; 2]>> {
     Ok(Some([w, c]))
 }
 
-/// The transfer function `--tf auto` gives `volume` read from `input`: the `phantom`
-/// preset for phantoms, `microct-bone` for the embedded micro-CT; for other volumes, a
-/// soft grayscale ramp over the value range.
-///
-/// # Errors
-/// None in practice (the preset is built in).
-pub fn auto_transfer(input: &VolumeInput, volume: &AnyVolume) -> Result<TransferFunction> {
-    if input.is_phantom() {
-        TransferFunction::preset("phantom")
-    } else if input.memory.is_none() && input.source == "embedded:microct-bone" {
-        TransferFunction::preset("microct-bone")
-    } else {
-        let r = volume.value_range();
-        Ok(TransferFunction::auto_for_range(r.min, r.max))
-    }
-}
-
 /// Loads the input and builds the scene (volume, transfer function, camera) and the
 /// settings (with sample counts when `sample_count`), checked; not yet the
 /// acceleration fields ([`AccelRequest::apply`]).
@@ -329,7 +312,7 @@ pub fn build_scene(
         t.validate()?;
         t.clone()
     } else if a.tf == "auto" {
-        auto_transfer(&a.input, &volume)?
+        super::input::auto_transfer(&a.input, &volume)?
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };

@@ -300,7 +300,7 @@ impl ViewState {
             width,
             height,
         )?;
-        let transfer = crate::jobs::render::auto_transfer(&input, volume)?;
+        let transfer = crate::jobs::input::auto_transfer(&input, volume)?;
         Ok(ViewState {
             format: FORMAT.into(),
             version: VERSION,

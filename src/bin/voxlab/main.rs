@@ -4,7 +4,6 @@
 
 mod cli;
 mod cmd;
-#[cfg(feature = "lab")]
 mod lab;
 
 use clap::{Parser, Subcommand};

@@ -77,7 +77,7 @@ pub fn run(a: ViewArgs) -> Result<ExitCode> {
         }
     };
     drop(term);
-    let options = Options {
+    let options = crate::lab::Options {
         state,
         volume,
         backend: a.backend,
@@ -87,33 +87,6 @@ pub fn run(a: ViewArgs) -> Result<ExitCode> {
         window_screenshot: a.window_screenshot,
         compare: a.compare,
     };
-    open(options)?;
+    crate::lab::run(options)?;
     Ok(ExitCode::SUCCESS)
-}
-
-/// What the window starts with.
-pub struct Options {
-    pub state: ViewState,
-    pub volume: voxlab::AnyVolume,
-    pub backend: Backend,
-    pub save_state: Option<PathBuf>,
-    pub screenshot: Option<PathBuf>,
-    pub frames: Option<u64>,
-    pub window_screenshot: Option<PathBuf>,
-    pub compare: bool,
-}
-
-#[cfg(feature = "lab")]
-fn open(options: Options) -> Result<()> {
-    crate::lab::run(options)
-}
-
-#[cfg(not(feature = "lab"))]
-fn open(_: Options) -> Result<()> {
-    Err(voxlab::Error::unsupported(
-        "view",
-        "this build",
-        "voxlab was built without the lab (feature `lab`); build it with \
-         `cargo build --release --features lab`",
-    ))
 }
