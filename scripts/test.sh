@@ -87,6 +87,43 @@ fi
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps ./python
 "$VENV/bin/python" -m pytest -q -p no:cacheprovider python/tests
 
+# The distributed reconstruction under MPI (feature `mpi`; tests/mpi_reconstruct.rs):
+# OpenMPI's mpirun and library, and libclang for the mpi crate's bindings, installed
+# through apt when missing and this runs as root. Without them these tests fail,
+# unless VOXLAB_ALLOW_NO_MPI=1, in which case they say loudly that they skipped.
+have_mpi() {
+    local clang
+    clang=$(ldconfig -p 2>/dev/null | grep -c 'libclang' || true)
+    command -v mpirun >/dev/null 2>&1 && command -v mpicc >/dev/null 2>&1 \
+        && [ "${clang:-0}" -gt 0 ]
+}
+if ! have_mpi && [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+    echo "test.sh: installing OpenMPI and libclang for the MPI tests…"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq --no-install-recommends openmpi-bin libopenmpi-dev \
+        libclang-dev >/dev/null
+fi
+MPI_SKIPPED=
+if have_mpi; then
+    cargo test --release --features mpi --test mpi_reconstruct --test distributed_reconstruct
+elif [ "${VOXLAB_ALLOW_NO_MPI:-}" = "1" ]; then
+    MPI_SKIPPED=1
+else
+    echo "test.sh: no MPI (mpirun, mpicc) or libclang, and cannot install them (needs root"
+    echo "test.sh: and apt-get): install openmpi-bin libopenmpi-dev libclang-dev, or set"
+    echo "test.sh: VOXLAB_ALLOW_NO_MPI=1 to skip the MPI tests."
+    exit 1
+fi
+
+if [ -n "$MPI_SKIPPED" ]; then
+    echo
+    echo "************************************************************"
+    echo "*  MPI TESTS SKIPPED (no MPI, VOXLAB_ALLOW_NO_MPI=1):       *"
+    echo "*    tests/mpi_reconstruct.rs                              *"
+    echo "************************************************************"
+fi
+
 if [ -s target/gpu-tests-skipped.txt ]; then
     echo
     echo "************************************************************"

@@ -55,6 +55,14 @@ pub enum Error {
     /// The caller asked a job to stop (through its progress callback).
     #[error("cancelled")]
     Cancelled,
+    /// A job on several processes failed on one of them (the lowest failing rank's
+    /// message; see [`crate::jobs::distributed`]).
+    #[error("rank {rank} of {ranks}: {message}")]
+    Rank {
+        rank: usize,
+        ranks: usize,
+        message: String,
+    },
 }
 
 impl Error {

@@ -235,27 +235,49 @@ fn a_region_backprojects_to_the_whole_grids_values_bit_for_bit() {
         // Slabs along j (the rotation axis of RTK's grid: the column path starts
         // mid-column) and along k, of unequal sizes, and one box cut along both.
         let regions = [
-            Region { j: 0..ny / 3, k: 0..nz },
-            Region { j: ny / 3..ny, k: 0..nz },
-            Region { j: 0..ny, k: 1..nz.max(2) - 1 },
-            Region { j: 2..ny - 1, k: nz / 2..nz },
+            Region {
+                j: 0..ny / 3,
+                k: 0..nz,
+            },
+            Region {
+                j: ny / 3..ny,
+                k: 0..nz,
+            },
+            Region {
+                j: 0..ny,
+                k: 1..nz.max(2) - 1,
+            },
+            Region {
+                j: 2..ny - 1,
+                k: nz / 2..nz,
+            },
         ];
-        for region in regions.iter().filter(|r| !r.j.is_empty() && !r.k.is_empty()) {
+        for region in regions
+            .iter()
+            .filter(|r| !r.j.is_empty() && !r.k.is_empty())
+        {
             let part = backproject_region(&q, &g, &grid, region, &none).unwrap();
             let want = cut(&whole.data, grid.dims, region);
             assert!(
-                part.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                part.iter()
+                    .zip(&want)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
                 "{name} f64, {region:?}"
             );
             let part = backproject_region(&q32, &g, &grid, region, &none).unwrap();
             let want = cut(&whole32.data, grid.dims, region);
             assert!(
-                part.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                part.iter()
+                    .zip(&want)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
                 "{name} f32, {region:?}"
             );
             assert_eq!(part.len(), region.voxels(grid.dims[0]));
         }
-        let outside = Region { j: 0..ny + 1, k: 0..nz };
+        let outside = Region {
+            j: 0..ny + 1,
+            k: 0..nz,
+        };
         assert!(backproject_region(&q, &g, &grid, &outside, &none).is_err());
     }
 }

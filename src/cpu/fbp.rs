@@ -263,7 +263,9 @@ pub fn backproject_region<R: Real>(
     {
         let scale = R::of(backprojection_scale(g.n_angles()));
         let mut data = vec![R::zero(); n];
-        backproject_columns(filtered, g, grid, region, &views, scale, &mut data, progress);
+        backproject_columns(
+            filtered, g, grid, region, &views, scale, &mut data, progress,
+        );
         return Ok(data);
     }
     // Zero-bordered copies of every detector row: [0, row…, 0].
@@ -1131,15 +1133,41 @@ fn cone_line_from<R: Real>(
 /// z-slice (scikit-image's `circle=True` output), `n = dims[0] = dims[1]`.
 pub fn apply_circle_mask<R: Real>(vol: &mut Reconstruction<R>) -> Result<()> {
     let d = vol.grid.dims;
-    if d[0] != d[1] {
+    circle_mask_region(d, &Region::all(d), &mut vol.data)
+}
+
+/// [`apply_circle_mask`] on the voxels of `region` of a grid of `dims` (in the
+/// region's order, as [`backproject_region`] returns them): the disc is the whole
+/// grid's, so the regions of a grid masked one by one equal the grid masked at once.
+///
+/// # Errors
+/// Slices that are not square; `data` not the region's size.
+pub fn circle_mask_region<R: Real>(
+    dims: [usize; 3],
+    region: &Region,
+    data: &mut [R],
+) -> Result<()> {
+    if dims[0] != dims[1] {
         return Err(Error::invalid(
             "circle mask",
-            format!("needs square slices, got {}×{}", d[0], d[1]),
+            format!("needs square slices, got {}×{}", dims[0], dims[1]),
         ));
     }
-    let r = (d[0] / 2) as i64;
-    for (idx, v) in vol.data.iter_mut().enumerate() {
-        let (i, j) = ((idx % d[0]) as i64 - r, ((idx / d[0]) % d[1]) as i64 - r);
+    if data.len() != region.voxels(dims[0]) {
+        return Err(Error::invalid(
+            "circle mask",
+            format!(
+                "{} values for a region of {} voxels",
+                data.len(),
+                region.voxels(dims[0])
+            ),
+        ));
+    }
+    let (nx, nj) = (dims[0], region.j.len());
+    let r = (dims[0] / 2) as i64;
+    for (idx, v) in data.iter_mut().enumerate() {
+        let i = (idx % nx) as i64 - r;
+        let j = (region.j.start + (idx / nx) % nj) as i64 - r;
         if i * i + j * j > r * r {
             *v = R::zero();
         }

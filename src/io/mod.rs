@@ -586,16 +586,9 @@ mod signals {
     }
 }
 
-/// Writes `path` atomically: `f` writes into a temporary file in the same directory
-/// (named `.<name>.tmp-<pid>-<n>`), which is flushed to disk and then renamed over
-/// `path`. If `f` or anything else fails, the temporary file is removed and `path` is
-/// left as it was (absent, or with its old contents): a half-written file is never
-/// seen under `path`.
-///
-/// `f` should name `path` in its own I/O errors (`Error::io(path, e)`); the temporary
-/// name is an implementation detail. Fails with [`Error::Io`] naming `path` when its
-/// directory does not exist.
-pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+/// A new temporary file beside `path` (`.NAME.tmp-PID-N`, created exclusively), known
+/// to the signal handler before it exists.
+fn temp_beside(path: &Path) -> Result<(TempFile, File)> {
     let name = path.file_name().ok_or_else(|| {
         Error::invalid(
             "output file",
@@ -627,7 +620,7 @@ pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -
     let tmp_path = dir.join(tmp_name);
     // Known to the signal handler before the file exists, so no window leaves it behind.
     let slot = signals::remember(&tmp_path);
-    let mut temp = TempFile {
+    let temp = TempFile {
         path: tmp_path,
         renamed: false,
         slot,
@@ -639,6 +632,20 @@ pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -
         .create_new(true)
         .open(&temp.path)
         .map_err(|e| Error::io(path, e))?;
+    Ok((temp, file))
+}
+
+/// Writes `path` atomically: `f` writes into a temporary file in the same directory
+/// (named `.<name>.tmp-<pid>-<n>`), which is flushed to disk and then renamed over
+/// `path`. If `f` or anything else fails, the temporary file is removed and `path` is
+/// left as it was (absent, or with its old contents): a half-written file is never
+/// seen under `path`.
+///
+/// `f` should name `path` in its own I/O errors (`Error::io(path, e)`); the temporary
+/// name is an implementation detail. Fails with [`Error::Io`] naming `path` when its
+/// directory does not exist.
+pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let (mut temp, file) = temp_beside(path)?;
     let mut writer = BufWriter::new(file);
     f(&mut writer)?;
     let file = writer
@@ -650,6 +657,69 @@ pub fn write_atomic(path: &Path, f: impl FnOnce(&mut dyn Write) -> Result<()>) -
     std::fs::rename(&temp.path, path).map_err(|e| Error::io(path, e))?;
     temp.renamed = true;
     Ok(())
+}
+
+/// The temporary file of an output that several processes write by byte ranges (a
+/// distributed reconstruction): one process creates it beside `path` at its final
+/// length, every process writes its ranges through [`write_part`], and the creator
+/// renames it to `path` once all have written ([`SharedOutput::commit`]). Dropped
+/// without a commit, it is removed, so a failed job leaves no half-written output.
+pub struct SharedOutput {
+    path: PathBuf,
+    temp: TempFile,
+}
+
+impl SharedOutput {
+    /// Creates the temporary file of `path`, `len` bytes of zeros, its name known to the
+    /// signal handler ([`remove_temp_files_on_signals`]).
+    ///
+    /// # Errors
+    /// A `path` that names no file or lies in a missing directory; I/O errors.
+    pub fn create(path: &Path, len: u64) -> Result<SharedOutput> {
+        let (temp, file) = temp_beside(path)?;
+        file.set_len(len).map_err(|e| Error::io(path, e))?;
+        Ok(SharedOutput {
+            path: path.to_path_buf(),
+            temp,
+        })
+    }
+
+    /// Where the parts are written until the commit.
+    pub fn temp_path(&self) -> &Path {
+        &self.temp.path
+    }
+
+    /// Makes the written file visible under its name (after every writer is done).
+    ///
+    /// # Errors
+    /// I/O errors.
+    pub fn commit(mut self) -> Result<()> {
+        let file = File::open(&self.temp.path).map_err(|e| Error::io(&self.path, e))?;
+        file.sync_all().map_err(|e| Error::io(&self.path, e))?;
+        drop(file);
+        std::fs::rename(&self.temp.path, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        self.temp.renamed = true;
+        Ok(())
+    }
+}
+
+/// Writes `parts` (byte offset, bytes) into the existing file `temp` of the output
+/// `out` (named in errors), each at its offset, and syncs it.
+///
+/// # Errors
+/// I/O errors.
+pub fn write_part(temp: &Path, out: &Path, parts: &[(u64, &[u8])]) -> Result<()> {
+    use std::io::{Seek, SeekFrom};
+    let mut f = OpenOptions::new()
+        .write(true)
+        .open(temp)
+        .map_err(|e| Error::io(out, e))?;
+    for (at, bytes) in parts {
+        f.seek(SeekFrom::Start(*at))
+            .and_then(|_| f.write_all(bytes))
+            .map_err(|e| Error::io(out, e))?;
+    }
+    f.sync_all().map_err(|e| Error::io(out, e))
 }
 
 // ---------------------------------------------------------------------------------

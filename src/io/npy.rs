@@ -136,48 +136,133 @@ pub fn read_npy_f64(path: &Path) -> Result<(Vec<usize>, Vec<f64>, bool)> {
     let reader = &mut BufReader::new(file);
     let h = read_header(reader, len, path, FLOAT_TYPES, FLOAT_TYPES_TEXT)?;
     let size = h.stored.size();
-    let expected = h.count as u64 * size as u64;
-    let available = len.saturating_sub(h.data_offset);
-    if available < expected {
-        return Err(too_short(path, expected, available));
-    }
+    check_data(&h, len, path)?;
     let mut bytes = super::reserve::<u8>(h.count * size, path)?;
     bytes.resize(h.count * size, 0);
     reader
         .read_exact(&mut bytes)
         .map_err(|e| super::read_error(path, e))?;
-    let big = h.endian == Endian::Big;
-    let values: Vec<f64> = if size == 8 {
-        bytes
-            .chunks_exact(8)
-            .map(|c| {
-                let a: [u8; 8] = c.try_into().expect("8-byte chunk");
-                if big {
-                    f64::from_be_bytes(a)
-                } else {
-                    f64::from_le_bytes(a)
-                }
-            })
-            .collect()
-    } else {
-        bytes
-            .chunks_exact(4)
-            .map(|c| {
-                let a: [u8; 4] = c.try_into().expect("4-byte chunk");
-                f64::from(if big {
-                    f32::from_be_bytes(a)
-                } else {
-                    f32::from_le_bytes(a)
-                })
-            })
-            .collect()
-    };
+    let mut values = super::reserve::<f64>(h.count, path)?;
+    values.resize(h.count, 0.0);
+    decode_f64(&bytes, size, h.endian == Endian::Big, &mut values);
     let values = if h.fortran_order {
         reorder(values, &h.shape)
     } else {
         values
     };
     Ok((h.shape, values, size == 8))
+}
+
+/// Whether the file (`len` bytes) holds all the data its header announces.
+fn check_data(h: &Header, len: u64, path: &Path) -> Result<()> {
+    let expected = h.count as u64 * h.stored.size() as u64;
+    let available = len.saturating_sub(h.data_offset);
+    if available < expected {
+        return Err(too_short(path, expected, available));
+    }
+    Ok(())
+}
+
+/// Decodes `f4` or `f8` samples (`size` 4 or 8 bytes, big-endian when `big`) into `out`
+/// as f64 (an `f4` widens exactly).
+fn decode_f64(bytes: &[u8], size: usize, big: bool, out: &mut [f64]) {
+    for (v, c) in out.iter_mut().zip(bytes.chunks_exact(size)) {
+        *v = if size == 8 {
+            let a: [u8; 8] = c.try_into().expect("8-byte chunk");
+            if big {
+                f64::from_be_bytes(a)
+            } else {
+                f64::from_le_bytes(a)
+            }
+        } else {
+            let a: [u8; 4] = c.try_into().expect("4-byte chunk");
+            f64::from(if big {
+                f32::from_be_bytes(a)
+            } else {
+                f32::from_le_bytes(a)
+            })
+        };
+    }
+}
+
+/// The shape of a float `.npy` file (`f4` or `f8`, either byte order) and whether it is
+/// stored in Fortran order, from its header alone (the data is only checked to be
+/// there, not read).
+pub fn npy_float_shape(path: &Path) -> Result<(Vec<usize>, bool)> {
+    let (file, len) = open(path)?;
+    let h = read_header(
+        &mut BufReader::new(file),
+        len,
+        path,
+        FLOAT_TYPES,
+        FLOAT_TYPES_TEXT,
+    )?;
+    check_data(&h, len, path)?;
+    Ok((h.shape, h.fortran_order))
+}
+
+/// [`read_npy_f64`] of only some lines of a C-order float array, a line being a run of
+/// `shape.last()` values (line `l` holds the values `l·n … l·n + n − 1`): the whole
+/// array's values, read exactly where `lines` says and zero elsewhere. Only the lines
+/// asked for are read from the file (one seek per run of consecutive lines).
+///
+/// # Errors
+/// As [`read_npy_f64`]; a Fortran-order file (whose lines are not contiguous); a line
+/// past the array.
+pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, Vec<f64>)> {
+    use std::io::{Seek, SeekFrom};
+    let (file, len) = open(path)?;
+    let mut reader = BufReader::new(file);
+    let h = read_header(&mut reader, len, path, FLOAT_TYPES, FLOAT_TYPES_TEXT)?;
+    if h.fortran_order {
+        return Err(Error::format(
+            path,
+            "fortran_order",
+            "a Fortran-order array cannot be read line by line: save it in C order",
+        ));
+    }
+    let size = h.stored.size();
+    check_data(&h, len, path)?;
+    let n = h.shape.last().copied().unwrap_or(1).max(1);
+    let total_lines = h.count / n;
+    if let Some(&bad) = lines.iter().find(|&&l| l >= total_lines) {
+        return Err(Error::invalid(
+            format!("lines of {}", path.display()),
+            format!("line {bad} is past the array's {total_lines} lines"),
+        ));
+    }
+    let mut values = super::reserve::<f64>(h.count, path)?;
+    values.resize(h.count, 0.0);
+    let big = h.endian == Endian::Big;
+    let mut wanted = lines.to_vec();
+    wanted.sort_unstable();
+    wanted.dedup();
+    let mut bytes = Vec::new();
+    let mut at = 0;
+    while at < wanted.len() {
+        // A run of consecutive lines: one seek, one read.
+        let first = wanted[at];
+        let mut end = at + 1;
+        while end < wanted.len() && wanted[end] == wanted[end - 1] + 1 {
+            end += 1;
+        }
+        let count = (end - at) * n;
+        bytes.resize(count * size, 0);
+        reader
+            .seek(SeekFrom::Start(h.data_offset + (first * n * size) as u64))
+            .and_then(|_| reader.read_exact(&mut bytes))
+            .map_err(|e| super::read_error(path, e))?;
+        let dst = &mut values[first * n..first * n + count];
+        decode_f64(&bytes, size, big, dst);
+        at = end;
+    }
+    Ok((h.shape, values))
+}
+
+/// The header of a little-endian float32 C-order `.npy` array of `shape`, as
+/// [`write_npy_f32`] writes it (the data follows it directly).
+pub fn npy_f32_header(shape: &[usize]) -> Vec<u8> {
+    header_bytes("<f4", shape)
 }
 
 /// Writes `data` as a little-endian float64 array of the given shape in C order,

@@ -56,7 +56,7 @@
 //! [`read_angles_txt`]: one angle in degrees per line; blank lines and `#` comments
 //! (whole-line or trailing) are ignored.
 
-use super::npy::{read_npy_f64, write_npy_f32, write_npy_f64};
+use super::npy::{npy_float_shape, read_npy_f64, read_npy_f64_lines, write_npy_f32, write_npy_f64};
 use super::nrrd::{read_nrrd, write_nrrd, NrrdWriteOptions};
 use crate::ct::{Beam, Geometry, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
@@ -96,6 +96,33 @@ pub fn read_projections<R: Real>(path: &Path) -> Result<Projections<R>> {
         }
         _ => return Err(unsupported(path)),
     };
+    from_array(path, &shape, values)
+}
+
+/// The `(angles, rows, cols)` of a projection file that can be read detector line by
+/// detector line ([`read_projection_lines`]): a 3-D C-order float `.npy` stack. `None`
+/// for every other file [`read_projections`] reads (read whole).
+///
+/// # Errors
+/// A `.npy` file whose header is bad or whose data is short.
+pub fn projection_shape(path: &Path) -> Result<Option<[usize; 3]>> {
+    if extension(path).as_deref() != Some("npy") {
+        return Ok(None);
+    }
+    Ok(match npy_float_shape(path)? {
+        (shape, false) if shape.len() == 3 => Some([shape[0], shape[1], shape[2]]),
+        _ => None,
+    })
+}
+
+/// [`read_projections`] of a stack [`projection_shape`] accepts, reading only the
+/// detector lines `lines` (line `a·rows + r` is row `r` of view `a`); every other line
+/// is zero. The values read are checked as [`read_projections`] checks them.
+///
+/// # Errors
+/// As [`read_projections`]; a line past the stack.
+pub fn read_projection_lines<R: Real>(path: &Path, lines: &[usize]) -> Result<Projections<R>> {
+    let (shape, values) = read_npy_f64_lines(path, lines)?;
     from_array(path, &shape, values)
 }
 

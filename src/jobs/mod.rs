@@ -38,6 +38,7 @@ pub mod compare;
 pub mod convert;
 pub mod d2vr;
 pub mod demo;
+pub mod distributed;
 pub mod embedded;
 pub mod fft;
 pub mod fvr;

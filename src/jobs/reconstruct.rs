@@ -207,7 +207,7 @@ fn parse_angles(s: &str) -> Result<Vec<f64>> {
 }
 
 /// The geometry of the input, and the file it was read from when found beside it.
-fn geometry_for(
+pub(super) fn geometry_for(
     a: &ReconstructRequest,
     p: &Projections<f64>,
 ) -> Result<(Geometry, Option<PathBuf>)> {
@@ -300,7 +300,7 @@ fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64
     Ok((Projections::new(p.angles, p.rows, diag, data)?, g2))
 }
 
-fn extension(p: &Path) -> Option<String> {
+pub(super) fn extension(p: &Path) -> Option<String> {
     p.extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)
@@ -308,7 +308,7 @@ fn extension(p: &Path) -> Option<String> {
 
 /// The options checked before any input is read: the outputs, the truth phantom and
 /// the spacing.
-fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
+pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
     if let Some(out) = &a.out {
         crate::io::check_output("--out", out, &["npy", "nrrd", "nhdr", "png"])?;
     }
@@ -499,9 +499,30 @@ fn fbp_problem(
     g: Geometry,
     progress: &dyn Progress,
 ) -> Result<(Grid, Projections<f64>, Geometry)> {
+    let grid = fbp_grid(a, &g, progress)?;
+    let (p, g) = fbp_projections(a, p, g)?;
+    Ok((grid, p, g))
+}
+
+/// The grid of an FBP/FDK job, checked against the voxel limit and the output.
+pub(super) fn fbp_grid(
+    a: &ReconstructRequest,
+    g: &Geometry,
+    progress: &dyn Progress,
+) -> Result<Grid> {
+    let grid = reconstruction_grid(a, g, progress)?;
+    check_grid(a, &grid, g.beam == Beam::Parallel, g.rows)?;
+    Ok(grid)
+}
+
+/// The projections an FBP/FDK job backprojects and their geometry: a parallel sinogram
+/// padded to the inscribed circle's diagonal unless `no_circle`; a short scan checked.
+pub(super) fn fbp_projections(
+    a: &ReconstructRequest,
+    p: Projections<f64>,
+    g: Geometry,
+) -> Result<(Projections<f64>, Geometry)> {
     let parallel = g.beam == Beam::Parallel;
-    let grid = reconstruction_grid(a, &g, progress)?;
-    check_grid(a, &grid, parallel, g.rows)?;
     let (p, g) = if parallel && !a.no_circle {
         pad_for_circle(&p, &g)?
     } else {
@@ -511,7 +532,7 @@ fn fbp_problem(
         // A clear error for a parallel beam or a wrong span.
         crate::cpu::parker::short_scan(&g)?;
     }
-    Ok((grid, p, g))
+    Ok((p, g))
 }
 
 /// `voxlab reconstruct --dry-run`: the memory plan of [`run`] — host bytes, device

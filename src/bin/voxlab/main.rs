@@ -114,14 +114,19 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            // Messages quote file contents: no byte of them reaches the terminal raw.
-            eprintln!(
-                "voxlab: error: {}",
-                voxlab::error::escape_controls(&e.to_string())
-            );
+            report_error(&e);
             ExitCode::FAILURE
         }
     }
+}
+
+/// How the command line says an error.
+pub fn report_error(e: &Error) {
+    // Messages quote file contents: no byte of them reaches the terminal raw.
+    eprintln!(
+        "voxlab: error: {}",
+        voxlab::error::escape_controls(&e.to_string())
+    );
 }
 
 /// The voxel limit from `--max-voxels` or `VOXLAB_MAX_VOXELS`.

@@ -101,6 +101,13 @@ pub struct ReconstructArgs {
     /// and the split the GPU would use) after reading the input, and write nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// FBP/FDK on the ranks of `mpirun -n N voxlab reconstruct … --distributed`: the
+    /// volume cut into one slab per rank, each rank reading only the detector rows its
+    /// slab needs from a 3-D .npy stack and writing its part of the one .npy output
+    /// (equal byte for byte to a single-process run). Needs a build with the `mpi`
+    /// feature; CPU backends only (docs/distributed.md).
+    #[arg(long, conflicts_with = "dry_run")]
+    pub distributed: bool,
 }
 
 pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
@@ -128,6 +135,9 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         tolerance: a.tolerance,
         convergence: a.convergence.clone(),
     };
+    if a.distributed {
+        return distributed(&req);
+    }
     let term = Terminal::bars();
     if a.dry_run {
         let plan = voxlab::jobs::reconstruct::plan(&req, &term)?;
@@ -189,4 +199,65 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--distributed`: every rank runs the job; rank 0 shows progress, the errors and the
+/// report.
+#[cfg(feature = "mpi")]
+fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
+    use voxlab::jobs::distributed::{mpi::Mpi, Comm};
+    let comm = Mpi::init()?;
+    let root = comm.rank() == 0;
+    let term = root.then(Terminal::bars);
+    let progress: &dyn voxlab::jobs::Progress = match &term {
+        Some(t) => t,
+        None => &(),
+    };
+    let r = voxlab::jobs::distributed::run(req, &comm, progress);
+    drop(term);
+    match r {
+        Ok(d) if root => {
+            let g = d.grid.dims;
+            println!(
+                "wrote {} ({} {}×{}×{} volume, {} filter, {} on {} in slabs along {}; \
+                 values {:.4} … {:.4})",
+                d.out.display(),
+                if d.parallel { "FBP" } else { "FDK" },
+                g[0],
+                g[1],
+                g[2],
+                req.filter.name(),
+                d.what,
+                match d.ranks.len() {
+                    1 => "1 rank".to_string(),
+                    n => format!("{n} ranks"),
+                },
+                if d.axis == 1 { 'j' } else { 'k' },
+                d.range.0,
+                d.range.1
+            );
+            print!("{}", d.describe());
+            Ok(ExitCode::SUCCESS)
+        }
+        Ok(_) => Ok(ExitCode::SUCCESS),
+        // Every rank holds the same error: rank 0 says it, and the others wait for
+        // that (mpirun ends the job once a rank has failed).
+        Err(e) => {
+            if root {
+                crate::report_error(&e);
+            }
+            comm.all_gather(&[0.0]);
+            Ok(ExitCode::FAILURE)
+        }
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+fn distributed(_req: &ReconstructRequest) -> Result<ExitCode> {
+    Err(voxlab::Error::invalid(
+        "--distributed",
+        "this voxlab was built without MPI: build it with `cargo build --release \
+         --features mpi` (Debian: apt install libopenmpi-dev libclang-dev) and run it \
+         under `mpirun -n N`",
+    ))
 }

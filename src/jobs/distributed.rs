@@ -1,0 +1,616 @@
+//! `voxlab reconstruct --distributed`: FBP/FDK on several processes (the ranks of a
+//! [`Comm`], MPI's under `mpirun`), the volume cut into slabs, one per rank.
+//!
+//! # How the work is cut
+//! [`slab_plan`] cuts the reconstruction grid along `k` (z-slabs) or `j`, whichever
+//! makes the ranks read fewer detector lines in all: a slab's voxels project, in every
+//! view, into a band of detector rows (the extreme rows are those of the slab box's
+//! corners, since a projection maps the box to the hull of its corners' images), and a
+//! rank reads only those rows, one more on each side for the bilinear taps, from a 3-D
+//! `.npy` stack (other files are read whole). The ramp filter transforms two detector
+//! lines in one complex FFT (lines `2m` and `2m + 1`, [`crate::cpu::ramp`]), so each
+//! line's partner is read too: the filtered lines a slab uses are then bit for bit
+//! those of the whole stack, and so is the slab ([`backproject_region`]). The result
+//! file equals the single-process one byte for byte, whatever the number of ranks.
+//!
+//! # The output
+//! One float32 `.npy` file: rank 0 creates it beside the output at its final length,
+//! each rank writes its slab's byte ranges, and rank 0 renames it once every rank has
+//! written ([`crate::io::SharedOutput`]). A failure on any rank fails the job on every
+//! rank after the phase it happened in (every phase ends with an agreement,
+//! [`agree`]), with the lowest failing rank's message; no file is left behind.
+//!
+//! Not distributed yet: the iterative methods, the GPU backend, `--truth`.
+
+use super::reconstruct::{
+    check_request, extension, fbp_grid, fbp_projections, geometry_for, ReconstructMethod,
+    ReconstructRequest,
+};
+use super::{Backend, Progress};
+use crate::cpu::fbp::{backproject_region, circle_mask_region, Grid, Region};
+use crate::cpu::ramp::{filter_projections, FilterMethod};
+use crate::ct::{Beam, Geometry, Projections};
+use crate::error::{Error, Result};
+use crate::io::npy::npy_f32_header;
+use crate::io::projections::{projection_shape, read_projection_lines, read_projections};
+use crate::io::{write_part, SharedOutput};
+use crate::real::Real;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The processes a distributed job runs on. Every method is a collective: every rank
+/// calls it, in the same order.
+pub trait Comm {
+    /// This process's rank, `0 … size − 1`.
+    fn rank(&self) -> usize;
+    /// How many ranks there are.
+    fn size(&self) -> usize;
+    /// Every rank's `values` (each rank gives as many), concatenated in rank order, on
+    /// every rank.
+    fn all_gather(&self, values: &[f64]) -> Vec<f64>;
+    /// `root`'s `bytes` on every rank (replacing theirs).
+    fn broadcast(&self, root: usize, bytes: &mut Vec<u8>);
+}
+
+/// One process alone: the distributed job as a plain one.
+pub struct Solo;
+
+impl Comm for Solo {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+        values.to_vec()
+    }
+    fn broadcast(&self, _root: usize, _bytes: &mut Vec<u8>) {}
+}
+
+/// The end of a phase: `r` on every rank when it succeeded on all; otherwise, on
+/// every rank, [`Error::Rank`] with the lowest failing rank's message (one process
+/// alone gets its own error back unchanged).
+pub fn agree<T>(comm: &dyn Comm, r: Result<T>) -> Result<T> {
+    let flags = comm.all_gather(&[if r.is_ok() { 1.0 } else { 0.0 }]);
+    let Some(first) = flags.iter().position(|&f| f == 0.0) else {
+        return r;
+    };
+    if comm.size() == 1 {
+        return r;
+    }
+    let mut message = match &r {
+        Err(e) if comm.rank() == first => e.to_string().into_bytes(),
+        _ => Vec::new(),
+    };
+    comm.broadcast(first, &mut message);
+    Err(Error::Rank {
+        rank: first,
+        ranks: comm.size(),
+        message: String::from_utf8_lossy(&message).into_owned(),
+    })
+}
+
+/// How a grid is cut among the ranks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlabPlan {
+    /// The grid axis the slabs are cut along: 1 (`j`) or 2 (`k`).
+    pub axis: usize,
+    /// Each rank's slab; `None` for the ranks past the grid's slices along `axis`.
+    pub slabs: Vec<Option<Region>>,
+    /// Each rank's detector lines (`view·rows + row`, sorted), partners included.
+    pub lines: Vec<Vec<usize>>,
+    /// The detector lines of the whole stack.
+    pub total_lines: usize,
+}
+
+impl SlabPlan {
+    /// The lines all ranks read together (a line read by two ranks counts twice).
+    pub fn lines_read(&self) -> usize {
+        self.lines.iter().map(Vec::len).sum()
+    }
+}
+
+/// `n` slices cut into `ranks` runs differing by at most one; empty runs are `None`.
+fn runs(n: usize, ranks: usize) -> Vec<Option<Range<usize>>> {
+    (0..ranks)
+        .map(|r| {
+            let (a, b) = (r * n / ranks, (r + 1) * n / ranks);
+            (a < b).then_some(a..b)
+        })
+        .collect()
+}
+
+/// The detector lines the voxels of `region` need in the filtered stack of `g`, with
+/// each line's FFT partner (see the module docs).
+pub fn region_lines(g: &Geometry, grid: &Grid, region: &Region) -> Vec<usize> {
+    let d = grid.dims;
+    let mut corners = Vec::with_capacity(8);
+    for i in [0, d[0] - 1] {
+        for j in [region.j.start, region.j.end - 1] {
+            for k in [region.k.start, region.k.end - 1] {
+                corners.push(grid.point(i, j, k).to_array());
+            }
+        }
+    }
+    let total = g.n_angles() * g.rows;
+    let mut lines = Vec::new();
+    for (a, m) in g.view_matrices::<f64>().iter().enumerate() {
+        let rows: Option<Vec<f64>> = corners
+            .iter()
+            .map(|&p| m.project(p).map(|(_, r, _)| r))
+            .collect();
+        // A corner at or behind the source: the whole view.
+        let band = match rows {
+            None => 0..g.rows,
+            Some(r) => {
+                let lo = r.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+                let hi = r.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+                let first = (lo.floor() - 1.0).max(0.0);
+                let last = (hi.floor() + 2.0).min(g.rows as f64 - 1.0);
+                if last < first {
+                    0..0
+                } else {
+                    first as usize..last as usize + 1
+                }
+            }
+        };
+        for r in band {
+            let line = a * g.rows + r;
+            lines.push(line);
+            if line ^ 1 < total {
+                lines.push(line ^ 1);
+            }
+        }
+    }
+    lines.sort_unstable();
+    lines.dedup();
+    lines
+}
+
+/// Cuts `grid` into one slab per rank along `k`, or along `j` when that reads fewer
+/// detector lines in all (a cone beam whose rotation axis is `j`: then each rank
+/// reads only its band of rows).
+///
+/// # Errors
+/// No ranks.
+pub fn slab_plan(g: &Geometry, grid: &Grid, ranks: usize) -> Result<SlabPlan> {
+    if ranks == 0 {
+        return Err(Error::invalid(
+            "ranks",
+            "a distributed job needs at least one",
+        ));
+    }
+    let d = grid.dims;
+    let plan_along = |axis: usize| {
+        let slabs: Vec<Option<Region>> = runs(d[axis], ranks)
+            .into_iter()
+            .map(|run| {
+                run.map(|run| match axis {
+                    1 => Region { j: run, k: 0..d[2] },
+                    _ => Region { j: 0..d[1], k: run },
+                })
+            })
+            .collect();
+        let lines = slabs
+            .iter()
+            .map(|s| s.as_ref().map_or(Vec::new(), |s| region_lines(g, grid, s)))
+            .collect();
+        SlabPlan {
+            axis,
+            slabs,
+            lines,
+            total_lines: g.n_angles() * g.rows,
+        }
+    };
+    let along_k = plan_along(2);
+    if d[1] == 1 {
+        return Ok(along_k);
+    }
+    let along_j = plan_along(1);
+    Ok(if along_j.lines_read() < along_k.lines_read() {
+        along_j
+    } else {
+        along_k
+    })
+}
+
+/// What one rank did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RankReport {
+    /// Its slab (`None`: more ranks than slices).
+    pub slab: Option<Region>,
+    /// The detector lines it read from the file.
+    pub lines_read: usize,
+    /// Seconds reading, filtering, backprojecting and writing.
+    pub read_seconds: f64,
+    pub filter_seconds: f64,
+    pub backproject_seconds: f64,
+    pub write_seconds: f64,
+    /// Bytes of the output it wrote (rank 0's include the header).
+    pub bytes_written: u64,
+}
+
+/// A distributed reconstruction, as every rank knows it at the end.
+#[derive(Clone, Debug)]
+pub struct Distributed {
+    pub grid: Grid,
+    /// FBP (parallel) or FDK (cone).
+    pub parallel: bool,
+    /// `cpu f64` or `cpu f32`.
+    pub what: String,
+    /// The grid axis the slabs run along: 1 (`j`) or 2 (`k`).
+    pub axis: usize,
+    /// The detector lines of the whole stack.
+    pub total_lines: usize,
+    /// The smallest and largest value written.
+    pub range: (f64, f64),
+    /// The output written.
+    pub out: PathBuf,
+    /// Every rank's report, in rank order.
+    pub ranks: Vec<RankReport>,
+}
+
+impl Distributed {
+    /// One line per rank: its slab, what it read, its times.
+    pub fn describe(&self) -> String {
+        let axis = if self.axis == 1 { 'j' } else { 'k' };
+        let mut s = String::new();
+        for (r, rep) in self.ranks.iter().enumerate() {
+            let slab = match &rep.slab {
+                Some(sl) if self.axis == 1 => format!("{axis} {}..{}", sl.j.start, sl.j.end),
+                Some(sl) => format!("{axis} {}..{}", sl.k.start, sl.k.end),
+                None => "no slab".into(),
+            };
+            s.push_str(&format!(
+                "rank {r}: {slab}, read {} of {} detector lines in {:.3} s, filter {:.3} s, \
+                 backprojection {:.3} s, wrote {} bytes in {:.3} s\n",
+                rep.lines_read,
+                self.total_lines,
+                rep.read_seconds,
+                rep.filter_seconds,
+                rep.backproject_seconds,
+                rep.bytes_written,
+                rep.write_seconds
+            ));
+        }
+        s
+    }
+}
+
+/// The options `--distributed` refuses, checked before anything is read.
+fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
+    if a.method != ReconstructMethod::Fbp {
+        return Err(Error::invalid(
+            "--distributed",
+            "only --method fbp runs distributed so far",
+        ));
+    }
+    if a.backend == Backend::Gpu {
+        return Err(Error::Unsupported {
+            job: "a distributed reconstruction".into(),
+            backend: "gpu".into(),
+            message: "the ranks reconstruct on the CPU (--backend cpu or cpu-f32)".into(),
+        });
+    }
+    if a.truth.is_some() {
+        return Err(Error::invalid(
+            "--truth",
+            "does not go with --distributed (reconstruct on one process to compare)",
+        ));
+    }
+    let out = a
+        .out
+        .clone()
+        .ok_or_else(|| Error::invalid("--out", "a distributed reconstruction needs an output"))?;
+    if extension(&out).as_deref() != Some("npy") {
+        return Err(Error::invalid(
+            "--out",
+            "a distributed reconstruction is written as one .npy file",
+        ));
+    }
+    Ok(out)
+}
+
+/// The projections this rank reads, their geometry, the grid and the plan.
+struct Prepared {
+    p: Projections<f64>,
+    g: Geometry,
+    grid: Grid,
+    plan: SlabPlan,
+    lines_read: usize,
+    read_seconds: f64,
+}
+
+fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
+    check_request(a)?;
+    check_distributed(a)?;
+    let t = Instant::now();
+    let shape = projection_shape(&a.input)?;
+    // The geometry is checked against the stack's shape; only a header is read so far.
+    let whole = match shape {
+        Some(_) => None,
+        None => Some(read_projections::<f64>(&a.input)?),
+    };
+    // A stand-in of zeros carries the shape (dropped before the lines are read).
+    let stand_in = match (&whole, shape) {
+        (None, Some([n, r, c])) => Some(Projections::new(n, r, c, vec![0.0; n * r * c])?),
+        _ => None,
+    };
+    let shaped = whole
+        .as_ref()
+        .or(stand_in.as_ref())
+        .expect("one of the two");
+    let (g, geometry_file) = geometry_for(a, shaped)?;
+    drop(stand_in);
+    if let Some(f) = &geometry_file {
+        progress.note(&format!("using the geometry {}", f.display()));
+    }
+    let grid = fbp_grid(a, &g, progress)?;
+    let plan = slab_plan(&g, &grid, comm.size())?;
+    let mine = &plan.lines[comm.rank()];
+    let (p, lines_read) = match whole {
+        Some(p) => (p, plan.total_lines),
+        None => (read_projection_lines::<f64>(&a.input, mine)?, mine.len()),
+    };
+    Ok(Prepared {
+        p,
+        g,
+        grid,
+        plan,
+        lines_read,
+        read_seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// This rank's slab, filtered and backprojected in `R`, masked to the circle for a
+/// parallel beam (unless `no_circle`), as f32; and the seconds filtering and
+/// backprojecting.
+fn slab_values<R: Real + rustfft::FftNum>(
+    a: &ReconstructRequest,
+    p: &Projections<R>,
+    g: &Geometry,
+    grid: &Grid,
+    slab: &Region,
+    progress: &dyn Progress,
+) -> Result<(Vec<f32>, f64, f64)> {
+    let t = Instant::now();
+    let p = if a.short_scan {
+        crate::cpu::parker::weigh(p, g)?
+    } else {
+        p.clone()
+    };
+    let q = filter_projections(&p, g, a.filter, FilterMethod::Fft)?;
+    drop(p);
+    let filter_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    progress.begin("reconstructing", "voxel lines", 0);
+    let rows = |done, total| progress.advance(done as u64, total as u64);
+    let mut v = backproject_region(&q, g, grid, slab, &rows)?;
+    progress.end(t.elapsed().as_secs_f64());
+    if g.beam == Beam::Parallel && !a.no_circle {
+        circle_mask_region(grid.dims, slab, &mut v)?;
+    }
+    Ok((
+        v.iter().map(|x| x.f64() as f32).collect(),
+        filter_seconds,
+        t.elapsed().as_secs_f64(),
+    ))
+}
+
+/// The bytes of a path, to send it to the other ranks.
+fn path_bytes(p: &Path) -> Vec<u8> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        p.as_os_str().as_bytes().to_vec()
+    }
+    #[cfg(not(unix))]
+    {
+        p.to_string_lossy().into_owned().into_bytes()
+    }
+}
+
+fn bytes_path(b: Vec<u8>) -> PathBuf {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStringExt;
+        PathBuf::from(std::ffi::OsString::from_vec(b))
+    }
+    #[cfg(not(unix))]
+    {
+        PathBuf::from(String::from_utf8_lossy(&b).into_owned())
+    }
+}
+
+/// Reconstructs on every rank of `comm` and writes one `.npy` file (module docs). Every
+/// rank calls it with the same request; `progress` reports this rank's slab (give rank
+/// 0 a terminal and the others `&()`).
+///
+/// # Errors
+/// As [`super::reconstruct::run`]; options `--distributed` does not take (an
+/// iterative method, the GPU, `--truth`, an output that is not `.npy`); on more than
+/// one rank, [`Error::Rank`] with the lowest failing rank's message.
+pub fn run(
+    a: &ReconstructRequest,
+    comm: &dyn Comm,
+    progress: &dyn Progress,
+) -> Result<Distributed> {
+    let rank = comm.rank();
+    let pre = agree(comm, prepare(a, comm, progress))?;
+    let Prepared {
+        p,
+        g,
+        grid,
+        plan,
+        lines_read,
+        read_seconds,
+    } = pre;
+    let parallel = g.beam == Beam::Parallel;
+    let slab = plan.slabs[rank].clone();
+    let f32_path = a.backend == Backend::CpuF32;
+    let computed = (|| -> Result<(Vec<f32>, f64, f64)> {
+        super::check_cancel(progress)?;
+        let Some(slab) = &slab else {
+            return Ok((Vec::new(), 0.0, 0.0));
+        };
+        let (p, g) = fbp_projections(a, p, g.clone())?;
+        if f32_path {
+            slab_values(a, &p.narrow()?, &g, &grid, slab, progress)
+        } else {
+            slab_values(a, &p, &g, &grid, slab, progress)
+        }
+    })();
+    let (values, filter_seconds, backproject_seconds) = agree(comm, computed)?;
+
+    // The output: rank 0 creates it, every rank writes its ranges, rank 0 renames it.
+    let out = a.out.clone().expect("checked in prepare");
+    let d = grid.dims;
+    let shape: Vec<usize> = if d[2] == 1 {
+        vec![d[1], d[0]]
+    } else {
+        vec![d[2], d[1], d[0]]
+    };
+    let header = npy_f32_header(&shape);
+    let t = Instant::now();
+    let total = header.len() as u64 + 4 * d.iter().product::<usize>() as u64;
+    let created = if rank == 0 {
+        SharedOutput::create(&out, total).map(Some)
+    } else {
+        Ok(None)
+    };
+    let created = agree(comm, created)?;
+    let mut temp = created
+        .as_ref()
+        .map_or(Vec::new(), |c| path_bytes(c.temp_path()));
+    comm.broadcast(0, &mut temp);
+    let temp = bytes_path(temp);
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let mut parts: Vec<(u64, &[u8])> = Vec::new();
+    if rank == 0 {
+        parts.push((0, &header));
+    }
+    if let Some(s) = &slab {
+        let run = 4 * d[0] * s.j.len();
+        for (n, k) in s.k.clone().enumerate() {
+            let at = header.len() + 4 * d[0] * (s.j.start + d[1] * k);
+            parts.push((at as u64, &bytes[n * run..(n + 1) * run]));
+        }
+    }
+    let bytes_written: u64 = parts.iter().map(|(_, b)| b.len() as u64).sum();
+    agree(comm, write_part(&temp, &out, &parts))?;
+    let committed = match created {
+        Some(c) => c.commit(),
+        None => Ok(()),
+    };
+    agree(comm, committed)?;
+    let write_seconds = t.elapsed().as_secs_f64();
+
+    // Every rank's report and the value range.
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v as f64), h.max(v as f64))
+        });
+    let s = slab.clone();
+    let mine = [
+        s.as_ref().map_or(-1.0, |s| s.j.start as f64),
+        s.as_ref().map_or(-1.0, |s| s.j.end as f64),
+        s.as_ref().map_or(-1.0, |s| s.k.start as f64),
+        s.as_ref().map_or(-1.0, |s| s.k.end as f64),
+        lines_read as f64,
+        read_seconds,
+        filter_seconds,
+        backproject_seconds,
+        write_seconds,
+        bytes_written as f64,
+        lo,
+        hi,
+    ];
+    let all = comm.all_gather(&mine);
+    let ranks: Vec<RankReport> = all
+        .chunks_exact(mine.len())
+        .map(|r| RankReport {
+            slab: (r[0] >= 0.0).then(|| Region {
+                j: r[0] as usize..r[1] as usize,
+                k: r[2] as usize..r[3] as usize,
+            }),
+            lines_read: r[4] as usize,
+            read_seconds: r[5],
+            filter_seconds: r[6],
+            backproject_seconds: r[7],
+            write_seconds: r[8],
+            bytes_written: r[9] as u64,
+        })
+        .collect();
+    let range = all
+        .chunks_exact(mine.len())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), r| {
+            (l.min(r[10]), h.max(r[11]))
+        });
+    Ok(Distributed {
+        grid,
+        parallel,
+        what: if f32_path { "cpu f32" } else { "cpu f64" }.into(),
+        axis: plan.axis,
+        total_lines: plan.total_lines,
+        range,
+        out,
+        ranks,
+    })
+}
+
+/// MPI's world communicator as a [`Comm`] (feature `mpi`; run under `mpirun`).
+#[cfg(feature = "mpi")]
+pub mod mpi {
+    use super::Comm;
+    use crate::error::{Error, Result};
+    use mpi::topology::SimpleCommunicator;
+    use mpi::traits::{Communicator, Root};
+
+    /// MPI, initialised for the life of this value (finalised when it is dropped).
+    pub struct Mpi {
+        _universe: mpi::environment::Universe,
+        world: SimpleCommunicator,
+    }
+
+    impl Mpi {
+        /// Initialises MPI.
+        ///
+        /// # Errors
+        /// MPI already initialised in this process.
+        pub fn init() -> Result<Mpi> {
+            let universe = mpi::initialize().ok_or_else(|| {
+                Error::invalid("MPI", "could not be initialised (it already was)")
+            })?;
+            let world = universe.world();
+            Ok(Mpi {
+                _universe: universe,
+                world,
+            })
+        }
+    }
+
+    impl Comm for Mpi {
+        fn rank(&self) -> usize {
+            self.world.rank() as usize
+        }
+        fn size(&self) -> usize {
+            self.world.size() as usize
+        }
+        fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+            use mpi::traits::CommunicatorCollectives;
+            let mut out = vec![0.0; values.len() * self.size()];
+            self.world.all_gather_into(values, &mut out[..]);
+            out
+        }
+        fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
+            let root = self.world.process_at_rank(root as i32);
+            let mut len = bytes.len() as u64;
+            root.broadcast_into(&mut len);
+            bytes.resize(len as usize, 0);
+            root.broadcast_into(&mut bytes[..]);
+        }
+    }
+}

@@ -1,0 +1,418 @@
+//! The distributed reconstruction (`jobs::distributed`) on 1–4 ranks of an in-process
+//! communicator (threads), against the single-process job: the output files are equal
+//! byte for byte, each rank of a cone beam reads only its band of detector rows, and a
+//! rank that fails makes every rank fail with its message, leaving no file behind.
+//! (tests/mpi_reconstruct.rs runs the same job under mpirun.)
+
+mod common;
+
+use common::{root, s, scratch, stderr, voxlab};
+use std::path::{Path, PathBuf};
+use std::sync::{Barrier, Mutex};
+use voxlab::jobs::distributed::{self, Comm, Distributed};
+use voxlab::jobs::reconstruct::ReconstructRequest;
+use voxlab::jobs::{Backend, Progress};
+use voxlab::Error;
+
+/// Ranks as threads of this process: every collective meets at a barrier.
+struct Threads<'a> {
+    rank: usize,
+    shared: &'a Shared,
+}
+
+struct Shared {
+    size: usize,
+    barrier: Barrier,
+    slots: Mutex<Vec<Vec<f64>>>,
+    bytes: Mutex<Vec<u8>>,
+}
+
+impl Comm for Threads<'_> {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.shared.size
+    }
+    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+        self.shared.slots.lock().unwrap()[self.rank] = values.to_vec();
+        self.shared.barrier.wait();
+        let all = self.shared.slots.lock().unwrap().concat();
+        self.shared.barrier.wait();
+        all
+    }
+    fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
+        if self.rank == root {
+            *self.shared.bytes.lock().unwrap() = bytes.clone();
+        }
+        self.shared.barrier.wait();
+        *bytes = self.shared.bytes.lock().unwrap().clone();
+        self.shared.barrier.wait();
+    }
+}
+
+/// A progress whose `cancelled` is true: the way a test makes one rank fail.
+struct Stop;
+impl Progress for Stop {
+    fn cancelled(&self) -> bool {
+        true
+    }
+}
+
+/// Runs the request on `ranks` threads; rank `failing` (if any) is cancelled.
+fn on_ranks(
+    req: &ReconstructRequest,
+    ranks: usize,
+    failing: Option<usize>,
+) -> Vec<voxlab::Result<Distributed>> {
+    let shared = Shared {
+        size: ranks,
+        barrier: Barrier::new(ranks),
+        slots: Mutex::new(vec![Vec::new(); ranks]),
+        bytes: Mutex::new(Vec::new()),
+    };
+    std::thread::scope(|sc| {
+        let handles: Vec<_> = (0..ranks)
+            .map(|rank| {
+                let comm = Threads {
+                    rank,
+                    shared: &shared,
+                };
+                sc.spawn(move || {
+                    let progress: &dyn Progress = if failing == Some(rank) { &Stop } else { &() };
+                    distributed::run(req, &comm, progress)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
+
+fn ct(name: &str) -> PathBuf {
+    root().join("tests/data/ct").join(name)
+}
+
+/// A projection file made by `voxlab project phantom:sphere` with `args`.
+fn projected(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, PathBuf) {
+    let proj = dir.join(format!("{name}.npy"));
+    let mut all = vec!["project", "phantom:sphere"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", s(&proj)]);
+    let o = voxlab(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    (proj.clone(), dir.join(format!("{name}.geometry.json")))
+}
+
+/// Files in `dir` whose names start with `.` (the temporary files of outputs).
+fn temp_files(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with('.'))
+        .collect()
+}
+
+/// The cases, each (name, request without `out`).
+fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
+    let (cone, cone_g) = projected(
+        dir,
+        "cone",
+        &[
+            "--geometry",
+            "cone",
+            "--angles",
+            "24",
+            "--cols",
+            "40",
+            "--rows",
+            "37",
+            "--du",
+            "8",
+        ],
+    );
+    let (short, short_g) = projected(
+        dir,
+        "short",
+        &[
+            "--geometry",
+            "cone",
+            "--angles",
+            "35",
+            "--range",
+            "210",
+            "--cols",
+            "32",
+            "--rows",
+            "32",
+            "--du",
+            "8",
+        ],
+    );
+    let (par, _) = projected(
+        dir,
+        "parallel",
+        &[
+            "--geometry",
+            "parallel",
+            "--angles",
+            "30",
+            "--cols",
+            "33",
+            "--rows",
+            "7",
+        ],
+    );
+    let geometry = |p: &Path| Some(p.display().to_string());
+    let base = ReconstructRequest::default;
+    vec![
+        (
+            "RTK's example, f64",
+            ReconstructRequest {
+                input: ct("rtk_joseph32.npy"),
+                geometry: geometry(&ct("rtk_geometry.json")),
+                size: Some(32),
+                spacing: Some(2.0),
+                ..base()
+            },
+        ),
+        (
+            "RTK's example, f32",
+            ReconstructRequest {
+                input: ct("rtk_joseph32.npy"),
+                geometry: geometry(&ct("rtk_geometry.json")),
+                size: Some(32),
+                spacing: Some(2.0),
+                backend: Backend::CpuF32,
+                ..base()
+            },
+        ),
+        (
+            "a cone beam with 37 rows onto 27³, hann",
+            ReconstructRequest {
+                input: cone,
+                geometry: geometry(&cone_g),
+                size: Some(27),
+                filter: voxlab::cpu::ramp::RampFilter::Hann,
+                ..base()
+            },
+        ),
+        (
+            "a short scan with Parker's weights, f32",
+            ReconstructRequest {
+                input: short,
+                geometry: geometry(&short_g),
+                size: Some(20),
+                short_scan: true,
+                backend: Backend::CpuF32,
+                ..base()
+            },
+        ),
+        (
+            "a parallel stack of 7 rows, circle",
+            ReconstructRequest {
+                input: par.clone(),
+                geometry: Some("parallel".into()),
+                angles: Some("30".into()),
+                ..base()
+            },
+        ),
+        (
+            "a parallel stack of 7 rows, no circle",
+            ReconstructRequest {
+                input: par,
+                geometry: Some("parallel".into()),
+                angles: Some("30".into()),
+                no_circle: true,
+                ..base()
+            },
+        ),
+    ]
+}
+
+#[test]
+fn one_to_four_ranks_write_the_single_process_file_byte_for_byte() {
+    let dir = scratch("distributed-cases");
+    for (name, req) in cases(&dir) {
+        let single = dir.join("single.npy");
+        let _ = std::fs::remove_file(&single);
+        let one = ReconstructRequest {
+            out: Some(single.clone()),
+            ..req.clone()
+        };
+        voxlab::jobs::reconstruct::run(&one, &()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let want = std::fs::read(&single).unwrap();
+        for ranks in 1..=4 {
+            let out = dir.join(format!("ranks{ranks}.npy"));
+            let _ = std::fs::remove_file(&out);
+            let many = ReconstructRequest {
+                out: Some(out.clone()),
+                ..req.clone()
+            };
+            let results = on_ranks(&many, ranks, None);
+            for r in &results {
+                assert!(r.is_ok(), "{name}, {ranks} ranks: {:?}", r.as_ref().err());
+            }
+            let got = std::fs::read(&out).unwrap();
+            assert!(got == want, "{name}, {ranks} ranks: the files differ");
+            let d = results[0].as_ref().unwrap();
+            assert_eq!(d.ranks.len(), ranks);
+            // The slabs tile the grid along their axis, in rank order.
+            let ends: Vec<(usize, usize)> = d
+                .ranks
+                .iter()
+                .filter_map(|r| r.slab.as_ref())
+                .map(|s| {
+                    if d.axis == 1 {
+                        (s.j.start, s.j.end)
+                    } else {
+                        (s.k.start, s.k.end)
+                    }
+                })
+                .collect();
+            assert_eq!(ends.first().map(|e| e.0), Some(0), "{name}");
+            assert_eq!(
+                ends.last().map(|e| e.1),
+                Some(d.grid.dims[d.axis]),
+                "{name}"
+            );
+            assert!(
+                ends.windows(2).all(|w| w[0].1 == w[1].0),
+                "{name}: {ends:?}"
+            );
+        }
+        assert!(
+            temp_files(&dir).is_empty(),
+            "{name}: {:?}",
+            temp_files(&dir)
+        );
+    }
+}
+
+/// A cone beam whose rotation axis is the grid's j axis is cut along j, and every rank
+/// of four reads well under half of the detector lines (its band and the partners).
+#[test]
+fn cone_beam_ranks_read_only_their_band_of_rows() {
+    let dir = scratch("distributed-band");
+    let out = dir.join("fdk.npy");
+    let req = ReconstructRequest {
+        input: ct("rtk_joseph32.npy"),
+        geometry: Some(ct("rtk_geometry.json").display().to_string()),
+        size: Some(32),
+        spacing: Some(2.0),
+        out: Some(out),
+        ..Default::default()
+    };
+    let results = on_ranks(&req, 4, None);
+    let d = results[0].as_ref().unwrap();
+    assert_eq!(d.axis, 1, "{}", d.describe());
+    for (r, rep) in d.ranks.iter().enumerate() {
+        assert!(
+            rep.lines_read * 2 < d.total_lines,
+            "rank {r}: {} of {} lines\n{}",
+            rep.lines_read,
+            d.total_lines,
+            d.describe()
+        );
+    }
+    // One rank reads the rows the whole grid needs (those the 32³ volume projects
+    // onto, 2160 of 2400 here), more than any rank of four.
+    let solo = on_ranks(&req, 1, None);
+    let solo = solo[0].as_ref().unwrap();
+    assert!(solo.ranks[0].lines_read <= solo.total_lines);
+    assert!(d
+        .ranks
+        .iter()
+        .all(|r| r.lines_read < solo.ranks[0].lines_read));
+}
+
+#[test]
+fn a_failing_rank_fails_every_rank_with_its_message_and_leaves_no_file() {
+    let dir = scratch("distributed-fail");
+    let out = dir.join("never.npy");
+    let req = ReconstructRequest {
+        input: ct("rtk_joseph32.npy"),
+        geometry: Some(ct("rtk_geometry.json").display().to_string()),
+        size: Some(32),
+        spacing: Some(2.0),
+        out: Some(out.clone()),
+        ..Default::default()
+    };
+    let results = on_ranks(&req, 3, Some(2));
+    for r in results {
+        match r {
+            Err(Error::Rank {
+                rank: 2,
+                ranks: 3,
+                message,
+            }) => assert_eq!(message, "cancelled"),
+            other => panic!("{:?}", other.map(|d| d.describe())),
+        }
+    }
+    assert!(!out.exists());
+    assert!(temp_files(&dir).is_empty(), "{:?}", temp_files(&dir));
+}
+
+#[test]
+fn what_it_does_not_take_is_refused_clearly() {
+    let dir = scratch("distributed-refused");
+    let base = ReconstructRequest {
+        input: ct("rtk_joseph32.npy"),
+        geometry: Some(ct("rtk_geometry.json").display().to_string()),
+        size: Some(32),
+        out: Some(dir.join("x.npy")),
+        ..Default::default()
+    };
+    let cases = [
+        (
+            ReconstructRequest {
+                method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
+                ..base.clone()
+            },
+            "only --method fbp",
+        ),
+        (
+            ReconstructRequest {
+                backend: Backend::Gpu,
+                ..base.clone()
+            },
+            "ranks reconstruct on the CPU",
+        ),
+        (
+            ReconstructRequest {
+                out: Some(dir.join("x.nrrd")),
+                ..base.clone()
+            },
+            "one .npy file",
+        ),
+        (
+            ReconstructRequest {
+                input: dir.join("missing.npy"),
+                ..base.clone()
+            },
+            "missing.npy",
+        ),
+    ];
+    for (req, words) in cases {
+        let e = distributed::run(&req, &distributed::Solo, &()).unwrap_err();
+        assert!(e.to_string().contains(words), "{e}");
+    }
+    assert!(std::fs::read_dir(&dir).unwrap().next().is_none());
+}
+
+/// Without the `mpi` feature, `--distributed` says how to get it.
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn the_command_line_without_mpi_says_how_to_build_it() {
+    let dir = scratch("distributed-cli");
+    let o = voxlab(&[
+        "reconstruct",
+        s(&ct("rtk_joseph32.npy")),
+        "--geometry",
+        s(&ct("rtk_geometry.json")),
+        "--out",
+        s(&dir.join("x.npy")),
+        "--distributed",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--features mpi"), "{}", stderr(&o));
+}

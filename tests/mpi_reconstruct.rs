@@ -1,0 +1,128 @@
+//! `mpirun -n N voxlab reconstruct … --distributed` (feature `mpi`, OpenMPI's mpirun)
+//! on 1–4 ranks against the single-process command: the output files are equal byte
+//! for byte; a failure on the ranks is one clear message and no file, in bounded time.
+#![cfg(feature = "mpi")]
+
+mod common;
+
+use common::{root, s, scratch, stderr, voxlab};
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+/// `mpirun -n ranks voxlab ARGS…`, killed after two minutes (a hang is a failure).
+fn mpirun(ranks: usize, args: &[&str]) -> Output {
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "-n", &ranks.to_string()])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .arg(env!("CARGO_BIN_EXE_voxlab"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    let mut child = c.spawn().expect("mpirun (OpenMPI) on the PATH");
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("mpirun -n {ranks} {args:?} still runs after 120 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn ct(name: &str) -> String {
+    root()
+        .join("tests/data/ct")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn same_file_on_every_rank_count(name: &str, dir: &Path, args: &[&str]) {
+    let single = dir.join(format!("{name}-single.npy"));
+    let mut one: Vec<&str> = vec!["reconstruct"];
+    one.extend_from_slice(args);
+    one.extend_from_slice(&["--out", s(&single)]);
+    let o = voxlab(&one);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let want = std::fs::read(&single).unwrap();
+    for ranks in 1..=4 {
+        let out = dir.join(format!("{name}-{ranks}.npy"));
+        let mut many = one.clone();
+        let n = many.len();
+        many[n - 1] = s(&out);
+        many.push("--distributed");
+        let o = mpirun(ranks, &many);
+        assert!(o.status.success(), "{name}, {ranks} ranks: {}", stderr(&o));
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        // Rank 0 reports every rank, once.
+        assert_eq!(text.matches("rank 0:").count(), 1, "{text}");
+        assert!(text.contains(&format!("rank {}:", ranks - 1)), "{text}");
+        assert!(
+            std::fs::read(&out).unwrap() == want,
+            "{name}, {ranks} ranks: the files differ"
+        );
+    }
+}
+
+#[test]
+fn one_to_four_mpi_ranks_write_the_single_process_file_byte_for_byte() {
+    let dir = scratch("mpi-cases");
+    same_file_on_every_rank_count(
+        "rtk",
+        &dir,
+        &[
+            &ct("rtk_joseph32.npy"),
+            "--geometry",
+            &ct("rtk_geometry.json"),
+            "--size",
+            "32",
+            "--spacing",
+            "2",
+        ],
+    );
+    same_file_on_every_rank_count(
+        "rtk-f32-27",
+        &dir,
+        &[
+            &ct("rtk_joseph32.npy"),
+            "--geometry",
+            &ct("rtk_geometry.json"),
+            "--size",
+            "27",
+            "--backend",
+            "cpu-f32",
+            "--filter",
+            "hann",
+        ],
+    );
+}
+
+#[test]
+fn a_failure_on_the_ranks_is_one_message_and_no_file() {
+    let dir = scratch("mpi-fail");
+    let out = dir.join("never.npy");
+    let missing = dir.join("missing.npy");
+    let o = mpirun(
+        3,
+        &[
+            "reconstruct",
+            s(&missing),
+            "--geometry",
+            &ct("rtk_geometry.json"),
+            "--out",
+            s(&out),
+            "--distributed",
+        ],
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert_eq!(e.matches("voxlab: error:").count(), 1, "{e}");
+    assert!(
+        e.contains("rank 0 of 3") && e.contains("missing.npy"),
+        "{e}"
+    );
+    assert!(std::fs::read_dir(&dir).unwrap().next().is_none());
+}
