@@ -315,6 +315,11 @@ pub fn filter_projections<R: Real + FftNum>(
                         )
                     },
                     |(z, scratch), (pair, (o, x))| {
+                        // Zero lines filter to zeros (`o` already is): a distributed
+                        // rank's unread lines cost nothing.
+                        if x.iter().all(|&v| v == R::zero()) {
+                            return;
+                        }
                         let two = x.len() > cols;
                         for v in z.iter_mut() {
                             *v = Complex::new(R::zero(), R::zero());
