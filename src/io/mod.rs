@@ -38,6 +38,7 @@
 //! Malformed files give [`Error::Format`] naming the file and the header field; absurd
 //! sizes are refused before anything is allocated. `docs/io.md` has the full rules.
 
+pub mod brick;
 pub mod den;
 pub mod dicom;
 pub mod frame;

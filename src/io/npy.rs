@@ -259,6 +259,32 @@ pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, V
     Ok((h.shape, values))
 }
 
+/// Where a C-order volume `.npy` file (a 2-D or 3-D array of a volume dtype) keeps its
+/// samples, for [`super::brick::read_brick`]; `None` for a Fortran-order one.
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
+    let (file, len) = open(path)?;
+    let h = read_header(
+        &mut BufReader::new(file),
+        len,
+        path,
+        VOLUME_TYPES,
+        VOLUME_TYPES_TEXT,
+    )?;
+    check_data(&h, len, path)?;
+    if h.fortran_order {
+        return Ok(None);
+    }
+    let dims = volume_dims(&h.shape, path)?;
+    Ok(Some(super::brick::RawLayout {
+        data: path.to_path_buf(),
+        offset: h.data_offset,
+        stored: h.stored,
+        endian: h.endian,
+        dims,
+        affine: DMat4::IDENTITY,
+    }))
+}
+
 /// The header of a little-endian float32 C-order `.npy` array of `shape`, as
 /// [`write_npy_f32`] writes it (the data follows it directly).
 pub fn npy_f32_header(shape: &[usize]) -> Vec<u8> {
@@ -294,9 +320,10 @@ pub fn read_npy_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
     volume_from_reader(&mut &bytes[..], bytes.len() as u64, path)
 }
 
-fn volume_from_reader(reader: &mut dyn Read, file_len: u64, path: &Path) -> Result<AnyVolume> {
-    let header = read_header(reader, file_len, path, VOLUME_TYPES, VOLUME_TYPES_TEXT)?;
-    let dims = match header.shape[..] {
+/// The volume dims (x, y, z) of a 3-D `(nz, ny, nx)` or 2-D `(ny, nx)` array, no axis
+/// empty (the limit on the count was checked with the header).
+fn volume_dims(shape: &[usize], path: &Path) -> Result<[usize; 3]> {
+    let dims = match *shape {
         [nz, ny, nx] => [nx, ny, nz],
         [ny, nx] => [nx, ny, 1],
         _ => {
@@ -304,14 +331,18 @@ fn volume_from_reader(reader: &mut dyn Read, file_len: u64, path: &Path) -> Resu
                 path,
                 "shape",
                 format!(
-                    "a volume needs a 2-D (ny, nx) or 3-D (nz, ny, nx) array, not shape {:?}",
-                    header.shape
+                    "a volume needs a 2-D (ny, nx) or 3-D (nz, ny, nx) array, not shape {shape:?}"
                 ),
             ))
         }
     };
-    // Refuses empty axes (the limit on the count was checked with the header).
     check_dims(dims).map_err(|e| Error::format(path, "shape", e.to_string()))?;
+    Ok(dims)
+}
+
+fn volume_from_reader(reader: &mut dyn Read, file_len: u64, path: &Path) -> Result<AnyVolume> {
+    let header = read_header(reader, file_len, path, VOLUME_TYPES, VOLUME_TYPES_TEXT)?;
+    let dims = volume_dims(&header.shape, path)?;
     let samples = read_data(reader, &header, file_len, path)?;
     samples.into_volume(dims, DMat4::IDENTITY)
 }

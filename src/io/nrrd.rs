@@ -221,6 +221,57 @@ pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVo
     samples.into_volume(header.dims, header.affine)
 }
 
+/// Where a raw-encoded NRRD (no line skip) keeps its samples, for
+/// [`super::brick::read_brick`]: after its own header (plus the byte skip, or the last
+/// bytes of the file for `byte skip: -1`) or in its detached data file. `None` for
+/// gzip or text encodings and for a line skip. The data file's length is checked; a
+/// checksum voxlab recorded is checked only by a whole read ([`read_nrrd`]).
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
+    let (file, len) = open(path)?;
+    let mut reader = BufReader::new(file);
+    let fields = read_fields(&mut reader, path)?;
+    let h = Header::parse(&fields, path)?;
+    if h.encoding != Encoding::Raw || h.line_skip != 0 {
+        return Ok(None);
+    }
+    let (data, start, len) = match &h.data_file {
+        None => {
+            let pos = reader.stream_position().map_err(|e| Error::io(path, e))?;
+            (path.to_path_buf(), pos, len)
+        }
+        Some(name) => {
+            let data = path.parent().unwrap_or(Path::new("")).join(name);
+            let (_, len) = super::open_data_file(path, &data)?;
+            (data, 0, len)
+        }
+    };
+    let expected = h.count as u64 * h.stored.size() as u64;
+    let available = len.saturating_sub(start);
+    let offset = if h.byte_skip == -1 {
+        if available < expected {
+            return Err(too_short(&data, expected, available));
+        }
+        len - expected
+    } else {
+        let skip = h.byte_skip as u64;
+        if skip > available {
+            return Err(past_end(&data, skip, available));
+        }
+        if available - skip < expected {
+            return Err(too_short(&data, expected, available - skip));
+        }
+        start + skip
+    };
+    Ok(Some(super::brick::RawLayout {
+        data,
+        offset,
+        stored: h.stored,
+        endian: h.endian,
+        dims: h.dims,
+        affine: h.affine,
+    }))
+}
+
 /// Reads an attached-header NRRD file held in memory (`path` only names it in
 /// errors). A header that names a detached data file is refused: there is no
 /// directory to find it in. Used by the fuzz targets; never panics.

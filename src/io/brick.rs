@@ -1,0 +1,181 @@
+//! Bricks: a box of a volume's voxels read straight from its file, without reading the
+//! rest (the input of a distributed job, where no rank holds the whole volume), and the
+//! k-d tree of bricks a volume is cut into for a number of ranks.
+//!
+//! A file can be read brick by brick when its samples are stored uncompressed in one
+//! block: a C-order `.npy` array, or a raw-encoded NRRD (attached or detached, any
+//! byte skip, no line skip). [`raw_layout`] says where that block is; [`read_brick`]
+//! reads one box of it, one seek per run of `x` (a row of the box), and decodes the
+//! samples exactly as the whole-file reader does, so a brick equals the same box cut
+//! from the whole volume, bit for bit, with the affine moved to the brick's first voxel.
+
+use super::{read_samples, Endian, Stored};
+use crate::error::{Error, Result};
+use crate::volume::{check_dims, max_voxels, AnyVolume};
+use glam::{DMat4, DVec3};
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+/// Where a volume file keeps its samples, uncompressed and x fastest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawLayout {
+    /// The file holding the samples (the header's own file, or a detached data file).
+    pub data: PathBuf,
+    /// The byte offset of the first sample in `data`.
+    pub offset: u64,
+    pub(crate) stored: Stored,
+    pub(crate) endian: Endian,
+    /// Voxels along x, y, z.
+    pub dims: [usize; 3],
+    /// The voxel-index → world affine of the whole volume.
+    pub affine: DMat4,
+}
+
+/// A box of voxels: `lo[a] .. hi[a]` along each axis (x, y, z).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Brick {
+    pub lo: [usize; 3],
+    pub hi: [usize; 3],
+}
+
+impl Brick {
+    /// The whole of a volume of `dims`.
+    pub fn all(dims: [usize; 3]) -> Brick {
+        Brick {
+            lo: [0; 3],
+            hi: dims,
+        }
+    }
+
+    /// Voxels along each axis.
+    pub fn dims(&self) -> [usize; 3] {
+        std::array::from_fn(|a| self.hi[a].saturating_sub(self.lo[a]))
+    }
+
+    /// How many voxels it holds.
+    pub fn voxels(&self) -> usize {
+        self.dims().iter().product()
+    }
+
+    /// This brick grown by `ghost` voxels on every side, within a volume of `dims`.
+    pub fn with_ghost(&self, ghost: usize, dims: [usize; 3]) -> Brick {
+        Brick {
+            lo: std::array::from_fn(|a| self.lo[a].saturating_sub(ghost)),
+            hi: std::array::from_fn(|a| (self.hi[a] + ghost).min(dims[a])),
+        }
+    }
+}
+
+/// Where `path` keeps its samples when it can be read brick by brick (module docs);
+/// `None` for every other file (compressed or text data, Fortran order, other formats).
+///
+/// # Errors
+/// A bad header; a file too short for the data its header announces.
+pub fn raw_layout(path: &Path) -> Result<Option<RawLayout>> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("npy") => super::npy::raw_layout(path),
+        Some("nrrd") | Some("nhdr") => super::nrrd::raw_layout(path),
+        _ => Ok(None),
+    }
+}
+
+/// Reads the voxels of `brick` from the block `layout` describes (`path`, the file
+/// the user named, in errors): a volume of the brick's size whose affine puts its
+/// voxel 0 where the whole volume's voxel `brick.lo` is.
+///
+/// # Errors
+/// An empty brick or one outside the volume; I/O errors.
+pub fn read_brick(layout: &RawLayout, brick: &Brick, path: &Path) -> Result<AnyVolume> {
+    let d = layout.dims;
+    if (0..3).any(|a| brick.lo[a] >= brick.hi[a] || brick.hi[a] > d[a]) {
+        return Err(Error::invalid(
+            format!("brick of {}", path.display()),
+            format!(
+                "{:?} .. {:?} is empty or leaves the {}×{}×{} volume",
+                brick.lo, brick.hi, d[0], d[1], d[2]
+            ),
+        ));
+    }
+    let bd = brick.dims();
+    check_dims(bd)?;
+    if brick.voxels() > max_voxels() {
+        return Err(Error::too_large(
+            format!("brick of {}", path.display()),
+            format!("{} voxels (limit {})", brick.voxels(), max_voxels()),
+        ));
+    }
+    let size = layout.stored.size();
+    let row = bd[0] * size;
+    let mut bytes = super::reserve::<u8>(brick.voxels() * size, path)?;
+    bytes.resize(brick.voxels() * size, 0);
+    let (file, _) = super::open(&layout.data)?;
+    let mut reader = BufReader::new(file);
+    let mut at = 0;
+    for k in brick.lo[2]..brick.hi[2] {
+        for j in brick.lo[1]..brick.hi[1] {
+            let first = brick.lo[0] + d[0] * (j + d[1] * k);
+            reader
+                .seek(SeekFrom::Start(layout.offset + (first * size) as u64))
+                .and_then(|_| reader.read_exact(&mut bytes[at..at + row]))
+                .map_err(|e| super::read_error(&layout.data, e))?;
+            at += row;
+        }
+    }
+    let samples = read_samples(
+        &mut &bytes[..],
+        layout.stored,
+        layout.endian,
+        brick.voxels(),
+        path,
+    )?;
+    let lo = DVec3::new(brick.lo[0] as f64, brick.lo[1] as f64, brick.lo[2] as f64);
+    samples.into_volume(bd, layout.affine * DMat4::from_translation(lo))
+}
+
+/// Cuts a volume of `dims` into `n` bricks by a k-d tree: the box's longest axis is
+/// cut where the two sides get voxels in proportion to their ranks (`⌊n/2⌋` and
+/// `⌈n/2⌉`), recursively. The bricks tile the volume, in the tree's order (the first
+/// half before the second along each cut).
+///
+/// # Errors
+/// `n` = 0; more bricks than a box can be cut into (a box 1 voxel wide on every axis
+/// that should hold two).
+pub fn kd_bricks(dims: [usize; 3], n: usize) -> Result<Vec<Brick>> {
+    if n == 0 {
+        return Err(Error::invalid("bricks", "a volume needs at least one"));
+    }
+    let mut out = Vec::with_capacity(n);
+    split(Brick::all(dims), n, &mut out)?;
+    Ok(out)
+}
+
+fn split(b: Brick, n: usize, out: &mut Vec<Brick>) -> Result<()> {
+    if n == 1 {
+        out.push(b);
+        return Ok(());
+    }
+    let bd = b.dims();
+    let axis = (0..3).max_by_key(|&a| (bd[a], a)).unwrap_or(0);
+    let (n1, n2) = (n / 2, n - n / 2);
+    // The cut leaves each side at least one slice per brick it must hold.
+    let cut = b.lo[axis] + bd[axis] * n1 / n;
+    if cut <= b.lo[axis] || cut >= b.hi[axis] {
+        return Err(Error::invalid(
+            "bricks",
+            format!(
+                "a {}×{}×{} box cannot be cut into {n} bricks along its longest axis",
+                bd[0], bd[1], bd[2]
+            ),
+        ));
+    }
+    let mut first = b;
+    first.hi[axis] = cut;
+    let mut second = b;
+    second.lo[axis] = cut;
+    split(first, n1, out)?;
+    split(second, n2, out)
+}
