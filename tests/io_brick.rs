@@ -1,7 +1,8 @@
 //! Bricks read straight from a file (`io::brick`): each brick of a k-d tree, with and
 //! without ghost voxels, equals the same box cut from the whole volume bit for bit,
 //! with the affine moved to its first voxel, for every voxel type, from `.npy` and
-//! raw NRRD (attached, detached, `byte skip: -1`); compressed files are not random
+//! raw NRRD (attached, detached, `byte skip: -1`) and MetaImage (`.mha`, `.mhd`);
+//! compressed files are not random
 //! access; the k-d bricks tile the volume.
 
 mod common;
@@ -10,6 +11,7 @@ use common::{bits, oblique_affine, sample_volumes, scratch};
 use glam::{DMat4, DVec3};
 use std::path::{Path, PathBuf};
 use voxlab::io::brick::{kd_bricks, raw_layout, read_brick, Brick};
+use voxlab::io::metaimage::{write_metaimage, MetaImageWriteOptions};
 use voxlab::io::npy::write_npy_volume;
 use voxlab::io::nrrd::{write_nrrd, NrrdWriteOptions};
 use voxlab::io::read_volume;
@@ -47,7 +49,13 @@ fn files(dir: &Path, name: &str, v: &AnyVolume) -> Vec<PathBuf> {
         },
     )
     .unwrap();
-    vec![npy, nrrd, nhdr]
+    let mut out = vec![npy, nrrd, nhdr];
+    for ext in ["mha", "mhd"] {
+        let mi = dir.join(format!("{name}-mi.{ext}"));
+        write_metaimage(&mi, v, MetaImageWriteOptions { compress: false }).unwrap();
+        out.push(mi);
+    }
+    out
 }
 
 fn check_bricks(path: &Path, n: usize, ghost: usize) {
@@ -133,6 +141,9 @@ fn compressed_and_fortran_files_are_not_random_access() {
     let gz = dir.join("gz.nrrd");
     write_nrrd(&gz, &v, NrrdWriteOptions::default()).unwrap();
     assert!(raw_layout(&gz).unwrap().is_none());
+    let zmha = dir.join("z.mha");
+    write_metaimage(&zmha, &v, MetaImageWriteOptions { compress: true }).unwrap();
+    assert!(raw_layout(&zmha).unwrap().is_none());
     let fortran = dir.join("f.npy");
     let mut b = b"\x93NUMPY\x01\x00".to_vec();
     let dict = "{'descr': '<f4', 'fortran_order': True, 'shape': (2, 3), }";

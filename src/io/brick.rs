@@ -3,8 +3,9 @@
 //! k-d tree of bricks a volume is cut into for a number of ranks.
 //!
 //! A file can be read brick by brick when its samples are stored uncompressed in one
-//! block: a C-order `.npy` array, or a raw-encoded NRRD (attached or detached, any
-//! byte skip, no line skip). [`raw_layout`] says where that block is; [`read_brick`]
+//! block: a C-order `.npy` array, a raw-encoded NRRD (attached or detached, any byte
+//! skip, no line skip), or an uncompressed binary MetaImage (`.mha`, or `.mhd` with one
+//! data file). [`raw_layout`] says where that block is; [`read_brick`]
 //! reads one box of it, one seek per run of `x` (a row of the box), and decodes the
 //! samples exactly as the whole-file reader does, so a brick equals the same box cut
 //! from the whole volume, bit for bit, with the affine moved to the brick's first voxel.
@@ -79,6 +80,7 @@ pub fn raw_layout(path: &Path) -> Result<Option<RawLayout>> {
     match ext.as_deref() {
         Some("npy") => super::npy::raw_layout(path),
         Some("nrrd") | Some("nhdr") => super::nrrd::raw_layout(path),
+        Some("mha") | Some("mhd") => super::metaimage::raw_layout(path),
         _ => Ok(None),
     }
 }

@@ -527,6 +527,60 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
     samples.into_volume(h.dims, h.affine)
 }
 
+/// Where an uncompressed binary MetaImage keeps its samples, for
+/// [`super::brick::read_brick`]: after its own header (`LOCAL`) or in its one data
+/// file (at `HeaderSize`, or the last bytes for −1). `None` for compressed or text
+/// data and for a list of slice files. The data must fill the file exactly, as for
+/// [`read_metaimage`].
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
+    use std::io::Seek;
+    let (file, len) = open(path)?;
+    let mut reader = BufReader::new(file);
+    let (fields, list) = read_lines(&mut reader, path)?;
+    let h = Header::parse(&fields, list, path)?;
+    if h.compressed || !h.binary {
+        return Ok(None);
+    }
+    let want = h.data_bytes();
+    let (data, offset, len) = match &h.data {
+        DataFile::List(_) => return Ok(None),
+        DataFile::Local => {
+            let pos = reader.stream_position().map_err(|e| Error::io(path, e))?;
+            (path.to_path_buf(), pos, len)
+        }
+        DataFile::File(name) => {
+            let data = path.parent().unwrap_or(Path::new("")).join(name);
+            let (_, len) = super::open_data_file(path, &data)?;
+            let offset = if h.header_size == -1 {
+                len.checked_sub(want)
+                    .ok_or_else(|| super::too_short(&data, want, len))?
+            } else {
+                h.header_size.max(0) as u64
+            };
+            (data, offset, len)
+        }
+    };
+    let available = len.saturating_sub(offset);
+    if available < want {
+        return Err(super::too_short(&data, want, available));
+    }
+    if available > want {
+        return Err(field(
+            &data,
+            "data",
+            format!("the data is longer than DimSize × ElementType describe ({want} bytes)"),
+        ));
+    }
+    Ok(Some(super::brick::RawLayout {
+        data,
+        offset,
+        stored: h.stored,
+        endian: h.endian,
+        dims: h.dims,
+        affine: h.affine,
+    }))
+}
+
 /// Reads a MetaImage held in memory; its data must be `LOCAL`.
 pub fn read_metaimage_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
     let mut reader = std::io::Cursor::new(bytes);
