@@ -416,3 +416,58 @@ fn the_command_line_without_mpi_says_how_to_build_it() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--features mpi"), "{}", stderr(&o));
 }
+
+/// The dry run's plan is the one the ranks then follow, and it writes nothing.
+#[test]
+fn the_dry_run_plans_what_the_ranks_then_do() {
+    let dir = scratch("distributed-plan");
+    let out = dir.join("fdk.npy");
+    let req = ReconstructRequest {
+        input: ct("rtk_joseph32.npy"),
+        geometry: Some(ct("rtk_geometry.json").display().to_string()),
+        size: Some(32),
+        spacing: Some(2.0),
+        out: Some(out.clone()),
+        ..Default::default()
+    };
+    let plan = distributed::plan(&req, 3, &()).unwrap();
+    assert!(!out.exists());
+    let text = plan.describe();
+    assert!(text.contains("rank 2: j 21..32 (11264 voxels)"), "{text}");
+    let done = on_ranks(&req, 3, None);
+    let d = done[0].as_ref().unwrap();
+    for (r, rep) in d.ranks.iter().enumerate() {
+        assert_eq!(rep.slab, plan.slabs.slabs[r]);
+        assert_eq!(rep.lines_read, plan.slabs.lines[r].len());
+    }
+    assert_eq!(std::fs::metadata(&out).unwrap().len(), plan.out_bytes);
+    // More ranks than slices: the last ones get none.
+    let many = distributed::plan(&req, 40, &()).unwrap();
+    assert!(
+        many.describe().contains("rank 39: no slab"),
+        "{}",
+        many.describe()
+    );
+    let o = voxlab(&[
+        "reconstruct",
+        s(&ct("rtk_joseph32.npy")),
+        "--geometry",
+        s(&ct("rtk_geometry.json")),
+        "--size",
+        "32",
+        "--spacing",
+        "2",
+        "--out",
+        s(&dir.join("cli.npy")),
+        "--distributed",
+        "--dry-run",
+        "--ranks",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout),
+        text.replace("fdk.npy", "cli.npy")
+    );
+    assert!(!dir.join("cli.npy").exists());
+}

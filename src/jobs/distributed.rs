@@ -112,13 +112,13 @@ impl SlabPlan {
     }
 }
 
-/// `n` slices cut into `ranks` runs differing by at most one; empty runs are `None`.
+/// `n` slices cut into `ranks` runs differing by at most one; the ranks past the `n`th
+/// get `None`.
 fn runs(n: usize, ranks: usize) -> Vec<Option<Range<usize>>> {
+    // With more ranks than slices, the first `n` get one each.
+    let m = n.min(ranks);
     (0..ranks)
-        .map(|r| {
-            let (a, b) = (r * n / ranks, (r + 1) * n / ranks);
-            (a < b).then_some(a..b)
-        })
+        .map(|r| (r < m).then(|| r * n / m..(r + 1) * n / m))
         .collect()
 }
 
@@ -323,10 +323,13 @@ struct Prepared {
     read_seconds: f64,
 }
 
-fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
+/// The stack when it must be read whole (`None`: it is read line by line), the
+/// geometry, the grid and the slab plan for `ranks`.
+type Planned = (Option<Projections<f64>>, Geometry, Grid, SlabPlan);
+
+fn planned(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Result<Planned> {
     check_request(a)?;
     check_distributed(a)?;
-    let t = Instant::now();
     let shape = projection_shape(&a.input)?;
     // The geometry is checked against the stack's shape; only a header is read so far.
     let whole = match shape {
@@ -348,7 +351,13 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
         progress.note(&format!("using the geometry {}", f.display()));
     }
     let grid = fbp_grid(a, &g, progress)?;
-    let plan = slab_plan(&g, &grid, comm.size())?;
+    let plan = slab_plan(&g, &grid, ranks)?;
+    Ok((whole, g, grid, plan))
+}
+
+fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
+    let t = Instant::now();
+    let (whole, g, grid, plan) = planned(a, comm.size(), progress)?;
     let mine = &plan.lines[comm.rank()];
     let (p, lines_read) = match whole {
         Some(p) => (p, plan.total_lines),
@@ -361,6 +370,108 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
         plan,
         lines_read,
         read_seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// What a distributed reconstruction on `ranks` ranks would do ([`plan`]).
+#[derive(Clone, Debug)]
+pub struct DistributedPlan {
+    pub grid: Grid,
+    pub slabs: SlabPlan,
+    /// Whether every rank would read the whole stack (not a 3-D C-order `.npy`).
+    pub reads_whole: bool,
+    /// Each rank's large host arrays at their peak (bytes): the projections (f64),
+    /// their weighted and filtered copies, the slab and its bytes to write.
+    pub host_bytes: Vec<u64>,
+    /// The output and its size in bytes.
+    pub out: PathBuf,
+    pub out_bytes: u64,
+}
+
+impl DistributedPlan {
+    /// The plan as text, one rank per line.
+    pub fn describe(&self) -> String {
+        use crate::gpu::plan::human_bytes;
+        let axis = if self.slabs.axis == 1 { 'j' } else { 'k' };
+        let d = self.grid.dims;
+        let mut s = format!(
+            "dry run: reconstruct on {} ranks (nothing is computed or written)\n\
+             grid:   {}×{}×{} in slabs along {axis}; the stack holds {} detector lines{}\n",
+            self.slabs.slabs.len(),
+            d[0],
+            d[1],
+            d[2],
+            self.slabs.total_lines,
+            if self.reads_whole {
+                " (read whole by every rank: not a 3-D C-order .npy)"
+            } else {
+                ""
+            }
+        );
+        for (r, (slab, lines)) in self.slabs.slabs.iter().zip(&self.slabs.lines).enumerate() {
+            let host = human_bytes(self.host_bytes[r]);
+            match slab {
+                Some(sl) => {
+                    let run = if self.slabs.axis == 1 { &sl.j } else { &sl.k };
+                    s += &format!(
+                        "rank {r}: {axis} {}..{} ({} voxels), reads {} lines, host {host} at the peak\n",
+                        run.start,
+                        run.end,
+                        sl.voxels(d[0]),
+                        if self.reads_whole { self.slabs.total_lines } else { lines.len() },
+                    );
+                }
+                None => s += &format!("rank {r}: no slab (more ranks than slices), host {host}\n"),
+            }
+        }
+        s += &format!(
+            "would write: {} ({} bytes)\n",
+            self.out.display(),
+            self.out_bytes
+        );
+        s
+    }
+}
+
+/// `voxlab reconstruct --distributed --dry-run --ranks N`: how [`run`] on `ranks`
+/// ranks would cut the grid and what each rank would read and hold, after reading the
+/// input's header and geometry (no MPI needed), computing and writing nothing.
+///
+/// # Errors
+/// As [`run`] up to the work.
+pub fn plan(
+    a: &ReconstructRequest,
+    ranks: usize,
+    progress: &dyn Progress,
+) -> Result<DistributedPlan> {
+    let (whole, g, grid, slabs) = planned(a, ranks, progress)?;
+    let real = if a.backend == Backend::CpuF32 { 4 } else { 8 };
+    let stack = (g.n_angles() * g.rows * g.cols) as u64;
+    // A parallel sinogram is padded to the circle's diagonal.
+    let padded = if g.beam == Beam::Parallel && !a.no_circle {
+        stack * ((2.0f64).sqrt() * g.cols as f64).ceil() as u64 / g.cols as u64
+    } else {
+        stack
+    };
+    let host_bytes = slabs
+        .slabs
+        .iter()
+        .map(|s| {
+            let voxels = s.as_ref().map_or(0, |s| s.voxels(grid.dims[0])) as u64;
+            // Read (f64), padded (f64), its narrowed and filtered copies, the slab and
+            // its f32 values and bytes.
+            8 * stack + 8 * padded + 2 * real * padded + voxels * (real + 8)
+        })
+        .collect();
+    let d = grid.dims;
+    let shape = npy_shape(d);
+    Ok(DistributedPlan {
+        grid,
+        slabs,
+        reads_whole: whole.is_some(),
+        host_bytes,
+        out: a.out.clone().expect("checked by check_distributed"),
+        out_bytes: npy_f32_header(&shape).len() as u64 + 4 * d.iter().product::<usize>() as u64,
     })
 }
 
@@ -397,6 +508,16 @@ fn slab_values<R: Real + rustfft::FftNum>(
         filter_seconds,
         t.elapsed().as_secs_f64(),
     ))
+}
+
+/// The `.npy` shape of a grid's values: `(ny, nx)` for one slice, else `(nz, ny, nx)`
+/// (as a single-process reconstruction writes it).
+fn npy_shape(d: [usize; 3]) -> Vec<usize> {
+    if d[2] == 1 {
+        vec![d[1], d[0]]
+    } else {
+        vec![d[2], d[1], d[0]]
+    }
 }
 
 /// The bytes of a path, to send it to the other ranks.
@@ -467,11 +588,7 @@ pub fn run(
     // The output: rank 0 creates it, every rank writes its ranges, rank 0 renames it.
     let out = a.out.clone().expect("checked in prepare");
     let d = grid.dims;
-    let shape: Vec<usize> = if d[2] == 1 {
-        vec![d[1], d[0]]
-    } else {
-        vec![d[2], d[1], d[0]]
-    };
+    let shape = npy_shape(d);
     let header = npy_f32_header(&shape);
     let t = Instant::now();
     let total = header.len() as u64 + 4 * d.iter().product::<usize>() as u64;

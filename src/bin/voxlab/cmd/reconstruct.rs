@@ -106,8 +106,12 @@ pub struct ReconstructArgs {
     /// slab needs from a 3-D .npy stack and writing its part of the one .npy output
     /// (equal byte for byte to a single-process run). Needs a build with the `mpi`
     /// feature; CPU backends only (docs/distributed.md).
-    #[arg(long, conflicts_with = "dry_run")]
+    #[arg(long)]
     pub distributed: bool,
+    /// With --distributed --dry-run: the number of ranks to plan for (no MPI needed):
+    /// prints each rank's slab, the detector lines it would read and its host memory.
+    #[arg(long, requires = "distributed", requires = "dry_run")]
+    pub ranks: Option<usize>,
 }
 
 pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
@@ -135,6 +139,17 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         tolerance: a.tolerance,
         convergence: a.convergence.clone(),
     };
+    if a.distributed && a.dry_run {
+        let Some(ranks) = a.ranks else {
+            return Err(voxlab::Error::invalid(
+                "--ranks",
+                "--distributed --dry-run plans for a number of ranks: give --ranks N",
+            ));
+        };
+        let plan = voxlab::jobs::distributed::plan(&req, ranks, &Terminal::bars())?;
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     if a.distributed {
         return distributed(&req);
     }
