@@ -92,6 +92,18 @@ fn ct(name: &str) -> PathBuf {
     root().join("tests/data/ct").join(name)
 }
 
+/// FDK of RTK's example (32³, 2 mm) into `out`.
+fn rtk(out: PathBuf) -> ReconstructRequest {
+    ReconstructRequest {
+        input: ct("rtk_joseph32.npy"),
+        geometry: Some(ct("rtk_geometry.json").display().to_string()),
+        size: Some(32),
+        spacing: Some(2.0),
+        out: Some(out),
+        ..Default::default()
+    }
+}
+
 /// A projection file made by `voxlab project phantom:sphere` with `args`.
 fn projected(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, PathBuf) {
     let proj = dir.join(format!("{name}.npy"));
@@ -294,14 +306,7 @@ fn one_to_four_ranks_write_the_single_process_file_byte_for_byte() {
 fn cone_beam_ranks_read_only_their_band_of_rows() {
     let dir = scratch("distributed-band");
     let out = dir.join("fdk.npy");
-    let req = ReconstructRequest {
-        input: ct("rtk_joseph32.npy"),
-        geometry: Some(ct("rtk_geometry.json").display().to_string()),
-        size: Some(32),
-        spacing: Some(2.0),
-        out: Some(out),
-        ..Default::default()
-    };
+    let req = rtk(out);
     let results = on_ranks(&req, 4, None);
     let d = results[0].as_ref().unwrap();
     assert_eq!(d.axis, 1, "{}", d.describe());
@@ -329,14 +334,7 @@ fn cone_beam_ranks_read_only_their_band_of_rows() {
 fn a_failing_rank_fails_every_rank_with_its_message_and_leaves_no_file() {
     let dir = scratch("distributed-fail");
     let out = dir.join("never.npy");
-    let req = ReconstructRequest {
-        input: ct("rtk_joseph32.npy"),
-        geometry: Some(ct("rtk_geometry.json").display().to_string()),
-        size: Some(32),
-        spacing: Some(2.0),
-        out: Some(out.clone()),
-        ..Default::default()
-    };
+    let req = rtk(out.clone());
     let results = on_ranks(&req, 3, Some(2));
     for r in results {
         match r {
@@ -422,14 +420,7 @@ fn the_command_line_without_mpi_says_how_to_build_it() {
 fn the_dry_run_plans_what_the_ranks_then_do() {
     let dir = scratch("distributed-plan");
     let out = dir.join("fdk.npy");
-    let req = ReconstructRequest {
-        input: ct("rtk_joseph32.npy"),
-        geometry: Some(ct("rtk_geometry.json").display().to_string()),
-        size: Some(32),
-        spacing: Some(2.0),
-        out: Some(out.clone()),
-        ..Default::default()
-    };
+    let req = rtk(out.clone());
     let plan = distributed::plan(&req, 3, &()).unwrap();
     assert!(!out.exists());
     let text = plan.describe();
