@@ -174,6 +174,10 @@ fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
             "7",
         ],
     );
+    // RTK's example as NRRD: read whole by every rank.
+    let nrrd = dir.join("rtk.nrrd");
+    let stack = voxlab::io::read_volume(&ct("rtk_joseph32.npy")).unwrap();
+    voxlab::io::nrrd::write_nrrd(&nrrd, &stack, Default::default()).unwrap();
     let geometry = |p: &Path| Some(p.display().to_string());
     let base = ReconstructRequest::default;
     vec![
@@ -216,6 +220,25 @@ fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
                 size: Some(20),
                 short_scan: true,
                 backend: Backend::CpuF32,
+                ..base()
+            },
+        ),
+        (
+            "RTK's example from NRRD, read whole",
+            ReconstructRequest {
+                input: nrrd,
+                geometry: geometry(&ct("rtk_geometry.json")),
+                size: Some(32),
+                spacing: Some(2.0),
+                ..base()
+            },
+        ),
+        (
+            "scikit-image's sinogram, one image cut along j",
+            ReconstructRequest {
+                input: ct("skimage_radon64.npy"),
+                geometry: Some("parallel".into()),
+                angles: Some(ct("skimage_theta.txt").display().to_string()),
                 ..base()
             },
         ),
@@ -268,6 +291,12 @@ fn one_to_four_ranks_write_the_single_process_file_byte_for_byte() {
             assert!(got == want, "{name}, {ranks} ranks: the files differ");
             let d = results[0].as_ref().unwrap();
             assert_eq!(d.ranks.len(), ranks);
+            // Every grid here has at least four slices along one axis: all ranks work.
+            assert!(
+                d.ranks.iter().all(|r| r.slab.is_some()),
+                "{name}: {}",
+                d.describe()
+            );
             // The slabs tile the grid along their axis, in rank order.
             let ends: Vec<(usize, usize)> = d
                 .ranks

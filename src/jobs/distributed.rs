@@ -169,9 +169,9 @@ pub fn region_lines(g: &Geometry, grid: &Grid, region: &Region) -> Vec<usize> {
     lines
 }
 
-/// Cuts `grid` into one slab per rank along `k`, or along `j` when that reads fewer
-/// detector lines in all (a cone beam whose rotation axis is `j`: then each rank
-/// reads only its band of rows).
+/// Cuts `grid` into one slab per rank along `k`, or along `j` when that gives more
+/// ranks a slab (a single image), or as many and reads fewer detector lines in all (a
+/// cone beam whose rotation axis is `j`: then each rank reads only its band of rows).
 ///
 /// # Errors
 /// No ranks.
@@ -204,16 +204,19 @@ pub fn slab_plan(g: &Geometry, grid: &Grid, ranks: usize) -> Result<SlabPlan> {
             total_lines: g.n_angles() * g.rows,
         }
     };
+    // First the axis that gives more ranks a slab, then the one that reads less.
     let along_k = plan_along(2);
-    if d[1] == 1 {
-        return Ok(along_k);
-    }
     let along_j = plan_along(1);
-    Ok(if along_j.lines_read() < along_k.lines_read() {
-        along_j
-    } else {
-        along_k
-    })
+    let busy = |p: &SlabPlan| p.slabs.iter().filter(|s| s.is_some()).count();
+    Ok(
+        match busy(&along_j)
+            .cmp(&busy(&along_k))
+            .then_with(|| along_k.lines_read().cmp(&along_j.lines_read()))
+        {
+            std::cmp::Ordering::Greater => along_j,
+            _ => along_k,
+        },
+    )
 }
 
 /// What one rank did.
