@@ -348,6 +348,12 @@ fn cone_beam_ranks_read_only_their_band_of_rows() {
             d.describe()
         );
     }
+    // Five agreements of one f64 each; rank 0 also sends the temporary file's name
+    // (its length, 8 bytes, then the name).
+    for rep in &d.ranks[1..] {
+        assert_eq!(rep.bytes_sent, 5 * 8);
+    }
+    assert!(d.ranks[0].bytes_sent > 5 * 8 + 8 + "fdk.npy".len() as u64);
     // One rank reads the rows the whole grid needs (those the 32³ volume projects
     // onto, 2160 of 2400 here), more than any rank of four.
     let solo = on_ranks(&req, 1, None);

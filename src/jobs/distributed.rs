@@ -69,6 +69,32 @@ impl Comm for Solo {
     fn broadcast(&self, _root: usize, _bytes: &mut Vec<u8>) {}
 }
 
+/// A [`Comm`] that counts the bytes this rank sends through it.
+struct Counted<'a> {
+    inner: &'a dyn Comm,
+    sent: std::cell::Cell<u64>,
+}
+
+impl Comm for Counted<'_> {
+    fn rank(&self) -> usize {
+        self.inner.rank()
+    }
+    fn size(&self) -> usize {
+        self.inner.size()
+    }
+    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+        self.sent.set(self.sent.get() + 8 * values.len() as u64);
+        self.inner.all_gather(values)
+    }
+    fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
+        if root == self.rank() {
+            // The length, then the bytes.
+            self.sent.set(self.sent.get() + 8 + bytes.len() as u64);
+        }
+        self.inner.broadcast(root, bytes)
+    }
+}
+
 /// The end of a phase: `r` on every rank when it succeeded on all; otherwise, on
 /// every rank, [`Error::Rank`] with the lowest failing rank's message (one process
 /// alone gets its own error back unchanged).
@@ -233,6 +259,9 @@ pub struct RankReport {
     pub write_seconds: f64,
     /// Bytes of the output it wrote (rank 0's include the header).
     pub bytes_written: u64,
+    /// Bytes it sent to the other ranks before the reports (its all-gather inputs and
+    /// what it broadcast as the root): the agreements and the output's name.
+    pub bytes_sent: u64,
 }
 
 /// A distributed reconstruction, as every rank knows it at the end.
@@ -268,14 +297,15 @@ impl Distributed {
             };
             s.push_str(&format!(
                 "rank {r}: {slab}, read {} of {} detector lines in {:.3} s, filter {:.3} s, \
-                 backprojection {:.3} s, wrote {} bytes in {:.3} s\n",
+                 backprojection {:.3} s, wrote {} bytes in {:.3} s, sent {} bytes\n",
                 rep.lines_read,
                 self.total_lines,
                 rep.read_seconds,
                 rep.filter_seconds,
                 rep.backproject_seconds,
                 rep.bytes_written,
-                rep.write_seconds
+                rep.write_seconds,
+                rep.bytes_sent
             ));
         }
         s
@@ -561,6 +591,11 @@ pub fn run(
     comm: &dyn Comm,
     progress: &dyn Progress,
 ) -> Result<Distributed> {
+    let counted = Counted {
+        inner: comm,
+        sent: std::cell::Cell::new(0),
+    };
+    let comm: &dyn Comm = &counted;
     let rank = comm.rank();
     let pre = agree(comm, prepare(a, comm, progress))?;
     let Prepared {
@@ -647,6 +682,7 @@ pub fn run(
         bytes_written as f64,
         lo,
         hi,
+        counted.sent.get() as f64,
     ];
     let all = comm.all_gather(&mine);
     let ranks: Vec<RankReport> = all
@@ -662,6 +698,7 @@ pub fn run(
             backproject_seconds: r[7],
             write_seconds: r[8],
             bytes_written: r[9] as u64,
+            bytes_sent: r[12] as u64,
         })
         .collect();
     let range = all
