@@ -210,12 +210,30 @@ fn a_gpu_fft_past_a_lowered_binding_is_split_and_gives_the_same_numbers() {
             .as_array()
             .unwrap()
             .iter()
-            .map(|c| (c["backend"].to_string(), c["rel_l2"].as_f64().unwrap()))
-            .collect::<Vec<_>>()
+            .map(|c| {
+                (
+                    (c["backend"].to_string(), c["rel_l2"].as_f64().unwrap()),
+                    c["split"].as_str().map(str::to_string),
+                )
+            })
+            .unzip::<_, _, Vec<_>, Vec<_>>()
     };
-    let whole = run(&d.join("whole.json"), None);
-    let split = run(&d.join("split.json"), Some("4KiB"));
+    let (whole, unsplit) = run(&d.join("whole.json"), None);
+    let (split, how) = run(&d.join("split.json"), Some("4KiB"));
     assert_eq!(whole.len(), 4, "{whole:?}");
     // The same transforms bit for bit, so the same errors against the exact DFT.
     assert_eq!(whole, split);
+    // Each case says how it was cut: 64 × 32 in slabs of 512-byte lines along axis 1
+    // (8 per 4 KiB) and of 256-byte slices along axis 0 (16 per 4 KiB); 32 × 16 × 8 in
+    // 2 KiB and 1 KiB pieces.
+    assert!(unsplit.iter().all(Option::is_none), "{unsplit:?}");
+    let s64 = "FFT in 4 slabs along axis 1 (axis 0's lines), then 4 slabs along axis 0 \
+               (the other axes)";
+    let s32 = "FFT in 8 slabs along axis 1 (axis 0's lines), then 8 slabs along axis 0 \
+               (the other axes)";
+    let want: Vec<Option<String>> = [s64, s64, s32, s32]
+        .iter()
+        .map(|s| Some(s.to_string()))
+        .collect();
+    assert_eq!(how, want);
 }

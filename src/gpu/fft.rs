@@ -533,11 +533,22 @@ pub fn fft_nd_timed(
     variant: GpuFftVariant,
 ) -> Result<GpuFftOutput> {
     let axes: Vec<usize> = (0..shape.len()).collect();
-    if !too_large_for_one_binding(ctx, data.len()) {
-        return transform(ctx, Input::Host(data), shape, &axes, dir, norm, variant);
+    match split_plan(ctx, shape)? {
+        None => transform(ctx, Input::Host(data), shape, &axes, dir, norm, variant),
+        Some(plan) => fft_nd_planned(ctx, data, shape, dir, norm, variant, &plan),
     }
-    let plan = FftSplitPlan::new(&ctx.limits, shape)?;
-    fft_nd_planned(ctx, data, shape, dir, norm, variant, &plan)
+}
+
+/// How [`fft_nd_timed`] splits an array of `shape` on `ctx`: `None` when it fits one
+/// binding of the planner's limits.
+///
+/// # Errors
+/// As [`FftSplitPlan::new`].
+pub fn split_plan(ctx: &GpuContext, shape: &[usize]) -> Result<Option<FftSplitPlan>> {
+    if !too_large_for_one_binding(ctx, shape.iter().product()) {
+        return Ok(None);
+    }
+    FftSplitPlan::new(&ctx.limits, shape).map(Some)
 }
 
 /// Whether `len` complex values exceed one binding of the planner's limits (or the

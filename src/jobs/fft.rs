@@ -133,6 +133,9 @@ pub struct CaseResult {
     pub gbps: f64,
     /// Why the case was not run (then the numbers are meaningless and it passes).
     pub skipped: Option<String>,
+    /// GPU only: how the transform was split past one storage binding ("FFT in 4
+    /// slabs along axis 1 …"); `None` when it ran in one piece.
+    pub split: Option<String>,
 }
 
 /// Everything `voxlab fft` measured.
@@ -182,6 +185,7 @@ fn case(
         gflops: flops(total) / median_s / 1e9,
         gbps: (2 * total * bytes_per_value) as f64 / median_s / 1e9,
         skipped: None,
+        split: None,
     }
 }
 
@@ -292,7 +296,7 @@ pub fn run(
                 kern.push(o.timings.kernel);
             }
             let stamps = first.timings.kernel_from_timestamps;
-            let c = case(
+            let mut c = case(
                 shape,
                 name,
                 ref_name,
@@ -302,6 +306,7 @@ pub fn run(
                 Some((median(kern), stamps)),
                 8,
             );
+            c.split = crate::gpu::fft::split_plan(ctx, shape)?.map(|p| p.describe());
             push(c, &mut cases);
         }
     }
@@ -332,8 +337,12 @@ pub fn format_case(c: &CaseResult) -> String {
     let kernel = c
         .kernel_median_s
         .map_or("-".to_string(), |k| format!("{:.3}", k * 1e3));
+    let split = c
+        .split
+        .as_ref()
+        .map_or(String::new(), |s| format!("  ({s})"));
     format!(
-        "{shape:<14} {:<17} {:<12} {:>10.2e} {:>9.1e} {:<4} {:>10.3} {:>10} {:>8.3} {:>7.3}",
+        "{shape:<14} {:<17} {:<12} {:>10.2e} {:>9.1e} {:<4} {:>10.3} {:>10} {:>8.3} {:>7.3}{split}",
         c.backend,
         c.reference,
         c.rel_l2,
