@@ -10,27 +10,13 @@
 //! samples exactly as the whole-file reader does, so a brick equals the same box cut
 //! from the whole volume, bit for bit, with the affine moved to the brick's first voxel.
 
-use super::{read_samples, Endian, Stored};
+use super::read_samples;
+pub use super::RawLayout;
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, max_voxels, AnyVolume};
 use glam::{DMat4, DVec3};
 use std::io::{BufReader, Read, Seek, SeekFrom};
-use std::path::{Path, PathBuf};
-
-/// Where a volume file keeps its samples, uncompressed and x fastest.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RawLayout {
-    /// The file holding the samples (the header's own file, or a detached data file).
-    pub data: PathBuf,
-    /// The byte offset of the first sample in `data`.
-    pub offset: u64,
-    pub(crate) stored: Stored,
-    pub(crate) endian: Endian,
-    /// Voxels along x, y, z.
-    pub dims: [usize; 3],
-    /// The voxel-index → world affine of the whole volume.
-    pub affine: DMat4,
-}
+use std::path::Path;
 
 /// A box of voxels: `lo[a] .. hi[a]` along each axis (x, y, z).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -532,7 +532,7 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
 /// file (at `HeaderSize`, or the last bytes for −1). `None` for compressed or text
 /// data and for a list of slice files. The data must fill the file exactly, as for
 /// [`read_metaimage`].
-pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
     use std::io::Seek;
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
@@ -571,7 +571,7 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>>
             format!("the data is longer than DimSize × ElementType describe ({want} bytes)"),
         ));
     }
-    Ok(Some(super::brick::RawLayout {
+    Ok(Some(super::RawLayout {
         data,
         offset,
         stored: h.stored,

@@ -754,6 +754,22 @@ impl Stored {
     }
 }
 
+/// Where a volume file keeps its samples, uncompressed and x fastest: what
+/// [`brick::read_brick`] reads a box of (each format's `raw_layout` finds it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawLayout {
+    /// The file holding the samples (the header's own file, or a detached data file).
+    pub data: PathBuf,
+    /// The byte offset of the first sample in `data`.
+    pub offset: u64,
+    pub(crate) stored: Stored,
+    pub(crate) endian: Endian,
+    /// Voxels along x, y, z.
+    pub dims: [usize; 3],
+    /// The voxel-index → world affine of the whole volume.
+    pub affine: DMat4,
+}
+
 /// Byte order of multi-byte samples in a file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Endian {

@@ -185,19 +185,19 @@ fn decode_f64(bytes: &[u8], size: usize, big: bool, out: &mut [f64]) {
     }
 }
 
+/// The header of `path`, read alone, with the data checked to be all there.
+fn header_only(path: &Path, allowed: &[Stored], allowed_text: &str) -> Result<Header> {
+    let (file, len) = open(path)?;
+    let h = read_header(&mut BufReader::new(file), len, path, allowed, allowed_text)?;
+    check_data(&h, len, path)?;
+    Ok(h)
+}
+
 /// The shape of a float `.npy` file (`f4` or `f8`, either byte order) and whether it is
 /// stored in Fortran order, from its header alone (the data is only checked to be
 /// there, not read).
 pub fn npy_float_shape(path: &Path) -> Result<(Vec<usize>, bool)> {
-    let (file, len) = open(path)?;
-    let h = read_header(
-        &mut BufReader::new(file),
-        len,
-        path,
-        FLOAT_TYPES,
-        FLOAT_TYPES_TEXT,
-    )?;
-    check_data(&h, len, path)?;
+    let h = header_only(path, FLOAT_TYPES, FLOAT_TYPES_TEXT)?;
     Ok((h.shape, h.fortran_order))
 }
 
@@ -261,21 +261,13 @@ pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, V
 
 /// Where a C-order volume `.npy` file (a 2-D or 3-D array of a volume dtype) keeps its
 /// samples, for [`super::brick::read_brick`]; `None` for a Fortran-order one.
-pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
-    let (file, len) = open(path)?;
-    let h = read_header(
-        &mut BufReader::new(file),
-        len,
-        path,
-        VOLUME_TYPES,
-        VOLUME_TYPES_TEXT,
-    )?;
-    check_data(&h, len, path)?;
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
+    let h = header_only(path, VOLUME_TYPES, VOLUME_TYPES_TEXT)?;
     if h.fortran_order {
         return Ok(None);
     }
     let dims = volume_dims(&h.shape, path)?;
-    Ok(Some(super::brick::RawLayout {
+    Ok(Some(super::RawLayout {
         data: path.to_path_buf(),
         offset: h.data_offset,
         stored: h.stored,

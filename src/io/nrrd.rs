@@ -226,7 +226,7 @@ pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVo
 /// bytes of the file for `byte skip: -1`) or in its detached data file. `None` for
 /// gzip or text encodings and for a line skip. The data file's length is checked; a
 /// checksum voxlab recorded is checked only by a whole read ([`read_nrrd`]).
-pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>> {
+pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
     let fields = read_fields(&mut reader, path)?;
@@ -262,7 +262,7 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::brick::RawLayout>>
         }
         start + skip
     };
-    Ok(Some(super::brick::RawLayout {
+    Ok(Some(super::RawLayout {
         data,
         offset,
         stored: h.stored,

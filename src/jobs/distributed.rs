@@ -520,13 +520,16 @@ fn slab_values<R: Real + rustfft::FftNum>(
     progress: &dyn Progress,
 ) -> Result<(Vec<f32>, f64, f64)> {
     let t = Instant::now();
-    let p = if a.short_scan {
-        crate::cpu::parker::weigh(p, g)?
+    let q = if a.short_scan {
+        filter_projections(
+            &crate::cpu::parker::weigh(p, g)?,
+            g,
+            a.filter,
+            FilterMethod::Fft,
+        )?
     } else {
-        p.clone()
+        filter_projections(p, g, a.filter, FilterMethod::Fft)?
     };
-    let q = filter_projections(&p, g, a.filter, FilterMethod::Fft)?;
-    drop(p);
     let filter_seconds = t.elapsed().as_secs_f64();
     let t = Instant::now();
     progress.begin("reconstructing", "voxel lines", 0);
