@@ -23,8 +23,8 @@
 //! Not distributed yet: the iterative methods, the GPU backend, `--truth`.
 
 use super::reconstruct::{
-    check_request, extension, fbp_grid, fbp_projections, geometry_for, ReconstructMethod,
-    ReconstructRequest,
+    check_request, extension, fbp_grid, fbp_projections, geometry_for, npy_shape,
+    ReconstructMethod, ReconstructRequest,
 };
 use super::{Backend, Progress};
 use crate::cpu::fbp::{backproject_region, circle_mask_region, Grid, Region};
@@ -544,16 +544,6 @@ fn slab_values<R: Real + rustfft::FftNum>(
         filter_seconds,
         t.elapsed().as_secs_f64(),
     ))
-}
-
-/// The `.npy` shape of a grid's values: `(ny, nx)` for one slice, else `(nz, ny, nx)`
-/// (as a single-process reconstruction writes it).
-fn npy_shape(d: [usize; 3]) -> Vec<usize> {
-    if d[2] == 1 {
-        vec![d[1], d[0]]
-    } else {
-        vec![d[2], d[1], d[0]]
-    }
 }
 
 /// The bytes of a path, to send it to the other ranks.

@@ -300,6 +300,16 @@ fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64
     Ok((Projections::new(p.angles, p.rows, diag, data)?, g2))
 }
 
+/// The `.npy` shape a reconstruction is written in: `(ny, nx)` for one slice, else
+/// `(nz, ny, nx)`.
+pub(super) fn npy_shape(d: [usize; 3]) -> Vec<usize> {
+    if d[2] == 1 {
+        vec![d[1], d[0]]
+    } else {
+        vec![d[2], d[1], d[0]]
+    }
+}
+
 pub(super) fn extension(p: &Path) -> Option<String> {
     p.extension()
         .and_then(|e| e.to_str())
@@ -981,12 +991,7 @@ impl Reconstructed {
         match extension(out).as_deref() {
             Some("npy") => {
                 let values: Vec<f32> = rec.data.iter().map(|&v| v as f32).collect();
-                let shape: Vec<usize> = if d[2] == 1 {
-                    vec![d[1], d[0]]
-                } else {
-                    vec![d[2], d[1], d[0]]
-                };
-                crate::io::npy::write_npy_f32(out, &shape, &values)
+                crate::io::npy::write_npy_f32(out, &npy_shape(d), &values)
             }
             Some("png") => {
                 if d[2] != 1 {
