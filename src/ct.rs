@@ -517,6 +517,30 @@ impl<T: Copy + Default> Projections<T> {
         let n = self.rows * self.cols;
         &mut self.data[k * n..(k + 1) * n]
     }
+
+    /// Every detector line zero-padded to `cols ≥ self.cols` bins, bin `self.cols / 2`
+    /// moved to `cols / 2` (scikit-image's `_sinogram_circle_to_square`, which `iradon`
+    /// applies for `circle=True`).
+    pub fn padded_centred(&self, cols: usize) -> Self {
+        let n = self.cols;
+        let before = cols / 2 - n / 2;
+        let mut data = vec![T::default(); self.angles * self.rows * cols];
+        for (dst, src) in data.chunks_mut(cols).zip(self.data.chunks(n)) {
+            dst[before..before + n].copy_from_slice(src);
+        }
+        Projections {
+            angles: self.angles,
+            rows: self.rows,
+            cols,
+            data,
+        }
+    }
+}
+
+/// scikit-image's detector width for `circle=True`: the inscribed circle's diagonal,
+/// `⌈√2·cols⌉` bins.
+pub fn circle_diagonal(cols: usize) -> usize {
+    (std::f64::consts::SQRT_2 * cols as f64).ceil() as usize
 }
 
 impl Projections<f64> {

@@ -595,3 +595,36 @@ fn fdk_matches_rtk_on_rtks_projections() {
     assert!(ours <= 1.05 * peer, "{ours} vs {peer}");
     assert!(diff < 1e-6 * scale, "{diff}");
 }
+
+/// `--filter none` (scikit-image's `filter_name=None`): the response is 1, the kernel a
+/// unit impulse, and filtering leaves the values as they are (divided by the detector
+/// spacing at the isocentre), exactly, on both filter methods and in f32.
+#[test]
+fn the_none_filter_is_the_identity() {
+    let p = 64;
+    assert!(frequency_response(p, RampFilter::None)
+        .iter()
+        .all(|&v| v == 1.0));
+    let k = ramp_kernel(p, RampFilter::None);
+    assert_eq!(k[0], 1.0);
+    assert!(k[1..].iter().all(|&v| v == 0.0));
+    let g = Geometry::parallel_stack(21, 3, 0.5, 0.5, Geometry::even_angles(7, 180.0)).unwrap();
+    let raw = random_projections(&g, 17);
+    for method in [FilterMethod::Direct, FilterMethod::Fft] {
+        let q = filter_projections(&raw, &g, RampFilter::None, method).unwrap();
+        for (a, b) in q.data.iter().zip(&raw.data) {
+            assert_eq!(*a, b / 0.5);
+        }
+        let raw32 = Projections {
+            angles: raw.angles,
+            rows: raw.rows,
+            cols: raw.cols,
+            data: raw.data.iter().map(|&v| v as f32).collect(),
+        };
+        let q32 = filter_projections(&raw32, &g, RampFilter::None, method).unwrap();
+        for (a, b) in q32.data.iter().zip(&raw32.data) {
+            assert_eq!(*a, b / 0.5);
+        }
+    }
+    assert_eq!("none".parse::<RampFilter>().unwrap(), RampFilter::None);
+}

@@ -326,6 +326,23 @@ fn parker_params_layout_agrees() {
     }
 }
 
+#[test]
+fn radon_params_layout_agrees() {
+    use voxlab::gpu::radon::{RadonParams, PARAMS_WGSL};
+    let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "RadonParams");
+    assert_eq!(span as usize, size_of::<RadonParams>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("dims", offset_of!(RadonParams, dims)),
+        ("work", offset_of!(RadonParams, work)),
+        ("scale", offset_of!(RadonParams, scale)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
 /// The Parker shader parses and validates.
 #[test]
 fn parker_shader_validates() {

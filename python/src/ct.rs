@@ -1,70 +1,111 @@
-//! `voxlab.transform.iradon`: filtered backprojection of a scikit-image sinogram by
-//! the reconstruct job ([`voxlab::jobs::reconstruct::reconstruct`]), in memory.
+//! `voxlab.transform.radon` and `iradon` (scikit-image's, [`voxlab::jobs::radon`]) and
+//! `voxlab.ct`'s projection and reconstruction ([`voxlab::jobs::project`],
+//! [`voxlab::jobs::reconstruct`]), in memory.
 
 use crate::{arrays, errors, job};
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use voxlab::cpu::ramp::RampFilter;
-use voxlab::ct::{Geometry, Projections};
+use voxlab::ct::Projections;
 use voxlab::io::projections::{geometry_from_json, geometry_to_json, Layout};
 use voxlab::jobs::input::VolumeInput;
 use voxlab::jobs::project::ProjectRequest;
+use voxlab::jobs::radon::IradonOptions;
 use voxlab::jobs::reconstruct::{reconstruct, ReconstructRequest};
 use voxlab::jobs::Backend;
 
-/// FBP of a float64 `(detector, angle)` sinogram taken at `theta` (degrees) onto an
-/// `output_size`² image in scikit-image's orientation, masked to the inscribed circle
-/// when `circle` (the sinogram is then padded as `iradon` pads it).
+/// scikit-image's `iradon` of a float64 `(detector, angle)` sinogram taken at `theta`
+/// (degrees) with numpy's `cos`/`sin` of those angles ([`voxlab::jobs::radon::iradon`]):
+/// an `output_size`² image summed in float32 when `float32` (scikit-image's rule for a
+/// float32 sinogram), else float64.
 #[pyfunction]
-#[pyo3(signature = (sinogram, theta, output_size, filter, circle, backend, progress=None))]
+#[pyo3(signature = (sinogram, theta, cos, sin, output_size, filter, interpolation, circle, backend, float32, progress=None))]
 #[allow(clippy::too_many_arguments)]
-fn fbp_parallel(
+fn iradon(
     py: Python<'_>,
     sinogram: PyReadonlyArrayDyn<'_, f64>,
     theta: Vec<f64>,
+    cos: Vec<f64>,
+    sin: Vec<f64>,
     output_size: usize,
     filter: &str,
+    interpolation: &str,
     circle: bool,
     backend: &str,
+    float32: bool,
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<Py<PyAny>> {
     let shape = sinogram.shape().to_vec();
     if shape.len() != 2 {
         return Err(errors::raise(py, "ShapeError", "the sinogram must be 2-D"));
     }
-    let (cols, angles) = (shape[0], shape[1]);
-    let filter: RampFilter = filter.parse().map_err(|e| errors::to_py(py, &e))?;
+    let options = IradonOptions {
+        output_size,
+        filter: filter.parse().map_err(|e| errors::to_py(py, &e))?,
+        interpolation: interpolation.parse().map_err(|e| errors::to_py(py, &e))?,
+        circle,
+    };
     let backend: Backend = backend.parse().map_err(|e| errors::to_py(py, &e))?;
     let s = sinogram
         .as_slice()
         .map_err(|_| errors::raise(py, "LayoutError", "the sinogram must be C-contiguous"))?;
-    // (detector, angle) → the one-row stack (angle, 1, detector).
-    let mut data = vec![0.0; cols * angles];
-    for (c, row) in s.chunks(angles).enumerate() {
-        for (k, &v) in row.iter().enumerate() {
-            data[k * cols + c] = v;
-        }
+    let trig: Vec<(f64, f64)> = cos.into_iter().zip(sin).collect();
+    let bins = shape[0];
+    fn image<A: voxlab::real::Real + numpy::Element>(
+        py: Python<'_>,
+        r: voxlab::jobs::radon::IradonImage<A>,
+    ) -> PyResult<Py<PyAny>> {
+        Ok(r.data
+            .into_pyarray(py)
+            .reshape([r.size, r.size])?
+            .into_any()
+            .unbind())
     }
-    let req = ReconstructRequest {
-        filter,
-        size: Some(output_size),
-        no_circle: !circle,
-        backend,
-        ..Default::default()
-    };
-    let rec = job::run(py, job::callback(&progress), |p| {
-        let proj = Projections::new(angles, 1, cols, data)?;
-        let g = Geometry::parallel_skimage(cols, theta)?;
-        reconstruct(&req, proj, g, None, p)
-    })?;
-    let d = rec.reconstruction.grid.dims;
-    Ok(rec
-        .reconstruction
-        .data
-        .into_pyarray(py)
-        .reshape([d[1], d[0]])?
-        .into_any()
-        .unbind())
+    if float32 {
+        let r = job::run(py, job::callback(&progress), |p| {
+            voxlab::jobs::radon::iradon::<f32>(s, bins, &theta, Some(&trig), &options, backend, p)
+        })?;
+        image(py, r)
+    } else {
+        let r = job::run(py, job::callback(&progress), |p| {
+            voxlab::jobs::radon::iradon::<f64>(s, bins, &theta, Some(&trig), &options, backend, p)
+        })?;
+        image(py, r)
+    }
+}
+
+/// A float64 `(detector, angle)` sinogram or `(angle, row, col)` stack as the library's
+/// stack layout: `(angles, rows, cols, data)`, the column fastest.
+pub fn projection_stack(
+    py: Python<'_>,
+    projections: &PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<(usize, usize, usize, Vec<f64>)> {
+    let shape = projections.shape().to_vec();
+    let s = projections
+        .as_slice()
+        .map_err(|_| errors::raise(py, "LayoutError", "the projections must be C-contiguous"))?;
+    Ok(match shape.len() {
+        2 => {
+            let (cols, angles) = (shape[0], shape[1]);
+            let mut data = vec![0.0; cols * angles];
+            for (c, row) in s.chunks(angles).enumerate() {
+                for (k, &v) in row.iter().enumerate() {
+                    data[k * cols + c] = v;
+                }
+            }
+            (angles, 1, cols, data)
+        }
+        3 => (shape[0], shape[1], shape[2], s.to_vec()),
+        _ => {
+            return Err(errors::raise(
+                py,
+                "ShapeError",
+                &format!(
+                    "projections are a (detector, angle) sinogram or an (angle, row, col) \
+                     stack; got shape {shape:?}"
+                ),
+            ))
+        }
+    })
 }
 
 /// What `project` returns: the stack `(angle, row, col)` (float64), the geometry JSON,
@@ -119,33 +160,7 @@ fn reconstruct_stack(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<(Py<PyAny>, [[f64; 4]; 4], String)> {
     let req: ReconstructRequest = errors::parse_request(py, "reconstruct option", request)?;
-    let shape = projections.shape().to_vec();
-    let s = projections
-        .as_slice()
-        .map_err(|_| errors::raise(py, "LayoutError", "the projections must be C-contiguous"))?;
-    let (angles, rows, cols, data) = match shape.len() {
-        2 => {
-            let (cols, angles) = (shape[0], shape[1]);
-            let mut data = vec![0.0; cols * angles];
-            for (c, row) in s.chunks(angles).enumerate() {
-                for (k, &v) in row.iter().enumerate() {
-                    data[k * cols + c] = v;
-                }
-            }
-            (angles, 1, cols, data)
-        }
-        3 => (shape[0], shape[1], shape[2], s.to_vec()),
-        _ => {
-            return Err(errors::raise(
-                py,
-                "ShapeError",
-                &format!(
-                    "projections are a (detector, angle) sinogram or an (angle, row, col) \
-                     stack; got shape {shape:?}"
-                ),
-            ))
-        }
-    };
+    let (angles, rows, cols, data) = projection_stack(py, &projections)?;
     let geometry = geometry.to_string();
     let rec = job::run(py, job::callback(&progress), |p| {
         let g = geometry_from_json(&geometry, std::path::Path::new("geometry"))?;
@@ -233,7 +248,7 @@ fn radon(
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(radon, m)?)?;
-    m.add_function(wrap_pyfunction!(fbp_parallel, m)?)?;
+    m.add_function(wrap_pyfunction!(iradon, m)?)?;
     m.add_function(wrap_pyfunction!(project, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_stack, m)?)?;
     Ok(())

@@ -1,10 +1,11 @@
 """scikit-image's ``radon`` and ``iradon`` on voxlab's library.
 
 :func:`iradon` has ``skimage.transform.iradon``'s signature, conventions, dtype
-handling and errors, and computes with the library's reconstruct job (the ramp
-filters of ``cpu::ramp``, which are scikit-image's ``_get_fourier_filter``, and the
-parallel-beam backprojector of ``cpu::fbp``/``gpu::fbp``) in float64 (``backend="cpu"``,
-the oracle), float32 (``"cpu-f32"``) or on the GPU (``"gpu"``).
+handling and errors, and computes with the library's iradon job
+(``jobs::radon::iradon``: the ramp filters of ``cpu::ramp``, which are
+scikit-image's ``_get_fourier_filter``, then scikit-image's pixel-driven
+backprojection with its interpolants, ``cpu::radon``/``gpu::radon``) in float64
+(``backend="cpu"``, the oracle), float32 (``"cpu-f32"``) or on the GPU (``"gpu"``).
 
 Conventions (scikit-image's): a sinogram has shape ``(detector, angle)``; angles
 ``theta`` in degrees; the rotation centre is detector bin ``n // 2`` and image pixel
@@ -13,9 +14,10 @@ Conventions (scikit-image's): a sinogram has shape ``(detector, angle)``; angles
 :func:`radon` is scikit-image's rotate-and-sum transform on the library's
 ``cpu::radon`` (``jobs::radon::radon``), equal to scikit-image's result.
 
-Not covered yet, each refused with :class:`voxlab.UnsupportedError` rather than
-computed differently: ``interpolation="nearest"`` and ``"cubic"`` (only ``"linear"``,
-scikit-image's default) and ``filter_name=None`` (no filter).
+Both compute as scikit-image does, step for step (``cpu::radon``): every filter
+(``None`` included), every interpolation, ``circle``, rectangular and odd sizes,
+scikit-image's dtype rules; on the GPU (``backend="gpu"``, ``gpu::radon``) in
+float32.
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _voxlab
-from ._errors import UnsupportedError
 
 __all__ = ["iradon", "radon"]
 
@@ -73,12 +74,17 @@ def iradon(
     sinogram; ``theta`` the angles in degrees (default: evenly over [0, 180));
     ``output_size`` the image's side (default: the detector count when ``circle``,
     else ``floor(sqrt(n²/2))``); ``filter_name`` one of ``ramp``, ``shepp-logan``,
-    ``cosine``, ``hamming``, ``hann``; ``circle`` that the object lies inside the
-    inscribed circle (the sinogram is padded to ``ceil(√2·n)`` bins and the output
-    zeroed outside the circle). The result has the input's float type (float32 for
-    float16/float32 input, float64 otherwise).
+    ``cosine``, ``hamming``, ``hann`` or ``None`` (no filter); ``interpolation`` how
+    a filtered projection is read between its bins: ``linear`` (``np.interp``),
+    ``nearest`` (the nearest bin, the left one at a tie) or ``cubic`` (the not-a-knot
+    cubic spline, scipy's ``interp1d(kind="cubic")``), 0 past the first and last bin
+    centres; ``circle`` that the object lies inside the inscribed circle (the sinogram
+    is padded to ``ceil(√2·n)`` bins and the output zeroed outside the circle). The
+    result has the input's float type (float32 for float16/float32 input, summed in
+    float32 as scikit-image sums it; float64 otherwise).
 
-    ``backend``: ``cpu`` (the f64 oracle), ``cpu-f32``, ``gpu`` or ``auto``.
+    ``backend``: ``cpu`` (the f64 oracle: scikit-image's arithmetic), ``cpu-f32``
+    (float32 throughout), ``gpu`` (float32, ``gpu::radon``) or ``auto``.
     """
     radon_image = np.asarray(radon_image)
     if radon_image.ndim != 2:
@@ -95,16 +101,6 @@ def iradon(
         raise ValueError(f"Unknown interpolation: {interpolation}")
     if filter_name not in _FILTERS:
         raise ValueError(f"Unknown filter: {filter_name}")
-    if interpolation != "linear":
-        raise UnsupportedError(
-            f"iradon: interpolation={interpolation!r} is not implemented by voxlab's "
-            "backprojector (it interpolates linearly: interpolation='linear')"
-        )
-    if filter_name is None:
-        raise UnsupportedError(
-            "iradon: filter_name=None (unfiltered backprojection) is not implemented "
-            "(filters: 'ramp', 'shepp-logan', 'cosine', 'hamming', 'hann')"
-        )
     radon_image = _convert_to_float(radon_image, preserve_range)
     dtype = radon_image.dtype
     img_shape = radon_image.shape[0]
@@ -114,45 +110,18 @@ def iradon(
         else:
             output_size = int(np.floor(np.sqrt((img_shape) ** 2 / 2.0)))
     sino = np.ascontiguousarray(radon_image, dtype=np.float64)
-    theta = [float(t) for t in np.asarray(theta, dtype=np.float64).reshape(-1)]
-    padded = int(np.ceil(np.sqrt(2) * img_shape)) if circle else img_shape
-    _warn_outside_detector(padded, int(output_size), theta, circle)
-    rec = _voxlab.fbp_parallel(
-        sino, theta, int(output_size), filter_name, bool(circle), backend, progress
+    # t = ypr·cos θ − xpr·sin θ with numpy's cosines and sines, taken angle by angle as
+    # scikit-image takes them (so that nearest-bin ties fall the same way).
+    angles = np.deg2rad(theta)
+    cos = [float(np.cos(a)) for a in angles]
+    sin = [float(np.sin(a)) for a in angles]
+    degrees = [float(t) for t in np.asarray(theta, dtype=np.float64).reshape(-1)]
+    rec = _voxlab.iradon(
+        sino, degrees, cos, sin, int(output_size),
+        "none" if filter_name is None else filter_name, interpolation, bool(circle),
+        backend, dtype == np.float32, progress,
     )
     return rec.astype(dtype, copy=False)
-
-
-def _warn_outside_detector(n: int, size: int, theta: Any, circle: bool) -> None:
-    """Warns when some output pixel's ray may miss the (padded) detector's bin centres
-    (an ``output_size`` larger than the detector allows, or the corners of a
-    ``circle=False`` output): there iradon's ``np.interp(left=0, right=0)`` gives 0
-    past the last bin centre, while voxlab's backprojector ramps linearly to 0 over
-    one more bin, so the two differ within one bin of the edge."""
-    r = size // 2
-    lo, hi = -(n // 2), n - 1 - n // 2
-    if circle:
-        # Pixels outside the circle of radius r are zeroed; inside, |s| ≤ r.
-        t = np.array([-r, r], dtype=np.float64)
-    else:
-        a = np.deg2rad(np.asarray(theta, dtype=np.float64))
-        c = np.array([-r, size - 1 - r], dtype=np.float64)
-        # s = col·cos θ − row·sin θ (offsets from the centre) is extreme at a corner.
-        t = (c[None, :, None] * np.cos(a)[:, None, None]
-             - c[None, None, :] * np.sin(a)[:, None, None])
-    if t.min() < lo or t.max() > hi:
-        import warnings
-
-        from ._errors import VoxlabWarning
-
-        warnings.warn(
-            f"iradon: rays of the {size}x{size} output may reach past the "
-            f"detector's last bin centre (|s| up to {np.abs(t).max():.2f}, bins span "
-            f"{lo}..{hi}); within one bin of the edge voxlab interpolates linearly to "
-            "zero where scikit-image gives 0, so pixels that far out differ",
-            VoxlabWarning,
-            stacklevel=3,
-        )
 
 
 def radon(image: Any, theta: Any = None, circle: bool = True, *,
@@ -170,8 +139,9 @@ def radon(image: Any, theta: Any = None, circle: bool = True, *,
     ``img_as_float`` scaling unless ``preserve_range``; float32 (and float16) images
     compute and return float32, everything else float64.
 
-    ``backend``: ``cpu`` (the image's precision) or ``cpu-f32`` (float32 throughout);
-    the GPU has no Radon transform and is refused with :class:`voxlab.UnsupportedError`.
+    ``backend``: ``cpu`` (the image's precision), ``cpu-f32`` (float32 throughout) or
+    ``gpu`` (float32 on the device, ``gpu::radon``; the sinogram keeps the image's
+    dtype, holding float32-rounded values).
     """
     image = np.asarray(image)
     if image.ndim != 2:

@@ -14,17 +14,21 @@
 //! (skimage's `warp(..., order=1, mode='constant', cval=0)`), and the sinogram's bin
 //! `k` of that angle is `Σ_r` of those values, summed over `r` in order
 //! (`rotated.sum(0)`). The arithmetic is skimage's, step for step, in the image's
-//! precision: coordinates in `R` (the matrix rounded to `R`), each row blend
-//! `(1 − dx)·a + dx·b` in `R` and the column blend in f64 (skimage's `top`/`bottom`
-//! are doubles), rounded back to `R`. With the same cosines and sines the result is
-//! bit-identical to skimage's in f64 (the f32 path differs
-//! from skimage's float32 build by rounding: measured in python/tests/test_radon.py).
+//! precision: coordinates in `R` (the matrix rounded to `R`), the bilinear blend with
+//! skimage's mix of f64 and `R` products (`bilinear`), rounded back to `R`, and the
+//! rows summed in `R`. With the same cosines and sines the result is bit-identical to
+//! skimage's in f64 and in f32 (python/tests/test_radon.py).
+//!
+//! The inverse, scikit-image's `iradon` backprojection, is [`iradon_backproject`]:
+//! every output pixel sums each filtered view read by an interpolation
+//! ([`Interpolation`], [`iradon_sample`]) at `t = y·cos θ − x·sin θ`.
 //!
 //! The transform is linear: a unit pixel at the centre gives 1 in bin `m` of every
 //! angle, and every angle's bins sum to the image's sum when no mass leaves the square.
 
 use crate::real::Real;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Where the image lies on its square: the square's side and the image's offset in
 /// it (`row0`, `col0`: negative when the square crops the image).
@@ -107,8 +111,13 @@ fn pixel<R: Real>(img: &[R], n: usize, r: i64, c: i64) -> R {
     }
 }
 
-/// Bilinear interpolation at row `r`, column `c` (skimage's `bilinear_interpolation`:
-/// the row blends in `R`, the column blend in f64, rounded to `R`).
+/// Bilinear interpolation at row `r`, column `c` (skimage's `bilinear_interpolation`
+/// as its compiled code evaluates it: the weights `1 − d` are doubles, `1.0 − d`, so
+/// each row blend is `(1 − dc)·left` in f64 plus `dc·right` in `R`, summed in f64, and
+/// the column blend `(1 − dr)·top + dr·bottom` is in f64, rounded to `R`). In f64 this
+/// is the plain bilinear formula.
+///
+/// mirrors shaders/radon.wgsl: bilinear
 #[inline(always)]
 fn bilinear<R: Real>(img: &[R], n: usize, r: R, c: R) -> R {
     let (minr, minc) = (r.floor(), c.floor());
@@ -116,11 +125,10 @@ fn bilinear<R: Real>(img: &[R], n: usize, r: R, c: R) -> R {
     let (dr, dc) = (r - minr, c - minc);
     let (r0, r1) = (minr.f64() as i64, maxr.f64() as i64);
     let (c0, c1) = (minc.f64() as i64, maxc.f64() as i64);
-    let one = R::one();
-    let top = ((one - dc) * pixel(img, n, r0, c0) + dc * pixel(img, n, r0, c1)).f64();
-    let bottom = ((one - dc) * pixel(img, n, r1, c0) + dc * pixel(img, n, r1, c1)).f64();
-    let dr = dr.f64();
-    R::of((1.0 - dr) * top + dr * bottom)
+    let blend = |left: R, right: R| (1.0 - dc.f64()) * left.f64() + (dc * right).f64();
+    let top = blend(pixel(img, n, r0, c0), pixel(img, n, r0, c1));
+    let bottom = blend(pixel(img, n, r1, c0), pixel(img, n, r1, c1));
+    R::of((1.0 - dr.f64()) * top + dr.f64() * bottom)
 }
 
 /// The rotation of angle θ about pixel `(m, m)`, `m = n / 2`, as the inverse map
@@ -143,6 +151,8 @@ pub fn rotation(n: usize, cos: f64, sin: f64) -> [f64; 6] {
 /// One sinogram column: the square image warped by the inverse map `h` (see
 /// [`rotation`]; rounded to `R`, as skimage's `matrix.astype(image.dtype)`), summed
 /// over rows.
+///
+/// mirrors shaders/radon.wgsl: radon_column
 pub fn radon_column<R: Real>(img: &[R], n: usize, h: &[f64; 6]) -> Vec<R> {
     let h: [R; 6] = h.map(R::of);
     let mut acc = vec![R::zero(); n];
@@ -170,6 +180,250 @@ pub fn radon_square<R: Real>(img: &[R], n: usize, maps: &[[f64; 6]]) -> Vec<R> {
             out[i * a + j] = v;
         }
     }
+    out
+}
+
+crate::choice_enum! {
+    /// How scikit-image's `iradon` reads a filtered projection between its bin centres
+    /// `x_j = j − n//2` (its `interpolation`); 0 before the first centre and after the
+    /// last, as `iradon`'s interpolants (`left=0, right=0`, `fill_value=0`).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub enum Interpolation: "interpolation", default Linear {
+        /// `np.interp`: the straight line between the two neighbouring bins.
+        Linear = "linear",
+        /// `interp1d(kind="nearest")`: the nearest bin; halfway between two, the left.
+        Nearest = "nearest",
+        /// `interp1d(kind="cubic")`: the not-a-knot cubic spline through every bin.
+        Cubic = "cubic",
+    }
+}
+
+impl Interpolation {
+    /// Its number in `shaders/radon.wgsl` (`IradonParams.kind`).
+    pub fn id(self) -> u32 {
+        match self {
+            Interpolation::Linear => 0,
+            Interpolation::Nearest => 1,
+            Interpolation::Cubic => 2,
+        }
+    }
+}
+
+/// The fewest bins a cubic spline needs (scipy's `make_interp_spline` with `k = 3`).
+pub const CUBIC_MIN_BINS: usize = 4;
+
+/// The second derivatives `M_j` of the not-a-knot cubic spline through `(j, y_j)`
+/// (unit spacing; scipy's `make_interp_spline(x, y, k=3)`, `interp1d(kind="cubic")`).
+///
+/// Between bins `j` and `j + 1` the spline is
+/// `S(t) = (M_j a³ + M_{j+1} b³)/6 + (y_j − M_j/6) a + (y_{j+1} − M_{j+1}/6) b` with
+/// `a = x_{j+1} − t`, `b = t − x_j` ([`iradon_sample`]). Continuity of `S'` gives
+/// `M_{j−1} + 4M_j + M_{j+1} = 6(y_{j+1} − 2y_j + y_{j−1})` for `1 ≤ j ≤ n − 2`, and
+/// "not a knot" (a continuous third derivative at `x_1` and `x_{n−2}`) gives
+/// `M_0 = 2M_1 − M_2` and `M_{n−1} = 2M_{n−2} − M_{n−3}`. Put into the first and last
+/// equations these leave `6M_1 = r_1` and `6M_{n−2} = r_{n−2}`; the rows between are a
+/// tridiagonal system with diagonal 4, solved by elimination (diagonally dominant,
+/// so stable), in f64. `y` needs at least [`CUBIC_MIN_BINS`] values (else the result
+/// is empty).
+pub fn spline_curvatures(y: &[f64]) -> Vec<f64> {
+    let n = y.len();
+    if n < CUBIC_MIN_BINS {
+        return Vec::new();
+    }
+    let r = |j: usize| 6.0 * (y[j + 1] - 2.0 * y[j] + y[j - 1]);
+    let mut m = vec![0.0; n];
+    m[1] = r(1) / 6.0;
+    m[n - 2] = r(n - 2) / 6.0;
+    // Rows j = 2 … n − 3: M_{j−1} + 4M_j + M_{j+1} = r_j, with M_1 and M_{n−2} known.
+    let inner = n.saturating_sub(4);
+    if inner > 0 {
+        let mut diag = vec![0.0; inner];
+        let mut rhs = vec![0.0; inner];
+        for (i, j) in (2..n - 2).enumerate() {
+            let mut b = r(j);
+            if j == 2 {
+                b -= m[1];
+            }
+            if j == n - 3 {
+                b -= m[n - 2];
+            }
+            let (d, prev) = if i == 0 {
+                (4.0, 0.0)
+            } else {
+                let w = 1.0 / diag[i - 1];
+                (4.0 - w, rhs[i - 1] * w)
+            };
+            diag[i] = d;
+            rhs[i] = b - prev;
+        }
+        for i in (0..inner).rev() {
+            let next = if i + 1 < inner { m[i + 3] } else { 0.0 };
+            m[i + 2] = (rhs[i] - next) / diag[i];
+        }
+    }
+    m[0] = 2.0 * m[1] - m[2];
+    m[n - 1] = 2.0 * m[n - 2] - m[n - 3];
+    m
+}
+
+/// One filtered projection `y` (bins `x_j = j − n//2`) read at `t` by `kind`, as
+/// scikit-image's `iradon` reads it: 0 outside `[x_0, x_{n−1}]`;
+/// - linear: `np.interp`'s arithmetic, `(y_{j+1} − y_j)·(t − x_j) + y_j` with
+///   `x_j = ⌊t⌋` (`y_j` itself at a bin centre and at the last one);
+/// - nearest: `y_j` of the nearest centre, the left one at a tie (`interp1d`'s
+///   `searchsorted(side="left")` over the midpoints), deciding with `t + t_lo`
+///   (see [`Angle`]: `t_lo` is what rounding `cos θ` and `sin θ` to `R` left out of
+///   `t`, 0 in f64);
+/// - cubic: the spline of [`spline_curvatures`] `m` (same length as `y`).
+///
+/// In f64 with numpy's `t` these are numpy's and scipy's numbers (linear and nearest
+/// bit for bit; the cubic spline to rounding).
+///
+/// mirrors shaders/radon.wgsl: iradon_sample
+#[inline(always)]
+pub fn iradon_sample<R: Real>(kind: Interpolation, y: &[R], m: &[R], t: R, t_lo: R) -> R {
+    let n = y.len();
+    let h = (n / 2) as f64;
+    let (first, last) = (R::of(-h), R::of((n - 1) as f64 - h));
+    // Also refuses NaN: every comparison with it is false.
+    if !(t >= first && t <= last) {
+        return R::zero();
+    }
+    let f = t.floor();
+    // x_j = f exactly: `j` is f's bin, in 0 … n − 1.
+    let j = (f.f64() + h) as usize;
+    match kind {
+        Interpolation::Linear => {
+            if j == n - 1 || f == t {
+                y[j]
+            } else {
+                (y[j + 1] - y[j]) * (t - f) + y[j]
+            }
+        }
+        Interpolation::Nearest => {
+            // Against the midpoint itself (`t − f` rounds for t just above −1 … 0);
+            // `t − mid` is exact near the midpoint, so `t_lo` decides a tie.
+            if (t - (f + R::of(0.5))) + t_lo > R::zero() {
+                y[j + 1]
+            } else {
+                y[j]
+            }
+        }
+        Interpolation::Cubic => {
+            let j = j.min(n - 2);
+            let xj = R::of(j as f64 - h);
+            let (a, b) = (xj + R::one() - t, t - xj);
+            let sixth = R::one() / R::of(6.0);
+            (m[j] * a * a * a + m[j + 1] * b * b * b) * sixth
+                + (y[j] - m[j] * sixth) * a
+                + (y[j + 1] - m[j + 1] * sixth) * b
+        }
+    }
+}
+
+/// One angle of [`iradon_backproject`]: `cos θ` and `sin θ` rounded to `R`, and what
+/// that rounding left out (`c_lo = cos θ − c`, rounded; 0 in f64).
+///
+/// scikit-image's `t = y·cos θ − x·sin θ` lands exactly on a midpoint between bins in
+/// exact arithmetic at angles such as 30°, 60°, 120° (where `x` or `y` is 0), and
+/// numpy's f64 cosines (`cos 60° = 0.5000000000000001`) push it a rounding to one side.
+/// In f32 the cosine rounds to 0.5 and `t` to the midpoint itself; `t_lo =
+/// y·c_lo − x·s_lo` keeps the push, so nearest-bin reads in f32 choose the bin numpy's
+/// f64 `t` chooses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Angle<R> {
+    pub c: R,
+    pub s: R,
+    pub c_lo: R,
+    pub s_lo: R,
+}
+
+impl<R: Real> Angle<R> {
+    /// `(cos θ, sin θ)` in f64, split for `R`.
+    pub fn new(cos: f64, sin: f64) -> Self {
+        let (c, s) = (R::of(cos), R::of(sin));
+        Angle {
+            c,
+            s,
+            c_lo: R::of(cos - c.f64()),
+            s_lo: R::of(sin - s.f64()),
+        }
+    }
+}
+
+/// Adds one filtered projection's value to an `A` accumulator as scikit-image's
+/// `reconstructed += interpolant(t)` does: interpolated in f64 and added to the output
+/// dtype (`fl_A(acc + v)`). In f32 throughout (`R = A = f32`, the GPU's arithmetic) a
+/// plain f32 addition.
+#[inline(always)]
+fn accumulate<R: Real, A: Real>(acc: A, v: R) -> A {
+    if R::NAME == "f64" {
+        A::of(acc.f64() + v.f64())
+    } else {
+        acc + A::of(v.f64())
+    }
+}
+
+/// scikit-image's `iradon` backprojection of filtered projections: `views` holds one
+/// filtered line of `bins` values per angle (angle-major), `trig` each angle's
+/// `(cos θ, sin θ)` (numpy's, to reproduce its `t`), `curvatures` the lines'
+/// [`spline_curvatures`] for [`Interpolation::Cubic`] (else empty). Output pixel
+/// (row, col) of the `size × size` image, with `x = row − size//2` and
+/// `y = col − size//2`, is
+///
+/// `f = π/(2A) · Σ_k sample_k(y·cos θ_k − x·sin θ_k)`
+///
+/// summed over the angles in order in `A`, zero outside the inscribed circle when
+/// `circle` (`x² + y² > (size//2)²`), then scaled as `rec·π/(2A)` in `A`. `R` is the
+/// precision of `t` and the interpolation (f64 as scikit-image; f32 as the GPU); `A`
+/// the output's (scikit-image's: the sinogram's float type). Rows run in parallel;
+/// the result does not depend on the thread count. `rows_done(done, total)` is called
+/// after each row.
+///
+/// mirrors shaders/radon.wgsl: iradon_backproject
+#[allow(clippy::too_many_arguments)]
+pub fn iradon_backproject<R: Real, A: Real>(
+    views: &[R],
+    curvatures: &[R],
+    bins: usize,
+    trig: &[(f64, f64)],
+    size: usize,
+    kind: Interpolation,
+    circle: bool,
+    rows_done: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<A> {
+    let radius = (size / 2) as i64;
+    let trig: Vec<Angle<R>> = trig.iter().map(|&(c, s)| Angle::new(c, s)).collect();
+    let pi = A::of(std::f64::consts::PI);
+    let denominator = A::of(2.0 * trig.len() as f64);
+    let done = AtomicUsize::new(0);
+    let mut out = vec![A::zero(); size * size];
+    out.par_chunks_mut(size.max(1))
+        .enumerate()
+        .panic_fuse()
+        .for_each(|(row, line)| {
+            let x = row as i64 - radius;
+            for (col, o) in line.iter_mut().enumerate() {
+                let y = col as i64 - radius;
+                if circle && x * x + y * y > radius * radius {
+                    continue;
+                }
+                let (xr, yr) = (R::of(x as f64), R::of(y as f64));
+                let mut acc = A::zero();
+                for (k, a) in trig.iter().enumerate() {
+                    let t = yr * a.c - xr * a.s;
+                    let t_lo = yr * a.c_lo - xr * a.s_lo;
+                    let line = &views[k * bins..(k + 1) * bins];
+                    let m = match kind {
+                        Interpolation::Cubic => &curvatures[k * bins..(k + 1) * bins],
+                        _ => &[],
+                    };
+                    acc = accumulate(acc, iradon_sample(kind, line, m, t, t_lo));
+                }
+                *o = acc * pi / denominator;
+            }
+            rows_done(done.fetch_add(1, Ordering::Relaxed) + 1, size);
+        });
     out
 }
 
@@ -206,6 +460,94 @@ mod tests {
         for k in 0..cols {
             let want: f64 = (0..rows).map(|r| img[r * cols + k]).sum();
             assert_eq!(s[k], want);
+        }
+    }
+
+    #[test]
+    fn the_not_a_knot_spline_reproduces_cubics() {
+        // A cubic through the bins is its own not-a-knot spline: the curvatures are
+        // its second derivative and every reading between bins is the cubic itself.
+        let n = 11usize;
+        let h = (n / 2) as f64;
+        let p = |x: f64| 0.7 - 1.3 * x + 0.25 * x * x - 0.04 * x * x * x;
+        let p2 = |x: f64| 0.5 - 0.24 * x;
+        let y: Vec<f64> = (0..n).map(|j| p(j as f64 - h)).collect();
+        let m = spline_curvatures(&y);
+        for (j, &mj) in m.iter().enumerate() {
+            assert!((mj - p2(j as f64 - h)).abs() < 1e-12, "M[{j}] = {mj}");
+        }
+        for t in [-5.0, -4.7, -0.5, 0.0, 0.31, 2.99, 4.5, 5.0] {
+            let s = iradon_sample(Interpolation::Cubic, &y, &m, t, 0.0);
+            assert!((s - p(t)).abs() < 1e-12, "S({t}) = {s}, p = {}", p(t));
+        }
+        // Four bins are the fewest; fewer give no spline.
+        assert_eq!(spline_curvatures(&y[..4]).len(), 4);
+        assert!(spline_curvatures(&y[..3]).is_empty());
+    }
+
+    #[test]
+    fn linear_and_nearest_read_as_numpy_and_scipy_do() {
+        // Bins at x = −2 … 2 (n = 5, centre 2).
+        let y = [1.0, 3.0, 2.0, 8.0, 4.0f64];
+        let m: [f64; 0] = [];
+        let lin = |t: f64| iradon_sample(Interpolation::Linear, &y, &m, t, 0.0);
+        let near = |t: f64| iradon_sample(Interpolation::Nearest, &y, &m, t, 0.0);
+        assert_eq!(lin(-2.0), 1.0);
+        assert_eq!(lin(-1.25), 1.0 + 2.0 * 0.75);
+        assert_eq!(lin(0.5), 2.0 + 6.0 * 0.5);
+        assert_eq!(lin(2.0), 4.0);
+        // np.interp(left=0, right=0): nothing past the first and last centres.
+        assert_eq!(lin(-2.0000001), 0.0);
+        assert_eq!(lin(2.0000001), 0.0);
+        assert_eq!(lin(f64::NAN), 0.0);
+        // interp1d(kind="nearest"): a midpoint goes to the left bin.
+        assert_eq!(near(-1.5), 1.0);
+        assert_eq!(near(-1.4999999), 3.0);
+        assert_eq!(near(0.5), 2.0);
+        assert_eq!(near(0.5000001), 8.0);
+        assert_eq!(near(2.0), 4.0);
+        assert_eq!(near(-2.1), 0.0);
+        // Just right of the midpoint −0.5 (t − ⌊t⌋ would round to 0.5 here).
+        assert_eq!(near(-0.49999999999999994), 2.0);
+        assert_eq!(near(-0.5), 3.0);
+        // In f32 a midpoint's side comes from `t_lo` (the rounding of cos and sin).
+        let y32 = y.map(|v| v as f32);
+        let near32 = |t: f32, lo: f32| iradon_sample(Interpolation::Nearest, &y32, &[], t, lo);
+        assert_eq!(near32(0.5, 0.0), 2.0);
+        assert_eq!(near32(0.5, 1e-16), 8.0);
+        assert_eq!(near32(0.5, -1e-16), 2.0);
+        // cos 60° in f64 is 0.5 + 2⁻⁵³: in f32 0.5 and a remainder of 2⁻⁵³.
+        let a = Angle::<f32>::new(60f64.to_radians().cos(), 60f64.to_radians().sin());
+        assert_eq!((a.c, a.c_lo), (0.5, 2f32.powi(-53)));
+        assert_eq!(Angle::<f64>::new(0.3, 0.7).c_lo, 0.0);
+    }
+
+    #[test]
+    fn one_view_backprojects_to_its_smear() {
+        // At θ = 0, t = y (the column's offset): every row is the view, × π/2.
+        let n = 9usize;
+        let view: Vec<f64> = (0..n).map(|j| (j * j) as f64 - 3.0).collect();
+        let none = |_: usize, _: usize| {};
+        for kind in [
+            Interpolation::Linear,
+            Interpolation::Nearest,
+            Interpolation::Cubic,
+        ] {
+            let m = spline_curvatures(&view);
+            let img: Vec<f64> =
+                iradon_backproject::<f64, f64>(&view, &m, n, &[(1.0, 0.0)], n, kind, false, &none);
+            for (i, &v) in img.iter().enumerate() {
+                let want = view[i % n] * std::f64::consts::PI / 2.0;
+                assert!(
+                    (v - want).abs() <= 1e-12 * want.abs().max(1.0),
+                    "{kind} {i}"
+                );
+            }
+            // The circle mask zeroes the corners.
+            let masked: Vec<f64> =
+                iradon_backproject::<f64, f64>(&view, &m, n, &[(1.0, 0.0)], n, kind, true, &none);
+            assert_eq!(masked[0], 0.0);
+            assert_eq!(masked[n * (n / 2) + n / 2], img[n * (n / 2) + n / 2]);
         }
     }
 

@@ -25,6 +25,7 @@
 //! | `cosine`      | `fftshift(sin(linspace(0, π, P, endpoint=False)))`  |
 //! | `hamming`     | `fftshift(np.hamming(P))`                           |
 //! | `hann`        | `fftshift(np.hanning(P))`                           |
+//! | `none`        | no ramp: `H = 1` (scikit-image's `filter_name=None`) |
 //!
 //! scikit-image keeps `Re(ifft(fft(row)·H))`. For a real row that is the circular
 //! convolution with the real kernel `g = Re(IDFT(H))` ([`ramp_kernel`]), i.e. the
@@ -80,11 +81,15 @@ crate::choice_enum! {
         Hamming = "hamming",
         /// Ramp × a Hann window.
         Hann = "hann",
+        /// No filter: the plain backprojection (scikit-image's `filter_name=None`), the
+        /// object blurred by the backprojection's `1/r` point spread.
+        None = "none",
     }
 }
 
 impl RampFilter {
-    /// Every filter, for tests and tables.
+    /// Every ramp filter, for tests and tables ([`RampFilter::None`], which is no
+    /// ramp, is left out).
     pub const ALL: [RampFilter; 5] = [
         RampFilter::RamLak,
         RampFilter::SheppLogan,
@@ -129,7 +134,7 @@ fn window(p: usize, filter: RampFilter) -> Vec<f64> {
     let shift = |v: Vec<f64>| (0..p).map(|k| v[(k + p / 2) % p]).collect::<Vec<_>>();
     let m = (p as f64 - 1.0).max(1.0);
     match filter {
-        RampFilter::RamLak => vec![1.0; p],
+        RampFilter::RamLak | RampFilter::None => vec![1.0; p],
         RampFilter::SheppLogan => (0..p)
             .map(|k| {
                 if k == 0 {
@@ -160,8 +165,12 @@ fn window(p: usize, filter: RampFilter) -> Vec<f64> {
 
 /// scikit-image's frequency response `H[k]` (`k` in NumPy's FFT order) of `filter` at
 /// padded length `p`: `2·Re(DFT(h))` times the window, with the DFT exact
-/// (`crate::cpu::dft`).
+/// (`crate::cpu::dft`); 1 at every bin for [`RampFilter::None`].
 pub fn frequency_response(p: usize, filter: RampFilter) -> Vec<f64> {
+    if filter == RampFilter::None {
+        // scikit-image's `fourier_filter[:] = 1`.
+        return vec![1.0; p];
+    }
     let h: Vec<Complex<f64>> = spatial_ramp(p)
         .into_iter()
         .map(|v| Complex::new(v, 0.0))
@@ -187,6 +196,11 @@ pub fn effective_response(p: usize, filter: RampFilter) -> Vec<f64> {
 pub fn ramp_kernel(p: usize, filter: RampFilter) -> Vec<f64> {
     if filter == RampFilter::RamLak {
         return spatial_ramp(p).into_iter().map(|v| 2.0 * v).collect();
+    }
+    if filter == RampFilter::None {
+        let mut delta = vec![0.0; p];
+        delta[0] = 1.0;
+        return delta;
     }
     let hh: Vec<Complex<f64>> = frequency_response(p, filter)
         .into_iter()
@@ -253,6 +267,12 @@ pub fn filter_projections<R: Real + FftNum>(
         ));
     }
     let inv_du = 1.0 / isocentre_spacing(g);
+    if filter == RampFilter::None {
+        // No ramp: the (pre-weighted) values per mm, exactly, with no transform's
+        // round trip (the GPU's FFT path rounds them in f32).
+        let data = preweight(p, g).iter().map(|&v| R::of(v * inv_du)).collect();
+        return Projections::new(p.angles, p.rows, p.cols, data);
+    }
     let mut out = vec![R::zero(); p.data.len()];
     match method {
         FilterMethod::Direct => {

@@ -22,7 +22,8 @@
 //! `probe` is the smallest end-to-end check that a device really computes: upload,
 //! dispatch, read back, compare. `fft` is the power-of-two FFT (split-stream and
 //! Stockham variants); `fvr` the Fourier volume rendering slice and its inverse FFT;
-//! `project` Joseph's CT forward projector.
+//! `project` Joseph's CT forward projector; `radon` scikit-image's Radon transform and
+//! its inverse's backprojection.
 
 pub mod adaptive;
 pub mod clipmesh;
@@ -42,6 +43,7 @@ pub mod preintegrate;
 pub mod probe;
 pub mod process;
 pub mod project;
+pub mod radon;
 pub mod ramp;
 pub mod raycast;
 pub mod shaders;

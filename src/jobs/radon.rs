@@ -1,10 +1,16 @@
-//! The Radon transform of a 2-D image in memory, as scikit-image's
-//! `skimage.transform.radon` (the Python package's `voxlab.transform.radon`). The
-//! algorithm is [`crate::cpu::radon`].
+//! scikit-image's Radon transform and its inverse on images in memory:
+//! [`radon`] as `skimage.transform.radon` and [`iradon`] as
+//! `skimage.transform.iradon` (the Python package's `voxlab.transform.radon` and
+//! `iradon`). The algorithms are [`crate::cpu::radon`] (the oracle) and
+//! [`crate::gpu::radon`] (the port); the ramp filters are [`crate::cpu::ramp`]'s.
 
-use super::{Backend, Progress};
-use crate::cpu::radon::{outside_circle, radon_square, square, Square};
-
+use super::{cancellable, Backend, Engine, Progress};
+use crate::cpu::radon::{
+    iradon_backproject, outside_circle, radon_square, spline_curvatures, square, Interpolation,
+    Square, CUBIC_MIN_BINS,
+};
+use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
+use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::real::Real;
 
@@ -27,11 +33,12 @@ pub struct Sinogram<R> {
 /// with scikit-image's `circle` rule (crop to the inscribed square, warning through
 /// `progress` when the image is not zero outside the circle; otherwise pad to the
 /// circumscribed square). Runs in the image's precision `R` on `cpu` or `cpu-f32`
-/// (the caller picks `R`).
+/// (the caller picks `R`), or in f32 on the GPU (`gpu`, and `auto` with a hardware
+/// GPU; the sinogram is then rounded f32 values in `R`).
 ///
 /// # Errors
-/// An empty image or a data length that is not `rows × cols`; a backend other than
-/// `cpu`/`cpu-f32` ([`Error::Unsupported`]); [`Error::Cancelled`].
+/// An empty image or a data length that is not `rows × cols`; no GPU for `gpu`;
+/// [`Error::Cancelled`].
 pub fn radon<R: Real>(
     image: &[R],
     rows: usize,
@@ -41,7 +48,10 @@ pub fn radon<R: Real>(
     backend: Backend,
     progress: &dyn Progress,
 ) -> Result<Sinogram<R>> {
-    backend.require("the Radon transform", &[Backend::Cpu, Backend::CpuF32])?;
+    backend.require(
+        "the Radon transform",
+        &[Backend::Cpu, Backend::CpuF32, Backend::Gpu],
+    )?;
     if rows == 0 || cols == 0 {
         return Err(Error::invalid("image", "the image is empty"));
     }
@@ -60,11 +70,207 @@ pub fn radon<R: Real>(
     if progress.cancelled() {
         return Err(Error::Cancelled);
     }
-    let data = radon_square(&img, sq.side, maps);
+    let engine = Engine::open(backend)?;
+    let data = match engine.gpu() {
+        Some(ctx) => {
+            let img: Vec<f32> = img.iter().map(|v| v.f64() as f32).collect();
+            crate::gpu::radon::radon_square(ctx, &img, sq.side, maps)?
+                .into_iter()
+                .map(|v| R::of(v as f64))
+                .collect()
+        }
+        None => radon_square(&img, sq.side, maps),
+    };
     progress.end(0.0);
     Ok(Sinogram {
         bins: sq.side,
         angles: maps.len(),
         data,
+    })
+}
+
+/// scikit-image's `iradon` options beside the sinogram and its angles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IradonOptions {
+    /// The output image's side (`output_size`).
+    pub output_size: usize,
+    /// The ramp filter (`filter_name`; [`RampFilter::None`] for `None`).
+    pub filter: RampFilter,
+    /// How filtered projections are read between bins (`interpolation`).
+    pub interpolation: Interpolation,
+    /// `circle`: the sinogram covers the inscribed circle only (it is padded to the
+    /// circle's diagonal first) and the image is zeroed outside that circle.
+    pub circle: bool,
+}
+
+/// An image of [`iradon`]: `size × size`, row-major, row 0 at the top.
+#[derive(Clone, Debug)]
+pub struct IradonImage<A> {
+    pub size: usize,
+    pub data: Vec<A>,
+    /// The backend that computed it (`auto` resolved).
+    pub backend: Backend,
+}
+
+/// Filtered backprojection of a `(bins, angles)` sinogram (row-major: bin, then angle,
+/// as scikit-image holds it) taken at `theta` (degrees), step for step as scikit-image's
+/// `iradon`: padded to `⌈√2·bins⌉` bins when `circle` (`_sinogram_circle_to_square`),
+/// filtered by [`crate::cpu::ramp`] (its padding and windows), then backprojected
+/// pixel by pixel with `t = y·cos θ − x·sin θ` read by the interpolation
+/// ([`crate::cpu::radon::iradon_backproject`]), masked and scaled by `π/(2A)`.
+///
+/// `trig` gives each angle's `(cos θ, sin θ)` as the caller computed them (numpy's,
+/// to reproduce scikit-image's `t` and so its nearest-bin choices bit for bit); `None`
+/// computes them in f64 from `theta`. On `cpu` the filter, `t` and the interpolation
+/// run in f64 and the sum in `A` (scikit-image: the sinogram's float type, so f32 for
+/// a float32 sinogram); `cpu-f32` and `gpu` run in f32 throughout and return f32
+/// values in `A`.
+///
+/// # Errors
+/// An empty sinogram, a length that is not `bins × angles`, a `trig` of another
+/// length, an `output_size` of 0 or past the voxel limit, non-finite values, cubic
+/// interpolation of fewer than 4 (padded) bins; no GPU for `gpu`;
+/// [`Error::Cancelled`].
+#[allow(clippy::too_many_arguments)]
+pub fn iradon<A: Real>(
+    sinogram: &[f64],
+    bins: usize,
+    theta: &[f64],
+    trig: Option<&[(f64, f64)]>,
+    options: &IradonOptions,
+    backend: Backend,
+    progress: &dyn Progress,
+) -> Result<IradonImage<A>> {
+    let angles = theta.len();
+    if bins == 0 || angles == 0 {
+        return Err(Error::invalid(
+            "sinogram",
+            format!("{bins} bins × {angles} angles is empty"),
+        ));
+    }
+    if sinogram.len() != bins * angles {
+        return Err(Error::invalid(
+            "sinogram",
+            format!(
+                "{} values for {bins} bins × {angles} angles",
+                sinogram.len()
+            ),
+        ));
+    }
+    let size = options.output_size;
+    if size == 0 {
+        return Err(Error::invalid("output_size", "must be at least 1"));
+    }
+    crate::volume::check_dims([size, size, 1])?;
+    let trig: Vec<(f64, f64)> = match trig {
+        Some(t) if t.len() != angles => {
+            return Err(Error::invalid(
+                "angles",
+                format!("{} cosines and sines for {angles} angles", t.len()),
+            ))
+        }
+        Some(t) => t.to_vec(),
+        None => theta
+            .iter()
+            .map(|d| {
+                let a = d.to_radians();
+                (a.cos(), a.sin())
+            })
+            .collect(),
+    };
+    // (bins, angles) → one filtered line per angle.
+    let mut lines = vec![0.0; bins * angles];
+    for (b, row) in sinogram.chunks(angles).enumerate() {
+        for (k, &v) in row.iter().enumerate() {
+            lines[k * bins + b] = v;
+        }
+    }
+    let mut proj = Projections::new(angles, 1, bins, lines)?;
+    if options.circle {
+        proj = proj.padded_centred(crate::ct::circle_diagonal(bins));
+    }
+    let n = proj.cols;
+    if options.interpolation == Interpolation::Cubic && n < CUBIC_MIN_BINS {
+        return Err(Error::invalid(
+            "interpolation",
+            format!("cubic interpolation needs at least {CUBIC_MIN_BINS} detector bins, not {n}"),
+        ));
+    }
+    let g = Geometry::parallel_skimage(n, theta.to_vec())?;
+    let engine = Engine::open(backend)?;
+    let kind = options.interpolation;
+    let curvatures = |lines: &[f64]| -> Vec<f64> {
+        match kind {
+            Interpolation::Cubic => lines.chunks(n).flat_map(spline_curvatures).collect(),
+            _ => Vec::new(),
+        }
+    };
+    progress.begin("iradon backprojection", "row", size as u64);
+    let data: Vec<A> = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            let p32 =
+                Projections::new(angles, 1, n, proj.data.iter().map(|&v| v as f32).collect())?;
+            let q = crate::gpu::ramp::filter_projections(ctx, &p32, &g, options.filter)?;
+            let q64: Vec<f64> = q.data.iter().map(|&v| v as f64).collect();
+            let m: Vec<f32> = curvatures(&q64).iter().map(|&v| v as f32).collect();
+            super::check_cancel(progress)?;
+            crate::gpu::radon::iradon_backproject(
+                ctx,
+                &q.data,
+                &m,
+                n,
+                &trig,
+                size,
+                kind,
+                options.circle,
+            )?
+            .into_iter()
+            .map(|v| A::of(v as f64))
+            .collect()
+        }
+        (Backend::CpuF32, _) => {
+            let p32 =
+                Projections::new(angles, 1, n, proj.data.iter().map(|&v| v as f32).collect())?;
+            let q = filter_projections(&p32, &g, options.filter, FilterMethod::Fft)?;
+            let q64: Vec<f64> = q.data.iter().map(|&v| v as f64).collect();
+            let m: Vec<f32> = curvatures(&q64).iter().map(|&v| v as f32).collect();
+            cancellable(progress, |cp| {
+                Ok(iradon_backproject::<f32, f32>(
+                    &q.data,
+                    &m,
+                    n,
+                    &trig,
+                    size,
+                    kind,
+                    options.circle,
+                    &|d, t| cp.advance(d, t),
+                ))
+            })?
+            .into_iter()
+            .map(|v| A::of(v as f64))
+            .collect()
+        }
+        _ => {
+            let q = filter_projections(&proj, &g, options.filter, FilterMethod::Fft)?;
+            let m = curvatures(&q.data);
+            cancellable(progress, |cp| {
+                Ok(iradon_backproject::<f64, A>(
+                    &q.data,
+                    &m,
+                    n,
+                    &trig,
+                    size,
+                    kind,
+                    options.circle,
+                    &|d, t| cp.advance(d, t),
+                ))
+            })?
+        }
+    };
+    progress.end(0.0);
+    Ok(IradonImage {
+        size,
+        data,
+        backend: engine.backend(),
     })
 }

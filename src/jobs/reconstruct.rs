@@ -287,17 +287,11 @@ pub(super) fn geometry_for(
 /// The padded stack and geometry of iradon's `circle=True` (`_sinogram_circle_to_square`):
 /// `ceil(√2·cols)` bins, old bin `cols//2` moved to the new centre.
 fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64>, Geometry)> {
-    let n = p.cols;
-    let diag = ((2.0f64).sqrt() * n as f64).ceil() as usize;
-    let before = diag / 2 - n / 2;
-    let mut data = vec![0.0; p.angles * p.rows * diag];
-    for (dst, src) in data.chunks_mut(diag).zip(p.data.chunks(n)) {
-        dst[before..before + n].copy_from_slice(src);
-    }
+    let diag = crate::ct::circle_diagonal(p.cols);
     let mut g2 = g.clone();
     g2.cols = diag;
-    g2.cu = g.cu + before as f64;
-    Ok((Projections::new(p.angles, p.rows, diag, data)?, g2))
+    g2.cu = g.cu + (diag / 2 - p.cols / 2) as f64;
+    Ok((p.padded_centred(diag), g2))
 }
 
 /// The `.npy` shape a reconstruction is written in: `(ny, nx)` for one slice, else

@@ -1,0 +1,250 @@
+//! scikit-image's Radon transform and the backprojection of its `iradon` on the GPU:
+//! the port of [`crate::cpu::radon`] (`shaders/radon.wgsl`), in f32.
+//!
+//! - [`radon_square`]: one invocation per sinogram bin and angle; it warps the square
+//!   image by the angle's inverse map (bilinear, zero outside) and sums the rows in
+//!   order, as `cpu::radon::radon_column` does. The CPU blends the two interpolated
+//!   rows in f64 (scikit-image's `top`/`bottom` are doubles); WGSL has no f64, so the
+//!   port blends in f32 and differs from the CPU f32 path by that rounding.
+//! - [`iradon_backproject`]: one invocation per output pixel; it sums, over the angles
+//!   in order, the filtered view read at `t = y·cos θ − x·sin θ` by the interpolation
+//!   (`iradon_sample`, the same arithmetic as the CPU's in f32), masks the inscribed
+//!   circle and scales by `π/(2A)`. The cubic spline's curvatures are solved on the
+//!   host by `cpu::radon::spline_curvatures` (a sequential recurrence along each line,
+//!   as the ray caster's B-spline prefilter) and uploaded beside the views.
+//!
+//! Each invocation loops over the image's rows (radon) or the angles (iradon); on a
+//! CPU adapter (llvmpipe) that loop is capped at [`LLVMPIPE_LOOP_LIMIT`] iterations,
+//! and longer loops are refused. Every buffer must fit one storage binding.
+
+use super::context::{buffer_entry, GpuContext, LLVMPIPE_LOOP_LIMIT};
+use crate::cpu::radon::{Angle, Interpolation};
+use crate::error::{Error, Result};
+use wgpu::util::DeviceExt;
+
+/// `shaders/shared/radon_params.wgsl`: the WGSL twin of [`RadonParams`].
+pub const PARAMS_WGSL: &str = super::shaders::RADON_PARAMS;
+
+const WORKGROUP: u32 = 64;
+
+/// Parameters of one dispatch; twin of `shaders/shared/radon_params.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RadonParams {
+    /// radon: square side, angles, unused ×2; iradon: bins, angles, output side,
+    /// interpolation ([`Interpolation::id`]).
+    pub dims: [u32; 4],
+    /// x extent of the dispatch in invocations, circle mask (iradon), unused ×2.
+    pub work: [u32; 4],
+    /// iradon: π and 2A in f32, unused ×2.
+    pub scale: [f32; 4],
+}
+
+/// The complete shader source: `shaders/radon.wgsl` and its imports.
+pub fn shader_source() -> String {
+    super::shaders::resolve("radon")
+}
+
+/// Refuses a loop longer than a CPU adapter runs per invocation.
+fn check_loop(ctx: &GpuContext, what: &str, iterations: usize) -> Result<()> {
+    if ctx.summary.is_cpu() && iterations > LLVMPIPE_LOOP_LIMIT - 16 {
+        return Err(Error::invalid(
+            what,
+            format!(
+                "{iterations} iterations per invocation exceed the {LLVMPIPE_LOOP_LIMIT} \
+                 loop iterations a CPU Vulkan driver (llvmpipe) runs; use the CPU backend"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A read-only storage buffer of `data`, refused past one binding.
+fn upload(ctx: &GpuContext, label: &str, data: &[u8]) -> Result<wgpu::Buffer> {
+    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+    if data.len() as u64 > limit {
+        return Err(Error::too_large(
+            label,
+            format!(
+                "{} bytes exceed one storage binding ({limit} bytes)",
+                data.len()
+            ),
+        ));
+    }
+    let zero = [0u8; 16];
+    Ok(ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: if data.is_empty() { &zero } else { data },
+            usage: wgpu::BufferUsages::STORAGE,
+        }))
+}
+
+/// Runs `entry` of `shaders/radon.wgsl` over `invocations` with these bindings and
+/// reads `out_len` values back.
+fn dispatch(
+    ctx: &GpuContext,
+    entry: &str,
+    mut params: RadonParams,
+    (src, aux, trig): (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer),
+    invocations: usize,
+    out_len: usize,
+) -> Result<Vec<f32>> {
+    let dev = &ctx.device;
+    let module = ctx.shader("radon.wgsl", &shader_source())?;
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("radon"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            buffer_entry(1, storage(true)),
+            buffer_entry(2, storage(true)),
+            buffer_entry(3, storage(true)),
+            buffer_entry(4, storage(false)),
+        ],
+    });
+    let pipeline = super::context::compute_pipeline(ctx, entry, &module, entry, &layout)?;
+    let groups = (invocations as u32).div_ceil(WORKGROUP).max(1);
+    let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
+    let gy = groups.div_ceil(gx);
+    params.work[0] = gx * WORKGROUP;
+    let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("radon params"),
+        contents: bytemuck::bytes_of(&params),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let out_bytes = (out_len * 4) as u64;
+    let out = ctx.storage_buffer("radon output", out_bytes)?;
+    let bind = ctx.bind_group(
+        "radon",
+        &layout,
+        &[
+            pbuf.as_entire_binding(),
+            src.as_entire_binding(),
+            aux.as_entire_binding(),
+            trig.as_entire_binding(),
+            out.as_entire_binding(),
+        ],
+    );
+    let mut enc = dev.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(gx, gy, 1);
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait()?;
+    Ok(bytemuck::cast_slice(&ctx.read_buffer(&out, out_bytes)?).to_vec())
+}
+
+/// The sinogram `(side, angles)` (row-major: bin, then angle) of a square image
+/// (`side²`, row-major), one inverse map per angle (`cpu::radon::rotation`, rounded to
+/// f32): the port of `cpu::radon::radon_square`.
+///
+/// # Errors
+/// An image that is not `side²` values; a buffer past one binding
+/// ([`Error::TooLarge`]); on a CPU adapter more than its loop limit of rows;
+/// [`Error::Gpu`] on device failure.
+pub fn radon_square(
+    ctx: &GpuContext,
+    img: &[f32],
+    side: usize,
+    maps: &[[f64; 6]],
+) -> Result<Vec<f32>> {
+    if img.len() != side * side {
+        return Err(Error::invalid(
+            "image",
+            format!("{} values for a {side} × {side} square", img.len()),
+        ));
+    }
+    let out_len = side * maps.len();
+    if out_len == 0 {
+        return Ok(Vec::new());
+    }
+    check_loop(ctx, "image", side)?;
+    let coefficients: Vec<f32> = maps.iter().flatten().map(|&v| v as f32).collect();
+    let src = upload(ctx, "radon image", bytemuck::cast_slice(img))?;
+    let aux = upload(ctx, "radon maps", bytemuck::cast_slice(&coefficients))?;
+    let trig = upload(ctx, "radon (unused)", &[])?;
+    let params = RadonParams {
+        dims: [side as u32, maps.len() as u32, 0, 0],
+        ..Default::default()
+    };
+    dispatch(
+        ctx,
+        "radon_column",
+        params,
+        (&src, &aux, &trig),
+        out_len,
+        out_len,
+    )
+}
+
+/// scikit-image's `iradon` backprojection of filtered views (one line of `bins` values
+/// per angle), in f32: the port of `cpu::radon::iradon_backproject` (`R = A = f32`).
+/// `curvatures` are the lines' spline curvatures for [`Interpolation::Cubic`] (else
+/// empty), `trig` each angle's `(cos θ, sin θ)` (split into f32 and its remainder,
+/// `cpu::radon::Angle`).
+///
+/// # Errors
+/// Lengths that do not match; a buffer past one binding ([`Error::TooLarge`]); on a
+/// CPU adapter more angles than its loop limit; [`Error::Gpu`] on device failure.
+#[allow(clippy::too_many_arguments)]
+pub fn iradon_backproject(
+    ctx: &GpuContext,
+    views: &[f32],
+    curvatures: &[f32],
+    bins: usize,
+    trig: &[(f64, f64)],
+    size: usize,
+    kind: Interpolation,
+    circle: bool,
+) -> Result<Vec<f32>> {
+    let angles = trig.len();
+    if views.len() != bins * angles
+        || (kind == Interpolation::Cubic && curvatures.len() != views.len())
+    {
+        return Err(Error::invalid(
+            "filtered views",
+            format!(
+                "{} values (and {} curvatures) for {bins} bins × {angles} angles",
+                views.len(),
+                curvatures.len()
+            ),
+        ));
+    }
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    check_loop(ctx, "angles", angles)?;
+    let cs: Vec<[f32; 4]> = trig
+        .iter()
+        .map(|&(c, s)| {
+            let a = Angle::<f32>::new(c, s);
+            [a.c, a.s, a.c_lo, a.s_lo]
+        })
+        .collect();
+    let src = upload(ctx, "iradon views", bytemuck::cast_slice(views))?;
+    let aux = upload(ctx, "iradon curvatures", bytemuck::cast_slice(curvatures))?;
+    let trig = upload(ctx, "iradon angles", bytemuck::cast_slice(&cs))?;
+    let params = RadonParams {
+        dims: [bins as u32, angles as u32, size as u32, kind.id()],
+        work: [0, circle as u32, 0, 0],
+        scale: [
+            std::f64::consts::PI as f32,
+            (2.0 * angles as f64) as f32,
+            0.0,
+            0.0,
+        ],
+    };
+    dispatch(
+        ctx,
+        "iradon_backproject",
+        params,
+        (&src, &aux, &trig),
+        size * size,
+        size * size,
+    )
+}
