@@ -3,6 +3,7 @@
 //! (built from keyword arguments by the Python half), volumes in memory.
 
 use crate::{arrays, errors, job};
+use numpy::PyReadonlyArrayDyn;
 use pyo3::prelude::*;
 use voxlab::jobs::adaptive::AdaptiveRequest;
 use voxlab::jobs::d2vr::D2vrRequest;
@@ -47,16 +48,41 @@ fn fvr(
 }
 
 /// The d2vr job (`voxlab d2vr`): the image (as the CLI's `.npy`), the samples-per-ray
-/// image when the job made one, and the rest as JSON.
+/// image when the job made one, and the rest as JSON. `projections` (a float64
+/// `(detector, angle)` sinogram or `(angle, row, col)` stack) with its `geometry`
+/// JSON are rendered instead of the request's `input`.
 #[pyfunction]
-#[pyo3(signature = (request, progress=None))]
+#[pyo3(signature = (request, progress=None, projections=None, geometry=None))]
 fn d2vr(
     py: Python<'_>,
     request: &str,
     progress: Option<Bound<'_, PyAny>>,
+    projections: Option<PyReadonlyArrayDyn<'_, f64>>,
+    geometry: Option<&str>,
 ) -> PyResult<(Py<PyAny>, Option<Py<PyAny>>, String)> {
-    let req: D2vrRequest = errors::parse_request(py, "d2vr option", request)?;
+    let mut req: D2vrRequest = errors::parse_request(py, "d2vr option", request)?;
+    let stack = match (&projections, geometry) {
+        (Some(p), Some(g)) => Some((crate::ct::projection_stack(py, p)?, g.to_string())),
+        (None, None) => None,
+        _ => {
+            return Err(errors::raise(
+                py,
+                "InvalidError",
+                "invalid d2vr option `geometry`: projections in memory need their geometry, \
+                 and a geometry needs projections",
+            ))
+        }
+    };
     let r = job::run(py, job::callback(&progress), |p| {
+        if let Some(((angles, rows, cols, data), g)) = stack {
+            let g =
+                voxlab::io::projections::geometry_from_json(&g, std::path::Path::new("geometry"))?;
+            let proj = voxlab::ct::Projections::new(angles, rows, cols, data)?;
+            req.memory = Some(std::sync::Arc::new((proj, g)));
+            if req.input == D2vrRequest::default().input {
+                req.input = "projections".into();
+            }
+        }
         voxlab::jobs::d2vr::run(&req, p)
     })?;
     let image = arrays::from_frame(py, &r.render.image)?;

@@ -71,6 +71,27 @@ def test_d2vr_equals_the_command_line(tmp_path, cli):
     assert s["fraction"] == s["value_reconstructions"] / s["box_samples"]
 
 
+def test_d2vr_of_projections_in_memory_equals_the_command_line_on_their_file(tmp_path, cli):
+    p = voxlab.ct.project("phantom:shepp-logan-modified", beam="cone", angles=16, cols=16,
+                          rows=16)
+    np.save(tmp_path / "p.npy", p.projections)
+    (tmp_path / "p.json").write_text(json.dumps(p.geometry))
+    out = tmp_path / "d.npy"
+    args = ["--grid", "16", "--size", "24"]
+    cli("d2vr", tmp_path / "p.npy", "--geometry", tmp_path / "p.json", *args, "--out", out)
+    want = np.load(out)
+    r = voxlab.d2vr(p, grid=16, size=24)  # a Projected carries its geometry
+    np.testing.assert_array_equal(r.image, want)
+    r = voxlab.d2vr(p.projections, geometry=p.geometry, grid=16, size=24, backend="cpu")
+    cli("d2vr", tmp_path / "p.npy", "--geometry", tmp_path / "p.json", *args,
+        "--backend", "cpu", "--out", out)
+    np.testing.assert_array_equal(r.image, np.load(out))
+    with pytest.raises(voxlab.InvalidError, match="geometry"):
+        voxlab.d2vr(p.projections, grid=16)
+    with pytest.raises(voxlab.InvalidError, match="projection stack|projections"):
+        voxlab.d2vr(p.projections[:, :, :15], geometry=p.geometry, grid=16)
+
+
 # --- Spectral adaptive sampling -------------------------------------------------------
 
 def test_adaptive_report_equals_the_command_lines_table(tmp_path, cli):

@@ -12,6 +12,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import _voxlab, _as_volume, _json_default, Volume
+from ._errors import InvalidError
 
 ProgressCallback = Callable[[str, int, int], Any]
 
@@ -108,17 +109,36 @@ def d2vr(
 ) -> D2vrResult:
     """D²VR (``voxlab d2vr``): volume rendering straight from projections, with no
     reconstructed grid. ``projections``: ``"phantom:NAME"`` (projected exactly with
-    ``beam``, ``angles``, ``detector``) or a projection stack file (``.npy``/NRRD with
-    its geometry JSON beside it, or ``geometry=`` a path). The job's options as
+    ``beam``, ``angles``, ``detector``), a projection stack file (``.npy``/NRRD with
+    its geometry JSON beside it, or ``geometry=`` a path), or projections in memory:
+    a :class:`voxlab.ct.Projected` (``voxlab.ct.project``'s result, which carries its
+    geometry), or an array — an ``(angle, row, col)`` stack or a ``(detector, angle)``
+    sinogram, float64 (other dtypes are converted) — with ``geometry=`` its geometry
+    (a dict as docs/projection.md describes, or its JSON text). The job's options as
     keywords: ``beam``, ``angles``, ``detector``, ``filter``, ``grid``, ``spacing``,
     ``mode``, ``tf``, ``gradient`` (``gfs`` | ``gfr``), ``no_cylinder``,
     ``occupancy``, ``ert``, ``step``, ``size``, ``azimuth``, ``elevation``,
     ``range``."""
     req: Dict[str, Any] = dict(options, backend=backend)
-    req["input"] = _os.fspath(projections)
-    if "geometry" in req and req["geometry"] is not None:
-        req["geometry"] = _os.fspath(req["geometry"])
-    image, samples, meta = _voxlab.d2vr(_dumps(req), progress)
+    geometry = req.pop("geometry", None)
+    stack = None
+    if hasattr(projections, "projections") and hasattr(projections, "geometry"):
+        stack, geometry = projections.projections, projections.geometry
+    elif isinstance(projections, np.ndarray):
+        stack = projections
+    if stack is not None:
+        if geometry is None:
+            raise InvalidError(
+                "invalid d2vr option `geometry`: projections in memory need their geometry"
+            )
+        g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
+        a = np.ascontiguousarray(np.asarray(stack, dtype=np.float64))
+        image, samples, meta = _voxlab.d2vr(_dumps(req), progress, a, g)
+    else:
+        req["input"] = _os.fspath(projections)
+        if geometry is not None:
+            req["geometry"] = _os.fspath(geometry)
+        image, samples, meta = _voxlab.d2vr(_dumps(req), progress)
     info = _json.loads(meta)
     return D2vrResult(image, samples, info["stats"], info["seconds"], info["engine"],
                       info["backend"], int(info["total_samples"]))

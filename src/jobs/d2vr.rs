@@ -18,6 +18,7 @@ use crate::settings::{Mode, RenderSettings};
 use crate::transfer::TransferFunction;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
+use std::sync::Arc;
 
 crate::choice_enum! {
     /// Gradient estimator for shading.
@@ -75,6 +76,11 @@ pub struct D2vrRequest {
     pub backend: Backend,
     /// GPU: keep the filtered projections as 16-bit floats (half the memory).
     pub f16_projections: bool,
+    /// A projection stack already in memory with its geometry (a NumPy array, the
+    /// output of the project job), used instead of reading `input`, which then only
+    /// names it in messages.
+    #[serde(skip)]
+    pub memory: Option<Arc<(Projections<f64>, Geometry)>>,
 }
 
 impl Default for D2vrRequest {
@@ -101,6 +107,7 @@ impl Default for D2vrRequest {
             range: [0.0, 1.0],
             backend: Backend::CpuF32,
             f16_projections: false,
+            memory: None,
         }
     }
 }
@@ -115,8 +122,16 @@ pub struct D2vrRendering {
     pub engine: Engine,
 }
 
-/// The raw projections and their geometry: read, or projected exactly from a phantom.
+/// The raw projections and their geometry: given in memory, read, or projected exactly
+/// from a phantom.
 fn projections<R: Real>(a: &D2vrRequest) -> Result<(Projections<R>, Geometry)> {
+    if let Some(m) = &a.memory {
+        let (p, g) = m.as_ref();
+        g.validate()?;
+        p.check_against(g)?;
+        let data = p.data.iter().map(|&v| R::of(v)).collect();
+        return Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g.clone()));
+    }
     if let Some(name) = a.input.strip_prefix("phantom:") {
         let ph = crate::phantom::Phantom::by_name(name)?;
         let d = 384.0 / a.detector.max(1) as f64;

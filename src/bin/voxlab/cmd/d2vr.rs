@@ -119,6 +119,7 @@ pub fn run(a: D2vrArgs) -> Result<ExitCode> {
         range: [a.range[0], a.range[1]],
         backend,
         f16_projections,
+        memory: None,
     };
     let term = Terminal::bars();
     let o = voxlab::jobs::d2vr::run(&req, &term)?;
