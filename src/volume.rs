@@ -160,12 +160,107 @@ pub const MIN_SPACING_MM: f64 = 1e-9;
 /// The coarsest voxel spacing accepted, in mm (a thousand kilometres).
 pub const MAX_SPACING_MM: f64 = 1e9;
 
+/// Voxels a volume reads without owning them: a buffer another owner keeps alive (a
+/// NumPy array the Python package borrows, a memory map). The slice must not change
+/// while any volume holds it.
+pub trait SharedVoxels<T>: Send + Sync {
+    /// The voxels, x fastest.
+    fn voxels(&self) -> &[T];
+}
+
+impl<T: Send + Sync> SharedVoxels<T> for Vec<T> {
+    fn voxels(&self) -> &[T] {
+        self
+    }
+}
+
+/// Where a volume's voxels live: in its own `Vec`, or in a shared buffer (cloning the
+/// volume then shares it too; writing through [`Volume::data_mut`] copies it first).
+#[derive(Clone)]
+enum Voxels<T> {
+    Owned(Vec<T>),
+    Shared(std::sync::Arc<dyn SharedVoxels<T>>),
+}
+
+impl<T> Voxels<T> {
+    fn as_slice(&self) -> &[T] {
+        match self {
+            Voxels::Owned(v) => v,
+            Voxels::Shared(s) => s.voxels(),
+        }
+    }
+}
+
+impl<T> Default for Voxels<T> {
+    fn default() -> Self {
+        Voxels::Owned(Vec::new())
+    }
+}
+
 /// A regular grid of voxels, x fastest, with spacing and a voxel-to-world affine.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// The voxels are the volume's own (`Vec`), or borrowed without a copy from a buffer
+/// that outlives it ([`Volume::shared`]).
+#[derive(Clone)]
 pub struct Volume<T> {
     dims: [usize; 3],
     affine: DMat4,
-    data: Vec<T>,
+    data: Voxels<T>,
+}
+
+impl<T: std::fmt::Debug> std::fmt::Debug for Volume<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Volume")
+            .field("dims", &self.dims)
+            .field("affine", &self.affine)
+            .field(
+                "data",
+                &match &self.data {
+                    Voxels::Owned(_) => "owned",
+                    Voxels::Shared(_) => "shared",
+                },
+            )
+            .finish()
+    }
+}
+
+impl<T: PartialEq> PartialEq for Volume<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self.dims == other.dims
+            && self.affine == other.affine
+            && self.data.as_slice() == other.data.as_slice()
+    }
+}
+
+/// Checks a voxel-to-world affine: finite, invertible, last row `(0, 0, 0, 1)`.
+fn check_affine(affine: DMat4) -> Result<()> {
+    let lin = DMat3::from_mat4(affine);
+    let det = lin.determinant();
+    if !affine.is_finite() || det.abs() < 1e-300 || !det.is_finite() {
+        return Err(Error::invalid(
+            "voxel-to-world affine",
+            "must be finite and invertible",
+        ));
+    }
+    if affine.row(3) != glam::DVec4::new(0.0, 0.0, 0.0, 1.0) {
+        return Err(Error::invalid(
+            "voxel-to-world affine",
+            "last row must be (0, 0, 0, 1)",
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that `len` values fill `dims`.
+fn check_len(dims: [usize; 3], len: usize) -> Result<()> {
+    let n = check_dims(dims)?;
+    if len != n {
+        return Err(Error::invalid(
+            "volume data",
+            format!("{len} values for dimensions {dims:?} (expected {n})"),
+        ));
+    }
+    Ok(())
 }
 
 impl<T: Voxel> Volume<T> {
@@ -179,32 +274,30 @@ impl<T: Voxel> Volume<T> {
 
     /// A volume with an explicit voxel-to-world affine.
     pub fn with_affine(dims: [usize; 3], affine: DMat4, data: Vec<T>) -> Result<Self> {
-        let n = check_dims(dims)?;
-        if data.len() != n {
-            return Err(Error::invalid(
-                "volume data",
-                format!(
-                    "{} values for dimensions {dims:?} (expected {n})",
-                    data.len()
-                ),
-            ));
-        }
-        let lin = DMat3::from_mat4(affine);
-        let det = lin.determinant();
-        if !affine.is_finite() || det.abs() < 1e-300 || !det.is_finite() {
-            return Err(Error::invalid(
-                "voxel-to-world affine",
-                "must be finite and invertible",
-            ));
-        }
-        let bottom = affine.row(3);
-        if bottom != glam::DVec4::new(0.0, 0.0, 0.0, 1.0) {
-            return Err(Error::invalid(
-                "voxel-to-world affine",
-                "last row must be (0, 0, 0, 1)",
-            ));
-        }
-        Ok(Volume { dims, affine, data })
+        check_len(dims, data.len())?;
+        check_affine(affine)?;
+        Ok(Volume {
+            dims,
+            affine,
+            data: Voxels::Owned(data),
+        })
+    }
+
+    /// A volume that reads its voxels from `data` without copying them (the same
+    /// checks as [`Volume::with_affine`]). Clones share the buffer; the first write
+    /// through [`Volume::data_mut`] copies it into the volume's own `Vec`.
+    pub fn shared(
+        dims: [usize; 3],
+        affine: DMat4,
+        data: std::sync::Arc<dyn SharedVoxels<T>>,
+    ) -> Result<Self> {
+        check_len(dims, data.voxels().len())?;
+        check_affine(affine)?;
+        Ok(Volume {
+            dims,
+            affine,
+            data: Voxels::Shared(data),
+        })
     }
 
     /// A volume of `dims` filled with `value`.
@@ -239,38 +332,50 @@ impl<T> Volume<T> {
         self.dims
     }
     pub fn data(&self) -> &[T] {
-        &self.data
+        self.data.as_slice()
     }
-    pub fn data_mut(&mut self) -> &mut [T] {
-        &mut self.data
+    /// The voxels to write: a volume that shares its buffer copies it first.
+    pub fn data_mut(&mut self) -> &mut [T]
+    where
+        T: Clone,
+    {
+        if let Voxels::Shared(s) = &self.data {
+            self.data = Voxels::Owned(s.voxels().to_vec());
+        }
+        match &mut self.data {
+            Voxels::Owned(v) => v,
+            Voxels::Shared(_) => unreachable!("copied just above"),
+        }
     }
-    pub fn into_data(self) -> Vec<T> {
-        self.data
+    /// The voxels as a `Vec` (a copy when the volume shares its buffer).
+    pub fn into_data(self) -> Vec<T>
+    where
+        T: Clone,
+    {
+        match self.data {
+            Voxels::Owned(v) => v,
+            Voxels::Shared(s) => s.voxels().to_vec(),
+        }
+    }
+    /// Whether the voxels are borrowed from a shared buffer ([`Volume::shared`]).
+    pub fn is_shared(&self) -> bool {
+        matches!(self.data, Voxels::Shared(_))
     }
     pub fn len(&self) -> usize {
-        self.data.len()
+        self.data().len()
     }
     pub fn is_empty(&self) -> bool {
-        self.data.is_empty()
+        self.data().is_empty()
     }
     /// The index-to-world affine.
     pub fn affine(&self) -> DMat4 {
         self.affine
     }
     /// Replaces the affine (it must be finite and invertible).
-    pub fn set_affine(&mut self, affine: DMat4) -> Result<()>
-    where
-        T: Voxel,
-    {
-        let data = std::mem::take(&mut self.data);
-        let v = Volume::with_affine(self.dims, affine, data);
-        match v {
-            Ok(v) => {
-                *self = v;
-                Ok(())
-            }
-            Err(e) => Err(e),
-        }
+    pub fn set_affine(&mut self, affine: DMat4) -> Result<()> {
+        check_affine(affine)?;
+        self.affine = affine;
+        Ok(())
     }
     /// Spacing in mm: the lengths of the affine's columns.
     pub fn spacing(&self) -> [f64; 3] {
@@ -308,7 +413,7 @@ impl<T> Volume<T> {
     }
     #[inline(always)]
     pub fn get(&self, i: usize, j: usize, k: usize) -> &T {
-        &self.data[self.index(i, j, k)]
+        &self.data()[self.index(i, j, k)]
     }
 }
 
@@ -421,7 +526,7 @@ impl<T: Voxel> Volume<T> {
     pub fn value_range(&self) -> ValueRange {
         use rayon::prelude::*;
         let (min, max, bad) = self
-            .data
+            .data()
             .par_chunks(1 << 16)
             .map(|c| {
                 let mut r = (f64::INFINITY, f64::NEG_INFINITY, 0usize);
@@ -454,7 +559,7 @@ impl<T: Voxel> Volume<T> {
         }
         let mut first = None;
         let mut count = 0;
-        for (i, v) in self.data.iter().enumerate() {
+        for (i, v) in self.data().iter().enumerate() {
             if !v.to_f64().is_finite() {
                 count += 1;
                 first.get_or_insert(i);
@@ -474,7 +579,7 @@ impl<T: Voxel> Volume<T> {
     /// counting passes run only when it says no).
     fn all_finite(&self) -> bool {
         use rayon::prelude::*;
-        self.data
+        self.data()
             .par_chunks(1 << 16)
             .all(|c| c.iter().fold(true, |ok, v| ok & v.to_f64().is_finite()))
     }
@@ -485,7 +590,7 @@ impl<T: Voxel> Volume<T> {
         if T::KIND != VoxelKind::F32 || self.all_finite() {
             return c;
         }
-        for (i, v) in self.data.iter().enumerate() {
+        for (i, v) in self.data().iter().enumerate() {
             let x = v.to_f64();
             if x.is_finite() {
                 continue;
@@ -520,7 +625,7 @@ impl<T: Voxel> Volume<T> {
         } else {
             (0.0, 0.0)
         };
-        for v in &mut self.data {
+        for v in self.data_mut() {
             let x = v.to_f64();
             if !x.is_finite() {
                 *v = T::from_f64(if x == f64::INFINITY { hi } else { lo });
@@ -540,7 +645,7 @@ impl<T: Voxel> Volume<T> {
         };
         let mut counts = vec![0u64; bins];
         let width = max - min;
-        for v in &self.data {
+        for v in self.data() {
             let x = v.to_f64();
             if !x.is_finite() {
                 continue;
@@ -574,7 +679,7 @@ impl<T: Voxel> Volume<T> {
         for k in lo[2]..hi[2] {
             for j in lo[1]..hi[1] {
                 let row = self.index(lo[0], j, k);
-                data.extend_from_slice(&self.data[row..row + dims[0]]);
+                data.extend_from_slice(&self.data()[row..row + dims[0]]);
             }
         }
         let shift = DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64);
@@ -586,7 +691,12 @@ impl<T: Voxel> Volume<T> {
         Volume {
             dims: self.dims,
             affine: self.affine,
-            data: self.data.iter().map(|v| U::from_f64(v.to_f64())).collect(),
+            data: Voxels::Owned(
+                self.data()
+                    .iter()
+                    .map(|v| U::from_f64(v.to_f64()))
+                    .collect(),
+            ),
         }
     }
 }
@@ -697,7 +807,11 @@ impl AnyVolume {
     }
     /// Converts to an f32 volume (exact for u8, u16 and i16).
     pub fn to_f32(&self) -> Volume<f32> {
-        with_volume!(self, v => v.convert::<f32>())
+        match self {
+            // The same voxels: a clone, which shares a shared buffer instead of copying.
+            AnyVolume::F32(v) => v.clone(),
+            other => with_volume!(other, v => v.convert::<f32>()),
+        }
     }
 }
 
@@ -763,6 +877,30 @@ mod tests {
         assert_eq!(v.data()[3], 10.0);
         assert_eq!(v.data()[12], 100.0);
         assert_eq!(*v.get(2, 3, 4), 432.0);
+    }
+
+    #[test]
+    fn a_shared_volume_reads_its_buffer_and_copies_only_on_write() {
+        let buffer: std::sync::Arc<Vec<u16>> = std::sync::Arc::new((0..24).collect());
+        let shared: std::sync::Arc<dyn SharedVoxels<u16>> = buffer.clone();
+        let v = Volume::shared([2, 3, 4], DMat4::IDENTITY, shared).unwrap();
+        assert!(v.is_shared());
+        assert_eq!(v.data().as_ptr(), buffer.as_ptr(), "no copy");
+        assert_eq!(*v.get(1, 2, 3), 23);
+        let c = v.clone();
+        assert!(c.is_shared() && c.data().as_ptr() == buffer.as_ptr());
+        let owned = Volume::with_affine([2, 3, 4], DMat4::IDENTITY, (0..24).collect()).unwrap();
+        assert_eq!(v, owned);
+        // A write copies first: the buffer is never changed.
+        let mut w = v.clone();
+        w.data_mut()[0] = 99;
+        assert!(!w.is_shared());
+        assert_eq!(buffer[0], 0);
+        assert_eq!(v.data()[0], 0);
+        assert_eq!(v.clone().into_data(), *buffer);
+        // The same checks as an owned volume.
+        let short: std::sync::Arc<dyn SharedVoxels<u16>> = std::sync::Arc::new(vec![0u16; 5]);
+        assert!(Volume::shared([2, 3, 4], DMat4::IDENTITY, short).is_err());
     }
 
     #[test]

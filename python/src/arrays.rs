@@ -1,17 +1,19 @@
 //! NumPy arrays to and from the library's volumes and frames.
 //!
 //! Volumes are `(nz, ny, nx)` arrays, x fastest: exactly the library's memory order,
-//! so a C-contiguous array is read as one slice (one copy, into the library's own
-//! `Volume`, which owns its voxels) and results come back as NumPy arrays that take
-//! over the Rust buffer without a copy. The Python half makes other layouts
-//! contiguous first (documented in docs/python.md) and checks dtypes and shapes.
+//! so a C-contiguous array of a voxel type is lent to the library without a copy
+//! (`Volume::shared`: the volume reads the array's buffer and keeps the array alive)
+//! and results come back as NumPy arrays that take over the Rust buffer without a
+//! copy. The Python half makes other layouts contiguous first (documented in
+//! docs/python.md) and checks dtypes and shapes.
 
 use crate::errors;
 use glam::DMat4;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use std::sync::Arc;
 use voxlab::frame::Frame;
-use voxlab::volume::{AnyVolume, Volume};
+use voxlab::volume::{AnyVolume, SharedVoxels, Volume};
 
 /// A row-major 4×4 matrix (`m[row][col]`) as glam's column-major matrix.
 pub fn mat4(m: [[f64; 4]; 4]) -> DMat4 {
@@ -38,9 +40,57 @@ fn slice_of<'a, T: numpy::Element>(
     })
 }
 
+/// A NumPy array's buffer lent to a volume without a copy ([`Volume::shared`]): the
+/// array object travels with it and keeps the buffer alive.
+struct NumpyVoxels<T> {
+    _array: Py<PyAny>,
+    ptr: *const T,
+    len: usize,
+}
+
+// SAFETY: the buffer is plain voxels at a fixed address for as long as `_array` keeps
+// the array alive (an array never moves its data); it is only read. The package's
+// rule (docs/python.md: the copy rule) is that an array is not written while a call
+// that reads it runs, the same rule NumPy's own GIL-releasing functions follow.
+unsafe impl<T: Sync> Send for NumpyVoxels<T> {}
+unsafe impl<T: Sync> Sync for NumpyVoxels<T> {}
+
+impl<T: Send + Sync> SharedVoxels<T> for NumpyVoxels<T> {
+    fn voxels(&self) -> &[T] {
+        if self.len == 0 {
+            return &[];
+        }
+        // SAFETY: `ptr` and `len` come from the C-contiguous, aligned array's slice,
+        // which `_array` keeps alive (see the Send/Sync note above).
+        unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
+    }
+}
+
+/// The voxels of a C-contiguous, aligned, native-order array of `T`, borrowed.
+fn borrowed<T: numpy::Element + Send + Sync + 'static>(
+    py: Python<'_>,
+    a: &Bound<'_, PyAny>,
+    x: &PyReadonlyArrayDyn<'_, T>,
+) -> PyResult<Arc<dyn SharedVoxels<T>>> {
+    let s = slice_of(py, x, "the volume")?;
+    if !(s.as_ptr() as usize).is_multiple_of(std::mem::align_of::<T>()) {
+        return Err(errors::raise(
+            py,
+            "LayoutError",
+            "the volume's buffer is not aligned (np.require(a, requirements='CA') makes it so)",
+        ));
+    }
+    Ok(Arc::new(NumpyVoxels {
+        _array: a.clone().unbind(),
+        ptr: s.as_ptr(),
+        len: s.len(),
+    }))
+}
+
 /// A `(nz, ny, nx)` array as a volume with voxel-to-world `affine`: uint8, uint16,
-/// int16 and float32 keep their type, float64 is stored as float32 (the library's
-/// volumes are f32 at most).
+/// int16 and float32 are borrowed without a copy (the volume reads the array's own
+/// buffer, which it keeps alive); float64 is converted to float32 (the library's
+/// volumes are f32 at most), a copy.
 pub fn volume(py: Python<'_>, a: &Bound<'_, PyAny>, affine: [[f64; 4]; 4]) -> PyResult<AnyVolume> {
     let ndim: usize = a.getattr("ndim")?.extract()?;
     if ndim != 3 {
@@ -55,20 +105,20 @@ pub fn volume(py: Python<'_>, a: &Bound<'_, PyAny>, affine: [[f64; 4]; 4]) -> Py
     let affine = mat4(affine);
     let conv = |r: voxlab::Result<AnyVolume>| r.map_err(|e| errors::to_py(py, &e));
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, u8>>() {
-        let s = slice_of(py, &x, "the volume")?;
-        return conv(Volume::with_affine(dims, affine, s.to_vec()).map(AnyVolume::U8));
+        let b = borrowed(py, a, &x)?;
+        return conv(Volume::shared(dims, affine, b).map(AnyVolume::U8));
     }
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, u16>>() {
-        let s = slice_of(py, &x, "the volume")?;
-        return conv(Volume::with_affine(dims, affine, s.to_vec()).map(AnyVolume::U16));
+        let b = borrowed(py, a, &x)?;
+        return conv(Volume::shared(dims, affine, b).map(AnyVolume::U16));
     }
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, i16>>() {
-        let s = slice_of(py, &x, "the volume")?;
-        return conv(Volume::with_affine(dims, affine, s.to_vec()).map(AnyVolume::I16));
+        let b = borrowed(py, a, &x)?;
+        return conv(Volume::shared(dims, affine, b).map(AnyVolume::I16));
     }
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f32>>() {
-        let s = slice_of(py, &x, "the volume")?;
-        return conv(Volume::with_affine(dims, affine, s.to_vec()).map(AnyVolume::F32));
+        let b = borrowed(py, a, &x)?;
+        return conv(Volume::shared(dims, affine, b).map(AnyVolume::F32));
     }
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f64>>() {
         let s = slice_of(py, &x, "the volume")?;
@@ -81,6 +131,12 @@ pub fn volume(py: Python<'_>, a: &Bound<'_, PyAny>, affine: [[f64; 4]; 4]) -> Py
         "DtypeError",
         &format!("a volume is uint8, uint16, int16, float32 or float64; got {dtype}"),
     ))
+}
+
+/// Whether `v` reads its voxels straight from a NumPy array's buffer (for the tests of
+/// the copy rule).
+pub fn is_borrowed(v: &AnyVolume) -> bool {
+    voxlab::with_volume!(v, x => x.is_shared())
 }
 
 /// A volume as a `(nz, ny, nx)` array of its own type (no copy of the voxels).

@@ -73,6 +73,15 @@ fn write_volume(
     job::run(py, None, |_| voxlab::io::write_volume(&path, &v))
 }
 
+/// How the library holds an array given as a volume: whether it reads the array's own
+/// buffer (the copy rule of docs/python.md) and the address of the voxels it reads.
+#[pyfunction]
+fn _volume_buffer(py: Python<'_>, array: &Bound<'_, PyAny>) -> PyResult<(bool, usize)> {
+    let v = arrays::volume(py, array, arrays::rows(glam::DMat4::IDENTITY))?;
+    let address = voxlab::with_volume!(&v, x => x.data().as_ptr() as usize);
+    Ok((arrays::is_borrowed(&v), address))
+}
+
 /// A phantom sampled at the voxel centres (`voxlab phantom`).
 #[pyfunction]
 fn sample_phantom(py: Python<'_>, spec: String) -> PyResult<VolumeParts> {
@@ -194,6 +203,7 @@ fn tf_eval(py: Python<'_>, json: &str, values: PyReadonlyArrayDyn<'_, f64>) -> P
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(_volume_buffer, m)?)?;
     m.add_function(wrap_pyfunction!(read_volume, m)?)?;
     m.add_function(wrap_pyfunction!(write_volume, m)?)?;
     m.add_function(wrap_pyfunction!(volume_info, m)?)?;

@@ -154,3 +154,34 @@ def test_transfer_function_points_json_and_values():
         voxlab.TransferFunction.from_json('{"domain": [0, 1], "points": [], "bogus": 1}')
     with pytest.raises(voxlab.InvalidError):
         voxlab.TransferFunction.preset("no-such-preset")
+
+
+# --- The copy rule ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16, np.float32])
+def test_a_contiguous_array_is_read_in_place(dtype):
+    a = np.arange(4 * 5 * 6).reshape(4, 5, 6).astype(dtype)
+    borrowed, address = voxlab._voxlab._volume_buffer(a)
+    assert borrowed and address == a.ctypes.data
+
+
+def test_other_layouts_are_copied_first():
+    a = np.arange(4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6)
+    # float64 becomes float32 (the library's widest voxel type): a copy.
+    borrowed, address = voxlab._voxlab._volume_buffer(a.astype(np.float64))
+    assert not borrowed
+    # A strided view is made contiguous by the Python half, and that copy is lent.
+    view = voxlab._volume_array(a[:, :, ::2])
+    assert view.flags.c_contiguous and not np.shares_memory(view, a)
+    borrowed, address = voxlab._voxlab._volume_buffer(view)
+    assert borrowed and address == view.ctypes.data
+    # A contiguous native array passes the Python half untouched.
+    assert voxlab._volume_array(a) is a
+
+
+def test_a_borrowed_volume_renders_as_a_copy_does():
+    a = voxlab.phantom("spheres", 24).array
+    lent = voxlab.render(a, mode="mip", view="+z", step=1.0).image
+    copied = voxlab.render(a.copy(), mode="mip", view="+z", step=1.0).image
+    np.testing.assert_array_equal(lent, copied)
+    np.testing.assert_array_equal(lent, a.max(axis=0))

@@ -71,9 +71,9 @@ BACKENDS = ("cpu", "cpu-f32", "gpu", "auto")
 
 def _volume_array(a: Any, what: str = "volume") -> np.ndarray:
     """``a`` as an array the library reads in place: 3-D, a voxel dtype, native byte
-    order, C-contiguous. A C-contiguous native array is passed on as it is (the
-    library then makes its one copy into its own volume); any other layout or byte
-    order is copied here first."""
+    order, C-contiguous and aligned. Such an array is passed on as it is, and the
+    library reads its buffer without a copy (uint8, uint16, int16, float32; float64 is
+    converted to float32); any other layout or byte order is copied here first."""
     arr = np.asarray(a)
     if arr.dtype.kind == "c" or arr.dtype.type not in VOLUME_DTYPES:
         raise DtypeError(
@@ -87,7 +87,7 @@ def _volume_array(a: Any, what: str = "volume") -> np.ndarray:
         raise ShapeError(f"a {what} has at least one voxel per axis; got shape {arr.shape}")
     if not arr.dtype.isnative:
         arr = arr.astype(arr.dtype.newbyteorder("="))
-    return np.ascontiguousarray(arr)
+    return np.require(arr, requirements=["C_CONTIGUOUS", "ALIGNED"])
 
 
 def _affine(affine: Any = None, spacing: Any = None) -> np.ndarray:
