@@ -289,9 +289,10 @@ pub fn iradon_sample<R: Real>(kind: Interpolation, y: &[R], m: &[R], t: R, t_lo:
     if !(t >= first && t <= last) {
         return R::zero();
     }
-    let f = t.floor();
-    // x_j = f exactly: `j` is f's bin, in 0 … n − 1.
-    let j = (f.f64() + h) as usize;
+    // ⌊t⌋ without a libm call (|t| < n here); x_j = f exactly: `j` is f's bin, in
+    // 0 … n − 1.
+    let (f, i) = t.floor_index();
+    let j = (i.unwrap_or(0) + (n / 2) as i64) as usize;
     match kind {
         Interpolation::Linear => {
             if j == n - 1 || f == t {
@@ -364,6 +365,30 @@ fn accumulate<R: Real, A: Real>(acc: A, v: R) -> A {
     }
 }
 
+/// Adds one view, read by `kind`, to the sums of a run of pixels of one row (`x` =
+/// `xr`, the pixels' `y` in `ys`): `t = y·c − x·s` and, for nearest, `t_lo`.
+#[inline(always)]
+fn add_view<R: Real, A: Real>(
+    kind: Interpolation,
+    acc: &mut [A],
+    ys: &[R],
+    view: &[R],
+    m: &[R],
+    a: &Angle<R>,
+    xr: R,
+) {
+    let (xs, xs_lo) = (xr * a.s, xr * a.s_lo);
+    for (sum, &yr) in acc.iter_mut().zip(ys) {
+        let t = yr * a.c - xs;
+        let t_lo = if kind == Interpolation::Nearest {
+            yr * a.c_lo - xs_lo
+        } else {
+            R::zero()
+        };
+        *sum = accumulate(*sum, iradon_sample(kind, view, m, t, t_lo));
+    }
+}
+
 /// scikit-image's `iradon` backprojection of filtered projections: `views` holds one
 /// filtered line of `bins` values per angle (angle-major), `trig` each angle's
 /// `(cos θ, sin θ)` (numpy's, to reproduce its `t`), `curvatures` the lines'
@@ -402,25 +427,42 @@ pub fn iradon_backproject<R: Real, A: Real>(
         .enumerate()
         .panic_fuse()
         .for_each(|(row, line)| {
+            // The row's pixels inside the circle (all of them without it): a run of
+            // columns, since the disc is convex.
             let x = row as i64 - radius;
-            for (col, o) in line.iter_mut().enumerate() {
-                let y = col as i64 - radius;
-                if circle && x * x + y * y > radius * radius {
-                    continue;
+            let inside = |col: &usize| {
+                let y = *col as i64 - radius;
+                !circle || x * x + y * y <= radius * radius
+            };
+            let Some(lo) = (0..size).find(inside) else {
+                rows_done(done.fetch_add(1, Ordering::Relaxed) + 1, size);
+                return;
+            };
+            let hi = (lo..size).rfind(inside).unwrap_or(lo) + 1;
+            let xr = R::of(x as f64);
+            let ys: Vec<R> = (lo..hi)
+                .map(|col| R::of(col as f64 - radius as f64))
+                .collect();
+            // Angle by angle over the run: every pixel still sums its views in order.
+            let mut acc = vec![A::zero(); hi - lo];
+            for (k, a) in trig.iter().enumerate() {
+                let view = &views[k * bins..(k + 1) * bins];
+                // One loop per interpolation, so that none tests `kind` per pixel.
+                match kind {
+                    Interpolation::Linear => {
+                        add_view(Interpolation::Linear, &mut acc, &ys, view, &[], a, xr)
+                    }
+                    Interpolation::Nearest => {
+                        add_view(Interpolation::Nearest, &mut acc, &ys, view, &[], a, xr)
+                    }
+                    Interpolation::Cubic => {
+                        let m = &curvatures[k * bins..(k + 1) * bins];
+                        add_view(Interpolation::Cubic, &mut acc, &ys, view, m, a, xr)
+                    }
                 }
-                let (xr, yr) = (R::of(x as f64), R::of(y as f64));
-                let mut acc = A::zero();
-                for (k, a) in trig.iter().enumerate() {
-                    let t = yr * a.c - xr * a.s;
-                    let t_lo = yr * a.c_lo - xr * a.s_lo;
-                    let line = &views[k * bins..(k + 1) * bins];
-                    let m = match kind {
-                        Interpolation::Cubic => &curvatures[k * bins..(k + 1) * bins],
-                        _ => &[],
-                    };
-                    acc = accumulate(acc, iradon_sample(kind, line, m, t, t_lo));
-                }
-                *o = acc * pi / denominator;
+            }
+            for (o, sum) in line[lo..hi].iter_mut().zip(acc) {
+                *o = sum * pi / denominator;
             }
             rows_done(done.fetch_add(1, Ordering::Relaxed) + 1, size);
         });
