@@ -569,3 +569,48 @@ fn dry_run_prints_the_memory_plan_and_writes_nothing() {
         stderr(&o)
     );
 }
+
+/// `--filter none` is the plain backprojection: one view at 0° smears its bins down
+/// the image's columns (a bin centre on every column, so no interpolation), times
+/// π/(2A) = π/2, exactly on the CPU oracle and within float32 rounding on the others.
+#[test]
+fn the_none_filter_backprojects_the_raw_views() {
+    let d = scratch("recon-none");
+    let n = 17usize;
+    let view: Vec<f64> = (0..n).map(|j| ((j * 7) % 11) as f64 - 2.5).collect();
+    let sino = d.join("view.npy");
+    write_npy_f64(&sino, &[n, 1], &view).unwrap();
+    let angles = d.join("angles.txt");
+    std::fs::write(&angles, "0\n").unwrap();
+    for (backend, tol) in [("cpu", 0.0), ("cpu-f32", 1e-6), ("gpu", 1e-6)] {
+        if backend == "gpu" && common::gpu("cli_ct_reconstruct none gpu").is_none() {
+            continue;
+        }
+        let out = d.join(format!("none-{backend}.npy"));
+        let o = voxlab(&[
+            "reconstruct",
+            s(&sino),
+            "--geometry",
+            "parallel",
+            "--angles",
+            s(&angles),
+            "--filter",
+            "none",
+            "--no-circle",
+            "--backend",
+            backend,
+            "--out",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (shape, got, _) = read_npy_f64(&out).unwrap();
+        assert_eq!(shape, vec![n, n]);
+        for (k, &g) in got.iter().enumerate() {
+            let want = (view[k % n] * std::f64::consts::PI / 2.0) as f32 as f64;
+            assert!(
+                (g - want).abs() <= tol * want.abs(),
+                "{backend} pixel {k}: {g} against {want}"
+            );
+        }
+    }
+}
