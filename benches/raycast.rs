@@ -10,6 +10,17 @@
 //! Pass a substring to run only matching cases: `cargo bench --bench raycast -- mip`.
 //! Under `cargo test` (no `--bench` argument) each case runs once on a tiny input, as
 //! a smoke test of the benchmark code.
+//!
+//! Then "GPU frame, one-shot" against "GPU frame, session reused" (cases
+//! `session/<variant>-<n>-at-<size>`, on the scene above and on half its edge at half
+//! its image size): the same orbit of frames (azimuth 30°, 40°, …), each rendered by
+//! `gpu::raycast::render` (the volume converted and uploaded, the shaders compiled and
+//! the set-up passes run every frame) and by one `gpu::raycast::RaycastSession` made
+//! before the timed frames and warmed by one untimed frame (per frame: the parameter
+//! block, the rays, the readback). Printed: wall-clock seconds per frame and their
+//! ratio, the share of set-up + upload + set-up passes in each frame's total, and the
+//! kernel medians (the same rays in both). The session's frames are checked equal to
+//! the one-shot frames bit for bit before they are timed.
 
 mod common;
 use common::median_min_max;
@@ -112,4 +123,107 @@ fn main() {
             samples as f64 / m32 / 1e6
         );
     }
+    if let Some(ctx) = gpu {
+        sessions(ctx, &args, n, size);
+    }
+}
+
+/// GPU frames of an orbit, one-shot against one session (see the module docs).
+fn sessions(ctx: &voxlab::gpu::GpuContext, args: &common::BenchArgs, n: usize, size: usize) {
+    use voxlab::settings::{Filter, RenderSettings};
+    let bspline = RenderSettings {
+        filter: Filter::BsplineInterp,
+        ..RenderSettings::default()
+    };
+    println!(
+        "\nGPU frame, one-shot vs session reused ({} frames of an orbit)\n{:<40} {:>24} {:>24} {:>9} {:>14} {:>14} {:>11} {:>11}",
+        args.runs,
+        "case",
+        "one-shot median (min–max) s",
+        "session median (min–max) s",
+        "one/sess",
+        "one-shot s+u+p",
+        "session s+u+p",
+        "one kern s",
+        "sess kern s"
+    );
+    // The benchmark's scene, and an interactive one: half the edge at half the size.
+    for (n, size) in [(n, size), (n / 2, size / 2)] {
+        for (variant, s) in [
+            ("dvr-shaded-trilinear", RenderSettings::default()),
+            ("dvr-shaded-bspline-interp", bspline.clone()),
+        ] {
+            let name = format!("session/{variant}-{n}-at-{size}");
+            if args.wants(&name) {
+                session_case(ctx, args, &name, n, size, &s);
+            }
+        }
+    }
+}
+
+/// One row of [`sessions`].
+fn session_case(
+    ctx: &voxlab::gpu::GpuContext,
+    args: &common::BenchArgs,
+    name: &str,
+    n: usize,
+    size: usize,
+    s: &voxlab::settings::RenderSettings,
+) {
+    use voxlab::camera::{Camera, Orbit, Projection};
+    use voxlab::gpu::raycast::{render as one_shot, GpuTimings, RaycastSession};
+    let (vol, tf, _) = raycast_scene(n, size).unwrap();
+    let (vol, tf) = (&vol, &tf);
+    let camera = |k: usize| {
+        let orbit = Orbit {
+            azimuth_deg: 30.0 + 10.0 * k as f64,
+            elevation_deg: 20.0,
+            distance_mm: Some(540.0),
+        };
+        let perspective = Projection::Perspective { fov_y_deg: 30.0 };
+        Camera::orbit(
+            glam::DVec3::ZERO,
+            [256.0; 3],
+            orbit,
+            perspective,
+            size,
+            size,
+        )
+        .unwrap()
+    };
+    // The share of set-up, uploads and set-up passes in a frame's total.
+    let overhead = |t: &GpuTimings| (t.setup + t.upload + t.prepare) / t.total;
+    let bits = |f: &voxlab::frame::Frame| f.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let mut session = RaycastSession::new(ctx, vol).unwrap();
+    session.render(tf, &camera(0), s, &|_, _| {}).unwrap();
+    let (mut t_one, mut t_sess, mut o_one, mut o_sess) = (vec![], vec![], vec![], vec![]);
+    let (mut k_one, mut k_sess) = (vec![], vec![]);
+    for k in 1..=args.runs {
+        let cam = camera(k);
+        let start = Instant::now();
+        let a = one_shot(ctx, vol, tf, &cam, s, &|_, _| {}).unwrap();
+        t_one.push(start.elapsed().as_secs_f64());
+        let start = Instant::now();
+        let b = session.render(tf, &cam, s, &|_, _| {}).unwrap();
+        t_sess.push(start.elapsed().as_secs_f64());
+        assert!(
+            bits(&a.output.image) == bits(&b.output.image),
+            "{name}: the session's frame differs from the one-shot frame; not timed"
+        );
+        o_one.push(overhead(&a.timings));
+        o_sess.push(overhead(&b.timings));
+        k_one.push(a.timings.kernel);
+        k_sess.push(b.timings.kernel);
+    }
+    assert_eq!(session.stats().volume_uploads, 1);
+    let (m1, lo1, hi1) = median_min_max(t_one);
+    let (ms, los, his) = median_min_max(t_sess);
+    println!(
+        "{name:<40} {m1:>8.4} ({lo1:.4}–{hi1:.4}) {ms:>8.4} ({los:.4}–{his:.4}) {:>9.2} {:>13.1}% {:>13.1}% {:>11.4} {:>11.4}",
+        m1 / ms,
+        100.0 * median_min_max(o_one).0,
+        100.0 * median_min_max(o_sess).0,
+        median_min_max(k_one).0,
+        median_min_max(k_sess).0,
+    );
 }

@@ -330,3 +330,220 @@ fn a_failing_parity_check_writes_its_images() {
         assert!(dir.join(f).is_file());
     }
 }
+
+// ---------------------------------------------------------------------------------
+// A render session: one upload, frames equal to one-shot renders
+// ---------------------------------------------------------------------------------
+
+/// The image and samples-per-ray image as bit patterns (NaN equals NaN, -0 is not 0).
+fn frame_bits(o: &voxlab::cpu::raycast::RenderOutput) -> (Vec<u64>, Vec<u64>) {
+    let bits = |f: &voxlab::frame::Frame| f.data.iter().map(|v| v.to_bits()).collect();
+    (bits(&o.image), o.samples.as_ref().map_or(Vec::new(), bits))
+}
+
+/// The counters that say what a frame made: (pipelines compiled, tables uploaded,
+/// set-up passes).
+fn made(s: voxlab::gpu::raycast::SessionStats) -> (usize, usize, usize) {
+    (s.pipelines_compiled, s.table_uploads, s.prepare_passes)
+}
+
+/// One session renders frames that change the camera, the transfer function, the mode,
+/// the filter (a prefiltered B-spline too), pre-classification, precomputed gradients,
+/// skipping and a 2-D transfer function. Every frame equals a fresh one-shot render of
+/// the same inputs bit for bit and the f64 oracle within the parity bounds above, the
+/// volume is uploaded once, and each frame makes exactly what its change needs.
+#[test]
+fn a_session_renders_every_frame_like_a_one_shot_render() {
+    use voxlab::gpu::raycast::{render, RaycastSession};
+    let Some(ctx) = common::gpu("a_session_renders_every_frame_like_a_one_shot_render") else {
+        return;
+    };
+    let (vol, tf1, orbit_cam, base) = scene(&BASE, 32, 48);
+    let (_, _, ortho_cam, _) = scene(
+        &Case {
+            cam: Cam::Ortho,
+            ..BASE
+        },
+        32,
+        48,
+    );
+    let mut tf2 = tf1.clone();
+    for p in &mut tf2.points {
+        p.rgba[3] *= 0.5;
+    }
+    let turned = |az: f64| {
+        Camera::orbit(
+            DVec3::ZERO,
+            [256.0; 3],
+            Orbit {
+                azimuth_deg: az,
+                elevation_deg: 20.0,
+                distance_mm: Some(540.0),
+            },
+            Projection::Perspective { fov_y_deg: 30.0 },
+            48,
+            36,
+        )
+        .unwrap()
+    };
+    let with = |f: &dyn Fn(&mut RenderSettings)| {
+        let mut s = base.clone();
+        f(&mut s);
+        s
+    };
+    let tf2d = voxlab::transfer2d::TransferFunction2D::from_1d(&tf2, base.lut_size, 0.1);
+    // (what changes, transfer function, camera, settings, and what the frame must make:
+    // pipelines compiled, tables uploaded, set-up passes).
+    type Step = (
+        &'static str,
+        TransferFunction,
+        Camera,
+        RenderSettings,
+        (usize, usize, usize),
+    );
+    #[rustfmt::skip]
+    let frames: Vec<Step> = vec![
+        // The ray caster's and the min/max grid's pipelines; the LUT, the (empty) 2-D
+        // LUT and the opacity prefix; the min/max grid.
+        ("first frame", tf1.clone(), orbit_cam.clone(), base.clone(), (2, 3, 1)),
+        ("camera", tf1.clone(), turned(75.0), base.clone(), (0, 0, 0)),
+        // New LUT entries: the table and the prefix, not the min/max grid (data values).
+        ("transfer function", tf2.clone(), turned(75.0), base.clone(), (0, 2, 0)),
+        ("mode: MIP", tf2.clone(), ortho_cam.clone(), with(&|s| s.mode = Mode::Mip), (1, 0, 0)),
+        // Catmull–Rom reaches 2 voxels: the min/max grid is made again.
+        ("filter: Catmull-Rom", tf2.clone(), turned(120.0), with(&|s| s.filter = CatmullRom), (1, 0, 1)),
+        // The B-spline coefficients, and the min/max grid of them.
+        ("filter: interpolating B-spline", tf2.clone(), turned(120.0), with(&|s| s.filter = BsplineInterp), (1, 0, 2)),
+        // Pre-classification is a parameter, not a shader: the first frame's pipeline,
+        // the pre-classification pass and its pipeline, the trilinear min/max grid.
+        ("pre-classified", tf2.clone(), turned(120.0), with(&|s| s.classification = Classification::Pre), (1, 0, 2)),
+        // Prefiltered pre-classification (on the CPU), no skipping; the B-spline's pipeline.
+        ("pre-classified B-spline", tf2.clone(), turned(150.0), with(&|s| {
+            s.classification = Classification::Pre;
+            s.filter = BsplineInterp;
+        }), (0, 0, 1)),
+        // The gradient pass and its pipeline. The ray caster without on-the-fly
+        // gradients is the MIP frame's shader (the mode is a parameter), and the
+        // trilinear min/max grid is still there.
+        ("precomputed Sobel gradients", tf2.clone(), turned(150.0), with(&|s| {
+            s.precompute_gradients = true;
+            s.gradient = GradientMethod::Sobel;
+        }), (1, 0, 1)),
+        ("skipping off", tf2.clone(), turned(180.0), with(&|s| s.skip_empty = false), (0, 0, 0)),
+        ("skipping, 16-voxel blocks", tf2.clone(), turned(180.0), with(&|s| s.block_size = 16), (0, 0, 1)),
+        ("2-D transfer function", tf2.clone(), turned(210.0), with(&|s| s.transfer_2d = Some(tf2d.clone())), (0, 1, 0)),
+        // Back to the first frame's transfer functions and blocks: the LUT, the prefix
+        // and the (empty) 2-D LUT again, the 32-voxel min/max grid again; its pipeline
+        // was kept.
+        ("first settings again", tf1.clone(), turned(240.0), base.clone(), (0, 3, 1)),
+    ];
+    let mut session = RaycastSession::new(ctx, &vol).unwrap();
+    assert_eq!(session.stats().volume_uploads, 1);
+    let mut before = made(session.stats());
+    for (i, (what, tf, cam, s)) in frames
+        .iter()
+        .map(|(w, tf, c, s, _)| (w, tf, c, s))
+        .enumerate()
+    {
+        let name = format!("session_frame_{i:02}");
+        let got = session.render(tf, cam, s, &|_, _| {}).unwrap();
+        let after = made(session.stats());
+        let delta = (after.0 - before.0, after.1 - before.1, after.2 - before.2);
+        assert_eq!(
+            delta, frames[i].4,
+            "{what}: (pipelines, tables, set-up passes) made"
+        );
+        before = after;
+        let stats = session.stats();
+        assert_eq!(
+            stats.volume_uploads, 1,
+            "{what}: the volume was uploaded again"
+        );
+        assert_eq!(stats.frames, i + 1);
+        // A frame that makes nothing says so in its timings.
+        if i > 0 {
+            assert_eq!(
+                got.timings.upload == 0.0,
+                delta.1 == 0,
+                "{what}: {:?}",
+                got.timings
+            );
+            assert_eq!(
+                got.timings.prepare == 0.0,
+                delta.2 == 0,
+                "{what}: {:?}",
+                got.timings
+            );
+        }
+        let fresh = render(ctx, &vol, tf, cam, s, &|_, _| {}).unwrap();
+        assert!(
+            frame_bits(&got.output) == frame_bits(&fresh.output),
+            "{what}: the session's frame differs from a one-shot render"
+        );
+        let cpu = voxlab::cpu::raycast::render::<f64>(&vol, tf, cam, s, &|_, _| {}).unwrap();
+        let tol = if s.mode == Mode::Dvr {
+            EXACT_DVR
+        } else {
+            EXACT_SCALAR.scaled(cpu.image.data.iter().fold(1.0f64, |m, x| m.max(x.abs())))
+        };
+        let e = common::assert_parity(&name, &cpu.image, &got.output.image, tol);
+        eprintln!("{what}: max |Δ| {:.2e} against the oracle", e.max_abs);
+    }
+}
+
+/// Orbiting the camera with everything else unchanged uploads nothing and prepares
+/// nothing after the first frame, and the first frame reports the volume's upload.
+#[test]
+fn an_orbit_uploads_the_volume_once() {
+    use voxlab::gpu::raycast::RaycastSession;
+    let Some(ctx) = common::gpu("an_orbit_uploads_the_volume_once") else {
+        return;
+    };
+    let (vol, tf, _, s) = scene(&BASE, 32, 32);
+    let mut session = RaycastSession::new(ctx, &vol).unwrap();
+    let mut first = None;
+    for k in 0..8 {
+        let cam = Camera::orbit(
+            DVec3::new(16.0, 17.0, 15.0),
+            [256.0; 3],
+            Orbit {
+                azimuth_deg: 45.0 * k as f64,
+                elevation_deg: 15.0,
+                distance_mm: Some(540.0),
+            },
+            Projection::Perspective { fov_y_deg: 30.0 },
+            32,
+            32,
+        )
+        .unwrap();
+        let g = session.render(&tf, &cam, &s, &|_, _| {}).unwrap();
+        let t = g.timings;
+        let stats = session.stats();
+        match first {
+            None => {
+                assert!(t.upload > 0.0 && t.prepare > 0.0, "{t:?}");
+                assert!(
+                    t.total >= t.setup + t.upload + t.prepare + t.kernel,
+                    "{t:?}"
+                );
+                first = Some(stats);
+            }
+            Some(f) => {
+                assert_eq!(t.upload, 0.0, "frame {k}: {t:?}");
+                assert_eq!(t.prepare, 0.0, "frame {k}: {t:?}");
+                assert_eq!(made(stats), made(f), "frame {k} made something");
+            }
+        }
+        assert_eq!(stats.volume_uploads, 1);
+        assert_eq!(stats.frames, k + 1);
+        if k == 5 {
+            let one = voxlab::gpu::raycast::render(ctx, &vol, &tf, &cam, &s, &|_, _| {}).unwrap();
+            assert!(frame_bits(&one.output) == frame_bits(&g.output));
+            assert!(
+                one.timings.upload > 0.0,
+                "a one-shot render uploads: {:?}",
+                one.timings
+            );
+        }
+    }
+}

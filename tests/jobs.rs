@@ -272,3 +272,131 @@ fn an_in_memory_transfer_function_renders_as_its_file_does() {
     assert!(r.is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// On the GPU a prepared scene keeps one render session: its frames (an orbit, a new
+/// transfer function, another filter and mode) equal `Renderer::render` of the same
+/// scene bit for bit, and the volume is uploaded once.
+#[test]
+fn prepared_gpu_frames_equal_one_shot_renders_and_upload_once() {
+    use voxlab::jobs::render::{build_scene, Renderer, SceneRequest};
+    use voxlab::settings::{Filter, Mode};
+    if common::gpu("prepared_gpu_frames_equal_one_shot_renders_and_upload_once").is_none() {
+        return;
+    }
+    let renderer = Renderer::new(Backend::Gpu).unwrap();
+    let request = SceneRequest {
+        input: VolumeInput::new("phantom:shepp-logan-modified:32"),
+        width: Some(40),
+        height: Some(30),
+        ..Default::default()
+    };
+    let (mut scene, settings) = build_scene(&request, true, &()).unwrap();
+    let prepared = renderer.prepare(&scene, &settings).unwrap();
+    let bits = |f: &voxlab::frame::Frame| f.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let mut tf2 = scene.transfer.clone();
+    tf2.points.iter_mut().for_each(|p| p.rgba[3] *= 0.25);
+    for (k, azimuth) in [30.0, 100.0, 170.0, 240.0].into_iter().enumerate() {
+        let frame_request = SceneRequest {
+            view: jobs::render::ViewRequest {
+                azimuth,
+                ..Default::default()
+            },
+            ..request.clone()
+        };
+        scene.camera = build_scene(&frame_request, true, &()).unwrap().0.camera;
+        let mut s = settings.clone();
+        if k == 2 {
+            s.filter = Filter::CatmullRom;
+            s.mode = Mode::Mip;
+        }
+        let tf = if k == 3 { &tf2 } else { &scene.transfer };
+        let got = renderer
+            .render_prepared_with(&prepared, tf, &scene.camera, &s, &|_, _| {})
+            .unwrap();
+        let one_shot_scene = voxlab::jobs::render::Scene {
+            transfer: tf.clone(),
+            ..scene.clone()
+        };
+        let want = renderer.render(&one_shot_scene, &s, &|_, _| {}).unwrap();
+        assert_eq!(
+            bits(&got.output.image),
+            bits(&want.output.image),
+            "frame {k}"
+        );
+        assert_eq!(
+            bits(got.output.samples.as_ref().unwrap()),
+            bits(want.output.samples.as_ref().unwrap()),
+            "frame {k}"
+        );
+        let session = got.gpu_session.expect("a GPU frame reports its session");
+        assert_eq!(session.volume_uploads, 1);
+        assert_eq!(session.frames, k + 1);
+        assert_eq!(prepared.gpu_stats(), Some(session));
+        let timings = got.gpu_timings.unwrap();
+        if k == 1 {
+            // Only the camera changed.
+            assert_eq!((timings.upload, timings.prepare), (0.0, 0.0), "{timings:?}");
+        }
+        // The one-shot render made its own session of one frame.
+        assert_eq!(want.gpu_session.unwrap().frames, 1);
+    }
+    // `render_prepared` renders with the prepared transfer function.
+    let a = renderer
+        .render_prepared(&prepared, &scene.camera, &settings, &|_, _| {})
+        .unwrap();
+    let b = renderer.render(&scene, &settings, &|_, _| {}).unwrap();
+    assert_eq!(bits(&a.output.image), bits(&b.output.image));
+}
+
+/// `voxlab render --repeat N` on the GPU uploads the volume once: the frames after the
+/// first report no upload, and the session counts one.
+#[test]
+fn a_repeated_gpu_render_uploads_the_volume_once() {
+    if common::gpu("a_repeated_gpu_render_uploads_the_volume_once").is_none() {
+        return;
+    }
+    let mut req = jobs::render::RenderRequest::default();
+    req.scene.input = VolumeInput::new("phantom:shepp-logan-modified:32");
+    req.scene.width = Some(32);
+    req.scene.height = Some(32);
+    req.backend = Backend::Gpu;
+    req.repeat = Some(4);
+    let out = jobs::render::run(&req, &()).unwrap();
+    let frames = out.frames.unwrap();
+    let session = frames.gpu_session.unwrap();
+    assert_eq!((session.volume_uploads, session.frames), (1, 4));
+    assert_eq!(frames.gpu_uploads.len(), 4);
+    assert!(frames.gpu_uploads[0] > 0.0, "{:?}", frames.gpu_uploads);
+    assert!(
+        frames.gpu_uploads[1..].iter().all(|&u| u == 0.0),
+        "{:?}",
+        frames.gpu_uploads
+    );
+    // The same image as one render.
+    req.repeat = None;
+    let one = jobs::render::run(&req, &()).unwrap();
+    assert_eq!(one.output.image.data, out.output.image.data);
+    // The command line says so.
+    let d = scratch("repeat-gpu");
+    let png = d.join("r.png");
+    let o = voxlab(&[
+        "render",
+        "phantom:shepp-logan-modified:24",
+        "--backend",
+        "gpu",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--repeat",
+        "3",
+        "--out",
+        s(&png),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("the volume uploaded 1 time(s) for 3 frames"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -1,14 +1,18 @@
-//! `voxlab.render`, `voxlab.Renderer`, `voxlab.compare`, `voxlab.compare_images`: the
-//! render and compare jobs from JSON requests (built from keyword arguments).
+//! `voxlab.render`, `voxlab.Renderer` (and its prepared scenes), `voxlab.compare`,
+//! `voxlab.compare_images`: the render and compare jobs from JSON requests (built from
+//! keyword arguments).
 
 use crate::{arrays, errors, job};
 use numpy::PyReadonlyArrayDyn;
 use pyo3::prelude::*;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use voxlab::cpu::raycast::RenderOutput;
 use voxlab::jobs::compare::CompareRequest;
 use voxlab::jobs::input::VolumeInput;
-use voxlab::jobs::render::{build_scene, RenderRequest, Renderer as JobRenderer, SceneRequest};
+use voxlab::jobs::render::{
+    build_scene, build_view, PreparedScene as JobPreparedScene, RenderRequest, Rendered,
+    Renderer as JobRenderer, SceneRequest,
+};
 use voxlab::jobs::Backend;
 use voxlab::metrics::{check_parity, diff_heatmap, Tolerance};
 use voxlab::transfer::TransferFunction;
@@ -104,8 +108,8 @@ fn render(
     output_parts(py, &r.output, meta)
 }
 
-/// A renderer that keeps its engine (for the GPU, the process's device and its
-/// compiled pipelines) between renders.
+/// A renderer that keeps its engine (for the GPU, the process's device) between
+/// renders; [`Renderer::prepare`] keeps a volume too.
 #[pyclass(frozen, module = "voxlab._voxlab")]
 struct Renderer {
     inner: JobRenderer,
@@ -153,40 +157,162 @@ impl Renderer {
         tf2d: Option<&str>,
     ) -> PyResult<RenderParts> {
         let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
-        if req.stereo.is_some()
-            || req.repeat.is_some()
-            || !req.volumes.is_empty()
-            || req.sampling.is_some()
-        {
-            return Err(errors::raise(
-                py,
-                "InvalidError",
-                "invalid Renderer.render option: a Renderer renders single frames; stereo, \
-                 repeat, volumes and sampling go through voxlab.render",
-            ));
-        }
+        single_frames(py, &req, "Renderer.render")?;
         let vol = volume
             .as_ref()
             .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
         memory_input(py, &mut req.scene, vol)?;
         memory_transfers(py, &mut req.scene, tf, tf2d)?;
         let renderer = &self.inner;
-        let (out, timings, seconds) = job::run(py, job::callback(&progress), |p| {
+        let (r, seconds) = job::run(py, job::callback(&progress), |p| {
             let (scene, mut settings) = build_scene(&req.scene, req.samples, p)?;
             req.scene.accel.apply(&mut settings)?;
             let t = std::time::Instant::now();
             let r = req.scene.accel.render(renderer, &scene, &settings, p)?;
-            Ok((r.output, r.gpu_timings, t.elapsed().as_secs_f64()))
+            Ok((r, t.elapsed().as_secs_f64()))
         })?;
-        let meta = serde_json::json!({
-            "engine": renderer.describe(),
-            "backend": renderer.backend().name(),
-            "fallback": renderer.fallback_reason(),
-            "seconds": seconds,
-            "total_samples": out.total_samples,
-            "gpu_timings": timings,
-        });
-        output_parts(py, &out, meta)
+        output_parts(py, &r.output, frame_meta(renderer, &r, seconds))
+    }
+
+    /// Prepares the scene of a JSON [`RenderRequest`] for many frames
+    /// ([`JobRenderer::prepare`]): loads the volume, and on the GPU uploads it once.
+    #[pyo3(signature = (request, volume=None, affine=None, progress=None, tf=None, tf2d=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn prepare(
+        &self,
+        py: Python<'_>,
+        request: &str,
+        volume: Option<Bound<'_, PyAny>>,
+        affine: Option<[[f64; 4]; 4]>,
+        progress: Option<Bound<'_, PyAny>>,
+        tf: Option<&str>,
+        tf2d: Option<&str>,
+    ) -> PyResult<PreparedScene> {
+        let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
+        single_frames(py, &req, "Renderer.prepare")?;
+        let vol = volume
+            .as_ref()
+            .map(|v| (v, affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY))));
+        memory_input(py, &mut req.scene, vol)?;
+        memory_transfers(py, &mut req.scene, tf, tf2d)?;
+        let renderer = JobRenderer::on(self.inner.engine());
+        let (prepared, volume) = job::run(py, job::callback(&progress), |p| {
+            let (scene, mut settings) = build_scene(&req.scene, req.samples, p)?;
+            req.scene.accel.apply(&mut settings)?;
+            let prepared = renderer.prepare(&scene, &settings)?;
+            Ok((prepared, scene.volume))
+        })?;
+        // The loaded volume stays (frames build their cameras and `auto` transfer
+        // functions from it); the request's own reference to the caller's data goes.
+        let mut input = req.scene.input;
+        input.memory = None;
+        Ok(PreparedScene {
+            renderer,
+            input,
+            state_file: req.scene.state_file,
+            volume,
+            prepared: Mutex::new(prepared),
+        })
+    }
+}
+
+/// Refuses what a single frame cannot be: stereo pairs, repeats, extra volumes,
+/// adaptive sampling.
+fn single_frames(py: Python<'_>, req: &RenderRequest, what: &str) -> PyResult<()> {
+    if req.stereo.is_some()
+        || req.repeat.is_some()
+        || !req.volumes.is_empty()
+        || req.sampling.is_some()
+    {
+        return Err(errors::raise(
+            py,
+            "InvalidError",
+            &format!(
+                "invalid {what} option: a Renderer renders single frames; stereo, repeat, \
+                 volumes and sampling go through voxlab.render"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The JSON half of a frame's result.
+fn frame_meta(renderer: &JobRenderer, r: &Rendered, seconds: f64) -> serde_json::Value {
+    serde_json::json!({
+        "engine": renderer.describe(),
+        "backend": renderer.backend().name(),
+        "fallback": renderer.fallback_reason(),
+        "seconds": seconds,
+        "total_samples": r.output.total_samples,
+        "gpu_timings": r.gpu_timings,
+        "gpu_session": r.gpu_session,
+    })
+}
+
+/// A volume prepared for many frames (`Renderer.prepare`): the library's own copy of
+/// the volume, taken when it was prepared, and on the GPU a render session (the volume
+/// uploaded once; pipelines, lookup tables and set-up volumes made again only when a
+/// frame changes them).
+#[pyclass(frozen, module = "voxlab._voxlab")]
+struct PreparedScene {
+    renderer: JobRenderer,
+    /// Where the volume came from (for the `auto` transfer function), without its data.
+    input: VolumeInput,
+    state_file: Option<std::path::PathBuf>,
+    volume: AnyVolume,
+    /// Frames render one at a time; a CPU preparation is replaced when a frame changes
+    /// the filter or gradients.
+    prepared: Mutex<JobPreparedScene>,
+}
+
+#[pymethods]
+impl PreparedScene {
+    /// One frame of a JSON [`RenderRequest`] of the prepared volume: every option but
+    /// the input's (its `input`, `state_file` and `backend` are the preparation's).
+    #[pyo3(signature = (request, progress=None, tf=None, tf2d=None))]
+    fn render(
+        &self,
+        py: Python<'_>,
+        request: &str,
+        progress: Option<Bound<'_, PyAny>>,
+        tf: Option<&str>,
+        tf2d: Option<&str>,
+    ) -> PyResult<RenderParts> {
+        let mut req: RenderRequest = errors::parse_request(py, "render option", request)?;
+        single_frames(py, &req, "PreparedScene.render")?;
+        req.scene.input = self.input.clone();
+        req.scene.state_file = self.state_file.clone();
+        memory_transfers(py, &mut req.scene, tf, tf2d)?;
+        let renderer = &self.renderer;
+        let (r, seconds) = job::run(py, job::callback(&progress), |p| {
+            let (transfer, camera, mut settings) =
+                build_view(&req.scene, &self.volume, req.samples)?;
+            req.scene.accel.apply(&mut settings)?;
+            let mut prepared = self.prepared.lock().unwrap_or_else(|e| e.into_inner());
+            if !prepared.serves(&settings) {
+                *prepared = renderer.prepare_volume(&self.volume, &transfer, &settings)?;
+            }
+            let t = std::time::Instant::now();
+            let r = req
+                .scene
+                .accel
+                .render_prepared(renderer, &prepared, &transfer, &camera, &settings, p)?;
+            Ok((r, t.elapsed().as_secs_f64()))
+        })?;
+        output_parts(py, &r.output, frame_meta(renderer, &r, seconds))
+    }
+
+    /// The GPU session's counters as JSON (`null` on the CPU backends).
+    fn session_stats(&self) -> String {
+        let prepared = self.prepared.lock().unwrap_or_else(|e| e.into_inner());
+        serde_json::to_string(&prepared.gpu_stats()).expect("counters serialise")
+    }
+
+    /// The prepared volume's shape `(nz, ny, nx)`.
+    #[getter]
+    fn shape(&self) -> (usize, usize, usize) {
+        let d = self.volume.dims();
+        (d[2], d[1], d[0])
     }
 }
 
@@ -271,5 +397,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(compare_images, m)?)?;
     m.add_class::<Renderer>()?;
+    m.add_class::<PreparedScene>()?;
     Ok(())
 }

@@ -255,3 +255,60 @@ def test_gpu_renders_match_the_oracle(gpu):
     a = random_volume()
     x = gpu.render(a, mode="xray", view="+z", step=1).image
     np.testing.assert_allclose(x, a.astype(np.float64).sum(axis=0), rtol=0, atol=5e-5 * a.shape[0])
+
+
+def test_a_prepared_gpu_scene_renders_like_render_and_uploads_once(gpu):
+    v = voxlab.phantom("shepp-logan-modified", 32)
+    scene = gpu.prepare(v, width=40, height=30, samples=True)
+    assert scene.shape == (32, 32, 32)
+    bone = voxlab.TransferFunction.preset("ct-bone")
+    frames = [
+        dict(azimuth=30.0),
+        dict(azimuth=80.0),
+        dict(azimuth=130.0, elevation=-10.0),
+        dict(azimuth=130.0, mode="mip", ortho=True),
+        dict(azimuth=180.0, filter="catmull-rom"),
+        dict(azimuth=180.0, tf=bone, window=(1.0, 0.5)),
+        dict(azimuth=230.0),
+    ]
+    for k, options in enumerate(frames):
+        got = scene.render(samples=True, **options)
+        want = voxlab.render(v, backend="gpu", width=40, height=30, samples=True, **options)
+        np.testing.assert_array_equal(got.image, want.image, err_msg=str(options))
+        np.testing.assert_array_equal(got.samples, want.samples, err_msg=str(options))
+        session = got.info["gpu_session"]
+        assert session["volume_uploads"] == 1 and session["frames"] == k + 1, session
+        if k in (1, 2):
+            # Only the camera changed: nothing uploaded, nothing prepared.
+            assert got.gpu_timings["upload"] == 0.0, got.gpu_timings
+            assert got.gpu_timings["prepare"] == 0.0, got.gpu_timings
+        if k == 1:
+            first = session
+        if k == 2:
+            assert session["table_uploads"] == first["table_uploads"]
+            assert session["pipelines_compiled"] == first["pipelines_compiled"]
+            assert session["prepare_passes"] == first["prepare_passes"]
+    assert scene.session_stats() == session
+    # The volume was copied at prepare: changing the array does not reach the frames.
+    a = random_volume((12, 10, 8))
+    kept = gpu.prepare(a, mode="mip", view="+z", step=1)
+    before = kept.render().image
+    a[:] = 0
+    np.testing.assert_array_equal(kept.render().image, before)
+    # Options that choose the volume belong to prepare.
+    with pytest.raises(voxlab.InvalidError, match="spacing"):
+        kept.render(spacing=(1, 2, 3))
+    with pytest.raises(voxlab.InvalidError, match="voxlab.render"):
+        kept.render(stereo={"layout": "anaglyph"})
+
+
+def test_a_prepared_cpu_scene_renders_like_render():
+    r = voxlab.Renderer("cpu-f32")
+    v = voxlab.phantom("spheres", 16)
+    scene = r.prepare(v, width=20, height=20)
+    for options in (dict(azimuth=0.0), dict(azimuth=90.0), dict(filter="catmull-rom")):
+        got = scene.render(**options)
+        want = voxlab.render(v, backend="cpu-f32", width=20, height=20, **options)
+        np.testing.assert_array_equal(got.image, want.image)
+        assert got.info["gpu_session"] is None
+    assert scene.session_stats() is None

@@ -527,11 +527,13 @@ def render(
 
 class Renderer:
     """A renderer that keeps its engine between renders: for ``backend="gpu"`` the
-    device, its queue and the compiled pipelines are opened once.
+    device and its queue are opened once.
 
-    Each :meth:`render` converts and uploads the volume again (the GPU path uploads
-    the volume and lookup table per frame); a session that keeps the uploaded volume
-    across frames is not there yet.
+    :meth:`render` is one-shot: each call converts the volume (and on the GPU uploads
+    it and compiles the pipelines) again. For many frames of one volume — an orbit, a
+    transfer-function sweep — :meth:`prepare` it once and render the frames from the
+    :class:`PreparedScene`: on the GPU the volume stays uploaded, and a frame makes
+    again only what it changed.
     """
 
     def __init__(self, backend: str = "cpu"):
@@ -559,7 +561,8 @@ class Renderer:
         **options: Any,
     ) -> RenderResult:
         """One frame, with :func:`render`'s keyword arguments (but not ``stereo``,
-        ``repeat``, ``volumes`` or ``sampling``, which :func:`render` does)."""
+        ``repeat``, ``volumes`` or ``sampling``, which :func:`render` does). The volume
+        is converted (on the GPU: uploaded) for this frame alone."""
         req = _Request(options, _REQUEST_KEYS)
         try:
             arr, aff = req.input(volume)
@@ -568,8 +571,104 @@ class Renderer:
         finally:
             req.close()
 
+    def prepare(
+        self,
+        volume: Any = None,
+        *,
+        samples: bool = False,
+        progress: Optional[ProgressCallback] = None,
+        **options: Any,
+    ) -> "PreparedScene":
+        """Loads ``volume`` (as :func:`render` takes it) and prepares it for many frames:
+        on the GPU the volume is uploaded here, once. ``samples`` and ``options``
+        (:meth:`render`'s keyword arguments) are the frames' defaults; each
+        :meth:`PreparedScene.render` may override any of them but those that choose
+        the volume (``spacing``, ``affine``, ``state_file``, ``phantom_size``, ``raw``,
+        ``non_finite``).
+
+        The prepared scene holds the library's own copy of the volume, taken now:
+        later changes to the array do not reach its frames (prepare again).
+        """
+        req = _Request(options, _REQUEST_KEYS)
+        try:
+            arr, aff = req.input(volume)
+            inner = self._inner.prepare(req.json(), arr, aff, progress, **req.transfers)
+        finally:
+            req.close()
+        return PreparedScene(inner, self, options, bool(samples))
+
     def __repr__(self) -> str:
         return f"Renderer({self.describe()!r})"
+
+
+#: Options that choose the volume: given to :meth:`Renderer.prepare` only.
+_VOLUME_KEYS = ("spacing", "affine", "state_file") + _LOAD_KEYS
+
+
+class PreparedScene:
+    """A volume prepared for many frames by :meth:`Renderer.prepare`.
+
+    It holds the library's own copy of the volume, taken when it was prepared (later
+    changes to the caller's array do not reach it). On the GPU it keeps a render
+    session: the volume is uploaded once, and each :meth:`render` makes again only what
+    its options changed since the last frame (a new camera uploads nothing; a new
+    transfer function uploads its lookup table; a new filter, mode or shading compiles
+    its shader once). Each frame equals :func:`render` of the same volume and options,
+    bit for bit. ``result.info["gpu_session"]`` counts what the session has done
+    (``volume_uploads``, ``table_uploads``, ``pipelines_compiled``, ``prepare_passes``,
+    ``frames``), ``result.gpu_timings`` what the frame did (``upload`` is 0 for a frame
+    that uploaded nothing). On the CPU backends the conversion is kept for frames of
+    the same filter and gradients (another filter converts again).
+
+    Frames render one at a time (a second thread waits for the first).
+    """
+
+    def __init__(self, inner: Any, renderer: Renderer, options: Dict[str, Any],
+                 samples: bool = False):
+        self._inner = inner
+        self._renderer = renderer
+        self._options = {k: v for k, v in options.items() if k not in _VOLUME_KEYS}
+        self._samples = samples
+
+    @property
+    def renderer(self) -> Renderer:
+        return self._renderer
+
+    @property
+    def shape(self) -> Tuple[int, int, int]:
+        """The prepared volume's shape ``(nz, ny, nx)``."""
+        return tuple(self._inner.shape)
+
+    def session_stats(self) -> Optional[Dict[str, int]]:
+        """The GPU session's counters so far (None on the CPU backends)."""
+        return _json.loads(self._inner.session_stats())
+
+    def render(
+        self,
+        *,
+        samples: Optional[bool] = None,
+        progress: Optional[ProgressCallback] = None,
+        **options: Any,
+    ) -> RenderResult:
+        """One frame: :meth:`Renderer.render`'s keyword arguments over the ones given
+        to :meth:`Renderer.prepare` (all but those that choose the volume; ``samples``
+        None: as prepared)."""
+        bad = sorted(k for k in options if k in _VOLUME_KEYS)
+        if bad:
+            raise InvalidError(
+                f"invalid PreparedScene.render option '{bad[0]}': it chooses the volume, "
+                "which was fixed by Renderer.prepare; prepare another scene for another "
+                "volume"
+            )
+        req = _Request({**self._options, **options}, _REQUEST_KEYS)
+        try:
+            text = req.json(samples=self._samples if samples is None else bool(samples))
+            return _result(self._inner.render(text, progress, **req.transfers))
+        finally:
+            req.close()
+
+    def __repr__(self) -> str:
+        return f"PreparedScene({self.shape}, {self._renderer.describe()!r})"
 
 
 # ------------------------------------------------------------------------------------
@@ -667,7 +766,8 @@ from . import ndimage  # noqa: E402
 
 __all__ = [
     "Volume", "read", "write", "info", "phantom", "phantom_names", "phantom_values",
-    "phantom_line_integrals", "TransferFunction", "render", "Renderer", "RenderResult",
+    "phantom_line_integrals", "TransferFunction", "render", "Renderer", "PreparedScene",
+    "RenderResult",
     "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "ndimage",
     "fvr", "d2vr", "D2vrResult", "adaptive", "AdaptiveResult", "process", "resample",
     "bench", "BACKENDS",

@@ -168,6 +168,13 @@ impl<R: Real> Prepared<R> {
         })
     }
 
+    /// Whether frames with `settings` can render from this preparation: they keep
+    /// the filter and gradients it was prepared for.
+    pub fn serves(&self, settings: &RenderSettings) -> bool {
+        settings.filter == self.field.filter
+            && (settings.gradient, settings.precompute_gradients) == self.gradient
+    }
+
     /// Renders a frame; `settings` must keep the filter and gradients prepared for
     /// (everything else, the camera and the transfer function may change).
     pub fn render(
@@ -189,9 +196,7 @@ impl<R: Real> Prepared<R> {
         progress: &(dyn Fn(usize, usize) + Sync),
         kernel: Kernel,
     ) -> Result<RenderOutput> {
-        if settings.filter != self.field.filter
-            || (settings.gradient, settings.precompute_gradients) != self.gradient
-        {
+        if !self.serves(settings) {
             return Err(Error::invalid(
                 "prepared volume",
                 format!(

@@ -24,11 +24,21 @@
 //! sampler. Real GPUs quantise the hardware filter's weights to about 8 bits; lavapipe
 //! does not, so only a real GPU shows the hardware path's true error.
 //!
+//! **Sessions.** [`RaycastSession`] keeps a volume on the device for many frames: it is
+//! checked, converted and uploaded once ([`RaycastSession::new`]), and each frame
+//! ([`RaycastSession::render`]) makes again only what its transfer function, camera and
+//! settings changed — the pipeline of a new shader source, a lookup table whose entries
+//! changed, the pre-classified colours of a new table, … — each cached under the key
+//! that determines it ([`SessionStats`] counts what was made). The one-shot [`render`]
+//! is a session of one frame, so the two paths are one code path and give the same
+//! image bit for bit. `jobs::renderer::Renderer::prepare` keeps a session for GPU
+//! frames; the Python package's prepared scenes and the lab render through it.
+//!
 //! What stays on the CPU, and why:
 //! - the full sinc: every sample sums the whole grid (n³ texture reads per sample, about
 //!   2·10⁶ for 128³), which is no GPU algorithm; it is refused with a clear error;
 //! - the B-spline prefilter of `bspline-interp`: a sequential recurrence along every
-//!   line, run once at set-up in f32 by the same code as the CPU path
+//!   line, run once per session in f32 by the same code as the CPU path
 //!   (`cpu::filter::prepare`), together with the pre-classified and gradient volumes it
 //!   would have to prefilter.
 
@@ -507,6 +517,10 @@ fn modes_params(settings: &RenderSettings, value_range: (f64, f64)) -> RaycastPa
 }
 
 /// Renders on the GPU. Same inputs and outputs as `cpu::raycast::render`.
+///
+/// A one-frame [`RaycastSession`]: the volume is converted and uploaded, the pipelines
+/// compiled and the set-up passes run for this frame alone. Frames of one volume
+/// render faster from one session.
 pub fn render(
     ctx: &GpuContext,
     volume: &AnyVolume,
@@ -515,303 +529,638 @@ pub fn render(
     settings: &RenderSettings,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<GpuRenderOutput> {
-    let t_start = Instant::now();
+    // Refuse bad settings before uploading anything.
     settings.validate()?;
     tf.validate()?;
-    volume.check_finite("volume")?;
-    let dims = volume.dims();
-    let max3d = ctx.limits.max_texture_dimension_3d as usize;
-    if dims.iter().any(|&n| n > max3d) {
-        return Err(Error::too_large(
-            "volume",
-            format!("{dims:?} exceeds the adapter's 3D texture limit of {max3d} per axis"),
-        ));
-    }
-    if ctx.summary.is_cpu() {
-        // The ray march is the only loop per invocation (plus 3 box-slab iterations).
-        let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-        // Skipping adds one iteration per cell crossed, twice; iso-surfaces loop over
-        // the iso-values per step (crossings, their sort) and an opaque surface's shadow
-        // ray marches once more.
-        let cells = crate::cpu::skip::cell_count(dims, settings.block_size);
-        let isos = settings.iso_surfaces.len() as f64;
-        let per_step = 1.0
-            + 2.0 * isos
-            + if settings.iso_shadows {
-                1.0 + isos
-            } else {
-                0.0
-            };
-        let mut steps =
-            (diag / settings.step + 2.0) * per_step + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
-        if settings.clip_mesh.is_some() {
-            // Up to MAX_SEGMENTS mesh ranges per skipping range, and their search.
-            steps += 8.0 * 2.0 * (cells[0] + cells[1] + cells[2]) as f64 + 64.0;
-        }
-        if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
-            return Err(Error::invalid(
-                "step",
-                format!(
-                    "up to {steps:.0} steps per ray exceed the {LLVMPIPE_LOOP_LIMIT} loop \
-                     iterations a CPU Vulkan driver (llvmpipe) runs per invocation; use a \
-                     larger step"
-                ),
+    RaycastSession::new(ctx, volume)?.render(tf, camera, settings, progress)
+}
+
+/// What a [`RaycastSession`] has done since it was made, counted so that callers and
+/// tests can see which frames re-used the device's data.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SessionStats {
+    /// Frames rendered.
+    pub frames: usize,
+    /// Uploads of the volume: one, when the session is made.
+    pub volume_uploads: usize,
+    /// Lookup tables uploaded (the 1-D and 2-D transfer functions' tables, the
+    /// skipping's opacity prefix), each when its entries changed.
+    pub table_uploads: usize,
+    /// Compute pipelines compiled: one per distinct ray-casting shader source, the
+    /// pre-classification and gradient passes and the min/max grid's, each once.
+    pub pipelines_compiled: usize,
+    /// Set-up products made: the B-spline coefficients, the pre-classified colours,
+    /// the gradient volume and the skipping's min/max grid, each when its key changed.
+    pub prepare_passes: usize,
+}
+
+/// How many ray-casting pipelines (one per generated shader source) a session keeps;
+/// the least recently used goes first.
+pub const PIPELINES_KEPT: usize = 8;
+
+/// A device resource and the key it was made for: the bit patterns of everything
+/// that determines it.
+struct Cached<T> {
+    key: Vec<u32>,
+    value: T,
+}
+
+/// Whether `slot` holds a resource made for `key`.
+fn fresh<T>(slot: &Option<Cached<T>>, key: &[u32]) -> bool {
+    slot.as_ref().is_some_and(|c| c.key == key)
+}
+
+/// A cache key: the bit patterns of a table's entries, then `extra`.
+fn table_key(entries: &[[f32; 4]], extra: &[u32]) -> Vec<u32> {
+    let mut k: Vec<u32> = bytemuck::cast_slice(entries).to_vec();
+    k.extend_from_slice(extra);
+    k
+}
+
+/// The set-up passes' shader (`raycast_prepare.wgsl`), its layout and the pipelines
+/// of the entry points used so far.
+struct PreparePipelines {
+    module: wgpu::ShaderModule,
+    layout: wgpu::BindGroupLayout,
+    pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
+}
+
+/// A volume on the device for many frames: the GPU ray caster's persistent state.
+///
+/// [`RaycastSession::new`] checks the volume (finite, within the adapter's 3-D texture
+/// size), converts it to f32 and uploads it once. [`RaycastSession::render`] then
+/// renders frames of any transfer function, camera and settings, making again only
+/// what changed since an earlier frame, each product cached under the key that
+/// determines it:
+///
+/// | on the device | made from | key |
+/// |---|---|---|
+/// | the ray-casting pipeline | [`raycast_shader`] | the generated source (the last [`PIPELINES_KEPT`]) |
+/// | the set-up and min/max pipelines | fixed shaders | compiled once |
+/// | the B-spline coefficients (`settings.filter.prefiltered()`) | CPU prefilter | made once (both interpolating B-splines share them) |
+/// | the lookup table, the 2-D one | the transfer functions | their entries |
+/// | pre-classified colours | `raycast_prepare.wgsl` (CPU for prefiltered filters) | LUT entries, window map, prefiltering |
+/// | the gradient volume | `raycast_prepare.wgsl` (CPU for prefiltered filters) | gradient method, prefiltering |
+/// | skipping's min/max grid | `gpu::skip` | block size, filter radius, prefiltering |
+/// | skipping's opacity prefix | the LUT | LUT entries |
+///
+/// Per frame only the parameter block (camera and settings), the clipping mesh's
+/// segments and the image bands are new. A frame equals, bit for bit, the one-shot
+/// [`render`] of the same inputs (which is a session of one frame). The session keeps
+/// one product of each kind (the last key), and its own f32 copy of the volume on the
+/// host for the CPU-side set-up (the prefilter, the CPU fallback of the min/max grid,
+/// clipping meshes).
+///
+/// Timings ([`GpuTimings`]) count what a frame did: the first frame also carries the
+/// session's set-up and volume upload; a frame that uploads nothing reports `upload =
+/// 0`, one that prepares nothing `prepare = 0`. [`RaycastSession::stats`] counts
+/// uploads, compiled pipelines and set-up passes.
+///
+/// ```no_run
+/// # use voxlab::{camera::*, gpu::{GpuContext, raycast::RaycastSession}, phantom::Phantom};
+/// # use voxlab::{settings::RenderSettings, transfer::TransferFunction};
+/// let ctx = GpuContext::shared()?;
+/// let volume = Phantom::shepp_logan_modified().sample([64; 3])?.into();
+/// let tf = TransferFunction::preset("phantom")?;
+/// let mut session = RaycastSession::new(ctx, &volume)?;       // uploads the volume
+/// for azimuth in (0..360).step_by(10) {
+///     let orbit = Orbit { azimuth_deg: azimuth as f64, ..Orbit::default() };
+///     let camera = Camera::orbit(glam::DVec3::splat(31.5), [64.0; 3], orbit,
+///         Projection::Perspective { fov_y_deg: 30.0 }, 128, 128)?;
+///     let frame = session.render(&tf, &camera, &RenderSettings::default(), &|_, _| {})?;
+///     // frames after the first: frame.timings.upload == 0.0
+/// }
+/// assert_eq!(session.stats().volume_uploads, 1);
+/// # Ok::<(), voxlab::Error>(())
+/// ```
+pub struct RaycastSession<'c> {
+    ctx: &'c GpuContext,
+    dims: [usize; 3],
+    affine: glam::DMat4,
+    /// The f32 volume's value range (the shading's gradient threshold is relative to it).
+    range: (f64, f64),
+    /// The volume as f32 on the host, x fastest.
+    grid: Grid<f32>,
+    /// The volume as an `R32Float` 3-D texture.
+    volume: wgpu::Texture,
+    filterable: bool,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
+    dummy: wgpu::Texture,
+    /// Buffers bound where skipping is off, and where there is no clipping mesh.
+    skip_off: (wgpu::Buffer, wgpu::Buffer),
+    no_segments: wgpu::Buffer,
+    /// Ray-casting pipelines by shader source, least recently used first.
+    pipelines: Vec<(String, wgpu::ComputePipeline)>,
+    prepare_pipelines: Option<PreparePipelines>,
+    minmax_pipeline: Option<super::skip::MinMaxPipeline>,
+    /// The interpolating B-splines' coefficients, on the host and as a texture.
+    coefficients: Option<(Grid<f32>, wgpu::Texture)>,
+    lut: Option<Cached<wgpu::Buffer>>,
+    lut2: Option<Cached<wgpu::Buffer>>,
+    prefix: Option<Cached<wgpu::Buffer>>,
+    preclassified: Option<Cached<wgpu::Texture>>,
+    gradients: Option<Cached<wgpu::Texture>>,
+    minmax: Option<Cached<wgpu::Buffer>>,
+    stats: SessionStats,
+    /// The session's own set-up and upload, reported with its first frame.
+    pending: Option<GpuTimings>,
+}
+
+impl<'c> RaycastSession<'c> {
+    /// Checks `volume` (finite voxels, each axis within the adapter's 3-D texture
+    /// limit), converts it to f32 and uploads it. The session holds its own copy: later
+    /// changes to `volume` do not reach it.
+    ///
+    /// # Errors
+    /// [`Error::NonFinite`], [`Error::TooLarge`], out of GPU memory.
+    pub fn new(ctx: &'c GpuContext, volume: &AnyVolume) -> Result<Self> {
+        let t_start = Instant::now();
+        volume.check_finite("volume")?;
+        let dims = volume.dims();
+        let max3d = ctx.limits.max_texture_dimension_3d as usize;
+        if dims.iter().any(|&n| n > max3d) {
+            return Err(Error::too_large(
+                "volume",
+                format!("{dims:?} exceeds the adapter's 3D texture limit of {max3d} per axis"),
             ));
         }
-    }
-    let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
-    if settings.hardware_filtering && !filterable {
-        return Err(Error::Gpu(
-            "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
-             which this adapter lacks"
-                .into(),
-        ));
-    }
-    let values = volume.to_f32();
-    let range = {
-        let r = values.value_range();
-        (r.min, r.max)
-    };
-    let lut = tf.lut(settings.lut_size).to_real::<f32>();
-    let mut params = raycast_params(dims, volume.affine(), &lut, range, camera, settings)?;
-    let pre = params.flags[0] == 1;
-    let precomputed = params.flags[2] == 1;
-
-    // Pipelines.
-    let dev = &ctx.device;
-    let raycast_module = ctx.shader("raycast.wgsl", &raycast_shader(settings))?;
-    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("raycast"),
-        entries: &[
-            buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1, filterable),
-            texture_entry(2, filterable),
-            texture_entry(3, filterable),
-            wgpu::BindGroupLayoutEntry {
-                binding: 4,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Sampler(if filterable {
-                    wgpu::SamplerBindingType::Filtering
-                } else {
-                    wgpu::SamplerBindingType::NonFiltering
-                }),
-                count: None,
-            },
-            buffer_entry(5, storage(true)),
-            buffer_entry(6, storage(false)),
-            buffer_entry(7, storage(false)),
-            buffer_entry(8, storage(true)),
-            buffer_entry(9, storage(true)),
-            buffer_entry(10, storage(true)),
-            buffer_entry(11, storage(true)),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "raycast", &raycast_module, "raycast", &layout)?;
-    let filter_mode = if filterable {
-        wgpu::FilterMode::Linear
-    } else {
-        wgpu::FilterMode::Nearest
-    };
-    let sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some("linear clamp"),
-        address_mode_u: wgpu::AddressMode::ClampToEdge,
-        address_mode_v: wgpu::AddressMode::ClampToEdge,
-        address_mode_w: wgpu::AddressMode::ClampToEdge,
-        mag_filter: filter_mode,
-        min_filter: filter_mode,
-        ..Default::default()
-    });
-    let t_setup = t_start.elapsed().as_secs_f64();
-
-    // Uploads: the volume (prefiltered on the CPU for bspline-interp) and the LUT.
-    let t_up = Instant::now();
-    let bspline_interp = settings.filter.prefiltered();
-    let grid = Grid::<f32> {
-        dims,
-        data: values.data().to_vec(),
-    };
-    let volume_tex = if bspline_interp {
-        ctx.upload_volume_r32(dims, &prepare(&grid, settings.filter).data)?
-    } else {
-        ctx.upload_volume_r32(dims, &grid.data)?
-    };
-    let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("lut"),
-        contents: bytemuck::cast_slice(&lut.entries),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    let lut2_entries: Vec<[f32; 4]> = match (&settings.transfer_2d, settings.mode) {
-        (Some(t), Mode::Dvr) => t.lut().to_real::<f32>().entries,
-        _ => vec![[0.0; 4]],
-    };
-    let lut2_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("lut2d"),
-        contents: bytemuck::cast_slice(&lut2_entries),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    ctx.wait()?;
-    let upload = t_up.elapsed().as_secs_f64();
-
-    // Set-up passes: pre-classified colours and gradient volumes.
-    let t_prep = Instant::now();
-    let dummy = ctx.rgba_texture([1, 1, 1], false)?;
-    let pre_tex = if !pre {
-        None
-    } else if bspline_interp {
-        let rgba =
-            crate::cpu::raycast::preclassify(&grid, &lut).map(|g| prepare(&g, settings.filter));
-        Some(ctx.upload_rgba(
-            dims,
-            &interleave(&rgba[0], &rgba[1], &rgba[2], Some(&rgba[3])),
-        )?)
-    } else {
-        Some(run_prepare(
-            ctx,
-            &params,
-            &volume_tex,
-            &lut_buf,
-            dims,
-            "preclassify",
-        )?)
-    };
-    let grad_tex = if !precomputed {
-        None
-    } else if bspline_interp {
-        let g = crate::cpu::gradient::precompute_gradients(&grid, settings.gradient)
-            .map(|g| prepare(&g, settings.filter));
-        Some(ctx.upload_rgba(dims, &interleave(&g[0], &g[1], &g[2], None))?)
-    } else {
-        Some(run_prepare(
-            ctx,
-            &params,
-            &volume_tex,
-            &lut_buf,
-            dims,
-            "precompute_gradients",
-        )?)
-    };
-    // Empty-space skipping: the min/max grid (built on the GPU) and the LUT's prefix
-    // count of non-zero opacities (O(LUT), on the host).
-    let (skip_minmax, skip_prefix) = if params.accel[0] == 1 {
-        let radius = crate::cpu::skip::skip_radius(settings).unwrap_or(1);
-        let sampled = if bspline_interp {
-            prepare(&grid, settings.filter)
-        } else {
-            grid.clone()
+        let values = volume.to_f32();
+        let range = {
+            let r = values.value_range();
+            (r.min, r.max)
         };
-        let mm =
-            super::skip::min_max_buffer(ctx, &volume_tex, &sampled, settings.block_size, radius)?;
-        let prefix = crate::cpu::skip::opacity_prefix(&lut, 0.0).prefix;
-        let pb = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("skip prefix"),
-            contents: bytemuck::cast_slice(&prefix),
-            usage: wgpu::BufferUsages::STORAGE,
+        let grid = Grid::<f32> {
+            dims,
+            data: values.into_data(),
+        };
+        let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+        let dev = &ctx.device;
+        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("raycast"),
+            entries: &[
+                buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                texture_entry(1, filterable),
+                texture_entry(2, filterable),
+                texture_entry(3, filterable),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Sampler(if filterable {
+                        wgpu::SamplerBindingType::Filtering
+                    } else {
+                        wgpu::SamplerBindingType::NonFiltering
+                    }),
+                    count: None,
+                },
+                buffer_entry(5, storage(true)),
+                buffer_entry(6, storage(false)),
+                buffer_entry(7, storage(false)),
+                buffer_entry(8, storage(true)),
+                buffer_entry(9, storage(true)),
+                buffer_entry(10, storage(true)),
+                buffer_entry(11, storage(true)),
+            ],
         });
-        (mm, pb)
-    } else {
-        let dummy = |label| {
+        let filter_mode = if filterable {
+            wgpu::FilterMode::Linear
+        } else {
+            wgpu::FilterMode::Nearest
+        };
+        let sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("linear clamp"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: filter_mode,
+            min_filter: filter_mode,
+            ..Default::default()
+        });
+        let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+        let zeros = |label, bytes: &[u8]| {
             dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
-                contents: &[0u8; 16],
+                contents: bytes,
                 usage: wgpu::BufferUsages::STORAGE,
             })
         };
-        (dummy("skip minmax (off)"), dummy("skip prefix (off)"))
-    };
-    // Clipping mesh (gpu::clipmesh): resolved on the host (the bricks mesh from the
-    // same grid the skipping bounds), its segments computed per tile below.
-    let clip_mesh = {
-        let voxels = match settings.classification {
-            Classification::Post if bspline_interp => prepare(&grid, settings.filter),
-            _ => grid.clone(),
-        };
-        let r =
-            crate::cpu::clipmesh::resolve(settings, volume.affine(), dims, Some(&voxels), &lut)?;
-        match r {
-            Some(m) => Some(super::clipmesh::GpuClipMesh::new(ctx, &m)?),
-            None => None,
-        }
-    };
-    params.clip_mesh[0] = clip_mesh.is_some() as u32;
-    let no_segments = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("clip mesh segments (off)"),
-        contents: &[0u8; 16 * super::clipmesh::SEGMENT_VEC4S],
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    ctx.wait()?;
-    let prepare_time = t_prep.elapsed().as_secs_f64();
+        let skip_off = (
+            zeros("skip minmax (off)", &[0u8; 16]),
+            zeros("skip prefix (off)", &[0u8; 16]),
+        );
+        let no_segments = zeros(
+            "clip mesh segments (off)",
+            &[0u8; 16 * super::clipmesh::SEGMENT_VEC4S],
+        );
+        let setup = t_start.elapsed().as_secs_f64();
+        let t_up = Instant::now();
+        let volume_tex = ctx.upload_volume_r32(dims, &grid.data)?;
+        // Submit the staged copy now, so that its time is the upload's.
+        ctx.queue.submit(std::iter::empty::<wgpu::CommandBuffer>());
+        ctx.wait()?;
+        let upload = t_up.elapsed().as_secs_f64();
+        Ok(RaycastSession {
+            ctx,
+            dims,
+            affine: volume.affine(),
+            range,
+            grid,
+            volume: volume_tex,
+            filterable,
+            layout,
+            sampler,
+            dummy,
+            skip_off,
+            no_segments,
+            pipelines: Vec::new(),
+            prepare_pipelines: None,
+            minmax_pipeline: None,
+            coefficients: None,
+            lut: None,
+            lut2: None,
+            prefix: None,
+            preclassified: None,
+            gradients: None,
+            minmax: None,
+            stats: SessionStats {
+                volume_uploads: 1,
+                ..SessionStats::default()
+            },
+            pending: Some(GpuTimings {
+                setup,
+                upload,
+                total: t_start.elapsed().as_secs_f64(),
+                ..GpuTimings::default()
+            }),
+        })
+    }
 
-    // Ray casting, in bands of rows that fit the storage-binding limit.
-    let (w, h) = (camera.width, camera.height);
-    let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
-    let pixel_bytes = if clip_mesh.is_some() {
-        16 * super::clipmesh::SEGMENT_VEC4S
-    } else {
-        16
-    };
-    let rows_per_tile = (max_binding / (w * pixel_bytes))
-        .clamp(1, h)
-        .min((1 << 20) / w + 1)
-        .max(1);
-    let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-    let (vol_view, pre_view, grad_view) = (
-        view(&volume_tex),
-        view(pre_tex.as_ref().unwrap_or(&dummy)),
-        view(grad_tex.as_ref().unwrap_or(&dummy)),
-    );
-    let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
-    let mut counts = vec![0u32; w * h];
-    let bands = render_bands(
-        ctx,
-        (&pipeline, "raycast"),
-        rows_per_tile,
-        (&mut image, &mut counts),
-        progress,
-        |row0, rows, out_buf, cnt_buf| {
-            params.flags2[2] = row0 as u32;
-            params.flags2[3] = rows as u32;
-            let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("raycast params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
+    /// The device the session lives on.
+    pub fn context(&self) -> &'c GpuContext {
+        self.ctx
+    }
+
+    /// The volume's dimensions (x, y, z).
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// What the session has done so far.
+    pub fn stats(&self) -> SessionStats {
+        self.stats
+    }
+
+    /// Renders a frame. Same inputs and outputs as `cpu::raycast::render` (the volume
+    /// being the session's); the image equals the one-shot [`render`]'s bit for bit.
+    ///
+    /// # Errors
+    /// Invalid settings or transfer function, options the GPU path refuses (the full
+    /// sinc, hardware filtering of other filters or without `FLOAT32_FILTERABLE`, rays
+    /// longer than a CPU driver's loop limit), shader or device errors.
+    pub fn render(
+        &mut self,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<GpuRenderOutput> {
+        let t_start = Instant::now();
+        settings.validate()?;
+        tf.validate()?;
+        let ctx = self.ctx;
+        let dev = &ctx.device;
+        let dims = self.dims;
+        check_loop_limit(ctx, dims, settings)?;
+        if settings.hardware_filtering && !self.filterable {
+            return Err(Error::Gpu(
+                "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
+                 which this adapter lacks"
+                    .into(),
+            ));
+        }
+        let lut = tf.lut(settings.lut_size).to_real::<f32>();
+        let mut params = raycast_params(dims, self.affine, &lut, self.range, camera, settings)?;
+        let pre = params.flags[0] == 1;
+        let precomputed = params.flags[2] == 1;
+        let skipping = params.accel[0] == 1;
+        let prefiltered = settings.filter.prefiltered();
+        let pipeline = self.raycast_pipeline(raycast_shader(settings))?;
+        let setup = t_start.elapsed().as_secs_f64();
+
+        // Uploads: the lookup tables whose entries changed.
+        let t_up = Instant::now();
+        let uploads_before = self.stats.table_uploads;
+        let table = |label, entries: &[u8]| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: entries,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let lut_key = table_key(&lut.entries, &[]);
+        if !fresh(&self.lut, &lut_key) {
+            self.lut = None;
+            let value = table("lut", bytemuck::cast_slice(&lut.entries));
+            self.lut = Some(Cached {
+                key: lut_key.clone(),
+                value,
             });
-            let seg_buf = match &clip_mesh {
-                Some(m) => Some(m.segments(ctx, &params)?),
-                None => None,
-            };
-            Ok(ctx.bind_group(
-                "raycast",
-                &layout,
+            self.stats.table_uploads += 1;
+        }
+        let lut2_entries: Vec<[f32; 4]> = match (&settings.transfer_2d, settings.mode) {
+            (Some(t), Mode::Dvr) => t.lut().to_real::<f32>().entries,
+            _ => vec![[0.0; 4]],
+        };
+        let lut2_key = table_key(&lut2_entries, &[]);
+        if !fresh(&self.lut2, &lut2_key) {
+            self.lut2 = None;
+            let value = table("lut2d", bytemuck::cast_slice(&lut2_entries));
+            self.lut2 = Some(Cached {
+                key: lut2_key,
+                value,
+            });
+            self.stats.table_uploads += 1;
+        }
+        // Empty-space skipping's prefix count of non-zero opacities (O(LUT), on the host).
+        if skipping && !fresh(&self.prefix, &lut_key) {
+            self.prefix = None;
+            let prefix = crate::cpu::skip::opacity_prefix(&lut, 0.0).prefix;
+            let value = table("skip prefix", bytemuck::cast_slice(&prefix));
+            self.prefix = Some(Cached {
+                key: lut_key,
+                value,
+            });
+            self.stats.table_uploads += 1;
+        }
+        let upload = if self.stats.table_uploads > uploads_before {
+            ctx.wait()?;
+            t_up.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
+
+        // Set-up passes: B-spline coefficients, pre-classified colours, gradients and
+        // the skipping's min/max grid, each made when its key changed.
+        let t_prep = Instant::now();
+        let passes_before = self.stats.prepare_passes;
+        if prefiltered && self.coefficients.is_none() {
+            // A sequential recurrence along every line, on the CPU (module docs).
+            let c = prepare(&self.grid, settings.filter);
+            let tex = ctx.upload_volume_r32(dims, &c.data)?;
+            self.coefficients = Some((c, tex));
+            self.stats.prepare_passes += 1;
+        }
+        let lut_buf = &self.lut.as_ref().expect("uploaded above").value;
+        if pre {
+            let key = table_key(
+                &lut.entries,
                 &[
-                    pbuf.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&vol_view),
-                    wgpu::BindingResource::TextureView(&pre_view),
-                    wgpu::BindingResource::TextureView(&grad_view),
-                    wgpu::BindingResource::Sampler(&sampler),
-                    lut_buf.as_entire_binding(),
-                    out_buf.as_entire_binding(),
-                    cnt_buf.as_entire_binding(),
-                    lut2_buf.as_entire_binding(),
-                    skip_minmax.as_entire_binding(),
-                    skip_prefix.as_entire_binding(),
-                    seg_buf.as_ref().unwrap_or(&no_segments).as_entire_binding(),
+                    lut.scale.to_bits(),
+                    lut.offset.to_bits(),
+                    prefiltered as u32,
                 ],
-            ))
-        },
-    )?;
-    Ok(GpuRenderOutput {
-        output: RenderOutput::from_counts(image, &counts, settings.sample_count),
-        timings: GpuTimings {
-            setup: t_setup,
+            );
+            if !fresh(&self.preclassified, &key) {
+                self.preclassified = None;
+                let value = if prefiltered {
+                    let rgba = crate::cpu::raycast::preclassify(&self.grid, &lut)
+                        .map(|g| prepare(&g, settings.filter));
+                    ctx.upload_rgba(
+                        dims,
+                        &interleave(&rgba[0], &rgba[1], &rgba[2], Some(&rgba[3])),
+                    )?
+                } else {
+                    let (layout, p) = prepare_pipeline(
+                        ctx,
+                        &mut self.prepare_pipelines,
+                        &mut self.stats,
+                        "preclassify",
+                    )?;
+                    run_prepare(ctx, layout, p, &params, &self.volume, lut_buf, dims)?
+                };
+                self.preclassified = Some(Cached { key, value });
+                self.stats.prepare_passes += 1;
+            }
+        }
+        if precomputed {
+            let key = vec![gradient_method_id(settings.gradient), prefiltered as u32];
+            if !fresh(&self.gradients, &key) {
+                self.gradients = None;
+                let value = if prefiltered {
+                    let g =
+                        crate::cpu::gradient::precompute_gradients(&self.grid, settings.gradient)
+                            .map(|g| prepare(&g, settings.filter));
+                    ctx.upload_rgba(dims, &interleave(&g[0], &g[1], &g[2], None))?
+                } else {
+                    let (layout, p) = prepare_pipeline(
+                        ctx,
+                        &mut self.prepare_pipelines,
+                        &mut self.stats,
+                        "precompute_gradients",
+                    )?;
+                    run_prepare(ctx, layout, p, &params, &self.volume, lut_buf, dims)?
+                };
+                self.gradients = Some(Cached { key, value });
+                self.stats.prepare_passes += 1;
+            }
+        }
+        // What the filter samples: the raw values, or the B-spline coefficients.
+        let (sampled_grid, sampled_tex) = match (&self.coefficients, prefiltered) {
+            (Some((g, t)), true) => (g, t),
+            _ => (&self.grid, &self.volume),
+        };
+        if skipping {
+            let radius = crate::cpu::skip::skip_radius(settings).unwrap_or(1);
+            let key = vec![
+                settings.block_size as u32,
+                radius as u32,
+                prefiltered as u32,
+            ];
+            if !fresh(&self.minmax, &key) {
+                self.minmax = None;
+                let had_pipeline = self.minmax_pipeline.is_some();
+                let value = super::skip::min_max_buffer_with(
+                    ctx,
+                    &mut self.minmax_pipeline,
+                    sampled_tex,
+                    sampled_grid,
+                    settings.block_size,
+                    radius,
+                )?;
+                if !had_pipeline && self.minmax_pipeline.is_some() {
+                    self.stats.pipelines_compiled += 1;
+                }
+                self.minmax = Some(Cached { key, value });
+                self.stats.prepare_passes += 1;
+            }
+        }
+        // Clipping mesh (gpu::clipmesh): resolved on the host every frame (the bricks
+        // mesh from the same grid the skipping bounds), its segments computed per band.
+        let clip_mesh = {
+            let voxels = match settings.classification {
+                Classification::Post => sampled_grid,
+                Classification::Pre => &self.grid,
+            };
+            let r = crate::cpu::clipmesh::resolve(settings, self.affine, dims, Some(voxels), &lut)?;
+            match r {
+                Some(m) => Some(super::clipmesh::GpuClipMesh::new(ctx, &m)?),
+                None => None,
+            }
+        };
+        params.clip_mesh[0] = clip_mesh.is_some() as u32;
+        let prepare_time = if self.stats.prepare_passes > passes_before || clip_mesh.is_some() {
+            ctx.wait()?;
+            t_prep.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
+
+        // Ray casting, in bands of rows that fit the storage-binding limit.
+        let (w, h) = (camera.width, camera.height);
+        let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
+        let pixel_bytes = if clip_mesh.is_some() {
+            16 * super::clipmesh::SEGMENT_VEC4S
+        } else {
+            16
+        };
+        let rows_per_tile = (max_binding / (w * pixel_bytes))
+            .clamp(1, h)
+            .min((1 << 20) / w + 1)
+            .max(1);
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let textures_of = |c: &Option<Cached<wgpu::Texture>>, used: bool| match c {
+            Some(c) if used => view(&c.value),
+            _ => view(&self.dummy),
+        };
+        let (vol_view, pre_view, grad_view) = (
+            view(sampled_tex),
+            textures_of(&self.preclassified, pre),
+            textures_of(&self.gradients, precomputed),
+        );
+        let (skip_minmax, skip_prefix) = match (&self.minmax, &self.prefix, skipping) {
+            (Some(m), Some(p), true) => (&m.value, &p.value),
+            _ => (&self.skip_off.0, &self.skip_off.1),
+        };
+        let lut2_buf = &self.lut2.as_ref().expect("uploaded above").value;
+        let (layout, sampler, no_segments) = (&self.layout, &self.sampler, &self.no_segments);
+        let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
+        let mut counts = vec![0u32; w * h];
+        let bands = render_bands(
+            ctx,
+            (&self.pipelines[pipeline].1, "raycast"),
+            rows_per_tile,
+            (&mut image, &mut counts),
+            progress,
+            |row0, rows, out_buf, cnt_buf| {
+                params.flags2[2] = row0 as u32;
+                params.flags2[3] = rows as u32;
+                let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("raycast params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let seg_buf = match &clip_mesh {
+                    Some(m) => Some(m.segments(ctx, &params)?),
+                    None => None,
+                };
+                Ok(ctx.bind_group(
+                    "raycast",
+                    layout,
+                    &[
+                        pbuf.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(&vol_view),
+                        wgpu::BindingResource::TextureView(&pre_view),
+                        wgpu::BindingResource::TextureView(&grad_view),
+                        wgpu::BindingResource::Sampler(sampler),
+                        lut_buf.as_entire_binding(),
+                        out_buf.as_entire_binding(),
+                        cnt_buf.as_entire_binding(),
+                        lut2_buf.as_entire_binding(),
+                        skip_minmax.as_entire_binding(),
+                        skip_prefix.as_entire_binding(),
+                        seg_buf.as_ref().unwrap_or(no_segments).as_entire_binding(),
+                    ],
+                ))
+            },
+        )?;
+        let mut timings = GpuTimings {
+            setup,
             upload,
             prepare: prepare_time,
             kernel: bands.kernel,
             kernel_from_timestamps: bands.from_timestamps,
             readback: bands.readback,
             total: t_start.elapsed().as_secs_f64(),
-        },
-    })
+        };
+        if let Some(p) = self.pending.take() {
+            timings.setup += p.setup;
+            timings.upload += p.upload;
+            timings.total += p.total;
+        }
+        self.stats.frames += 1;
+        Ok(GpuRenderOutput {
+            output: RenderOutput::from_counts(image, &counts, settings.sample_count),
+            timings,
+        })
+    }
+
+    /// The index in `self.pipelines` of the ray-casting pipeline of `source`, compiled
+    /// when it is not there (dropping the least recently used past [`PIPELINES_KEPT`]).
+    fn raycast_pipeline(&mut self, source: String) -> Result<usize> {
+        if let Some(i) = self.pipelines.iter().position(|(s, _)| *s == source) {
+            let hit = self.pipelines.remove(i);
+            self.pipelines.push(hit);
+        } else {
+            if self.pipelines.len() >= PIPELINES_KEPT {
+                self.pipelines.remove(0);
+            }
+            let module = self.ctx.shader("raycast.wgsl", &source)?;
+            let pipeline = compute_pipeline(self.ctx, "raycast", &module, "raycast", &self.layout)?;
+            self.stats.pipelines_compiled += 1;
+            self.pipelines.push((source, pipeline));
+        }
+        Ok(self.pipelines.len() - 1)
+    }
+}
+
+/// On a CPU adapter, refuses rays that could run past llvmpipe's loop limit.
+fn check_loop_limit(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSettings) -> Result<()> {
+    if !ctx.summary.is_cpu() {
+        return Ok(());
+    }
+    // The ray march is the only loop per invocation (plus 3 box-slab iterations).
+    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    // Skipping adds one iteration per cell crossed, twice; iso-surfaces loop over the
+    // iso-values per step (crossings, their sort) and an opaque surface's shadow ray
+    // marches once more.
+    let cells = crate::cpu::skip::cell_count(dims, settings.block_size);
+    let isos = settings.iso_surfaces.len() as f64;
+    let per_step = 1.0
+        + 2.0 * isos
+        + if settings.iso_shadows {
+            1.0 + isos
+        } else {
+            0.0
+        };
+    let mut steps =
+        (diag / settings.step + 2.0) * per_step + 2.0 * (cells[0] + cells[1] + cells[2]) as f64;
+    if settings.clip_mesh.is_some() {
+        // Up to MAX_SEGMENTS mesh ranges per skipping range, and their search.
+        steps += 8.0 * 2.0 * (cells[0] + cells[1] + cells[2]) as f64 + 64.0;
+    }
+    if steps > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
+        return Err(Error::invalid(
+            "step",
+            format!(
+                "up to {steps:.0} steps per ray exceed the {LLVMPIPE_LOOP_LIMIT} loop \
+                 iterations a CPU Vulkan driver (llvmpipe) runs per invocation; use a \
+                 larger step"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Interleaves three or four grids into RGBA texels (the fourth channel 0 if absent).
@@ -828,36 +1177,67 @@ fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>
         .collect()
 }
 
+/// The layout and pipeline of one of `raycast_prepare.wgsl`'s entry points, compiled
+/// into `slot` on first use.
+fn prepare_pipeline<'s>(
+    ctx: &GpuContext,
+    slot: &'s mut Option<PreparePipelines>,
+    stats: &mut SessionStats,
+    entry: &'static str,
+) -> Result<(&'s wgpu::BindGroupLayout, &'s wgpu::ComputePipeline)> {
+    let p = match slot {
+        Some(p) => p,
+        None => {
+            let dev = &ctx.device;
+            let module = ctx.shader("raycast_prepare.wgsl", &prepare_shader())?;
+            let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("prepare"),
+                entries: &[
+                    buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                    texture_entry(1, false),
+                    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 3,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::StorageTexture {
+                            access: wgpu::StorageTextureAccess::WriteOnly,
+                            format: wgpu::TextureFormat::Rgba32Float,
+                            view_dimension: wgpu::TextureViewDimension::D3,
+                        },
+                        count: None,
+                    },
+                ],
+            });
+            slot.insert(PreparePipelines {
+                module,
+                layout,
+                pipelines: Vec::new(),
+            })
+        }
+    };
+    let i = match p.pipelines.iter().position(|(e, _)| *e == entry) {
+        Some(i) => i,
+        None => {
+            let pipeline = compute_pipeline(ctx, entry, &p.module, entry, &p.layout)?;
+            stats.pipelines_compiled += 1;
+            p.pipelines.push((entry, pipeline));
+            p.pipelines.len() - 1
+        }
+    };
+    Ok((&p.layout, &p.pipelines[i].1))
+}
+
 /// Runs one of `raycast_prepare.wgsl`'s passes into a new RGBA texture.
 fn run_prepare(
     ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    pipeline: &wgpu::ComputePipeline,
     params: &RaycastParams,
     volume: &wgpu::Texture,
     lut: &wgpu::Buffer,
     dims: [usize; 3],
-    entry: &str,
 ) -> Result<wgpu::Texture> {
     let dev = &ctx.device;
-    let module = ctx.shader("raycast_prepare.wgsl", &prepare_shader())?;
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("prepare"),
-        entries: &[
-            buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1, false),
-            buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
-            wgpu::BindGroupLayoutEntry {
-                binding: 3,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                },
-                count: None,
-            },
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, entry, &module, entry, &layout)?;
     let target = ctx.rgba_texture(dims, true)?;
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("prepare params"),
@@ -868,7 +1248,7 @@ fn run_prepare(
     let target_view = target.create_view(&Default::default());
     let bind = ctx.bind_group(
         "prepare",
-        &layout,
+        layout,
         &[
             pbuf.as_entire_binding(),
             wgpu::BindingResource::TextureView(&vol_view),
@@ -879,7 +1259,7 @@ fn run_prepare(
     let mut enc = dev.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &bind, &[]);
         pass.dispatch_workgroups(
             (dims[0] as u32).div_ceil(4),

@@ -29,11 +29,50 @@ pub struct SkipGridParams {
 /// (llvmpipe stops every loop of an invocation after 65535 iterations in total).
 const MAX_PER_INVOCATION: usize = 60_000;
 
+/// The compiled grid-building pipeline (`shaders/skip_minmax.wgsl`), for a caller that
+/// builds several grids (a `gpu::raycast::RaycastSession` keeps one).
+pub struct MinMaxPipeline {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl MinMaxPipeline {
+    /// Compiles the shader and makes the pipeline.
+    pub fn new(ctx: &GpuContext) -> Result<Self> {
+        let module = ctx.shader("skip_minmax.wgsl", &super::shaders::resolve("skip_minmax"))?;
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("skip minmax"),
+                entries: &[
+                    buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                    texture_entry(1, false),
+                    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
+                ],
+            });
+        let pipeline = compute_pipeline(ctx, "skip_minmax", &module, "skip_minmax", &layout)?;
+        Ok(MinMaxPipeline { layout, pipeline })
+    }
+}
+
 /// Builds the grid of `volume` (an `R32Float` texture of `dims`) into a storage buffer
 /// of `[min, max]` pairs (x fastest). Falls back to the CPU build (identical values)
 /// when a cell's footprint is too large for one workgroup's loop on a CPU adapter.
 pub fn min_max_buffer(
     ctx: &GpuContext,
+    volume: &wgpu::Texture,
+    values: &Grid<f32>,
+    block: usize,
+    radius: usize,
+) -> Result<wgpu::Buffer> {
+    min_max_buffer_with(ctx, &mut None, volume, values, block, radius)
+}
+
+/// [`min_max_buffer`] with the pipeline kept in `pipeline`: compiled there on first use
+/// (and left `None` when the CPU builds the grid).
+pub fn min_max_buffer_with(
+    ctx: &GpuContext,
+    pipeline: &mut Option<MinMaxPipeline>,
     volume: &wgpu::Texture,
     values: &Grid<f32>,
     block: usize,
@@ -54,16 +93,10 @@ pub fn min_max_buffer(
             }));
     }
     let dev = &ctx.device;
-    let module = ctx.shader("skip_minmax.wgsl", &super::shaders::resolve("skip_minmax"))?;
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("skip minmax"),
-        entries: &[
-            buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1, false),
-            buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "skip_minmax", &module, "skip_minmax", &layout)?;
+    let MinMaxPipeline { layout, pipeline } = match pipeline {
+        Some(p) => p,
+        None => pipeline.insert(MinMaxPipeline::new(ctx)?),
+    };
     let out = ctx.storage_buffer("skip minmax", (n_cells * 8) as u64)?;
     let view = volume.create_view(&Default::default());
     // Slabs of cell rows per submission keep each dispatch short on slow adapters.
@@ -88,7 +121,7 @@ pub fn min_max_buffer(
         });
         let bind = ctx.bind_group(
             "skip minmax",
-            &layout,
+            layout,
             &[
                 pbuf.as_entire_binding(),
                 wgpu::BindingResource::TextureView(&view),
@@ -98,7 +131,7 @@ pub fn min_max_buffer(
         let mut enc = dev.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(cells[0] as u32, cells[1] as u32, nz as u32);
         }

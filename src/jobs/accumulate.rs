@@ -5,10 +5,12 @@
 //! 1, …`) shrinks that noise like `1/√N` towards the exact integral. Both backends
 //! jitter each pixel by the same offsets.
 
-use super::renderer::{Rendered, Renderer, Scene};
+use super::renderer::{PreparedScene, Rendered, Renderer, Scene};
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::settings::RenderSettings;
+use crate::transfer::TransferFunction;
 
 /// Renders `frames` frames jittered with seeds `seed, seed + 1, …` and averages them
 /// (images and sample counts; `total_samples` is the sum over frames, GPU timings are
@@ -21,19 +23,42 @@ pub fn render_accumulated(
     frames: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Rendered> {
-    if frames == 0 || frames > 65_536 {
-        return Err(Error::invalid("accumulate", "frames must lie in 1 … 65536"));
-    }
-    let mut acc: Option<Rendered> = None;
-    // The volume is checked, converted and bounded once, not once per frame.
+    check_frames(frames)?;
+    // The volume is checked, converted (uploaded) and bounded once, not once per frame.
     let prepared = renderer.prepare(scene, settings)?;
+    render_accumulated_prepared(
+        renderer,
+        &prepared,
+        &scene.transfer,
+        &scene.camera,
+        settings,
+        seed,
+        frames,
+        progress,
+    )
+}
+
+/// [`render_accumulated`] of a scene already prepared (with `tf` and `camera`).
+#[allow(clippy::too_many_arguments)]
+pub fn render_accumulated_prepared(
+    renderer: &Renderer,
+    prepared: &PreparedScene,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    seed: u32,
+    frames: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Rendered> {
+    check_frames(frames)?;
+    let mut acc: Option<Rendered> = None;
     for f in 0..frames {
         let s = RenderSettings {
             jitter: Some(seed.wrapping_add(f as u32)),
             interleaved: false,
             ..settings.clone()
         };
-        let r = renderer.render_prepared(&prepared, &scene.camera, &s, &|_, _| {})?;
+        let r = renderer.render_prepared_with(prepared, tf, camera, &s, &|_, _| {})?;
         acc = Some(match acc {
             None => r,
             Some(mut a) => {
@@ -50,6 +75,7 @@ pub fn render_accumulated(
                     x.readback += y.readback;
                     x.total += y.total;
                 }
+                a.gpu_session = r.gpu_session;
                 a
             }
         });
@@ -62,6 +88,13 @@ pub fn render_accumulated(
         s.data.iter_mut().for_each(|v| *v *= k);
     }
     Ok(a)
+}
+
+fn check_frames(frames: usize) -> Result<()> {
+    if frames == 0 || frames > 65_536 {
+        return Err(Error::invalid("accumulate", "frames must lie in 1 … 65536"));
+    }
+    Ok(())
 }
 
 fn add_into(a: &mut Frame, b: &Frame) {

@@ -17,7 +17,7 @@ use crate::camera::{AxisView, Camera, Orbit, Projection};
 use crate::cpu::adaptive::Sampling;
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
-use crate::gpu::raycast::GpuTimings;
+use crate::gpu::raycast::{GpuTimings, SessionStats};
 use crate::settings::{
     Classification, ClipMeshUnits, ClipSpace, Compositing, Filter, GradientMethod, IsoSurface,
     Light, Mode, RenderSettings,
@@ -141,6 +141,39 @@ impl AccelRequest {
                 &|done, total| cp.advance(done, total),
             ),
             None => renderer.render(scene, settings, &|done, total| cp.advance(done, total)),
+        })
+    }
+}
+
+impl AccelRequest {
+    /// [`AccelRequest::render`] of a prepared scene with `tf` and `camera`: one frame,
+    /// or the average of `accumulate` jittered frames, from the volume prepared once.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_prepared(
+        &self,
+        renderer: &Renderer,
+        prepared: &PreparedScene,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Rendered> {
+        cancellable(progress, |cp| match self.accumulate {
+            Some(n) => super::accumulate::render_accumulated_prepared(
+                renderer,
+                prepared,
+                tf,
+                camera,
+                settings,
+                settings.jitter.unwrap_or(0),
+                n,
+                &|done, total| cp.advance(done, total),
+            ),
+            None => {
+                renderer.render_prepared_with(prepared, tf, camera, settings, &|done, total| {
+                    cp.advance(done, total)
+                })
+            }
         })
     }
 }
@@ -301,18 +334,56 @@ pub fn build_scene(
     sample_count: bool,
     progress: &dyn Progress,
 ) -> Result<(Scene, RenderSettings)> {
+    let (volume, (transfer, camera, settings)) = match &a.state_file {
+        Some(path) => {
+            let state = super::view::ViewState::load(path)?;
+            let volume = state.input.load(progress)?;
+            (volume, state_view(&state, sample_count)?)
+        }
+        None => {
+            let volume = a.input.load(progress)?;
+            let view = build_view(a, &volume, sample_count)?;
+            (volume, view)
+        }
+    };
+    let scene = Scene {
+        volume,
+        transfer,
+        camera,
+    };
+    Ok((scene, settings))
+}
+
+/// The transfer function, camera and settings of a view state file.
+fn state_view(
+    state: &super::view::ViewState,
+    sample_count: bool,
+) -> Result<(TransferFunction, Camera, RenderSettings)> {
+    state.validate()?;
+    let mut settings = state.settings.clone();
+    settings.sample_count = sample_count;
+    Ok((state.transfer.clone(), state.camera()?, settings))
+}
+
+/// [`build_scene`] for a volume already loaded from `a.input` (a prepared scene's
+/// frames): the transfer function, camera and settings, checked. With `state_file`
+/// they are the state's (whose input is then the volume's source).
+///
+/// # Errors
+/// Whatever the transfer functions, the camera or the settings refuse.
+pub fn build_view(
+    a: &SceneRequest,
+    volume: &AnyVolume,
+    sample_count: bool,
+) -> Result<(TransferFunction, Camera, RenderSettings)> {
     if let Some(path) = &a.state_file {
-        let state = super::view::ViewState::load(path)?;
-        let (scene, mut settings) = state.scene(state.input.load(progress)?)?;
-        settings.sample_count = sample_count;
-        return Ok((scene, settings));
+        return state_view(&super::view::ViewState::load(path)?, sample_count);
     }
-    let volume = a.input.load(progress)?;
     let mut tf = if let Some(t) = &a.transfer {
         t.validate()?;
         t.clone()
     } else if a.tf == "auto" {
-        super::input::auto_transfer(&a.input, &volume)?
+        super::input::auto_transfer(&a.input, volume)?
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };
@@ -365,7 +436,7 @@ pub fn build_scene(
             t.window = WindowMap::from_window_level(w, l, t.domain)?;
         }
     }
-    let camera = scene_camera(a, &volume)?;
+    let camera = scene_camera(a, volume)?;
     let mut settings = match &a.settings_file {
         Some(p) => crate::json::read_file::<RenderSettings>(p, "render settings JSON")?,
         None => {
@@ -400,12 +471,7 @@ pub fn build_scene(
         settings.transfer_2d = tf2d;
     }
     settings.validate()?;
-    let scene = Scene {
-        volume,
-        transfer: tf,
-        camera,
-    };
-    Ok((scene, settings))
+    Ok((tf, camera, settings))
 }
 
 /// The camera of a request for `volume`: the axis view, or the orbit around the
@@ -507,13 +573,19 @@ pub struct RenderRequest {
 }
 
 /// Per-frame timing of a repeated render.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FrameTimes {
     /// The median seconds per frame.
     pub median: f64,
     pub frames: usize,
     /// Seconds spent preparing the volume once.
     pub prepare: f64,
+    /// GPU only: the session's counters after the last frame (one volume upload for
+    /// all frames).
+    pub gpu_session: Option<SessionStats>,
+    /// GPU only: the host-to-device upload seconds of each frame (the first carries the
+    /// volume's upload; frames that upload nothing report 0).
+    pub gpu_uploads: Vec<f64>,
 }
 
 /// How a stereo pair was made.
@@ -644,7 +716,8 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
             let prepared = renderer.prepare(&scene, &settings)?;
             let prepare = since(t_prep);
             let mut times = Vec::with_capacity(n as usize);
-            let mut last = None;
+            let mut uploads = Vec::new();
+            let mut last: Option<Rendered> = None;
             let rows = n as usize * h as usize;
             for f in 0..n as usize {
                 let t_f = Instant::now();
@@ -654,6 +727,7 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
                     })
                 })?;
                 times.push(since(t_f));
+                uploads.extend(r.gpu_timings.map(|t| t.upload));
                 last = Some(r);
             }
             times.sort_by(f64::total_cmp);
@@ -661,6 +735,8 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
                 median: times[times.len() / 2],
                 frames: times.len(),
                 prepare,
+                gpu_session: last.as_ref().and_then(|r| r.gpu_session),
+                gpu_uploads: uploads,
             };
             let last = last.expect("at least one frame");
             result.output = last.output;

@@ -1,20 +1,29 @@
 //! A [`Scene`] (volume, transfer function, camera) rendered with [`RenderSettings`]
 //! (how) on a [`Backend`] (who: the f64 oracle, the same code in f32, or the GPU
-//! port). A [`Renderer`] keeps its engine (and the GPU device) for many renders, and
-//! [`Renderer::prepare`] checks and converts a volume once for many frames. The
-//! render job ([`super::render`]), jittered accumulation and stereo pairs are built on
-//! it.
+//! port). A [`Renderer`] keeps its engine (and the GPU device) for many renders.
+//!
+//! [`Renderer::prepare`] makes a [`PreparedScene`] of a volume for many frames, and
+//! [`Renderer::render_prepared`] renders its frames, each equal to [`Renderer::render`]
+//! of the same scene. On the CPU backends the volume is checked and converted once (and
+//! the skipping's min/max grids kept); on the GPU the prepared scene holds a
+//! [`RaycastSession`]: the volume is uploaded once, and frames that orbit the camera,
+//! edit the transfer function or change settings make again only what changed (a
+//! frame that changes nothing but the camera uploads nothing and runs no set-up pass;
+//! [`Rendered::gpu_session`] counts). The render job ([`super::render`], including
+//! `--repeat`), jittered accumulation, the Python package's prepared scenes and the lab
+//! are built on it.
 
 pub use super::Backend;
 use super::Engine;
 use crate::camera::Camera;
 use crate::cpu::raycast::{self, RenderOutput};
 use crate::error::Result;
-use crate::gpu::raycast::GpuTimings;
+use crate::gpu::raycast::{GpuTimings, RaycastSession, SessionStats};
 use crate::gpu::GpuContext;
 use crate::settings::RenderSettings;
 use crate::transfer::TransferFunction;
 use crate::volume::AnyVolume;
+use std::sync::{Mutex, MutexGuard};
 
 /// What to render.
 #[derive(Clone, Debug)]
@@ -32,6 +41,9 @@ pub struct Rendered {
     pub backend: Backend,
     /// GPU timings, for GPU renders.
     pub gpu_timings: Option<GpuTimings>,
+    /// What the GPU session had done after this frame (a one-shot render's session
+    /// made one frame), for GPU renders.
+    pub gpu_session: Option<SessionStats>,
 }
 
 /// A backend made ready for renders: [`Engine`] with the ray caster's entry points.
@@ -86,17 +98,22 @@ impl Renderer {
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Rendered> {
         let (v, tf, cam) = (&scene.volume, &scene.transfer, &scene.camera);
-        let (output, gpu_timings) = match (self.backend(), self.gpu()) {
+        let (output, gpu_timings, gpu_session) = match (self.backend(), self.gpu()) {
             (Backend::Gpu, Some(ctx)) => {
-                let g = crate::gpu::raycast::render(ctx, v, tf, cam, settings, progress)?;
-                (g.output, Some(g.timings))
+                settings.validate()?;
+                tf.validate()?;
+                let mut session = RaycastSession::new(ctx, v)?;
+                let g = session.render(tf, cam, settings, progress)?;
+                (g.output, Some(g.timings), Some(session.stats()))
             }
             (Backend::CpuF32, _) => (
                 raycast::render::<f32>(v, tf, cam, settings, progress)?,
                 None,
+                None,
             ),
             _ => (
                 raycast::render::<f64>(v, tf, cam, settings, progress)?,
+                None,
                 None,
             ),
         };
@@ -104,39 +121,97 @@ impl Renderer {
             output,
             backend: self.backend(),
             gpu_timings,
+            gpu_session,
         })
     }
 }
 
-/// A scene whose volume is prepared once for many frames: on the CPU backends the
-/// finiteness check, the conversion and the skipping's min/max grids
-/// ([`raycast::Prepared`]); the GPU backend renders from the scene as usual.
-pub struct PreparedScene<'a> {
-    scene: &'a Scene,
-    cpu: PreparedCpu,
+/// A scene's volume prepared once for many frames, with the transfer function frames
+/// render with unless told another ([`Renderer::render_prepared_with`]).
+///
+/// On the GPU: a [`RaycastSession`] (the volume uploaded once; pipelines, lookup tables
+/// and set-up volumes cached and made again only when a frame changes what determines
+/// them), so frames may change every setting. On the CPU backends: the finiteness
+/// check, the conversion and the skipping's min/max grids ([`raycast::Prepared`]), for
+/// frames that keep the filter and gradients prepared for ([`PreparedScene::serves`]).
+///
+/// It holds its own copy of the volume, taken when it was prepared: later changes to
+/// the scene do not reach it.
+pub struct PreparedScene {
+    transfer: TransferFunction,
+    engine: PreparedEngine,
 }
 
-enum PreparedCpu {
-    Gpu,
+enum PreparedEngine {
+    /// Behind a lock, so that frames render through `&self` (one at a time).
+    Gpu(Box<Mutex<RaycastSession<'static>>>),
     F32(raycast::Prepared<f32>),
     F64(raycast::Prepared<f64>),
 }
 
+impl PreparedScene {
+    /// The transfer function [`Renderer::render_prepared`] renders with.
+    pub fn transfer(&self) -> &TransferFunction {
+        &self.transfer
+    }
+
+    /// Replaces the transfer function frames render with.
+    pub fn set_transfer(&mut self, tf: TransferFunction) {
+        self.transfer = tf;
+    }
+
+    /// Whether frames with `settings` can render from this preparation: always on the
+    /// GPU; on the CPU when they keep the filter and gradients it was prepared for.
+    pub fn serves(&self, settings: &RenderSettings) -> bool {
+        match &self.engine {
+            PreparedEngine::Gpu(_) => true,
+            PreparedEngine::F32(c) => c.serves(settings),
+            PreparedEngine::F64(c) => c.serves(settings),
+        }
+    }
+
+    /// The GPU session's counters (uploads, compiled pipelines, set-up passes); `None`
+    /// on the CPU backends.
+    pub fn gpu_stats(&self) -> Option<SessionStats> {
+        match &self.engine {
+            PreparedEngine::Gpu(s) => Some(lock(s).stats()),
+            _ => None,
+        }
+    }
+}
+
+/// The session, also after a frame panicked while holding it (its caches are replaced
+/// whole, never left half-made).
+fn lock<'a>(s: &'a Mutex<RaycastSession<'static>>) -> MutexGuard<'a, RaycastSession<'static>> {
+    s.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 impl Renderer {
-    /// Prepares `scene` for frames with `settings`' filter and gradients.
-    pub fn prepare<'a>(
+    /// Prepares `scene` for frames; on the CPU backends for `settings`' filter and
+    /// gradients. On the GPU this uploads the volume.
+    pub fn prepare(&self, scene: &Scene, settings: &RenderSettings) -> Result<PreparedScene> {
+        self.prepare_volume(&scene.volume, &scene.transfer, settings)
+    }
+
+    /// [`Renderer::prepare`] of a volume and a transfer function (no camera yet).
+    pub fn prepare_volume(
         &self,
-        scene: &'a Scene,
+        volume: &AnyVolume,
+        transfer: &TransferFunction,
         settings: &RenderSettings,
-    ) -> Result<PreparedScene<'a>> {
+    ) -> Result<PreparedScene> {
         settings.validate()?;
-        let v = &scene.volume;
-        let cpu = match (self.backend(), self.gpu()) {
-            (Backend::Gpu, Some(_)) => PreparedCpu::Gpu,
-            (Backend::CpuF32, _) => PreparedCpu::F32(raycast::Prepared::new(v, settings)?),
-            _ => PreparedCpu::F64(raycast::Prepared::new(v, settings)?),
+        let engine = match (self.backend(), self.engine.gpu()) {
+            (Backend::Gpu, Some(ctx)) => {
+                PreparedEngine::Gpu(Box::new(Mutex::new(RaycastSession::new(ctx, volume)?)))
+            }
+            (Backend::CpuF32, _) => PreparedEngine::F32(raycast::Prepared::new(volume, settings)?),
+            _ => PreparedEngine::F64(raycast::Prepared::new(volume, settings)?),
         };
-        Ok(PreparedScene { scene, cpu })
+        Ok(PreparedScene {
+            transfer: transfer.clone(),
+            engine,
+        })
     }
 
     /// Renders a frame of a prepared scene seen by `camera`: the same image as
@@ -148,29 +223,35 @@ impl Renderer {
         settings: &RenderSettings,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Rendered> {
-        let tf = &p.scene.transfer;
+        self.render_prepared_with(p, &p.transfer, camera, settings, progress)
+    }
+
+    /// [`Renderer::render_prepared`] with another transfer function (on the GPU its
+    /// lookup table is uploaded when its entries changed since the last frame).
+    pub fn render_prepared_with(
+        &self,
+        p: &PreparedScene,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Rendered> {
         settings.validate()?;
         tf.validate()?;
-        let (output, gpu_timings) = match (&p.cpu, self.gpu()) {
-            (PreparedCpu::Gpu, Some(ctx)) => {
-                let g = crate::gpu::raycast::render(
-                    ctx,
-                    &p.scene.volume,
-                    tf,
-                    camera,
-                    settings,
-                    progress,
-                )?;
-                (g.output, Some(g.timings))
+        let (output, gpu_timings, gpu_session) = match &p.engine {
+            PreparedEngine::Gpu(s) => {
+                let mut session = lock(s);
+                let g = session.render(tf, camera, settings, progress)?;
+                (g.output, Some(g.timings), Some(session.stats()))
             }
-            (PreparedCpu::F32(c), _) => (c.render(tf, camera, settings, progress)?, None),
-            (PreparedCpu::F64(c), _) => (c.render(tf, camera, settings, progress)?, None),
-            (PreparedCpu::Gpu, None) => unreachable!("prepared for the GPU without one"),
+            PreparedEngine::F32(c) => (c.render(tf, camera, settings, progress)?, None, None),
+            PreparedEngine::F64(c) => (c.render(tf, camera, settings, progress)?, None, None),
         };
         Ok(Rendered {
             output,
             backend: self.backend(),
             gpu_timings,
+            gpu_session,
         })
     }
 }

@@ -479,6 +479,21 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
                  the volume prepared once in {:.3} s",
                 f.median, f.frames, f.prepare
             );
+            if let Some(g) = f.gpu_session {
+                let uploads: Vec<String> =
+                    f.gpu_uploads.iter().map(|u| format!("{u:.4}")).collect();
+                eprintln!(
+                    "GPU session: the volume uploaded {} time(s) for {} frames, {} table \
+                     upload(s), {} pipeline(s) compiled, {} set-up pass(es); upload seconds \
+                     per frame: {}",
+                    g.volume_uploads,
+                    g.frames,
+                    g.table_uploads,
+                    g.pipelines_compiled,
+                    g.prepare_passes,
+                    uploads.join(" ")
+                );
+            }
         }
     }
     Ok(ExitCode::SUCCESS)

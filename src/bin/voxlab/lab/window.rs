@@ -1,6 +1,8 @@
 //! The window: egui on wgpu, presenting on the ray caster's own device. A thin
 //! shell: the view it shows is a [`ViewState`], every frame is the render job's
-//! ([`Renderer::render`]), the editors call [`voxlab::editor`], the difference view
+//! (a [`PreparedScene`] of the volume through [`Renderer::render_prepared_with`]: on the
+//! GPU the volume is uploaded once, and interaction re-makes only what it changed),
+//! the editors call [`voxlab::editor`], the difference view
 //! [`voxlab::metrics`]. Nothing here computes an image.
 
 use super::editors;
@@ -15,7 +17,7 @@ use voxlab::choice::Choice;
 use voxlab::frame::Frame;
 use voxlab::gpu::context::GpuContext;
 use voxlab::io::frame::rgba8;
-use voxlab::jobs::render::{Renderer, Scene};
+use voxlab::jobs::render::{PreparedScene, Renderer, Scene};
 use voxlab::jobs::view::{ViewProjection, ViewState};
 use voxlab::jobs::Backend;
 use voxlab::metrics::{diff_heatmap, error_stats, ErrorStats};
@@ -77,6 +79,9 @@ struct Lab {
     state: ViewState,
     volume: AnyVolume,
     renderer: Renderer,
+    /// `volume` prepared for the interactive frames (on the GPU: uploaded once, with
+    /// the pipelines and set-up volumes cached), made on the first frame.
+    prepared: Option<PreparedScene>,
     /// The interactive backend's last frame, with its generation.
     frame: Option<(u64, Frame)>,
     texture: Option<egui::TextureHandle>,
@@ -122,6 +127,7 @@ impl Lab {
             state: o.state,
             volume: o.volume,
             renderer,
+            prepared: None,
             frame: None,
             texture: None,
             generation: 1,
@@ -163,17 +169,36 @@ impl Lab {
         Ok((scene, settings))
     }
 
+    /// The interactive frame of the current view, from the prepared volume (prepared
+    /// again only when the settings need it: on the CPU backends, another filter or
+    /// gradient method; on the GPU the session serves every setting).
+    fn render_frame(&mut self) -> Result<voxlab::jobs::render::Rendered> {
+        self.state.validate()?;
+        let camera = self.state.camera()?;
+        let mut settings = self.state.settings.clone();
+        settings.sample_count = true;
+        let tf = &self.state.transfer;
+        let prepared = match self.prepared.take() {
+            Some(p) if p.serves(&settings) => p,
+            _ => self.renderer.prepare_volume(&self.volume, tf, &settings)?,
+        };
+        let out = self
+            .renderer
+            .render_prepared_with(&prepared, tf, &camera, &settings, &|_, _| {});
+        self.prepared = Some(prepared);
+        out
+    }
+
     /// Renders the interactive frame when the view changed.
     fn render(&mut self, ctx: &egui::Context) {
         if self.rendered == self.generation {
             return;
         }
         self.rendered = self.generation;
-        let result = self.scene().and_then(|(scene, settings)| {
-            let t = Instant::now();
-            let out = self.renderer.render(&scene, &settings, &|_, _| {})?;
-            Ok((out, t.elapsed().as_secs_f64()))
-        });
+        let t = Instant::now();
+        let result = self
+            .render_frame()
+            .map(|out| (out, t.elapsed().as_secs_f64()));
         match result {
             Ok((out, seconds)) => {
                 self.frame_ms = seconds * 1e3;
