@@ -361,6 +361,21 @@ impl<T> Volume<T> {
     pub fn is_shared(&self) -> bool {
         matches!(self.data, Voxels::Shared(_))
     }
+    /// The same volume holding its own voxels (a copy of a shared buffer): for what
+    /// outlives the call that lent the buffer (a render session).
+    pub fn into_owned(self) -> Self
+    where
+        T: Clone,
+    {
+        match self.data {
+            Voxels::Owned(_) => self,
+            Voxels::Shared(s) => Volume {
+                dims: self.dims,
+                affine: self.affine,
+                data: Voxels::Owned(s.voxels().to_vec()),
+            },
+        }
+    }
     pub fn len(&self) -> usize {
         self.data().len()
     }
@@ -805,6 +820,10 @@ impl AnyVolume {
     pub fn values_f64(&self) -> Vec<f64> {
         with_volume!(self, v => v.data().iter().map(|x| x.to_f64()).collect())
     }
+    /// The same volume holding its own voxels ([`Volume::into_owned`]).
+    pub fn into_owned(self) -> AnyVolume {
+        with_volume!(self, v => v.into_owned().into())
+    }
     /// Converts to an f32 volume (exact for u8, u16 and i16).
     pub fn to_f32(&self) -> Volume<f32> {
         match self {
@@ -898,6 +917,8 @@ mod tests {
         assert_eq!(buffer[0], 0);
         assert_eq!(v.data()[0], 0);
         assert_eq!(v.clone().into_data(), *buffer);
+        let own = v.clone().into_owned();
+        assert!(!own.is_shared() && own.data().as_ptr() != buffer.as_ptr() && own == v);
         // The same checks as an owned volume.
         let short: std::sync::Arc<dyn SharedVoxels<u16>> = std::sync::Arc::new(vec![0u16; 5]);
         assert!(Volume::shared([2, 3, 4], DMat4::IDENTITY, short).is_err());

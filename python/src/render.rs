@@ -200,7 +200,8 @@ impl Renderer {
             let (scene, mut settings) = build_scene(&req.scene, req.samples, p)?;
             req.scene.accel.apply(&mut settings)?;
             let prepared = renderer.prepare(&scene, &settings)?;
-            Ok((prepared, scene.volume))
+            // A copy of its own: the caller may change the array between frames.
+            Ok((prepared, scene.volume.into_owned()))
         })?;
         // The loaded volume stays (frames build their cameras and `auto` transfer
         // functions from it); the request's own reference to the caller's data goes.

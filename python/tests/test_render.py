@@ -312,3 +312,14 @@ def test_a_prepared_cpu_scene_renders_like_render():
         np.testing.assert_array_equal(got.image, want.image)
         assert got.info["gpu_session"] is None
     assert scene.session_stats() is None
+    # The array is lent to prepare without a copy, but the scene keeps a copy of its
+    # own: a frame that prepares again (a new filter) after the array changed still
+    # shows the volume as it was.
+    orig = v.array.copy()
+    a = v.array.copy()
+    kept = r.prepare(a, width=20, height=20, mode="mip", view="+z", step=1)
+    a[:] = 0
+    got = kept.render(filter="catmull-rom").image
+    want = voxlab.render(orig, backend="cpu-f32", width=20, height=20, mode="mip", view="+z",
+                         step=1, filter="catmull-rom").image
+    np.testing.assert_array_equal(got, want)
