@@ -290,6 +290,79 @@ pub fn resize_widget(tf: &mut TransferFunction2D, i: usize, half: [f64; 2]) -> R
     Ok(())
 }
 
+/// A handle on a widget's box (its centre ± its half sizes, [`widget_box`]): the side it
+/// holds on each axis, −1 the low edge, +1 the high edge, 0 neither (an edge's
+/// midpoint). The four corners and the four edge midpoints are the eight handles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Handle {
+    pub value: i8,
+    pub gradient: i8,
+}
+
+/// The handles of widget `w` and where they are, `(value, gradient)`: the eight of its
+/// box for rectangles, ellipses and triangles; none for a profile (whose points the
+/// 1-D editor shapes).
+pub fn widget_handles(w: &Widget) -> Vec<(Handle, [f64; 2])> {
+    if matches!(w.shape, Shape::Profile { .. }) {
+        return Vec::new();
+    }
+    let ([v, g], [hv, hg]) = widget_box(w);
+    let mut out = Vec::with_capacity(8);
+    for gradient in [-1i8, 0, 1] {
+        for value in [-1i8, 0, 1] {
+            if value == 0 && gradient == 0 {
+                continue;
+            }
+            out.push((
+                Handle { value, gradient },
+                [v + f64::from(value) * hv, g + f64::from(gradient) * hg],
+            ));
+        }
+    }
+    out
+}
+
+/// Drags handle `h` of widget `i` to `(value, gradient)`: on each axis the handle
+/// holds, the opposite edge stays where it is and the held edge goes to the point (past
+/// the opposite edge, the box turns over); an axis it does not hold keeps its extent.
+///
+/// # Errors
+/// `i` is not a widget, a profile (no handles), or the point is not finite.
+pub fn drag_handle(tf: &mut TransferFunction2D, i: usize, h: Handle, to: [f64; 2]) -> Result<()> {
+    if !to.iter().all(|x| x.is_finite()) {
+        return Err(Error::invalid(
+            "2D widget",
+            format!("handle position {to:?} must be finite"),
+        ));
+    }
+    let w = widget_mut(tf, i)?;
+    if matches!(w.shape, Shape::Profile { .. }) {
+        return Err(Error::invalid(
+            "2D widget",
+            "a profile widget has no handles (shape its points instead)",
+        ));
+    }
+    let (centre, half) = widget_box(w);
+    let mut new_centre = centre;
+    let mut new_half = half;
+    for (axis, side) in [h.value, h.gradient].into_iter().enumerate() {
+        if side == 0 {
+            continue;
+        }
+        let fixed = centre[axis] - f64::from(side) * half[axis];
+        new_centre[axis] = 0.5 * (fixed + to[axis]);
+        // A box of no extent is no box: keep it a hair wide.
+        let least = 1e-9 * (fixed.abs() + to[axis].abs()).max(1e-9);
+        new_half[axis] = (0.5 * (to[axis] - fixed).abs()).max(least);
+    }
+    move_widget(
+        tf,
+        i,
+        [new_centre[0] - centre[0], new_centre[1] - centre[1]],
+    )?;
+    resize_widget(tf, i, new_half)
+}
+
 /// Deletes widget `i` (a 2-D function may have none: it is then transparent).
 ///
 /// # Errors

@@ -361,6 +361,22 @@ impl<T> Volume<T> {
     pub fn is_shared(&self) -> bool {
         matches!(self.data, Voxels::Shared(_))
     }
+    /// The same voxels behind a shared buffer (no copy: the volume's own `Vec` becomes
+    /// the buffer), so that clones share them: for a volume many renders read (the
+    /// lab's).
+    pub fn into_shared(self) -> Self
+    where
+        T: Send + Sync + 'static,
+    {
+        match self.data {
+            Voxels::Owned(v) => Volume {
+                dims: self.dims,
+                affine: self.affine,
+                data: Voxels::Shared(std::sync::Arc::new(v)),
+            },
+            Voxels::Shared(_) => self,
+        }
+    }
     /// The same volume holding its own voxels (a copy of a shared buffer): for what
     /// outlives the call that lent the buffer (a render session).
     pub fn into_owned(self) -> Self
@@ -820,6 +836,11 @@ impl AnyVolume {
     pub fn values_f64(&self) -> Vec<f64> {
         with_volume!(self, v => v.data().iter().map(|x| x.to_f64()).collect())
     }
+    /// The same voxels behind a shared buffer ([`Volume::into_shared`]): clones share
+    /// them.
+    pub fn into_shared(self) -> AnyVolume {
+        with_volume!(self, v => v.into_shared().into())
+    }
     /// The same volume holding its own voxels ([`Volume::into_owned`]).
     pub fn into_owned(self) -> AnyVolume {
         with_volume!(self, v => v.into_owned().into())
@@ -919,6 +940,10 @@ mod tests {
         assert_eq!(v.clone().into_data(), *buffer);
         let own = v.clone().into_owned();
         assert!(!own.is_shared() && own.data().as_ptr() != buffer.as_ptr() && own == v);
+        // An owned volume turned shared keeps its voxels where they are.
+        let at = own.data().as_ptr();
+        let s = own.into_shared();
+        assert!(s.is_shared() && s.data().as_ptr() == at && s.clone().data().as_ptr() == at);
         // The same checks as an owned volume.
         let short: std::sync::Arc<dyn SharedVoxels<u16>> = std::sync::Arc::new(vec![0u16; 5]);
         assert!(Volume::shared([2, 3, 4], DMat4::IDENTITY, short).is_err());

@@ -305,6 +305,64 @@ fn editor_widgets_add_pick_move_resize_delete() {
 }
 
 #[test]
+fn a_widgets_handles_resize_it_about_the_opposite_side() {
+    let mut tf = TransferFunction2D::from_1d(&ramp_tf(), 64, 10.0);
+    tf.widgets.clear();
+    for kind in [
+        WidgetKind::Rectangle,
+        WidgetKind::Ellipse,
+        WidgetKind::Triangle,
+    ] {
+        tf.widgets.clear();
+        let i = editor::add_widget(&mut tf, kind, [0.5, 5.0], [0.1, 2.0], [1.0; 4]).unwrap();
+        let handles = editor::widget_handles(&tf.widgets[i]);
+        assert_eq!(handles.len(), 8, "{kind:?}");
+        // The corners and edge midpoints of the box [0.4, 0.6] × [3, 7].
+        let at = |v: i8, g: i8| {
+            handles
+                .iter()
+                .find(|(h, _)| h.value == v && h.gradient == g)
+                .map(|(_, p)| *p)
+                .unwrap()
+        };
+        assert!(near(at(-1, -1), [0.4, 3.0]) && near(at(1, 1), [0.6, 7.0]));
+        assert!(near(at(0, 1), [0.5, 7.0]) && near(at(1, 0), [0.6, 5.0]));
+        // The high-value, high-gradient corner dragged to (0.7, 9): the low corner stays.
+        let corner = editor::Handle {
+            value: 1,
+            gradient: 1,
+        };
+        editor::drag_handle(&mut tf, i, corner, [0.7, 9.0]).unwrap();
+        let (c, h) = editor::widget_box(&tf.widgets[i]);
+        assert!(
+            near(c, [0.55, 6.0]) && near(h, [0.15, 3.0]),
+            "{kind:?}: {c:?} {h:?}"
+        );
+        // The low-value edge's midpoint: only the value extent changes.
+        let edge = editor::Handle {
+            value: -1,
+            gradient: 0,
+        };
+        editor::drag_handle(&mut tf, i, edge, [0.5, 123.0]).unwrap();
+        let (c, h) = editor::widget_box(&tf.widgets[i]);
+        assert!(
+            near(c, [0.6, 6.0]) && near(h, [0.1, 3.0]),
+            "{kind:?}: {c:?} {h:?}"
+        );
+        // Past the opposite edge the box turns over instead of inverting.
+        editor::drag_handle(&mut tf, i, edge, [0.9, 0.0]).unwrap();
+        let (c, h) = editor::widget_box(&tf.widgets[i]);
+        assert!(
+            near(c, [0.8, 6.0]) && near(h, [0.1, 3.0]),
+            "{kind:?}: {c:?} {h:?}"
+        );
+        tf.validate().unwrap();
+        assert!(editor::drag_handle(&mut tf, i, edge, [f64::NAN, 0.0]).is_err());
+        assert!(editor::drag_handle(&mut tf, 7, edge, [0.5, 0.0]).is_err());
+    }
+}
+
+#[test]
 fn the_joint_histogram_counts_a_ramp_at_its_slope() {
     // f = 3·x mm with 2 mm voxels along x: |∇f| = 3 per mm inside, half that on the two
     // x faces (clamped neighbours); values 0, 6, …, 42.

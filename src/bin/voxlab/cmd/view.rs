@@ -48,12 +48,31 @@ pub struct ViewArgs {
     /// Write a PNG of the whole window (panels and editors included) on exit.
     #[arg(long)]
     pub window_screenshot: Option<PathBuf>,
-    /// Open on the difference view: the interactive frame against the CPU oracle.
+    /// Open on the difference view: side A (the interactive frame) against side B
+    /// (the CPU oracle), or the sides --sides names.
     #[arg(long)]
     pub compare: bool,
+    /// The difference view's two sides, A,B: any two of gpu, cpu-f32 and cpu (B is the
+    /// reference; a side on the interactive backend takes the interactive frame).
+    /// Default: the interactive backend,cpu.
+    #[arg(long, value_name = "A,B", value_delimiter = ',', value_parser = choice::<Backend>())]
+    pub sides: Vec<Backend>,
 }
 
 pub fn run(a: ViewArgs) -> Result<ExitCode> {
+    let sides = match a.sides.as_slice() {
+        [] => None,
+        [x, y] => Some([*x, *y]),
+        other => {
+            return Err(voxlab::Error::invalid(
+                "--sides",
+                format!(
+                    "takes two backends A,B (such as gpu,cpu), not {}",
+                    other.len()
+                ),
+            ))
+        }
+    };
     if let Some(p) = &a.screenshot {
         check_output("--screenshot", p, &["png", "npy"])?;
     }
@@ -86,6 +105,7 @@ pub fn run(a: ViewArgs) -> Result<ExitCode> {
         frames: a.frames,
         window_screenshot: a.window_screenshot,
         compare: a.compare,
+        sides,
     };
     crate::lab::run(options)?;
     Ok(ExitCode::SUCCESS)

@@ -21,6 +21,8 @@ pub struct Context<'a> {
 pub struct EditorState {
     selected: Option<usize>,
     selected_widget: Option<usize>,
+    /// The selected widget's handle being dragged.
+    handle: Option<editor::Handle>,
     /// The opacity at the 1-D editor's top edge.
     alpha_top: f64,
     tf_path: String,
@@ -29,6 +31,8 @@ pub struct EditorState {
     joint: Option<(String, egui::TextureHandle)>,
     /// A sensible `g_max` for a new 2-D function.
     gradient_max: f64,
+    /// Where the 1-D and 2-D editors were drawn last (for the pointer tests).
+    rects: [Option<Rect>; 2],
 }
 
 const PICK_PX: f64 = 8.0;
@@ -42,12 +46,32 @@ impl EditorState {
         EditorState {
             selected: None,
             selected_widget: None,
+            handle: None,
             alpha_top: top,
             tf_path: "transfer.json".into(),
             tf2d_path: "transfer-2d.json".into(),
             joint: None,
             gradient_max: ((r.max - r.min) / h * 0.5).max(1e-9),
+            rects: [None; 2],
         }
+    }
+
+    /// Where the 1-D and the 2-D editors were drawn in the last frame.
+    #[cfg(test)]
+    pub fn rects(&self) -> [Option<Rect>; 2] {
+        self.rects
+    }
+
+    /// The opacity at the 1-D editor's top edge.
+    #[cfg(test)]
+    pub fn alpha_top(&self) -> f64 {
+        self.alpha_top
+    }
+
+    /// The selected point of the 1-D editor and widget of the 2-D editor.
+    #[cfg(test)]
+    pub fn selection(&self) -> (Option<usize>, Option<usize>) {
+        (self.selected, self.selected_widget)
     }
 
     /// Shows both editors; returns whether the view changed.
@@ -116,6 +140,7 @@ impl EditorState {
         let (response, painter) =
             ui.allocate_painter(egui::vec2(380.0, 170.0), Sense::click_and_drag());
         let rect = response.rect;
+        self.rects[0] = Some(rect);
         let [d0, d1] = tf.domain;
         let top = self.alpha_top;
         let to_screen = |u: f64, a: f64| {
@@ -332,6 +357,7 @@ impl EditorState {
         let (response, painter) =
             ui.allocate_painter(egui::vec2(380.0, 200.0), Sense::click_and_drag());
         let rect = response.rect;
+        self.rects[1] = Some(rect);
         if let Some((_, t)) = &self.joint {
             painter.image(
                 t.id(),
@@ -412,17 +438,54 @@ impl EditorState {
                 }
             }
         }
+        // The selected widget's handles: drag one to resize the widget, the opposite
+        // side staying where it is.
+        let selected = self.selected_widget.filter(|&i| i < tf.widgets.len());
+        let handles: Vec<(editor::Handle, Pos2)> = selected
+            .map(|i| editor::widget_handles(&tf.widgets[i]))
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(h, [u, g])| (h, to_screen(u, g)))
+            .collect();
+        for (h, at) in &handles {
+            let colour = if self.handle == Some(*h) {
+                Color32::WHITE
+            } else {
+                Color32::YELLOW
+            };
+            painter.rect_filled(
+                Rect::from_center_size(*at, egui::vec2(7.0, 7.0)),
+                1.0,
+                colour,
+            );
+        }
         if let Some(p) = response.interact_pointer_pos() {
             if response.drag_started_by(egui::PointerButton::Primary) || response.clicked() {
-                let (u, g) = from_screen(p, tf);
-                self.selected_widget = editor::widget_at(tf, u, g);
+                self.handle = handles
+                    .iter()
+                    .find(|(_, at)| at.distance(p) <= PICK_PX as f32)
+                    .map(|(h, _)| *h);
+                if self.handle.is_none() {
+                    let (u, g) = from_screen(p, tf);
+                    self.selected_widget = editor::widget_at(tf, u, g);
+                }
             } else if response.dragged_by(egui::PointerButton::Primary) {
                 if let Some(i) = self.selected_widget {
                     let (u1, g1) = from_screen(p, tf);
-                    let (u0, g0) = from_screen(p - response.drag_delta(), tf);
-                    let _ = editor::move_widget(tf, i, [u1 - u0, g1 - g0]);
+                    match self.handle {
+                        Some(h) => {
+                            let _ = editor::drag_handle(tf, i, h, [u1, g1]);
+                        }
+                        None => {
+                            let (u0, g0) = from_screen(p - response.drag_delta(), tf);
+                            let _ = editor::move_widget(tf, i, [u1 - u0, g1 - g0]);
+                        }
+                    }
                 }
             }
+        }
+        if response.drag_stopped() {
+            self.handle = None;
         }
         ui.horizontal(|ui| {
             let mid = [0.5 * (d0 + d1), 0.3 * tf.gradient_max];
@@ -466,6 +529,7 @@ impl EditorState {
                 }
                 if ui.button("delete").clicked() && editor::delete_widget(tf, i).is_ok() {
                     self.selected_widget = None;
+                    self.handle = None;
                 }
             });
         }
@@ -496,7 +560,9 @@ fn file_row<T>(
     message: &mut String,
 ) -> Option<T> {
     ui.horizontal(|ui| {
-        ui.add(egui::TextEdit::singleline(path).desired_width(180.0));
+        let label = ui.label("file");
+        ui.add(egui::TextEdit::singleline(path).desired_width(160.0))
+            .labelled_by(label.id);
         let p = std::path::Path::new(path.as_str());
         if ui.button("save").clicked() {
             *message = match save(p) {

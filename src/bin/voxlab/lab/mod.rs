@@ -26,6 +26,9 @@ pub struct Options {
     pub frames: Option<u64>,
     pub window_screenshot: Option<PathBuf>,
     pub compare: bool,
+    /// The difference view's sides A and B (default: the interactive backend against
+    /// the CPU f64 oracle).
+    pub sides: Option<[Backend; 2]>,
 }
 
 /// Opens the window and runs until it closes (or `--frames` frames were drawn).

@@ -1,9 +1,10 @@
 //! The window: egui on wgpu, presenting on the ray caster's own device. A thin
-//! shell: the view it shows is a [`ViewState`], every frame is the render job's
-//! (a [`PreparedScene`] of the volume through [`Renderer::render_prepared_with`]: on the
-//! GPU the volume is uploaded once, and interaction re-makes only what it changed),
-//! the editors call [`voxlab::editor`], the difference view
-//! [`voxlab::metrics`]. Nothing here computes an image.
+//! shell: the view it shows is a [`ViewState`], every frame is the render job's,
+//! rendered off the UI thread ([`worker::Frames`]: a prepared scene of the volume, on
+//! the GPU a render session that uploads the volume once), the two sides of the
+//! difference view are rendered off the UI thread too ([`worker::Worker`]), the editors
+//! call [`voxlab::editor`], the difference view [`voxlab::metrics`]. Nothing here
+//! computes an image.
 
 use super::editors;
 use super::worker::{self, Worker};
@@ -11,13 +12,12 @@ use super::Options;
 use eframe::egui;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
 use voxlab::camera::AxisView;
 use voxlab::choice::Choice;
 use voxlab::frame::Frame;
 use voxlab::gpu::context::GpuContext;
 use voxlab::io::frame::rgba8;
-use voxlab::jobs::render::{PreparedScene, Renderer, Scene};
+use voxlab::jobs::render::{Renderer, Scene};
 use voxlab::jobs::view::{ViewProjection, ViewState};
 use voxlab::jobs::Backend;
 use voxlab::metrics::{diff_heatmap, error_stats, ErrorStats};
@@ -71,29 +71,51 @@ pub fn run(options: Options) -> Result<()> {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Show {
     Interactive,
-    Reference,
+    /// One side of the difference view (0: A, 1: B).
+    Side(usize),
     Difference,
+}
+
+/// One side of the difference view: a backend, and its frames of the current view.
+struct Side {
+    backend: Backend,
+    worker: Worker,
+    /// The side's last render (coarse or full).
+    done: Option<worker::Done>,
+    texture: Option<egui::TextureHandle>,
+}
+
+impl Side {
+    fn new(backend: Backend) -> Self {
+        Side {
+            backend,
+            worker: Worker::start(),
+            done: None,
+            texture: None,
+        }
+    }
 }
 
 struct Lab {
     state: ViewState,
+    /// The volume, its voxels shared (clones are cheap: every render request takes one).
     volume: AnyVolume,
     renderer: Renderer,
-    /// `volume` prepared for the interactive frames (on the GPU: uploaded once, with
-    /// the pipelines and set-up volumes cached), made on the first frame.
-    prepared: Option<PreparedScene>,
+    /// The interactive frames, rendered off the UI thread.
+    frames_worker: worker::Frames,
     /// The interactive backend's last frame, with its generation.
     frame: Option<(u64, Frame)>,
     texture: Option<egui::TextureHandle>,
     generation: u64,
-    rendered: u64,
+    /// The generation last asked of `frames_worker`.
+    requested: u64,
     frame_ms: f64,
     samples_per_ray: f64,
     frames_drawn: u64,
-    worker: Worker,
-    reference_backend: Backend,
-    reference: Option<worker::Done>,
-    reference_texture: Option<egui::TextureHandle>,
+    /// The difference view's sides A and B. A side on the interactive backend takes the
+    /// interactive frame; another is rendered by its own worker.
+    sides: [Side; 2],
+    /// The difference A − B of the current view: its generation, statistics and heat map.
     diff: Option<(u64, ErrorStats, egui::TextureHandle)>,
     within: Option<bool>,
     show: Show,
@@ -110,6 +132,8 @@ struct Lab {
     window_pixels: Option<Arc<Mutex<Option<Arc<egui::ColorImage>>>>>,
     /// Where `--frames`' final writes report a failure to [`run`].
     failure_slot: Arc<Mutex<Option<Error>>>,
+    /// Where the 3-D view was drawn in the last frame.
+    view_rect: Option<egui::Rect>,
 }
 
 impl Lab {
@@ -120,25 +144,24 @@ impl Lab {
     ) -> Result<Self> {
         let h = o.volume.histogram(256);
         let histogram_range = [h.min, h.max];
+        let volume = o.volume.into_shared();
+        let [a, b] = o.sides.unwrap_or([renderer.backend(), Backend::Cpu]);
         Ok(Lab {
             histogram: voxlab::volume::log_heights(&h.counts),
             histogram_range,
-            editors: editors::EditorState::new(&o.volume, &o.state),
+            editors: editors::EditorState::new(&volume, &o.state),
             state: o.state,
-            volume: o.volume,
+            frames_worker: worker::Frames::start(Renderer::on(renderer.engine()), volume.clone()),
+            volume,
             renderer,
-            prepared: None,
             frame: None,
             texture: None,
             generation: 1,
-            rendered: 0,
+            requested: 0,
             frame_ms: 0.0,
             samples_per_ray: 0.0,
             frames_drawn: 0,
-            worker: Worker::start(),
-            reference_backend: Backend::Cpu,
-            reference: None,
-            reference_texture: None,
+            sides: [Side::new(a), Side::new(b)],
             diff: None,
             within: None,
             show: if o.compare {
@@ -154,6 +177,7 @@ impl Lab {
             window_screenshot: o.window_screenshot,
             window_pixels: None,
             failure_slot,
+            view_rect: None,
         })
     }
 
@@ -169,131 +193,162 @@ impl Lab {
         Ok((scene, settings))
     }
 
-    /// The interactive frame of the current view, from the prepared volume (prepared
-    /// again only when the settings need it: on the CPU backends, another filter or
-    /// gradient method; on the GPU the session serves every setting).
-    fn render_frame(&mut self) -> Result<voxlab::jobs::render::Rendered> {
-        self.state.validate()?;
-        let camera = self.state.camera()?;
-        let mut settings = self.state.settings.clone();
-        settings.sample_count = true;
-        let tf = &self.state.transfer;
-        let prepared = match self.prepared.take() {
-            Some(p) if p.serves(&settings) => p,
-            _ => self.renderer.prepare_volume(&self.volume, tf, &settings)?,
-        };
-        let out = self
-            .renderer
-            .render_prepared_with(&prepared, tf, &camera, &settings, &|_, _| {});
-        self.prepared = Some(prepared);
-        out
-    }
-
-    /// Renders the interactive frame when the view changed.
+    /// Asks for the interactive frame of the current view when it changed (the frames'
+    /// worker renders it off the UI thread; a newer view cancels it).
     fn render(&mut self, ctx: &egui::Context) {
-        if self.rendered == self.generation {
+        if self.requested == self.generation {
             return;
         }
-        self.rendered = self.generation;
-        let t = Instant::now();
-        let result = self
-            .render_frame()
-            .map(|out| (out, t.elapsed().as_secs_f64()));
-        match result {
-            Ok((out, seconds)) => {
-                self.frame_ms = seconds * 1e3;
-                let px = (out.output.image.width * out.output.image.height).max(1);
-                self.samples_per_ray = out.output.total_samples as f64 / px as f64;
-                let image = to_color_image(&out.output.image);
-                match &mut self.texture {
-                    Some(t) => t.set(image, egui::TextureOptions::NEAREST),
-                    None => {
-                        self.texture =
-                            Some(ctx.load_texture("view", image, egui::TextureOptions::NEAREST))
-                    }
-                }
-                self.frame = Some((self.generation, out.output.image));
-                self.message.clear();
-            }
-            Err(e) => self.message = format!("render: {e}"),
-        }
-        if self.show != Show::Interactive {
-            self.request_reference(ctx);
-        }
+        self.requested = self.generation;
+        self.frames_worker.request(worker::FrameJob {
+            generation: self.generation,
+            state: self.state.clone(),
+            repaint: ctx.clone(),
+        });
     }
 
-    /// Starts the reference render of the current view (coarse, then full), cancelling
-    /// the one in flight.
-    fn request_reference(&mut self, ctx: &egui::Context) {
-        if self
-            .reference
-            .as_ref()
-            .is_some_and(|r| r.generation == self.generation && r.full)
-            || self
-                .worker
-                .busy_with(self.generation, self.reference_backend)
-        {
-            return;
-        }
-        match self.scene() {
-            Ok((scene, settings)) => self.worker.request(worker::Job {
-                generation: self.generation,
-                backend: self.reference_backend,
-                scene,
-                settings,
-                view: self.state.view,
-                size: [self.state.width, self.state.height],
-                repaint: ctx.clone(),
-            }),
-            Err(e) => self.message = format!("reference: {e}"),
-        }
-    }
-
-    /// Takes finished reference renders and updates the difference.
-    fn collect_reference(&mut self, ctx: &egui::Context) {
-        while let Some(done) = self.worker.poll() {
+    /// Takes finished interactive frames.
+    fn collect_frames(&mut self, ctx: &egui::Context) {
+        while let Some(done) = self.frames_worker.poll() {
             match done.result {
-                Ok(ref frame) => {
-                    let image = to_color_image(frame);
-                    match &mut self.reference_texture {
+                Ok(out) => {
+                    self.frame_ms = done.seconds * 1e3;
+                    let px = (out.output.image.width * out.output.image.height).max(1);
+                    self.samples_per_ray = out.output.total_samples as f64 / px as f64;
+                    let image = to_color_image(&out.output.image);
+                    match &mut self.texture {
                         Some(t) => t.set(image, egui::TextureOptions::NEAREST),
                         None => {
-                            self.reference_texture = Some(ctx.load_texture(
-                                "reference",
-                                image,
-                                egui::TextureOptions::NEAREST,
-                            ))
+                            self.texture =
+                                Some(ctx.load_texture("view", image, egui::TextureOptions::NEAREST))
                         }
                     }
+                    self.frame = Some((done.generation, out.output.image));
+                    if self.message.starts_with("render:") {
+                        self.message.clear();
+                    }
                 }
-                Err(Error::Cancelled) => continue,
-                Err(ref e) => self.message = format!("reference: {e}"),
+                Err(Error::Cancelled) => {}
+                Err(e) => self.message = format!("render: {e}"),
             }
-            self.reference = Some(done);
         }
-        let (Some((g, port)), Some(r)) = (&self.frame, &self.reference) else {
+    }
+
+    /// Whether side `i` of the difference view takes the interactive frame.
+    fn side_is_interactive(&self, i: usize) -> bool {
+        self.sides[i].backend == self.renderer.backend()
+    }
+
+    /// Starts the renders of the current view on the sides that are not the interactive
+    /// frame (coarse, then full), cancelling those in flight.
+    fn request_sides(&mut self, ctx: &egui::Context) {
+        for i in 0..2 {
+            if self.side_is_interactive(i) {
+                continue;
+            }
+            let side = &self.sides[i];
+            if side
+                .done
+                .as_ref()
+                .is_some_and(|r| r.generation == self.generation && r.full)
+                || side.worker.busy_with(self.generation, side.backend)
+            {
+                continue;
+            }
+            match self.scene() {
+                Ok((scene, settings)) => {
+                    let job = worker::Job {
+                        generation: self.generation,
+                        backend: self.sides[i].backend,
+                        scene,
+                        settings,
+                        view: self.state.view,
+                        size: [self.state.width, self.state.height],
+                        repaint: ctx.clone(),
+                    };
+                    self.sides[i].worker.request(job);
+                }
+                Err(e) => self.message = format!("side {}: {e}", ["A", "B"][i]),
+            }
+        }
+    }
+
+    /// Side `i`'s full frame of the current view, once there is one.
+    fn side_frame(&self, i: usize) -> Option<&Frame> {
+        if self.side_is_interactive(i) {
+            return self
+                .frame
+                .as_ref()
+                .filter(|(g, _)| *g == self.generation)
+                .map(|(_, f)| f);
+        }
+        match &self.sides[i].done {
+            Some(d) if d.full && d.generation == self.generation => d.result.as_ref().ok(),
+            _ => None,
+        }
+    }
+
+    /// Takes the sides' finished renders and makes the difference A − B of the
+    /// current view once both sides have their full frame.
+    fn collect_sides(&mut self, ctx: &egui::Context) {
+        for i in 0..2 {
+            while let Some(done) = self.sides[i].worker.poll() {
+                match done.result {
+                    Ok(ref frame) => {
+                        let image = to_color_image(frame);
+                        let side = &mut self.sides[i];
+                        match &mut side.texture {
+                            Some(t) => t.set(image, egui::TextureOptions::NEAREST),
+                            None => {
+                                side.texture = Some(ctx.load_texture(
+                                    ["side-a", "side-b"][i],
+                                    image,
+                                    egui::TextureOptions::NEAREST,
+                                ))
+                            }
+                        }
+                    }
+                    Err(Error::Cancelled) => continue,
+                    Err(ref e) => self.message = format!("side {}: {e}", ["A", "B"][i]),
+                }
+                self.sides[i].done = Some(done);
+            }
+        }
+        if self.diff.as_ref().is_some_and(|d| d.0 == self.generation) {
+            return;
+        }
+        let (Some(a), Some(b)) = (self.side_frame(0), self.side_frame(1)) else {
             return;
         };
-        let Ok(oracle) = &r.result else { return };
-        if !(r.full && r.generation == *g && self.diff.as_ref().is_none_or(|d| d.0 != *g)) {
+        if a.data.len() != b.data.len() {
             return;
         }
-        if oracle.data.len() != port.data.len() {
-            return;
-        }
-        let stats = error_stats(&oracle.data, &port.data, f64::INFINITY);
-        let heat = diff_heatmap(oracle, port, None);
+        // B is the reference: the statistics are A's error against it.
+        let stats = error_stats(&b.data, &a.data, f64::INFINITY);
+        let heat = diff_heatmap(b, a, None);
         let texture =
             ctx.load_texture("diff", to_color_image(&heat), egui::TextureOptions::NEAREST);
-        let (_, gpu_tol) = voxlab::bench::raycast::raycast_tolerances(&self.state.settings);
-        let (f32_tol, _) = voxlab::bench::raycast::raycast_tolerances(&self.state.settings);
-        let tol = match (self.renderer.backend(), r.backend) {
-            (Backend::Gpu, _) => Some(gpu_tol),
+        let (f32_tol, gpu_tol) = voxlab::bench::raycast::raycast_tolerances(&self.state.settings);
+        let pair = (self.sides[0].backend, self.sides[1].backend);
+        let tol = match pair {
+            (Backend::Gpu, Backend::Cpu | Backend::CpuF32)
+            | (Backend::Cpu | Backend::CpuF32, Backend::Gpu) => Some(gpu_tol),
             (Backend::CpuF32, Backend::Cpu) | (Backend::Cpu, Backend::CpuF32) => Some(f32_tol),
             _ => None,
         };
         self.within = tol.map(|t| t.admits(&stats));
-        self.diff = Some((*g, stats, texture));
+        self.diff = Some((self.generation, stats, texture));
+    }
+
+    /// Whether the current view's difference is done (or cannot be made).
+    fn difference_done(&self) -> bool {
+        self.diff.as_ref().is_some_and(|d| d.0 == self.generation)
+            || (0..2).any(|i| {
+                self.sides[i]
+                    .done
+                    .as_ref()
+                    .is_some_and(|r| r.generation == self.generation && r.full && r.result.is_err())
+            })
     }
 
     fn save_state(&mut self) {
@@ -323,13 +378,13 @@ impl Lab {
     /// `--frames`: after the last frame (and, in the reference and difference views,
     /// once the reference is done), write what was asked for and close.
     fn finish(&mut self, ctx: &egui::Context) {
-        let reference_done = self.show == Show::Interactive
-            || self.diff.as_ref().is_some_and(|d| d.0 == self.generation)
-            || self
-                .reference
-                .as_ref()
-                .is_some_and(|r| r.generation == self.generation && r.full && r.result.is_err());
-        if !reference_done {
+        let frame_done = self
+            .frame
+            .as_ref()
+            .is_some_and(|(g, _)| *g == self.generation)
+            || self.message.starts_with("render:");
+        let reference_done = self.show == Show::Interactive || self.difference_done();
+        if !frame_done || !reference_done {
             ctx.request_repaint_after(std::time::Duration::from_millis(50));
             return;
         }
@@ -651,23 +706,43 @@ impl Lab {
         }
         ui.horizontal(|ui| {
             ui.label("image");
-            ui.add(egui::DragValue::new(&mut self.state.width).range(16..=4096));
-            ui.label("×");
-            ui.add(egui::DragValue::new(&mut self.state.height).range(16..=4096));
+            ui.add(
+                egui::DragValue::new(&mut self.state.width)
+                    .range(16..=4096)
+                    .prefix("w "),
+            );
+            ui.add(
+                egui::DragValue::new(&mut self.state.height)
+                    .range(16..=4096)
+                    .prefix("h "),
+            );
         });
         ui.separator();
-        ui.label("compare with");
-        egui::ComboBox::from_id_salt("reference")
-            .selected_text(self.reference_backend.name())
-            .show_ui(ui, |ui| {
-                for b in [Backend::Cpu, Backend::CpuF32] {
-                    ui.selectable_value(&mut self.reference_backend, b, b.name());
-                }
-            });
+        ui.label("difference view: A − B (B is the reference)");
+        for (i, name) in ["A", "B"].into_iter().enumerate() {
+            let interactive = self.renderer.backend();
+            let before = self.sides[i].backend;
+            egui::ComboBox::from_label(format!("side {name}"))
+                .selected_text(side_label(before, interactive))
+                .show_ui(ui, |ui| {
+                    for b in [Backend::Gpu, Backend::CpuF32, Backend::Cpu] {
+                        ui.selectable_value(
+                            &mut self.sides[i].backend,
+                            b,
+                            side_label(b, interactive),
+                        );
+                    }
+                });
+            if self.sides[i].backend != before {
+                self.sides[i].done = None;
+                self.diff = None;
+            }
+        }
         ui.horizontal(|ui| {
             ui.selectable_value(&mut self.show, Show::Interactive, "interactive");
-            ui.selectable_value(&mut self.show, Show::Reference, "reference");
-            ui.selectable_value(&mut self.show, Show::Difference, "difference (D)");
+            ui.selectable_value(&mut self.show, Show::Side(0), "A");
+            ui.selectable_value(&mut self.show, Show::Side(1), "B");
+            ui.selectable_value(&mut self.show, Show::Difference, "A − B (D)");
         });
         ui.separator();
         ui.horizontal(|ui| {
@@ -700,7 +775,8 @@ impl Lab {
         let size = egui::vec2(self.state.width as f32, self.state.height as f32);
         let texture = match self.show {
             Show::Interactive => self.texture.as_ref(),
-            Show::Reference => self.reference_texture.as_ref(),
+            Show::Side(i) if self.side_is_interactive(i) => self.texture.as_ref(),
+            Show::Side(i) => self.sides[i].texture.as_ref(),
             Show::Difference => self.diff.as_ref().map(|d| &d.2),
         }
         .or(self.texture.as_ref());
@@ -712,6 +788,7 @@ impl Lab {
             ),
             None => ui.allocate_response(size, egui::Sense::click_and_drag()),
         };
+        self.view_rect = Some(response.rect);
         let shift = ui.input(|i| i.modifiers.shift);
         let d = response.drag_delta();
         if d != egui::Vec2::ZERO {
@@ -743,25 +820,36 @@ impl Lab {
             self.state.height
         ));
         if self.show != Show::Interactive {
-            match &self.reference {
-                Some(r) if r.generation == self.generation => ui.label(format!(
-                    "{}: {} in {:.2} s",
-                    r.backend.name(),
-                    if r.full {
-                        "full"
-                    } else {
-                        "coarse (refining…)"
-                    },
-                    r.seconds
-                )),
-                _ => ui.label(format!("{}: rendering…", self.reference_backend.name())),
-            };
+            for i in 0..2 {
+                let name = ["A", "B"][i];
+                let side = &self.sides[i];
+                if self.side_is_interactive(i) {
+                    ui.label(format!(
+                        "{name}: {} (the interactive frame)",
+                        side.backend.name()
+                    ));
+                    continue;
+                }
+                match &side.done {
+                    Some(r) if r.generation == self.generation => ui.label(format!(
+                        "{name}: {}, {} in {:.2} s",
+                        r.backend.name(),
+                        if r.full {
+                            "full"
+                        } else {
+                            "coarse (refining…)"
+                        },
+                        r.seconds
+                    )),
+                    _ => ui.label(format!("{name}: {}, rendering…", side.backend.name())),
+                };
+            }
             if let Some((g, s, _)) = &self.diff {
                 if *g == self.generation {
                     ui.label(format!(
-                        "{} vs {}: max |Δ| {:.3e}, RMSE {:.3e}, PSNR {:.1} dB{}",
-                        self.renderer.backend().name(),
-                        self.reference_backend.name(),
+                        "A ({}) − B ({}): max |Δ| {:.3e}, RMSE {:.3e}, PSNR {:.1} dB{}",
+                        self.sides[0].backend.name(),
+                        self.sides[1].backend.name(),
                         s.max_abs,
                         s.rmse,
                         s.psnr_db,
@@ -827,12 +915,28 @@ fn write_window(path: &std::path::Path, image: &egui::ColorImage) -> Result<()> 
     voxlab::io::write_frame(path, &frame, voxlab::io::PngOptions::default())
 }
 
+/// How the side pickers name a backend: the interactive one says so.
+fn side_label(b: Backend, interactive: Backend) -> String {
+    if b == interactive {
+        format!("{} (interactive)", b.name())
+    } else {
+        b.name().to_string()
+    }
+}
+
 fn to_color_image(frame: &Frame) -> egui::ColorImage {
     egui::ColorImage::from_rgba_unmultiplied([frame.width, frame.height], &rgba8(frame, None))
 }
 
 impl eframe::App for Lab {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        self.draw(ui);
+    }
+}
+
+impl Lab {
+    /// One frame of the window: keys, panels, renders.
+    fn draw(&mut self, ui: &mut egui::Ui) {
         let ctx = ui.ctx().clone();
         self.keys(&ctx);
         egui::Panel::left("settings")
@@ -858,10 +962,11 @@ impl eframe::App for Lab {
                 });
             });
         self.render(&ctx);
+        self.collect_frames(&ctx);
         if self.show != Show::Interactive {
-            self.request_reference(&ctx);
+            self.request_sides(&ctx);
         }
-        self.collect_reference(&ctx);
+        self.collect_sides(&ctx);
         egui::CentralPanel::default().show(ui, |ui| self.view_panel(ui));
         self.help_window(&ctx);
         self.frames_drawn += 1;
@@ -872,5 +977,358 @@ impl eframe::App for Lab {
             // Scripted runs keep drawing until they are done.
             ctx.request_repaint();
         }
+    }
+}
+
+/// The window driven by simulated pointer and key events (egui_kittest: the lab's own
+/// drawing code, without a display), on the CPU backends.
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use egui::{Event, Modifiers, PointerButton, Pos2, Vec2};
+    use egui_kittest::kittest::Queryable;
+    use egui_kittest::Harness;
+    use std::time::{Duration, Instant};
+    use voxlab::editor::{self, WidgetKind};
+    use voxlab::jobs::input::VolumeInput;
+    use voxlab::jobs::view::DEGREES_PER_PIXEL;
+    use voxlab::transfer2d::TransferFunction2D;
+
+    /// The lab on `input` at `size`² pixels, rendering on `backend`.
+    fn lab(input: &str, size: usize, backend: Backend) -> Harness<'static, Lab> {
+        let input = VolumeInput::new(input);
+        let volume = input.load(&()).unwrap();
+        let state = ViewState::new(input, &volume, size, size).unwrap();
+        let options = Options {
+            state,
+            volume,
+            backend,
+            save_state: None,
+            screenshot: None,
+            frames: None,
+            window_screenshot: None,
+            compare: false,
+            sides: None,
+        };
+        let lab = Lab::new(
+            options,
+            Renderer::new(backend).unwrap(),
+            Arc::new(Mutex::new(None)),
+        )
+        .unwrap();
+        Harness::builder()
+            .with_size(Vec2::new(1400.0, 1000.0))
+            .build_ui_state(|ui, lab: &mut Lab| lab.draw(ui), lab)
+    }
+
+    /// Steps the window until `done` (the renders run on their own threads).
+    fn wait(h: &mut Harness<'static, Lab>, what: &str, done: impl Fn(&Lab) -> bool) {
+        let start = Instant::now();
+        while !done(h.state()) {
+            assert!(
+                start.elapsed() < Duration::from_secs(300),
+                "timed out waiting for {what}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+            h.step();
+        }
+    }
+
+    /// The interactive frame of the current view is there.
+    fn frame_ready(lab: &Lab) -> bool {
+        lab.frame
+            .as_ref()
+            .is_some_and(|(g, _)| *g == lab.generation)
+    }
+
+    fn button(h: &Harness<'static, Lab>, pos: Pos2, button: PointerButton, pressed: bool) {
+        h.event(Event::PointerButton {
+            pos,
+            button,
+            pressed,
+            modifiers: Modifiers::NONE,
+        });
+    }
+
+    /// Presses `b` at `from`, moves to `to` in eight steps and releases it there.
+    fn drag(h: &mut Harness<'static, Lab>, from: Pos2, to: Pos2, b: PointerButton) {
+        h.hover_at(from);
+        h.step();
+        button(h, from, b, true);
+        h.step();
+        for k in 1..=8 {
+            h.hover_at(from + (to - from) * (k as f32 / 8.0));
+            h.step();
+        }
+        button(h, to, b, false);
+        h.step();
+    }
+
+    fn click(h: &mut Harness<'static, Lab>, at: Pos2, b: PointerButton) {
+        h.hover_at(at);
+        h.step();
+        button(h, at, b, true);
+        h.step();
+        button(h, at, b, false);
+        h.step();
+    }
+
+    #[test]
+    fn dragging_the_view_orbits_it_and_the_wheel_zooms() {
+        let mut h = lab("phantom:sphere:16", 64, Backend::CpuF32);
+        h.step();
+        wait(&mut h, "the first frame", frame_ready);
+        let rect = h.state().view_rect.unwrap();
+        let before = h.state().state.view;
+        // 80 px to the right, as the drag reports it (egui decides it is a drag after a
+        // few pixels, which the orbit does not see).
+        drag(
+            &mut h,
+            rect.center(),
+            rect.center() + Vec2::new(80.0, 0.0),
+            PointerButton::Primary,
+        );
+        let after = h.state().state.view;
+        let turned = (before.azimuth_deg - after.azimuth_deg).rem_euclid(360.0);
+        assert!(
+            turned > DEGREES_PER_PIXEL * 70.0 && turned <= DEGREES_PER_PIXEL * 80.0 + 1e-9,
+            "azimuth {} → {}",
+            before.azimuth_deg,
+            after.azimuth_deg
+        );
+        assert_eq!(after.elevation_deg, before.elevation_deg);
+        // The frame follows the view.
+        wait(&mut h, "the orbited frame", frame_ready);
+        // The wheel over the view zooms in by exp(Δ/200).
+        let d0 = h.state().state.view.distance_mm;
+        h.hover_at(rect.center());
+        h.step();
+        h.event(Event::MouseWheel {
+            unit: egui::MouseWheelUnit::Point,
+            delta: Vec2::new(0.0, 100.0),
+            modifiers: Modifiers::NONE,
+            phase: egui::TouchPhase::Move,
+            source: egui::MouseWheelSource::Unknown,
+        });
+        for _ in 0..60 {
+            h.step();
+        }
+        let d1 = h.state().state.view.distance_mm;
+        let want = d0 / 0.5f64.exp();
+        assert!(
+            (d1 - want).abs() < 0.01 * want,
+            "distance {d0} → {d1}, want {want}"
+        );
+        // A right-drag pans: the target moves, the direction of view does not.
+        let before = h.state().state.view;
+        drag(
+            &mut h,
+            rect.center(),
+            rect.center() + Vec2::new(0.0, 40.0),
+            PointerButton::Secondary,
+        );
+        let after = h.state().state.view;
+        assert_ne!(after.target, before.target);
+        assert_eq!(
+            (after.azimuth_deg, after.elevation_deg),
+            (before.azimuth_deg, before.elevation_deg)
+        );
+    }
+
+    #[test]
+    fn the_1d_editor_adds_moves_and_deletes_points_where_the_pointer_is() {
+        let mut h = lab("phantom:sphere:16", 48, Backend::CpuF32);
+        h.step();
+        let rect = h.state().editors.rects()[0].unwrap();
+        let n = h.state().state.transfer.points.len();
+        let [d0, d1] = h.state().state.transfer.domain;
+        // High in the editor, where no point is: a click adds one there.
+        let at = Pos2::new(rect.left() + 0.37 * rect.width(), rect.top() + 12.0);
+        click(&mut h, at, PointerButton::Primary);
+        let tf = &h.state().state.transfer;
+        assert_eq!(tf.points.len(), n + 1);
+        let (Some(i), _) = h.state().editors.selection() else {
+            panic!("the new point is selected");
+        };
+        let px = (d1 - d0) / rect.width() as f64;
+        assert!(
+            (tf.points[i].value - (d0 + 0.37 * (d1 - d0))).abs() <= px,
+            "value {}",
+            tf.points[i].value
+        );
+        let frames_before = h.state().generation;
+        // Dragged 30 px right: the point follows (held between its neighbours).
+        let value = tf.points[i].value;
+        drag(
+            &mut h,
+            at,
+            at + Vec2::new(30.0, 0.0),
+            PointerButton::Primary,
+        );
+        let moved = h.state().state.transfer.points[i].value;
+        assert!(
+            moved > value && moved <= value + 30.0 * px + 1e-9,
+            "{value} → {moved}"
+        );
+        assert!(
+            h.state().generation > frames_before,
+            "the edit renders again"
+        );
+        // A right-click on it deletes it.
+        let top = h.state().editors.alpha_top();
+        let p = h.state().state.transfer.points[i];
+        let on = Pos2::new(
+            rect.left() + ((p.value - d0) / (d1 - d0)) as f32 * rect.width(),
+            rect.bottom() - (p.rgba[3] / top) as f32 * (rect.height() - 14.0) - 14.0,
+        );
+        click(&mut h, on, PointerButton::Secondary);
+        assert_eq!(h.state().state.transfer.points.len(), n);
+    }
+
+    #[test]
+    fn a_2d_widget_follows_its_handle() {
+        let mut h = lab("phantom:marschner-lobb:24", 48, Backend::CpuF32);
+        // One rectangle on a linear gradient axis.
+        {
+            let lab = h.state_mut();
+            let mut tf = TransferFunction2D::from_1d(&lab.state.transfer, 64, 2.0);
+            tf.gradient_axis = voxlab::transfer2d::GradientAxis::Linear;
+            tf.widgets.clear();
+            let [d0, d1] = tf.domain;
+            let mid = 0.5 * (d0 + d1);
+            editor::add_widget(
+                &mut tf,
+                WidgetKind::Rectangle,
+                [mid, 1.0],
+                [0.2 * (d1 - d0), 0.5],
+                [1.0, 0.5, 0.2, 0.4],
+            )
+            .unwrap();
+            lab.state.settings.transfer_2d = Some(tf);
+            lab.changed();
+        }
+        h.step();
+        let rect = h.state().editors.rects()[1].unwrap();
+        let tf = h.state().state.settings.transfer_2d.clone().unwrap();
+        let [d0, d1] = tf.domain;
+        let to_screen = |u: f64, g: f64| {
+            Pos2::new(
+                rect.left() + ((u - d0) / (d1 - d0)) as f32 * rect.width(),
+                rect.bottom() - (g / tf.gradient_max) as f32 * rect.height(),
+            )
+        };
+        let (c, half) = editor::widget_box(&tf.widgets[0]);
+        // A click inside selects it; its handles appear.
+        click(&mut h, to_screen(c[0], c[1]), PointerButton::Primary);
+        assert_eq!(h.state().editors.selection().1, Some(0));
+        // The high corner dragged 40 px right and 30 px up; the low corner stays.
+        let corner = to_screen(c[0] + half[0], c[1] + half[1]);
+        let to = corner + Vec2::new(40.0, -30.0);
+        drag(&mut h, corner, to, PointerButton::Primary);
+        let tf2 = h.state().state.settings.transfer_2d.clone().unwrap();
+        let (c2, half2) = editor::widget_box(&tf2.widgets[0]);
+        let (px_v, px_g) = (
+            (d1 - d0) / rect.width() as f64,
+            tf.gradient_max / rect.height() as f64,
+        );
+        let low = [c[0] - half[0], c[1] - half[1]];
+        let low2 = [c2[0] - half2[0], c2[1] - half2[1]];
+        assert!((low2[0] - low[0]).abs() < 1e-9 && (low2[1] - low[1]).abs() < 1e-9);
+        let high2 = [c2[0] + half2[0], c2[1] + half2[1]];
+        let want = [c[0] + half[0] + 40.0 * px_v, c[1] + half[1] + 30.0 * px_g];
+        assert!(
+            (high2[0] - want[0]).abs() <= 1.5 * px_v && (high2[1] - want[1]).abs() <= 1.5 * px_g,
+            "high corner {high2:?}, want {want:?}"
+        );
+        // Dragging inside moves the widget whole.
+        let inside = to_screen(c2[0], c2[1]);
+        drag(
+            &mut h,
+            inside,
+            inside + Vec2::new(-20.0, 0.0),
+            PointerButton::Primary,
+        );
+        let tf3 = h.state().state.settings.transfer_2d.clone().unwrap();
+        let (c3, half3) = editor::widget_box(&tf3.widgets[0]);
+        assert!((half3[0] - half2[0]).abs() < 1e-9 && c3[0] < c2[0]);
+    }
+
+    #[test]
+    fn keys_choose_views_and_the_difference_of_two_chosen_sides() {
+        let mut h = lab("phantom:sphere:16", 40, Backend::CpuF32);
+        h.step();
+        wait(&mut h, "the first frame", frame_ready);
+        let mut v = h.state().state.view;
+        h.key_press(egui::Key::Num5);
+        h.step();
+        v.look_along(AxisView::PlusZ);
+        assert_eq!(h.state().state.view, v);
+        h.key_press(egui::Key::O);
+        h.step();
+        assert!(matches!(
+            h.state().state.view.projection,
+            ViewProjection::Orthographic { .. }
+        ));
+        // Side A from the picker: the f64 oracle instead of the interactive frame.
+        h.get_by_label("side A").click();
+        h.run_steps(3);
+        let options = h.query_all_by_label("cpu").collect::<Vec<_>>();
+        options.last().expect("the picker lists cpu").click();
+        h.step();
+        assert_eq!(h.state().sides[0].backend, Backend::Cpu);
+        // D: the difference view; both sides are the oracle, so A − B is exactly 0.
+        h.key_press(egui::Key::D);
+        h.step();
+        assert!(h.state().show == Show::Difference);
+        wait(&mut h, "the difference", |lab| {
+            lab.diff.as_ref().is_some_and(|d| d.0 == lab.generation)
+        });
+        let (_, stats, _) = h.state().diff.as_ref().unwrap();
+        assert_eq!(stats.max_abs, 0.0);
+        // Side B from the picker: the interactive frame (cpu-f32) against A (the
+        // oracle), within the f32 path's stated tolerance.
+        h.get_by_label("side B").click();
+        h.run_steps(3);
+        let options = h
+            .query_all_by_label("cpu-f32 (interactive)")
+            .collect::<Vec<_>>();
+        options.last().expect("the picker lists cpu-f32").click();
+        h.step();
+        assert_eq!(h.state().sides[1].backend, Backend::CpuF32);
+        h.state_mut().changed();
+        wait(&mut h, "the difference", |lab| {
+            lab.diff.as_ref().is_some_and(|d| d.0 == lab.generation)
+        });
+        let (_, stats, _) = h.state().diff.as_ref().unwrap();
+        assert!(stats.max_abs > 0.0);
+        assert_eq!(h.state().within, Some(true));
+    }
+
+    #[test]
+    fn frames_render_off_the_ui_thread() {
+        // The f64 oracle at 256² on a 64³ phantom takes a good part of a second.
+        let mut h = lab("phantom:shepp-logan-modified:64", 256, Backend::Cpu);
+        h.step();
+        wait(&mut h, "the first frame", frame_ready);
+        // A new view: the step that asks for its frame returns without it (a render on
+        // the UI thread would have drawn it within the step), and the frame comes
+        // later.
+        h.state_mut().state.view.orbit_by(30.0, 0.0);
+        h.state_mut().changed();
+        h.step();
+        assert_eq!(h.state().requested, h.state().generation);
+        assert!(!frame_ready(h.state()), "the step waited for the render");
+        wait(&mut h, "the new frame", frame_ready);
+        // A newer view cancels the one in flight: only the last is shown.
+        for _ in 0..3 {
+            h.state_mut().state.view.orbit_by(30.0, 0.0);
+            h.state_mut().changed();
+            h.step();
+        }
+        wait(&mut h, "the last frame", frame_ready);
+        let lab = h.state();
+        let (scene, settings) = lab.scene().unwrap();
+        let want = voxlab::jobs::render::render(&scene, &settings, Backend::Cpu).unwrap();
+        assert_eq!(lab.frame.as_ref().unwrap().1, want.image);
     }
 }
