@@ -2,8 +2,9 @@
 //! library computes them (`jobs::radon`, the code behind `voxlab.transform.radon` and
 //! `iradon`), on the CPU in f64 and f32 and on the GPU when an adapter is found.
 //!
-//! Cases: the radon of a random `n²` disc image at 180 angles, and the iradon of its
-//! `(n, 180)` sinogram onto `n²` (`circle=True`, ramp filter) for each interpolation;
+//! Cases: the radon of a random `n²` disc image at 180 angles, the iradon of its
+//! `(n, 180)` sinogram onto `n²` (`circle=True`, ramp filter) for each interpolation,
+//! and one iteration of `iradon_sart` on it (relaxation 0.15);
 //! `n` = 256 (the size of docs/bench/python-overhead.md and of scikit-image's timings
 //! there). Times are whole job calls (filtering included), medians of
 //! `VOXLAB_BENCH_RUNS` (default 5) runs after one warm-up, in milliseconds. Under
@@ -15,7 +16,7 @@ use common::{median_min_max, BenchArgs};
 use std::time::Instant;
 use voxlab::cpu::radon::{rotation, Interpolation};
 use voxlab::cpu::ramp::RampFilter;
-use voxlab::jobs::radon::{iradon, radon, IradonOptions};
+use voxlab::jobs::radon::{iradon, iradon_sart, radon, IradonOptions, SartOptions};
 use voxlab::jobs::Backend;
 
 fn timed<T>(args: &BenchArgs, mut f: impl FnMut() -> T) -> (f64, f64, f64) {
@@ -82,6 +83,38 @@ fn main() {
         }
     }
     let sino = radon(&image, n, n, &maps, true, Backend::Cpu, &()).unwrap();
+    let name = format!("iradon_sart {n}² from {angles} views, one iteration");
+    if args.wants(&name) {
+        let sino32: Vec<f32> = sino.data.iter().map(|&v| v as f32).collect();
+        let theta32: Vec<f32> = theta.iter().map(|&v| v as f32).collect();
+        for &(label, b) in &backends {
+            let t = if b == Backend::Cpu {
+                let o = SartOptions {
+                    image: None,
+                    shifts: None,
+                    clip: None,
+                    relaxation: 0.15,
+                };
+                timed(&args, || {
+                    iradon_sart(&sino.data, n, &theta, &o, b, &()).unwrap()
+                })
+            } else {
+                let o = SartOptions {
+                    image: None,
+                    shifts: None,
+                    clip: None,
+                    relaxation: 0.15,
+                };
+                timed(&args, || {
+                    iradon_sart(&sino32, n, &theta32, &o, b, &()).unwrap()
+                })
+            };
+            println!(
+                "| {name} | {label} | {:.1} | {:.1} | {:.1} |",
+                t.0, t.1, t.2
+            );
+        }
+    }
     for kind in [
         Interpolation::Linear,
         Interpolation::Nearest,

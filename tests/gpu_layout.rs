@@ -343,6 +343,29 @@ fn radon_params_layout_agrees() {
     }
 }
 
+#[test]
+fn sart_ray_layout_agrees() {
+    use voxlab::gpu::radon::{sart_shader_source, SartRayGpu};
+    let src = sart_shader_source();
+    let (span, members) = wgsl_struct_layout(&src, "SartRayGpu");
+    assert_eq!(span as usize, size_of::<SartRayGpu>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("ds", offset_of!(SartRayGpu, ds)),
+        ("dx", offset_of!(SartRayGpu, dx)),
+        ("dy", offset_of!(SartRayGpu, dy)),
+        ("x0", offset_of!(SartRayGpu, x0)),
+        ("y0", offset_of!(SartRayGpu, y0)),
+        ("ns", offset_of!(SartRayGpu, ns)),
+        ("window", offset_of!(SartRayGpu, window)),
+        ("live", offset_of!(SartRayGpu, live)),
+    ];
+    assert_eq!(members.len(), rust.len(), "member count");
+    for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {
+        assert_eq!(wname, rname, "member order");
+        assert_eq!(*woff as usize, *roff, "offset of {rname}");
+    }
+}
+
 /// The Parker shader parses and validates.
 #[test]
 fn parker_shader_validates() {

@@ -108,6 +108,115 @@ pub fn projection_stack(
     })
 }
 
+/// The golden-ratio order of views `iradon_sart` visits
+/// ([`voxlab::cpu::radon::golden_order`]), in the angles' precision (float32 or
+/// float64).
+#[pyfunction]
+fn golden_order(py: Python<'_>, theta: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
+    if let Ok(t) = theta.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+        let v = t
+            .as_slice()
+            .map_err(|_| errors::raise(py, "LayoutError", "theta must be C-contiguous"))?;
+        Ok(voxlab::cpu::radon::golden_order(v))
+    } else if let Ok(t) = theta.extract::<PyReadonlyArrayDyn<'_, f32>>() {
+        let v = t
+            .as_slice()
+            .map_err(|_| errors::raise(py, "LayoutError", "theta must be C-contiguous"))?;
+        Ok(voxlab::cpu::radon::golden_order(v))
+    } else {
+        Err(errors::raise(
+            py,
+            "DtypeError",
+            "theta must be float32 or float64",
+        ))
+    }
+}
+
+/// One call of scikit-image's `iradon_sart` ([`voxlab::jobs::radon::iradon_sart`]) on
+/// a C-contiguous float32 or float64 `(n, angles)` sinogram, in its precision: `theta`,
+/// `image` (`n × n`) and `shifts` of the same dtype; returns the image.
+#[pyfunction]
+#[pyo3(signature = (sinogram, theta, image, shifts, clip, relaxation, backend, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn iradon_sart(
+    py: Python<'_>,
+    sinogram: &Bound<'_, PyAny>,
+    theta: &Bound<'_, PyAny>,
+    image: Option<Bound<'_, PyAny>>,
+    shifts: Option<Bound<'_, PyAny>>,
+    clip: Option<(f64, f64)>,
+    relaxation: f64,
+    backend: &str,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<Py<PyAny>> {
+    let backend: Backend = backend.parse().map_err(|e| errors::to_py(py, &e))?;
+    #[allow(clippy::too_many_arguments)]
+    fn go<R: voxlab::real::Real + numpy::Element>(
+        py: Python<'_>,
+        sinogram: &Bound<'_, PyAny>,
+        theta: &Bound<'_, PyAny>,
+        image: Option<Bound<'_, PyAny>>,
+        shifts: Option<Bound<'_, PyAny>>,
+        clip: Option<(f64, f64)>,
+        relaxation: f64,
+        backend: Backend,
+        progress: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<Py<PyAny>> {
+        let vec = |a: &Bound<'_, PyAny>, what: &str| -> PyResult<Vec<R>> {
+            let x = a.extract::<PyReadonlyArrayDyn<'_, R>>().map_err(|_| {
+                errors::raise(
+                    py,
+                    "DtypeError",
+                    &format!("{what} must have the sinogram's dtype"),
+                )
+            })?;
+            Ok(x.as_slice()
+                .map_err(|_| {
+                    errors::raise(py, "LayoutError", &format!("{what} must be C-contiguous"))
+                })?
+                .to_vec())
+        };
+        let sino = sinogram
+            .extract::<PyReadonlyArrayDyn<'_, R>>()
+            .map_err(|e| errors::raise(py, "DtypeError", &e.to_string()))?;
+        let shape = sino.shape().to_vec();
+        if shape.len() != 2 {
+            return Err(errors::raise(py, "ShapeError", "the sinogram must be 2-D"));
+        }
+        let s = vec(sinogram, "the sinogram")?;
+        let options = voxlab::jobs::radon::SartOptions {
+            image: image.as_ref().map(|a| vec(a, "image")).transpose()?,
+            shifts: shifts
+                .as_ref()
+                .map(|a| vec(a, "projection_shifts"))
+                .transpose()?,
+            clip: clip.map(|(lo, hi)| [R::of(lo), R::of(hi)]),
+            relaxation,
+        };
+        let theta = vec(theta, "theta")?;
+        let n = shape[0];
+        let out = job::run(py, job::callback(&progress), |p| {
+            voxlab::jobs::radon::iradon_sart(&s, n, &theta, &options, backend, p)
+        })?;
+        Ok(out.into_pyarray(py).reshape([n, n])?.into_any().unbind())
+    }
+    if sinogram.extract::<PyReadonlyArrayDyn<'_, f64>>().is_ok() {
+        go::<f64>(
+            py, sinogram, theta, image, shifts, clip, relaxation, backend, progress,
+        )
+    } else if sinogram.extract::<PyReadonlyArrayDyn<'_, f32>>().is_ok() {
+        go::<f32>(
+            py, sinogram, theta, image, shifts, clip, relaxation, backend, progress,
+        )
+    } else {
+        Err(errors::raise(
+            py,
+            "DtypeError",
+            "SART takes a float32 or float64 sinogram",
+        ))
+    }
+}
+
 /// What `project` returns: the stack `(angle, row, col)` (float64), the geometry JSON,
 /// and the rest as JSON.
 type ProjectParts = (Py<PyAny>, String, String);
@@ -249,6 +358,8 @@ fn radon(
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(radon, m)?)?;
     m.add_function(wrap_pyfunction!(iradon, m)?)?;
+    m.add_function(wrap_pyfunction!(iradon_sart, m)?)?;
+    m.add_function(wrap_pyfunction!(golden_order, m)?)?;
     m.add_function(wrap_pyfunction!(project, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_stack, m)?)?;
     Ok(())

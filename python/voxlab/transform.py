@@ -22,13 +22,14 @@ float32.
 
 from __future__ import annotations
 
-from typing import Any, Optional
+import warnings
+from typing import Any, Iterator, Optional
 
 import numpy as np
 
 from . import _voxlab
 
-__all__ = ["iradon", "radon"]
+__all__ = ["iradon", "iradon_sart", "order_angles_golden_ratio", "radon"]
 
 _FILTERS = ("ramp", "shepp-logan", "cosine", "hamming", "hann", None)
 _INTERPOLATIONS = ("linear", "nearest", "cubic")
@@ -163,3 +164,99 @@ def radon(image: Any, theta: Any = None, circle: bool = True, *,
         maps.append([float(v) for v in r.astype(image.dtype)])
     img = np.ascontiguousarray(image)
     return _voxlab.radon(img, maps, bool(circle), backend, progress)
+
+
+def order_angles_golden_ratio(theta: Any) -> Iterator[int]:
+    """The order ``iradon_sart`` visits the views in (scikit-image's
+    ``order_angles_golden_ratio``: Kohler's golden-ratio scheme), computed by the
+    library (``cpu::radon::golden_order``) in ``theta``'s precision: a generator of
+    indices into ``theta``, each once."""
+    theta = np.asarray(theta)
+    dtype = np.float32 if theta.dtype == np.float32 else np.float64
+    yield from _voxlab.golden_order(np.ascontiguousarray(theta, dtype=dtype))
+
+
+def iradon_sart(radon_image: Any, theta: Any = None, image: Any = None,
+                projection_shifts: Any = None, clip: Any = None,
+                relaxation: float = 0.15, dtype: Any = None, *, backend: str = "cpu",
+                progress: Any = None) -> np.ndarray:
+    """Inverse radon transform by one iteration of SART (scikit-image's
+    ``iradon_sart``): every view once, in the golden-ratio order, each view's rays
+    sampled every half pixel with bilinear weights inside the circle of radius
+    ``n//2 − 1``, the deviation ``(p − Σw·x)/Σw²`` spread back along the ray with a
+    Hamming window, ``image += relaxation·update`` after each view, then ``clip``.
+
+    Parameters, defaults, dtype rules, warnings and errors are scikit-image's:
+    ``radon_image`` the ``(n, angles)`` sinogram; ``theta`` the angles in degrees
+    (default: evenly over [0, 180)); ``image`` the ``n × n`` start (default zeros; pass
+    the previous result for further iterations); ``projection_shifts`` each view's
+    shift in bins; ``clip`` ``(low, high)``; ``relaxation`` the step; ``dtype``
+    float32 or float64 (default: the sinogram's float type, else float64 with a
+    warning). The arithmetic is scikit-image's in that precision (``cpu::radon``).
+
+    ``backend``: ``cpu`` (the sinogram's precision), ``cpu-f32`` (float32) or ``gpu``
+    (float32, the whole iteration on the device: ``gpu::radon::iradon_sart``); the
+    result has ``dtype`` in every case.
+    """
+    radon_image = np.asarray(radon_image)
+    if radon_image.ndim != 2:
+        raise ValueError("radon_image must be two dimensional")
+    if dtype is None:
+        if radon_image.dtype.char in "fd":
+            dtype = radon_image.dtype
+        else:
+            warnings.warn(
+                "Only floating point data type are valid for SART inverse "
+                "radon transform. Input data is cast to float. To disable "
+                "this warning, please cast image_radon to float.",
+                stacklevel=2,
+            )
+            dtype = np.dtype(float)
+    elif np.dtype(dtype).char not in "fd":
+        raise ValueError(
+            "Only floating point data type are valid for inverse radon transform."
+        )
+    dtype = np.dtype(dtype)
+    radon_image = radon_image.astype(dtype, copy=False)
+    n = radon_image.shape[0]
+    reconstructed_shape = (n, n)
+    if theta is None:
+        theta = np.linspace(0, 180, radon_image.shape[1], endpoint=False, dtype=dtype)
+    elif len(theta) != radon_image.shape[1]:
+        raise ValueError(
+            f"Shape of theta ({len(theta)}) does not match the "
+            f"number of projections ({radon_image.shape[1]})"
+        )
+    else:
+        theta = np.asarray(theta, dtype=dtype)
+    if image is not None:
+        image = np.asarray(image)
+        if image.shape != reconstructed_shape:
+            raise ValueError(
+                f"Shape of image ({image.shape}) does not match first dimension "
+                f"of radon_image ({reconstructed_shape})"
+            )
+        if image.dtype != dtype:
+            warnings.warn(
+                f"image dtype does not match output dtype: image is cast to {dtype}",
+                stacklevel=2,
+            )
+        image = np.asarray(image, dtype=dtype)
+    if projection_shifts is not None:
+        if len(projection_shifts) != radon_image.shape[1]:
+            raise ValueError(
+                f"Shape of projection_shifts ({len(projection_shifts)}) does not match "
+                f"the number of projections ({radon_image.shape[1]})"
+            )
+        projection_shifts = np.asarray(projection_shifts, dtype=dtype)
+    if clip is not None:
+        if len(clip) != 2:
+            raise ValueError("clip must be a length-2 sequence")
+        clip = tuple(float(c) for c in np.asarray(clip, dtype=dtype))
+    work = np.float32 if backend == "cpu-f32" else dtype
+    as_work = lambda a: None if a is None else np.ascontiguousarray(a, dtype=work)  # noqa: E731
+    rec = _voxlab.iradon_sart(
+        as_work(radon_image), as_work(theta), as_work(image), as_work(projection_shifts),
+        clip, float(relaxation), backend, progress,
+    )
+    return rec.astype(dtype, copy=False)

@@ -1,4 +1,4 @@
-from typing import Any, Callable, Literal, Optional
+from typing import Any, Callable, Iterator, Literal, Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -14,3 +14,11 @@ def radon(image: ArrayLike, theta: Optional[ArrayLike] = None, circle: bool = Tr
           preserve_range: bool = False,
           backend: Literal["cpu", "cpu-f32", "gpu", "auto"] = "cpu",
           progress: Optional[Callable[[str, int, int], Any]] = None) -> np.ndarray: ...
+def order_angles_golden_ratio(theta: ArrayLike) -> Iterator[int]: ...
+def iradon_sart(radon_image: ArrayLike, theta: Optional[ArrayLike] = None,
+                image: Optional[ArrayLike] = None,
+                projection_shifts: Optional[ArrayLike] = None,
+                clip: Optional[Sequence[float]] = None, relaxation: float = 0.15,
+                dtype: Any = None, *,
+                backend: Literal["cpu", "cpu-f32", "gpu", "auto"] = "cpu",
+                progress: Optional[Callable[[str, int, int], Any]] = None) -> np.ndarray: ...

@@ -469,6 +469,399 @@ pub fn iradon_backproject<R: Real, A: Real>(
     out
 }
 
+// ---------------------------------------------------------------------------------
+// SART (scikit-image's `iradon_sart`)
+// ---------------------------------------------------------------------------------
+
+/// The order in which `iradon_sart` visits the views: Kohler's golden-ratio scheme as
+/// scikit-image's `order_angles_golden_ratio` computes it, in the angles' precision `R`
+/// (numpy's arithmetic on `R` scalars: the step `180/φ²` rounded to `R`, numpy's
+/// floored remainder, and its choice between the two neighbours, the distances taken
+/// as `min(d mod 180, d mod −180)`). Every index is yielded once.
+pub fn golden_order<R: Real>(theta: &[R]) -> Vec<usize> {
+    let interval = R::of(180.0);
+    let phi = (1.0 + 5f64.sqrt()) / 2.0;
+    let increment = R::of(180.0 / (phi * phi));
+    // numpy's remainder: fmod, then the divisor's sign.
+    let rem = |a: R, b: R| {
+        let m = a % b;
+        if m != R::zero() && ((b < R::zero()) != (m < R::zero())) {
+            m + b
+        } else if m == R::zero() {
+            R::zero().copysign(b)
+        } else {
+            m
+        }
+    };
+    let mut remaining: Vec<usize> = (0..theta.len()).collect();
+    remaining.sort_by(|&a, &b| {
+        theta[a]
+            .partial_cmp(&theta[b])
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let mut order = Vec::with_capacity(theta.len());
+    if remaining.is_empty() {
+        return order;
+    }
+    let mut angle = theta[remaining[0]];
+    order.push(remaining.remove(0));
+    while !remaining.is_empty() {
+        let n = remaining.len();
+        angle = rem(angle + increment, interval);
+        // searchsorted(side="left") over the remaining angles (ascending).
+        let above = remaining.partition_point(|&k| theta[k] < angle);
+        let below = (above + n - 1) % n;
+        let above = above % n;
+        let distance = |k: usize| {
+            let d = (angle - theta[remaining[k]]).abs();
+            let (a, b) = (rem(d, interval), rem(d, -interval));
+            if b < a {
+                b
+            } else {
+                a
+            }
+        };
+        let pick = if distance(below) < distance(above) {
+            below
+        } else {
+            above
+        };
+        order.push(remaining.remove(pick));
+    }
+    order
+}
+
+/// One ray of scikit-image's SART through an `n × n` image: its samples
+/// `(x, y) = (x₀ + k·dx, y₀ + k·dy)`, `k = 0 … ns`, `ds` apart, inside the circle of
+/// radius `n//2 − 1` about pixel `(n//2, n//2)` (`bilinear_ray_sum`'s set-up, with its
+/// mix of f64 and `R`: the angle, `√`, `cos` and `sin` in f64, rounded to `R` where
+/// scikit-image stores them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SartRay<R> {
+    pub ns: usize,
+    pub ds: R,
+    pub dx: R,
+    pub dy: R,
+    pub x0: R,
+    pub y0: R,
+}
+
+impl<R: Real> SartRay<R> {
+    /// The ray at `ray_position` (bins, `i + projection_shift`) of the view at
+    /// `theta_deg` degrees; `None` when it misses the circle.
+    pub fn new(n: usize, theta_deg: R, ray_position: R) -> Option<Self> {
+        let theta = R::of(theta_deg.f64() / 180.0 * std::f64::consts::PI);
+        let radius = R::of((n / 2) as f64 - 1.0);
+        let centre = R::of((n / 2) as f64);
+        let t = ray_position - centre;
+        let s0 = if radius * radius >= t * t {
+            R::of((radius * radius - t * t).f64().sqrt())
+        } else {
+            R::zero()
+        };
+        let ns = 2 * (R::of(2.0) * s0).f64().ceil() as i64;
+        if ns <= 0 {
+            return None;
+        }
+        // (2.0·s0)/Ns: a double literal, so the division is in f64.
+        let ds = R::of(2.0 * s0.f64() / R::of(ns as f64).f64());
+        let (c, s) = (theta.f64().cos(), theta.f64().sin());
+        Some(SartRay {
+            ns: ns as usize,
+            ds,
+            dx: R::of(-ds.f64() * c),
+            dy: R::of(-ds.f64() * s),
+            x0: R::of(s0.f64() * c - t.f64() * s),
+            y0: R::of(s0.f64() * s + t.f64() * c),
+        })
+    }
+
+    /// Sample `k`: the pixel `(i, j)` (row, column) below and left of it and the
+    /// fractions `(di, dj)`.
+    #[inline(always)]
+    pub fn sample(&self, n: usize, k: usize) -> (i64, i64, R, R) {
+        let centre = R::of((n / 2) as f64);
+        let kr = R::of(k as f64);
+        let (ii, jj) = (
+            self.x0 + kr * self.dx + centre,
+            self.y0 + kr * self.dy + centre,
+        );
+        // ⌊·⌋ without a libm call (|x| < n here).
+        let ((fi, _), (fj, _)) = (ii.f64().floor_index(), jj.f64().floor_index());
+        (
+            fi as i64,
+            fj as i64,
+            R::of(ii.f64() - fi),
+            R::of(jj.f64() - fj),
+        )
+    }
+}
+
+/// The four bilinear weights of a SART sample, in scikit-image's compiled arithmetic:
+/// the three with a `1 − d` factor (a double literal there) in f64, `di·dj·ds` in `R`,
+/// each rounded to `R`.
+///
+/// mirrors shaders/radon_sart.wgsl: sart_weights
+#[inline(always)]
+fn sart_weights<R: Real>(di: R, dj: R, ds: R) -> [R; 4] {
+    let (d, e, s) = (di.f64(), dj.f64(), ds.f64());
+    [
+        R::of((1.0 - d) * (1.0 - e) * s),
+        R::of((1.0 - d) * e * s),
+        R::of(d * (1.0 - e) * s),
+        di * dj * ds,
+    ]
+}
+
+/// Which of a sample's four taps (i, j), (i, j+1), (i+1, j), (i+1, j+1) scikit-image
+/// uses: `i > 0`, `j > 0` and the far taps inside the image (its tests, which leave row
+/// and column 0 out).
+///
+/// mirrors shaders/radon_sart.wgsl: sart_taps
+#[inline(always)]
+fn sart_taps(n: usize, i: i64, j: i64) -> [bool; 4] {
+    let last = n as i64 - 1;
+    [
+        i > 0 && j > 0,
+        i > 0 && j < last,
+        i < last && j > 0,
+        i < last && j < last,
+    ]
+}
+
+/// A ray's sum through the image and the sum of its squared weights
+/// (`bilinear_ray_sum`), summed along the ray in `R`.
+///
+/// mirrors shaders/radon_sart.wgsl: sart_ray_sum
+pub fn sart_ray_sum<R: Real>(img: &[R], n: usize, ray: &SartRay<R>) -> (R, R) {
+    let (mut sum, mut norm) = (R::zero(), R::zero());
+    for k in 0..=ray.ns {
+        let (i, j, di, dj) = ray.sample(n, k);
+        let w = sart_weights(di, dj, ray.ds);
+        let taps = sart_taps(n, i, j);
+        for (t, (di, dj)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
+            if taps[t] {
+                let p = img[(i + di) as usize * n + (j + dj) as usize];
+                sum = sum + w[t] * p;
+                norm = norm + w[t] * w[t];
+            }
+        }
+    }
+    (sum, norm)
+}
+
+/// The Hamming window scikit-image weights a ray's update with at sample `k` of `ns`:
+/// `0.53836 − 0.46164·cos(2πk/(ns − 1))`, evaluated in f64 and rounded to `R` (the GPU
+/// takes these values from the host: WGSL's `cos` may be off by 2⁻¹¹).
+#[inline(always)]
+pub fn sart_window<R: Real>(k: usize, ns: usize) -> R {
+    let beta = R::of(0.46164);
+    let c = (2.0 * std::f64::consts::PI * k as f64 / (ns as f64 - 1.0)).cos();
+    R::of((R::one() - beta).f64() - beta.f64() * c)
+}
+
+/// The Hamming windows of the sample counts met so far ([`sart_window`] for `k = 0 …
+/// ns`), made once per count: every view's rays of one length share one.
+#[derive(Clone, Debug, Default)]
+pub struct SartWindows<R> {
+    by_count: Vec<Vec<R>>,
+}
+
+impl<R: Real> SartWindows<R> {
+    /// Makes the window of `ns` samples if it is not there yet.
+    pub fn add(&mut self, ns: usize) {
+        if self.by_count.len() <= ns {
+            self.by_count.resize(ns + 1, Vec::new());
+        }
+        if self.by_count[ns].is_empty() {
+            self.by_count[ns] = (0..=ns).map(|k| sart_window(k, ns)).collect();
+        }
+    }
+
+    /// The window of `ns` samples (made by [`SartWindows::add`]).
+    pub fn of(&self, ns: usize) -> &[R] {
+        &self.by_count[ns]
+    }
+}
+
+/// Adds a ray's update (`bilinear_ray_update`): `deviation · w · ds · hamming` to each
+/// tap of each sample, in scikit-image's compiled arithmetic (the three taps with a
+/// `1 − d` factor in f64, added to the `R` image in f64 and rounded; the fourth in
+/// `R`), samples in order. Only the rows
+/// `rows` are written (the caller's band of the image).
+///
+/// mirrors shaders/radon_sart.wgsl: sart_scatter
+fn sart_ray_update<R: Real>(
+    update: &mut [R],
+    n: usize,
+    ray: &SartRay<R>,
+    deviation: R,
+    window: &[R],
+    rows: std::ops::Range<usize>,
+) {
+    let band = rows.start as i64..rows.end as i64;
+    let first = rows.start;
+    // The samples whose rows can fall in the band (a sample at row index x touches
+    // rows ⌊x⌋ and ⌊x⌋ + 1), with a sample of margin each way; each is tested below.
+    let a = ray.x0.f64() + (n / 2) as f64;
+    let d = ray.dx.f64();
+    let (lo, hi) = (rows.start as f64 - 2.0, rows.end as f64 + 1.0);
+    let ks = if d.abs() < 1e-9 {
+        if a >= lo && a < hi {
+            0..ray.ns + 1
+        } else {
+            0..0
+        }
+    } else {
+        let (k1, k2) = ((lo - a) / d, (hi - a) / d);
+        let kmin = (k1.min(k2).floor() - 1.0).max(0.0) as usize;
+        let kmax = ((k1.max(k2).ceil() + 1.0).max(-1.0) as usize).min(ray.ns);
+        kmin..kmax + 1
+    };
+    for k in ks {
+        let (i, j, di, dj) = ray.sample(n, k);
+        if i + 1 < band.start || i >= band.end {
+            continue;
+        }
+        let taps = sart_taps(n, i, j);
+        let h = window[k];
+        let (dv, d, e, s, hv) = (deviation.f64(), di.f64(), dj.f64(), ray.ds.f64(), h.f64());
+        let mut add = |r: i64, c: i64, v: R, wide: Option<f64>| {
+            if band.contains(&r) {
+                let at = (r as usize - first) * n + c as usize;
+                update[at] = match wide {
+                    Some(w) => R::of(update[at].f64() + w),
+                    None => update[at] + v,
+                };
+            }
+        };
+        if taps[0] {
+            add(i, j, R::zero(), Some(dv * (1.0 - d) * (1.0 - e) * s * hv));
+        }
+        if taps[1] {
+            add(i, j + 1, R::zero(), Some(dv * (1.0 - d) * e * s * hv));
+        }
+        if taps[2] {
+            let w = (deviation * di).f64() * (1.0 - e) * s * hv;
+            add(i + 1, j, R::zero(), Some(w));
+        }
+        if taps[3] {
+            add(i + 1, j + 1, deviation * di * dj * ray.ds * h, None);
+        }
+    }
+}
+
+/// The bands of rows the SART update is written in, in parallel: within a band every
+/// pixel receives its rays' contributions in the rays' order and the samples' order,
+/// as one thread writing the whole image would, whatever the number of threads.
+const SART_BANDS: usize = 16;
+
+/// One view's update (`sart_projection_update`): each ray's deviation
+/// `(p − Σw·x)/Σw²` (`R`), spread back along the ray with its weights and the Hamming
+/// window. Rays sum in parallel; the update is written in bands of rows in parallel,
+/// every pixel's contributions in scikit-image's order, so the result is
+/// scikit-image's bit for bit in f64 with the same cosines.
+pub fn sart_projection_update<R: Real>(
+    img: &[R],
+    n: usize,
+    theta_deg: R,
+    projection: &[R],
+    shift: R,
+    windows: &mut SartWindows<R>,
+) -> Vec<R> {
+    let rays: Vec<Option<(SartRay<R>, R)>> = projection
+        .par_iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let ray = SartRay::new(n, theta_deg, R::of(i as f64) + shift)?;
+            let (sum, norm) = sart_ray_sum(img, n, &ray);
+            let deviation = if norm > R::zero() {
+                -(sum - p) / norm
+            } else {
+                R::zero()
+            };
+            Some((ray, deviation))
+        })
+        .collect();
+    for (ray, _) in rays.iter().flatten() {
+        windows.add(ray.ns);
+    }
+    let windows = &*windows;
+    let mut update = vec![R::zero(); n * n];
+    let rows_per_band = n.div_ceil(SART_BANDS).max(1);
+    update
+        .par_chunks_mut(rows_per_band * n)
+        .enumerate()
+        .for_each(|(b, band)| {
+            let rows = b * rows_per_band..(b * rows_per_band + band.len() / n);
+            for (ray, deviation) in rays.iter().flatten() {
+                let w = windows.of(ray.ns);
+                sart_ray_update(band, n, ray, *deviation, w, rows.clone());
+            }
+        });
+    update
+}
+
+/// numpy's `clip(x, lo, hi)`, `minimum(maximum(x, lo), hi)`: a NaN anywhere gives NaN,
+/// and `lo > hi` gives `hi`.
+///
+/// mirrors shaders/radon_sart.wgsl: sart_apply
+#[inline(always)]
+pub fn np_clip<R: Real>(x: R, lo: R, hi: R) -> R {
+    let m = if x.is_nan() || lo.is_nan() || x >= lo {
+        if lo.is_nan() {
+            lo
+        } else {
+            x
+        }
+    } else {
+        lo
+    };
+    if m.is_nan() || hi.is_nan() || m <= hi {
+        if hi.is_nan() {
+            hi
+        } else {
+            m
+        }
+    } else {
+        hi
+    }
+}
+
+/// One call of scikit-image's `iradon_sart`: every view once, in the golden-ratio order
+/// ([`golden_order`]), `image += λ·update` after each (`λ` rounded to `R`), then
+/// clipped to `clip` when given. `sinogram` is `(n, angles)` row-major (bin, then
+/// angle), `image` the `n × n` start (updated in place). `view_done(done, total)` is
+/// called after each view.
+#[allow(clippy::too_many_arguments)]
+pub fn iradon_sart<R: Real>(
+    sinogram: &[R],
+    n: usize,
+    theta_deg: &[R],
+    image: &mut [R],
+    shifts: &[R],
+    clip: Option<[R; 2]>,
+    relaxation: f64,
+    view_done: &dyn Fn(usize, usize),
+) {
+    let angles = theta_deg.len();
+    let lambda = R::of(relaxation);
+    let mut windows = SartWindows::default();
+    for (done, k) in golden_order(theta_deg).into_iter().enumerate() {
+        let projection: Vec<R> = (0..n).map(|b| sinogram[b * angles + k]).collect();
+        let update =
+            sart_projection_update(image, n, theta_deg[k], &projection, shifts[k], &mut windows);
+        image
+            .par_iter_mut()
+            .zip(&update)
+            .for_each(|(x, &u)| *x = *x + lambda * u);
+        if let Some([lo, hi]) = clip {
+            image.par_iter_mut().for_each(|x| *x = np_clip(*x, lo, hi));
+        }
+        view_done(done + 1, angles);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -591,6 +984,33 @@ mod tests {
             assert_eq!(masked[0], 0.0);
             assert_eq!(masked[n * (n / 2) + n / 2], img[n * (n / 2) + n / 2]);
         }
+    }
+
+    #[test]
+    fn the_golden_order_visits_every_view_once_from_the_smallest_angle() {
+        for m in [1usize, 2, 7, 180] {
+            let theta: Vec<f64> = (0..m)
+                .map(|k| (k * 37 % m) as f64 * 180.0 / m as f64)
+                .collect();
+            let order = golden_order(&theta);
+            let mut seen = order.clone();
+            seen.sort_unstable();
+            assert_eq!(seen, (0..m).collect::<Vec<_>>());
+            assert_eq!(theta[order[0]], 0.0);
+        }
+        // 180/φ² ≈ 68.75°: from 0° of 0°, 1°, … 179° the next is 69°.
+        let theta: Vec<f64> = (0..180).map(f64::from).collect();
+        assert_eq!(&golden_order(&theta)[..2], &[0, 69]);
+    }
+
+    #[test]
+    fn np_clip_is_numpys() {
+        assert_eq!(np_clip(0.5, 0.0, 1.0), 0.5);
+        assert_eq!(np_clip(-1.0, 0.0, 1.0), 0.0);
+        assert_eq!(np_clip(2.0, 0.0, 1.0), 1.0);
+        assert!(np_clip(f64::NAN, 0.0, 1.0).is_nan());
+        // lo > hi: numpy gives hi.
+        assert_eq!(np_clip(0.5, 2.0, 1.0), 1.0);
     }
 
     #[test]

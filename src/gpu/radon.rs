@@ -248,3 +248,259 @@ pub fn iradon_backproject(
         size * size,
     )
 }
+
+/// One ray of one view for `shaders/radon_sart.wgsl` (its WGSL twin is the struct of
+/// that name there): `cpu::radon::SartRay` in f32, with where its Hamming window starts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SartRayGpu {
+    pub ds: f32,
+    pub dx: f32,
+    pub dy: f32,
+    pub x0: f32,
+    pub y0: f32,
+    pub ns: u32,
+    pub window: u32,
+    pub live: u32,
+}
+
+/// The complete SART shader source: `shaders/radon_sart.wgsl` and its imports.
+pub fn sart_shader_source() -> String {
+    super::shaders::resolve("radon_sart")
+}
+
+/// One call of scikit-image's `iradon_sart` on the GPU, in f32: the port of
+/// `cpu::radon::iradon_sart` (`R = f32`). `sinogram` is `(n, angles)` row-major,
+/// `order` the views' order (`cpu::radon::golden_order`), `image` the start. The whole
+/// iteration runs on the device (one submission); the image is read back once. The
+/// rays' set-up and the Hamming windows are made on the host, in f32 as the CPU makes
+/// them; a pixel's update sums its rays three phases apart (rays `i ≡ 0, 1, 2 mod 3`),
+/// not in the rays' order, so the result agrees with the CPU's f32 to rounding.
+///
+/// # Errors
+/// Lengths that do not match; a buffer past one binding ([`Error::TooLarge`]);
+/// [`Error::Gpu`] on device failure.
+#[allow(clippy::too_many_arguments)]
+pub fn iradon_sart(
+    ctx: &GpuContext,
+    sinogram: &[f32],
+    n: usize,
+    theta_deg: &[f32],
+    order: &[usize],
+    image: &[f32],
+    shifts: &[f32],
+    clip: Option<[f32; 2]>,
+    relaxation: f64,
+) -> Result<Vec<f32>> {
+    use crate::cpu::radon::SartRay;
+    let angles = theta_deg.len();
+    if sinogram.len() != n * angles
+        || image.len() != n * n
+        || shifts.len() != angles
+        || order.len() != angles
+        || order.iter().any(|&k| k >= angles)
+    {
+        return Err(Error::invalid(
+            "SART",
+            format!(
+                "{} sinogram values, {} image values, {} shifts and {} views for n = {n} \
+                 and {angles} angles",
+                sinogram.len(),
+                image.len(),
+                shifts.len(),
+                order.len()
+            ),
+        ));
+    }
+    if n == 0 || angles == 0 {
+        return Ok(image.to_vec());
+    }
+    // The views as lines, the rays of every view and the windows of every length.
+    let mut lines = vec![0f32; n * angles];
+    for (b, row) in sinogram.chunks(angles).enumerate() {
+        for (k, &v) in row.iter().enumerate() {
+            lines[k * n + b] = v;
+        }
+    }
+    let mut made = crate::cpu::radon::SartWindows::<f32>::default();
+    let mut windows: Vec<f32> = Vec::new();
+    let mut window_at = std::collections::HashMap::new();
+    let mut rays = Vec::with_capacity(n * angles);
+    for k in 0..angles {
+        for i in 0..n {
+            let ray = SartRay::<f32>::new(n, theta_deg[k], i as f32 + shifts[k]);
+            rays.push(match ray {
+                None => SartRayGpu::default(),
+                Some(r) => {
+                    let window = *window_at.entry(r.ns).or_insert_with(|| {
+                        let at = windows.len() as u32;
+                        made.add(r.ns);
+                        windows.extend_from_slice(made.of(r.ns));
+                        at
+                    });
+                    SartRayGpu {
+                        ds: r.ds,
+                        dx: r.dx,
+                        dy: r.dy,
+                        x0: r.x0,
+                        y0: r.y0,
+                        ns: r.ns as u32,
+                        window,
+                        live: 1,
+                    }
+                }
+            });
+        }
+    }
+    check_loop(ctx, "rays", 2 * n + 2)?;
+    let lines_buf = upload(ctx, "SART sinogram", bytemuck::cast_slice(&lines))?;
+    let rays_buf = upload(ctx, "SART rays", bytemuck::cast_slice(&rays))?;
+    let windows_buf = upload(ctx, "SART windows", bytemuck::cast_slice(&windows))?;
+    let dev = &ctx.device;
+    let rw = |label: &str, data: &[f32]| -> Result<wgpu::Buffer> {
+        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+        if (data.len() * 4) as u64 > limit {
+            return Err(Error::too_large(
+                label,
+                format!(
+                    "{} bytes exceed one storage binding ({limit} bytes)",
+                    data.len() * 4
+                ),
+            ));
+        }
+        Ok(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::cast_slice(data),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        }))
+    };
+    let image_buf = rw("SART image", image)?;
+    let update_buf = rw("SART update", &vec![0f32; n * n])?;
+    let deviation_buf = rw("SART deviations", &vec![0f32; n])?;
+    // Every dispatch's parameters in one buffer, bound at its own (aligned) offset.
+    let align = ctx.limits.min_uniform_buffer_offset_alignment.max(16) as usize;
+    let stride = std::mem::size_of::<RadonParams>().div_ceil(align) * align;
+    let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
+    let groups = |invocations: usize| {
+        let g = (invocations as u32).div_ceil(WORKGROUP).max(1);
+        let gx = g.min(max_x);
+        (gx, g.div_ceil(gx))
+    };
+    let (clip_on, [lo, hi]) = match clip {
+        Some(c) => (1, c),
+        None => (0, [0.0, 0.0]),
+    };
+    let steps: Vec<(&str, u32, usize)> = vec![
+        ("sart_deviation", 0, n),
+        ("sart_scatter", 0, n.div_ceil(3)),
+        ("sart_scatter", 1, n.div_ceil(3)),
+        ("sart_scatter", 2, n.div_ceil(3)),
+        ("sart_apply", 0, n * n),
+    ];
+    let mut bytes = vec![0u8; stride * steps.len() * angles];
+    let mut dispatches = Vec::with_capacity(steps.len() * angles);
+    for (v, &view) in order.iter().enumerate() {
+        for (s, &(entry, phase, invocations)) in steps.iter().enumerate() {
+            let (gx, gy) = groups(invocations);
+            let p = RadonParams {
+                dims: [n as u32, angles as u32, view as u32, phase],
+                work: [gx * WORKGROUP, clip_on, 0, 0],
+                scale: [relaxation as f32, lo, hi, 0.0],
+            };
+            let at = (v * steps.len() + s) * stride;
+            bytes[at..at + std::mem::size_of::<RadonParams>()]
+                .copy_from_slice(bytemuck::bytes_of(&p));
+            dispatches.push((entry, at as u32, gx, gy));
+        }
+    }
+    let params_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("SART params"),
+        contents: &bytes,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let module = ctx.shader("radon_sart.wgsl", &sart_shader_source())?;
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("radon sart"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(
+                        std::mem::size_of::<RadonParams>() as u64
+                    ),
+                },
+                count: None,
+            },
+            buffer_entry(1, storage(true)),
+            buffer_entry(2, storage(true)),
+            buffer_entry(3, storage(true)),
+            buffer_entry(4, storage(false)),
+            buffer_entry(5, storage(false)),
+            buffer_entry(6, storage(false)),
+        ],
+    });
+    let pipelines: std::collections::HashMap<&str, wgpu::ComputePipeline> =
+        ["sart_deviation", "sart_scatter", "sart_apply"]
+            .into_iter()
+            .map(|e| {
+                Ok((
+                    e,
+                    super::context::compute_pipeline(ctx, e, &module, e, &layout)?,
+                ))
+            })
+            .collect::<Result<_>>()?;
+    let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("radon sart"),
+        layout: &layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &params_buf,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<RadonParams>() as u64),
+                }),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: lines_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: rays_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: windows_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: image_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: update_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 6,
+                resource: deviation_buf.as_entire_binding(),
+            },
+        ],
+    });
+    let mut enc = dev.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        for &(entry, offset, gx, gy) in &dispatches {
+            pass.set_pipeline(&pipelines[entry]);
+            pass.set_bind_group(0, &bind, &[offset]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+    }
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait()?;
+    Ok(bytemuck::cast_slice(&ctx.read_buffer(&image_buf, (n * n * 4) as u64)?).to_vec())
+}

@@ -90,6 +90,7 @@ registry! {
     PROCESS_RESAMPLE = "process_resample" => "process_resample.wgsl",
     PROJECT = "project" => "project.wgsl",
     RADON = "radon" => "radon.wgsl",
+    RADON_SART = "radon_sart" => "radon_sart.wgsl",
     RAMP_FILTER = "ramp_filter" => "ramp_filter.wgsl",
     RAYCAST = "raycast" => "raycast.wgsl",
     RAYCAST_PREPARE = "raycast_prepare" => "raycast_prepare.wgsl",

@@ -274,3 +274,131 @@ pub fn iradon<A: Real>(
         backend: engine.backend(),
     })
 }
+
+/// scikit-image's `iradon_sart` options beside the sinogram and its angles.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SartOptions<R> {
+    /// The start image, `n × n` row-major (`image`; `None`: zeros).
+    pub image: Option<Vec<R>>,
+    /// Each view's shift of its bins (`projection_shifts`; `None`: zeros).
+    pub shifts: Option<Vec<R>>,
+    /// The range the image is clipped to after every view (`clip`).
+    pub clip: Option<[R; 2]>,
+    /// `relaxation`: the step `image += λ·update` (λ rounded to `R`).
+    pub relaxation: f64,
+}
+
+/// One iteration of scikit-image's `iradon_sart` on an `(n, angles)` sinogram
+/// (row-major: bin, then angle) taken at `theta` degrees, in the sinogram's precision
+/// `R` (scikit-image's `dtype`): every view once in the golden-ratio order, each view's
+/// update from bilinear samples half a pixel apart along its rays inside the circle of
+/// radius `n//2 − 1` ([`crate::cpu::radon::iradon_sart`]). Returns the `n × n` image.
+/// Runs on `cpu` or `cpu-f32` in `R` (the caller picks `R`), or in f32 on the GPU
+/// (`gpu::radon::iradon_sart`, values returned in `R`).
+///
+/// # Errors
+/// An empty sinogram or lengths that do not match (theta, image, shifts), non-finite
+/// values, a relaxation that is not finite; no GPU for `gpu`; [`Error::Cancelled`].
+pub fn iradon_sart<R: Real>(
+    sinogram: &[R],
+    bins: usize,
+    theta: &[R],
+    options: &SartOptions<R>,
+    backend: Backend,
+    progress: &dyn Progress,
+) -> Result<Vec<R>> {
+    let angles = theta.len();
+    if bins == 0 || angles == 0 {
+        return Err(Error::invalid(
+            "sinogram",
+            format!("{bins} bins × {angles} angles is empty"),
+        ));
+    }
+    if sinogram.len() != bins * angles {
+        return Err(Error::invalid(
+            "sinogram",
+            format!(
+                "{} values for {bins} bins × {angles} angles",
+                sinogram.len()
+            ),
+        ));
+    }
+    let length = |what: &str, got: usize, want: usize| -> Result<()> {
+        if got == want {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                what,
+                format!("{got} values where the sinogram needs {want}"),
+            ))
+        }
+    };
+    if let Some(im) = &options.image {
+        length("image", im.len(), bins * bins)?;
+    }
+    if let Some(sh) = &options.shifts {
+        length("projection_shifts", sh.len(), angles)?;
+    }
+    if !options.relaxation.is_finite() {
+        return Err(Error::invalid("relaxation", "must be finite"));
+    }
+    let finite = |what: &str, v: &[R]| -> Result<()> {
+        match v.iter().position(|x| !x.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(Error::invalid(
+                what,
+                format!("value {i} is {} (NaN or infinite)", v[i]),
+            )),
+        }
+    };
+    finite("sinogram", sinogram)?;
+    finite("theta", theta)?;
+    crate::volume::check_dims([bins, bins, 1])?;
+    let mut image = options
+        .image
+        .clone()
+        .unwrap_or_else(|| vec![R::zero(); bins * bins]);
+    let shifts = options
+        .shifts
+        .clone()
+        .unwrap_or_else(|| vec![R::zero(); angles]);
+    let engine = Engine::open(backend)?;
+    progress.begin("SART", "view", angles as u64);
+    match engine.gpu() {
+        Some(ctx) => {
+            let f = |v: &[R]| v.iter().map(|x| x.f64() as f32).collect::<Vec<f32>>();
+            let order = crate::cpu::radon::golden_order(theta);
+            let clip = options.clip.map(|c| c.map(|x| x.f64() as f32));
+            super::check_cancel(progress)?;
+            let out = crate::gpu::radon::iradon_sart(
+                ctx,
+                &f(sinogram),
+                bins,
+                &f(theta),
+                &order,
+                &f(&image),
+                &f(&shifts),
+                clip,
+                options.relaxation,
+            )?;
+            image = out.iter().map(|&v| R::of(v as f64)).collect();
+        }
+        None => {
+            cancellable(progress, |cp| {
+                crate::cpu::radon::iradon_sart(
+                    sinogram,
+                    bins,
+                    theta,
+                    &mut image,
+                    &shifts,
+                    options.clip,
+                    options.relaxation,
+                    &|d, t| cp.advance(d, t),
+                );
+                Ok(())
+            })?;
+        }
+    }
+    progress.end(0.0);
+    Ok(image)
+}
