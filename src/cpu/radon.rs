@@ -634,10 +634,15 @@ fn sart_taps(n: usize, i: i64, j: i64) -> [bool; 4] {
 ///
 /// mirrors shaders/radon_sart.wgsl: sart_ray_sum
 pub fn sart_ray_sum<R: Real>(img: &[R], n: usize, ray: &SartRay<R>) -> (R, R) {
+    let samples: Vec<_> = (0..=ray.ns).map(|k| ray.sample(n, k)).collect();
+    sart_sum_of(img, n, ray.ds, &samples)
+}
+
+/// [`sart_ray_sum`] over a ray's samples already taken (`SartRay::sample`, in order).
+fn sart_sum_of<R: Real>(img: &[R], n: usize, ds: R, samples: &[(i64, i64, R, R)]) -> (R, R) {
     let (mut sum, mut norm) = (R::zero(), R::zero());
-    for k in 0..=ray.ns {
-        let (i, j, di, dj) = ray.sample(n, k);
-        let w = sart_weights(di, dj, ray.ds);
+    for &(i, j, di, dj) in samples {
+        let w = sart_weights(di, dj, ds);
         let taps = sart_taps(n, i, j);
         for (t, (di, dj)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
             if taps[t] {
@@ -691,41 +696,42 @@ impl<R: Real> SartWindows<R> {
 /// `rows` are written (the caller's band of the image).
 ///
 /// mirrors shaders/radon_sart.wgsl: sart_scatter
+#[allow(clippy::too_many_arguments)]
 fn sart_ray_update<R: Real>(
     update: &mut [R],
     n: usize,
-    ray: &SartRay<R>,
+    ds: R,
+    samples: &[(i64, i64, R, R)],
     deviation: R,
     window: &[R],
     rows: std::ops::Range<usize>,
 ) {
     let band = rows.start as i64..rows.end as i64;
     let first = rows.start;
-    // The samples whose rows can fall in the band (a sample at row index x touches
-    // rows ⌊x⌋ and ⌊x⌋ + 1), with a sample of margin each way; each is tested below.
-    let a = ray.x0.f64() + (n / 2) as f64;
-    let d = ray.dx.f64();
-    let (lo, hi) = (rows.start as f64 - 2.0, rows.end as f64 + 1.0);
-    let ks = if d.abs() < 1e-9 {
-        if a >= lo && a < hi {
-            0..ray.ns + 1
-        } else {
-            0..0
-        }
-    } else {
-        let (k1, k2) = ((lo - a) / d, (hi - a) / d);
-        let kmin = (k1.min(k2).floor() - 1.0).max(0.0) as usize;
-        let kmax = ((k1.max(k2).ceil() + 1.0).max(-1.0) as usize).min(ray.ns);
-        kmin..kmax + 1
+    // The samples that touch the band (a sample in row i touches rows i and i + 1):
+    // a run, since a ray's row never turns back.
+    let Some((&(i0, ..), &(i1, ..))) = samples.first().zip(samples.last()) else {
+        return;
     };
-    for k in ks {
-        let (i, j, di, dj) = ray.sample(n, k);
-        if i + 1 < band.start || i >= band.end {
+    let touches = |i: i64| i + 1 >= band.start && i < band.end;
+    let (from, to) = if i0 <= i1 {
+        (
+            samples.partition_point(|s| s.0 + 1 < band.start),
+            samples.partition_point(|s| s.0 < band.end),
+        )
+    } else {
+        (
+            samples.partition_point(|s| s.0 >= band.end),
+            samples.partition_point(|s| s.0 + 1 >= band.start),
+        )
+    };
+    for (k, &(i, j, di, dj)) in samples.iter().enumerate().take(to).skip(from) {
+        if !touches(i) {
             continue;
         }
         let taps = sart_taps(n, i, j);
         let h = window[k];
-        let (dv, d, e, s, hv) = (deviation.f64(), di.f64(), dj.f64(), ray.ds.f64(), h.f64());
+        let (dv, d, e, s, hv) = (deviation.f64(), di.f64(), dj.f64(), ds.f64(), h.f64());
         let mut add = |r: i64, c: i64, v: R, wide: Option<f64>| {
             if band.contains(&r) {
                 let at = (r as usize - first) * n + c as usize;
@@ -746,7 +752,7 @@ fn sart_ray_update<R: Real>(
             add(i + 1, j, R::zero(), Some(w));
         }
         if taps[3] {
-            add(i + 1, j + 1, deviation * di * dj * ray.ds * h, None);
+            add(i + 1, j + 1, deviation * di * dj * ds * h, None);
         }
     }
 }
@@ -769,21 +775,23 @@ pub fn sart_projection_update<R: Real>(
     shift: R,
     windows: &mut SartWindows<R>,
 ) -> Vec<R> {
-    let rays: Vec<Option<(SartRay<R>, R)>> = projection
+    type Samples<R> = Vec<(i64, i64, R, R)>;
+    let rays: Vec<Option<(SartRay<R>, Samples<R>, R)>> = projection
         .par_iter()
         .enumerate()
         .map(|(i, &p)| {
             let ray = SartRay::new(n, theta_deg, R::of(i as f64) + shift)?;
-            let (sum, norm) = sart_ray_sum(img, n, &ray);
+            let samples: Samples<R> = (0..=ray.ns).map(|k| ray.sample(n, k)).collect();
+            let (sum, norm) = sart_sum_of(img, n, ray.ds, &samples);
             let deviation = if norm > R::zero() {
                 -(sum - p) / norm
             } else {
                 R::zero()
             };
-            Some((ray, deviation))
+            Some((ray, samples, deviation))
         })
         .collect();
-    for (ray, _) in rays.iter().flatten() {
+    for (ray, ..) in rays.iter().flatten() {
         windows.add(ray.ns);
     }
     let windows = &*windows;
@@ -794,9 +802,9 @@ pub fn sart_projection_update<R: Real>(
         .enumerate()
         .for_each(|(b, band)| {
             let rows = b * rows_per_band..(b * rows_per_band + band.len() / n);
-            for (ray, deviation) in rays.iter().flatten() {
+            for (ray, samples, deviation) in rays.iter().flatten() {
                 let w = windows.of(ray.ns);
-                sart_ray_update(band, n, ray, *deviation, w, rows.clone());
+                sart_ray_update(band, n, ray.ds, samples, *deviation, w, rows.clone());
             }
         });
     update
