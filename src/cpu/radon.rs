@@ -775,13 +775,14 @@ pub fn sart_projection_update<R: Real>(
     shift: R,
     windows: &mut SartWindows<R>,
 ) -> Vec<R> {
-    type Samples<R> = Vec<(i64, i64, R, R)>;
-    let rays: Vec<Option<(SartRay<R>, Samples<R>, R)>> = projection
+    /// A ray, its samples (row, column, fractions) and its deviation.
+    type Traced<R> = (SartRay<R>, Vec<(i64, i64, R, R)>, R);
+    let rays: Vec<Option<Traced<R>>> = projection
         .par_iter()
         .enumerate()
         .map(|(i, &p)| {
             let ray = SartRay::new(n, theta_deg, R::of(i as f64) + shift)?;
-            let samples: Samples<R> = (0..=ray.ns).map(|k| ray.sample(n, k)).collect();
+            let samples: Vec<_> = (0..=ray.ns).map(|k| ray.sample(n, k)).collect();
             let (sum, norm) = sart_sum_of(img, n, ray.ds, &samples);
             let deviation = if norm > R::zero() {
                 -(sum - p) / norm
