@@ -551,6 +551,7 @@ fn data_files_can_be_confined_to_the_headers_folder() {
     );
     let confined = voxlab::io::ReadOptions {
         confine_data_files: true,
+        ..Default::default()
     };
     common::assert_format(
         voxlab::io::read_volume_with(&hdr, &confined),

@@ -315,6 +315,7 @@ fn confined_data_files_stay_in_the_headers_folder() {
         &p,
         &voxlab::io::ReadOptions {
             confine_data_files: true,
+            ..Default::default()
         },
     );
     assert_format(r, "data file", "outside");

@@ -7,7 +7,9 @@ mod common;
 use common::{assert_format, bits, gzip, oblique_affine, sample_volumes, scratch};
 use glam::{DMat4, DVec3};
 use std::path::{Path, PathBuf};
-use voxlab::io::nifti::{read_nifti, read_nifti_bytes, write_nifti};
+use voxlab::io::nifti::{
+    read_nifti, read_nifti_bytes, write_nifti, write_nifti_version, NiftiVersion,
+};
 use voxlab::io::{read_volume, write_volume};
 use voxlab::{AnyVolume, Error, Volume, VoxelKind};
 
@@ -128,6 +130,10 @@ fn read(bytes: &[u8]) -> voxlab::Result<AnyVolume> {
     read_nifti_bytes(bytes, Path::new("t.nii"))
 }
 
+fn read_frame(bytes: &[u8], frame: Option<usize>) -> voxlab::Result<AnyVolume> {
+    voxlab::io::nifti::read_nifti_bytes_frame(bytes, Path::new("t.nii"), frame)
+}
+
 // ---------------------------------------------------------------------------------
 // Round trips
 // ---------------------------------------------------------------------------------
@@ -211,15 +217,252 @@ fn written_header_fields() {
 }
 
 #[test]
-fn writer_refuses_axes_longer_than_32767() {
+fn axes_longer_than_nifti1_allows_are_written_as_nifti2() {
     let dir = scratch("long");
-    let v: AnyVolume = Volume::new([32768, 1, 1], [1.0; 3], vec![0u8; 32768])
-        .unwrap()
-        .into();
-    let e = write_nifti(&dir.join("x.nii"), &v).unwrap_err();
-    assert!(matches!(e, Error::Invalid { .. }), "{e}");
-    assert!(e.to_string().contains("32767"), "{e}");
-    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+    let v: AnyVolume = Volume::new(
+        [32768, 1, 2],
+        [0.5, 1.0, 2.0],
+        (0..65536u32).map(|i| (i % 251) as u8).collect(),
+    )
+    .unwrap()
+    .into();
+    // NIfTI-1 cannot hold the axis.
+    let e = write_nifti_version(&dir.join("one.nii"), &v, NiftiVersion::One).unwrap_err();
+    assert!(
+        matches!(e, Error::Invalid { .. }) && e.to_string().contains("32767"),
+        "{e}"
+    );
+    assert!(!dir.join("one.nii").exists());
+    let p = dir.join("x.nii");
+    write_nifti(&p, &v).unwrap();
+    let b = std::fs::read(&p).unwrap();
+    assert_eq!(i32::from_le_bytes([b[0], b[1], b[2], b[3]]), 540);
+    assert_eq!(i64::from_le_bytes(b[24..32].try_into().unwrap()), 32768);
+    assert_eq!(bits(&read_nifti(&p).unwrap()), bits(&v));
+}
+
+/// A NIfTI-2 header built field by field from the standard (540 bytes, 64-bit sizes,
+/// f64 geometry), the extension flag, then the data.
+#[allow(clippy::too_many_arguments)]
+fn nifti2_bytes(
+    big: bool,
+    dim: [i64; 8],
+    datatype: i16,
+    bitpix: i16,
+    pixdim: [f64; 8],
+    vox_offset: i64,
+    sform: Option<[[f64; 4]; 3]>,
+    magic: &[u8; 8],
+    data: &[u8],
+) -> Vec<u8> {
+    let mut b = vec![0u8; vox_offset.max(544) as usize];
+    macro_rules! put {
+        ($off:expr, $v:expr) => {{
+            let v = $v;
+            let bytes = if big {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            };
+            b[$off..$off + bytes.len()].copy_from_slice(&bytes);
+        }};
+    }
+    put!(0, 540i32);
+    b[4..12].copy_from_slice(magic);
+    put!(12, datatype);
+    put!(14, bitpix);
+    for i in 0..8 {
+        put!(16 + 8 * i, dim[i]);
+        put!(104 + 8 * i, pixdim[i]);
+    }
+    put!(168, vox_offset);
+    put!(176, 0.0f64);
+    put!(184, 0.0f64);
+    if let Some(rows) = sform {
+        put!(348, 1i32);
+        for r in 0..3 {
+            for c in 0..4 {
+                put!(400 + 32 * r + 8 * c, rows[r][c]);
+            }
+        }
+    }
+    put!(500, 2i32);
+    b.extend_from_slice(data);
+    b
+}
+
+#[test]
+fn nifti2_headers_built_by_hand_in_both_byte_orders() {
+    let magic = b"n+2\0\r\n\x1a\n";
+    // An sform no f32 holds exactly: NIfTI-2 keeps it to the last bit.
+    let rows = [
+        [0.1, 0.0, 0.0, -12.345678901234],
+        [0.0, 0.2, 0.0, 1.0 / 3.0],
+        [0.0, 0.0, 0.30000000000000004, 7.0],
+    ];
+    for big in [false, true] {
+        let data: Vec<u8> = (0..24u16)
+            .flat_map(|v| {
+                if big {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                }
+            })
+            .collect();
+        let pixdim = [1.0, 0.1, 0.2, 0.3, 1.0, 1.0, 1.0, 1.0];
+        let bytes = nifti2_bytes(
+            big,
+            [4, 2, 3, 2, 2, 1, 1, 1],
+            512,
+            16,
+            pixdim,
+            544,
+            Some(rows),
+            magic,
+            &data,
+        );
+        // Two frames of 2×3×2 u16.
+        assert_format(read(&bytes), "dim[4]", "2 3-D volumes");
+        let v = read_frame(&bytes, Some(1)).unwrap();
+        assert_eq!(v.kind(), VoxelKind::U16);
+        assert_eq!(v.dims(), [2, 3, 2]);
+        assert_eq!(v.values_f64(), (12..24).map(f64::from).collect::<Vec<_>>());
+        let a = v.affine();
+        for (r, row) in rows.iter().enumerate() {
+            assert_eq!(&a.row(r).to_array(), row, "big {big}");
+        }
+        // Gzip too.
+        assert_eq!(bits(&read_frame(&gzip(&bytes), Some(1)).unwrap()), bits(&v));
+        // Fields checked as in NIfTI-1.
+        let bad = nifti2_bytes(
+            big,
+            [3, 2, 3, 2, 1, 1, 1, 1],
+            512,
+            8,
+            pixdim,
+            544,
+            None,
+            magic,
+            &data,
+        );
+        assert_format(read(&bad), "bitpix", "does not match");
+        let bad = nifti2_bytes(
+            big,
+            [3, 2, 3, 2, 1, 1, 1, 1],
+            512,
+            16,
+            pixdim,
+            540,
+            None,
+            magic,
+            &data,
+        );
+        assert_format(read(&bad), "vox_offset", "at least 544");
+        let bad = nifti2_bytes(
+            big,
+            [3, 2, 3, 2, 1, 1, 1, 1],
+            512,
+            16,
+            pixdim,
+            544,
+            None,
+            b"n+1\0\0\0\0\0",
+            &data,
+        );
+        assert_format(read(&bad), "magic", "not a NIfTI-2 file");
+        let bad = nifti2_bytes(
+            big,
+            [3, 2, -3, 2, 1, 1, 1, 1],
+            512,
+            16,
+            pixdim,
+            544,
+            None,
+            magic,
+            &data,
+        );
+        assert_format(read(&bad), "dim[2]", "at least 1");
+        let huge = nifti2_bytes(
+            big,
+            [3, 1 << 40, 1 << 40, 2, 1, 1, 1, 1],
+            512,
+            16,
+            pixdim,
+            544,
+            None,
+            magic,
+            &data,
+        );
+        assert!(read(&huge).is_err());
+    }
+}
+
+/// A NIfTI-2 file is told by its content, whatever its name; `ni2` pairs keep their
+/// voxels (every frame) in the `.img`; `voxlab info` names the frames and `--frame`
+/// picks one on the command line.
+#[test]
+fn nifti2_files_on_disk_pairs_and_the_command_line() {
+    let dir = scratch("nifti2-disk");
+    let data: Vec<u8> = (0..24).collect();
+    let pixdim = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    let dim = [4, 3, 2, 2, 2, 1, 1, 1];
+    for big in [false, true] {
+        let single = nifti2_bytes(big, dim, 2, 8, pixdim, 544, None, b"n+2\0\r\n\x1a\n", &data);
+        let p = dir.join(format!("scan-{big}.bin"));
+        std::fs::write(&p, &single).unwrap();
+        assert_eq!(
+            voxlab::io::detect_format(&p).unwrap(),
+            voxlab::io::Format::Nifti
+        );
+        assert_eq!(voxlab::io::frame_count(&p).unwrap(), 2);
+        let opts = voxlab::io::ReadOptions {
+            frame: Some(1),
+            ..Default::default()
+        };
+        let v = voxlab::io::read_volume_with(&p, &opts).unwrap();
+        assert_eq!(v.values_f64(), (12..24).map(f64::from).collect::<Vec<_>>());
+
+        // A pair: the header alone in p.hdr, both frames in p.img from vox_offset 0.
+        let pair = nifti2_bytes(big, dim, 2, 8, pixdim, 0, None, b"ni2\0\r\n\x1a\n", &[]);
+        let hdr = dir.join(format!("pair-{big}.hdr"));
+        std::fs::write(&hdr, &pair[..540]).unwrap();
+        std::fs::write(dir.join(format!("pair-{big}.img")), &data).unwrap();
+        assert_eq!(voxlab::io::read_volume_with(&hdr, &opts).unwrap(), v);
+        assert_format(read_nifti(&hdr), "dim[4]", "2 3-D volumes");
+    }
+    let p = dir.join("scan-false.bin");
+    let p = p.to_str().unwrap();
+    let out = common::voxlab(&["info", p]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("NIfTI") && text.contains("frames"), "{text}");
+    assert!(text.contains("2 3-D volumes"), "{text}");
+    let out = common::voxlab(&["info", p, "--frame", "2"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("past the file's 2"),
+        "{err}"
+    );
+}
+
+#[test]
+fn nifti2_round_trips_with_the_affine_exact() {
+    let dir = scratch("nifti2");
+    for v in sample_volumes(oblique_affine()) {
+        for name in ["v.nii", "v.nii.gz"] {
+            let p = dir.join(name);
+            write_nifti_version(&p, &v, NiftiVersion::Two).unwrap();
+            let back = read_nifti(&p).unwrap();
+            assert_eq!(bits(&back), bits(&v), "{name}");
+            // f64 geometry: exactly the affine written (NIfTI-1 rounds it to f32).
+            assert_eq!(back.affine(), v.affine(), "{name}");
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------
@@ -441,13 +684,35 @@ fn bad_geometry_is_refused_naming_the_field() {
 }
 
 #[test]
-fn four_d_is_refused_and_trailing_unit_axes_are_fine() {
+fn four_d_files_give_the_frame_asked_for_and_trailing_unit_axes_are_fine() {
     let data: Vec<u8> = (0..36).collect();
     let mut h = Hdr::new(false);
     h.dim = [4, 3, 2, 2, 3, 1, 1, 1];
-    assert_format(read(&h.bytes(&data)), "dim[4]", "scalar 3-D");
+    // Three 3×2×2 volumes: without a frame the file is refused, naming how many.
+    assert_format(read(&h.bytes(&data)), "dim[4]", "3 3-D volumes (t 3)");
+    for k in 0..3 {
+        let v = read_frame(&h.bytes(&data), Some(k)).unwrap();
+        assert_eq!(v.dims(), [3, 2, 2]);
+        assert_eq!(
+            v.values_f64(),
+            (12 * k..12 * k + 12).map(|x| x as f64).collect::<Vec<_>>()
+        );
+    }
+    assert_format(
+        read_frame(&h.bytes(&data), Some(3)),
+        "dim[4]",
+        "past the file's 3",
+    );
+    // Axes 4 … 7 count as one, the fourth fastest: (t 1, u 2) holds two volumes.
     h.dim = [5, 3, 2, 2, 1, 2, 1, 1];
-    assert_format(read(&h.bytes(&data)), "dim[5]", "scalar 3-D");
+    assert_format(read(&h.bytes(&data)), "dim[4]", "t 1, u 2");
+    assert_eq!(
+        read_frame(&h.bytes(&data), Some(1)).unwrap().values_f64()[0],
+        12.0
+    );
+    // Every frame must be in the file, though one is read.
+    h.dim = [4, 3, 2, 2, 4, 1, 1, 1];
+    assert_format(read_frame(&h.bytes(&data), Some(0)), "data", "too short");
     h.dim = [7, 3, 2, 2, 1, 1, 1, 1];
     assert_eq!(read(&h.bytes(&data)).unwrap().dims(), [3, 2, 2]);
     h.dim = [2, 3, 2, 9, 9, 9, 9, 9];
@@ -463,8 +728,10 @@ fn bad_headers_name_the_field() {
         f(&mut h);
         read(&h.bytes(&data))
     };
-    assert_format(with(&|h| h.sizeof_hdr = 347), "sizeof_hdr", "not 348");
-    assert_format(with(&|h| h.sizeof_hdr = 540), "sizeof_hdr", "NIfTI-2");
+    assert_format(with(&|h| h.sizeof_hdr = 347), "sizeof_hdr", "neither 348");
+    assert_format(with(&|h| h.sizeof_hdr = 347), "sizeof_hdr", "NIfTI-2");
+    // 540 says NIfTI-2, whose 540-byte header this short file does not hold.
+    assert_format(with(&|h| h.sizeof_hdr = 540), "header", "truncated");
     assert_format(with(&|h| h.magic = *b"n+2\0"), "magic", "not a NIfTI-1");
     assert_format(with(&|h| h.magic = [0; 4]), "magic", "Analyze");
     assert_format(with(&|h| h.dim[0] = 0), "dim[0]", "1 to 7");
@@ -479,7 +746,7 @@ fn bad_headers_name_the_field() {
     assert_format(
         with(&|h| h.datatype = 7),
         "datatype",
-        "not a NIfTI-1 datatype",
+        "not a NIfTI datatype",
     );
     assert_format(
         with(&|h| h.vox_offset = 348.0),

@@ -6,5 +6,8 @@ use libfuzzer_sys::fuzz_target;
 use voxlab::io::{read_volume_bytes, Format};
 
 fuzz_target!(|data: &[u8]| {
-    let _ = read_volume_bytes(data, Format::Nifti, std::path::Path::new("fuzz.nifti"));
+    let path = std::path::Path::new("fuzz.nifti");
+    let _ = read_volume_bytes(data, Format::Nifti, path);
+    // Files of several 3-D volumes are read one frame at a time.
+    let _ = voxlab::io::nifti::read_nifti_bytes_frame(data, path, Some(1));
 });

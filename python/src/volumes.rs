@@ -27,9 +27,15 @@ fn parts(py: Python<'_>, v: voxlab::volume::AnyVolume, format: &str) -> PyResult
 /// Reads any volume `voxlab info` reads (a file, a DICOM directory, `phantom:…`),
 /// NaN and infinities kept.
 #[pyfunction]
-#[pyo3(signature = (source, raw_json=None))]
-fn read_volume(py: Python<'_>, source: String, raw_json: Option<String>) -> PyResult<VolumeParts> {
+#[pyo3(signature = (source, raw_json=None, frame=None))]
+fn read_volume(
+    py: Python<'_>,
+    source: String,
+    raw_json: Option<String>,
+    frame: Option<usize>,
+) -> PyResult<VolumeParts> {
     let mut input = VolumeInput::new(source);
+    input.load.frame = frame;
     if let Some(j) = raw_json {
         input.load.raw = Some(errors::parse_request(py, "raw layout", &j)?);
     }
@@ -61,16 +67,41 @@ fn volume_info(
     serde_json::to_string(&info).map_err(|e| errors::raise(py, "InternalError", &e.to_string()))
 }
 
-/// Writes a volume by extension (`.nrrd`, `.nhdr`, `.nii`, `.nii.gz`, `.npy`).
+/// Writes a volume by extension (`.nrrd`, `.nhdr`, `.nii`, `.nii.gz`, `.mha`, `.mhd`,
+/// `.npy`); `nifti_version` 1 or 2 chooses the NIfTI header.
 #[pyfunction]
+#[pyo3(signature = (path, array, affine, nifti_version=None))]
 fn write_volume(
     py: Python<'_>,
     path: std::path::PathBuf,
     array: &Bound<'_, PyAny>,
     affine: [[f64; 4]; 4],
+    nifti_version: Option<u8>,
 ) -> PyResult<()> {
+    use voxlab::io::nifti::{write_nifti_version, NiftiVersion};
     let v = arrays::volume(py, array, affine)?;
-    job::run(py, None, |_| voxlab::io::write_volume(&path, &v))
+    let version = match nifti_version {
+        None => None,
+        Some(1) => Some(NiftiVersion::One),
+        Some(2) => Some(NiftiVersion::Two),
+        Some(other) => {
+            return Err(errors::raise(
+                py,
+                "InvalidError",
+                &format!("invalid nifti_version: {other} (1 or 2)"),
+            ))
+        }
+    };
+    let name = path.to_string_lossy().to_ascii_lowercase();
+    let nifti = name.ends_with(".nii") || name.ends_with(".nii.gz");
+    job::run(py, None, |_| match version {
+        Some(version) if nifti => write_nifti_version(&path, &v, version),
+        Some(_) => Err(voxlab::Error::invalid(
+            "nifti_version",
+            format!("{} is not a .nii or .nii.gz file", path.display()),
+        )),
+        None => voxlab::io::write_volume(&path, &v),
+    })
 }
 
 /// How the library holds an array given as a volume: whether it reads the array's own

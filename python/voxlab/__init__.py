@@ -179,7 +179,8 @@ def _as_volume(v: Any, spacing: Any = None, affine: Any = None) -> Tuple[np.ndar
     return _volume_array(v), _affine(affine, spacing)
 
 
-def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] = None) -> Volume:
+def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] = None,
+         frame: Optional[int] = None) -> Volume:
     """Reads a volume: every format ``voxlab info`` reads (NRRD attached/detached,
     NIfTI-1 ``.nii``/``.nii.gz``, DICOM file or series directory, PVM, VolPack
     ``.den``, multi-page TIFF, ``.npy``, MetaImage ``.mha``/``.mhd``), a
@@ -187,12 +188,17 @@ def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] 
     samples described by ``raw={"dims": [nx, ny, nz], "sample": "u16", "endian":
     "little", "spacing": [sx, sy, sz], "offset": 0}``.
 
+    A file that holds several 3-D volumes (a NIfTI time series or vector image,
+    ``dim[4..7]``; a 4-D MetaImage; a NRRD with a non-spatial axis) is read one volume
+    at a time: ``frame=k`` (0, 1, …; :func:`info` says how many there are); without it
+    such a file is refused naming how many it holds.
+
     NaN and infinite voxels are kept as stored. Raises :class:`FileError`,
     :class:`FormatError` (the file and the field) or :class:`TooLargeError`.
     """
     source = _os.fspath(path)
     raw_json = None if raw is None else _json.dumps(raw)
-    arr, affine, fmt, _kind = _voxlab.read_volume(source, raw_json)
+    arr, affine, fmt, _kind = _voxlab.read_volume(source, raw_json, frame)
     return Volume(arr, np.array(affine, dtype=np.float64), fmt, source)
 
 
@@ -214,6 +220,7 @@ def write(
     *,
     spacing: Any = None,
     affine: Any = None,
+    nifti_version: Optional[int] = None,
 ) -> None:
     """Writes a volume by extension, atomically: ``.nrrd`` (gzip), ``.nhdr`` (detached,
     data in ``<stem>.raw.gz``), ``.nii``/``.nii.gz`` (affine as sform and qform),
@@ -222,10 +229,12 @@ def write(
 
     ``volume`` is a :class:`Volume` (its affine is written) or an array with
     ``spacing=(sx, sy, sz)`` mm or a 4x4 ``affine`` (default: 1 mm voxels at the
-    origin). float64 arrays are written as float32.
+    origin). float64 arrays are written as float32. ``nifti_version``: 1 or 2 for
+    ``.nii``/``.nii.gz`` (default: NIfTI-1, or NIfTI-2 when an axis is longer than
+    32767 voxels; NIfTI-2 keeps the affine in float64, NIfTI-1 in float32).
     """
     arr, aff = _as_volume(volume, spacing, affine)
-    _voxlab.write_volume(_os.fspath(path), arr, aff.tolist())
+    _voxlab.write_volume(_os.fspath(path), arr, aff.tolist(), nifti_version)
 
 
 def phantom(name: str, size: Union[int, Sequence[int]] = 128) -> Volume:
@@ -380,7 +389,7 @@ _ACCEL_KEYS = (
     "skip_empty", "block_size", "clip_box", "clip_space", "jitter", "accumulate",
     "interleaved", "clip_mesh", "clip_mesh_units",
 )
-_LOAD_KEYS = ("phantom_size", "raw", "non_finite")
+_LOAD_KEYS = ("phantom_size", "raw", "non_finite", "frame", "confine_data_files")
 
 
 @dataclass

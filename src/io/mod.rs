@@ -93,7 +93,7 @@ impl Format {
         match self {
             Format::Nrrd => "NRRD",
             Format::Npy => "NumPy .npy",
-            Format::Nifti => "NIfTI-1",
+            Format::Nifti => "NIfTI",
             Format::Dicom => "DICOM",
             Format::Pvm => "PVM",
             Format::Den => "VolPack .den",
@@ -325,6 +325,12 @@ fn sniff(head: &[u8]) -> Option<Format> {
         Some(Format::Dicom)
     } else if head.len() >= 348 && (&head[344..348] == b"n+1\0" || &head[344..348] == b"ni1\0") {
         Some(Format::Nifti)
+    } else if head.len() >= 12
+        && (head[..4] == 540i32.to_le_bytes() || head[..4] == 540i32.to_be_bytes())
+        && (&head[4..8] == b"n+2\0" || &head[4..8] == b"ni2\0")
+    {
+        // NIfTI-2: sizeof_hdr 540 and the magic at byte 4.
+        Some(Format::Nifti)
     } else if starts(b"ObjectType") {
         Some(Format::MetaImage)
     } else {
@@ -346,6 +352,23 @@ pub struct ReadOptions {
     /// `data file:` that is absolute or climbs with `../`, which the format allows), so
     /// that an untrusted header cannot make voxlab read any file the user can.
     pub confine_data_files: bool,
+    /// Which 3-D volume to read from a file that holds several (a NIfTI `dim[4..7]`, a
+    /// MetaImage of 4 dimensions, a NRRD with a non-spatial axis): its index, the
+    /// extra axes counted as one. `None` refuses such a file, naming how many it holds.
+    pub frame: Option<usize>,
+}
+
+/// How many 3-D volumes a file holds, from its header: more than 1 for a NIfTI time
+/// series or vector image, a 4-D MetaImage or a NRRD with a non-spatial axis (those
+/// are read one at a time, [`ReadOptions::frame`]); 1 for every other file.
+///
+/// # Errors
+/// The header's errors.
+pub fn frame_count(path: &Path) -> Result<usize> {
+    match detect_format(path)? {
+        Format::Nifti => nifti::nifti_frames(path),
+        _ => Ok(1),
+    }
 }
 
 /// [`read_volume`] with [`ReadOptions`].
@@ -367,7 +390,7 @@ pub fn read_volume_as_with(
     match format {
         Format::Nrrd => nrrd::read_nrrd_with(path, options),
         Format::Npy => npy::read_npy_volume(path),
-        Format::Nifti => nifti::read_nifti(path),
+        Format::Nifti => nifti::read_nifti_frame(path, options.frame),
         Format::Dicom => dicom::read_dicom(path),
         Format::Pvm => pvm::read_pvm(path),
         Format::Den => den::read_den(path),

@@ -1,44 +1,54 @@
-//! NIfTI-1 files (`.nii`, `.nii.gz`, and `.hdr`/`.img` pairs), read and written by hand;
-//! gzip via `flate2`.
+//! NIfTI-1 and NIfTI-2 files (`.nii`, `.nii.gz`, and `.hdr`/`.img` pairs), read and
+//! written by hand; gzip via `flate2`.
 //!
 //! # The format
 //!
-//! A NIfTI-1 file is a fixed 348-byte binary header, 4 bytes saying whether header
-//! extensions follow, the extensions if any, and the voxels from byte `vox_offset` on.
-//! The fields voxlab uses (offsets in bytes):
+//! A NIfTI file is a fixed binary header (348 bytes in NIfTI-1, 540 in NIfTI-2), 4 bytes
+//! saying whether header extensions follow, the extensions if any, and the voxels from
+//! byte `vox_offset` on. NIfTI-2 holds the same fields as NIfTI-1, widened (sizes and
+//! offsets to i64, reals to f64) and reordered. The fields voxlab uses (offsets in
+//! bytes, NIfTI-1 / NIfTI-2):
 //!
 //! ```text
-//! offset  field          type      use
-//!   0     sizeof_hdr     i32       348; also tells the byte order (else byte-swapped)
-//!  40     dim            8 × i16   dim[0] = number of axes (1..7), dim[1..] = sizes
-//!  70     datatype       i16       the stored type (codes below)
-//!  72     bitpix         i16       bits per voxel; must match datatype
-//!  76     pixdim         8 × f32   pixdim[0] = qfac (±1), pixdim[1..3] = voxel size
-//! 108     vox_offset     f32       where the voxels start
-//! 112     scl_slope      f32       value = stored · slope + inter (0 = no scaling)
-//! 116     scl_inter      f32
-//! 123     xyzt_units     u8        spatial unit in bits 0..2: 1 m, 2 mm, 3 µm
-//! 252     qform_code     i16       > 0: the quaternion fields hold a geometry
-//! 254     sform_code     i16       > 0: srow_x/y/z hold a geometry
-//! 256     quatern_b,c,d  3 × f32   rotation quaternion (a is implied, a ≥ 0)
-//! 268     qoffset_x,y,z  3 × f32   translation
-//! 280     srow_x,y,z     12 × f32  rows of the 3×4 voxel-to-world affine
-//! 344     magic          4 bytes   "n+1\0": one file; "ni1\0": a .hdr/.img pair
+//! NIfTI-1        NIfTI-2        field          use
+//!   0 i32          0 i32        sizeof_hdr     348 or 540; also tells the byte order
+//! 344 [4]          4 [8]        magic          "n+1\0"/"n+2\0…": one file;
+//!                                              "ni1\0"/"ni2\0…": a .hdr/.img pair
+//!  40 8 × i16     16 8 × i64    dim            dim[0] = number of axes (1..7),
+//!                                              dim[1..] = sizes
+//!  70 i16         12 i16        datatype       the stored type (codes below)
+//!  72 i16         14 i16        bitpix         bits per voxel; must match datatype
+//!  76 8 × f32    104 8 × f64    pixdim         pixdim[0] = qfac (±1), [1..3] = voxel size
+//! 108 f32        168 i64        vox_offset     where the voxels start
+//! 112 f32        176 f64        scl_slope      value = stored · slope + inter
+//! 116 f32        184 f64        scl_inter      (slope 0 = no scaling)
+//! 123 u8         500 i32        xyzt_units     spatial unit in bits 0..2: 1 m, 2 mm, 3 µm
+//! 252 i16        344 i32        qform_code     > 0: the quaternion fields hold a geometry
+//! 254 i16        348 i32        sform_code     > 0: srow_x/y/z hold a geometry
+//! 256 3 × f32    352 3 × f64    quatern_b,c,d  rotation quaternion (a is implied, a ≥ 0)
+//! 268 3 × f32    376 3 × f64    qoffset_x,y,z  translation
+//! 280 12 × f32   400 12 × f64   srow_x,y,z     rows of the 3×4 voxel-to-world affine
 //! ```
 //!
 //! All multi-byte fields and voxels are in the file's byte order; the voxels are x
-//! fastest, like the crate's memory order.
+//! fastest, like the crate's memory order, then the axes past the third (`t` fastest)
+//! — a 4-D file is its 3-D volumes one after another.
 //!
 //! # What is read
 //!
-//! - Both byte orders, told by `sizeof_hdr`. Single files (`n+1`, data at
-//!   `vox_offset`, which must be a whole number ≥ 352) and pairs (`ni1`: the header in
+//! - Both versions and both byte orders, told by `sizeof_hdr`. Single files (`n+1`,
+//!   `n+2`: data at `vox_offset`, which must be a whole number at or past the header
+//!   and its 4 extension bytes: 352, 544) and pairs (`ni1`, `ni2`: the header in
 //!   `X.hdr`, the voxels in `X.img` from `vox_offset` on; `X.hdr.gz` pairs with
 //!   `X.img.gz`). Gzip-compressed files (`.nii.gz`) are recognised by their content.
 //!   Extensions are skipped. Bytes after the voxels are ignored.
-//! - `dim[0]` from 1 to 7; x, y, z from `dim[1..3]` (1 beyond `dim[0]`); `dim[4..]`
-//!   up to `dim[0]` must be 1, because voxlab volumes are scalar 3-D (a time series or
-//!   vector image is refused naming the `dim` entry).
+//! - `dim[0]` from 1 to 7; x, y, z from `dim[1..3]` (1 beyond `dim[0]`). The axes past
+//!   the third (`dim[4..]` up to `dim[0]`: time, then vector components) count the
+//!   file's 3-D volumes, its *frames*, numbered with the fourth axis fastest. voxlab
+//!   volumes are scalar 3-D, so a file of several frames is read one frame at a time:
+//!   [`read_nifti_frame`] (`--frame K`, `voxlab.read(path, frame=K)`) seeks to frame K
+//!   and reads only its voxels; [`read_nifti`] refuses such a file with a message
+//!   giving the count. [`nifti_frames`] reads the count from the header alone.
 //! - `datatype`: 2 (u8) → u8, 256 (i8) → i16, 4 (i16) → i16, 512 (u16) → u16, 16 (f32)
 //!   → f32, and 8 (i32), 768 (u32), 1024 (i64), 1280 (u64), 64 (f64) → f32 rounded to
 //!   nearest (see [`crate::io`]). Complex, RGB, RGBA, binary and float128 data are
@@ -58,19 +68,21 @@
 //!   (+x towards the subject's right, +y anterior, +z superior); a spatial unit of metres or micrometres is converted to millimetres,
 //!   an unknown unit is taken as millimetres. A non-finite or singular result is
 //!   refused naming `sform`, `qform` or `pixdim`.
-//! - NIfTI-2 (`sizeof_hdr` 540) and Analyze 7.5 (no magic) are refused with a message.
+//! - Analyze 7.5 (no magic) is refused with a message.
 //!
 //! # What is written
 //!
-//! [`write_nifti`] writes a single little-endian NIfTI-1 file, gzip-compressed when the
-//! name ends in `.gz`: datatype 2, 512, 4 or 16 for u8, u16, i16 and f32, `vox_offset`
+//! [`write_nifti`] writes a single little-endian NIfTI-1 file — NIfTI-2 when an axis is
+//! longer than NIfTI-1's 32767, or when asked with [`write_nifti_version`] —
+//! gzip-compressed when the name ends in `.gz`: datatype 2, 512, 4 or 16 for u8, u16, i16 and f32, `vox_offset`
 //! 352 (no extensions), no scaling (slope 1, intercept 0), millimetres, `sform_code` 2
 //! (aligned) with the affine in `srow`, and `qform_code` 2 with the same geometry as a
 //! quaternion when the affine's linear part is a rotation times positive scales
 //! (possibly with one reflection, written as `qfac` −1), else `qform_code` 0. `pixdim`
-//! holds the column lengths. The file stores the affine as 32-bit floats, so **a round
-//! trip gives back the affine rounded to f32** (exactly, when it is f32-representable).
-//! Axes longer than 32767 voxels cannot be stored and are refused.
+//! holds the column lengths; `vox_offset` is 544 in NIfTI-2. NIfTI-1 stores the affine
+//! as 32-bit floats, so **a NIfTI-1 round trip gives back the affine rounded to f32**
+//! (exactly, when it is f32-representable); NIfTI-2 stores f64 and gives it back
+//! exactly.
 
 use super::{fill, open, read_error, read_samples, too_short, write_atomic, write_samples_le};
 use super::{truncated_header, Endian, Samples, Stored};
@@ -93,11 +105,27 @@ const WRITE_OFFSET: usize = 352;
 /// stream shorter than its promise divided by this is certainly truncated.
 const MAX_DEFLATE_RATIO: u64 = 1032;
 
-/// Reads a NIfTI-1 volume: `.nii`, `.nii.gz`, or the `.hdr` of a `.hdr`/`.img` pair.
+/// Reads a NIfTI-1 or NIfTI-2 volume: `.nii`, `.nii.gz`, or the `.hdr` of a
+/// `.hdr`/`.img` pair. A file of several 3-D volumes is refused (choose one with
+/// [`read_nifti_frame`]).
 pub fn read_nifti(path: &Path) -> Result<AnyVolume> {
+    read_nifti_frame(path, None)
+}
+
+/// How many 3-D volumes a NIfTI file holds (the product of `dim[4..]`), from its
+/// header alone.
+pub fn nifti_frames(path: &Path) -> Result<usize> {
+    let (file, len) = open(path)?;
+    let (mut reader, _) = maybe_gzip(BufReader::new(file), len, path)?;
+    Ok(read_header(&mut reader, path, Some(0))?.frames)
+}
+
+/// [`read_nifti`] of 3-D volume `frame` (counting the axes past the third as one, the
+/// fourth fastest) of a file that holds several; `None` reads a file of one.
+pub fn read_nifti_frame(path: &Path, frame: Option<usize>) -> Result<AnyVolume> {
     let (file, len) = open(path)?;
     let (mut reader, size) = maybe_gzip(BufReader::new(file), len, path)?;
-    let header = read_header(&mut reader, path)?;
+    let header = read_header(&mut reader, path, frame)?;
     if header.pair {
         let img = image_path(path)?;
         let (file, len) = open(&img).map_err(|e| {
@@ -110,7 +138,7 @@ pub fn read_nifti(path: &Path) -> Result<AnyVolume> {
         let (mut data, size) = maybe_gzip(BufReader::new(file), len, &img)?;
         read_data(&mut data, size, 0, &header, &img)
     } else {
-        read_data(&mut reader, size, HEADER_LEN as u64, &header, path)
+        read_data(&mut reader, size, header.len as u64, &header, path)
     }
 }
 
@@ -118,16 +146,27 @@ pub fn read_nifti(path: &Path) -> Result<AnyVolume> {
 /// only names the file in errors. A `ni1` header is refused (its voxels are in another
 /// file).
 pub fn read_nifti_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    read_nifti_bytes_frame(bytes, path, None)
+}
+
+/// [`read_nifti_bytes`] of one 3-D volume of a file that holds several
+/// ([`read_nifti_frame`]).
+pub fn read_nifti_bytes_frame(
+    bytes: &[u8],
+    path: &Path,
+    frame: Option<usize>,
+) -> Result<AnyVolume> {
     let (mut reader, size) = maybe_gzip(bytes, bytes.len() as u64, path)?;
-    let header = read_header(&mut reader, path)?;
+    let header = read_header(&mut reader, path, frame)?;
     if header.pair {
         return Err(Error::format(
             path,
             "magic",
-            "a ni1 header keeps its voxels in a separate .img file; read the .hdr file by name",
+            "a ni1/ni2 header keeps its voxels in a separate .img file; read the .hdr file \
+             by name",
         ));
     }
-    read_data(&mut reader, size, HEADER_LEN as u64, &header, path)
+    read_data(&mut reader, size, header.len as u64, &header, path)
 }
 
 /// How much data a stream can hold at most.
@@ -193,105 +232,203 @@ struct Header {
     stored: Stored,
     dims: [usize; 3],
     count: usize,
+    /// 3-D volumes in the file (the product of `dim[4..]`), and the one read.
+    frames: usize,
+    frame: usize,
     vox_offset: u64,
     /// `(slope, inter)` when the values are scaled.
     scale: Option<(f64, f64)>,
     affine: DMat4,
-    /// `ni1`: the voxels are in a separate `.img` file.
+    /// `ni1`/`ni2`: the voxels are in a separate `.img` file.
     pair: bool,
+    /// Bytes of the header (348 for NIfTI-1, 540 for NIfTI-2).
+    len: usize,
 }
 
-/// Typed access to the raw header bytes.
+/// Bytes in a NIfTI-2 header.
+pub const HEADER2_LEN: usize = 540;
+
+/// The fields voxlab reads, where each version keeps them.
+#[derive(Clone, Copy, Debug)]
+enum Field {
+    Dim(usize),
+    Datatype,
+    Bitpix,
+    Pixdim(usize),
+    VoxOffset,
+    SclSlope,
+    SclInter,
+    QformCode,
+    SformCode,
+    /// quatern_b, c, d, then qoffset_x, y, z.
+    Quatern(usize),
+    /// srow_x[0..4], srow_y, srow_z.
+    Srow(usize),
+}
+
+/// Typed access to the raw header bytes of either version.
 struct Raw<'a> {
-    b: &'a [u8; HEADER_LEN],
+    b: &'a [u8],
     endian: Endian,
+    /// 1 or 2.
+    version: u8,
 }
 
 impl Raw<'_> {
-    fn i16(&self, off: usize) -> i16 {
-        let a = [self.b[off], self.b[off + 1]];
-        match self.endian {
-            Endian::Little => i16::from_le_bytes(a),
-            Endian::Big => i16::from_be_bytes(a),
+    fn bytes<const N: usize>(&self, off: usize) -> [u8; N] {
+        let mut a = [0u8; N];
+        a.copy_from_slice(&self.b[off..off + N]);
+        if self.endian == Endian::Big {
+            a.reverse();
+        }
+        a
+    }
+    /// The field's offset and its width in bytes (integers) for this version.
+    fn place(&self, f: Field) -> (usize, usize) {
+        match (self.version, f) {
+            (1, Field::Dim(i)) => (40 + 2 * i, 2),
+            (1, Field::Datatype) => (70, 2),
+            (1, Field::Bitpix) => (72, 2),
+            (1, Field::Pixdim(i)) => (76 + 4 * i, 4),
+            (1, Field::VoxOffset) => (108, 4),
+            (1, Field::SclSlope) => (112, 4),
+            (1, Field::SclInter) => (116, 4),
+            (1, Field::QformCode) => (252, 2),
+            (1, Field::SformCode) => (254, 2),
+            (1, Field::Quatern(i)) => (256 + 4 * i, 4),
+            (1, Field::Srow(i)) => (280 + 4 * i, 4),
+            (_, Field::Dim(i)) => (16 + 8 * i, 8),
+            (_, Field::Datatype) => (12, 2),
+            (_, Field::Bitpix) => (14, 2),
+            (_, Field::Pixdim(i)) => (104 + 8 * i, 8),
+            (_, Field::VoxOffset) => (168, 8),
+            (_, Field::SclSlope) => (176, 8),
+            (_, Field::SclInter) => (184, 8),
+            (_, Field::QformCode) => (344, 4),
+            (_, Field::SformCode) => (348, 4),
+            (_, Field::Quatern(i)) => (352 + 8 * i, 8),
+            (_, Field::Srow(i)) => (400 + 8 * i, 8),
         }
     }
-    fn f32(&self, off: usize) -> f32 {
-        let a = [
-            self.b[off],
-            self.b[off + 1],
-            self.b[off + 2],
-            self.b[off + 3],
-        ];
-        match self.endian {
-            Endian::Little => f32::from_le_bytes(a),
-            Endian::Big => f32::from_be_bytes(a),
+    /// An integer field (i16 in NIfTI-1; i16, i32 or i64 in NIfTI-2), little-endian
+    /// bytes after [`Raw::bytes`]'s swap.
+    fn int(&self, f: Field) -> i64 {
+        let (off, w) = self.place(f);
+        match w {
+            2 => i64::from(i16::from_le_bytes(self.bytes::<2>(off))),
+            4 => i64::from(i32::from_le_bytes(self.bytes::<4>(off))),
+            _ => i64::from_le_bytes(self.bytes::<8>(off)),
         }
     }
-    fn f64(&self, off: usize) -> f64 {
-        f64::from(self.f32(off))
+    /// A real field (f32 in NIfTI-1, f64 in NIfTI-2) as f64; `vox_offset` too (an f32
+    /// in NIfTI-1, an i64 in NIfTI-2).
+    fn real(&self, f: Field) -> f64 {
+        let (off, w) = self.place(f);
+        match (w, f) {
+            (8, Field::VoxOffset) => i64::from_le_bytes(self.bytes::<8>(off)) as f64,
+            (4, _) => f64::from(f32::from_le_bytes(self.bytes::<4>(off))),
+            _ => f64::from_le_bytes(self.bytes::<8>(off)),
+        }
+    }
+    /// The spatial unit's code (`xyzt_units & 7`).
+    fn space_unit(&self) -> u8 {
+        if self.version == 1 {
+            self.b[123] & 0x07
+        } else {
+            (i32::from_le_bytes(self.bytes::<4>(500)) & 0x07) as u8
+        }
+    }
+    /// The magic: whether the voxels are in a separate file (`ni1`, `ni2`).
+    fn pair(&self, path: &Path) -> Result<bool> {
+        let (magic, one, pair) = if self.version == 1 {
+            (&self.b[344..348], &b"n+1\0"[..], &b"ni1\0"[..])
+        } else {
+            (
+                &self.b[4..12],
+                &b"n+2\0\r\n\x1a\n"[..],
+                &b"ni2\0\r\n\x1a\n"[..],
+            )
+        };
+        if magic == one {
+            Ok(false)
+        } else if magic == pair {
+            Ok(true)
+        } else {
+            Err(Error::format(
+                path,
+                "magic",
+                if self.version == 1 {
+                    format!(
+                        "{:?} is neither \"n+1\" nor \"ni1\": not a NIfTI-1 file (Analyze 7.5 \
+                         headers without the magic are not supported)",
+                        String::from_utf8_lossy(magic)
+                    )
+                } else {
+                    format!(
+                        "{:?} is neither \"n+2\" nor \"ni2\" (with \\r\\n\\x1a\\n): not a \
+                         NIfTI-2 file",
+                        String::from_utf8_lossy(magic)
+                    )
+                },
+            ))
+        }
     }
 }
 
-fn read_header(reader: &mut dyn Read, path: &Path) -> Result<Header> {
-    let mut b = [0u8; HEADER_LEN];
-    let got = fill(reader, &mut b).map_err(|e| read_error(path, e))?;
+fn read_header(reader: &mut dyn Read, path: &Path, frame: Option<usize>) -> Result<Header> {
+    let mut b = vec![0u8; HEADER2_LEN];
+    let got = fill(reader, &mut b[..4]).map_err(|e| read_error(path, e))?;
     if got < 4 {
         return Err(Error::format(
             path,
             "sizeof_hdr",
-            "the file is too short to be a NIfTI-1 file",
+            "the file is too short to be a NIfTI file",
         ));
     }
     let sizeof = [b[0], b[1], b[2], b[3]];
-    let endian = match (i32::from_le_bytes(sizeof), i32::from_be_bytes(sizeof)) {
-        (348, _) => Endian::Little,
-        (_, 348) => Endian::Big,
-        (540, _) | (_, 540) => {
-            return Err(Error::format(
-                path,
-                "sizeof_hdr",
-                "this is a NIfTI-2 file (header of 540 bytes), which is not supported; \
-                 convert it to NIfTI-1 (e.g. with nibabel: nib.Nifti1Image(img.dataobj, img.affine))",
-            ))
-        }
+    let (endian, version, len) = match (i32::from_le_bytes(sizeof), i32::from_be_bytes(sizeof)) {
+        (348, _) => (Endian::Little, 1, HEADER_LEN),
+        (_, 348) => (Endian::Big, 1, HEADER_LEN),
+        (540, _) => (Endian::Little, 2, HEADER2_LEN),
+        (_, 540) => (Endian::Big, 2, HEADER2_LEN),
         (v, _) => {
             return Err(Error::format(
                 path,
                 "sizeof_hdr",
-                format!("{v} is not 348 in either byte order: not a NIfTI-1 file"),
-            ))
-        }
-    };
-    if got < HEADER_LEN {
-        return Err(truncated_header(path, got, HEADER_LEN));
-    }
-    parse_header(&Raw { b: &b, endian }, path)
-}
-
-fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
-    let err = |field: &str, msg: String| Error::format(path, field, msg);
-    let pair = match &h.b[344..348] {
-        b"n+1\0" => false,
-        b"ni1\0" => true,
-        m => {
-            return Err(err(
-                "magic",
                 format!(
-                    "{:?} is neither \"n+1\" nor \"ni1\": not a NIfTI-1 file (Analyze 7.5 \
-                     headers without the magic are not supported)",
-                    String::from_utf8_lossy(m)
+                    "{v} is neither 348 (NIfTI-1) nor 540 (NIfTI-2) in either byte order: \
+                     not a NIfTI file"
                 ),
             ))
         }
     };
+    let got = 4 + fill(reader, &mut b[4..len]).map_err(|e| read_error(path, e))?;
+    if got < len {
+        return Err(truncated_header(path, got, len));
+    }
+    b.truncate(len);
+    parse_header(
+        &Raw {
+            b: &b,
+            endian,
+            version,
+        },
+        path,
+        frame,
+    )
+}
 
-    let dim: Vec<i16> = (0..8).map(|i| h.i16(40 + 2 * i)).collect();
+fn parse_header(h: &Raw, path: &Path, frame: Option<usize>) -> Result<Header> {
+    let err = |field: &str, msg: String| Error::format(path, field, msg);
+    let pair = h.pair(path)?;
+    let dim: Vec<i64> = (0..8).map(|i| h.int(Field::Dim(i))).collect();
     let ndim = dim[0];
     if !(1..=7).contains(&ndim) {
         return Err(err("dim[0]", format!("{ndim} axes: must be from 1 to 7")));
     }
     let ndim = ndim as usize;
     let mut dims = [1usize; 3];
+    let mut frames = 1usize;
     for (i, &d) in dim.iter().enumerate().take(ndim + 1).skip(1) {
         if d < 1 {
             return Err(err(
@@ -299,21 +436,52 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
                 format!("{d}: sizes must be at least 1"),
             ));
         }
+        let d = usize::try_from(d).unwrap_or(usize::MAX);
         if i <= 3 {
-            dims[i - 1] = d as usize;
-        } else if d != 1 {
-            return Err(err(
-                &format!("dim[{i}]"),
-                format!(
-                    "{d}: voxlab volumes are scalar 3-D, so axes beyond the third \
-                     (time, vector components) must have size 1; extract one 3-D volume first"
-                ),
-            ));
+            dims[i - 1] = d;
+        } else {
+            frames = frames
+                .checked_mul(d)
+                .ok_or_else(|| err(&format!("dim[{i}]"), format!("{d}: too many volumes")))?;
         }
     }
     let count = check_dims(dims).map_err(|e| err("dim", e.to_string()))?;
+    let frame = match frame {
+        None if frames > 1 => {
+            return Err(err(
+                "dim[4]",
+                format!(
+                    "the file holds {frames} 3-D volumes ({}); choose one with --frame K \
+                     (0 … {})",
+                    extra_axes(&dim[4..=ndim]),
+                    frames - 1
+                ),
+            ))
+        }
+        None => 0,
+        Some(k) if k >= frames => {
+            return Err(err(
+                "dim[4]",
+                format!(
+                    "frame {k} is past the file's {frames} 3-D volume{} (0 … {})",
+                    if frames == 1 { "" } else { "s" },
+                    frames - 1
+                ),
+            ))
+        }
+        Some(k) => k,
+    };
+    count
+        .checked_mul(frames)
+        .filter(|&n| n <= (1usize << 62))
+        .ok_or_else(|| {
+            err(
+                "dim",
+                format!("{frames} volumes of {count} voxels: too many"),
+            )
+        })?;
 
-    let datatype = h.i16(70);
+    let datatype = h.int(Field::Datatype);
     let stored = match datatype {
         2 => Stored::U8,
         256 => Stored::I8,
@@ -335,7 +503,7 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
                 1792 => "complex128",
                 2048 => "complex256",
                 2304 => "RGBA32",
-                _ => "not a NIfTI-1 datatype",
+                _ => "not a NIfTI datatype",
             };
             return Err(err(
                 "datatype",
@@ -346,8 +514,8 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
             ));
         }
     };
-    let bitpix = h.i16(72);
-    if bitpix as i64 != stored.size() as i64 * 8 {
+    let bitpix = h.int(Field::Bitpix);
+    if bitpix != stored.size() as i64 * 8 {
         return Err(err(
             "bitpix",
             format!(
@@ -357,8 +525,9 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
         ));
     }
 
-    let vox_offset = h.f32(108);
-    let min_offset = if pair { 0.0 } else { (HEADER_LEN + 4) as f32 };
+    let header_len = h.b.len();
+    let vox_offset = h.real(Field::VoxOffset);
+    let min_offset = if pair { 0.0 } else { (header_len + 4) as f64 };
     if !vox_offset.is_finite() || vox_offset.fract() != 0.0 || vox_offset < min_offset {
         return Err(err(
             "vox_offset",
@@ -376,11 +545,11 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
             format!("{vox_offset:e} bytes is past the end of any file"),
         ));
     }
-    // A whole f32 below 2^53 converts exactly.
+    // A whole number below 2^53 converts exactly.
     let vox_offset = vox_offset as u64;
 
-    let slope = h.f64(112);
-    let inter = h.f64(116);
+    let slope = h.real(Field::SclSlope);
+    let inter = h.real(Field::SclInter);
     let scale = if slope != 0.0 && slope.is_finite() && (slope, inter) != (1.0, 0.0) {
         if !inter.is_finite() {
             return Err(err(
@@ -399,22 +568,41 @@ fn parse_header(h: &Raw, path: &Path) -> Result<Header> {
         stored,
         dims,
         count,
+        frames,
+        frame,
         vox_offset,
         scale,
         affine,
         pair,
+        len: header_len,
     })
+}
+
+/// The axes past the third, named as NIfTI names them: `t 10`, `u 3` …
+fn extra_axes(dim: &[i64]) -> String {
+    dim.iter()
+        .zip(["t", "u", "v", "w"])
+        .map(|(d, name)| format!("{name} {d}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The voxel-to-world affine in millimetres (see the module docs for the rules).
 fn geometry(h: &Raw, path: &Path) -> Result<DMat4> {
-    let qform_code = h.i16(252);
-    let sform_code = h.i16(254);
-    let pixdim = |i: usize| h.f64(76 + 4 * i);
+    let qform_code = h.int(Field::QformCode);
+    let sform_code = h.int(Field::SformCode);
+    let pixdim = |i: usize| h.real(Field::Pixdim(i));
     let (affine, field) = if sform_code > 0 {
-        let row =
-            |off: usize| DVec4::new(h.f64(off), h.f64(off + 4), h.f64(off + 8), h.f64(off + 12));
-        let (x, y, z) = (row(280), row(296), row(312));
+        let srow = |i: usize| h.real(Field::Srow(i));
+        let row = |r: usize| {
+            DVec4::new(
+                srow(4 * r),
+                srow(4 * r + 1),
+                srow(4 * r + 2),
+                srow(4 * r + 3),
+            )
+        };
+        let (x, y, z) = (row(0), row(1), row(2));
         let m = DMat4::from_cols(
             DVec4::new(x.x, y.x, z.x, 0.0),
             DVec4::new(x.y, y.y, z.y, 0.0),
@@ -432,8 +620,9 @@ fn geometry(h: &Raw, path: &Path) -> Result<DMat4> {
             ));
         }
         let qfac = if pixdim(0) < 0.0 { -1.0 } else { 1.0 };
-        let bcd = [h.f64(256), h.f64(260), h.f64(264)];
-        let offset = DVec3::new(h.f64(268), h.f64(272), h.f64(276));
+        let q = |i: usize| h.real(Field::Quatern(i));
+        let bcd = [q(0), q(1), q(2)];
+        let offset = DVec3::new(q(3), q(4), q(5));
         let rot = quaternion_matrix(bcd).ok_or_else(|| {
             Error::format(
                 path,
@@ -454,7 +643,7 @@ fn geometry(h: &Raw, path: &Path) -> Result<DMat4> {
         }
         (DMat4::from_scale(d), "pixdim")
     };
-    let unit = match h.b[123] & 0x07 {
+    let unit = match h.space_unit() {
         1 => 1000.0, // metres
         3 => 0.001,  // micrometres
         _ => 1.0,    // millimetres, or unknown
@@ -512,7 +701,9 @@ fn read_data(
     path: &Path,
 ) -> Result<AnyVolume> {
     let bytes = h.count as u64 * h.stored.size() as u64;
-    let end = h.vox_offset.saturating_add(bytes);
+    // Every volume of the file must be there, though one is read.
+    let all = bytes.saturating_mul(h.frames as u64);
+    let end = h.vox_offset.saturating_add(all);
     match size {
         Size::Exact(len) => {
             if h.vox_offset > len {
@@ -523,7 +714,7 @@ fn read_data(
                 ));
             }
             if len < end {
-                return Err(too_short(path, bytes, len - h.vox_offset));
+                return Err(too_short(path, all, len - h.vox_offset));
             }
         }
         Size::Gzip(len) => {
@@ -533,7 +724,7 @@ fn read_data(
                     path,
                     "data",
                     format!(
-                        "the data is too short: {bytes} bytes from offset {} cannot fit in \
+                        "the data is too short: {all} bytes from offset {} cannot fit in \
                          {len} bytes of gzip data",
                         h.vox_offset
                     ),
@@ -541,7 +732,10 @@ fn read_data(
             }
         }
     }
-    let skip = h.vox_offset.saturating_sub(pos);
+    let skip = h
+        .vox_offset
+        .saturating_add(bytes * h.frame as u64)
+        .saturating_sub(pos);
     let skipped =
         io::copy(&mut reader.take(skip), &mut io::sink()).map_err(|e| read_error(path, e))?;
     if skipped < skip {
@@ -576,10 +770,33 @@ fn read_data(
 // Writing
 // ---------------------------------------------------------------------------------
 
-/// Writes a volume as a little-endian NIfTI-1 single file, gzip-compressed when the
-/// name ends in `.gz`, atomically (see the module docs for the fields written).
+/// Which NIfTI a writer writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NiftiVersion {
+    /// NIfTI-1 (348-byte header, f32 geometry, axes of at most 32767 voxels).
+    One,
+    /// NIfTI-2 (540-byte header, f64 geometry, 64-bit sizes).
+    Two,
+}
+
+/// Writes a volume as a little-endian NIfTI single file, gzip-compressed when the name
+/// ends in `.gz`, atomically (see the module docs for the fields written): NIfTI-1, or
+/// NIfTI-2 when an axis is longer than NIfTI-1 can store.
 pub fn write_nifti(path: &Path, vol: &AnyVolume) -> Result<()> {
-    let header = header_bytes(vol, path)?;
+    let version = if vol.dims().iter().any(|&d| d > i16::MAX as usize) {
+        NiftiVersion::Two
+    } else {
+        NiftiVersion::One
+    };
+    write_nifti_version(path, vol, version)
+}
+
+/// [`write_nifti`] in the given version.
+pub fn write_nifti_version(path: &Path, vol: &AnyVolume, version: NiftiVersion) -> Result<()> {
+    let header = match version {
+        NiftiVersion::One => header_bytes(vol, path)?,
+        NiftiVersion::Two => header2_bytes(vol),
+    };
     let gzip = path
         .extension()
         .and_then(|e| e.to_str())
@@ -699,6 +916,80 @@ fn header_bytes(vol: &AnyVolume, path: &Path) -> Result<Vec<u8>> {
     }
     b[344..348].copy_from_slice(b"n+1\0");
     Ok(b)
+}
+
+/// The 544 bytes before the voxels of a NIfTI-2 single file: header and an empty
+/// extension flag. The geometry is stored in f64, so it round-trips exactly.
+fn header2_bytes(vol: &AnyVolume) -> Vec<u8> {
+    let dims = vol.dims();
+    let (datatype, bitpix): (i16, i16) = match vol.kind() {
+        VoxelKind::U8 => (2, 8),
+        VoxelKind::U16 => (512, 16),
+        VoxelKind::I16 => (4, 16),
+        VoxelKind::F32 => (16, 32),
+    };
+    let affine = vol.affine();
+    let mut b = vec![0u8; HEADER2_LEN + 4];
+    let put_f64 =
+        |b: &mut [u8], off: usize, v: f64| b[off..off + 8].copy_from_slice(&v.to_le_bytes());
+    b[0..4].copy_from_slice(&(HEADER2_LEN as i32).to_le_bytes());
+    b[4..12].copy_from_slice(b"n+2\0\r\n\x1a\n");
+    b[12..14].copy_from_slice(&datatype.to_le_bytes());
+    b[14..16].copy_from_slice(&bitpix.to_le_bytes());
+    let dim = [
+        3,
+        dims[0] as i64,
+        dims[1] as i64,
+        dims[2] as i64,
+        1,
+        1,
+        1,
+        1,
+    ];
+    for (i, d) in dim.iter().enumerate() {
+        b[16 + 8 * i..24 + 8 * i].copy_from_slice(&d.to_le_bytes());
+    }
+    let qform = qform_of(affine);
+    let lin = DMat3::from_mat4(affine);
+    let qfac = match qform {
+        Some((qfac, _, _)) => qfac,
+        None if lin.determinant() < 0.0 => -1.0,
+        None => 1.0,
+    };
+    let pixdim = [
+        qfac,
+        lin.x_axis.length(),
+        lin.y_axis.length(),
+        lin.z_axis.length(),
+        1.0,
+        1.0,
+        1.0,
+        1.0,
+    ];
+    for (i, p) in pixdim.iter().enumerate() {
+        put_f64(&mut b, 104 + 8 * i, *p);
+    }
+    b[168..176].copy_from_slice(&((HEADER2_LEN + 4) as i64).to_le_bytes());
+    put_f64(&mut b, 176, 1.0);
+    put_f64(&mut b, 184, 0.0);
+    let descrip = b"voxlab";
+    b[240..240 + descrip.len()].copy_from_slice(descrip);
+    let t = affine.w_axis;
+    if let Some((_, bcd, _)) = qform {
+        b[344..348].copy_from_slice(&2i32.to_le_bytes());
+        for (i, v) in bcd.iter().chain([t.x, t.y, t.z].iter()).enumerate() {
+            put_f64(&mut b, 352 + 8 * i, *v);
+        }
+    }
+    b[348..352].copy_from_slice(&2i32.to_le_bytes());
+    for r in 0..3 {
+        for (c, v) in affine.row(r).to_array().iter().enumerate() {
+            put_f64(&mut b, 400 + 32 * r + 8 * c, *v);
+        }
+    }
+    // Millimetres, no time unit.
+    b[500..504].copy_from_slice(&2i32.to_le_bytes());
+    b
 }
 
 #[cfg(test)]

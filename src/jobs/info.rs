@@ -27,6 +27,17 @@ pub struct VolumeInfo {
     /// value for integer volumes with at most 1024 distinct values.
     #[serde(skip)]
     pub plot_histogram: Option<Histogram>,
+    /// For a file of several 3-D volumes (a time series, a vector image): how many, and
+    /// which one the rest describes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<Frames>,
+}
+
+/// How many 3-D volumes a file holds and which one `info` describes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Frames {
+    pub count: usize,
+    pub described: usize,
 }
 
 /// Describes `input` as stored (NaN and infinite voxels are counted, not replaced),
@@ -37,7 +48,16 @@ pub struct VolumeInfo {
 /// The input's errors.
 pub fn run(input: &VolumeInput, bins: usize, plot: bool) -> Result<VolumeInfo> {
     let format = input.format_name()?;
-    let v = input.read()?;
+    // A file of several volumes is described by the one asked for, else by its first.
+    let count = input.frame_count()?;
+    let described = input.load.frame.unwrap_or(0);
+    let v = if count > 1 && input.load.frame.is_none() {
+        let mut first = input.clone();
+        first.load.frame = Some(0);
+        first.read()?
+    } else {
+        input.read()?
+    };
     let r = v.value_range();
     let plot_histogram = plot.then(|| {
         let integer = v.kind() != VoxelKind::F32;
@@ -61,6 +81,7 @@ pub fn run(input: &VolumeInput, bins: usize, plot: bool) -> Result<VolumeInfo> {
         non_finite: v.non_finite(),
         histogram: v.histogram(bins.clamp(1, 4096)),
         plot_histogram,
+        frames: (count > 1).then_some(Frames { count, described }),
     })
 }
 
@@ -68,7 +89,7 @@ pub fn run(input: &VolumeInput, bins: usize, plot: bool) -> Result<VolumeInfo> {
 /// fixes the world frame (NIfTI: RAS+, DICOM: LPS+), else as ±X/±Y/±Z.
 pub fn orientation(affine: glam::DMat4, format: &str) -> String {
     let letters: Option<[[&str; 2]; 3]> = match format {
-        "NIfTI-1" => Some([["R", "L"], ["A", "P"], ["S", "I"]]),
+        "NIfTI-1" | "NIfTI" => Some([["R", "L"], ["A", "P"], ["S", "I"]]),
         "DICOM" => Some([["L", "R"], ["P", "A"], ["S", "I"]]),
         _ => None,
     };

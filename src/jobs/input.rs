@@ -79,6 +79,9 @@ pub struct LoadOptions {
     /// Refuse data files that a header names outside its own folder
     /// ([`crate::io::ReadOptions::confine_data_files`]).
     pub confine_data_files: bool,
+    /// Which 3-D volume of a file that holds several (a time series, a vector image) to
+    /// read ([`crate::io::ReadOptions::frame`]).
+    pub frame: Option<usize>,
 }
 
 impl Default for LoadOptions {
@@ -88,6 +91,7 @@ impl Default for LoadOptions {
             raw: None,
             non_finite: NonFinite::Replace,
             confine_data_files: false,
+            frame: None,
         }
     }
 }
@@ -162,6 +166,22 @@ impl VolumeInput {
         }
     }
 
+    /// How many 3-D volumes the input holds (see [`crate::io::frame_count`]); 1 for
+    /// phantoms, embedded scans, raw samples and volumes in memory.
+    ///
+    /// # Errors
+    /// The file's header errors.
+    pub fn frame_count(&self) -> Result<usize> {
+        if self.memory.is_some()
+            || self.is_phantom()
+            || self.source.starts_with("embedded:")
+            || self.load.raw.is_some()
+        {
+            return Ok(1);
+        }
+        crate::io::frame_count(Path::new(&self.source))
+    }
+
     /// The volume as stored, NaN and infinite voxels included (`info` reports them).
     ///
     /// # Errors
@@ -200,6 +220,7 @@ impl VolumeInput {
                 path,
                 &crate::io::ReadOptions {
                     confine_data_files: self.load.confine_data_files,
+                    frame: self.load.frame,
                 },
             ),
         }

@@ -109,6 +109,11 @@ pub struct LoadArgs {
     /// header can make voxlab read any file you can read.
     #[arg(long)]
     pub confine_data_files: bool,
+    /// Which 3-D volume to read from a file that holds several (a NIfTI time series or
+    /// vector image, a 4-D MetaImage, a NRRD with a non-spatial axis): 0, 1, …;
+    /// `voxlab info` says how many a file holds.
+    #[arg(long)]
+    pub frame: Option<usize>,
 }
 
 impl LoadArgs {
@@ -125,6 +130,7 @@ impl LoadArgs {
             }),
             non_finite: self.non_finite,
             confine_data_files: self.confine_data_files,
+            frame: self.frame,
         }
     }
 

@@ -76,6 +76,12 @@ pub fn run(a: InfoArgs) -> Result<ExitCode> {
         d[0] * d[1] * d[2],
         v.kind.name()
     );
+    if let Some(f) = v.frames {
+        println!(
+            "  frames    {} 3-D volumes; this is frame {} (--frame K reads another)",
+            f.count, f.described
+        );
+    }
     println!("  spacing   {:.6} × {:.6} × {:.6} mm", s[0], s[1], s[2]);
     println!("  orient    {}", v.orientation);
     for row in &v.affine_rows[..3] {
