@@ -98,7 +98,7 @@ def nifti(dims=(4, 4, 4), datatype=2, bitpix=8, sizeof_hdr=348, magic=b"n+1\0", 
 
 put("nifti-truncated.nii", nifti(data=bytes(63)), "format", "data", "")
 put("nifti-bad-sizeof-hdr.nii", nifti(sizeof_hdr=349), "format", "sizeof_hdr", "")
-put("nifti-4d.nii", nifti(dims=(2, 2, 2, 3)), "format", "dim[4]", "scalar 3-D")
+put("nifti-4d.nii", nifti(dims=(2, 2, 2, 3)), "format", "dim[4]", "choose one with --frame")
 put("nifti-complex.nii", nifti(datatype=32, bitpix=64), "format", "datatype", "")
 put("nifti-bitpix-mismatch.nii", nifti(datatype=4, bitpix=8), "format", "bitpix", "")
 put("nifti-over-voxel-limit.nii", nifti(dims=(32767, 32767, 32767), data=bytes(16)), "format", "dim", "")
