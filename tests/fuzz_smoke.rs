@@ -105,9 +105,8 @@ fn must_not_panic(format: Format, bytes: &[u8], what: &str) -> bool {
     let r = catch_unwind(AssertUnwindSafe(|| {
         let path = Path::new("fuzz.bin");
         let whole = read_volume_bytes(bytes, format, path).is_ok();
-        // A NIfTI file of several 3-D volumes is read one at a time: frame 1 too.
-        let frame = format == Format::Nifti
-            && voxlab::io::nifti::read_nifti_bytes_frame(bytes, path, Some(1)).is_ok();
+        // A file of several 3-D volumes is read one at a time: frame 1 too.
+        let frame = voxlab::io::read_volume_bytes_frame(bytes, format, path, Some(1)).is_ok();
         whole || frame
     }));
     match r {

@@ -535,6 +535,17 @@ fn nrrd_bad_headers() {
                 .replace("2 2 2", "2 2 2 2"),
             &[0; 16],
         ),
+        "sizes",
+        "2 3-D volumes (axis 3: 2); choose one with --frame",
+    );
+    assert_format(
+        read(
+            "dim1.nrrd",
+            &uchar_header("", "")
+                .replace("dimension: 3", "dimension: 1")
+                .replace("2 2 2", "8"),
+            &eight,
+        ),
         "dimension",
         "2-D or 3-D",
     );
@@ -580,7 +591,6 @@ fn nrrd_bad_headers() {
         ("(1,0,0) (0,1) (0,0,1)", "components"),
         ("(1,0,0) (0,1,0) (0,0,nan)", "finite"),
         ("(1,0,0) (0,1,0) (0,0,1", "not closed"),
-        ("none (0,1,0) (0,0,1)", "not spatial"),
     ] {
         let h = uchar_header(
             "",
@@ -588,6 +598,18 @@ fn nrrd_bad_headers() {
         );
         assert_format(read("dirs.nrrd", &h, &eight), "space directions", words);
     }
+    // A `none` direction makes its axis number frames (io_frames.rs); one spatial axis
+    // is not a volume.
+    let h = uchar_header(
+        "",
+        "space dimension: 3\nspace directions: none (0,1,0) (0,0,1)\n",
+    );
+    assert_format(read("dirs.nrrd", &h, &eight), "sizes", "--frame");
+    let h = uchar_header(
+        "",
+        "space dimension: 3\nspace directions: none none (0,0,1)\n",
+    );
+    assert_format(read("dirs.nrrd", &h, &eight), "dimension", "1 spatial axis");
     let h = uchar_header("", "space: RAST\n");
     assert_format(read("time.nrrd", &h, &eight), "space", "time");
     let h = uchar_header("", "space: somewhere\n");

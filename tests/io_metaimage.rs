@@ -119,7 +119,7 @@ fn detached_files_header_size_and_lists() {
     assert_format(
         read_volume(&file(&dir, "l1.mhd", h.as_bytes())),
         "ElementDataFile",
-        "one per slice",
+        "one per 2-D image",
     );
 }
 
@@ -277,14 +277,7 @@ fn lies_name_the_file_and_the_field() {
         "ElementDataFile",
         "ends",
     );
-    // 4-D and vector images are refused as not read yet, not as broken.
-    let p = file(
-        &dir,
-        "t4.mha",
-        b"ObjectType = Image\nNDims = 4\nDimSize = 1 1 1 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n\0\0",
-    );
-    let e = read_volume(&p).unwrap_err().to_string();
-    assert!(e.contains("NDims 4"), "{e}");
+    // A vector image without --frame: its channels are frames (io_frames.rs).
     let p = file(
         &dir,
         "rgb.mha",

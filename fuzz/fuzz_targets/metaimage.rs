@@ -4,8 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use voxlab::io::{read_volume_bytes, Format};
+use voxlab::io::{read_volume_bytes, read_volume_bytes_frame, Format};
 
 fuzz_target!(|data: &[u8]| {
-    let _ = read_volume_bytes(data, Format::MetaImage, std::path::Path::new("fuzz.mha"));
+    let path = std::path::Path::new("fuzz.mha");
+    let _ = read_volume_bytes(data, Format::MetaImage, path);
+    // Files of several 3-D volumes are read one frame at a time.
+    let _ = read_volume_bytes_frame(data, Format::MetaImage, path, Some(1));
 });

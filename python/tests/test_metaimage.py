@@ -94,3 +94,52 @@ def test_itk_2d_images_are_one_slice(tmp_path):
     np.testing.assert_array_equal(vol.array[0], arr)
     np.testing.assert_allclose(vol.affine[:3, 3], [1.0, -2.0, 0.0])
     np.testing.assert_allclose(np.diag(vol.affine)[:2], [0.5, 2.0])
+
+
+@pytest.mark.parametrize("ext,compress", [(".mha", False), (".mha", True), (".mhd", False)])
+def test_itk_4d_images_read_one_frame_at_a_time(tmp_path, ext, compress):
+    """A 4-D image ITK writes (a time series): frame k is ITK's array[k], with the
+    spatial part of ITK's 4-D geometry; without a frame the file is refused."""
+    rng = np.random.default_rng(5)
+    arr = rng.integers(-3000, 3000, size=(3, 4, 5, 6)).astype(np.int16)  # (t, z, y, x)
+    img = sitk.GetImageFromArray(arr, isVector=False)
+    assert img.GetDimension() == 4
+    img.SetSpacing(_SPACING + (2.5,))
+    img.SetOrigin(_ORIGIN + (40.0,))
+    d4 = np.eye(4)
+    d4[:3, :3] = _ROT
+    img.SetDirection(tuple(d4.flatten()))
+    path = tmp_path / f"run{ext}"
+    sitk.WriteImage(img, str(path), useCompression=compress)
+    affine = np.eye(4)
+    affine[:3, :3] = _ROT @ np.diag(_SPACING)
+    affine[:3, 3] = _ORIGIN
+    for k in range(3):
+        vol = voxlab.read(path, frame=k)
+        np.testing.assert_array_equal(vol.array, arr[k])
+        np.testing.assert_allclose(vol.affine, affine, rtol=0, atol=1e-12)
+    with pytest.raises(voxlab.VoxlabError, match="3 3-D volumes"):
+        voxlab.read(path)
+    with pytest.raises(voxlab.VoxlabError, match="past the file's 3"):
+        voxlab.read(path, frame=3)
+
+
+@pytest.mark.parametrize("ext", [".nrrd", ".mha"])
+@pytest.mark.parametrize("compress", [False, True])
+def test_itk_vector_images_read_one_component_at_a_time(tmp_path, ext, compress):
+    """A vector image ITK writes (NRRD: kinds vector, a `none` direction; MetaImage:
+    ElementNumberOfChannels; the components fastest): frame k is component k."""
+    rng = np.random.default_rng(9)
+    arr = rng.random((4, 5, 6, 3)).astype(np.float32)  # (z, y, x, component)
+    img = sitk.GetImageFromArray(arr, isVector=True)
+    img.SetSpacing(_SPACING)
+    img.SetOrigin(_ORIGIN)
+    img.SetDirection(tuple(_ROT.flatten()))
+    path = tmp_path / f"vec{ext}"
+    sitk.WriteImage(img, str(path), useCompression=compress)
+    for k in range(3):
+        vol = voxlab.read(path, frame=k)
+        np.testing.assert_array_equal(vol.array, arr[..., k])
+        np.testing.assert_allclose(vol.affine, _itk_affine(img), rtol=0, atol=1e-12)
+    with pytest.raises(voxlab.VoxlabError, match="--frame"):
+        voxlab.read(path)

@@ -2,18 +2,30 @@
 //! `Key = Value` lines followed by the samples or naming the file(s) that hold them.
 //!
 //! Read:
-//! - `ObjectType = Image`, `NDims` 2 or 3 (a 2-D image is one slice), `DimSize`,
+//! - `ObjectType = Image`, `NDims` 2 to 10 (a 2-D image is one slice; the axes past
+//!   the third number the file's 3-D volumes, its frames, read one at a time with
+//!   [`ReadOptions::frame`](super::ReadOptions::frame), `--frame K`), `DimSize`,
 //!   `ElementType` `MET_UCHAR`, `MET_CHAR`, `MET_USHORT`, `MET_SHORT`, `MET_UINT`,
 //!   `MET_INT`, `MET_ULONG`, `MET_LONG` (4 bytes, as MetaIO defines them),
 //!   `MET_ULONG_LONG`, `MET_LONG_LONG`, `MET_FLOAT`, `MET_DOUBLE` (mapped to voxel types
-//!   as every reader here maps them, docs/io.md), `ElementNumberOfChannels = 1`;
+//!   as every reader here maps them, docs/io.md), `ElementNumberOfChannels` (samples
+//!   per voxel, interleaved: above 1, each channel is a frame, numbered before the
+//!   axes past the third);
 //! - `ElementSpacing` (else `ElementSize`, else 1 mm), `Offset` (alias `Position`,
 //!   `Origin`), `TransformMatrix` (alias `Rotation`, `Orientation`);
 //! - `BinaryData` (`False`: the samples as text), `ElementByteOrderMSB` /
 //!   `BinaryDataByteOrderMSB`, `CompressedData` (zlib) with `CompressedDataSize`,
 //!   `HeaderSize` (bytes to skip in a data file; −1: the data ends the file);
 //! - `ElementDataFile` (the last key): `LOCAL` (the data follows the header), a file
-//!   beside the header, or `LIST` followed by one file per slice.
+//!   beside the header, or `LIST` followed by one file per image of `NDims − 1` axes
+//!   (a slice of a 3-D image, a 3-D volume of a 4-D one), or `LIST nD` with one file per
+//!   image of the first `n` axes (MetaIO's convention).
+//!
+//! Of a 4-D (or higher) image only the chosen frame's samples are kept: its run is
+//! read and the rest skipped, so the memory is one frame's, and with `LIST` only the
+//! files that hold it are opened. Spacing, offset and directions are the first three
+//! components of the header's (the spatial ones; a time axis has no place in a
+//! voxel-to-world affine).
 //!
 //! Other keys (`CenterOfRotation`, `AnatomicalOrientation`, `ElementMin`, comments …)
 //! are read past. **The affine is ITK's**: voxel `(i, j, k)` lies at
@@ -26,7 +38,7 @@
 //! affine split back into spacing (the columns' lengths) and directions, every number
 //! written so that it reads back exactly.
 
-use super::{open, read_error, read_samples, snippet, Endian, Samples, Stored};
+use super::{open, read_error, snippet, Endian, Samples, Stored};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, check_spacing, AnyVolume};
 use glam::{DMat4, DVec4};
@@ -44,9 +56,21 @@ enum DataFile {
     List(Vec<String>),
 }
 
+/// The most axes a MetaImage may have (MetaIO's limit).
+const MAX_NDIMS: usize = 10;
+
 #[derive(Clone, Debug)]
 struct Header {
+    /// The 3-D volume's sizes: the first three axes (a 2-D image has `nz` 1).
     dims: [usize; 3],
+    /// The sizes of the axes past the third, which number the file's 3-D volumes.
+    extra: Vec<usize>,
+    /// How many 3-D volumes the file holds (the product of `extra`).
+    frames: usize,
+    /// Samples in each file of a `LIST` (the first `LIST nD` axes' sizes' product).
+    per_file: usize,
+    /// `ElementNumberOfChannels`: samples per voxel, interleaved.
+    channels: usize,
     stored: Stored,
     endian: Endian,
     binary: bool,
@@ -223,15 +247,12 @@ impl Header {
             .ok_or_else(|| field(path, "NDims", "missing"))?
             .parse()
             .map_err(|_| field(path, "NDims", "is not a whole number"))?;
-        if nd >= 4 {
-            return Err(Error::unsupported(
-                "read",
-                path.display(),
-                format!("NDims {nd}: voxlab reads 2-D and 3-D MetaImages, not 4-D or higher yet"),
+        if !(2..=MAX_NDIMS).contains(&nd) {
+            return Err(field(
+                path,
+                "NDims",
+                format!("{nd}: needs 2 to {MAX_NDIMS}"),
             ));
-        }
-        if nd < 2 {
-            return Err(field(path, "NDims", format!("{nd}: needs 2 or 3")));
         }
         let dim_text = get(&["DimSize"]).ok_or_else(|| field(path, "DimSize", "missing"))?;
         let d: Vec<usize> = dim_text
@@ -252,19 +273,38 @@ impl Header {
                 format!("has {} sizes, NDims is {nd}", d.len()),
             ));
         }
-        let dims = [d[0], d[1], if nd == 3 { d[2] } else { 1 }];
-        check_dims(dims).map_err(|e| field(path, "DimSize", e.to_string()))?;
-        let channels = get(&["ElementNumberOfChannels"]).unwrap_or("1");
-        if channels != "1" {
-            return Err(Error::unsupported(
-                "read",
-                path.display(),
-                format!(
-                    "ElementNumberOfChannels = {}: voxlab reads scalar images only",
-                    snippet(channels)
-                ),
-            ));
-        }
+        let dims = [d[0], d[1], if nd >= 3 { d[2] } else { 1 }];
+        let count = check_dims(dims).map_err(|e| field(path, "DimSize", e.to_string()))?;
+        let extra: Vec<usize> = d.iter().skip(3).copied().collect();
+        // Every frame must be in the file, though one is read: the whole data's size
+        // is checked before anything is allocated.
+        let frames = extra
+            .iter()
+            .try_fold(1usize, |a, &e| a.checked_mul(e))
+            .filter(|&f| f >= 1)
+            .and_then(|f| count.checked_mul(f).filter(|&t| t <= 1 << 62).map(|_| f))
+            .ok_or_else(|| {
+                field(
+                    path,
+                    "DimSize",
+                    format!("'{}': too many samples, or a size of 0", snippet(dim_text)),
+                )
+            })?;
+        // Channels interleave (fastest) and number frames before the extra axes.
+        let channels: usize = match get(&["ElementNumberOfChannels"]) {
+            None => 1,
+            Some(t) => t.parse().ok().filter(|&c| c >= 1).ok_or_else(|| {
+                field(
+                    path,
+                    "ElementNumberOfChannels",
+                    format!("'{}' is not a whole number ≥ 1", snippet(t)),
+                )
+            })?,
+        };
+        let frames = channels
+            .checked_mul(frames)
+            .filter(|&f| count.checked_mul(f).is_some_and(|t| t <= 1 << 62))
+            .ok_or_else(|| field(path, "ElementNumberOfChannels", "too many samples"))?;
         let stored = element_type(
             path,
             get(&["ElementType"]).ok_or_else(|| field(path, "ElementType", "missing"))?,
@@ -301,7 +341,8 @@ impl Header {
             }
             None => 0,
         };
-        let embed = |v: Vec<f64>| -> [f64; 3] { [v[0], v[1], if nd == 3 { v[2] } else { 0.0 }] };
+        // The first three components: the space of the first three axes.
+        let embed = |v: &[f64]| -> [f64; 3] { [v[0], v[1], if nd >= 3 { v[2] } else { 0.0 }] };
         let spacing = match get(&["ElementSpacing"]) {
             Some(t) => numbers(path, "ElementSpacing", t, nd)?,
             None => match get(&["ElementSize"]) {
@@ -312,11 +353,11 @@ impl Header {
         let spacing = [
             spacing[0],
             spacing[1],
-            if nd == 3 { spacing[2] } else { 1.0 },
+            if nd >= 3 { spacing[2] } else { 1.0 },
         ];
         check_spacing(spacing).map_err(|e| field(path, "ElementSpacing", e.to_string()))?;
         let offset = match get(&["Offset", "Position", "Origin"]) {
-            Some(t) => embed(numbers(path, "Offset", t, nd)?),
+            Some(t) => embed(&numbers(path, "Offset", t, nd)?),
             None => [0.0; 3],
         };
         let m = match get(&["TransformMatrix", "Rotation", "Orientation"]) {
@@ -325,10 +366,11 @@ impl Header {
                 .map(|i| if i % (nd + 1) == 0 { 1.0 } else { 0.0 })
                 .collect(),
         };
-        // Direction of index axis a: the a-th nd numbers (ITK's MetaImageIO).
+        // Direction of index axis a: the a-th nd numbers (ITK's MetaImageIO), of which
+        // the first three are the spatial ones.
         let dir = |a: usize| -> [f64; 3] {
             if a < nd {
-                embed(m[a * nd..(a + 1) * nd].to_vec())
+                embed(&m[a * nd..(a + 1) * nd])
             } else {
                 [0.0, 0.0, 1.0]
             }
@@ -351,17 +393,40 @@ impl Header {
             ));
         }
         let data_text = get(&["ElementDataFile"]).unwrap_or("LOCAL");
+        let mut per_file = count;
         let data = match data_text.split_whitespace().next() {
             Some("LOCAL") | Some("Local") | Some("local") => DataFile::Local,
             Some("LIST") => {
-                if list.len() != dims[2] {
+                // `LIST` alone: each file holds an image of NDims − 1 axes; `LIST nD`:
+                // of n axes (MetaIO).
+                let file_dim = match data_text.split_whitespace().nth(1) {
+                    None => nd - 1,
+                    Some(t) => t
+                        .strip_suffix(['D', 'd'])
+                        .and_then(|n| n.parse::<usize>().ok())
+                        .filter(|n| (1..nd).contains(n))
+                        .ok_or_else(|| {
+                            field(
+                                path,
+                                "ElementDataFile",
+                                format!(
+                                    "LIST {}: the files' dimension must be 1D to {}D",
+                                    snippet(t),
+                                    nd - 1
+                                ),
+                            )
+                        })?,
+                };
+                per_file = d[..file_dim].iter().product::<usize>() * channels;
+                let files: usize = d[file_dim..].iter().product();
+                if list.len() != files {
                     return Err(field(
                         path,
                         "ElementDataFile",
                         format!(
-                            "LIST names {} files, DimSize needs one per slice ({})",
+                            "LIST names {} files, DimSize needs {files} (one per {file_dim}-D \
+                             image)",
                             list.len(),
-                            dims[2]
                         ),
                     ));
                 }
@@ -397,6 +462,10 @@ impl Header {
         }
         Ok(Header {
             dims,
+            extra,
+            frames,
+            per_file,
+            channels,
             stored,
             endian,
             binary,
@@ -412,15 +481,50 @@ impl Header {
         self.dims.iter().product()
     }
 
+    /// Bytes of the whole data, every frame.
     fn data_bytes(&self) -> u64 {
-        self.n() as u64 * self.stored.size() as u64
+        (self.n() * self.frames) as u64 * self.stored.size() as u64
+    }
+
+    /// Where frame `frame` lies in the data (see [`super::choose_frame`]): the
+    /// channel fastest, then the axes past the third.
+    fn pick(&self, frame: Option<usize>, path: &Path) -> Result<super::FramePick> {
+        let mut axes: Vec<String> = Vec::new();
+        if self.channels > 1 {
+            axes.push(format!("ElementNumberOfChannels {}", self.channels));
+        }
+        axes.extend(
+            self.extra
+                .iter()
+                .enumerate()
+                .map(|(i, e)| format!("DimSize[{}] {e}", i + 3)),
+        );
+        let field = if self.extra.is_empty() {
+            "ElementNumberOfChannels"
+        } else {
+            "DimSize"
+        };
+        let k = super::choose_frame(path, field, self.frames, &axes.join(", "), frame)?;
+        let (c, [nx, ny, _]) = (self.channels, self.dims);
+        Ok(super::FramePick {
+            total: self.n() * self.frames,
+            dims: self.dims,
+            base: (k / c) * self.n() * c + k % c,
+            strides: [c, c * nx, c * nx * ny],
+        })
     }
 }
 
-/// Reads `n` samples from `reader` as the header says (compressed or not, binary or
-/// text), and refuses data beyond them; `len` is what the reader holds (text data is
-/// read as far as its values can need).
-fn read_body(reader: &mut dyn Read, h: &Header, n: usize, path: &Path) -> Result<Samples> {
+/// Reads the samples `pick` chooses from `reader`, which holds `pick.total` samples as
+/// the header says (compressed or not, binary or text), and refuses data beyond them
+/// (text data is read as far as its values can need).
+fn read_body(
+    reader: &mut dyn Read,
+    h: &Header,
+    pick: &super::FramePick,
+    path: &Path,
+) -> Result<Samples> {
+    let n = pick.total;
     if !h.binary {
         let cap = (n as u64).saturating_mul(64).saturating_add(1 << 16);
         let mut text = String::new();
@@ -428,13 +532,14 @@ fn read_body(reader: &mut dyn Read, h: &Header, n: usize, path: &Path) -> Result
             .take(cap)
             .read_to_string(&mut text)
             .map_err(|e| read_error(path, e))?;
-        return super::parse_text_samples(
+        return Ok(super::parse_text_samples(
             &text,
             h.stored,
             n,
             path,
             "sample of the header's ElementType",
-        );
+        )?
+        .pick(pick));
     }
     if h.compressed {
         let limited: Box<dyn Read> = match h.compressed_size {
@@ -442,7 +547,7 @@ fn read_body(reader: &mut dyn Read, h: &Header, n: usize, path: &Path) -> Result
             None => Box::new(reader),
         };
         let mut z = flate2::read::ZlibDecoder::new(limited);
-        let samples = read_samples(&mut z, h.stored, h.endian, n, path)?;
+        let samples = super::read_picked(&mut z, h.stored, h.endian, pick, path)?;
         let mut rest = [0u8; 1];
         if super::fill(&mut z, &mut rest).map_err(|e| read_error(path, e))? > 0 {
             return Err(field(
@@ -453,7 +558,7 @@ fn read_body(reader: &mut dyn Read, h: &Header, n: usize, path: &Path) -> Result
         }
         return Ok(samples);
     }
-    let samples = read_samples(reader, h.stored, h.endian, n, path)?;
+    let samples = super::read_picked(reader, h.stored, h.endian, pick, path)?;
     let mut rest = [0u8; 1];
     if super::fill(reader, &mut rest).map_err(|e| read_error(path, e))? > 0 {
         return Err(field(
@@ -473,8 +578,18 @@ pub fn read_metaimage(path: &Path) -> Result<AnyVolume> {
     read_metaimage_with(path, &super::ReadOptions::default())
 }
 
+/// How many 3-D volumes a MetaImage holds (the product of its `DimSize` past the
+/// third), from its header alone.
+pub fn metaimage_frames(path: &Path) -> Result<usize> {
+    let (file, _) = open(path)?;
+    let mut reader = BufReader::new(file);
+    let (fields, list) = read_lines(&mut reader, path)?;
+    Ok(Header::parse(&fields, list, path)?.frames)
+}
+
 /// [`read_metaimage`] with [`ReadOptions`](super::ReadOptions): with
-/// `confine_data_files`, the data files must lie in the header's folder.
+/// `confine_data_files`, the data files must lie in the header's folder; `frame`
+/// chooses one 3-D volume of a 4-D (or higher) image.
 pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVolume> {
     let (file, _) = open(path)?;
     let mut reader = BufReader::new(file);
@@ -489,8 +604,9 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
         let (f, len) = super::open_data_file(path, &data_path)?;
         Ok((BufReader::new(f), len, data_path))
     };
+    let pick = h.pick(options.frame, path)?;
     let samples = match &h.data {
-        DataFile::Local => read_body(&mut reader, &h, h.n(), path)?,
+        DataFile::Local => read_body(&mut reader, &h, &pick, path)?,
         DataFile::File(name) => {
             let (mut r, len, data_path) = data_file(name)?;
             let skip = if h.header_size == -1 {
@@ -507,21 +623,42 @@ pub fn read_metaimage_with(path: &Path, options: &super::ReadOptions) -> Result<
                 h.header_size as u64
             };
             skip_bytes(&mut r, skip, path, &data_path)?;
-            read_body(&mut r, &h, h.n(), &data_path)?
+            read_body(&mut r, &h, &pick, &data_path)?
         }
         DataFile::List(names) => {
-            let per = h.dims[0] * h.dims[1];
+            // Only the files that hold the frame's samples are read: the part of one,
+            // or whole ones joined and the frame picked from them.
+            let per = h.per_file;
+            let (lo, hi) = (pick.base, pick.index(pick.n() - 1) + 1);
+            let (first, last) = (lo / per, (hi - 1) / per);
+            let mut sub = pick;
+            sub.base = lo - first * per;
+            sub.total = (last - first + 1) * per;
+            let whole = super::FramePick::whole([per, 1, 1]);
+            if first < last && !sub.contiguous() {
+                super::check_interleaved(&sub, path)?;
+            }
             let mut all: Option<Samples> = None;
-            for name in names {
+            for name in &names[first..=last] {
                 let (mut r, _, data_path) = data_file(name)?;
                 skip_bytes(&mut r, h.header_size.max(0) as u64, path, &data_path)?;
-                let s = read_body(&mut r, &h, per, &data_path)?;
+                let s = read_body(
+                    &mut r,
+                    &h,
+                    if first == last { &sub } else { &whole },
+                    &data_path,
+                )?;
                 all = Some(match all {
                     None => s,
                     Some(a) => a.append(s),
                 });
             }
-            all.expect("at least one slice (dims are checked)")
+            let all = all.expect("at least one file (dims are checked)");
+            if first == last {
+                all
+            } else {
+                all.pick(&sub)
+            }
         }
     };
     samples.into_volume(h.dims, h.affine)
@@ -538,7 +675,7 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
     let mut reader = BufReader::new(file);
     let (fields, list) = read_lines(&mut reader, path)?;
     let h = Header::parse(&fields, list, path)?;
-    if h.compressed || !h.binary {
+    if h.compressed || !h.binary || h.frames > 1 {
         return Ok(None);
     }
     let want = h.data_bytes();
@@ -583,6 +720,15 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
 
 /// Reads a MetaImage held in memory; its data must be `LOCAL`.
 pub fn read_metaimage_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    read_metaimage_bytes_frame(bytes, path, None)
+}
+
+/// [`read_metaimage_bytes`] of one 3-D volume of a file that holds several.
+pub fn read_metaimage_bytes_frame(
+    bytes: &[u8],
+    path: &Path,
+    frame: Option<usize>,
+) -> Result<AnyVolume> {
     let mut reader = std::io::Cursor::new(bytes);
     let (fields, list) = read_lines(&mut reader, path)?;
     let h = Header::parse(&fields, list, path)?;
@@ -593,7 +739,8 @@ pub fn read_metaimage_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
             "names other files; read the header from a path",
         ));
     }
-    read_body(&mut reader, &h, h.n(), path)?.into_volume(h.dims, h.affine)
+    let pick = h.pick(frame, path)?;
+    read_body(&mut reader, &h, &pick, path)?.into_volume(h.dims, h.affine)
 }
 
 /// Skips the `HeaderSize` bytes of `data`, a data file `header` names.

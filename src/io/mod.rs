@@ -367,6 +367,8 @@ pub struct ReadOptions {
 pub fn frame_count(path: &Path) -> Result<usize> {
     match detect_format(path)? {
         Format::Nifti => nifti::nifti_frames(path),
+        Format::MetaImage => metaimage::metaimage_frames(path),
+        Format::Nrrd => nrrd::nrrd_frames(path),
         _ => Ok(1),
     }
 }
@@ -387,6 +389,10 @@ pub fn read_volume_as_with(
     format: Format,
     options: &ReadOptions,
 ) -> Result<AnyVolume> {
+    if !matches!(format, Format::Nifti | Format::MetaImage | Format::Nrrd) {
+        // Files of one 3-D volume: frame 0 is the volume, a later one is refused.
+        choose_frame(path, "frame", 1, "", options.frame)?;
+    }
     match format {
         Format::Nrrd => nrrd::read_nrrd_with(path, options),
         Format::Npy => npy::read_npy_volume(path),
@@ -412,14 +418,28 @@ pub fn read_volume_as_with(
 /// raw) are refused. This is what the fuzz targets and the fuzz smoke test call: it
 /// must return an error, never panic, whatever the bytes.
 pub fn read_volume_bytes(bytes: &[u8], format: Format, path: &Path) -> Result<AnyVolume> {
+    read_volume_bytes_frame(bytes, format, path, None)
+}
+
+/// [`read_volume_bytes`] of one 3-D volume of a file that holds several
+/// ([`ReadOptions::frame`]); what the fuzz targets call with frame 1 too.
+pub fn read_volume_bytes_frame(
+    bytes: &[u8],
+    format: Format,
+    path: &Path,
+    frame: Option<usize>,
+) -> Result<AnyVolume> {
+    if !matches!(format, Format::Nifti | Format::MetaImage | Format::Nrrd) {
+        choose_frame(path, "frame", 1, "", frame)?;
+    }
     match format {
-        Format::Nrrd => nrrd::read_nrrd_bytes(bytes, path),
+        Format::Nrrd => nrrd::read_nrrd_bytes_frame(bytes, path, frame),
         Format::Npy => npy::read_npy_bytes(bytes, path),
-        Format::Nifti => nifti::read_nifti_bytes(bytes, path),
+        Format::Nifti => nifti::read_nifti_bytes_frame(bytes, path, frame),
         Format::Pvm => pvm::read_pvm_bytes(bytes, path),
         Format::Den => den::read_den_bytes(bytes, path),
         Format::Tiff => tiff::read_tiff_bytes(bytes, path),
-        Format::MetaImage => metaimage::read_metaimage_bytes(bytes, path),
+        Format::MetaImage => metaimage::read_metaimage_bytes_frame(bytes, path, frame),
         other => Err(Error::invalid(
             "in-memory volume",
             format!("{} files are read from disk only", other.name()),
@@ -845,6 +865,25 @@ impl Samples {
         }
     }
 
+    /// The samples of one frame ([`FramePick`]) out of these, all of the file's.
+    pub(crate) fn pick(self, pick: &FramePick) -> Samples {
+        fn take<T: Copy>(mut v: Vec<T>, pick: &FramePick) -> Vec<T> {
+            if pick.contiguous() {
+                v.truncate(pick.base + pick.n());
+                v.drain(..pick.base);
+                v
+            } else {
+                (0..pick.n()).map(|i| v[pick.index(i)]).collect()
+            }
+        }
+        match self {
+            Samples::U8(v) => Samples::U8(take(v, pick)),
+            Samples::U16(v) => Samples::U16(take(v, pick)),
+            Samples::I16(v) => Samples::I16(take(v, pick)),
+            Samples::F32(v) => Samples::F32(take(v, pick)),
+        }
+    }
+
     /// The values as f32 (exact: u8, u16 and i16 all fit in f32).
     pub(crate) fn into_f32(self) -> Vec<f32> {
         match self {
@@ -854,6 +893,144 @@ impl Samples {
             Samples::F32(v) => v,
         }
     }
+}
+
+// ---------------------------------------------------------------------------------
+// Files of several 3-D volumes (frames)
+// ---------------------------------------------------------------------------------
+
+/// Which of a file's `frames` 3-D volumes to read: `frame`, or the only one. A file
+/// of several without a choice, or a choice past the last, is refused naming `field`
+/// and the count; `axes` describes the extra axes (`"t 5"`, `"axis 0: 3 (vector)"`).
+pub(crate) fn choose_frame(
+    path: &Path,
+    field: &str,
+    frames: usize,
+    axes: &str,
+    frame: Option<usize>,
+) -> Result<usize> {
+    match frame {
+        None if frames > 1 => Err(Error::format(
+            path,
+            field,
+            format!(
+                "the file holds {frames} 3-D volumes ({axes}); choose one with --frame K \
+                 (0 … {})",
+                frames - 1
+            ),
+        )),
+        None => Ok(0),
+        Some(k) if k >= frames => Err(Error::format(
+            path,
+            field,
+            format!(
+                "frame {k} is past the file's {frames} 3-D volume{} (0 … {})",
+                if frames == 1 { "" } else { "s" },
+                frames - 1
+            ),
+        )),
+        Some(k) => Ok(k),
+    }
+}
+
+/// Where one 3-D volume's samples lie among all the samples of a file's data: voxel
+/// `(x, y, z)` is sample `base + x·strides[0] + y·strides[1] + z·strides[2]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct FramePick {
+    /// Samples in the file's data, every frame.
+    pub total: usize,
+    pub dims: [usize; 3],
+    pub base: usize,
+    pub strides: [usize; 3],
+}
+
+impl FramePick {
+    /// The whole data as one volume.
+    pub fn whole(dims: [usize; 3]) -> FramePick {
+        FramePick {
+            total: dims[0] * dims[1] * dims[2],
+            dims,
+            base: 0,
+            strides: [1, dims[0], dims[0] * dims[1]],
+        }
+    }
+
+    /// Samples of the volume.
+    pub fn n(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// The volume is one run of samples (its frame axes are the slowest).
+    fn contiguous(&self) -> bool {
+        let [nx, ny, nz] = self.dims;
+        (nx == 1 || self.strides[0] == 1)
+            && (ny == 1 || self.strides[1] == nx)
+            && (nz == 1 || self.strides[2] == nx * ny)
+    }
+
+    fn index(&self, i: usize) -> usize {
+        let [nx, ny, _] = self.dims;
+        let (x, y, z) = (i % nx, (i / nx) % ny, i / (nx * ny));
+        self.base + x * self.strides[0] + y * self.strides[1] + z * self.strides[2]
+    }
+}
+
+/// Reads one frame's samples ([`FramePick`]) from a stream of all the frames'
+/// samples, reading past the rest so that the stream ends where the data does. A
+/// frame that is one run is read alone; interleaved frames (a fastest vector axis)
+/// need every sample in memory, so their total must be within the voxel limit.
+pub(crate) fn read_picked(
+    reader: &mut dyn Read,
+    stored: Stored,
+    endian: Endian,
+    pick: &FramePick,
+    path: &Path,
+) -> Result<Samples> {
+    let size = stored.size() as u64;
+    let total_bytes = pick.total as u64 * size;
+    if pick.contiguous() {
+        let n = pick.n();
+        let before = pick.base as u64 * size;
+        let skipped = skip_samples(reader, before, path)?;
+        if skipped < before {
+            return Err(too_short(path, total_bytes, skipped));
+        }
+        let samples = read_samples(reader, stored, endian, n, path)?;
+        let after = (pick.total - pick.base - n) as u64 * size;
+        let skipped = skip_samples(reader, after, path)?;
+        if skipped < after {
+            return Err(too_short(
+                path,
+                total_bytes,
+                before + n as u64 * size + skipped,
+            ));
+        }
+        return Ok(samples);
+    }
+    check_interleaved(pick, path)?;
+    let all = read_samples(reader, stored, endian, pick.total, path)?;
+    Ok(all.pick(pick))
+}
+
+/// Refuses interleaved frames whose data is larger than the voxel limit (reading one
+/// needs all of it).
+pub(crate) fn check_interleaved(pick: &FramePick, path: &Path) -> Result<()> {
+    if pick.total > crate::volume::max_voxels() {
+        return Err(Error::too_large(
+            format!("data of {}", path.display()),
+            format!(
+                "its frames are interleaved, so reading one needs all {} samples, more than \
+                 the voxel limit {} (raise it with --max-voxels)",
+                pick.total,
+                crate::volume::max_voxels()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn skip_samples(reader: &mut dyn Read, bytes: u64, path: &Path) -> Result<u64> {
+    io::copy(&mut reader.take(bytes), &mut io::sink()).map_err(|e| read_error(path, e))
 }
 
 /// A fixed-size number that can be decoded from bytes in either order.

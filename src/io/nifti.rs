@@ -446,31 +446,8 @@ fn parse_header(h: &Raw, path: &Path, frame: Option<usize>) -> Result<Header> {
         }
     }
     let count = check_dims(dims).map_err(|e| err("dim", e.to_string()))?;
-    let frame = match frame {
-        None if frames > 1 => {
-            return Err(err(
-                "dim[4]",
-                format!(
-                    "the file holds {frames} 3-D volumes ({}); choose one with --frame K \
-                     (0 … {})",
-                    extra_axes(&dim[4..=ndim]),
-                    frames - 1
-                ),
-            ))
-        }
-        None => 0,
-        Some(k) if k >= frames => {
-            return Err(err(
-                "dim[4]",
-                format!(
-                    "frame {k} is past the file's {frames} 3-D volume{} (0 … {})",
-                    if frames == 1 { "" } else { "s" },
-                    frames - 1
-                ),
-            ))
-        }
-        Some(k) => k,
-    };
+    let axes = dim.get(4..=ndim).map(extra_axes).unwrap_or_default();
+    let frame = super::choose_frame(path, "dim[4]", frames, &axes, frame)?;
     count
         .checked_mul(frames)
         .filter(|&n| n <= (1usize << 62))

@@ -31,11 +31,18 @@
 //! - `encoding`: `raw`, `gzip`/`gz`, `ascii`/`text`/`txt`. `bzip2`, `hex` and `zrl`
 //!   are refused (recompress with `unu save -e gzip`).
 //! - `endian`: `little` or `big`; required for multi-byte types in raw or gzip data.
-//! - `dimension` and `sizes`: a 3-D volume, or 2-D (read with `nz = 1`). Axes of size 1
-//!   are dropped when they are non-spatial (a `none` space direction, or a non-domain
-//!   `kinds` entry such as `vector`) and, beyond three axes, from the slowest end; a
-//!   volume must be left with two or three axes, all spatial. Multi-component data
-//!   (an RGB or vector axis of size 3) is refused.
+//! - `dimension` and `sizes`: a 3-D volume, or 2-D (read with `nz = 1`), and any
+//!   number of further axes that number the file's 3-D volumes, its *frames*. An axis
+//!   is spatial unless its space direction is `none`, its `kinds` entry is not a domain
+//!   kind (`vector`, `RGB-color`, `list` …) or is `time`. The volume's axes are the first three spatial ones (spatial
+//!   axes of size 1 are dropped from the slowest end while there are more than three;
+//!   with directions, more than three spatial axes are refused); every other axis of
+//!   size above 1 is a frame axis, wherever it lies (a fastest vector axis too). A file
+//!   of several frames is read one at a time: [`ReadOptions::frame`](super::ReadOptions)
+//!   or `--frame K`, the frame axes counted as one with the first the fastest; without
+//!   a choice it is refused, naming the count. A frame that is one run of the data is
+//!   read alone (the rest is skipped); frames interleaved with the volume's axes need
+//!   the whole data in memory, within the voxel limit.
 //! - Geometry, giving the index-to-world affine: with `space directions`, the columns
 //!   of the linear part are the direction vectors; otherwise `spacings` give a diagonal
 //!   (finite and positive on the spatial axes; `nan` marks non-spatial axes); otherwise
@@ -66,7 +73,7 @@
 //! [`NrrdWriteOptions`] say. No `space` name is written because a volume does not know
 //! its frame.
 
-use super::{open, parse_text_samples, read_error, read_samples, too_short, write_atomic};
+use super::{open, parse_text_samples, read_error, too_short, write_atomic};
 use super::{write_samples_le, Endian, Samples, Stored};
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, check_spacing, AnyVolume, VoxelKind};
@@ -147,15 +154,25 @@ pub fn read_nrrd(path: &Path) -> Result<AnyVolume> {
     read_nrrd_with(path, &super::ReadOptions::default())
 }
 
+/// How many 3-D volumes a NRRD holds (the product of the sizes of its axes that are
+/// not the volume's), from its header alone.
+pub fn nrrd_frames(path: &Path) -> Result<usize> {
+    let (file, _) = open(path)?;
+    let fields = read_fields(&mut BufReader::new(file), path)?;
+    Ok(Header::parse(&fields, path)?.frames())
+}
+
 /// [`read_nrrd`] with [`ReadOptions`](super::ReadOptions): with `confine_data_files`, a
-/// detached header may only name a data file inside its own folder.
+/// detached header may only name a data file inside its own folder; `frame` chooses
+/// one 3-D volume of a file with non-spatial axes.
 pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVolume> {
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
     let fields = read_fields(&mut reader, path)?;
     let header = Header::parse(&fields, path)?;
+    let pick = header.pick(options.frame, path)?;
     let samples = match &header.data_file {
-        None => read_data(&mut reader, len, path, &header)?,
+        None => read_data(&mut reader, len, path, &header, &pick)?,
         Some(name) => {
             let dir = path.parent().unwrap_or(Path::new(""));
             let data_path = dir.join(name);
@@ -195,7 +212,7 @@ pub fn read_nrrd_with(path: &Path, options: &super::ReadOptions) -> Result<AnyVo
                     .seek(SeekFrom::Start(0))
                     .map_err(|e| Error::io(&data_path, e))?;
             }
-            let samples = read_data(&mut reader, len, &data_path, &header)?;
+            let samples = read_data(&mut reader, len, &data_path, &header, &pick)?;
             if header.data_check.is_none()
                 && header.encoding == Encoding::Raw
                 && header.byte_skip >= 0
@@ -231,7 +248,7 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
     let mut reader = BufReader::new(file);
     let fields = read_fields(&mut reader, path)?;
     let h = Header::parse(&fields, path)?;
-    if h.encoding != Encoding::Raw || h.line_skip != 0 {
+    if h.encoding != Encoding::Raw || h.line_skip != 0 || h.frames() > 1 {
         return Ok(None);
     }
     let (data, start, len) = match &h.data_file {
@@ -276,6 +293,11 @@ pub(crate) fn raw_layout(path: &Path) -> Result<Option<super::RawLayout>> {
 /// errors). A header that names a detached data file is refused: there is no
 /// directory to find it in. Used by the fuzz targets; never panics.
 pub fn read_nrrd_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
+    read_nrrd_bytes_frame(bytes, path, None)
+}
+
+/// [`read_nrrd_bytes`] of one 3-D volume of a file that holds several.
+pub fn read_nrrd_bytes_frame(bytes: &[u8], path: &Path, frame: Option<usize>) -> Result<AnyVolume> {
     let mut reader = io::Cursor::new(bytes);
     let fields = read_fields(&mut reader, path)?;
     let header = Header::parse(&fields, path)?;
@@ -286,7 +308,8 @@ pub fn read_nrrd_bytes(bytes: &[u8], path: &Path) -> Result<AnyVolume> {
             "a detached header cannot be read from memory",
         ));
     }
-    let samples = read_data(&mut reader, bytes.len() as u64, path, &header)?;
+    let pick = header.pick(frame, path)?;
+    let samples = read_data(&mut reader, bytes.len() as u64, path, &header, &pick)?;
     samples.into_volume(header.dims, header.affine)
 }
 
@@ -472,7 +495,13 @@ struct Header {
     /// Little when the byte order does not matter (1-byte types, text).
     endian: Endian,
     dims: [usize; 3],
+    /// Samples of one 3-D volume.
     count: usize,
+    /// Samples in the data, every frame.
+    total: usize,
+    voxel_strides: [usize; 3],
+    /// The axes past the volume's that number its frames (none for one volume).
+    frame_axes: Vec<FrameAxis>,
     affine: DMat4,
     byte_skip: i64,
     line_skip: u64,
@@ -601,8 +630,20 @@ impl Header {
             })
             .collect::<Result<Vec<usize>>>()?;
 
-        let (dims, affine) = geometry(&f, &sizes)?;
+        let Layout {
+            dims,
+            affine,
+            voxel_strides,
+            frame_axes,
+        } = geometry(&f, &sizes)?;
         let count = check_dims(dims).map_err(|e| f.error("sizes", e.to_string()))?;
+        // Every frame must be in the file, though one is read: the whole data's size
+        // is checked before anything is allocated.
+        let total = sizes
+            .iter()
+            .try_fold(1usize, |a, &n| a.checked_mul(n))
+            .filter(|&t| t > 0 && t <= 1 << 62)
+            .ok_or_else(|| f.error("sizes", "too many samples, or a size of 0"))?;
 
         let byte_skip: i64 = match f.get("byte skip") {
             None => 0,
@@ -677,10 +718,44 @@ impl Header {
             endian,
             dims,
             count,
+            total,
+            voxel_strides,
+            frame_axes,
             affine,
             byte_skip,
             line_skip,
             data_file,
+        })
+    }
+
+    /// How many 3-D volumes the data holds.
+    fn frames(&self) -> usize {
+        self.frame_axes.iter().map(|a| a.size).product()
+    }
+
+    /// Where frame `frame` lies in the data (see [`super::choose_frame`]): its index
+    /// split over the frame axes, the first fastest.
+    fn pick(&self, frame: Option<usize>, path: &Path) -> Result<super::FramePick> {
+        let axes = self
+            .frame_axes
+            .iter()
+            .map(|a| match &a.kind {
+                Some(k) => format!("axis {}: {} ({k})", a.axis, a.size),
+                None => format!("axis {}: {}", a.axis, a.size),
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let mut k = super::choose_frame(path, "sizes", self.frames(), &axes, frame)?;
+        let mut base = 0;
+        for a in &self.frame_axes {
+            base += (k % a.size) * a.stride;
+            k /= a.size;
+        }
+        Ok(super::FramePick {
+            total: self.total,
+            dims: self.dims,
+            base,
+            strides: self.voxel_strides,
         })
     }
 }
@@ -717,8 +792,28 @@ fn parse_type(name: &str) -> Option<Stored> {
 /// `vector` or `RGB-color`, is a non-spatial axis.
 const DOMAIN_KINDS: &[&str] = &["domain", "space", "time", "none", "???"];
 
+/// An axis that numbers the file's 3-D volumes (frames).
+#[derive(Clone, Debug, PartialEq)]
+struct FrameAxis {
+    axis: usize,
+    size: usize,
+    /// Samples between neighbours along the axis.
+    stride: usize,
+    /// Its `kinds` entry, if given.
+    kind: Option<String>,
+}
+
+/// The volume's axes, their affine, and the axes that number frames.
+struct Layout {
+    dims: [usize; 3],
+    affine: DMat4,
+    /// Samples between neighbours along the volume's x, y and z.
+    voxel_strides: [usize; 3],
+    frame_axes: Vec<FrameAxis>,
+}
+
 /// Chooses the volume's axes and builds the index-to-world affine.
-fn geometry(f: &Fields, sizes: &[usize]) -> Result<([usize; 3], DMat4)> {
+fn geometry(f: &Fields, sizes: &[usize]) -> Result<Layout> {
     let dimension = sizes.len();
     let space_dim = space_dimension(f)?;
     let directions = match f.get("space directions") {
@@ -805,17 +900,20 @@ fn geometry(f: &Fields, sizes: &[usize]) -> Result<([usize; 3], DMat4)> {
     };
     let kinds = f.per_axis("kinds", dimension)?;
 
-    // Which axes are spatial: a `none` direction or a non-domain kind says no.
+    // Which axes are spatial: a `none` direction, a non-domain kind or the kind `time`
+    // says no.
     let spatial = |a: usize| {
         let by_direction = directions.as_ref().is_none_or(|d| d[a].is_some());
-        let by_kind = kinds
-            .as_ref()
-            .is_none_or(|k| DOMAIN_KINDS.iter().any(|d| d.eq_ignore_ascii_case(k[a])));
+        let by_kind = kinds.as_ref().is_none_or(|k| {
+            DOMAIN_KINDS.iter().any(|d| d.eq_ignore_ascii_case(k[a]))
+                && !k[a].eq_ignore_ascii_case("time")
+        });
         by_direction && by_kind
     };
-    let mut keep: Vec<usize> = (0..dimension)
-        .filter(|&a| spatial(a) || sizes[a] != 1)
-        .collect();
+    // The volume's axes: the spatial ones, less those of size 1 from the slowest end
+    // while there are more than three; without directions, spatial axes past the
+    // third number frames like the non-spatial ones.
+    let mut keep: Vec<usize> = (0..dimension).filter(|&a| spatial(a)).collect();
     while keep.len() > 3 {
         match keep.iter().rposition(|&a| sizes[a] == 1) {
             Some(p) => {
@@ -824,22 +922,43 @@ fn geometry(f: &Fields, sizes: &[usize]) -> Result<([usize; 3], DMat4)> {
             None => break,
         }
     }
-    if keep.len() > 3 || keep.len() < 2 {
+    if keep.len() > 3 && directions.is_some() {
         return Err(f.error(
-            "dimension",
+            "space directions",
             format!(
-                "sizes {sizes:?} do not describe a 2-D or 3-D volume (only axes of size 1 can be dropped)"
+                "{} axes have directions; a volume has at most three (sizes {sizes:?})",
+                keep.len()
             ),
         ));
     }
-    if let Some(&a) = keep.iter().find(|&&a| !spatial(a)) {
+    keep.truncate(3);
+    if keep.len() < 2 {
         return Err(f.error(
-            if directions.is_some() { "space directions" } else { "kinds" },
+            "dimension",
             format!(
-                "axis {a} (size {}) is not spatial: multi-component data is not supported, only scalar volumes",
-                sizes[a]
+                "sizes {sizes:?} do not describe a 2-D or 3-D volume: {} spatial ax{}",
+                keep.len(),
+                if keep.len() == 1 { "is" } else { "es" }
             ),
         ));
+    }
+    // Every other axis of size above 1 numbers the file's frames, the first fastest.
+    let mut strides = vec![1usize; dimension];
+    for a in 1..dimension {
+        strides[a] = strides[a - 1].saturating_mul(sizes[a - 1]);
+    }
+    let frame_axes: Vec<FrameAxis> = (0..dimension)
+        .filter(|a| !keep.contains(a) && sizes[*a] > 1)
+        .map(|a| FrameAxis {
+            axis: a,
+            size: sizes[a],
+            stride: strides[a],
+            kind: kinds.as_ref().map(|k| k[a].to_string()),
+        })
+        .collect();
+    let mut voxel_strides = [0usize; 3];
+    for (i, &a) in keep.iter().enumerate() {
+        voxel_strides[i] = strides[a];
     }
 
     // The columns of the linear part: one world vector per kept axis.
@@ -885,7 +1004,12 @@ fn geometry(f: &Fields, sizes: &[usize]) -> Result<([usize; 3], DMat4)> {
         sizes[keep[1]],
         keep.get(2).map_or(1, |&a| sizes[a]),
     ];
-    Ok((dims, affine))
+    Ok(Layout {
+        dims,
+        affine,
+        voxel_strides,
+        frame_axes,
+    })
 }
 
 /// The space's dimension from `space` or `space dimension` (2 or 3), if given.
@@ -993,6 +1117,7 @@ fn read_data<R: BufRead + Seek>(
     len: u64,
     path: &Path,
     h: &Header,
+    pick: &super::FramePick,
 ) -> Result<Samples> {
     for i in 0..h.line_skip {
         let n = reader.skip_until(b'\n').map_err(|e| Error::io(path, e))?;
@@ -1004,7 +1129,7 @@ fn read_data<R: BufRead + Seek>(
             ));
         }
     }
-    let expected = h.count as u64 * h.stored.size() as u64;
+    let expected = h.total as u64 * h.stored.size() as u64;
     match h.encoding {
         Encoding::Raw => {
             let pos = reader.stream_position().map_err(|e| Error::io(path, e))?;
@@ -1031,13 +1156,13 @@ fn read_data<R: BufRead + Seek>(
                     return Err(too_short(path, expected, available));
                 }
             }
-            read_samples(reader, h.stored, h.endian, h.count, path)
+            super::read_picked(reader, h.stored, h.endian, pick, path)
         }
         Encoding::Gzip => {
             // `byte skip` counts decompressed bytes, as in teem.
             let mut gz = MultiGzDecoder::new(reader);
             skip_bytes(&mut gz, h.byte_skip as u64, path)?;
-            let samples = read_samples(&mut gz, h.stored, h.endian, h.count, path)?;
+            let samples = super::read_picked(&mut gz, h.stored, h.endian, pick, path)?;
             // Decode to the end of the stream, so that its checksum is verified and a
             // truncated or corrupt tail is reported rather than silently ignored; data
             // beyond what the header describes is refused.
@@ -1059,7 +1184,7 @@ fn read_data<R: BufRead + Seek>(
             skip_bytes(reader, h.byte_skip as u64, path)?;
             // At most what the values can need, however long the file: a value takes
             // at most MAX_TEXT_VALUE_BYTES with its separators.
-            let limit = (h.count as u64)
+            let limit = (h.total as u64)
                 .saturating_mul(MAX_TEXT_VALUE_BYTES)
                 .saturating_add(1 << 16);
             let mut bytes = Vec::new();
@@ -1077,7 +1202,7 @@ fn read_data<R: BufRead + Seek>(
             }
             let text = String::from_utf8(bytes)
                 .map_err(|_| Error::format(path, "data", "the ascii data is not text"))?;
-            parse_text_samples(&text, h.stored, h.count, path, &h.type_name)
+            Ok(parse_text_samples(&text, h.stored, h.total, path, &h.type_name)?.pick(pick))
         }
     }
 }
@@ -1236,14 +1361,53 @@ mod tests {
         .unwrap();
         assert_eq!(h.dims, [4, 5, 1]);
         assert_eq!(h.affine, DMat4::from_scale(DVec3::new(0.5, 2.0, 1.0)));
-        // RGB data is refused, by kinds or by directions.
-        let e = header(&format!(
+        // An RGB axis numbers frames: three 2-D images, the colour fastest.
+        let h = header(&format!(
             "{base}dimension: 3\nsizes: 3 4 5\nkinds: RGB-color domain domain\n"
         ))
+        .unwrap();
+        assert_eq!(
+            (h.dims, h.frames(), h.voxel_strides),
+            ([4, 5, 1], 3, [3, 12, 0])
+        );
+        let p = Path::new("rgb.nrrd");
+        let e = h.pick(None, p).unwrap_err().to_string();
+        assert!(
+            e.contains("sizes") && e.contains("--frame") && e.contains("RGB-color"),
+            "{e}"
+        );
+        assert_eq!(h.pick(Some(2), p).unwrap().base, 2);
+        assert!(h.pick(Some(3), p).is_err());
+        // Without directions or kinds, axes past the third number frames.
+        let h = header(&format!("{base}dimension: 4\nsizes: 2 4 5 6\n")).unwrap();
+        assert_eq!((h.dims, h.frames()), ([2, 4, 5], 6));
+        assert_eq!(h.pick(Some(4), p).unwrap().base, 4 * 40);
+        // A time axis between space axes, by kinds: frames with a stride.
+        let h = header(&format!(
+            "{base}dimension: 4\nsizes: 4 3 5 6\nkinds: space time space space\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            (h.dims, h.frames(), h.voxel_strides),
+            ([4, 5, 6], 3, [1, 12, 60])
+        );
+        assert_eq!(h.pick(Some(1), p).unwrap().base, 4);
+        // Two frame axes: the first is the fastest.
+        let h = header(&format!(
+            "{base}dimension: 5\nsizes: 2 4 5 6 3\nspace directions: none (1,0,0) (0,1,0) (0,0,1) none\n"
+        ))
+        .unwrap();
+        assert_eq!(h.frames(), 6);
+        assert_eq!(h.pick(Some(3), p).unwrap().base, 1 + 240);
+        // Four spatial directions are not a volume.
+        let e = header(&format!(
+            "{base}dimension: 4\nsizes: 2 4 5 6\nspace directions: (1,0,0) (0,1,0) (0,0,1) (1,1,1)\n"
+        ))
         .unwrap_err();
-        assert!(e.to_string().contains("kinds"), "{e}");
-        let e = header(&format!("{base}dimension: 4\nsizes: 2 4 5 6\n")).unwrap_err();
-        assert!(e.to_string().contains("dimension"), "{e}");
+        assert!(e.to_string().contains("space directions"), "{e}");
+        // A size of 0 anywhere is refused.
+        let e = header(&format!("{base}dimension: 4\nsizes: 2 4 5 0\n")).unwrap_err();
+        assert!(e.to_string().contains("sizes"), "{e}");
     }
 
     #[test]
