@@ -554,3 +554,140 @@ fn the_dicm_marker_wins_over_other_magic_and_names() {
     let v = voxlab::io::read_volume(&series).unwrap();
     assert_eq!(v.values_f64(), want);
 }
+
+/// Items of a sequence of defined length (explicit VR little endian): each item's
+/// elements, sorted by tag.
+fn sequence(items: Vec<Vec<Element>>) -> Vec<u8> {
+    let mut out = Vec::new();
+    for mut item in items {
+        item.sort_by_key(|e| (e.0, e.1));
+        let mut body = Vec::new();
+        for (g, e, vr, v) in &item {
+            element(&mut body, Syntax::ExplicitLittle, *g, *e, vr, v);
+        }
+        out.extend([0xFE, 0xFF, 0x00, 0xE0]);
+        out.extend((body.len() as u32).to_le_bytes());
+        out.extend(body);
+    }
+    out
+}
+
+#[test]
+fn compressed_multi_frame_with_functional_groups_is_a_volume_in_place() {
+    // An enhanced multi-frame image, RLE-coded, 3 frames of 2 × 3 signed 16-bit
+    // samples 100·k − i stored in the order z = 10, 0, 5 along an oblique normal;
+    // orientation and pixel spacing in the shared functional groups, each frame's
+    // position and rescale intercept in its own.
+    let syntax = Syntax::Rle;
+    let (r, c) = ([0.6, 0.8, 0.0], [0.0, 0.0, -1.0]);
+    // normal = r × c = (−0.8, 0.6, 0)
+    let n = [-0.8, 0.6, 0.0];
+    let origin = [5.0, -3.0, 7.0];
+    let zs = [10.0, 0.0, 5.0];
+    let intercepts = [0.0, -1000.0, 7.0];
+    let ds = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x}"))
+            .collect::<Vec<_>>()
+            .join("\\")
+            .into_bytes()
+    };
+    let mut e = image_elements(syntax, 2, 3, 16, "MONOCHROME2");
+    e.retain(|x| (x.0, x.1) != (0x0028, 0x0103));
+    e.push((0x0028, 0x0103, *b"US", us(syntax, &[1])));
+    e.push((0x0028, 0x0008, *b"IS", b"3".to_vec()));
+    let shared = sequence(vec![vec![
+        (
+            0x0020,
+            0x9116,
+            *b"SQ",
+            sequence(vec![vec![(
+                0x0020,
+                0x0037,
+                *b"DS",
+                ds(&[r[0], r[1], r[2], c[0], c[1], c[2]]),
+            )]]),
+        ),
+        (
+            0x0028,
+            0x9110,
+            *b"SQ",
+            sequence(vec![vec![(0x0028, 0x0030, *b"DS", ds(&[0.5, 0.25]))]]),
+        ),
+    ]]);
+    e.push((0x5200, 0x9229, *b"SQ", shared));
+    let per_frame: Vec<Vec<Element>> = (0..3)
+        .map(|k| {
+            let p: Vec<f64> = (0..3).map(|a| origin[a] + n[a] * zs[k]).collect();
+            vec![
+                (
+                    0x0020,
+                    0x9113,
+                    *b"SQ",
+                    sequence(vec![vec![(0x0020, 0x0032, *b"DS", ds(&p))]]),
+                ),
+                (
+                    0x0028,
+                    0x9145,
+                    *b"SQ",
+                    sequence(vec![vec![
+                        (0x0028, 0x1052, *b"DS", ds(&[intercepts[k]])),
+                        (0x0028, 0x1053, *b"DS", ds(&[1.0])),
+                    ]]),
+                ),
+            ]
+        })
+        .collect();
+    e.push((0x5200, 0x9230, *b"SQ", sequence(per_frame)));
+    // The frames, each one RLE fragment, with a basic offset table.
+    let frames: Vec<Vec<u8>> = (0..3i16)
+        .map(|k| {
+            let px: Vec<u8> = (0..6i16)
+                .flat_map(|i| (100 * k - i).to_le_bytes())
+                .collect();
+            rle_frame(&px, 2)
+        })
+        .collect();
+    let mut bot = Vec::new();
+    let mut at = 0u32;
+    for f in &frames {
+        bot.extend(at.to_le_bytes());
+        at += 8 + f.len() as u32;
+    }
+    let mut data = Vec::new();
+    for (g, el, vr, v) in {
+        e.sort_by_key(|x| (x.0, x.1));
+        &e
+    } {
+        element(&mut data, syntax, *g, *el, vr, v);
+    }
+    let refs: Vec<&[u8]> = frames.iter().map(Vec::as_slice).collect();
+    encapsulated(&mut data, &bot, &refs);
+    let path = scratch("enhanced").join("enhanced.dcm");
+    std::fs::write(&path, wrap(syntax, data)).unwrap();
+
+    let v = voxlab::io::read_volume(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(v.dims(), [3, 2, 3]);
+    // Sorted along the normal: frames 1 (z 0), 2 (z 5), 0 (z 10).
+    let mut want = Vec::new();
+    for k in [1usize, 2, 0] {
+        for i in 0..6 {
+            want.push((100 * k as i64 - i) as f64 + intercepts[k]);
+        }
+    }
+    assert_eq!(v.values_f64(), want);
+    let a = v.affine();
+    let cols = [
+        [r[0] * 0.25, r[1] * 0.25, r[2] * 0.25],
+        [c[0] * 0.5, c[1] * 0.5, c[2] * 0.5],
+        [n[0] * 5.0, n[1] * 5.0, n[2] * 5.0],
+        [origin[0], origin[1], origin[2]],
+    ];
+    for (k, w) in cols.iter().enumerate() {
+        let got = a.col(k).truncate().to_array();
+        assert!(
+            got.iter().zip(w).all(|(g, w)| (g - w).abs() < 1e-9),
+            "affine column {k} is {got:?}, want {w:?}"
+        );
+    }
+}
