@@ -127,6 +127,10 @@ fn lossy_files_match_pydicoms_decoding() {
         // (islow): both round, in different places; measured max 1 here.
         ("jpeg_baseline.dcm", 8, 1.0),
         ("jpeg_extended_8.dcm", 8, 1.0),
+        // 12-bit DCT, decoded in voxlab with the exact f64 IDCT, against libjpeg's
+        // 12-bit integer IDCT (islow, whose fixed-point rounding is coarser at 12
+        // bits): measured max 2 at one voxel, 212 of the 1620 voxels differing.
+        ("jpeg_extended_12.dcm", 16, 2.0),
         // JPEG-LS near-lossless decoding is exact integer arithmetic (T.87): no
         // freedom, so CharLS and pure_jpegls agree exactly.
         ("jpegls_near.dcm", 16, 0.0),
@@ -146,7 +150,8 @@ fn lossy_files_match_pydicoms_decoding() {
                 at = i;
             }
         }
-        eprintln!("{name}: max |voxlab - pydicom| = {worst}");
+        let differ = got.iter().zip(&want).filter(|(a, b)| a != b).count();
+        eprintln!("{name}: max |voxlab - pydicom| = {worst}, {differ} voxels differ");
         assert!(
             worst <= tol,
             "{name}: max |voxlab - pydicom| = {worst} at voxel {at} (x {}, y {}), allowed {tol}",
@@ -154,14 +159,6 @@ fn lossy_files_match_pydicoms_decoding() {
             at / COLS
         );
     }
-}
-
-#[test]
-fn twelve_bit_lossy_jpeg_is_refused_clearly() {
-    let e = format_err(read_dicom(&data("jpeg_extended_12.dcm")));
-    assert!(e.contains("jpeg_extended_12.dcm"), "{e}");
-    assert!(e.contains("BitsStored"), "{e}");
-    assert!(e.contains("12-bit lossy JPEG"), "{e}");
 }
 
 /// (min, max, sum, weighted sum Σ v[i]·(i mod 251 + 1)), as tests/io_dicom.rs and
@@ -374,7 +371,22 @@ fn corrupt_frames_name_the_file_and_the_field() {
     let dir = scratch("dicom_corrupt");
     // (fixture, what is done to its first fragment, words the error must hold)
     type Edit = fn(&mut Vec<u8>);
-    let cases: [(&str, &str, Edit, &str); 8] = [
+    let cases: [(&str, &str, Edit, &str); 10] = [
+        (
+            "jpeg_extended_12.dcm",
+            "jpeg12-progressive",
+            |f| {
+                let at = f.windows(2).position(|w| w == [0xFF, 0xC1]).unwrap();
+                f[at + 1] = 0xC2;
+            },
+            "12-bit progressive JPEG is not supported",
+        ),
+        (
+            "jpeg_extended_12.dcm",
+            "jpeg12-cut",
+            |f| f.truncate(f.len() / 2),
+            "JPEG frame 1",
+        ),
         (
             "rle_i16.dcm",
             "rle-short",

@@ -6,7 +6,7 @@
 //! | transfer syntax | UID | decoder |
 //! |---|---|---|
 //! | RLE Lossless | 1.2.840.10008.1.2.5 | here ([`rle`], PS3.5 Annex G) |
-//! | JPEG Baseline (process 1), Extended (processes 2 & 4), Lossless (process 14, and its selection value 1) | …1.2.4.50, .51, .57, .70 | `jpeg-decoder` (8-bit DCT, 2–16-bit lossless) |
+//! | JPEG Baseline (process 1), Extended (processes 2 & 4), Lossless (process 14, and its selection value 1) | …1.2.4.50, .51, .57, .70 | `jpeg-decoder` (8-bit DCT, 2–16-bit lossless); 12-bit sequential DCT here ([`jpeg12`]) |
 //! | JPEG-LS Lossless, Near-Lossless | …1.2.4.80, .81 | `pure_jpegls` |
 //! | JPEG 2000 (lossless only, and lossy), and Part 2 with one component | …1.2.4.90, .91, .92, .93 | `jpeg2k` on `openjp2`, the Rust port of OpenJPEG |
 //!
@@ -389,13 +389,22 @@ fn jpeg(data: &[u8], px: &PixelFormat, err: &dyn Fn(&str, String) -> Error) -> R
         sof.precision,
         err,
     )?;
+    if sof.marker == 0xC1 && sof.precision == 12 {
+        let samples = jpeg12::decode(data).map_err(|m| err("PixelData", m))?;
+        return Ok(widen(
+            samples.into_iter().map(u32::from),
+            px.rows * px.cols,
+            (px.bits_allocated / 8) as usize,
+        ));
+    }
     if !lossless && sof.precision != 8 {
         return Err(err(
             "BitsStored",
             format!(
-                "{}-bit lossy JPEG (JPEG Extended, process 4) is not supported: the \
-                 decoder (jpeg-decoder) reads 8-bit DCT data only; decompress first, e.g. \
-                 `dcmdjpeg in.dcm out.dcm` (DCMTK) or `gdcmconv --raw in.dcm out.dcm`",
+                "{}-bit progressive JPEG is not supported (voxlab decodes 12-bit \
+                 sequential DCT, JPEG Extended process 4, and 8-bit DCT through \
+                 jpeg-decoder); decompress first, e.g. `dcmdjpeg in.dcm out.dcm` (DCMTK) \
+                 or `gdcmconv --raw in.dcm out.dcm`",
                 sof.precision
             ),
         ));
@@ -463,6 +472,325 @@ fn check_frame(
         ));
     }
     Ok(())
+}
+
+// ---------------------------------------------------------------------------------
+// JPEG Extended, 12-bit sequential DCT (ITU T.81 Annex F)
+// ---------------------------------------------------------------------------------
+
+/// 12-bit sequential Huffman DCT (SOF1, DICOM's JPEG Extended process 4), one
+/// component, decoded here because `jpeg-decoder` reads 8-bit DCT data only. The
+/// inverse DCT is the exact definition (A.3.3) in f64, rounded and clamped to 0‥4095;
+/// libjpeg's integer IDCT differs from it by at most 1.
+mod jpeg12 {
+    /// Zig-zag index → natural (row-major) index within an 8 × 8 block.
+    const ZIGZAG: [usize; 64] = [
+        0, 1, 8, 16, 9, 2, 3, 10, 17, 24, 32, 25, 18, 11, 4, 5, 12, 19, 26, 33, 40, 48, 41, 34, 27,
+        20, 13, 6, 7, 14, 21, 28, 35, 42, 49, 56, 57, 50, 43, 36, 29, 22, 15, 23, 30, 37, 44, 51,
+        58, 59, 52, 45, 38, 31, 39, 46, 53, 60, 61, 54, 47, 55, 62, 63,
+    ];
+
+    /// A Huffman table as F.2.2.3 decodes with it.
+    #[derive(Clone)]
+    struct Huffman {
+        maxcode: [i32; 17],
+        mincode: [i32; 17],
+        valptr: [usize; 17],
+        values: Vec<u8>,
+    }
+
+    impl Huffman {
+        /// From the 16 code counts and the values of a DHT segment (Annex C).
+        fn new(counts: &[u8], values: &[u8]) -> Huffman {
+            let (mut maxcode, mut mincode, mut valptr) = ([-1i32; 17], [0i32; 17], [0usize; 17]);
+            let (mut code, mut k) = (0i32, 0usize);
+            for l in 1..=16 {
+                let n = counts[l - 1] as usize;
+                valptr[l] = k;
+                mincode[l] = code;
+                code += n as i32;
+                k += n;
+                maxcode[l] = if n > 0 { code - 1 } else { -1 };
+                code <<= 1;
+            }
+            Huffman {
+                maxcode,
+                mincode,
+                valptr,
+                values: values.to_vec(),
+            }
+        }
+    }
+
+    /// Bits of the entropy-coded data, most significant first, stuffed zero bytes
+    /// (FF 00) removed.
+    struct Bits<'a> {
+        data: &'a [u8],
+        pos: usize,
+        byte: u32,
+        left: u32,
+    }
+
+    impl Bits<'_> {
+        fn bit(&mut self) -> Result<u32, String> {
+            if self.left == 0 {
+                let b = *self
+                    .data
+                    .get(self.pos)
+                    .ok_or("the JPEG data ends inside the scan")?;
+                if b == 0xFF {
+                    match self.data.get(self.pos + 1) {
+                        Some(0) => self.pos += 2,
+                        Some(&m) => {
+                            return Err(format!(
+                                "the JPEG scan ends early (marker FF{m:02X} at byte {})",
+                                self.pos
+                            ))
+                        }
+                        None => return Err("the JPEG data ends inside the scan".into()),
+                    }
+                } else {
+                    self.pos += 1;
+                }
+                self.byte = u32::from(b);
+                self.left = 8;
+            }
+            self.left -= 1;
+            Ok((self.byte >> self.left) & 1)
+        }
+
+        fn bits(&mut self, n: u32) -> Result<u32, String> {
+            let mut v = 0;
+            for _ in 0..n {
+                v = (v << 1) | self.bit()?;
+            }
+            Ok(v)
+        }
+
+        /// DECODE (F.2.2.3).
+        fn decode(&mut self, h: &Huffman) -> Result<u8, String> {
+            let mut code = self.bit()? as i32;
+            for l in 1..=16 {
+                if code <= h.maxcode[l] {
+                    // A table with more codes than its lengths allow can put a code
+                    // below its length's first one.
+                    return usize::try_from(code - h.mincode[l])
+                        .ok()
+                        .and_then(|off| h.values.get(h.valptr[l] + off))
+                        .copied()
+                        .ok_or_else(|| "a Huffman code points outside its table".to_string());
+                }
+                code = (code << 1) | self.bit()? as i32;
+            }
+            Err("an invalid Huffman code in the JPEG scan".into())
+        }
+
+        /// RECEIVE and EXTEND (F.2.2.1): an `s`-bit magnitude category's value.
+        fn receive_extend(&mut self, s: u32) -> Result<i32, String> {
+            if s == 0 {
+                return Ok(0);
+            }
+            if s > 16 {
+                return Err(format!("a JPEG coefficient of {s} bits"));
+            }
+            let v = self.bits(s)? as i32;
+            Ok(if v < 1 << (s - 1) {
+                v - (1 << s) + 1
+            } else {
+                v
+            })
+        }
+    }
+
+    /// The samples (row-major, 0‥4095) of a 12-bit sequential JPEG stream with one
+    /// component; the caller has checked its frame header against the image size.
+    pub(super) fn decode(data: &[u8]) -> Result<Vec<u16>, String> {
+        let mut qt: [Option<[u16; 64]>; 4] = [None; 4];
+        let mut dc: [Option<Huffman>; 4] = [None, None, None, None];
+        let mut ac: [Option<Huffman>; 4] = [None, None, None, None];
+        let (mut width, mut height, mut tq) = (0usize, 0usize, 0usize);
+        let mut restart = 0usize;
+        let mut pos = 2;
+        loop {
+            while data.get(pos) == Some(&0xFF) && data.get(pos + 1) == Some(&0xFF) {
+                pos += 1;
+            }
+            let (Some(&0xFF), Some(&m)) = (data.get(pos), data.get(pos + 1)) else {
+                return Err(format!("a JPEG marker was expected at byte {pos}"));
+            };
+            let len = data
+                .get(pos + 2..pos + 4)
+                .map(|l| u16::from_be_bytes([l[0], l[1]]) as usize)
+                .ok_or("the JPEG stream ends inside a marker segment")?;
+            let body = data
+                .get(pos + 4..pos + 2 + len)
+                .filter(|_| len >= 2)
+                .ok_or_else(|| format!("JPEG marker FF{m:02X} claims {len} bytes past the end"))?;
+            let short = || format!("the JPEG marker segment FF{m:02X} is too short");
+            match m {
+                0xDB => {
+                    let mut b = body;
+                    while let Some((&pq_tq, rest)) = b.split_first() {
+                        let (pq, t) = ((pq_tq >> 4) as usize, (pq_tq & 15) as usize);
+                        let size = 64 * (pq + 1);
+                        if pq > 1 || t > 3 || rest.len() < size {
+                            return Err("a bad JPEG quantisation table (DQT)".into());
+                        }
+                        let mut q = [0u16; 64];
+                        for (k, v) in q.iter_mut().enumerate() {
+                            *v = if pq == 0 {
+                                u16::from(rest[k])
+                            } else {
+                                u16::from_be_bytes([rest[2 * k], rest[2 * k + 1]])
+                            };
+                        }
+                        qt[t] = Some(q);
+                        b = &rest[size..];
+                    }
+                }
+                0xC4 => {
+                    let mut b = body;
+                    while let Some((&tc_th, rest)) = b.split_first() {
+                        let (tc, th) = (tc_th >> 4, (tc_th & 15) as usize);
+                        let counts = rest.get(..16).ok_or_else(short)?;
+                        let n: usize = counts.iter().map(|&c| c as usize).sum();
+                        let values = rest.get(16..16 + n).ok_or_else(short)?;
+                        if tc > 1 || th > 3 {
+                            return Err("a bad JPEG Huffman table (DHT)".into());
+                        }
+                        let h = Some(Huffman::new(counts, values));
+                        if tc == 0 {
+                            dc[th] = h;
+                        } else {
+                            ac[th] = h;
+                        }
+                        b = &rest[16 + n..];
+                    }
+                }
+                0xC1 => {
+                    let b = body.get(..9).ok_or_else(short)?;
+                    height = u16::from_be_bytes([b[1], b[2]]) as usize;
+                    width = u16::from_be_bytes([b[3], b[4]]) as usize;
+                    tq = (b[8] & 3) as usize;
+                }
+                0xDD => {
+                    let b = body.get(..2).ok_or_else(short)?;
+                    restart = u16::from_be_bytes([b[0], b[1]]) as usize;
+                }
+                0xDA => {
+                    let b = body.get(..6).ok_or_else(short)?;
+                    if b[0] != 1 {
+                        return Err(format!("a JPEG scan of {} components", b[0]));
+                    }
+                    if (b[3], b[4], b[5]) != (0, 63, 0) {
+                        return Err("the JPEG scan is not sequential (Ss, Se, Ah/Al)".into());
+                    }
+                    let (td, ta) = ((b[2] >> 4) as usize, (b[2] & 15) as usize);
+                    let missing = || "the JPEG scan uses a table that was not defined".to_string();
+                    let dc = dc.get(td).and_then(Option::as_ref).ok_or_else(missing)?;
+                    let ac = ac.get(ta).and_then(Option::as_ref).ok_or_else(missing)?;
+                    let q = qt[tq].as_ref().ok_or_else(missing)?;
+                    if width == 0 || height == 0 {
+                        return Err("the JPEG scan comes before its frame header".into());
+                    }
+                    let bits = Bits {
+                        data,
+                        pos: pos + 2 + len,
+                        byte: 0,
+                        left: 0,
+                    };
+                    return scan(bits, dc, ac, q, width, height, restart);
+                }
+                0xC0 | 0xC2..=0xCF => {
+                    return Err(format!(
+                        "the 12-bit JPEG decoder reads sequential Huffman (SOF1) data only, \
+                         not FF{m:02X}"
+                    ))
+                }
+                _ => {}
+            }
+            pos += 2 + len;
+        }
+    }
+
+    fn scan(
+        mut bits: Bits,
+        dc: &Huffman,
+        ac: &Huffman,
+        q: &[u16; 64],
+        width: usize,
+        height: usize,
+        restart: usize,
+    ) -> Result<Vec<u16>, String> {
+        // cos((2x + 1)uπ/16)·C(u)/2: the 1-D basis of A.3.3.
+        let mut basis = [[0f64; 8]; 8];
+        for (x, row) in basis.iter_mut().enumerate() {
+            for (u, b) in row.iter_mut().enumerate() {
+                let c = if u == 0 {
+                    std::f64::consts::FRAC_1_SQRT_2
+                } else {
+                    1.0
+                };
+                *b = 0.5 * c * ((2 * x + 1) as f64 * u as f64 * std::f64::consts::PI / 16.0).cos();
+            }
+        }
+        let (bw, bh) = (width.div_ceil(8), height.div_ceil(8));
+        let mut out = vec![0u16; width * height];
+        let mut pred = 0i32;
+        for n in 0..bw * bh {
+            if restart > 0 && n > 0 && n % restart == 0 {
+                // RSTn: the bits left in the byte are padding; the prediction restarts.
+                bits.left = 0;
+                let p = bits.pos;
+                match (bits.data.get(p), bits.data.get(p + 1)) {
+                    (Some(0xFF), Some(0xD0..=0xD7)) => bits.pos += 2,
+                    _ => return Err(format!("a JPEG restart marker was expected at byte {p}")),
+                }
+                pred = 0;
+            }
+            let mut coef = [0f64; 64];
+            let t = u32::from(bits.decode(dc)?);
+            pred = pred.saturating_add(bits.receive_extend(t)?);
+            coef[0] = f64::from(pred) * f64::from(q[0]);
+            let mut k = 1;
+            while k < 64 {
+                let rs = bits.decode(ac)?;
+                let (r, s) = (usize::from(rs >> 4), u32::from(rs & 15));
+                if s == 0 {
+                    if r != 15 {
+                        break;
+                    }
+                    k += 16;
+                    continue;
+                }
+                k += r;
+                if k > 63 {
+                    return Err("a JPEG block has more than 64 coefficients".into());
+                }
+                coef[ZIGZAG[k]] = f64::from(bits.receive_extend(s)?) * f64::from(q[k]);
+                k += 1;
+            }
+            // The separable inverse DCT: rows of the block, then columns.
+            let mut tmp = [0f64; 64];
+            for v in 0..8 {
+                for x in 0..8 {
+                    tmp[v * 8 + x] = (0..8).map(|u| basis[x][u] * coef[v * 8 + u]).sum();
+                }
+            }
+            let (bx, by) = ((n % bw) * 8, (n / bw) * 8);
+            for (y, by_y) in basis.iter().enumerate() {
+                for x in 0..8 {
+                    let (px, py) = (bx + x, by + y);
+                    if px >= width || py >= height {
+                        continue;
+                    }
+                    let f: f64 = (0..8).map(|v| by_y[v] * tmp[v * 8 + x]).sum();
+                    out[py * width + px] = (f + 2048.0).round().clamp(0.0, 4095.0) as u16;
+                }
+            }
+        }
+        Ok(out)
+    }
 }
 
 // ---------------------------------------------------------------------------------

@@ -88,7 +88,7 @@
 //! |---|---|---|
 //! | RLE Lossless | 1.2.840.10008.1.2.5 | 8, 16 and 32 bits |
 //! | JPEG Baseline (process 1) | …1.2.4.50 | 8 bits |
-//! | JPEG Extended (processes 2 & 4) | …1.2.4.51 | 8 bits; 12-bit lossy JPEG is refused |
+//! | JPEG Extended (processes 2 & 4) | …1.2.4.51 | 8 and 12 bits |
 //! | JPEG Lossless (process 14), and its selection value 1 | …1.2.4.57, …1.2.4.70 | 2 to 16 bits |
 //! | JPEG-LS Lossless, Near-Lossless | …1.2.4.80, …1.2.4.81 | 2 to 16 bits |
 //! | JPEG 2000 (lossless only, and lossy; Part 2 with one component) | …1.2.4.90, .91, .92, .93 | up to 32 bits |

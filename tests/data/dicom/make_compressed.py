@@ -146,8 +146,8 @@ check(compressed(pattern(1, "i16"), RLELossless, "rle_i16.dcm"), pattern(1, "i16
 check(compressed(pattern(1, "u8"), RLELossless, "rle_u8.dcm"), pattern(1, "u8"))
 check(rle32(pattern(1, "u32"), "rle_u32.dcm"), pattern(1, "u32"))
 
-# JPEG (DCMTK): baseline and extended 8-bit (lossy), extended 12-bit (lossy, which
-# voxlab's decoder does not read), lossless process 14 (selection value 6) and SV1.
+# JPEG (DCMTK): baseline and extended 8-bit (lossy), extended 12-bit (lossy),
+# lossless process 14 (selection value 6) and SV1.
 check(dcmcjpeg(pattern(1, "u8"), ["+eb", "+q", "75"], "jpeg_baseline.dcm"), pattern(1, "u8"), True)
 check(dcmcjpeg(pattern(1, "u8"), ["+ee", "+q", "75"], "jpeg_extended_8.dcm"), pattern(1, "u8"), True)
 check(dcmcjpeg(pattern(1), ["+ee", "+q", "90"], "jpeg_extended_12.dcm", 12), pattern(1), True)
