@@ -691,3 +691,41 @@ fn compressed_multi_frame_with_functional_groups_is_a_volume_in_place() {
         );
     }
 }
+
+#[test]
+fn a_series_of_compressed_slices_is_read_like_any_series() {
+    // Three RLE slices of 2 × 3 unsigned 16-bit samples 1000·z + i, written in the
+    // order z = 2, 0, 1 under file names that do not follow it; one slice without
+    // a basic offset table.
+    let dir = scratch("rle_series");
+    for (file, z) in [("a.dcm", 2u16), ("b.dcm", 0), ("c.dcm", 1)] {
+        let syntax = Syntax::Rle;
+        let mut e = image_elements(syntax, 2, 3, 16, "MONOCHROME2");
+        e.push((
+            0x0020,
+            0x0032,
+            *b"DS",
+            format!("0\\0\\{}", 1.5 * f64::from(z)).into_bytes(),
+        ));
+        e.push((0x0020, 0x0037, *b"DS", b"1\\0\\0\\0\\1\\0".to_vec()));
+        e.sort_by_key(|x| (x.0, x.1));
+        let mut data = Vec::new();
+        for (g, el, vr, v) in &e {
+            element(&mut data, syntax, *g, *el, vr, v);
+        }
+        let px: Vec<u8> = (0..6u16)
+            .flat_map(|i| (1000 * z + i).to_le_bytes())
+            .collect();
+        let frame = rle_frame(&px, 2);
+        let bot = if z == 1 { Vec::new() } else { vec![0; 4] };
+        encapsulated(&mut data, &bot, &[&frame]);
+        std::fs::write(dir.join(file), wrap(syntax, data)).unwrap();
+    }
+    let v = voxlab::io::read_volume(&dir).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(v.dims(), [3, 2, 3]);
+    let want: Vec<f64> = (0..3)
+        .flat_map(|z| (0..6).map(move |i| f64::from(1000 * z + i)))
+        .collect();
+    assert_eq!(v.values_f64(), want);
+    assert_eq!(v.affine().col(2).to_array(), [0.0, 0.0, 1.5, 0.0]);
+}
