@@ -313,17 +313,26 @@ fn trailing_padding_is_ignored_in_every_native_syntax() {
 }
 
 #[test]
-fn compressed_syntaxes_are_refused_clearly() {
-    for (name, uid) in [
-        ("rle.dcm", "1.2.840.10008.1.2.5"),
-        ("jpeg_2000.dcm", "1.2.840.10008.1.2.4.91"),
-        ("jpeg_lossless_sel1.dcm", "1.2.840.10008.1.2.4.70"),
-    ] {
-        let e = format_err(read_dicom(&root().join(CORPUS).join(name)));
-        assert!(e.contains(uid), "{e}");
-        assert!(e.contains("not supported"), "{e}");
-        assert!(e.contains("gdcmconv --raw"), "{e}");
-    }
+fn compressed_syntaxes_voxlab_does_not_decode_are_refused_clearly() {
+    // jpeg_2000.dcm relabelled High-Throughput JPEG 2000 (…4.201): the transfer syntax
+    // UID in the meta group grows from 22 to 24 bytes, and the group's length with it.
+    let src = std::fs::read(root().join(CORPUS).join("jpeg_2000.dcm")).unwrap();
+    let old = b"1.2.840.10008.1.2.4.91";
+    let at = src.windows(old.len()).position(|w| w == old).unwrap();
+    let mut b = src[..at - 2].to_vec();
+    b.extend(24u16.to_le_bytes());
+    b.extend(b"1.2.840.10008.1.2.4.201\0");
+    b.extend(&src[at + old.len()..]);
+    let group = u32::from_le_bytes(b[140..144].try_into().unwrap()) + 2;
+    b[140..144].copy_from_slice(&group.to_le_bytes());
+    let path = scratch("htj2k").join("htj2k.dcm");
+    std::fs::write(&path, b).unwrap();
+    let e = format_err(read_dicom(&path));
+    assert!(e.contains("TransferSyntaxUID"), "{e}");
+    assert!(e.contains("1.2.840.10008.1.2.4.201"), "{e}");
+    assert!(e.contains("High-Throughput JPEG 2000"), "{e}");
+    assert!(e.contains("not supported"), "{e}");
+    assert!(e.contains("gdcmconv --raw"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------

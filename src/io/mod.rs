@@ -286,9 +286,10 @@ fn directory_format(dir: &Path) -> Format {
         if !p.is_file() {
             continue;
         }
+        // A file named .tif that carries the DICOM marker is DICOM (the marker wins
+        // over any name or other magic).
         if matches!(extension(&p).as_deref(), Some("tif") | Some("tiff")) {
             tiffs += 1;
-            continue;
         }
         let mut head = [0u8; 132];
         let is_dicom = File::open(&p)

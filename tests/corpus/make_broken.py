@@ -135,7 +135,14 @@ def src(rel):
 
 put("dicom-truncated-pixels.dcm", src("tests/corpus/dicom/explicit_big.dcm")[:60000], "format", "PixelData", "truncated")
 put("dicom-truncated-header.dcm", src("tests/corpus/dicom/implicit_little.dcm")[:200], "format", "MediaStorageSOPInstanceUID", "truncated")
-put("dicom-jpeg2000.dcm", src("tests/corpus/dicom/jpeg_2000.dcm"), "format", "TransferSyntaxUID", "JPEG 2000")
+def j2k_wider(b):
+    """The JPEG 2000 codestream's SIZ says 513 columns; the DICOM attributes say 512."""
+    at = b.index(b"\xff\x4f\xff\x51") + 8
+    return b[:at] + struct.pack(">I", 513) + b[at + 4:]
+
+
+put("dicom-jpeg2000-size.dcm", j2k_wider(src("tests/corpus/dicom/jpeg_2000.dcm")), "format", "Rows/Columns",
+    "the compressed frame is 513 x 512")
 put("tiff-truncated.tif", src("data/microct-bone/bone_128x128x128.tif")[:40000], "format", "file", "truncated")
 put("tiff-ifd-past-end.tif", b"II*\x00" + struct.pack("<I", 1 << 30) + bytes(16), "format", "file", "")
 

@@ -47,7 +47,7 @@ print(f"  z step = {normal * mean_step}")
 print(f"  origin = {np.array(dss[0].ImagePositionPatient, dtype=np.float64)}")
 stats(np.stack([rescaled(d) for d in dss]))
 
-for name in ["implicit_little", "explicit_big", "deflated"]:
+for name in ["implicit_little", "explicit_big", "deflated", "rle", "jpeg_lossless_sel1", "jpeg_2000"]:
     ds = pydicom.dcmread(f"tests/corpus/dicom/{name}.dcm")
     print(f"{name}.dcm ({ds.file_meta.TransferSyntaxUID}):")
     stats(rescaled(ds)[None, :, :])

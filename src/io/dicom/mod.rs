@@ -41,7 +41,8 @@
 //!   ImagePositionPatient; orientation and pixel spacing from the per-frame or the
 //!   SharedFunctionalGroupsSequence (PlaneOrientationSequence, PixelMeasuresSequence),
 //!   else from the top-level attributes; a frame with its own orientation or pixel
-//!   spacing must match frame 1. When every frame has a position, frames are
+//!   spacing must match frame 1. An RT dose places its frames by
+//!   GridFrameOffsetVector instead (below). When every frame has a position, frames are
 //!   sorted and checked like a series. Otherwise frames are taken in file order with
 //!   the spacing given by SpacingBetweenSlices, else SliceThickness, else 1 mm.
 //!   A directory may hold one multi-frame file, but not a multi-frame file mixed
@@ -57,10 +58,11 @@
 //! unsigned data, no intercept), `i16` when the data is signed or shifted below zero
 //! and fits, else `u16` when it fits, else `i16` when it fits; in all other cases
 //! (fractional slope or intercept, or a range that fits neither) the values are
-//! `f32`. SamplesPerPixel must be 1: colour (RGB, YBR, palette) is refused.
-//! MONOCHROME1 images (where low values are displayed bright) keep their stored
-//! values: nothing is inverted, so a transfer function sees what the scanner
-//! measured.
+//! `f32`. SamplesPerPixel must be 1: colour (RGB, YBR) is refused, and so is
+//! PALETTE COLOR (one sample that indexes a colour table). BitsAllocated 1 (bitmaps:
+//! masks, overlays) is refused. MONOCHROME1 images (where low values are displayed
+//! bright) keep their stored values: nothing is inverted, so a transfer function sees
+//! what the scanner measured (invert the transfer function, not the data).
 //!
 //! # Geometry
 //!
@@ -75,11 +77,42 @@
 //!
 //! # Transfer syntaxes
 //!
-//! Implicit VR little endian, explicit VR little endian, explicit VR big endian and
-//! deflated explicit VR little endian. Compressed pixel data (JPEG baseline, extended
-//! and lossless, JPEG-LS, JPEG 2000, RLE, …) is refused with the transfer syntax's
-//! UID and name; decompress first with `gdcmconv --raw in.dcm out.dcm` (GDCM) or
-//! `dcmdjpeg` / `dcmdrle` (DCMTK).
+//! Uncompressed: implicit VR little endian, explicit VR little endian, explicit VR big
+//! endian (samples of 16 and 32 bits turned around whole, whether the pixel data is OB
+//! or OW) and deflated explicit VR little endian.
+//!
+//! Compressed (encapsulated) pixel data is decoded into the same stored samples
+//! ([`encapsulated`] says which decoder reads what):
+//!
+//! | syntax | UID | notes |
+//! |---|---|---|
+//! | RLE Lossless | 1.2.840.10008.1.2.5 | 8, 16 and 32 bits |
+//! | JPEG Baseline (process 1) | …1.2.4.50 | 8 bits |
+//! | JPEG Extended (processes 2 & 4) | …1.2.4.51 | 8 and 12 bits |
+//! | JPEG Lossless (process 14), and its selection value 1 | …1.2.4.57, …1.2.4.70 | 2 to 16 bits |
+//! | JPEG-LS Lossless, Near-Lossless | …1.2.4.80, …1.2.4.81 | 2 to 16 bits |
+//! | JPEG 2000 (lossless only, and lossy; Part 2 with one component) | …1.2.4.90, .91, .92, .93 | up to 32 bits |
+//!
+//! Frames are found from the basic offset table when there is one; without it, one
+//! frame is all the fragments, as many fragments as frames are one frame each, and
+//! otherwise a fragment that starts a codestream (JPEG SOI, JPEG 2000 SOC) starts a
+//! frame. Each frame's own header must agree with Rows, Columns, SamplesPerPixel 1 and
+//! BitsAllocated before it is decoded; a corrupt frame is an error naming the file,
+//! the frame and the field. Other compressed syntaxes (High-Throughput JPEG 2000, JPEG
+//! XL, MPEG, …) are refused with their UID and name; decompress them first with
+//! `gdcmconv --raw in.dcm out.dcm` (GDCM).
+//!
+//! # RT dose grids
+//!
+//! An RT dose is a multi-frame image without functional groups: frame k lies at
+//! ImagePositionPatient + GridFrameOffsetVector\[k\] − GridFrameOffsetVector\[0\] along
+//! the slice normal (which reads both forms the standard allows: offsets relative to
+//! the first frame, whose first value is 0, and absolute z coordinates, whose first
+//! value is the first frame's z), and the frames are then sorted and checked like a
+//! series. DoseGridScaling multiplies the stored values (after any rescale): the
+//! voxels are doses in Gy, as `f32`.
+
+mod encapsulated;
 
 use super::Samples;
 use crate::error::{Error, Result};
@@ -87,6 +120,7 @@ use crate::volume::{check_dims, AnyVolume};
 use dicom_dictionary_std::tags;
 use dicom_object::mem::InMemDicomObject;
 use dicom_object::{DefaultDicomObject, Tag};
+use encapsulated::Codec;
 use glam::{DMat4, DVec3, DVec4};
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -277,7 +311,9 @@ fn parse_file(path: &Path) -> Result<(DefaultDicomObject, Option<Vec<u8>>)> {
             if let Some(raw) = locate_pixel_data(&bytes, obj.meta().transfer_syntax()) {
                 return Ok((obj, Some(raw)));
             }
-        } else if !NATIVE_SYNTAXES.contains(&obj.meta().transfer_syntax()) {
+        } else if !NATIVE_SYNTAXES.contains(&obj.meta().transfer_syntax())
+            && Codec::of(obj.meta().transfer_syntax()).is_none()
+        {
             // Let the caller report the unsupported syntax rather than a parse error.
             return Ok((obj, None));
         }
@@ -625,10 +661,10 @@ fn chain(e: &dyn std::error::Error) -> String {
     s
 }
 
-/// Refuses transfer syntaxes with compressed pixel data.
+/// Refuses the transfer syntaxes whose pixel data voxlab does not decode.
 fn check_syntax(path: &Path, obj: &DefaultDicomObject) -> Result<()> {
     let uid = obj.meta().transfer_syntax();
-    if NATIVE_SYNTAXES.contains(&uid) {
+    if NATIVE_SYNTAXES.contains(&uid) || Codec::of(uid).is_some() {
         return Ok(());
     }
     let name = COMPRESSED_SYNTAXES
@@ -641,9 +677,9 @@ fn check_syntax(path: &Path, obj: &DefaultDicomObject) -> Result<()> {
         "TransferSyntaxUID",
         format!(
             "transfer syntax {uid} ({name}) is not supported: voxlab reads uncompressed \
-             DICOM only (implicit/explicit VR little endian, explicit VR big endian, \
-             deflated); decompress first, e.g. `gdcmconv --raw in.dcm out.dcm` or \
-             `dcmdjpeg in.dcm out.dcm` (`dcmdrle` for RLE)"
+             DICOM (implicit/explicit VR little endian, explicit VR big endian, deflated), \
+             RLE Lossless, JPEG (baseline, extended 8-bit, lossless), JPEG-LS and JPEG \
+             2000; decompress first, e.g. `gdcmconv --raw in.dcm out.dcm`"
         ),
     ))
 }
@@ -826,7 +862,11 @@ fn pixel_format(path: &Path, obj: &InMemDicomObject) -> Result<PixelFormat> {
     if spp != 1 || photometric.starts_with("PALETTE") {
         return Err(Error::format(
             path,
-            "SamplesPerPixel",
+            if spp != 1 {
+                "SamplesPerPixel"
+            } else {
+                "PhotometricInterpretation"
+            },
             format!(
                 "colour images are not supported (SamplesPerPixel = {spp}, \
                  PhotometricInterpretation = '{photometric}'); voxlab reads grayscale \
@@ -837,6 +877,14 @@ fn pixel_format(path: &Path, obj: &InMemDicomObject) -> Result<PixelFormat> {
     let rows = required(path, obj, tags::ROWS, "Rows")? as usize;
     let cols = required(path, obj, tags::COLUMNS, "Columns")? as usize;
     let bits_allocated = required(path, obj, tags::BITS_ALLOCATED, "BitsAllocated")?;
+    if bits_allocated == 1 {
+        return Err(Error::format(
+            path,
+            "BitsAllocated",
+            "1-bit (bitmap) pixel data is not supported: voxlab reads 8, 16 or 32 bits \
+             per sample (a 1-bit image is a mask or an overlay, not a volume of values)",
+        ));
+    }
     if ![8, 16, 32].contains(&bits_allocated) {
         return Err(Error::format(
             path,
@@ -935,6 +983,29 @@ fn rescale(path: &Path, obj: &InMemDicomObject) -> Result<Option<(f64, f64)>> {
         return Err(Error::format(path, "RescaleSlope", "must not be 0"));
     }
     Ok(Some((slope, intercept.map_or(0.0, |v| v[0]))))
+}
+
+/// DoseGridScaling (3004,000E) of an RT dose: the dose in Gy is the stored value times it.
+fn dose_scaling(path: &Path, obj: &InMemDicomObject) -> Result<Option<f64>> {
+    let Some(v) = floats_n(path, obj, tags::DOSE_GRID_SCALING, "DoseGridScaling", 1)? else {
+        return Ok(None);
+    };
+    if v[0] > 0.0 {
+        Ok(Some(v[0]))
+    } else {
+        Err(Error::format(
+            path,
+            "DoseGridScaling",
+            format!("{} must be positive", v[0]),
+        ))
+    }
+}
+
+/// A rescale (slope, intercept), then a dose grid scaling, as one (slope, intercept).
+fn with_dose(rescale: Option<(f64, f64)>, dose: Option<f64>) -> (f64, f64) {
+    let (slope, intercept) = rescale.unwrap_or((1.0, 0.0));
+    let d = dose.unwrap_or(1.0);
+    (slope * d, intercept * d)
 }
 
 fn plane_of(path: &Path, obj: &InMemDicomObject) -> Result<Plane> {
@@ -1068,6 +1139,19 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
         };
         fallback_dz = measures.and_then(thickness).or_else(|| thickness(obj));
         let top_rescale = rescale(path, obj)?;
+        let dose = dose_scaling(path, obj)?;
+        // An RT dose grid places its frames by GridFrameOffsetVector (module docs).
+        let grid = floats_n(
+            path,
+            obj,
+            tags::GRID_FRAME_OFFSET_VECTOR,
+            "GridFrameOffsetVector",
+            first.px.frames,
+        )?;
+        let grid_origin = match (&grid, plane.orientation) {
+            (Some(_), Some((r, c))) => position(path, obj)?.map(|p| (p, r.cross(c))),
+            _ => None,
+        };
         let name = first.name();
         for f in 0..first.px.frames {
             let pos = match per_frame
@@ -1077,11 +1161,15 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                 Some(g) => position(path, g)?,
                 None => None,
             };
+            let pos = match (pos, &grid, grid_origin) {
+                (None, Some(g), Some((p0, normal))) => Some(p0 + normal * (g[f] - g[0])),
+                (pos, ..) => pos,
+            };
             let rs = match group(f, tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE) {
                 Some(g) => rescale(path, g)?.or(top_rescale),
                 None => top_rescale,
             };
-            let (slope, intercept) = rs.unwrap_or((1.0, 0.0));
+            let (slope, intercept) = with_dose(rs, dose);
             // Every frame must share frame 1's orientation and pixel spacing.
             for seq in [
                 tags::PLANE_ORIENTATION_SEQUENCE,
@@ -1155,7 +1243,10 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                     ),
                 ));
             }
-            let (slope, intercept) = rescale(&im.path, &im.obj)?.unwrap_or((1.0, 0.0));
+            let (slope, intercept) = with_dose(
+                rescale(&im.path, &im.obj)?,
+                dose_scaling(&im.path, &im.obj)?,
+            );
             slices.push(Slice {
                 image: i,
                 frame: 0,
@@ -1323,13 +1414,26 @@ fn pixel_bytes(im: &Image) -> Result<std::borrow::Cow<'_, [u8]>> {
         .element(tags::PIXEL_DATA)
         .map_err(|_| Error::format(&im.path, "PixelData", "missing"))?;
     let dicom_core_value = e.value();
-    let prim = dicom_core_value.primitive().ok_or_else(|| {
-        Error::format(
+    if let (Some(fragments), Some(offsets)) = (
+        dicom_core_value.fragments(),
+        dicom_core_value.offset_table(),
+    ) {
+        return encapsulated_bytes(im, offsets, fragments).map(std::borrow::Cow::Owned);
+    }
+    let prim = dicom_core_value
+        .primitive()
+        .ok_or_else(|| Error::format(&im.path, "PixelData", "neither native nor encapsulated"))?;
+    if let Some(codec) = Codec::of(im.obj.meta().transfer_syntax()) {
+        return Err(Error::format(
             &im.path,
             "PixelData",
-            "the pixel data is encapsulated (compressed), which voxlab does not read",
-        )
-    })?;
+            format!(
+                "the transfer syntax is {} but the pixel data is not encapsulated \
+                 (no fragments)",
+                codec.name()
+            ),
+        ));
+    }
     if cfg!(target_endian = "big") {
         // Values other than bytes are held in the machine's order.
         return Err(Error::format(
@@ -1363,6 +1467,32 @@ fn pixel_bytes(im: &Image) -> Result<std::borrow::Cow<'_, [u8]>> {
         // samples: already little-endian samples.
         _ => prim.to_bytes(),
     })
+}
+
+/// Every frame of encapsulated (compressed) pixel data, decoded and joined: the bytes
+/// native pixel data would hold. [`assemble`] has checked the volume's size before
+/// this allocates it.
+fn encapsulated_bytes(im: &Image, offsets: &[u32], fragments: &[Vec<u8>]) -> Result<Vec<u8>> {
+    let uid = im.obj.meta().transfer_syntax();
+    let codec = Codec::of(uid).ok_or_else(|| {
+        Error::format(
+            &im.path,
+            "TransferSyntaxUID",
+            format!(
+                "the pixel data is encapsulated (compressed) but transfer syntax {} is \
+                 not one voxlab decodes",
+                super::snippet(uid)
+            ),
+        )
+    })?;
+    let px = &im.px;
+    let frames = encapsulated::split_frames(&im.path, codec, offsets, fragments, px.frames)?;
+    let frame_bytes = px.rows * px.cols * (px.bits_allocated / 8) as usize;
+    let mut out = Vec::with_capacity(frame_bytes * px.frames);
+    for (k, data) in frames.iter().enumerate() {
+        out.extend(encapsulated::decode_frame(&im.path, codec, data, px, k)?);
+    }
+    Ok(out)
 }
 
 /// Decodes all slices; chooses the voxel type from the values (module docs).
