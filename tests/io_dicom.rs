@@ -611,3 +611,122 @@ fn colour_is_refused() {
         "{e}"
     );
 }
+
+fn is(tag: dicom_core::Tag, v: &str) -> DataElement<InMemDicomObject> {
+    DataElement::new(tag, VR::IS, PrimitiveValue::from(v))
+}
+
+/// A time series: three positions at each of two times, as six single-frame files
+/// (in a scrambled order, TemporalPositionIdentifier telling the times apart), and as
+/// one multi-frame image (FrameContentSequence's TemporalPositionIndex). Each slice's
+/// RescaleIntercept encodes its time and position, so the values say which slices
+/// were read. Without --frame the series is refused naming the count.
+#[test]
+fn time_series_read_one_time_point_at_a_time() {
+    let dir = scratch("dicom-time");
+    let series = dir.join("series");
+    std::fs::create_dir_all(&series).unwrap();
+    let intercept = |t: usize, z: usize| 1000 * t + 10 * z;
+    for (n, (t, z)) in [(1, 2), (0, 0), (1, 0), (0, 2), (0, 1), (1, 1)]
+        .into_iter()
+        .enumerate()
+    {
+        write_synthetic(
+            &series.join(format!("im{n}.dcm")),
+            1,
+            vec![
+                ds(tags::IMAGE_POSITION_PATIENT, &format!("0\\0\\{}", 2 * z)),
+                ds(tags::IMAGE_ORIENTATION_PATIENT, "1\\0\\0\\0\\1\\0"),
+                ds(tags::PIXEL_SPACING, "1\\1"),
+                ds(tags::RESCALE_INTERCEPT, &intercept(t, z).to_string()),
+                is(tags::TEMPORAL_POSITION_IDENTIFIER, &(t + 1).to_string()),
+                is(tags::INSTANCE_NUMBER, &(n + 1).to_string()),
+            ],
+        );
+    }
+    assert_eq!(voxlab::io::frame_count(&series).unwrap(), 2);
+    let e = format_err(read_dicom(&series));
+    assert!(
+        e.contains("TemporalPositionIdentifier") && e.contains("2 3-D volumes"),
+        "{e}"
+    );
+    for t in 0..2 {
+        let v = voxlab::io::dicom::read_dicom_frame(&series, Some(t)).unwrap();
+        assert_eq!(v.dims(), [4, 3, 3]);
+        assert_eq!(v.spacing(), [1.0, 1.0, 2.0]);
+        let want: Vec<f64> = (0..3)
+            .flat_map(|z| (0..12).map(move |i| (i + intercept(t, z)) as f64))
+            .collect();
+        assert_eq!(v.values_f64(), want, "time point {t}");
+    }
+    let e = voxlab::io::dicom::read_dicom_frame(&series, Some(2)).unwrap_err();
+    assert!(e.to_string().contains("past the file's 2"), "{e}");
+    // Without a key that tells the times apart, the same position twice is a duplicate.
+    let dup = dir.join("dup");
+    std::fs::create_dir_all(&dup).unwrap();
+    for (n, z) in [0, 1, 0, 1].into_iter().enumerate() {
+        write_synthetic(
+            &dup.join(format!("im{n}.dcm")),
+            1,
+            vec![
+                ds(tags::IMAGE_POSITION_PATIENT, &format!("0\\0\\{z}")),
+                ds(tags::IMAGE_ORIENTATION_PATIENT, "1\\0\\0\\0\\1\\0"),
+            ],
+        );
+    }
+    let e = format_err(read_dicom(&dup));
+    assert!(e.contains("duplicate slice position"), "{e}");
+
+    // One multi-frame image: frames at z = 0, 0, 5, 5 with temporal indices 2, 1, 1, 2.
+    let path = dir.join("mf.dcm");
+    let per_frame: Vec<InMemDicomObject> = [("0", "2"), ("0", "1"), ("5", "1"), ("5", "2")]
+        .iter()
+        .map(|(z, t)| {
+            item(vec![
+                seq(
+                    tags::PLANE_POSITION_SEQUENCE,
+                    vec![item(vec![ds(
+                        tags::IMAGE_POSITION_PATIENT,
+                        &format!("0\\0\\{z}"),
+                    )])],
+                ),
+                seq(
+                    tags::FRAME_CONTENT_SEQUENCE,
+                    vec![item(vec![DataElement::new(
+                        tags::TEMPORAL_POSITION_INDEX,
+                        VR::UL,
+                        PrimitiveValue::from(t.parse::<u32>().unwrap()),
+                    )])],
+                ),
+            ])
+        })
+        .collect();
+    let shared = item(vec![seq(
+        tags::PLANE_ORIENTATION_SEQUENCE,
+        vec![item(vec![ds(
+            tags::IMAGE_ORIENTATION_PATIENT,
+            "1\\0\\0\\0\\1\\0",
+        )])],
+    )]);
+    write_synthetic(
+        &path,
+        4,
+        vec![
+            seq(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE, vec![shared]),
+            seq(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, per_frame),
+        ],
+    );
+    assert_eq!(voxlab::io::frame_count(&path).unwrap(), 2);
+    let e = format_err(read_dicom(&path));
+    assert!(e.contains("TemporalPositionIndex"), "{e}");
+    // Frame f holds 100·f + i: time 1 (index 1) is file frames 1 (z 0) and 2 (z 5).
+    for (t, frames) in [(0, [1, 2]), (1, [0, 3])] {
+        let v = voxlab::io::dicom::read_dicom_frame(&path, Some(t)).unwrap();
+        assert_eq!(v.dims(), [4, 3, 2]);
+        let want: Vec<f64> = frames
+            .iter()
+            .flat_map(|f| (0..12).map(move |i| (100 * f + i) as f64))
+            .collect();
+        assert_eq!(v.values_f64(), want, "time point {t}");
+    }
+}

@@ -370,6 +370,7 @@ pub fn frame_count(path: &Path) -> Result<usize> {
         Format::Nifti => nifti::nifti_frames(path),
         Format::MetaImage => metaimage::metaimage_frames(path),
         Format::Nrrd => nrrd::nrrd_frames(path),
+        Format::Dicom => dicom::dicom_frames(path),
         _ => Ok(1),
     }
 }
@@ -390,7 +391,10 @@ pub fn read_volume_as_with(
     format: Format,
     options: &ReadOptions,
 ) -> Result<AnyVolume> {
-    if !matches!(format, Format::Nifti | Format::MetaImage | Format::Nrrd) {
+    if !matches!(
+        format,
+        Format::Nifti | Format::MetaImage | Format::Nrrd | Format::Dicom
+    ) {
         // Files of one 3-D volume: frame 0 is the volume, a later one is refused.
         choose_frame(path, "frame", 1, "", options.frame)?;
     }
@@ -398,7 +402,7 @@ pub fn read_volume_as_with(
         Format::Nrrd => nrrd::read_nrrd_with(path, options),
         Format::Npy => npy::read_npy_volume(path),
         Format::Nifti => nifti::read_nifti_frame(path, options.frame),
-        Format::Dicom => dicom::read_dicom(path),
+        Format::Dicom => dicom::read_dicom_frame(path, options.frame),
         Format::Pvm => pvm::read_pvm(path),
         Format::Den => den::read_den(path),
         Format::Tiff if path.is_dir() => tiff::read_tiff_dir(path),

@@ -47,6 +47,16 @@
 //!   the spacing given by SpacingBetweenSlices, else SliceThickness, else 1 mm.
 //!   A directory may hold one multi-frame file, but not a multi-frame file mixed
 //!   with other images.
+//! - **Time series** (a cardiac or perfusion series, an enhanced multi-frame image
+//!   with a temporal dimension): when every position holds the same number `t ≥ 2` of
+//!   slices, told apart by the first of TemporalPositionIdentifier,
+//!   TemporalPositionIndex (FrameContentSequence), TriggerTime, AcquisitionTime and
+//!   InstanceNumber (a multi-frame image: its frame order) that every slice has and
+//!   that differs between the slices at one position, the series holds `t` 3-D
+//!   volumes, ordered by that key; one is read at a time ([`read_dicom_frame`],
+//!   `--frame K`), and without a choice the series is refused naming the count and
+//!   the key. Positions held by unequal numbers of slices, or slices no key tells
+//!   apart, stay *duplicate slice position* errors.
 //!
 //! # Values
 //!
@@ -183,22 +193,39 @@ const SHEAR_TOL: f64 = 0.05;
 /// Reads a DICOM file (single- or multi-frame) or a directory holding one series;
 /// see the module docs for what is accepted.
 pub fn read_dicom(path: &Path) -> Result<AnyVolume> {
+    read_dicom_frame(path, None)
+}
+
+/// [`read_dicom`] of time point `frame` of a series (or multi-frame image) that holds
+/// several 3-D volumes, the same positions at several times (module docs); `None`
+/// reads one of a single volume.
+pub fn read_dicom_frame(path: &Path, frame: Option<usize>) -> Result<AnyVolume> {
+    let images = read_images(path)?;
+    let a = assemble(&images, frame)?;
+    decode(&images, &a.slices)?.into_volume(a.dims, a.affine)
+}
+
+/// How many 3-D volumes (time points) a DICOM file or series holds.
+pub fn dicom_frames(path: &Path) -> Result<usize> {
+    let images = read_images(path)?;
+    Ok(assemble(&images, Some(0))?.frames)
+}
+
+fn read_images(path: &Path) -> Result<Vec<Image>> {
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    let images = if meta.is_dir() {
-        read_directory(path)?
-    } else {
-        let (obj, raw) = parse_file(path)?;
-        check_syntax(path, &obj)?;
-        if !has_pixels(&obj, &raw) {
-            return Err(Error::format(
-                path,
-                "PixelData",
-                "the DICOM object holds no image (no PixelData element)",
-            ));
-        }
-        vec![Image::new(path.to_path_buf(), obj, raw)?]
-    };
-    assemble(images)
+    if meta.is_dir() {
+        return read_directory(path);
+    }
+    let (obj, raw) = parse_file(path)?;
+    check_syntax(path, &obj)?;
+    if !has_pixels(&obj, &raw) {
+        return Err(Error::format(
+            path,
+            "PixelData",
+            "the DICOM object holds no image (no PixelData element)",
+        ));
+    }
+    Ok(vec![Image::new(path.to_path_buf(), obj, raw)?])
 }
 
 // ---------------------------------------------------------------------------------
@@ -962,6 +989,96 @@ struct Slice {
     position: Option<DVec3>,
     slope: f64,
     intercept: f64,
+    /// What orders the slices at one position in time, by [`TIME_KEYS`].
+    time: [Option<f64>; 5],
+}
+
+/// The attributes that order a time series' slices at one position, the first that
+/// every slice has and that tells them apart winning: TemporalPositionIdentifier
+/// (0020,0100), a multi-frame image's TemporalPositionIndex (0020,9128), TriggerTime
+/// (0018,1060), AcquisitionTime (0008,0032), and InstanceNumber (0020,0013) — or, in a
+/// multi-frame image, the frame's place in the file.
+const TIME_KEYS: [&str; 5] = [
+    "TemporalPositionIdentifier",
+    "TemporalPositionIndex",
+    "TriggerTime",
+    "AcquisitionTime",
+    "InstanceNumber",
+];
+
+/// The time keys ([`TIME_KEYS`]) of a file's image.
+fn time_keys(obj: &InMemDicomObject) -> [Option<f64>; 5] {
+    let number = |tag| {
+        text(obj, tag).and_then(|t| t.trim().trim_end_matches('\0').trim().parse::<f64>().ok())
+    };
+    [
+        number(tags::TEMPORAL_POSITION_IDENTIFIER),
+        None,
+        number(tags::TRIGGER_TIME),
+        number(tags::ACQUISITION_TIME),
+        number(tags::INSTANCE_NUMBER),
+    ]
+}
+
+/// The slices, sorted and checked, of one 3-D volume, and how many the series holds.
+struct Assembled {
+    slices: Vec<Slice>,
+    dims: [usize; 3],
+    affine: DMat4,
+    frames: usize,
+}
+
+/// A series that holds the same positions at several times: the slices of time point
+/// `frame` and the count, else all the slices and 1. Positions are grouped along the
+/// normal (within 0.001 mm); every position must hold the same number `t ≥ 2` of
+/// slices, told apart by one of [`TIME_KEYS`] — otherwise the slices are left as they
+/// are, and [`sort_and_check`] names the duplicates.
+fn time_point(
+    mut slices: Vec<Slice>,
+    normal: DVec3,
+    where_: &Path,
+    frame: Option<usize>,
+) -> Result<(Vec<Slice>, usize)> {
+    let proj = |s: &Slice| s.position.unwrap_or_default().dot(normal);
+    slices.sort_by(|a, b| proj(a).total_cmp(&proj(b)));
+    let mut groups: Vec<Vec<Slice>> = Vec::new();
+    for s in slices {
+        match groups.last_mut() {
+            Some(g) if proj(&s) - proj(&g[0]) < 1e-3 => g.push(s),
+            _ => groups.push(vec![s]),
+        }
+    }
+    let t = groups[0].len();
+    let distinct = |k: usize| {
+        groups.iter().all(|g| {
+            let mut v: Vec<f64> = g.iter().filter_map(|s| s.time[k]).collect();
+            v.sort_by(f64::total_cmp);
+            v.len() == g.len() && v.windows(2).all(|w| w[0] != w[1])
+        })
+    };
+    let key = (0..TIME_KEYS.len()).find(|&k| distinct(k));
+    let (Some(key), true) = (key, t >= 2 && groups.iter().all(|g| g.len() == t)) else {
+        super::choose_frame(where_, "frame", 1, "", frame)?;
+        return Ok((groups.into_iter().flatten().collect(), 1));
+    };
+    let axes = format!(
+        "{t} time points at each of {} positions, ordered by {}",
+        groups.len(),
+        TIME_KEYS[key]
+    );
+    let k = super::choose_frame(where_, TIME_KEYS[key], t, &axes, frame)?;
+    let picked = groups
+        .into_iter()
+        .map(|mut g| {
+            g.sort_by(|a, b| {
+                a.time[key]
+                    .unwrap_or(0.0)
+                    .total_cmp(&b.time[key].unwrap_or(0.0))
+            });
+            g.swap_remove(k)
+        })
+        .collect();
+    Ok((picked, t))
 }
 
 /// In-plane geometry shared by all slices.
@@ -1082,7 +1199,7 @@ fn same_plane(a: &Plane, b: &Plane) -> std::result::Result<(), &'static str> {
 }
 
 /// Turns the images into slices and geometry, and decodes the voxels.
-fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
+fn assemble(images: &[Image], frame: Option<usize>) -> Result<Assembled> {
     let first = &images[0];
     // Refuse absurd sizes (NumberOfFrames can claim anything) before building slices.
     let frames = images
@@ -1191,6 +1308,11 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                     }
                 }
             }
+            let index = per_frame
+                .get(f)
+                .and_then(|g| first_item(g, tags::FRAME_CONTENT_SEQUENCE))
+                .and_then(|g| int(g, tags::TEMPORAL_POSITION_INDEX))
+                .map(|i| i as f64);
             slices.push(Slice {
                 image: 0,
                 frame: f,
@@ -1198,6 +1320,7 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                 position: pos,
                 slope,
                 intercept,
+                time: [None, index, None, None, Some(f as f64)],
             });
         }
     } else {
@@ -1254,6 +1377,7 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
                 position: position(&im.path, &im.obj)?,
                 slope,
                 intercept,
+                time: time_keys(&im.obj),
             });
         }
         if images.len() == 1 {
@@ -1278,8 +1402,14 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
     let (row, col) = plane.orientation.unwrap_or((DVec3::X, DVec3::Y));
     let [row_spacing, col_spacing] = plane.spacing.unwrap_or([1.0, 1.0]);
     let normal = row.cross(col);
-    let n = slices.len();
     let all_positioned = plane.orientation.is_some() && slices.iter().all(|s| s.position.is_some());
+    let (mut slices, frames) = if all_positioned && slices.len() > 1 {
+        time_point(slices, normal, &where_, frame)?
+    } else {
+        super::choose_frame(&where_, "frame", 1, "", frame)?;
+        (slices, 1)
+    };
+    let n = slices.len();
 
     let (origin, dz_vec) = if n > 1 && all_positioned {
         sort_and_check(&mut slices, normal, &where_)?
@@ -1316,8 +1446,12 @@ fn assemble(images: Vec<Image>) -> Result<AnyVolume> {
         dz_vec.extend(0.0),
         DVec4::new(origin.x, origin.y, origin.z, 1.0),
     );
-    let samples = decode(&images, &slices)?;
-    samples.into_volume(dims, affine)
+    Ok(Assembled {
+        slices,
+        dims,
+        affine,
+        frames,
+    })
 }
 
 /// Sorts slices along the normal and checks the steps; returns the origin and the
