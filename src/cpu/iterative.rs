@@ -447,25 +447,45 @@ fn all_views<R>(pair: &dyn MatchedPair<R>) -> Vec<usize> {
 /// `b − A x` over `views` (`b` holds every view).
 /// Mirrors shaders/iterative.wgsl: residual (the device-resident port, src/gpu/iterative.rs).
 fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Result<Vec<R>> {
-    residual_within(prob, x, views, None)
+    residual_within(prob, x, views, None, None)
 }
 
 /// [`residual_of`] for an image that is `+0` off the support `planes` were made for
-/// (`MatchedPair::forward_within`: the same numbers).
+/// (`MatchedPair::forward_within`: the same numbers), times the row weights `rows`
+/// (every view's) when given: `R_S (b − A x)` in the same pass.
 fn residual_within<R: Real>(
     prob: &Problem<R>,
     x: &[R],
     views: &[usize],
     planes: Option<&SupportPlanes>,
+    rows: Option<&[R]>,
 ) -> Result<Vec<R>> {
     let pv = prob.pair.per_view();
     let mut r = prob.pair.forward_within(x, views, planes)?;
-    r.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
-        let src = &prob.b[views[slot] * pv..(views[slot] + 1) * pv];
-        for (v, &bv) in img.iter_mut().zip(src) {
-            *v = bv - *v;
+    let per_view = |slot: usize, img: &mut [R]| {
+        let at = views[slot] * pv..(views[slot] + 1) * pv;
+        let src = &prob.b[at.clone()];
+        match rows {
+            Some(w) => {
+                for ((v, &bv), &wv) in img.iter_mut().zip(src).zip(&w[at]) {
+                    *v = (bv - *v) * wv;
+                }
+            }
+            None => {
+                for (v, &bv) in img.iter_mut().zip(src) {
+                    *v = bv - *v;
+                }
+            }
         }
-    });
+    };
+    if views.len() == 1 {
+        // One view (an OS-SART subset of one): too little work to share out.
+        per_view(0, &mut r);
+    } else {
+        r.par_chunks_mut(pv)
+            .enumerate()
+            .for_each(|(slot, img)| per_view(slot, img));
+    }
     Ok(r)
 }
 
@@ -529,7 +549,6 @@ fn sart<R: Real>(
         nonnegative: opts.nonnegative,
         support: prob.support,
     };
-    let pv = pair.per_view();
     let weighted = |r: &[R]| -> f64 {
         0.5 * sum_by(r.len(), |i| {
             let v = r[i].f64();
@@ -542,7 +561,7 @@ fn sart<R: Real>(
     let mut iterations = 0;
     for it in 0..=opts.iterations {
         // The residual of the current iterate (the last pass only logs it).
-        let r = residual_within(prob, &x, &all, planes)?;
+        let r = residual_within(prob, &x, &all, planes, None)?;
         residual.push(norm(&r));
         objective.push(weighted(&r));
         if it > 0 {
@@ -570,13 +589,7 @@ fn sart<R: Real>(
         }
         for s in subset_order(opts.order, k, it) {
             let views = &groups[s];
-            let mut wr = residual_within(prob, &x, views, planes)?;
-            wr.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
-                let w = &row_w[views[slot] * pv..(views[slot] + 1) * pv];
-                for (v, &wv) in img.iter_mut().zip(w) {
-                    *v = *v * wv;
-                }
-            });
+            let wr = residual_within(prob, &x, views, planes, Some(&row_w))?;
             if one_pass[s] && pair.sart_update(&mut x, &wr, views, &step)? {
                 continue;
             }
