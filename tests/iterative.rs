@@ -248,7 +248,7 @@ fn the_one_pass_sart_update_gives_the_same_numbers_bit_for_bit() {
                             R::zero()
                         };
                         let v = x0[i] + lambda * c * ui;
-                        if nonnegative && !(v > R::zero()) {
+                        if nonnegative && (v.is_nan() || v <= R::zero()) {
                             R::zero()
                         } else {
                             v

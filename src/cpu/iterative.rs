@@ -657,7 +657,11 @@ fn update_chunk<R: Real, const MASK: bool, const NONNEG: bool>(
         let uv = if MASK && !ms[j] { zero } else { uv };
         let v = *xv + lambda * cs[j] * uv;
         // max(v, 0), with v = −0 and NaN giving 0 (as JosephPair::sart_update does).
-        *xv = if NONNEG && !(v > zero) { zero } else { v };
+        *xv = if NONNEG && (v.is_nan() || v <= zero) {
+            zero
+        } else {
+            v
+        };
     }
 }
 

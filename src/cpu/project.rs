@@ -1383,7 +1383,7 @@ impl<R: Real> JosephPair<R> {
                     let qb = 2.0 * (ka * x0 - cm);
                     let qc = cm * cm + x0 * x0 - reach * reach;
                     let disc = qb * qb - 4.0 * qa * qc;
-                    if !(disc >= 0.0) {
+                    if disc.is_nan() || disc < 0.0 {
                         continue;
                     }
                     let root = disc.sqrt();

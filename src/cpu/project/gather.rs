@@ -116,7 +116,7 @@ impl<R: Real> GatherView<R> {
         // xa0_c ≈ α + c·δ, within `dev`.
         let delta = (xa0(c1).f64() - xa0(c0).f64()) / (c1 - c0) as f64;
         let alpha = xa0(c0).f64() - c0 as f64 * delta;
-        if !(delta.abs() > 1e-6) {
+        if delta.is_nan() || delta.abs() <= 1e-6 {
             return None;
         }
         let dev = valid
@@ -284,7 +284,7 @@ pub fn sart_voxel<R: Real>(x: R, u: R, sum: R, keep: bool, lambda: R, nonnegativ
         zero
     };
     let v = x + lambda * c * u;
-    if nonnegative && !(v > zero) {
+    if nonnegative && (v.is_nan() || v <= zero) {
         zero
     } else {
         v
