@@ -4,7 +4,11 @@
 //! bins (scikit-image's geometry), in f64 and f32 on all rayon threads — the forward
 //! pass `A x` and the transpose `Aᵀ y` over every view, the same over one view (an
 //! OS-SART update with one view per subset), and a whole SIRT iteration
-//! (`cpu::iterative::solve`, 10 iterations, divided by 10).
+//! (`cpu::iterative::solve`, 10 iterations, divided by 10). A second table times
+//! OS-SART with one view per subset as the peers' comparison runs it (λ = 0.15, the
+//! inscribed disc as the support, 10 passes): the time per pass, and that time over
+//! the 180 subsets (each pass also projects every view once for the residual it
+//! logs: the `A x` column above).
 //!
 //! One warm-up, then `VOXLAB_BENCH_RUNS` (default 5) timed runs; medians in
 //! milliseconds as a Markdown table. Pass a substring to run only matching rows:
@@ -32,18 +36,24 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> f64 {
     median_min_max(t).0
 }
 
+/// The pair of the peers' problem and a test image.
+fn problem<R: Real>(n: usize, views: usize) -> (JosephPair<R>, Vec<R>) {
+    let g = Geometry::parallel_skimage(n, Geometry::even_angles(views, 180.0)).unwrap();
+    let grid = parallel_stack_grid(n, &g);
+    let pair = JosephPair::<R>::new(grid.dims, grid.affine, &g).unwrap();
+    let x: Vec<R> = (0..pair.n_voxels())
+        .map(|i| R::of(((i * 7919) % 1000) as f64 / 1000.0))
+        .collect();
+    (pair, x)
+}
+
 fn row<R: Real>(args: &BenchArgs, n: usize, views: usize) {
     let name = format!("{n}² from {views} views, {}", R::NAME);
     if !args.wants(&name) {
         return;
     }
-    let g = Geometry::parallel_skimage(n, Geometry::even_angles(views, 180.0)).unwrap();
-    let grid = parallel_stack_grid(n, &g);
-    let pair = JosephPair::<R>::new(grid.dims, grid.affine, &g).unwrap();
+    let (pair, x) = problem::<R>(n, views);
     let all: Vec<usize> = (0..views).collect();
-    let x: Vec<R> = (0..pair.n_voxels())
-        .map(|i| R::of(((i * 7919) % 1000) as f64 / 1000.0))
-        .collect();
     let b = pair.forward(&x, &all);
     let one = [views / 3];
     let fwd = time(args.runs, || pair.forward(&x, &all));
@@ -76,6 +86,47 @@ fn row<R: Real>(args: &BenchArgs, n: usize, views: usize) {
     );
 }
 
+/// OS-SART with one view per subset, as `scripts/peers/iterative_peers.py` runs it.
+fn sart_row<R: Real>(args: &BenchArgs, n: usize, views: usize) {
+    let name = format!("{n}² from {views} views, {}", R::NAME);
+    if !args.wants(&name) {
+        return;
+    }
+    let (pair, x) = problem::<R>(n, views);
+    let all: Vec<usize> = (0..views).collect();
+    let b = pair.forward(&x, &all);
+    // The inscribed disc (radius n/2 about pixel n/2), as `voxlab reconstruct`.
+    let h = (n / 2) as i64;
+    let support: Vec<bool> = (0..n * n)
+        .map(|i| {
+            let (c, r) = ((i % n) as i64 - h, (i / n) as i64 - h);
+            c * c + r * r <= h * h
+        })
+        .collect();
+    let passes = 10;
+    let opts = IterativeOptions {
+        method: Method::OsSart,
+        iterations: passes,
+        subsets: views,
+        relaxation: 0.15,
+        ..IterativeOptions::default()
+    };
+    let prob = Problem {
+        pair: &pair as &dyn MatchedPair<R>,
+        b: &b,
+        support: Some(&support),
+    };
+    let x0 = vec![R::zero(); pair.n_voxels()];
+    let pass = time(args.runs.min(3), || {
+        solve(&prob, x0.clone(), &opts, &mut |_, _, _| Ok(())).unwrap()
+    }) / passes as f64;
+    println!(
+        "| {name} | {:.2} | {:.1} |",
+        pass * 1e3,
+        pass * 1e6 / views as f64
+    );
+}
+
 fn main() {
     let args = BenchArgs::from_env();
     let (n, views) = if args.smoke { (32, 12) } else { (256, 180) };
@@ -86,4 +137,11 @@ fn main() {
     println!("|---|---|---|---|---|---|");
     row::<f64>(&args, n, views);
     row::<f32>(&args, n, views);
+    println!();
+    println!(
+        "| OS-SART, one view per subset, λ = 0.15, disc support | pass (ms) | per subset (µs) |"
+    );
+    println!("|---|---|---|");
+    sart_row::<f64>(&args, n, views);
+    sart_row::<f32>(&args, n, views);
 }

@@ -11,7 +11,9 @@ use voxlab::cpu::fbp::{fbp, skimage_grid, Reconstruction};
 use voxlab::cpu::iterative::{
     dot, solve, subset_order, IterativeOptions, Method, Problem, Solution, SubsetOrder,
 };
-use voxlab::cpu::project::{project_phantom, project_volume, Grid, JosephPair, ProjectOptions};
+use voxlab::cpu::project::{
+    project_phantom, project_volume, Grid, JosephPair, ProjectOptions, SartUpdate, GATHER_MAX_VIEWS,
+};
 use voxlab::cpu::ramp::RampFilter;
 use voxlab::ct::Geometry;
 use voxlab::phantom::{Phantom, Primitive};
@@ -164,6 +166,131 @@ fn the_flat_layout_gives_the_same_numbers_bit_for_bit() {
     for (name, g, dims, affine) in cases() {
         let flat = JosephPair::<f64>::new(dims, affine, &g).unwrap().is_flat();
         assert_eq!(flat, name == "parallel", "{name}");
+    }
+}
+
+/// The 2-D parallel problems of the one-pass OS-SART update: odd and even sizes, views
+/// on the axes and the diagonals, detector pixels of 1, 0.45 and 1.7 voxels, and a
+/// sinogram offset by a third of a pixel.
+fn gather_cases() -> Vec<(String, Geometry, [usize; 3], DMat4)> {
+    let mut v = Vec::new();
+    for (n, bins, views, du, shift) in [
+        (41, 41, 9, 1.0, 0.0),
+        (32, 46, 8, 1.0, 0.0),
+        (17, 23, 180, 1.0, 0.0),
+        (64, 64, 4, 1.0, 0.0),
+        (20, 47, 12, 0.45, 0.0),
+        (33, 21, 10, 1.7, 0.33),
+    ] {
+        let mut g = Geometry::parallel_skimage(bins, Geometry::even_angles(views, 180.0)).unwrap();
+        g.du = du;
+        g.cu += shift;
+        let grid = skimage_grid(n);
+        v.push((
+            format!("parallel {n}² from {views} views of {bins} × {du}"),
+            g,
+            grid.dims,
+            grid.affine,
+        ));
+    }
+    v
+}
+
+/// `JosephPair::sart_update` (the transpose as a gather, the column sums and OS-SART's
+/// update in one pass over the image) gives the numbers of the transpose by planes,
+/// the masked column weights and the update bit for bit, in f64 and f32 (on a CPU with
+/// AVX-512F the f32 vector kernel), on single views and on subsets out of order, with
+/// and without a support, clamped or not; and whole OS-SART runs equal those of the
+/// pair without the gather.
+#[test]
+fn the_one_pass_sart_update_gives_the_same_numbers_bit_for_bit() {
+    fn check<R: voxlab::real::Real>(name: &str, g: &Geometry, dims: [usize; 3], affine: DMat4) {
+        let pair = JosephPair::<R>::new(dims, affine, g).unwrap();
+        let (nv, pv, n) = (pair.n_views(), pair.per_view(), pair.n_voxels());
+        let x0: Vec<R> = random(n, 61).into_iter().map(R::of).collect();
+        let mut y: Vec<R> = random(nv * pv, 62).into_iter().map(R::of).collect();
+        for v in y.iter_mut().step_by(7) {
+            *v = R::zero();
+        }
+        // A support with holes, and voxels of x outside it that are not 0.
+        let support: Vec<bool> = random(n, 63).iter().map(|v| *v > -0.6).collect();
+        let mut subsets: Vec<Vec<usize>> = (0..nv).map(|k| vec![k]).collect();
+        subsets.push(vec![nv - 1, nv / 2, 0, 1]);
+        subsets.push((0..nv).step_by(3).take(GATHER_MAX_VIEWS).collect());
+        // Past GATHER_MAX_VIEWS views the update is left to the caller's steps.
+        assert!(!pair.has_sart_update(&vec![0; GATHER_MAX_VIEWS + 1]));
+        for views in &subsets {
+            assert!(pair.has_sart_update(views), "{name}: {views:?}");
+            let ys = &y[..views.len() * pv];
+            let ones = vec![R::one(); ys.len()];
+            let (u, sums) = (pair.transpose(ys, views), pair.transpose(&ones, views));
+            for (mask, nonnegative) in [(None, false), (Some(&support[..]), true)] {
+                let lambda = R::of(0.7);
+                let mut got = x0.clone();
+                let step = SartUpdate {
+                    relaxation: lambda,
+                    nonnegative,
+                    support: mask,
+                };
+                assert!(pair.sart_update(&mut got, ys, views, &step));
+                // cpu::iterative's steps: mask, reciprocal, x + λ·c·u, max(x, 0).
+                let want: Vec<R> = (0..n)
+                    .map(|i| {
+                        let keep = mask.is_none_or(|m| m[i]);
+                        let (ui, si) = if keep {
+                            (u[i], sums[i])
+                        } else {
+                            (R::zero(), R::zero())
+                        };
+                        let c = if si > R::of(1e-6) {
+                            R::one() / si
+                        } else {
+                            R::zero()
+                        };
+                        let v = x0[i] + lambda * c * ui;
+                        if nonnegative && (v.is_nan() || v <= R::zero()) {
+                            R::zero()
+                        } else {
+                            v
+                        }
+                    })
+                    .collect();
+                let diff = got.iter().zip(&want).filter(|(a, b)| a != b).count();
+                assert_eq!(diff, 0, "{name} {} {views:?} {mask:?}", R::NAME);
+            }
+        }
+        // Whole runs: OS-SART with one view per subset and with three, from the pair
+        // with and without the gather (the solver takes it where it is fast: f32 on a
+        // CPU with AVX-512F).
+        let b: Vec<R> = pair.forward(&x0, &all(nv));
+        let plain = JosephPair::<R>::new(dims, affine, g)
+            .unwrap()
+            .without_gather();
+        assert!(!plain.has_sart_update(&[0]));
+        for (subsets, nonnegative) in [(nv, false), (nv.div_ceil(3), true)] {
+            assert!(plain.n_views() / subsets <= GATHER_MAX_VIEWS);
+            let o = IterativeOptions {
+                method: Method::OsSart,
+                iterations: 3,
+                subsets,
+                relaxation: 0.6,
+                nonnegative,
+                ..Default::default()
+            };
+            let one = run_on(&pair, &b, Some(&support), &o, &mut Vec::new());
+            let two = run_on(&plain, &b, Some(&support), &o, &mut Vec::new());
+            assert_eq!(one.x, two.x, "{name} {} {subsets} subsets", R::NAME);
+            assert_eq!(one.residual, two.residual, "{name} {}", R::NAME);
+        }
+    }
+    for (name, g, dims, affine) in gather_cases() {
+        check::<f64>(&name, &g, dims, affine);
+        check::<f32>(&name, &g, dims, affine);
+    }
+    // 3-D problems have no gather.
+    for (name, g, dims, affine) in cases() {
+        let pair = JosephPair::<f64>::new(dims, affine, &g).unwrap();
+        assert_eq!(pair.has_sart_update(&[0]), name == "parallel", "{name}");
     }
 }
 

@@ -24,7 +24,7 @@
 //! Every sum over voxels or rays is taken in fixed chunks in a fixed order, so the
 //! results do not depend on the thread count; [`JosephPair`] is deterministic too.
 
-use super::project::JosephPair;
+use super::project::{JosephPair, SartUpdate, SupportPlanes};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use rayon::prelude::*;
@@ -180,6 +180,47 @@ pub trait MatchedPair<R>: Sync {
     /// # Errors
     /// Device failures (a GPU pair).
     fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>>;
+    /// What [`Self::forward_within`] needs to skip the planes where every tap of a ray
+    /// lies off `support` ([`JosephPair::support_planes`]); `None` when the pair has
+    /// no such narrowing.
+    fn support_planes(&self, _support: &[bool]) -> Option<SupportPlanes> {
+        None
+    }
+    /// [`Self::forward`] of an image that is `+0` off the support `planes` were made
+    /// for, the same numbers ([`JosephPair::forward_within`]).
+    ///
+    /// # Errors
+    /// Device failures (a GPU pair).
+    fn forward_within(
+        &self,
+        x: &[R],
+        views: &[usize],
+        _planes: Option<&SupportPlanes>,
+    ) -> Result<Vec<R>> {
+        self.forward(x, views)
+    }
+    /// Whether [`Self::sart_update`] runs for `views` (`cpu::iterative`'s OS-SART then
+    /// keeps no column weights for them).
+    fn has_sart_update(&self, _views: &[usize]) -> bool {
+        false
+    }
+    /// OS-SART's update over `views` in one pass over the image, when the pair has
+    /// one ([`JosephPair::sart_update`]): `x ← x + λ·C·M·Aᵀ y` with
+    /// `C = diag(1 / M·Aᵀ𝟙)`, the same numbers as [`Self::transpose`], the column
+    /// weights and the update one after the other. `Ok(false)`, and `x` untouched,
+    /// when it has none.
+    ///
+    /// # Errors
+    /// Device failures (a GPU pair).
+    fn sart_update(
+        &self,
+        _x: &mut [R],
+        _y: &[R],
+        _views: &[usize],
+        _step: &SartUpdate<R>,
+    ) -> Result<bool> {
+        Ok(false)
+    }
 }
 
 impl<R: Real> MatchedPair<R> for JosephPair<R> {
@@ -197,6 +238,32 @@ impl<R: Real> MatchedPair<R> for JosephPair<R> {
     }
     fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>> {
         Ok(JosephPair::transpose(self, y, views))
+    }
+    fn support_planes(&self, support: &[bool]) -> Option<SupportPlanes> {
+        JosephPair::support_planes(self, support)
+    }
+    fn forward_within(
+        &self,
+        x: &[R],
+        views: &[usize],
+        planes: Option<&SupportPlanes>,
+    ) -> Result<Vec<R>> {
+        Ok(JosephPair::forward_within(self, x, views, planes))
+    }
+    fn has_sart_update(&self, views: &[usize]) -> bool {
+        // One pass is faster than the transpose by planes with stored column weights
+        // only on the vector kernel (the scalar gather would slow the f64 oracle).
+        JosephPair::has_fast_sart_update(self, views)
+    }
+    fn sart_update(
+        &self,
+        x: &mut [R],
+        y: &[R],
+        views: &[usize],
+        step: &SartUpdate<R>,
+    ) -> Result<bool> {
+        Ok(JosephPair::has_fast_sart_update(self, views)
+            && JosephPair::sart_update(self, x, y, views, step))
     }
 }
 
@@ -380,14 +447,45 @@ fn all_views<R>(pair: &dyn MatchedPair<R>) -> Vec<usize> {
 /// `b − A x` over `views` (`b` holds every view).
 /// Mirrors shaders/iterative.wgsl: residual (the device-resident port, src/gpu/iterative.rs).
 fn residual_of<R: Real>(prob: &Problem<R>, x: &[R], views: &[usize]) -> Result<Vec<R>> {
+    residual_within(prob, x, views, None, None)
+}
+
+/// [`residual_of`] for an image that is `+0` off the support `planes` were made for
+/// (`MatchedPair::forward_within`: the same numbers), times the row weights `rows`
+/// (every view's) when given: `R_S (b − A x)` in the same pass.
+fn residual_within<R: Real>(
+    prob: &Problem<R>,
+    x: &[R],
+    views: &[usize],
+    planes: Option<&SupportPlanes>,
+    rows: Option<&[R]>,
+) -> Result<Vec<R>> {
     let pv = prob.pair.per_view();
-    let mut r = prob.pair.forward(x, views)?;
-    r.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
-        let src = &prob.b[views[slot] * pv..(views[slot] + 1) * pv];
-        for (v, &bv) in img.iter_mut().zip(src) {
-            *v = bv - *v;
+    let mut r = prob.pair.forward_within(x, views, planes)?;
+    let per_view = |slot: usize, img: &mut [R]| {
+        let at = views[slot] * pv..(views[slot] + 1) * pv;
+        let src = &prob.b[at.clone()];
+        match rows {
+            Some(w) => {
+                for ((v, &bv), &wv) in img.iter_mut().zip(src).zip(&w[at]) {
+                    *v = (bv - *v) * wv;
+                }
+            }
+            None => {
+                for (v, &bv) in img.iter_mut().zip(src) {
+                    *v = bv - *v;
+                }
+            }
         }
-    });
+    };
+    if views.len() == 1 {
+        // One view (an OS-SART subset of one): too little work to share out.
+        per_view(0, &mut r);
+    } else {
+        r.par_chunks_mut(pv)
+            .enumerate()
+            .for_each(|(slot, img)| per_view(slot, img));
+    }
     Ok(r)
 }
 
@@ -416,23 +514,41 @@ fn sart<R: Real>(
 ) -> Result<Solution<R>> {
     let pair = prob.pair;
     let all = all_views(pair);
+    // Every image projected here is 0 off the support (x is masked, and so are the
+    // updates): the pair may skip the planes where a ray's taps all lie off it.
+    let planes = prob.support.and_then(|m| pair.support_planes(m));
+    let planes = planes.as_ref();
     let ones_x = masked(vec![R::one(); pair.n_voxels()], prob.support);
-    let row_w = reciprocal(pair.forward(&ones_x, &all)?);
+    let row_w = reciprocal(pair.forward_within(&ones_x, &all, planes)?);
     let k = if subsets { opts.subsets } else { 1 };
     let groups: Vec<Vec<usize>> = (0..k).map(|s| subset_views(pair.n_views(), k, s)).collect();
-    // Column weights per subset: kept while they fit, else recomputed.
+    // The subsets whose update the pair makes in one pass (computing their column
+    // weights as it goes); the others keep their column weights while they fit, else
+    // recompute them.
+    let one_pass: Vec<bool> = groups
+        .iter()
+        .map(|v| subsets && pair.has_sart_update(v))
+        .collect();
     let keep = keeps_column_weights(k, pair.n_voxels(), std::mem::size_of::<R>());
     let col_w_of = |views: &[usize]| {
         let ones_y = vec![R::one(); views.len() * pair.per_view()];
         transpose_masked(prob, &ones_y, views).map(reciprocal)
     };
-    let kept: Vec<Vec<R>> = if keep {
-        groups.iter().map(|v| col_w_of(v)).collect::<Result<_>>()?
+    let kept: Vec<Option<Vec<R>>> = if keep {
+        groups
+            .iter()
+            .zip(&one_pass)
+            .map(|(v, &one)| if one { Ok(None) } else { col_w_of(v).map(Some) })
+            .collect::<Result<_>>()?
     } else {
         Vec::new()
     };
     let lambda = R::of(opts.relaxation);
-    let pv = pair.per_view();
+    let step = SartUpdate {
+        relaxation: lambda,
+        nonnegative: opts.nonnegative,
+        support: prob.support,
+    };
     let weighted = |r: &[R]| -> f64 {
         0.5 * sum_by(r.len(), |i| {
             let v = r[i].f64();
@@ -445,7 +561,7 @@ fn sart<R: Real>(
     let mut iterations = 0;
     for it in 0..=opts.iterations {
         // The residual of the current iterate (the last pass only logs it).
-        let r = residual_of(prob, &x, &all)?;
+        let r = residual_within(prob, &x, &all, planes, None)?;
         residual.push(norm(&r));
         objective.push(weighted(&r));
         if it > 0 {
@@ -465,29 +581,22 @@ fn sart<R: Real>(
                 .zip(&row_w)
                 .for_each(|(v, &w)| *v = *v * w);
             let upd = prob.pair.transpose(&wr, &all)?;
-            update(
-                &mut x,
-                &upd,
-                &kept[0],
-                lambda,
-                opts.nonnegative,
-                prob.support,
-            );
+            let Some(cw) = &kept[0] else {
+                unreachable!("SIRT keeps its column weights")
+            };
+            update(&mut x, &upd, cw, lambda, opts.nonnegative, prob.support);
             continue;
         }
         for s in subset_order(opts.order, k, it) {
             let views = &groups[s];
-            let mut wr = residual_of(prob, &x, views)?;
-            wr.par_chunks_mut(pv).enumerate().for_each(|(slot, img)| {
-                let w = &row_w[views[slot] * pv..(views[slot] + 1) * pv];
-                for (v, &wv) in img.iter_mut().zip(w) {
-                    *v = *v * wv;
-                }
-            });
+            let wr = residual_within(prob, &x, views, planes, Some(&row_w))?;
+            if one_pass[s] && pair.sart_update(&mut x, &wr, views, &step)? {
+                continue;
+            }
             let upd = prob.pair.transpose(&wr, views)?;
             let fresh;
-            let cw = if keep {
-                &kept[s]
+            let cw = if let Some(Some(cw)) = kept.get(s) {
+                cw
             } else {
                 fresh = col_w_of(views)?;
                 &fresh
@@ -547,7 +656,12 @@ fn update_chunk<R: Real, const MASK: bool, const NONNEG: bool>(
         let uv = us[j];
         let uv = if MASK && !ms[j] { zero } else { uv };
         let v = *xv + lambda * cs[j] * uv;
-        *xv = if NONNEG { v.max(zero) } else { v };
+        // max(v, 0), with v = −0 and NaN giving 0 (as JosephPair::sart_update does).
+        *xv = if NONNEG && (v.is_nan() || v <= zero) {
+            zero
+        } else {
+            v
+        };
     }
 }
 

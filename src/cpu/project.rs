@@ -38,6 +38,9 @@ use crate::volume::{check_dims, Volume, Voxel};
 use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
+mod gather;
+pub use gather::{sart_voxel, SartUpdate, GATHER_MAX_VIEWS};
+
 /// Exact projections of `phantom` (f64): one line integral per detector pixel centre.
 pub fn project_phantom(phantom: &Phantom, g: &Geometry) -> Result<Projections<f64>> {
     g.validate()?;
@@ -698,6 +701,8 @@ struct FlatRays<R> {
     w: Vec<R>,
     s0: Vec<u32>,
     s1: Vec<u32>,
+    /// Per view, its layout for the gather when it has one ([`gather`]).
+    gather: Vec<Option<gather::GatherView<R>>>,
 }
 
 impl<R: Real> FlatRays<R> {
@@ -718,6 +723,7 @@ impl<R: Real> FlatRays<R> {
             w: vec![R::zero(); n],
             s0: vec![1; n],
             s1: vec![0; n],
+            gather: Vec::new(),
         };
         for (k, axis) in view_axis.iter().enumerate() {
             let m = (*axis)?;
@@ -736,6 +742,10 @@ impl<R: Real> FlatRays<R> {
             }
             flat.axes.push((m, a.unwrap_or((m + 1) % 3)));
         }
+        flat.gather = (0..view_axis.len())
+            .into_par_iter()
+            .map(|k| gather::GatherView::new(dims, &flat, k))
+            .collect();
         Some(flat)
     }
 }
@@ -762,11 +772,20 @@ pub fn view_axes<R: Real>(
         .collect()
 }
 
+/// Every ray's planes (`s0..=s1`, `1..=0` for none) narrowed to a support
+/// ([`JosephPair::support_planes`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SupportPlanes {
+    s0: Vec<u32>,
+    s1: Vec<u32>,
+}
+
 /// One view's line integrals over the flat layout: plane by plane, every ray of the
 /// view that crosses the plane adds its sample — for each ray the terms of
 /// [`joseph_sum`]'s 2-D path in the same order, so the same sum bit for bit.
 fn forward_flat<R: Real>(
     flat: &FlatRays<R>,
+    planes: Option<&SupportPlanes>,
     (x, lines): (&[R], Option<&[R]>),
     dims: [usize; 3],
     (k, first): (usize, usize),
@@ -774,7 +793,10 @@ fn forward_flat<R: Real>(
 ) {
     let pv = flat.per_view;
     let rays = k * pv + first..k * pv + first + dst.len();
-    let (s0, s1) = (&flat.s0[rays.clone()], &flat.s1[rays.clone()]);
+    let (s0, s1) = match planes {
+        Some(p) => (&p.s0[rays.clone()], &p.s1[rays.clone()]),
+        None => (&flat.s0[rays.clone()], &flat.s1[rays.clone()]),
+    };
     let (xa0, ka) = (&flat.xa0[rays.clone()], &flat.ka[rays.clone()]);
     let (m, a) = flat.axes[k];
     let stride = [1, dims[0], dims[0] * dims[1]];
@@ -803,8 +825,22 @@ fn forward_flat<R: Real>(
     #[cfg(target_arch = "x86_64")]
     if let (Some(view), Some(x), Some(out)) = (view.as_f32(), as_f32(x), as_f32_mut(dst)) {
         if avx512_fits(x.len(), [dims[a], hi as usize + 1]) {
+            // A parallel view: the positions of its gather layout, and no planes' mask.
+            let parallel = flat.gather[k]
+                .as_ref()
+                .and_then(|g| as_f32(g.positions(first..first + out.len())));
             // SAFETY: the CPU has AVX-512F (avx512_fits), indices fit an i32.
-            unsafe { forward_flat_f32x16(view, x, (sm, sa, dims[a]), out) };
+            unsafe {
+                match parallel {
+                    Some(xa0) => forward_flat_f32x16::<true>(
+                        FlatView { xa0, ..view },
+                        x,
+                        (sm, sa, dims[a]),
+                        out,
+                    ),
+                    None => forward_flat_f32x16::<false>(view, x, (sm, sa, dims[a]), out),
+                }
+            };
             for (v, &w) in dst.iter_mut().zip(&flat.w[rays]) {
                 *v = *v * w;
             }
@@ -972,9 +1008,15 @@ fn avx512_fits(len: usize, small: [usize; 2]) -> bool {
 /// walk their planes, with the same operations in the same order for every ray, so
 /// the same sums bit for bit. A tap outside the in-plane range reads 0 (masked), a
 /// ray outside its planes `s0..=s1` keeps its sum (a masked add).
+///
+/// `PARALLEL`: a view with a gather layout (`gather::GatherView`, whose positions
+/// `view.xa0` put a ray that misses the grid far outside it, and whose rays take no
+/// tap inside the grid past their planes): a ray outside its planes then adds
+/// `+0`, which leaves its sum as it is (a sum that starts at `+0` is never `−0`),
+/// so the kernel adds without the planes' mask, and tests the taps on integers.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn forward_flat_f32x16(
+unsafe fn forward_flat_f32x16<const PARALLEL: bool>(
     view: FlatView<f32>,
     x: &[f32],
     (sm, sa, na): (usize, usize, usize),
@@ -988,6 +1030,7 @@ unsafe fn forward_flat_f32x16(
     let (one, zero) = (set(1.0), _mm512_setzero_ps());
     let (max0, min1, max1) = (set(na as f32 - 1.0), set(-1.0), set(na as f32 - 2.0));
     let vsa = _mm512_set1_epi32(sa as i32);
+    let vna = _mm512_set1_epi32(na as i32);
     let mut c = 0;
     while c < pv {
         let n = (pv - c).min(16);
@@ -1011,32 +1054,42 @@ unsafe fn forward_flat_f32x16(
             let ka = _mm512_maskz_loadu_ps(m, view.ka.as_ptr().add(c));
             let q = dst.as_mut_ptr().add(c);
             let mut d = _mm512_maskz_loadu_ps(m, q);
+            // The last ray's lane.
+            let last = _mm512_set1_epi32(n as i32 - 1);
             for s in lo..=hi {
-                let vs = _mm512_set1_epi32(s as i32);
-                let active = m & _mm512_cmple_epu32_mask(s0, vs) & _mm512_cmple_epu32_mask(vs, s1);
                 let xa = _mm512_add_ps(xa0, _mm512_mul_ps(set(s as f32), ka));
                 let fx = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(xa);
                 let tx = _mm512_sub_ps(xa, fx);
-                let ok0 = active
-                    & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, zero)
-                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max0);
-                let ok1 = active
-                    & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, min1)
-                    & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max1);
                 let ix = _mm512_cvttps_epi32(fx);
+                let (active, ok0, ok1) = if PARALLEL {
+                    // 0 ≤ ⌊x⌋ < n_a and 0 ≤ ⌊x⌋ + 1 < n_a, as unsigned integers.
+                    let ok0 = m & _mm512_cmplt_epu32_mask(ix, vna);
+                    let ix1 = _mm512_add_epi32(ix, _mm512_set1_epi32(1));
+                    (m, ok0, m & _mm512_cmplt_epu32_mask(ix1, vna))
+                } else {
+                    let vs = _mm512_set1_epi32(s as i32);
+                    let active =
+                        m & _mm512_cmple_epu32_mask(s0, vs) & _mm512_cmple_epu32_mask(vs, s1);
+                    let ok0 = active
+                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, zero)
+                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max0);
+                    let ok1 = active
+                        & _mm512_cmp_ps_mask::<_CMP_GE_OQ>(fx, min1)
+                        & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(fx, max1);
+                    (active, ok0, ok1)
+                };
                 let any = ok0 | ok1;
                 let base = s as usize * sm;
                 // Contiguous planes and taps within a window of 32 values: two loads
                 // and two permutes instead of two gathers. The window starts one
-                // below the truncated position of the first or the last ray (where
-                // the rays' positions are monotone, every tap lies between them);
-                // the lanes' own indices decide whether it holds them all.
-                let sf = s as f32;
-                let ends = [
-                    view.xa0[c] + sf * view.ka[c],
-                    view.xa0[c + n - 1] + sf * view.ka[c + n - 1],
-                ];
-                let wlo = (ends[0].min(ends[1]) as i32).saturating_sub(1);
+                // below the tap of the first or the last ray (where the rays'
+                // positions are monotone, every tap lies between them); the lanes'
+                // own indices decide whether it holds them all.
+                let ends = (
+                    _mm_cvtsi128_si32(_mm512_castsi512_si128(ix)),
+                    _mm_cvtsi128_si32(_mm512_castsi512_si128(_mm512_permutexvar_epi32(last, ix))),
+                );
+                let wlo = ends.0.min(ends.1).wrapping_sub(1);
                 let at = base as i64 + i64::from(wlo);
                 let i0 = _mm512_sub_epi32(ix, _mm512_set1_epi32(wlo));
                 let inside = _mm512_mask_cmple_epu32_mask(any, i0, _mm512_set1_epi32(30));
@@ -1062,7 +1115,8 @@ unsafe fn forward_flat_f32x16(
                     _mm512_mul_ps(v0, _mm512_sub_ps(one, tx)),
                     _mm512_mul_ps(v1, tx),
                 );
-                d = _mm512_mask_add_ps(d, active, d, _mm512_add_ps(top, zero));
+                // `top · 1 + 0` in joseph_sum: the same sum, as d is never −0.
+                d = _mm512_mask_add_ps(d, active, d, top);
             }
             _mm512_mask_storeu_ps(q, m, d);
         }
@@ -1253,6 +1307,108 @@ impl<R: Real> JosephPair<R> {
     /// `A x` over the views `views` (in that order): `views.len() × rows × cols`
     /// line integrals, the numbers [`project_volume`] gives for them.
     pub fn forward(&self, x: &[R], views: &[usize]) -> Vec<R> {
+        self.forward_within(x, views, None)
+    }
+
+    /// Every ray's planes narrowed to those where one of its taps can fall on a
+    /// voxel of `support` (one flag per voxel), for [`Self::forward_within`]; `None`
+    /// without the flat 2-D layout. The support is bounded by the disc about the
+    /// centre of its bounding box through its farthest voxel; a ray's planes whose
+    /// crossing lies farther than one voxel outside that disc are dropped (with a
+    /// plane to spare at either end): every tap there lies off the support.
+    pub fn support_planes(&self, support: &[bool]) -> Option<SupportPlanes> {
+        let flat = self.flat.as_ref()?;
+        assert_eq!(
+            support.len(),
+            self.n_voxels(),
+            "JosephPair::support_planes: support size"
+        );
+        let dims = self.dims;
+        let coords = |i: usize| {
+            [
+                i % dims[0],
+                (i / dims[0]) % dims[1],
+                i / (dims[0] * dims[1]),
+            ]
+        };
+        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        for (i, _) in support.iter().enumerate().filter(|(_, &k)| k) {
+            let c = coords(i);
+            for a in 0..3 {
+                (lo[a], hi[a]) = (lo[a].min(c[a]), hi[a].max(c[a]));
+            }
+        }
+        let n = flat.xa0.len();
+        let empty = SupportPlanes {
+            s0: vec![1; n],
+            s1: vec![0; n],
+        };
+        if lo[0] == usize::MAX {
+            return Some(empty);
+        }
+        let centre: [f64; 3] = std::array::from_fn(|a| (lo[a] + hi[a]) as f64 / 2.0);
+        let rho = support
+            .iter()
+            .enumerate()
+            .filter(|(_, &k)| k)
+            .map(|(i, _)| {
+                let c = coords(i);
+                (0..3)
+                    .map(|a| (c[a] as f64 - centre[a]).powi(2))
+                    .sum::<f64>()
+            })
+            .fold(0.0f64, f64::max)
+            .sqrt();
+        // A tap lies within one voxel (along a) of the ray's crossing, whose computed
+        // position is within 1e-3 of the exact line's.
+        let reach = rho + 1.01;
+        let pv = flat.per_view;
+        let mut out = empty;
+        out.s0
+            .par_chunks_mut(pv)
+            .zip(out.s1.par_chunks_mut(pv))
+            .enumerate()
+            .for_each(|(k, (s0, s1))| {
+                let (m, a) = flat.axes[k];
+                let (cm, ca) = (centre[m], centre[a]);
+                for c in 0..pv {
+                    let r = k * pv + c;
+                    let (f0, f1) = (flat.s0[r], flat.s1[r]);
+                    if f0 > f1 {
+                        continue;
+                    }
+                    // (s − cm)² + (xa0 + s·ka − ca)² ≤ reach²: a quadratic in s.
+                    let (x0, ka) = (flat.xa0[r].f64() - ca, flat.ka[r].f64());
+                    let qa = 1.0 + ka * ka;
+                    let qb = 2.0 * (ka * x0 - cm);
+                    let qc = cm * cm + x0 * x0 - reach * reach;
+                    let disc = qb * qb - 4.0 * qa * qc;
+                    if disc.is_nan() || disc < 0.0 {
+                        continue;
+                    }
+                    let root = disc.sqrt();
+                    let (r0, r1) = ((-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa));
+                    let n0 = (r0.floor() - 1.0).max(f64::from(f0));
+                    let n1 = (r1.ceil() + 1.0).min(f64::from(f1));
+                    if n0 <= n1 {
+                        (s0[c], s1[c]) = (n0 as u32, n1 as u32);
+                    }
+                }
+            });
+        Some(out)
+    }
+
+    /// [`Self::forward`] of an image that is `+0` off the support `planes` were
+    /// made for ([`Self::support_planes`]), skipping the planes where every tap of a
+    /// ray lies off it: their samples are `+0`, which leaves a ray's sum as it is
+    /// (a sum that starts at `+0` is never `−0`), so the numbers are
+    /// [`Self::forward`]'s bit for bit. `None`: every plane.
+    pub fn forward_within(
+        &self,
+        x: &[R],
+        views: &[usize],
+        planes: Option<&SupportPlanes>,
+    ) -> Vec<R> {
         assert_eq!(x.len(), self.n_voxels(), "JosephPair::forward: grid size");
         let dims = self.dims;
         let mut out = vec![R::zero(); views.len() * self.per_view()];
@@ -1271,9 +1427,9 @@ impl<R: Real> JosephPair<R> {
                 .flatten();
             let lines = lines.as_deref();
             out.par_chunks_mut(pv).zip(views).for_each(|(dst, &k)| {
-                dst.par_chunks_mut(piece)
-                    .enumerate()
-                    .for_each(|(j, d)| forward_flat(flat, (x, lines), dims, (k, j * piece), d));
+                dst.par_chunks_mut(piece).enumerate().for_each(|(j, d)| {
+                    forward_flat(flat, planes, (x, lines), dims, (k, j * piece), d)
+                });
             });
             return out;
         }
