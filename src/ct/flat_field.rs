@@ -122,7 +122,7 @@ pub fn mean_frames(what: &str, frames: &[f64], pixels: usize) -> Result<Vec<f64>
     if pixels == 0 || frames.is_empty() {
         return Err(Error::invalid(what, "holds no frames (an empty stack)"));
     }
-    if frames.len() % pixels != 0 {
+    if !frames.len().is_multiple_of(pixels) {
         return Err(Error::invalid(
             what,
             format!(
