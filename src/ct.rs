@@ -36,6 +36,12 @@
 //! the zero-padded bilinear interpolation of a (filtered) projection at the point's
 //! detector position: [`ViewMatrix::project`] and [`bilinear_zero`] are that per-element
 //! work, mirrored by `shaders/shared/ct_geometry.wgsl`.
+//!
+//! # Intensities
+//! A scanner's raw projections are intensities; [`flat_field`] turns them into line
+//! integrals with flat- and dark-field images.
+
+pub mod flat_field;
 
 use crate::error::{Error, Result};
 use crate::real::Real;

@@ -251,9 +251,11 @@ fn bad_arrays_are_refused_clearly() {
     b.extend_from_slice(text.as_bytes());
     std::fs::write(&f, b).unwrap();
     assert_format(read_projections::<f32>(&f), "shape", "limit");
-    // Unknown extension.
-    let e = read_projections::<f32>(&dir.join("p.tif")).unwrap_err();
-    assert!(e.to_string().contains(".npy, .nrrd or .nhdr"), "{e}");
+    // Unknown format.
+    let f = dir.join("p.txt");
+    std::fs::write(&f, "not projections").unwrap();
+    let e = read_projections::<f32>(&f).unwrap_err();
+    assert!(e.to_string().contains("unknown format"), "{e}");
 }
 
 #[test]

@@ -254,29 +254,109 @@ fn project(
     Ok((arr, geometry, meta.to_string()))
 }
 
+/// A flat- or dark-field argument: a path (any projection format, read by
+/// [`voxlab::io::projections::read_field_image`]) or a float64 array (one `(rows, cols)`
+/// image or a `(frame, rows, cols)` stack, averaged).
+pub enum Field {
+    Path(std::path::PathBuf),
+    Array(Vec<usize>, Vec<f64>),
+}
+
+impl Field {
+    fn from_py(
+        py: Python<'_>,
+        what: &str,
+        obj: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<Option<Self>> {
+        let Some(obj) = obj else { return Ok(None) };
+        if obj.is_none() {
+            return Ok(None);
+        }
+        if let Ok(path) = obj.extract::<std::path::PathBuf>() {
+            return Ok(Some(Field::Path(path)));
+        }
+        let arr = obj.extract::<PyReadonlyArrayDyn<'_, f64>>().map_err(|_| {
+            errors::raise(
+                py,
+                "DtypeError",
+                &format!("{what} must be a path or a float64 array"),
+            )
+        })?;
+        let shape = arr.shape().to_vec();
+        let values = arr
+            .as_slice()
+            .map_err(|_| errors::raise(py, "LayoutError", &format!("{what} must be C-contiguous")))?
+            .to_vec();
+        Ok(Some(Field::Array(shape, values)))
+    }
+
+    /// The averaged `rows × cols` image.
+    fn image(self, what: &str, rows: usize, cols: usize) -> voxlab::Result<Vec<f64>> {
+        use voxlab::io::projections::{field_image, read_field_image};
+        match self {
+            Field::Path(p) => read_field_image(&p, what, rows, cols, &Default::default()),
+            Field::Array(shape, values) => field_image(
+                std::path::Path::new(&format!("{what} array")),
+                what,
+                &shape,
+                values,
+                rows,
+                cols,
+            ),
+        }
+    }
+}
+
 /// The reconstruct job on projections in memory: a float64 `(detector, angle)`
 /// sinogram or `(angle, row, col)` stack with its geometry JSON, the options of a JSON
-/// [`ReconstructRequest`]. Returns the reconstruction laid out as the CLI's `.npy`
-/// (`(n, n)`, `(rows, n, n)` or `(N, N, N)`), its grid's voxel-to-world affine (rows,
-/// mm in the CT frame) and the rest as JSON.
+/// [`ReconstructRequest`]. With `flat` (and `dark`), the projections are intensities
+/// turned into line integrals first ([`voxlab::ct::flat_field::line_integrals`]).
+/// Returns the reconstruction laid out as the CLI's `.npy` (`(n, n)`, `(rows, n, n)` or
+/// `(N, N, N)`), its grid's voxel-to-world affine (rows, mm in the CT frame) and the
+/// rest as JSON (`intensity`: the conversion's counts).
 #[pyfunction]
-#[pyo3(signature = (projections, geometry, request, progress=None))]
+#[pyo3(signature = (projections, geometry, request, progress=None, flat=None, dark=None))]
 fn reconstruct_stack(
     py: Python<'_>,
     projections: PyReadonlyArrayDyn<'_, f64>,
     geometry: &str,
     request: &str,
     progress: Option<Bound<'_, PyAny>>,
+    flat: Option<Bound<'_, PyAny>>,
+    dark: Option<Bound<'_, PyAny>>,
 ) -> PyResult<(Py<PyAny>, [[f64; 4]; 4], String)> {
     let req: ReconstructRequest = errors::parse_request(py, "reconstruct option", request)?;
     let (angles, rows, cols, data) = projection_stack(py, &projections)?;
+    let flat = Field::from_py(py, "flat", flat)?;
+    let dark = Field::from_py(py, "dark", dark)?;
+    if dark.is_some() && flat.is_none() {
+        return Err(errors::raise(
+            py,
+            "InvalidError",
+            "invalid dark: goes with flat: intensities need the flat field",
+        ));
+    }
     let geometry = geometry.to_string();
     let rec = job::run(py, job::callback(&progress), |p| {
         let g = geometry_from_json(&geometry, std::path::Path::new("geometry"))?;
-        let proj = Projections::new(angles, rows, cols, data)?;
-        reconstruct(&req, proj, g, None, p)
+        let mut proj = Projections::new(angles, rows, cols, data)?;
+        let mut report = None;
+        if let Some(flat) = flat {
+            let f = flat.image("flat", rows, cols)?;
+            let d = match dark {
+                Some(d) => Some(d.image("dark", rows, cols)?),
+                None => None,
+            };
+            let (q, r) = voxlab::ct::flat_field::line_integrals(&proj, &f, d.as_deref())?;
+            proj = q;
+            report = Some(r);
+        }
+        let mut done = reconstruct(&req, proj, g, None, p)?;
+        done.intensity = report;
+        Ok(done)
     })?;
     let meta = serde_json::json!({
+        "intensity": rec.intensity,
         "parallel": rec.parallel,
         "what": rec.what,
         "truth_rms": rec.truth.as_ref().map(|t| t.rms),

@@ -91,6 +91,8 @@ def reconstruct(
     nonnegative: bool = False,
     init: str = "zero",
     tolerance: float = 0.0,
+    flat: Any = None,
+    dark: Any = None,
     progress: Optional[Callable[[str, int, int], Any]] = None,
 ) -> Volume:
     """FBP (parallel beam: scikit-image's images, ``circle`` as iradon's) or FDK (cone
@@ -111,6 +113,17 @@ def reconstruct(
     iteration). A parallel-beam image is supported on the inscribed disc when
     ``circle``.
 
+    ``flat`` and ``dark``: the projections are detector intensities ``I``, and
+    become the line integrals ``p = -ln((I - D) / (F - D))`` before anything else
+    (docs/ct.md). Each is a path (any format ``voxlab reconstruct --flat`` reads) or
+    an array: one ``(rows, cols)`` image or a ``(frame, rows, cols)`` stack, averaged
+    in float64 (for a one-row sinogram also ``(detector, frame)``); ``dark`` defaults
+    to 0 and needs ``flat``. Dead pixels (``F - D <= 0``) give 0, starved samples
+    (``I - D <= 0``) the ratio floored at the smallest positive normal float64;
+    nothing is NaN or infinite. The counts are in ``info["intensity"]``
+    (``samples``, ``pixels``, ``dead_pixels``, ``starved``, ``clamped``,
+    ``above_flat``); it is ``None`` without ``flat``.
+
     Returns a :class:`voxlab.Volume` whose array is laid out as the command line's
     ``.npy`` (``(n, n)`` for one row, ``(rows, n, n)``, or ``(N, N, N)``) and whose
     affine maps the grid into the CT frame (mm). Its ``info`` dict holds ``what``
@@ -125,7 +138,11 @@ def reconstruct(
            "relaxation": relaxation, "tv_weight": tv_weight,
            "nonnegative": bool(nonnegative), "init": init, "tolerance": float(tolerance)}
     p = np.ascontiguousarray(np.asarray(projections, dtype=np.float64))
-    arr, affine, meta = _voxlab.reconstruct_stack(p, g, _json.dumps(req), progress)
+    fields = [f if f is None or isinstance(f, str) or hasattr(f, "__fspath__")
+              else np.ascontiguousarray(np.asarray(f, dtype=np.float64))
+              for f in (flat, dark)]
+    arr, affine, meta = _voxlab.reconstruct_stack(
+        p, g, _json.dumps(req), progress, fields[0], fields[1])
     v = Volume(arr, np.array(affine, dtype=np.float64), "reconstruction")
     v.info = _json.loads(meta)  # type: ignore[attr-defined]
     return v

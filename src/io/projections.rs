@@ -1,5 +1,6 @@
-//! Projection stacks and CT geometry on disk: `.npy` / NRRD arrays, a small geometry
-//! JSON file, and angle lists.
+//! Projection stacks and CT geometry on disk: projection arrays in every volume format
+//! voxlab reads, flat- and dark-field images, a small geometry JSON file, and angle
+//! lists.
 //!
 //! # Arrays
 //!
@@ -21,11 +22,23 @@
 //! file read as `Projections<f64>` is exact. Writing uses the stack's own precision
 //! (`<f4` for f32, `<f8` for f64).
 //!
-//! NRRD (`.nrrd`, `.nhdr`): read through [`crate::io::nrrd`], so samples arrive as f32
-//! (a `double` file is rounded to f32; see [`crate::io`]). Axes are NRRD's fastest
-//! first: a stack is `sizes: cols rows angles`, a sinogram `sizes: angles detector`.
-//! Written as gzip-compressed `float` with spacing `du dv 1` (stack) or `1 du`
-//! (sinogram) when a geometry is given, else 1.
+//! Every other format [`crate::io::read_volume_with`] reads — NRRD (`.nrrd`, `.nhdr`),
+//! MetaImage (`.mha`, `.mhd`, RTK's own projection format), TIFF (a multi-page file or a
+//! directory of pages), NIfTI, DICOM, PVM, `.den` — is read as a volume whose
+//! `(x, y, z)` axes are `(col, row, angle)`, so its samples arrive as that reader gives
+//! them (integers exact, doubles rounded to f32; see [`crate::io`]); a volume of one
+//! slice (`z = 1`) is a 2-D array and so a scikit-image sinogram `(y, x) = (detector,
+//! angle)`. [`ReadOptions::frame`] picks one stack of a 4-D file. NRRD is also written,
+//! as gzip-compressed `float` with spacing `du dv 1` (stack) or `1 du` (sinogram) when a
+//! geometry is given, else 1.
+//!
+//! # Flat and dark fields
+//!
+//! [`read_field_image`] reads a flat- or dark-field file in any of the formats above for
+//! projections of `rows × cols` pixels: one `(rows, cols)` image or a stack
+//! `(frame, rows, cols)` whose frames are averaged in f64 (for one-row sinograms also a
+//! `(detector, frame)` array). [`crate::ct::flat_field`] turns intensities into line
+//! integrals with them.
 //!
 //! Every read refuses non-finite samples, arrays that are not 2-D or 3-D, and sizes
 //! past [`crate::volume::max_voxels`] (before allocating); truncated files and wrong
@@ -57,7 +70,8 @@
 //! (whole-line or trailing) are ignored.
 
 use super::npy::{npy_float_shape, read_npy_f64, read_npy_f64_lines, write_npy_f32, write_npy_f64};
-use super::nrrd::{read_nrrd, write_nrrd, NrrdWriteOptions};
+use super::nrrd::{write_nrrd, NrrdWriteOptions};
+use super::{choose_frame, read_volume_with, ReadOptions};
 use crate::ct::{Beam, Geometry, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::real::Real;
@@ -74,29 +88,137 @@ pub enum Layout {
     Skimage,
 }
 
-/// Reads a projection stack from `.npy`, `.nrrd` or `.nhdr` (see the module docs for
-/// the layouts). Fails on non-finite samples, arrays that are not 2-D or 3-D, and
-/// unsupported dtypes or extensions.
+/// Reads a projection stack from any file [`crate::io::read_volume`] reads (see the module
+/// docs for the layouts). Fails on non-finite samples, arrays that are not 2-D or 3-D,
+/// and unsupported dtypes or formats.
 pub fn read_projections<R: Real>(path: &Path) -> Result<Projections<R>> {
-    let (shape, values) = match extension(path).as_deref() {
-        Some("npy") => {
-            let (shape, values, _) = read_npy_f64(path)?;
-            (shape, values)
-        }
-        Some("nrrd") | Some("nhdr") => {
-            let vol = read_nrrd(path)?;
-            let [nx, ny, nz] = vol.dims();
-            // NRRD's fastest axis first; a 2-D image reads as nz = 1.
-            let shape = if nz == 1 {
-                vec![ny, nx]
-            } else {
-                vec![nz, ny, nx]
-            };
-            (shape, vol.values_f64())
-        }
-        _ => return Err(unsupported(path)),
-    };
+    read_projections_with(path, &ReadOptions::default())
+}
+
+/// [`read_projections`] with [`ReadOptions`]: `frame` picks one 3-D stack of a file
+/// that holds several (a 4-D NIfTI, MetaImage or NRRD).
+pub fn read_projections_with<R: Real>(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Projections<R>> {
+    let (shape, values) = read_array(path, options)?;
     from_array(path, &shape, values)
+}
+
+/// The array in a projection, flat- or dark-field file: its shape in NumPy's order
+/// (slowest axis first) and its values. `.npy` is read in f64 as stored; every other
+/// format through [`read_volume_with`], its `(x, y, z)` taken as `(col, row, angle)`
+/// and a volume of one slice as a 2-D `(y, x)` array.
+fn read_array(path: &Path, options: &ReadOptions) -> Result<(Vec<usize>, Vec<f64>)> {
+    if path.is_file() && extension(path).as_deref() == Some("npy") {
+        choose_frame(path, "frame", 1, "", options.frame)?;
+        let (shape, values, _) = read_npy_f64(path)?;
+        return Ok((shape, values));
+    }
+    let vol = read_volume_with(path, options)?;
+    let [nx, ny, nz] = vol.dims();
+    let shape = if nz == 1 {
+        vec![ny, nx]
+    } else {
+        vec![nz, ny, nx]
+    };
+    Ok((shape, vol.values_f64()))
+}
+
+/// Reads a flat- or dark-field file (`what`: `"flat"` or `"dark"`) for projections of
+/// `rows × cols` pixels and returns its frames averaged in f64
+/// ([`crate::ct::flat_field::mean_frames`]): one `rows × cols` image. Any format
+/// [`read_projections`] reads; the array is
+///
+/// - 3-D `(frame, row, col)`: frames averaged;
+/// - 2-D with one detector row (`rows == 1`) and shape `(cols, frames)`: scikit-image's
+///   `(detector, angle)` layout, frames averaged;
+/// - 2-D `(rows, cols)`: one image.
+///
+/// # Errors
+/// A shape that is none of these (naming the file, `shape` and the projections' size),
+/// an empty stack, non-finite values, the readers' errors.
+pub fn read_field_image(
+    path: &Path,
+    what: &str,
+    rows: usize,
+    cols: usize,
+    options: &ReadOptions,
+) -> Result<Vec<f64>> {
+    let (shape, values) = read_array(path, options)?;
+    field_image(path, what, &shape, values, rows, cols)
+}
+
+/// [`read_field_image`] of an array already in memory: `shape` in NumPy's order, `path`
+/// names it in errors (a file, or `flat array`).
+///
+/// # Errors
+/// As [`read_field_image`].
+pub fn field_image(
+    path: &Path,
+    what: &str,
+    shape: &[usize],
+    values: Vec<f64>,
+    rows: usize,
+    cols: usize,
+) -> Result<Vec<f64>> {
+    if shape.iter().product::<usize>() != values.len() {
+        return Err(Error::format(
+            path,
+            "shape",
+            format!("shape {shape:?} does not hold {} values", values.len()),
+        ));
+    }
+    let (frames, values) = match *shape {
+        [k, r, c] if r == rows && c == cols => (k, values),
+        [d, k] if rows == 1 && d == cols => {
+            // (detector, frame) → frame-major.
+            let mut out = vec![0.0; values.len()];
+            for (i, v) in values.iter().enumerate() {
+                out[(i % k.max(1)) * cols + i / k.max(1)] = *v;
+            }
+            (k, out)
+        }
+        [r, c] if r == rows && c == cols => (1, values),
+        _ => {
+            return Err(Error::format(
+                path,
+                "shape",
+                format!(
+                    "the {what} field is an array of shape {shape:?}, but the projections \
+                     have rows × cols = {rows} × {cols}: give one ({rows}, {cols}) image or \
+                     a stack (frames, {rows}, {cols}){}",
+                    if rows == 1 {
+                        format!(" or a ({cols}, frames) array")
+                    } else {
+                        String::new()
+                    }
+                ),
+            ))
+        }
+    };
+    if frames == 0 {
+        return Err(Error::format(
+            path,
+            "shape",
+            format!("the {what} field holds no frames (shape {shape:?})"),
+        ));
+    }
+    if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+        return Err(Error::format(
+            path,
+            "data",
+            format!(
+                "sample {k} is {} (the {what} field must be finite)",
+                values[k]
+            ),
+        ));
+    }
+    crate::ct::flat_field::mean_frames(
+        &format!("{what} field {}", path.display()),
+        &values,
+        rows * cols,
+    )
 }
 
 /// The `(angles, rows, cols)` of a projection file that can be read detector line by
@@ -478,7 +600,7 @@ fn unsupported(path: &Path) -> Error {
     Error::invalid(
         "projection file",
         format!(
-            "{}: projections are read and written as .npy, .nrrd or .nhdr",
+            "{}: projections are written as .npy, .nrrd or .nhdr",
             path.display()
         ),
     )

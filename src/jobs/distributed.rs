@@ -327,6 +327,17 @@ fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
             message: "the ranks reconstruct on the CPU (--backend cpu or cpu-f32)".into(),
         });
     }
+    if a.flat.is_some() || a.frame.is_some() {
+        return Err(Error::invalid(
+            if a.flat.is_some() {
+                "--flat"
+            } else {
+                "--frame"
+            },
+            "does not go with --distributed yet (the ranks read line integrals from a \
+             3-D .npy stack): convert on one process first",
+        ));
+    }
     if a.truth.is_some() {
         return Err(Error::invalid(
             "--truth",

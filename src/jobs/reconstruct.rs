@@ -15,11 +15,15 @@ use crate::cpu::iterative::MatchedPair;
 use crate::cpu::iterative::{IterativeOptions, Method, Problem, SubsetOrder};
 use crate::cpu::project::JosephPair;
 use crate::cpu::ramp::RampFilter;
+use crate::ct::flat_field::{line_integrals, IntensityReport};
 use crate::ct::{ct_to_phantom, Beam, Geometry, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::gpu::joseph_pair::GpuJosephPair;
-use crate::io::projections::{geometry_path, read_angles_txt, read_geometry, read_projections};
+use crate::io::projections::{
+    geometry_path, read_angles_txt, read_field_image, read_geometry, read_projections_with,
+};
+use crate::io::ReadOptions;
 use crate::io::{write_frame, PngOptions};
 use crate::phantom::Phantom;
 use crate::volume::AnyVolume;
@@ -82,9 +86,20 @@ crate::choice_enum! {
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReconstructRequest {
-    /// Projections: `.npy`, `.nrrd` or `.nhdr`; 2-D = a scikit-image sinogram
+    /// Projections: any volume format voxlab reads (`.npy` f64 exact; NRRD, MetaImage,
+    /// TIFF, NIfTI, DICOM with x, y, z = col, row, angle); 2-D = a scikit-image sinogram
     /// (detector, angle), 3-D = a stack (angle, row, col).
     pub input: PathBuf,
+    /// Which 3-D stack to read from an input that holds several (a 4-D NIfTI,
+    /// MetaImage or NRRD; [`crate::io::ReadOptions::frame`]).
+    pub frame: Option<usize>,
+    /// The input holds detector intensities: the flat-field image (beam, no object) in
+    /// any format the input may be in; a stack of frames is averaged. The projections
+    /// become `−ln((I − D)/(F − D))` ([`crate::ct::flat_field`]). `None`: the input holds
+    /// line integrals already.
+    pub flat: Option<PathBuf>,
+    /// With `flat`: the dark-field image (no beam; `None`: 0), as `flat`.
+    pub dark: Option<PathBuf>,
     /// `parallel` (scikit-image's geometry; needs `angles`) or a geometry JSON file.
     /// `None`: `<input-stem>.geometry.json` beside the input.
     pub geometry: Option<String>,
@@ -187,6 +202,8 @@ pub struct Reconstructed {
     pub geometry_file: Option<PathBuf>,
     /// Iterative methods: residuals and objectives per iteration.
     pub iterative: Option<IterationLog>,
+    /// With a flat field: what the conversion of intensities to line integrals did.
+    pub intensity: Option<IntensityReport>,
 }
 
 /// `angles`: a count (evenly over 180°) or a file.
@@ -313,6 +330,7 @@ pub(super) fn extension(p: &Path) -> Option<String> {
 /// The options checked before any input is read: the outputs, the truth phantom and
 /// the spacing.
 pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
+    check_flat_dark(a)?;
     if let Some(out) = &a.out {
         crate::io::check_output("--out", out, &["npy", "nrrd", "nhdr", "png"])?;
     }
@@ -407,12 +425,53 @@ pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
 /// GPU errors; [`Error::Cancelled`].
 pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstructed> {
     check_request(a)?;
-    let p = read_projections::<f64>(&a.input)?;
+    let (p, intensity) = read_input(a)?;
     let (g, geometry_file) = geometry_for(a, &p)?;
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));
     }
-    reconstruct(a, p, g, geometry_file, progress)
+    let mut done = reconstruct(a, p, g, geometry_file, progress)?;
+    done.intensity = intensity;
+    Ok(done)
+}
+
+/// The request's projections as line integrals: the input read (its `frame`), and with
+/// `flat` (and `dark`) converted from intensities by [`line_integrals`], with the
+/// report of that conversion.
+///
+/// # Errors
+/// The readers' errors; flat or dark images that do not match the projections' rows ×
+/// cols (naming the file); `dark` without `flat`.
+pub fn read_input(a: &ReconstructRequest) -> Result<(Projections<f64>, Option<IntensityReport>)> {
+    check_flat_dark(a)?;
+    let options = ReadOptions {
+        frame: a.frame,
+        ..Default::default()
+    };
+    let p = read_projections_with::<f64>(&a.input, &options)?;
+    let Some(flat) = &a.flat else {
+        return Ok((p, None));
+    };
+    let fields = ReadOptions::default();
+    let f = read_field_image(flat, "flat", p.rows, p.cols, &fields)?;
+    let d = match &a.dark {
+        Some(dark) => Some(read_field_image(dark, "dark", p.rows, p.cols, &fields)?),
+        None => None,
+    };
+    let (p, report) = line_integrals(&p, &f, d.as_deref())?;
+    Ok((p, Some(report)))
+}
+
+/// `dark` goes with `flat`.
+fn check_flat_dark(a: &ReconstructRequest) -> Result<()> {
+    if a.dark.is_some() && a.flat.is_none() {
+        return Err(Error::invalid(
+            "--dark",
+            "goes with --flat: intensities need the flat field (the dark field alone \
+             gives no line integrals)",
+        ));
+    }
+    Ok(())
 }
 
 /// Reconstructs projections already in memory with their geometry: what [`run`] does
@@ -489,6 +548,7 @@ pub fn reconstruct(
         truth,
         geometry_file,
         iterative: None,
+        intensity: None,
     };
     finish(a, done)
 }
@@ -549,7 +609,7 @@ pub(super) fn fbp_projections(
 /// split.
 pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPlan> {
     check_request(a)?;
-    let p = read_projections::<f64>(&a.input)?;
+    let (p, _) = read_input(a)?;
     let (g, _) = geometry_for(a, &p)?;
     p.check_against(&g)?;
     let mut writes: Vec<String> = a.out.iter().map(|o| o.display().to_string()).collect();
@@ -968,6 +1028,7 @@ fn iterative(
             truth,
             geometry_file,
             iterative: Some(log),
+            intensity: None,
         },
     )
 }

@@ -14,9 +14,25 @@ use voxlab::Result;
 /// Arguments of `voxlab reconstruct`.
 #[derive(Args)]
 pub struct ReconstructArgs {
-    /// Projections: .npy, .nrrd or .nhdr; 2-D = a scikit-image sinogram (detector,
-    /// angle), 3-D = a stack (angle, row, col).
+    /// Projections in any volume format voxlab reads (.npy, .nrrd/.nhdr, .mha/.mhd, TIFF
+    /// file or directory, NIfTI, DICOM; x, y, z = col, row, angle); 2-D = a scikit-image
+    /// sinogram (detector, angle), 3-D = a stack (angle, row, col). Line integrals, or
+    /// intensities with --flat (and --dark).
     pub input: PathBuf,
+    /// Which 3-D stack to read from an input that holds several (a 4-D NIfTI, MetaImage
+    /// or NRRD): 0, 1, …
+    #[arg(long)]
+    pub frame: Option<usize>,
+    /// The input holds detector intensities I: the flat-field image F (beam, no object),
+    /// one (rows, cols) image or a stack of frames (averaged), any format the input may
+    /// be in. The projections become p = −ln((I − D)/(F − D)); dead pixels (F − D ≤ 0)
+    /// give 0, starved ones (I − D ≤ 0) the floored ratio; the counts are printed
+    /// (docs/ct.md).
+    #[arg(long)]
+    pub flat: Option<PathBuf>,
+    /// With --flat: the dark-field image D (no beam; default 0), as --flat.
+    #[arg(long, requires = "flat")]
+    pub dark: Option<PathBuf>,
     /// `parallel` (scikit-image's geometry; needs --angles) or a geometry JSON file (as
     /// `voxlab project` writes). Default: <input-stem>.geometry.json beside the input.
     #[arg(long)]
@@ -117,6 +133,9 @@ pub struct ReconstructArgs {
 pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
     let req = ReconstructRequest {
         input: a.input.clone(),
+        frame: a.frame,
+        flat: a.flat.clone(),
+        dark: a.dark.clone(),
         geometry: a.geometry.clone(),
         angles: a.angles.clone(),
         filter: a.filter,
@@ -162,6 +181,9 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
     }
     let r = voxlab::jobs::reconstruct::run(&req, &term)?;
     drop(term);
+    if let Some(report) = &r.intensity {
+        println!("{}", report.summary());
+    }
     let d = r.reconstruction.grid.dims;
     let shape = if d[2] == 1 {
         format!("{}×{} image", d[0], d[1])
