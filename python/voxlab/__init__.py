@@ -189,9 +189,9 @@ def read(path: Union[str, "os.PathLike[str]"], *, raw: Optional[Dict[str, Any]] 
     "little", "spacing": [sx, sy, sz], "offset": 0}``.
 
     A file that holds several 3-D volumes (a NIfTI time series or vector image,
-    ``dim[4..7]``; a 4-D MetaImage; a NRRD with a non-spatial axis) is read one volume
-    at a time: ``frame=k`` (0, 1, …; :func:`info` says how many there are); without it
-    such a file is refused naming how many it holds.
+    ``dim[4..7]``; a 4-D or vector MetaImage; a NRRD with a non-spatial axis; a DICOM
+    time series) is read one volume at a time: ``frame=k`` (0, 1, …; :func:`info` says
+    how many there are); without it such a file is refused naming how many it holds.
 
     NaN and infinite voxels are kept as stored. Raises :class:`FileError`,
     :class:`FormatError` (the file and the field) or :class:`TooLargeError`.

@@ -354,14 +354,16 @@ pub struct ReadOptions {
     /// that an untrusted header cannot make voxlab read any file the user can.
     pub confine_data_files: bool,
     /// Which 3-D volume to read from a file that holds several (a NIfTI `dim[4..7]`, a
-    /// MetaImage of 4 dimensions, a NRRD with a non-spatial axis): its index, the
-    /// extra axes counted as one. `None` refuses such a file, naming how many it holds.
+    /// MetaImage of 4 dimensions or several channels, a NRRD with a non-spatial axis, a
+    /// DICOM time series): its index, the extra axes counted as one. `None` refuses
+    /// such a file, naming how many it holds; a file of one volume takes 0 only.
     pub frame: Option<usize>,
 }
 
 /// How many 3-D volumes a file holds, from its header: more than 1 for a NIfTI time
-/// series or vector image, a 4-D MetaImage or a NRRD with a non-spatial axis (those
-/// are read one at a time, [`ReadOptions::frame`]); 1 for every other file.
+/// series or vector image, a 4-D or vector MetaImage, a NRRD with a non-spatial axis
+/// or a DICOM time series (those are read one at a time, [`ReadOptions::frame`]); 1
+/// for every other file.
 ///
 /// # Errors
 /// The header's errors.

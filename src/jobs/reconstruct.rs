@@ -91,7 +91,7 @@ pub struct ReconstructRequest {
     /// (detector, angle), 3-D = a stack (angle, row, col).
     pub input: PathBuf,
     /// Which 3-D stack to read from an input that holds several (a 4-D NIfTI,
-    /// MetaImage or NRRD; [`crate::io::ReadOptions::frame`]).
+    /// MetaImage or NRRD, a DICOM time series; [`crate::io::ReadOptions::frame`]).
     pub frame: Option<usize>,
     /// The input holds detector intensities: the flat-field image (beam, no object) in
     /// any format the input may be in; a stack of frames is averaged. The projections

@@ -110,8 +110,8 @@ pub struct LoadArgs {
     #[arg(long)]
     pub confine_data_files: bool,
     /// Which 3-D volume to read from a file that holds several (a NIfTI time series or
-    /// vector image, a 4-D MetaImage, a NRRD with a non-spatial axis): 0, 1, …;
-    /// `voxlab info` says how many a file holds.
+    /// vector image, a 4-D or vector MetaImage, a NRRD with a non-spatial axis, a DICOM
+    /// time series): 0, 1, …; `voxlab info` says how many a file holds.
     #[arg(long)]
     pub frame: Option<usize>,
 }

@@ -92,7 +92,7 @@
 //! or OW) and deflated explicit VR little endian.
 //!
 //! Compressed (encapsulated) pixel data is decoded into the same stored samples
-//! ([`encapsulated`] says which decoder reads what):
+//! (`src/io/dicom/encapsulated.rs` says which decoder reads what):
 //!
 //! | syntax | UID | notes |
 //! |---|---|---|

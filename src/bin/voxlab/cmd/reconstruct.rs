@@ -20,7 +20,7 @@ pub struct ReconstructArgs {
     /// intensities with --flat (and --dark).
     pub input: PathBuf,
     /// Which 3-D stack to read from an input that holds several (a 4-D NIfTI, MetaImage
-    /// or NRRD): 0, 1, …
+    /// or NRRD, a DICOM time series): 0, 1, …
     #[arg(long)]
     pub frame: Option<usize>,
     /// The input holds detector intensities I: the flat-field image F (beam, no object),
