@@ -79,6 +79,32 @@ pub struct Geometry {
     pub cv: f64,
 }
 
+/// One view of a geometry given view by view — RTK's geometry XML, ASTRA's `cone_vec`
+/// and `parallel3d_vec` — as four vectors in the CT frame (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewVectors {
+    /// Cone beam: the source's position. Parallel beam: the rays' direction, from the
+    /// source side towards the detector (any nonzero length).
+    pub source: DVec3,
+    /// The centre of detector pixel `(col, row) = (0, 0)`.
+    pub pixel00: DVec3,
+    /// From the centre of pixel `(col, row)` to that of `(col + 1, row)`.
+    pub u: DVec3,
+    /// From the centre of pixel `(col, row)` to that of `(col, row + 1)`.
+    pub v: DVec3,
+}
+
+/// A geometry given view by view: the beam's kind, the detector's size and one
+/// [`ViewVectors`] per projection. [`Geometry::from_views`] turns it into a [`Geometry`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewGeometry {
+    /// Parallel rays (`ViewVectors::source` is a direction) or a point source.
+    pub parallel: bool,
+    pub cols: usize,
+    pub rows: usize,
+    pub views: Vec<ViewVectors>,
+}
+
 /// The largest number of projections or detector pixels per axis accepted (a lying
 /// header or a typo must not allocate terabytes).
 pub const MAX_DETECTOR: usize = 1 << 16;
@@ -146,6 +172,18 @@ impl Geometry {
         };
         g.validate()?;
         Ok(g)
+    }
+
+    /// A geometry given view by view (RTK's XML, ASTRA's vectors, voxlab's `views`).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for views that do not define a detector and a beam.
+    pub fn from_views(views: ViewGeometry) -> Result<Self> {
+        let _ = views;
+        Err(Error::invalid(
+            "CT geometry",
+            "a geometry given view by view is not supported yet",
+        ))
     }
 
     /// `n` angles evenly spread over `[0, range_deg)` (`range_deg = 180` for a parallel
