@@ -18,6 +18,13 @@
 //! right and `y = n//2 − row` up lies in the world's xz-plane as `X = x`, `Z = −y`; then
 //! `u = X cos a − Z sin a = x cos θ + y sin θ` with `θ = a`, exactly scikit-image's `s`.
 //!
+//! **Given view by view** ([`Geometry::from_views`]): RTK's geometry XML, ASTRA's
+//! `cone_vec`/`parallel3d_vec` — per view a source (or ray direction), the centre of
+//! detector pixel `(0, 0)` and the pixel steps `u`, `v` ([`ViewVectors`]). The
+//! projective map then comes from the vectors (`per_view_matrix`: Cramer's rule on
+//! the ray–plane intersection), and the FDK weights from each view's distances along
+//! its detector normal ([`ViewFrame`]); the circle's fields become nominal values.
+//!
 //! # Detector pixels
 //! Detector pixel `(col, row)` has its centre at
 //! `u = (col − cu)·du`, `v = (row − cv)·dv`; `cu`, `cv` are the (possibly fractional)
@@ -714,7 +721,7 @@ fn check_view(k: usize, v: &ViewVectors, parallel: bool) -> Result<()> {
     }
     let (lu, lv) = (v.u.length(), v.v.length());
     let sin = v.u.cross(v.v).length() / (lu * lv);
-    if !(sin >= MIN_SINE) {
+    if !(sin.is_finite() && sin >= MIN_SINE) {
         return bad(format!(
             "u and v are parallel (the sine of their angle is {sin:e}): they span no detector"
         ));
@@ -722,18 +729,18 @@ fn check_view(k: usize, v: &ViewVectors, parallel: bool) -> Result<()> {
     let n = v.u.cross(v.v).normalize();
     if parallel {
         let l = v.source.length();
-        if !(l >= 1e-150) {
+        if !(l.is_finite() && l >= 1e-150) {
             return bad("the ray direction (source) is zero".into());
         }
         let c = (v.source.dot(n) / l).abs();
-        if !(c >= MIN_SINE) {
+        if !(c.is_finite() && c >= MIN_SINE) {
             return bad(format!(
                 "the rays run parallel to the detector plane (cosine with its normal {c:e})"
             ));
         }
     } else {
         let sdd = n.dot(v.pixel00 - v.source).abs();
-        if !(sdd >= MIN_LENGTH_MM) {
+        if !(sdd.is_finite() && sdd >= MIN_LENGTH_MM) {
             return bad(format!(
                 "the source lies on the detector plane (distance {sdd:e} mm)"
             ));
