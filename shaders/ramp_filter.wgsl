@@ -12,8 +12,11 @@
 @group(0) @binding(1) var<storage, read_write> lines: array<f32>;
 // The packed complex lines, `[re, im]` pairs, P per line.
 @group(0) @binding(2) var<storage, read_write> packed: array<vec2<f32>>;
-// The effective response times 1/(P·spacing), P values (NumPy FFT order).
+// The effective response times 1/(P·spacing), P values (NumPy FFT order); for views
+// given by vectors times 1/P only (each view's 1/spacing is in its weight).
 @group(0) @binding(3) var<storage, read> response: array<f32>;
+// Every view's pre-weighting (weighting 2), one dummy entry otherwise.
+@group(0) @binding(4) var<storage, read> views: array<RampViewGpu>;
 
 fn invocation(gid: vec3<u32>) -> u32 {
     return gid.x + gid.y * params.work.y;
@@ -23,6 +26,17 @@ fn invocation(gid: vec3<u32>) -> u32 {
 // mirrors src/cpu/ramp.rs: cosine_weight
 fn cosine_weight(sdd: f32, u: f32, v: f32) -> f32 {
     return sdd / sqrt(sdd * sdd + u * u + v * v);
+}
+
+// The pre-weight of pixel (col, row) of a view given by vectors: 1/spacing times, for
+// a cone beam, the cosine SDD/|X − S| of the ray's angle with the detector normal.
+// mirrors src/cpu/ramp.rs: RampView::weight
+fn view_weight(w: RampViewGpu, col: f32, row: f32) -> f32 {
+    if w.r.w == 0.0 {
+        return w.u.w;
+    }
+    let x = w.r.xyz + w.u.xyz * col + w.v.xyz * row;
+    return w.u.w * w.r.w / length(x);
 }
 
 // Detector line `line` (view-major, then row) at column `c`, cosine-weighted for a
@@ -36,6 +50,10 @@ fn preweighted_sample(line: u32, c: u32) -> f32 {
     let x = lines[line * cols + c];
     if params.work.z == 0u {
         return x;
+    }
+    if params.work.z == 2u {
+        let rows = params.dims.y;
+        return x * view_weight(views[params.work.w + line / rows], f32(c), f32(line % rows));
     }
     let u = (f32(c) - params.detector.x) * params.detector.z;
     let v = (f32(line % params.dims.y) - params.detector.y) * params.detector.w;

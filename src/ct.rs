@@ -18,6 +18,13 @@
 //! right and `y = n//2 − row` up lies in the world's xz-plane as `X = x`, `Z = −y`; then
 //! `u = X cos a − Z sin a = x cos θ + y sin θ` with `θ = a`, exactly scikit-image's `s`.
 //!
+//! **Given view by view** ([`Geometry::from_views`]): RTK's geometry XML, ASTRA's
+//! `cone_vec`/`parallel3d_vec` — per view a source (or ray direction), the centre of
+//! detector pixel `(0, 0)` and the pixel steps `u`, `v` ([`ViewVectors`]). The
+//! projective map then comes from the vectors (`per_view_matrix`: Cramer's rule on
+//! the ray–plane intersection), and the FDK weights from each view's distances along
+//! its detector normal ([`ViewFrame`]); the circle's fields become nominal values.
+//!
 //! # Detector pixels
 //! Detector pixel `(col, row)` has its centre at
 //! `u = (col − cu)·du`, `v = (row − cv)·dv`; `cu`, `cv` are the (possibly fractional)
@@ -77,6 +84,13 @@ pub struct Geometry {
     /// Index of the detector pixel the central ray hits (fractional allowed).
     pub cu: f64,
     pub cv: f64,
+    /// A geometry given view by view ([`Geometry::from_views`]): one [`ViewVectors`]
+    /// per projection, which then define every view; `None` for the circular orbit
+    /// the fields above describe. With views, `beam`, `angles_deg`, `du`, `dv`, `cu`
+    /// and `cv` are nominal values taken from them (see [`Geometry::from_views`]): the
+    /// beam's kind, and view 0's spacing, centre and distances for defaults and
+    /// messages.
+    pub views: Option<Vec<ViewVectors>>,
 }
 
 /// One view of a geometry given view by view — RTK's geometry XML, ASTRA's `cone_vec`
@@ -122,6 +136,7 @@ impl Geometry {
             dv: 1.0,
             cu: (cols / 2) as f64,
             cv: 0.0,
+            views: None,
         };
         g.validate()?;
         Ok(g)
@@ -145,6 +160,7 @@ impl Geometry {
             dv,
             cu: (cols / 2) as f64,
             cv: (rows as f64 - 1.0) / 2.0,
+            views: None,
         };
         g.validate()?;
         Ok(g)
@@ -169,6 +185,7 @@ impl Geometry {
             dv,
             cu: (cols as f64 - 1.0) / 2.0,
             cv: (rows as f64 - 1.0) / 2.0,
+            views: None,
         };
         g.validate()?;
         Ok(g)
@@ -176,14 +193,150 @@ impl Geometry {
 
     /// A geometry given view by view (RTK's XML, ASTRA's vectors, voxlab's `views`).
     ///
+    /// The views define everything; the circular fields are filled with nominal
+    /// values for defaults and messages: `beam` is [`Beam::Parallel`] or
+    /// [`Beam::Cone`] with view 0's source–isocentre distance `|S₀|` and its
+    /// source–detector distance `SDD₀` (the source's distance from the detector
+    /// plane); `angles_deg[k]` is view `k`'s gantry angle in RTK's sense (the source's
+    /// azimuth about the `y` axis, `atan2(S_x, S_z)`; for a parallel beam that of
+    /// `−direction`); `du`, `dv` are view 0's `|u|`, `|v|`; `cu`, `cv` the detector
+    /// indices where view 0's ray through the isocentre lands (the detector's centre
+    /// when it misses). A parallel beam's direction is stored normalised.
+    ///
     /// # Errors
-    /// [`Error::Invalid`] for views that do not define a detector and a beam.
+    /// [`Error::Invalid`] for views that do not define a detector and a beam
+    /// ([`Geometry::validate`]: non-finite vectors, `u` and `v` parallel or of
+    /// absurd length, a source on the detector plane, rays parallel to it);
+    /// [`Error::TooLarge`] for too many views or pixels.
     pub fn from_views(views: ViewGeometry) -> Result<Self> {
-        let _ = views;
-        Err(Error::invalid(
-            "CT geometry",
-            "a geometry given view by view is not supported yet",
-        ))
+        let ViewGeometry {
+            parallel,
+            cols,
+            rows,
+            mut views,
+        } = views;
+        if views.is_empty() {
+            return Err(Error::invalid("CT geometry", "no views"));
+        }
+        if views.len() > MAX_DETECTOR {
+            return Err(Error::too_large(
+                "CT geometry",
+                format!("{} views (at most {MAX_DETECTOR})", views.len()),
+            ));
+        }
+        for (k, v) in views.iter().enumerate() {
+            check_view(k, v, parallel)?;
+        }
+        if parallel {
+            for v in &mut views {
+                v.source = v.source.normalize();
+            }
+        }
+        let angles_deg = views
+            .iter()
+            .map(|v| {
+                let s = if parallel { -v.source } else { v.source };
+                s.x.atan2(s.z).to_degrees()
+            })
+            .collect();
+        let v0 = views[0];
+        let beam = if parallel {
+            Beam::Parallel
+        } else {
+            let f = view_frame(&v0, false);
+            Beam::Cone {
+                sid: v0.source.length(),
+                sdd: f.sdd,
+            }
+        };
+        let m = per_view_matrix(&v0, parallel);
+        let centre = ((cols as f64 - 1.0) / 2.0, (rows as f64 - 1.0) / 2.0);
+        let (cu, cv) = if m[2][3] > 0.0 {
+            let (c, r) = (m[0][3] / m[2][3], m[1][3] / m[2][3]);
+            if c.is_finite() && r.is_finite() && c.abs() <= 1e12 && r.abs() <= 1e12 {
+                (c, r)
+            } else {
+                centre
+            }
+        } else {
+            centre
+        };
+        let g = Geometry {
+            beam,
+            angles_deg,
+            cols,
+            rows,
+            du: v0.u.length(),
+            dv: v0.v.length(),
+            cu,
+            cv,
+            views: Some(views),
+        };
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// Whether the geometry is the circular orbit of its fields (no per-view vectors).
+    pub fn is_circular(&self) -> bool {
+        self.views.is_none()
+    }
+
+    /// A clear error for an option that needs a circular orbit, given a geometry
+    /// defined view by view; `what` names the option.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming `what` when `self` has per-view vectors.
+    pub fn require_circular(&self, what: &str) -> Result<()> {
+        if self.is_circular() {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                what,
+                "needs a circular orbit (a geometry of beam, angles and detector), but this \
+                 geometry is given view by view",
+            ))
+        }
+    }
+
+    /// The four vectors of view `k` ([`ViewVectors`]): the stored ones for a
+    /// geometry given view by view, else those of the circular orbit — cone source
+    /// `SID·e_w` (parallel direction `−e_w`), pixel `(0, 0)` at
+    /// [`Geometry::detector_point`], `u = du·e_u`, `v = dv·e_v`. Feeding every view's
+    /// vectors to [`Geometry::from_views`] gives the same geometry view by view.
+    pub fn view_vectors(&self, k: usize) -> ViewVectors {
+        if let Some(views) = &self.views {
+            return views[k];
+        }
+        let (eu, ev, ew) = self.axes(k);
+        ViewVectors {
+            source: match self.beam {
+                Beam::Parallel => -ew,
+                Beam::Cone { sid, .. } => ew * sid,
+            },
+            pixel00: self.detector_point(k, 0.0, 0.0),
+            u: eu * self.du,
+            v: ev * self.dv,
+        }
+    }
+
+    /// Distances of view `k` along its detector normal ([`ViewFrame`]).
+    pub fn view_frame(&self, k: usize) -> ViewFrame {
+        match &self.views {
+            Some(views) => view_frame(&views[k], self.beam == Beam::Parallel),
+            None => {
+                let (_, _, ew) = self.axes(k);
+                let (sid, sdd) = match self.beam {
+                    Beam::Parallel => (0.0, 0.0),
+                    Beam::Cone { sid, sdd } => (sid, sdd),
+                };
+                ViewFrame {
+                    normal: -ew,
+                    sid,
+                    sdd,
+                    source_distance: sid,
+                }
+            }
+        }
     }
 
     /// `n` angles evenly spread over `[0, range_deg)` (`range_deg = 180` for a parallel
@@ -257,6 +410,18 @@ impl Geometry {
                 ));
             }
         }
+        if let Some(views) = &self.views {
+            if views.len() != self.angles_deg.len() {
+                return bad(format!(
+                    "{} views for {} angles",
+                    views.len(),
+                    self.angles_deg.len()
+                ));
+            }
+            for (k, v) in views.iter().enumerate() {
+                check_view(k, v, self.beam == Beam::Parallel)?;
+            }
+        }
         Ok(())
     }
 
@@ -282,6 +447,24 @@ impl Geometry {
         let Beam::Cone { sid, .. } = self.beam else {
             return Ok(None);
         };
+        if let Some(views) = &self.views {
+            // Each view's source against the box, in the grid's index frame.
+            let inv = affine.inverse();
+            for (k, v) in views.iter().enumerate() {
+                let x = inv.transform_point3(v.source);
+                if (0..3).all(|a| x[a] > -0.5 && x[a] < dims[a] as f64 - 0.5) {
+                    return Err(Error::invalid(
+                        what,
+                        format!(
+                            "the source of view {k} at ({:.4}, {:.4}, {:.4}) mm lies inside \
+                             {box_name}",
+                            v.source.x, v.source.y, v.source.z
+                        ),
+                    ));
+                }
+            }
+            return Ok(None);
+        }
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         let mut r_out: f64 = 0.0;
         for p in crate::volume::box_corners(dims, affine) {
@@ -315,8 +498,17 @@ impl Geometry {
         self.angles_deg.len()
     }
 
-    /// The view unit vectors `(e_u, e_v, e_w)` at projection `k`.
+    /// The view unit vectors `(e_u, e_v, e_w)` at projection `k`. For a geometry
+    /// given view by view: `e_u = u/|u|`, `e_w` the detector's unit normal towards
+    /// the source (against a parallel beam's rays), `e_v = e_w × e_u` (along `v` when
+    /// `u ⟂ v`).
     pub fn axes(&self, k: usize) -> (DVec3, DVec3, DVec3) {
+        if let Some(views) = &self.views {
+            let f = view_frame(&views[k], self.beam == Beam::Parallel);
+            let eu = views[k].u.normalize();
+            let ew = -f.normal;
+            return (eu, ew.cross(eu), ew);
+        }
         let a = self.angles_deg[k].to_radians();
         let (s, c) = a.sin_cos();
         (DVec3::new(c, 0.0, -s), DVec3::Y, DVec3::new(s, 0.0, c))
@@ -325,6 +517,10 @@ impl Geometry {
     /// The world position of the centre of detector pixel `(col, row)` of view `k`
     /// (continuous indices allowed).
     pub fn detector_point(&self, k: usize, col: f64, row: f64) -> DVec3 {
+        if let Some(views) = &self.views {
+            let v = &views[k];
+            return v.pixel00 + v.u * col + v.v * row;
+        }
         let (eu, ev, ew) = self.axes(k);
         let (u, v) = ((col - self.cu) * self.du, (row - self.cv) * self.dv);
         match self.beam {
@@ -339,7 +535,22 @@ impl Geometry {
     /// A parallel ray is the whole line through the pixel's point on the isocentre
     /// plane (`t ≥ −∞`; keeping the origin there keeps chord computations exact); a
     /// cone ray starts at the source (`t ≥ 0`).
+    ///
+    /// For a geometry given view by view a parallel ray's origin is the pixel's
+    /// point moved along the ray to the plane through the isocentre perpendicular
+    /// to it, for the same reason.
     pub fn ray(&self, k: usize, col: f64, row: f64) -> (DVec3, DVec3, f64) {
+        if let Some(views) = &self.views {
+            let det = self.detector_point(k, col, row);
+            let s = views[k].source;
+            return match self.beam {
+                Beam::Parallel => {
+                    let d = s.normalize();
+                    (det - d * det.dot(d), d, f64::NEG_INFINITY)
+                }
+                Beam::Cone { .. } => (s, (det - s).normalize(), 0.0),
+            };
+        }
         let (_, _, ew) = self.axes(k);
         let det = self.detector_point(k, col, row);
         match self.beam {
@@ -357,6 +568,9 @@ impl Geometry {
     }
 
     fn view_matrix_f64(&self, k: usize) -> [[f64; 4]; 4] {
+        if let Some(views) = &self.views {
+            return per_view_matrix(&views[k], self.beam == Beam::Parallel);
+        }
         let (eu, ev, ew) = self.axes(k);
         // Rows: numerator of the column index, of the row index, the denominator, and
         // the weight's numerator (see `ViewMatrix`).
@@ -394,6 +608,154 @@ impl Geometry {
         (0..self.n_angles()).map(|k| self.view_matrix(k)).collect()
     }
 }
+
+/// The distances of one view along its detector normal — the quantities FDK's
+/// weights are made of (RTK's `FDKWeightProjectionFilter` and
+/// `FDKBackProjectionImageFilter`; [`Geometry::view_frame`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewFrame {
+    /// The detector plane's unit normal, pointing from the source's side to the
+    /// detector (along a parallel beam's rays: `normal · direction > 0`).
+    pub normal: DVec3,
+    /// Cone beam: the isocentre's depth along the normal from the source,
+    /// `SID_k = (O − S)·n̂` (RTK's source-to-isocentre distance). 0 for a parallel beam.
+    pub sid: f64,
+    /// Cone beam: the detector plane's distance from the source,
+    /// `SDD_k = (pixel00 − S)·n̂`. 0 for a parallel beam.
+    pub sdd: f64,
+    /// Cone beam: the source's distance from the isocentre `|S|` (equal to `sid` when
+    /// the normal through the source meets the isocentre). 0 for a parallel beam.
+    pub source_distance: f64,
+}
+
+/// [`ViewFrame`] of one view given by vectors (`source` a unit direction when
+/// `parallel`).
+fn view_frame(v: &ViewVectors, parallel: bool) -> ViewFrame {
+    let n = v.u.cross(v.v).normalize();
+    if parallel {
+        let n = if n.dot(v.source) < 0.0 { -n } else { n };
+        return ViewFrame {
+            normal: n,
+            sid: 0.0,
+            sdd: 0.0,
+            source_distance: 0.0,
+        };
+    }
+    let r = v.pixel00 - v.source;
+    let n = if n.dot(r) < 0.0 { -n } else { n };
+    ViewFrame {
+        normal: n,
+        sid: -n.dot(v.source),
+        sdd: n.dot(r),
+        source_distance: v.source.length(),
+    }
+}
+
+/// The rows of [`ViewMatrix`] for one view given by vectors (`source` a unit
+/// direction when `parallel`).
+///
+/// Cone beam, source `S`, pixel `(0, 0)` at `D₀`, steps `u`, `v`, normal
+/// `n̂ ∝ u × v` towards the detector, `r = D₀ − S`: the ray from `S` through `P`
+/// meets the detector at `S + t·(P − S) = D₀ + col·u + row·v`, and Cramer's rule gives
+///
+/// `col = (P − S)·(v × r) / (P − S)·(u × v)`, `row = (P − S)·(r × u) / (P − S)·(u × v)`.
+///
+/// Numerators and denominator are scaled alike so that the denominator is the depth
+/// `(P − S)·n̂` in mm, and the weight's numerator is `SID_k = (O − S)·n̂`: the FDK
+/// weight `(SID_k/depth)²` is then RTK's (its backprojection divides the projective
+/// map by its value at the isocentre). Parallel beam, unit direction `d`: `P` moves
+/// along `d` onto the plane, `col = d·(v × (D₀ − P)) / d·(u × v)`,
+/// `row = d·((D₀ − P) × u) / d·(u × v)`, denominator 1, weight 1.
+fn per_view_matrix(v: &ViewVectors, parallel: bool) -> [[f64; 4]; 4] {
+    let n = v.u.cross(v.v);
+    if parallel {
+        let d = v.source;
+        let q = d.dot(n);
+        let c = -d.cross(v.v) / q;
+        let r = -v.u.cross(d) / q;
+        return [
+            [c.x, c.y, c.z, d.dot(v.v.cross(v.pixel00)) / q],
+            [r.x, r.y, r.z, d.dot(v.pixel00.cross(v.u)) / q],
+            [0.0, 0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0, 0.0],
+        ];
+    }
+    let s = v.source;
+    let r = v.pixel00 - s;
+    let f = view_frame(v, false);
+    // σ/|n|: the factor that turns (P − S)·n into the depth (P − S)·n̂.
+    let scale = f.normal.dot(n).recip();
+    let a = v.v.cross(r) * scale;
+    let b = r.cross(v.u) * scale;
+    let row = |e: DVec3| [e.x, e.y, e.z, -e.dot(s)];
+    [row(a), row(b), row(f.normal), [f.sid, 0.0, 0.0, 0.0]]
+}
+
+/// Checks one view given by vectors: finite, lengths in range, `u` and `v` not
+/// parallel, the source off the detector plane (cone) or the rays not parallel to it.
+fn check_view(k: usize, v: &ViewVectors, parallel: bool) -> Result<()> {
+    let bad = |m: String| Err(Error::invalid("CT geometry", format!("view {k}: {m}")));
+    for (name, x) in [
+        ("source", v.source),
+        ("pixel00", v.pixel00),
+        ("u", v.u),
+        ("v", v.v),
+    ] {
+        if !x.is_finite() {
+            return bad(format!("{name} is not finite"));
+        }
+        if x.length() > MAX_LENGTH_MM {
+            return bad(format!(
+                "|{name}| = {:e} mm exceeds {MAX_LENGTH_MM:e} mm",
+                x.length()
+            ));
+        }
+    }
+    for (name, x) in [("u", v.u), ("v", v.v)] {
+        let l = x.length();
+        if l < MIN_LENGTH_MM {
+            return bad(format!(
+                "the pixel step |{name}| = {l:e} mm is below {MIN_LENGTH_MM:e} mm"
+            ));
+        }
+    }
+    let (lu, lv) = (v.u.length(), v.v.length());
+    let sin = v.u.cross(v.v).length() / (lu * lv);
+    if !(sin.is_finite() && sin >= MIN_SINE) {
+        return bad(format!(
+            "u and v are parallel (the sine of their angle is {sin:e}): they span no detector"
+        ));
+    }
+    let n = v.u.cross(v.v).normalize();
+    if parallel {
+        let l = v.source.length();
+        if !(l.is_finite() && l >= 1e-150) {
+            return bad("the ray direction (source) is zero".into());
+        }
+        let c = (v.source.dot(n) / l).abs();
+        if !(c.is_finite() && c >= MIN_SINE) {
+            return bad(format!(
+                "the rays run parallel to the detector plane (cosine with its normal {c:e})"
+            ));
+        }
+    } else {
+        let sdd = n.dot(v.pixel00 - v.source).abs();
+        if !(sdd.is_finite() && sdd >= MIN_LENGTH_MM) {
+            return bad(format!(
+                "the source lies on the detector plane (distance {sdd:e} mm)"
+            ));
+        }
+        if v.source.length() < MIN_LENGTH_MM {
+            return bad("the source sits at the isocentre".into());
+        }
+    }
+    Ok(())
+}
+
+/// The smallest sine of the angle between a view's `u` and `v` (and between a
+/// parallel beam's rays and its detector plane) that a geometry may give: below it
+/// the detector's coordinates are ill-conditioned.
+pub const MIN_SINE: f64 = 1e-6;
 
 /// The projective map of one view: world point `P` (mm) → continuous detector indices
 /// `(col, row)` and the FDK distance weight.

@@ -273,6 +273,22 @@ fn ramp_params_layout_agrees() {
 }
 
 #[test]
+fn ramp_view_layout_agrees() {
+    use voxlab::gpu::ramp::{shader_source, RampViewGpu};
+    let (span, members) = wgsl_struct_layout(&shader_source(), "RampViewGpu");
+    assert_eq!(span as usize, size_of::<RampViewGpu>(), "struct size");
+    let rust: Vec<(&str, usize)> = vec![
+        ("r", offset_of!(RampViewGpu, r)),
+        ("u", offset_of!(RampViewGpu, u)),
+        ("v", offset_of!(RampViewGpu, v)),
+    ];
+    for ((name, off), (wname, woff)) in rust.iter().zip(&members) {
+        assert_eq!((*name, *off as u32), (wname.as_str(), *woff));
+    }
+    assert_eq!(members.len(), rust.len());
+}
+
+#[test]
 fn process_params_layout_agrees() {
     use voxlab::gpu::process::{ProcessParams, PARAMS_WGSL};
     let (span, members) = wgsl_struct_layout(PARAMS_WGSL, "ProcessParams");

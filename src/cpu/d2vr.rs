@@ -344,6 +344,8 @@ impl<'a, R: Real> ProjectionField<'a, R> {
         occupancy: Option<&'a OccupancyMask>,
     ) -> Result<Self> {
         g.validate()?;
+        // The bounding cylinder (`effective_cylinder`) is that of a circular orbit.
+        g.require_circular("D²VR")?;
         q.check_against(g)?;
         if let Some(m) = occupancy {
             if m.dims != grid.dims {

@@ -59,6 +59,9 @@ pub struct ShortScan {
 /// measured) or of a full turn or more (no short scan: reconstruct without weights).
 pub fn short_scan(g: &Geometry) -> Result<ShortScan> {
     g.validate()?;
+    // Parker's weights are functions of the gantry angle and the fan angle of a
+    // circular orbit.
+    g.require_circular("short scan (--short-scan)")?;
     let bad = |m: String| Err(Error::invalid("short scan", m));
     let Beam::Cone { sdd, .. } = g.beam else {
         return bad(

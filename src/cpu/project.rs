@@ -191,11 +191,90 @@ impl<R: Real> JosephView<R> {
         let inv = affine.inverse();
         let point = |p: DVec3| inv.transform_point3(p);
         let vector = |v: DVec3| inv.transform_vector3(v);
+        let z = DVec3::ZERO;
+        let (a0, a_u, a_v, d0, d_u, d_v, w0, w_u, w_v, t_min) = if let Some(views) = &g.views {
+            // A view given by vectors: a cone's rays leave the source towards
+            // pixel00 + c·u + r·v; a parallel ray runs along the unit direction `d`
+            // through the pixel's point moved along `d` onto the plane through the
+            // isocentre perpendicular to it (`x − (x·d)·d`, linear, so still affine
+            // in `(c, r)`), as `Geometry::ray` does.
+            let vv = &views[k];
+            match g.beam {
+                Beam::Parallel => {
+                    let d = vv.source.normalize();
+                    let flat = |x: DVec3| x - d * x.dot(d);
+                    (
+                        point(flat(vv.pixel00)),
+                        vector(flat(vv.u)),
+                        vector(flat(vv.v)),
+                        vector(d),
+                        z,
+                        z,
+                        d,
+                        z,
+                        z,
+                        PARALLEL_T_MIN,
+                    )
+                }
+                Beam::Cone { .. } => {
+                    let r = vv.pixel00 - vv.source;
+                    (
+                        point(vv.source),
+                        z,
+                        z,
+                        vector(r),
+                        vector(vv.u),
+                        vector(vv.v),
+                        r,
+                        vv.u,
+                        vv.v,
+                        0.0,
+                    )
+                }
+            }
+        } else {
+            Self::circular(g, k, &point, &vector)
+        };
+        let row = |v: DVec3, w: f64| [R::of(v.x), R::of(v.y), R::of(v.z), R::of(w)];
+        JosephView {
+            rows: [
+                row(a0, t_min),
+                row(a_u, 0.0),
+                row(a_v, 0.0),
+                row(d0, 0.0),
+                row(d_u, 0.0),
+                row(d_v, 0.0),
+                row(w0, 0.0),
+                row(w_u, 0.0),
+                row(w_v, 0.0),
+            ],
+        }
+    }
+
+    /// The ten rows of a circular orbit's view `k` (before rounding to `R`).
+    #[allow(clippy::type_complexity)]
+    fn circular(
+        g: &Geometry,
+        k: usize,
+        point: &dyn Fn(DVec3) -> DVec3,
+        vector: &dyn Fn(DVec3) -> DVec3,
+    ) -> (
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        DVec3,
+        f64,
+    ) {
         let (eu, ev, ew) = g.axes(k);
         let (su, sv) = (eu * g.du, ev * g.dv);
         let det00 = g.detector_point(k, 0.0, 0.0);
         let z = DVec3::ZERO;
-        let (a0, a_u, a_v, d0, d_u, d_v, w0, w_u, w_v, t_min) = match g.beam {
+        match g.beam {
             Beam::Parallel => (
                 point(det00),
                 vector(su),
@@ -223,20 +302,6 @@ impl<R: Real> JosephView<R> {
                     0.0,
                 )
             }
-        };
-        let row = |v: DVec3, w: f64| [R::of(v.x), R::of(v.y), R::of(v.z), R::of(w)];
-        JosephView {
-            rows: [
-                row(a0, t_min),
-                row(a_u, 0.0),
-                row(a_v, 0.0),
-                row(d0, 0.0),
-                row(d_u, 0.0),
-                row(d_v, 0.0),
-                row(w0, 0.0),
-                row(w_u, 0.0),
-                row(w_v, 0.0),
-            ],
         }
     }
 }

@@ -62,6 +62,7 @@ use crate::cpu::dft::{dft_1d, Direction, Normalization};
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::real::Real;
+use glam::DVec3;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 use rustfft::{FftNum, FftPlanner};
@@ -229,10 +230,119 @@ pub fn isocentre_spacing(g: &Geometry) -> f64 {
     }
 }
 
+/// One view's pre-weighting for a geometry given view by view: the FDK cosine weight
+/// and the view's own isocentre spacing folded into one factor per pixel,
+/// [`RampView::weight`]. With `S` the source, `X` the pixel's centre and the view's
+/// distances along the detector normal ([`crate::ct::ViewFrame`]):
+///
+/// - cone beam: `weight = SDD_k / |X − S|` (the cosine of the ray's angle with the
+///   detector normal; RTK's `SDD/√(SDD² + u² + v²)` with `(u, v)` measured from the
+///   foot of the source's perpendicular, so source and detector offsets are in it)
+///   divided by the spacing `|u|·SID_k²/(SDD_k·|S|)` — the pixel's width at the
+///   isocentre, `|u|·SID_k/SDD_k`, with the factor `|S|/SID_k` of RTK's
+///   `FDKWeightProjectionFilter` (Rit & Clackdoyle 2014) for a source off the normal
+///   through the isocentre;
+/// - parallel beam: `1/|u_⊥|`, the column step's component perpendicular to the rays.
+///
+/// For a circular orbit written as views these are the circular weights and spacing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RampView {
+    /// From the source to the centre of pixel `(0, 0)` (mm; unused for a parallel beam).
+    pub r: DVec3,
+    /// The column and row steps (mm).
+    pub u: DVec3,
+    pub v: DVec3,
+    /// `SDD_k` (mm) for a cone beam, 0 for a parallel beam.
+    pub sdd: f64,
+    /// `1/spacing` (per mm).
+    pub scale: f64,
+}
+
+impl RampView {
+    /// The factor pixel `(col, row)` is multiplied by before the ramp.
+    ///
+    /// mirrors shaders/ramp_filter.wgsl: view_weight
+    #[inline(always)]
+    pub fn weight(&self, col: f64, row: f64) -> f64 {
+        if self.sdd == 0.0 {
+            return self.scale;
+        }
+        let x = self.r + self.u * col + self.v * row;
+        self.scale * self.sdd / x.length()
+    }
+}
+
+/// Every view's [`RampView`] of a geometry given view by view (`None` for a circular
+/// orbit, whose weights are [`cosine_weight`] and [`isocentre_spacing`]).
+///
+/// # Errors
+/// [`Error::Invalid`] for a cone-beam view whose isocentre does not lie in front of
+/// the source (`SID_k ≤ 0`): FDK's weights need the object between source and
+/// detector.
+pub fn ramp_views(g: &Geometry) -> Result<Option<Vec<RampView>>> {
+    let Some(views) = &g.views else {
+        return Ok(None);
+    };
+    views
+        .iter()
+        .enumerate()
+        .map(|(k, vv)| {
+            let f = g.view_frame(k);
+            if g.beam == Beam::Parallel {
+                let d = vv.source.normalize();
+                let perp = vv.u - d * vv.u.dot(d);
+                return Ok(RampView {
+                    r: DVec3::ZERO,
+                    u: vv.u,
+                    v: vv.v,
+                    sdd: 0.0,
+                    scale: 1.0 / perp.length(),
+                });
+            }
+            if !(f.sid >= crate::ct::MIN_LENGTH_MM && f.sid < f.sdd) {
+                return Err(Error::invalid(
+                    "FDK",
+                    format!(
+                        "view {k}: the isocentre lies at depth {:.6e} mm along the detector \
+                         normal from the source, which is not between the source and the \
+                         detector (SDD {:.6e} mm)",
+                        f.sid, f.sdd
+                    ),
+                ));
+            }
+            let spacing = vv.u.length() * f.sid * f.sid / (f.sdd * f.source_distance);
+            Ok(RampView {
+                r: vv.pixel00 - vv.source,
+                u: vv.u,
+                v: vv.v,
+                sdd: f.sdd,
+                scale: 1.0 / spacing,
+            })
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
+}
+
 /// The projections a filter sees: for a cone beam the cosine-weighted copy (in f64),
-/// otherwise the input converted to f64.
-pub fn preweight<R: Real>(p: &Projections<R>, g: &Geometry) -> Vec<f64> {
+/// otherwise the input converted to f64. For a geometry given view by view every
+/// pixel is multiplied by its [`RampView::weight`] (which holds the view's
+/// `1/spacing` too).
+///
+/// # Errors
+/// As [`ramp_views`].
+pub fn preweight<R: Real>(p: &Projections<R>, g: &Geometry) -> Result<Vec<f64>> {
     let mut out: Vec<f64> = p.data.iter().map(|v| v.f64()).collect();
+    if let Some(rv) = ramp_views(g)? {
+        out.par_chunks_mut(g.cols)
+            .enumerate()
+            .for_each(|(line, row_data)| {
+                let (k, r) = (line / g.rows, line % g.rows);
+                for (c, x) in row_data.iter_mut().enumerate() {
+                    *x *= rv[k].weight(c as f64, r as f64);
+                }
+            });
+        return Ok(out);
+    }
     if let Beam::Cone { sdd, .. } = g.beam {
         out.par_chunks_mut(g.cols)
             .enumerate()
@@ -244,7 +354,7 @@ pub fn preweight<R: Real>(p: &Projections<R>, g: &Geometry) -> Vec<f64> {
                 }
             });
     }
-    out
+    Ok(out)
 }
 
 /// Filters every detector row of `p` (shaped for `g`) with `filter`: cosine
@@ -266,17 +376,26 @@ pub fn filter_projections<R: Real + FftNum>(
             "contain NaN or infinite values",
         ));
     }
-    let inv_du = 1.0 / isocentre_spacing(g);
+    let views = ramp_views(g)?;
+    // Views given by vectors carry their own 1/spacing in their weights.
+    let inv_du = if views.is_some() {
+        1.0
+    } else {
+        1.0 / isocentre_spacing(g)
+    };
     if filter == RampFilter::None {
         // No ramp: the (pre-weighted) values per mm, exactly, with no transform's
         // round trip (the GPU's FFT path rounds them in f32).
-        let data = preweight(p, g).iter().map(|&v| R::of(v * inv_du)).collect();
+        let data = preweight(p, g)?
+            .iter()
+            .map(|&v| R::of(v * inv_du))
+            .collect();
         return Projections::new(p.angles, p.rows, p.cols, data);
     }
     let mut out = vec![R::zero(); p.data.len()];
     match method {
         FilterMethod::Direct => {
-            let w = preweight(p, g);
+            let w = preweight(p, g)?;
             let k: Vec<f64> = ramp_kernel(pl, filter);
             out.par_chunks_mut(cols)
                 .zip(w.par_chunks(cols))
@@ -298,6 +417,7 @@ pub fn filter_projections<R: Real + FftNum>(
                 .map(|&v| R::of(v * inv_du / pl as f64))
                 .collect();
             let weights: Option<Vec<R>> = match g.beam {
+                _ if views.is_some() => None,
                 Beam::Parallel => None,
                 Beam::Cone { sdd, .. } => Some(
                     (0..g.rows * cols)
@@ -319,9 +439,12 @@ pub fn filter_projections<R: Real + FftNum>(
                 .get_inplace_scratch_len()
                 .max(inv.get_inplace_scratch_len());
             let weight = |line: usize, c: usize| -> R {
-                match &weights {
-                    None => R::one(),
-                    Some(w) => w[(line % g.rows) * cols + c],
+                match (&weights, &views) {
+                    (_, Some(v)) => {
+                        R::of(v[line / g.rows].weight(c as f64, (line % g.rows) as f64))
+                    }
+                    (None, None) => R::one(),
+                    (Some(w), None) => w[(line % g.rows) * cols + c],
                 }
             };
             out.par_chunks_mut(2 * cols)

@@ -166,6 +166,8 @@ pub fn render_d2vr(
     check_inputs(settings, options, grid)?;
     tf.validate()?;
     geometry.validate()?;
+    // As on the CPU: the bounding cylinder is that of a circular orbit.
+    geometry.require_circular("D²VR")?;
     filtered.check_against(geometry)?;
     if settings.mode == Mode::Dvr && settings.compositing == Compositing::BackToFront {
         return Err(Error::invalid(

@@ -8,7 +8,9 @@
 //! 1. `ramp_pad`: two detector lines share one complex line of the padded length
 //!    `P = `[`padded_length`]`(cols)` (a power of two), `z = a + i·b`, each sample
 //!    multiplied by the cosine weight for a cone beam ([`preweighted_sample`]), zeros
-//!    past `cols`;
+//!    past `cols`; for a geometry given view by view by each view's
+//!    [`RampView::weight`] (cosine weight and `1/spacing`, from a table of
+//!    [`RampViewGpu`]);
 //! 2. a batch of forward FFTs of length `P` ([`GpuFftPlan::lines`], Stockham);
 //! 3. `ramp_multiply`: times the even real response [`effective_response`] scaled by
 //!    `1/(P·spacing)` (a real even filter acts on the real and imaginary parts
@@ -26,7 +28,8 @@
 
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::ramp::{
-    cosine_weight, effective_response, isocentre_spacing, padded_length, RampFilter,
+    cosine_weight, effective_response, isocentre_spacing, padded_length, ramp_views, RampFilter,
+    RampView,
 };
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::{Error, Result};
@@ -93,12 +96,48 @@ impl RampPlan {
 pub struct RampParams {
     /// Detector columns, rows, padded length `P`, detector lines in the chunk.
     pub dims: [u32; 4],
-    /// Complex lines in the chunk, invocations per row of workgroups, cone (1) or not.
+    /// Complex lines in the chunk, invocations per row of workgroups, the weighting
+    /// (0 none, 1 circular cone beam, 2 per view from the table), the chunk's first
+    /// view.
     pub work: [u32; 4],
     /// `cu`, `cv` (pixels), `du`, `dv` (mm).
     pub detector: [f32; 4],
     /// SDD (mm) for a cone beam.
     pub cone: [f32; 4],
+}
+
+/// One view's [`RampView`] in f32 for upload: `[r, sdd]`, `[u, 1/spacing]`, `[v, 0]`.
+///
+/// mirrors shaders/shared/ramp_params.wgsl: RampViewGpu
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RampViewGpu {
+    pub r: [f32; 4],
+    pub u: [f32; 4],
+    pub v: [f32; 4],
+}
+
+impl RampViewGpu {
+    /// The view rounded to f32.
+    pub fn new(v: &RampView) -> Self {
+        let f = |x: glam::DVec3, w: f64| [x.x as f32, x.y as f32, x.z as f32, w as f32];
+        RampViewGpu {
+            r: f(v.r, v.sdd),
+            u: f(v.u, v.scale),
+            v: f(v.v, 0.0),
+        }
+    }
+
+    /// [`RampView::weight`] in f32.
+    ///
+    /// mirrors shaders/ramp_filter.wgsl: view_weight
+    pub fn weight(&self, col: f32, row: f32) -> f32 {
+        if self.r[3] == 0.0 {
+            return self.u[3];
+        }
+        let x: [f32; 3] = std::array::from_fn(|i| self.r[i] + self.u[i] * col + self.v[i] * row);
+        self.u[3] * self.r[3] / (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
+    }
 }
 
 /// `shaders/shared/ramp_params.wgsl`: the WGSL twin of [`RampParams`].
@@ -115,10 +154,21 @@ pub fn shader_source() -> String {
 /// cosine-weighted for a cone beam, zero past the chunk's last line.
 ///
 /// mirrors shaders/ramp_filter.wgsl: preweighted_sample
-pub fn preweighted_sample(data: &[f32], g: &Geometry, line: usize, c: usize) -> f32 {
+/// `views` holds every view's [`RampViewGpu`] for a geometry given view by view
+/// (then `line` counts from view 0).
+pub fn preweighted_sample(
+    data: &[f32],
+    g: &Geometry,
+    views: Option<&[RampViewGpu]>,
+    line: usize,
+    c: usize,
+) -> f32 {
     let Some(&x) = data.get(line * g.cols + c) else {
         return 0.0;
     };
+    if let Some(v) = views {
+        return x * v[line / g.rows].weight(c as f32, (line % g.rows) as f32);
+    }
     match g.beam {
         Beam::Parallel => x,
         Beam::Cone { sdd, .. } => {
@@ -158,7 +208,17 @@ pub fn filter_projections(
     }
     let per_chunk = RampPlan::new(&ctx.limits, g)?.views_per_chunk;
 
-    let inv_spacing = 1.0 / isocentre_spacing(g);
+    let per_view = ramp_views(g)?;
+    // Views given by vectors carry their own 1/spacing in their weights.
+    let inv_spacing = if per_view.is_some() {
+        1.0
+    } else {
+        1.0 / isocentre_spacing(g)
+    };
+    let table: Vec<RampViewGpu> = match &per_view {
+        Some(v) => v.iter().map(RampViewGpu::new).collect(),
+        None => vec![RampViewGpu::default()],
+    };
     let resp: Vec<f32> = effective_response(pl, filter)
         .iter()
         .map(|&v| (v * inv_spacing / pl as f64) as f32)
@@ -167,6 +227,11 @@ pub fn filter_projections(
     let rbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("ramp response"),
         contents: bytemuck::cast_slice(&resp),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let vbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("ramp views"),
+        contents: bytemuck::cast_slice(&table),
         usage: wgpu::BufferUsages::STORAGE,
     });
     let module = ctx.shader("ramp_filter.wgsl", &shader_source())?;
@@ -180,6 +245,7 @@ pub fn filter_projections(
             entry(1, storage(false)),
             entry(2, storage(false)),
             entry(3, storage(true)),
+            entry(4, storage(true)),
         ],
     });
     let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -203,12 +269,13 @@ pub fn filter_projections(
         pipeline("ramp_crop"),
     ];
     let (cone, sdd) = match g.beam {
+        _ if per_view.is_some() => (2, 0.0),
         Beam::Parallel => (0, 0.0),
         Beam::Cone { sdd, .. } => (1, sdd as f32),
     };
     let line_len = rows * cols;
     let mut plans: Option<(usize, GpuFftPlan, GpuFftPlan)> = None;
-    for chunk in out.chunks_mut(per_chunk * line_len) {
+    for (index, chunk) in out.chunks_mut(per_chunk * line_len).enumerate() {
         let n_lines = chunk.len() / cols;
         let pairs = n_lines.div_ceil(2);
         if plans.as_ref().map(|p| p.0) != Some(pairs) {
@@ -232,7 +299,12 @@ pub fn filter_projections(
         let gy = groups.div_ceil(gx);
         let params = RampParams {
             dims: [cols as u32, rows as u32, pl as u32, n_lines as u32],
-            work: [pairs as u32, gx * WORKGROUP, cone, 0],
+            work: [
+                pairs as u32,
+                gx * WORKGROUP,
+                cone,
+                (index * per_chunk) as u32,
+            ],
             detector: [g.cu as f32, g.cv as f32, g.du as f32, g.dv as f32],
             cone: [sdd, 0.0, 0.0, 0.0],
         };
@@ -252,6 +324,7 @@ pub fn filter_projections(
                     lbuf.as_entire_binding(),
                     z.as_entire_binding(),
                     rbuf.as_entire_binding(),
+                    vbuf.as_entire_binding(),
                 ],
             );
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -526,6 +526,7 @@ pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
         dv: j.dv,
         cu: j.cu.unwrap_or(dcu),
         cv: j.cv.unwrap_or(dcv),
+        views: None,
     };
     g.validate().map_err(|e| match e {
         Error::Invalid { message, .. } | Error::TooLarge { message, .. } => bad(message),

@@ -306,8 +306,15 @@ pub(super) fn geometry_for(
 fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64>, Geometry)> {
     let diag = crate::ct::circle_diagonal(p.cols);
     let mut g2 = g.clone();
+    let shift = (diag / 2 - p.cols / 2) as f64;
     g2.cols = diag;
-    g2.cu = g.cu + (diag / 2 - p.cols / 2) as f64;
+    g2.cu = g.cu + shift;
+    // Views given by vectors: old column c is new column c + shift.
+    if let Some(views) = &mut g2.views {
+        for v in views {
+            v.pixel00 -= v.u * shift;
+        }
+    }
     Ok((p.padded_centred(diag), g2))
 }
 

@@ -325,9 +325,163 @@ pub fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
 // CT
 // ---------------------------------------------------------------------------------
 
+/// RTK's view axes at gantry angle `a_deg`: `(e_u, e_v, e_w)` (written out here, not
+/// taken from voxlab, so that per-view test geometries are built independently).
+pub fn rtk_axes(a_deg: f64) -> (DVec3, DVec3, DVec3) {
+    let (s, c) = a_deg.to_radians().sin_cos();
+    (DVec3::new(c, 0.0, -s), DVec3::Y, DVec3::new(s, 0.0, c))
+}
+
+/// A flat detector of `cols × rows` pixels of `du × dv` mm centred on `centre`, its
+/// columns along `eu` and rows along `ev`, turned by `turn`: the
+/// [`voxlab::ct::ViewVectors`] with `source`.
+pub fn detector_view(
+    source: DVec3,
+    centre: DVec3,
+    (eu, ev): (DVec3, DVec3),
+    turn: DQuat,
+    (cols, rows, du, dv): (usize, usize, f64, f64),
+) -> voxlab::ct::ViewVectors {
+    let (u, v) = (turn * eu * du, turn * ev * dv);
+    voxlab::ct::ViewVectors {
+        source,
+        pixel00: centre - u * ((cols as f64 - 1.0) / 2.0) - v * ((rows as f64 - 1.0) / 2.0),
+        u,
+        v,
+    }
+}
+
+/// A circular cone-beam orbit (RTK's frame, `n` views over 360°) whose flat detector
+/// is turned by `in_plane_deg` about the central ray and then tilted by
+/// `out_of_plane_deg` about its own column axis, and moved by `offset` (mm along
+/// `e_u`, `e_v`) — the ASTRA `cone_vec` of a misaligned scanner.
+#[allow(clippy::too_many_arguments)]
+pub fn cone_tilted(
+    n: usize,
+    sid: f64,
+    sdd: f64,
+    size: (usize, usize, f64, f64),
+    in_plane_deg: f64,
+    out_of_plane_deg: f64,
+    offset: (f64, f64),
+) -> voxlab::ct::Geometry {
+    let views = (0..n)
+        .map(|k| {
+            let (eu, ev, ew) = rtk_axes(k as f64 * 360.0 / n as f64);
+            let turn = DQuat::from_axis_angle(eu, out_of_plane_deg.to_radians())
+                * DQuat::from_axis_angle(ew, in_plane_deg.to_radians());
+            let centre = ew * (sid - sdd) + eu * offset.0 + ev * offset.1;
+            detector_view(ew * sid, centre, (eu, ev), turn, size)
+        })
+        .collect();
+    voxlab::ct::Geometry::from_views(voxlab::ct::ViewGeometry {
+        parallel: false,
+        cols: size.0,
+        rows: size.1,
+        views,
+    })
+    .unwrap()
+}
+
+/// A wobbling cone-beam orbit: per view its own SID (`sid ± 5 %`), SDD (`sdd ± 4 %`),
+/// a source that rises and falls along the rotation axis (±6 mm, a helix that turns
+/// back) with the detector following it, and a detector offset of `(2.5, −1.5)` mm.
+pub fn cone_wobble(
+    n: usize,
+    sid: f64,
+    sdd: f64,
+    size: (usize, usize, f64, f64),
+) -> voxlab::ct::Geometry {
+    let views = (0..n)
+        .map(|k| {
+            let a = k as f64 * 360.0 / n as f64;
+            let (eu, ev, ew) = rtk_axes(a);
+            let t = a.to_radians();
+            let (sid_k, sdd_k) = (
+                sid * (1.0 + 0.05 * (3.0 * t).sin()),
+                sdd * (1.0 + 0.04 * (2.0 * t).cos()),
+            );
+            let h = 6.0 * t.sin();
+            let source = ew * sid_k + ev * h;
+            let centre = source - ew * sdd_k + eu * 2.5 - ev * 1.5;
+            detector_view(source, centre, (eu, ev), DQuat::IDENTITY, size)
+        })
+        .collect();
+    voxlab::ct::Geometry::from_views(voxlab::ct::ViewGeometry {
+        parallel: false,
+        cols: size.0,
+        rows: size.1,
+        views,
+    })
+    .unwrap()
+}
+
+/// ASTRA's `parallel3d_vec` with an oblique detector: `n` views over 180°, rays along
+/// `−e_w`, the detector turned by `turn_deg` about its row axis (the rays meet it
+/// obliquely, its columns foreshortened by `cos turn`), `dist` mm behind the
+/// isocentre and offset by `(1.7, 0.6)` mm.
+pub fn parallel_vec(
+    n: usize,
+    size: (usize, usize, f64, f64),
+    turn_deg: f64,
+    dist: f64,
+) -> voxlab::ct::Geometry {
+    let views = (0..n)
+        .map(|k| {
+            let (eu, ev, ew) = rtk_axes(k as f64 * 180.0 / n as f64);
+            let turn = DQuat::from_axis_angle(ev, turn_deg.to_radians());
+            let centre = -ew * dist + eu * 1.7 + ev * 0.6;
+            detector_view(-ew * 3.0, centre, (eu, ev), turn, size)
+        })
+        .collect();
+    voxlab::ct::Geometry::from_views(voxlab::ct::ViewGeometry {
+        parallel: true,
+        cols: size.0,
+        rows: size.1,
+        views,
+    })
+    .unwrap()
+}
+
+/// The per-view CT cases appended to [`ct_cases`]: a cone orbit with a turned and
+/// tilted, offset detector; a wobbling, helix-like cone orbit with per-view SID and
+/// SDD; a `parallel3d_vec` stack with an oblique detector.
+pub fn per_view_cases(
+    parallel_angles: usize,
+    cone_angles: usize,
+) -> Vec<(&'static str, voxlab::ct::Geometry, voxlab::cpu::fbp::Grid)> {
+    use voxlab::cpu::fbp::rtk_grid;
+    vec![
+        (
+            "cone-vec-tilted",
+            cone_tilted(
+                cone_angles,
+                300.0,
+                450.0,
+                (40, 30, 1.0, 1.0),
+                4.0,
+                6.0,
+                (3.2, -2.1),
+            ),
+            rtk_grid([21, 15, 18], [1.1, 1.3, 0.9]),
+        ),
+        (
+            "cone-vec-wobble",
+            cone_wobble(cone_angles, 300.0, 450.0, (40, 30, 1.0, 1.0)),
+            rtk_grid([20, 14, 17], [1.1, 1.3, 0.9]),
+        ),
+        (
+            "parallel3d-vec",
+            parallel_vec(parallel_angles, (36, 7, 1.5, 1.25), 12.0, 40.0),
+            rtk_grid([24, 5, 22], [1.4, 1.25, 1.4]),
+        ),
+    ]
+}
+
 /// Small CT cases shared by the CPU and GPU reconstruction tests: (name, geometry,
 /// reconstruction grid) for a scikit-image parallel beam, a 3-D parallel stack and an
-/// RTK cone beam with `parallel_angles` / `cone_angles` views.
+/// RTK cone beam with `parallel_angles` / `cone_angles` views, then the geometries
+/// given view by view of [`per_view_cases`].
 pub fn ct_cases(
     parallel_angles: usize,
     cone_angles: usize,
@@ -353,6 +507,9 @@ pub fn ct_cases(
         ("stack", stack.clone(), parallel_stack_grid(30, &stack)),
         ("cone", cone, rtk_grid([21, 15, 18], [1.1, 1.3, 0.9])),
     ]
+    .into_iter()
+    .chain(per_view_cases(parallel_angles, cone_angles))
+    .collect()
 }
 
 /// The cases of Joseph's matched pair (tests/iterative.rs, tests/gpu_iterative.rs):
