@@ -520,3 +520,36 @@ fn astra_cone_file_reads_as_rtks_circle() {
         assert!(d < 1e-12, "view {k}: {d:e}");
     }
 }
+
+/// More views than `ct::MAX_DETECTOR` are refused as they are read, in every format,
+/// and the error names the file.
+#[test]
+fn too_many_views_are_refused_while_reading() {
+    let n = voxlab::ct::MAX_DETECTOR + 1;
+    let path = Path::new("many.geometry");
+    let row = "[0,0,1000, 0,0,-500, 1,0,0, 0,1,0]";
+    let astra = format!(
+        r#"{{"type": "cone_vec", "DetectorRowCount": 2, "DetectorColCount": 2, "Vectors": [{}]}}"#,
+        vec![row; n].join(",")
+    );
+    let view =
+        r#"{"source": [0, 0, 1000], "pixel00": [0, 0, -500], "u": [1, 0, 0], "v": [0, 1, 0]}"#;
+    let voxlab = format!(
+        r#"{{"beam": "cone", "cols": 2, "rows": 2, "views": [{}]}}"#,
+        vec![view; n].join(",")
+    );
+    let rtk = format!(
+        "<RTKThreeDCircularGeometry version=\"3\"><SourceToIsocenterDistance>1000</SourceToIsocenterDistance><SourceToDetectorDistance>1500</SourceToDetectorDistance>{}</RTKThreeDCircularGeometry>",
+        "<Projection/>".repeat(n)
+    );
+    let grid = DetectorGrid::centred(2, 2, 1.0, 1.0);
+    for text in [astra, voxlab, rtk] {
+        let e = parse_geometry(&text, path, Some(&grid))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("many.geometry") && e.contains("more than 65536"),
+            "{e}"
+        );
+    }
+}

@@ -395,12 +395,14 @@ pub fn parse_rtk_geometry(text: &str, path: &Path) -> Result<RtkGeometry> {
                                 ),
                             ))
                         }
-                        None => return Err(bad(
-                            "version",
-                            format!(
+                        None => {
+                            return Err(bad(
+                                "version",
+                                format!(
                                 "<{RTK_ROOT}> has no version attribute (RTK writes version=\"3\")"
                             ),
-                        )),
+                            ))
+                        }
                     };
                     stack.push(RTK_ROOT);
                     continue;
