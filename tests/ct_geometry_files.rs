@@ -553,3 +553,91 @@ fn too_many_views_are_refused_while_reading() {
         );
     }
 }
+
+/// The detector grid a projection file's header gives: spacing, origin and direction of
+/// a MetaImage or NRRD stack; none for `.npy`; a header whose projection axis moves
+/// the pixels within the detector plane is refused, naming the file.
+#[test]
+fn projection_headers_give_the_detector_grid() {
+    use glam::{DMat4, DVec4};
+    use voxlab::{AnyVolume, Volume};
+    let dir = common::scratch("projection_grid");
+    let dims = [6, 4, 3]; // cols, rows, projections
+    let data: Vec<f32> = (0..72).map(|i| i as f32).collect();
+    // A flipped row axis and an origin off centre.
+    let affine = DMat4::from_cols(
+        DVec4::new(0.5, 0.0, 0.0, 0.0),
+        DVec4::new(0.0, -0.25, 0.0, 0.0),
+        DVec4::new(0.0, 0.0, 1.0, 0.0),
+        DVec4::new(-1.25, 0.375, 0.0, 1.0),
+    );
+    let vol = AnyVolume::from(Volume::with_affine(dims, affine, data.clone()).unwrap());
+    for name in ["stack.mha", "stack.nrrd"] {
+        let path = dir.join(name);
+        voxlab::io::write_volume(&path, &vol).unwrap();
+        let (p, grid) = read_projections_grid::<f64>(&path, &ReadOptions::default()).unwrap();
+        assert_eq!((p.angles, p.rows, p.cols), (3, 4, 6));
+        let g = grid.unwrap();
+        assert_eq!((g.cols, g.rows), (6, 4), "{name}");
+        assert_eq!(g.origin, DVec2::new(-1.25, 0.375), "{name}");
+        assert_eq!(g.col_step, DVec2::new(0.5, 0.0), "{name}");
+        assert_eq!(g.row_step, DVec2::new(0.0, -0.25), "{name}");
+    }
+    let npy = dir.join("stack.npy");
+    voxlab::io::write_volume(&npy, &vol).unwrap();
+    assert_eq!(
+        read_projections_grid::<f64>(&npy, &ReadOptions::default())
+            .unwrap()
+            .1,
+        None
+    );
+
+    let mut mixed = affine;
+    mixed.z_axis.x = 0.1;
+    let path = dir.join("mixed.mha");
+    voxlab::io::write_volume(
+        &path,
+        &AnyVolume::from(Volume::with_affine(dims, mixed, data).unwrap()),
+    )
+    .unwrap();
+    match read_projections_grid::<f64>(&path, &ReadOptions::default()) {
+        Err(Error::Format {
+            path: p, message, ..
+        }) => {
+            assert_eq!(p, path);
+            assert!(message.contains("projection axis"), "{message}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// XML entities cannot blow a small file up ("billion laughs"), and a file with a
+/// parameter nested in another is refused.
+#[test]
+fn hostile_xml_is_refused() {
+    let laughs = r#"<?xml version="1.0"?>
+<!DOCTYPE lolz [
+ <!ENTITY lol "lollollollollollollollollollol">
+ <!ENTITY lol1 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+ <!ENTITY lol2 "&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;&lol1;">
+ <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+ <!ENTITY lol4 "&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;">
+ <!ENTITY lol5 "&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;">
+ <!ENTITY lol6 "&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;&lol5;">
+ <!ENTITY lol7 "&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;&lol6;">
+ <!ENTITY lol8 "&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;&lol7;">
+ <!ENTITY lol9 "&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;&lol8;">
+]>
+<RTKThreeDCircularGeometry version="3"><Projection><GantryAngle>&lol9;</GantryAngle></Projection></RTKThreeDCircularGeometry>"#;
+    let nested = "<RTKThreeDCircularGeometry version=\"3\"><Projection><GantryAngle><InPlaneAngle>1</InPlaneAngle></GantryAngle></Projection></RTKThreeDCircularGeometry>";
+    let path = Path::new("hostile.xml");
+    let grid = DetectorGrid::centred(2, 2, 1.0, 1.0);
+    let t = std::time::Instant::now();
+    for text in [laughs, nested] {
+        match parse_geometry(text, path, Some(&grid)) {
+            Err(Error::Format { path: p, .. }) => assert_eq!(p, path),
+            other => panic!("{other:?}"),
+        }
+    }
+    assert!(t.elapsed().as_secs_f64() < 5.0);
+}
