@@ -555,7 +555,7 @@ fn too_many_views_are_refused_while_reading() {
 }
 
 /// The detector grid a projection file's header gives: spacing, origin and direction of
-/// a MetaImage or NRRD stack; none for `.npy`; a header whose projection axis moves
+/// a MetaImage or NRRD stack; none for `.npy` and NIfTI; a header whose projection axis moves
 /// the pixels within the detector plane is refused, naming the file.
 #[test]
 fn projection_headers_give_the_detector_grid() {
@@ -583,14 +583,13 @@ fn projection_headers_give_the_detector_grid() {
         assert_eq!(g.col_step, DVec2::new(0.5, 0.0), "{name}");
         assert_eq!(g.row_step, DVec2::new(0.0, -0.25), "{name}");
     }
-    let npy = dir.join("stack.npy");
-    voxlab::io::write_volume(&npy, &vol).unwrap();
-    assert_eq!(
-        read_projections_grid::<f64>(&npy, &ReadOptions::default())
-            .unwrap()
-            .1,
-        None
-    );
+    // .npy has no geometry; NIfTI's is in RAS patient coordinates, not RTK's plane.
+    for name in ["stack.npy", "stack.nii"] {
+        let path = dir.join(name);
+        voxlab::io::write_volume(&path, &vol).unwrap();
+        let (_, grid) = read_projections_grid::<f64>(&path, &ReadOptions::default()).unwrap();
+        assert_eq!(grid, None, "{name}");
+    }
 
     let mut mixed = affine;
     mixed.z_axis.x = 0.1;

@@ -155,10 +155,14 @@ fn read_array_affine(
     Ok((shape, vol.values_f64(), Some(affine)))
 }
 
-/// [`read_projections_with`], and the detector grid the file's header describes: a 3-D
-/// stack in a format with spacing and origin (MetaImage, NRRD, NIfTI, …), its `(x, y)`
-/// axes the columns and rows ([`DetectorGrid::from_affine`]) — what an RTK geometry
-/// file needs ([`read_geometry_with`]). `None` for `.npy` files and 2-D sinograms.
+/// [`read_projections_with`], and the detector grid the file's header describes: the
+/// spacing, origin and direction of a 3-D MetaImage or NRRD stack, its `(x, y)` axes
+/// the columns and rows ([`DetectorGrid::from_affine`]) — what an RTK geometry file
+/// needs ([`read_geometry_with`]). MetaImage's numbers are ITK's; a NRRD's are taken as
+/// written, which is ITK's reading for the LPS space ITK and RTK write (a NRRD in a RAS
+/// space differs from ITK's reading by the signs of `x` and `y`). `None` for every
+/// other format (`.npy` has no geometry; NIfTI's RAS and DICOM's patient frame are not
+/// the projection image's plane) and for 2-D sinograms.
 ///
 /// # Errors
 /// As [`read_projections_with`]; a header whose projection axis moves the pixels
@@ -169,8 +173,12 @@ pub fn read_projections_grid<R: Real>(
 ) -> Result<(Projections<R>, Option<DetectorGrid>)> {
     let (shape, values, affine) = read_array_affine(path, options)?;
     let p = from_array(path, &shape, values)?;
+    let with_grid = matches!(
+        super::detect_format(path),
+        Ok(super::Format::MetaImage | super::Format::Nrrd)
+    );
     let grid = match affine {
-        Some(a) if shape.len() == 3 => {
+        Some(a) if shape.len() == 3 && with_grid => {
             Some(DetectorGrid::from_affine(p.cols, p.rows, &a).map_err(|e| e.in_file(path))?)
         }
         _ => None,
