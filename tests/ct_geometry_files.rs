@@ -640,3 +640,28 @@ fn hostile_xml_is_refused() {
     }
     assert!(t.elapsed().as_secs_f64() < 5.0);
 }
+
+/// Once [`Geometry::from_views`] exists: RTK's tilted geometry with offsets, read with
+/// its MetaImage's grid as a [`Geometry`], projects every point as RTK's matrices do.
+#[test]
+#[ignore = "needs Geometry::from_views"]
+fn rtk_xml_reads_as_a_geometry_with_rtks_matrices() {
+    for case in RTK_CASES {
+        let record = json(&format!("rtk_{case}.json"));
+        let mha = data(&format!("rtk_{case}_ellipsoids.mha"));
+        let (p, grid) = read_projections_grid::<f64>(&mha, &ReadOptions::default()).unwrap();
+        let grid = grid.unwrap();
+        let g = voxlab::io::projections::read_geometry_with(
+            &data(&format!("rtk_{case}.xml")),
+            Some(&grid),
+        )
+        .unwrap();
+        p.check_against(&g).unwrap();
+        for k in 0..g.n_angles() {
+            let m = g.view_matrix::<f64>(k).rows;
+            let rtk = rtk_matrix_in_pixels(&mat34(&record["matrices"][k]), &grid);
+            let d = projective_distance(&rtk, &[m[0], m[1], m[2]]);
+            assert!(d < 1e-12, "{case} view {k}: {d:e}");
+        }
+    }
+}
