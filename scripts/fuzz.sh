@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-60}
 shift || true
-targets=${*:-nrrd npy nifti pvm den metaimage}
+targets=${*:-nrrd npy nifti pvm den metaimage rtk_geometry astra_geometry}
 if ! cargo fuzz --version >/dev/null 2>&1; then
     echo "fuzz.sh: cargo-fuzz is missing: cargo install cargo-fuzz" >&2
     exit 1

@@ -3,13 +3,16 @@
 //! mutated a few thousand times (bit flips, boundary bytes, inserted and deleted runs,
 //! digits replaced by huge numbers), and the reader must answer every input with a
 //! volume or an error, never a panic. The same entry points are the cargo-fuzz
-//! targets in `fuzz/` (`bash scripts/fuzz.sh` runs those for longer).
+//! targets in `fuzz/` (`bash scripts/fuzz.sh` runs those for longer). The CT geometry
+//! readers (RTK's XML, ASTRA's and voxlab's JSON) get the same treatment from their
+//! seeds in `tests/corpus/seeds/rtk_geometry/` and `astra_geometry/`.
 
 mod common;
 
 use common::Rng;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
+use voxlab::io::projections::{parse_geometry_bytes, DetectorGrid};
 use voxlab::io::{read_volume_bytes, Format};
 
 /// The formats with an in-memory reader, and the folder of their seeds.
@@ -156,5 +159,56 @@ fn readers_answer_every_mutation_with_a_volume_or_an_error() {
             "{}: {ok} read, {err} refused",
             format.name()
         );
+    }
+}
+
+/// Reads `bytes` as a geometry file (any format, with a detector grid for RTK's XML, as
+/// the fuzz targets `rtk_geometry` and `astra_geometry` do); panics on a panic.
+fn geometry_must_not_panic(bytes: &[u8], what: &str) -> bool {
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        let path = Path::new("fuzz.geometry");
+        let grid = DetectorGrid::centred(24, 20, 4.0, 3.5);
+        match parse_geometry_bytes(bytes, path, Some(&grid)) {
+            Ok(g) => {
+                let _ = g.into_geometry(path);
+                true
+            }
+            Err(_) => false,
+        }
+    }));
+    match r {
+        Ok(ok) => ok,
+        Err(_) => panic!(
+            "geometry reader panicked on {what} ({} bytes): {}",
+            bytes.len(),
+            String::from_utf8_lossy(&bytes[..bytes.len().min(2048)])
+        ),
+    }
+}
+
+#[test]
+fn geometry_readers_answer_every_mutation_with_a_geometry_or_an_error() {
+    for dir in ["rtk_geometry", "astra_geometry"] {
+        let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+        let (mut ok, mut err) = (0usize, 0usize);
+        for (path, seed) in seeds(dir) {
+            assert!(
+                geometry_must_not_panic(&seed, "the seed itself"),
+                "seed {} does not read",
+                path.display()
+            );
+            for len in 0..seed.len() {
+                geometry_must_not_panic(&seed[..len], &format!("truncation to {len}"));
+            }
+            for m in 0..MUTATIONS {
+                let bytes = mutate(&seed, &mut rng);
+                if geometry_must_not_panic(&bytes, &format!("mutation {m} of {}", path.display())) {
+                    ok += 1;
+                } else {
+                    err += 1;
+                }
+            }
+        }
+        assert!(ok > 0 && err > 0, "{dir}: {ok} read, {err} refused");
     }
 }

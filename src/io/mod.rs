@@ -38,6 +38,7 @@
 //! Malformed files give [`Error::Format`] naming the file and the header field; absurd
 //! sizes are refused before anything is allocated. `docs/io.md` has the full rules.
 
+pub mod astra_geometry;
 pub mod brick;
 pub mod den;
 pub mod dicom;
@@ -50,6 +51,7 @@ pub mod nrrd;
 pub mod projections;
 pub mod pvm;
 pub mod raw;
+pub mod rtk_geometry;
 pub mod tiff;
 
 pub use crate::source::{open, read_limited, read_text_limited};

@@ -64,6 +64,24 @@
 //! arrays (a description of the volume, versions, …) are ignored; an unknown field with
 //! a plain value is refused, so a typo is an error and not a silent default.
 //!
+//! A geometry may also be given **view by view** ([`ViewGeometry`]): `beam`, `cols`,
+//! `rows` and one entry per projection, four vectors in the CT frame (mm, see
+//! [`ViewVectors`]) — the circular fields are then refused:
+//!
+//! ```json
+//! { "beam": "cone", "cols": 4, "rows": 3,
+//!   "views": [{"source": [0, 0, 1000], "pixel00": [-4.5, -3, -500],
+//!              "u": [3, 0, 0], "v": [0, 3, 0]}] }
+//! ```
+//!
+//! # Other geometry files
+//!
+//! [`read_geometry_with`] (and [`parse_geometry`]) read voxlab's JSON, RTK's geometry
+//! XML ([`super::rtk_geometry`]) and ASTRA's `proj_geom` as JSON
+//! ([`super::astra_geometry`]), telling them apart by their contents
+//! ([`detect_geometry_format`]). RTK's file needs the projections' [`DetectorGrid`],
+//! which [`read_projections_grid`] takes from a MetaImage or NRRD header.
+//!
 //! # Angle lists
 //!
 //! [`read_angles_txt`]: one angle in degrees per line; blank lines and `#` comments
@@ -71,8 +89,9 @@
 
 use super::npy::{npy_float_shape, read_npy_f64, read_npy_f64_lines, write_npy_f32, write_npy_f64};
 use super::nrrd::{write_nrrd, NrrdWriteOptions};
+pub use super::rtk_geometry::DetectorGrid;
 use super::{choose_frame, read_volume_with, ReadOptions};
-use crate::ct::{Beam, Geometry, Projections, MAX_DETECTOR};
+use crate::ct::{Beam, Geometry, Projections, ViewGeometry, ViewVectors, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use crate::volume::{max_voxels, AnyVolume, Volume};
@@ -110,10 +129,20 @@ pub fn read_projections_with<R: Real>(
 /// format through [`read_volume_with`], its `(x, y, z)` taken as `(col, row, angle)`
 /// and a volume of one slice as a 2-D `(y, x)` array.
 fn read_array(path: &Path, options: &ReadOptions) -> Result<(Vec<usize>, Vec<f64>)> {
+    let (shape, values, _) = read_array_affine(path, options)?;
+    Ok((shape, values))
+}
+
+/// [`read_array`] and the volume's index-to-world affine (`None` for `.npy`, which
+/// has none).
+fn read_array_affine(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<(Vec<usize>, Vec<f64>, Option<DMat4>)> {
     if path.is_file() && extension(path).as_deref() == Some("npy") {
         choose_frame(path, "frame", 1, "", options.frame)?;
         let (shape, values, _) = read_npy_f64(path)?;
-        return Ok((shape, values));
+        return Ok((shape, values, None));
     }
     let vol = read_volume_with(path, options)?;
     let [nx, ny, nz] = vol.dims();
@@ -122,7 +151,39 @@ fn read_array(path: &Path, options: &ReadOptions) -> Result<(Vec<usize>, Vec<f64
     } else {
         vec![nz, ny, nx]
     };
-    Ok((shape, vol.values_f64()))
+    let affine = vol.affine();
+    Ok((shape, vol.values_f64(), Some(affine)))
+}
+
+/// [`read_projections_with`], and the detector grid the file's header describes: the
+/// spacing, origin and direction of a 3-D MetaImage or NRRD stack, its `(x, y)` axes
+/// the columns and rows ([`DetectorGrid::from_affine`]) — what an RTK geometry file
+/// needs ([`read_geometry_with`]). MetaImage's numbers are ITK's; a NRRD's are taken as
+/// written, which is ITK's reading for the LPS space ITK and RTK write (a NRRD in a RAS
+/// space differs from ITK's reading by the signs of `x` and `y`). `None` for every
+/// other format (`.npy` has no geometry; NIfTI's RAS and DICOM's patient frame are not
+/// the projection image's plane) and for 2-D sinograms.
+///
+/// # Errors
+/// As [`read_projections_with`]; a header whose projection axis moves the pixels
+/// within the detector plane.
+pub fn read_projections_grid<R: Real>(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<(Projections<R>, Option<DetectorGrid>)> {
+    let (shape, values, affine) = read_array_affine(path, options)?;
+    let p = from_array(path, &shape, values)?;
+    let with_grid = matches!(
+        super::detect_format(path),
+        Ok(super::Format::MetaImage | super::Format::Nrrd)
+    );
+    let grid = match affine {
+        Some(a) if shape.len() == 3 && with_grid => {
+            Some(DetectorGrid::from_affine(p.cols, p.rows, &a).map_err(|e| e.in_file(path))?)
+        }
+        _ => None,
+    };
+    Ok((p, grid))
 }
 
 /// Reads a flat- or dark-field file (`what`: `"flat"` or `"dark"`) for projections of
@@ -398,10 +459,10 @@ struct GeometryJson {
     sdd: Option<f64>,
     cols: usize,
     rows: usize,
-    #[serde(default = "one")]
-    du: f64,
-    #[serde(default = "one")]
-    dv: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    du: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    dv: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cu: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -410,6 +471,51 @@ struct GeometryJson {
     angles_deg: Option<Vec<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     angles: Option<EvenAngles>,
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "bounded_views"
+    )]
+    views: Option<Vec<ViewJson>>,
+}
+
+/// One view of the per-view form: [`ViewVectors`] in mm.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ViewJson {
+    source: [f64; 3],
+    pixel00: [f64; 3],
+    u: [f64; 3],
+    v: [f64; 3],
+}
+
+/// `views`, refused past [`MAX_DETECTOR`] entries as they are read.
+fn bounded_views<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<Vec<ViewJson>>, D::Error> {
+    struct V;
+    impl<'de> serde::de::Visitor<'de> for V {
+        type Value = Vec<ViewJson>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            write!(f, "a list of at most {MAX_DETECTOR} views")
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(
+            self,
+            mut seq: A,
+        ) -> std::result::Result<Vec<ViewJson>, A::Error> {
+            let mut out = Vec::new();
+            while let Some(x) = seq.next_element()? {
+                if out.len() == MAX_DETECTOR {
+                    return Err(serde::de::Error::custom(format!(
+                        "more than {MAX_DETECTOR} views"
+                    )));
+                }
+                out.push(x);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_seq(V).map(Some)
 }
 
 /// The fields of [`GeometryJson`].
@@ -425,11 +531,8 @@ const KNOWN_FIELDS: &[&str] = &[
     "cv",
     "angles_deg",
     "angles",
+    "views",
 ];
-
-fn one() -> f64 {
-    1.0
-}
 
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -457,18 +560,60 @@ pub fn geometry_to_json(g: &Geometry) -> String {
         sdd,
         cols: g.cols,
         rows: g.rows,
-        du: g.du,
-        dv: g.dv,
+        du: Some(g.du),
+        dv: Some(g.dv),
         cu: Some(g.cu),
         cv: Some(g.cv),
         angles_deg: Some(g.angles_deg.clone()),
         angles: None,
+        views: None,
     };
     serde_json::to_string_pretty(&j).expect("plain numbers serialise") + "\n"
 }
 
-/// Parses geometry JSON text (`path` only names it in errors) and validates it.
+/// A geometry given view by view as voxlab's JSON (the per-view form of the module
+/// docs).
+pub fn view_geometry_to_json(g: &ViewGeometry) -> String {
+    let j = GeometryJson {
+        beam: if g.parallel {
+            BeamName::Parallel
+        } else {
+            BeamName::Cone
+        },
+        sid: None,
+        sdd: None,
+        cols: g.cols,
+        rows: g.rows,
+        du: None,
+        dv: None,
+        cu: None,
+        cv: None,
+        angles_deg: None,
+        angles: None,
+        views: Some(
+            g.views
+                .iter()
+                .map(|v| ViewJson {
+                    source: v.source.to_array(),
+                    pixel00: v.pixel00.to_array(),
+                    u: v.u.to_array(),
+                    v: v.v.to_array(),
+                })
+                .collect(),
+        ),
+    };
+    serde_json::to_string_pretty(&j).expect("plain numbers serialise") + "\n"
+}
+
+/// Parses voxlab's geometry JSON text (`path` only names it in errors) and validates
+/// it: the circular form as a [`Geometry`], the per-view form through
+/// [`Geometry::from_views`]. [`parse_geometry`] reads every format.
 pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
+    parse_voxlab_geometry(text, path)?.into_geometry(path)
+}
+
+/// voxlab's geometry JSON, either form.
+fn parse_voxlab_geometry(text: &str, path: &Path) -> Result<GeometryFile> {
     let bad = |m: String| Error::format(path, "geometry", m);
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut value: serde_json::Value =
@@ -483,6 +628,39 @@ pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
     }
     let j: GeometryJson =
         serde_json::from_value(value).map_err(|e| bad(crate::json::explain(&e.to_string())))?;
+    if let Some(views) = j.views {
+        let given = [
+            ("sid", j.sid.is_some()),
+            ("sdd", j.sdd.is_some()),
+            ("du", j.du.is_some()),
+            ("dv", j.dv.is_some()),
+            ("cu", j.cu.is_some()),
+            ("cv", j.cv.is_some()),
+            ("angles_deg", j.angles_deg.is_some()),
+            ("angles", j.angles.is_some()),
+        ];
+        if let Some((name, _)) = given.iter().find(|(_, g)| *g) {
+            return Err(bad(format!(
+                "{name} goes with the circular form; a geometry given by \"views\" holds \
+                 beam, cols, rows and the views only"
+            )));
+        }
+        let vg = ViewGeometry {
+            parallel: j.beam == BeamName::Parallel,
+            cols: j.cols,
+            rows: j.rows,
+            views: views
+                .iter()
+                .map(|v| ViewVectors {
+                    source: DVec3::from_array(v.source),
+                    pixel00: DVec3::from_array(v.pixel00),
+                    u: DVec3::from_array(v.u),
+                    v: DVec3::from_array(v.v),
+                })
+                .collect(),
+        };
+        return Ok(GeometryFile::Views(vg));
+    }
     let beam = match (j.beam, j.sid, j.sdd) {
         (BeamName::Parallel, None, None) => Beam::Parallel,
         (BeamName::Parallel, _, _) => {
@@ -509,7 +687,9 @@ pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
         }
         _ => {
             return Err(bad(
-                "give exactly one of angles_deg (a list) or angles ({count, range_deg})".into(),
+                "give exactly one of angles_deg (a list), angles ({count, range_deg}) or \
+                 views (one per projection)"
+                    .into(),
             ))
         }
     };
@@ -522,8 +702,8 @@ pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
         angles_deg,
         cols: j.cols,
         rows: j.rows,
-        du: j.du,
-        dv: j.dv,
+        du: j.du.unwrap_or(1.0),
+        dv: j.dv.unwrap_or(1.0),
         cu: j.cu.unwrap_or(dcu),
         cv: j.cv.unwrap_or(dcv),
         views: None,
@@ -532,13 +712,177 @@ pub fn geometry_from_json(text: &str, path: &Path) -> Result<Geometry> {
         Error::Invalid { message, .. } | Error::TooLarge { message, .. } => bad(message),
         other => other,
     })?;
-    Ok(g)
+    Ok(GeometryFile::Circular(g))
 }
 
-/// Reads a geometry JSON file.
-pub fn read_geometry(path: &Path) -> Result<Geometry> {
+/// The formats of a CT geometry file, told apart by their contents
+/// ([`detect_geometry_format`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeometryFormat {
+    /// voxlab's JSON (module docs): an object with `beam`.
+    Voxlab,
+    /// ASTRA's `proj_geom` as JSON ([`super::astra_geometry`]): an object with `type`.
+    Astra,
+    /// RTK's geometry XML ([`super::rtk_geometry`]): an XML document.
+    Rtk,
+}
+
+impl GeometryFormat {
+    /// The format's name in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            GeometryFormat::Voxlab => "voxlab geometry JSON",
+            GeometryFormat::Astra => "ASTRA proj_geom JSON",
+            GeometryFormat::Rtk => "RTK geometry XML",
+        }
+    }
+}
+
+/// What a geometry file describes: voxlab's circular [`Geometry`], or views given one
+/// by one (RTK's XML, ASTRA's geometries, voxlab's per-view JSON).
+#[derive(Clone, Debug, PartialEq)]
+pub enum GeometryFile {
+    Circular(Geometry),
+    Views(ViewGeometry),
+}
+
+impl GeometryFile {
+    /// The [`Geometry`] ([`Geometry::from_views`] for views); `path` names the file in
+    /// errors.
+    ///
+    /// # Errors
+    /// [`Geometry::from_views`]'s, as [`Error::Format`] naming the file.
+    pub fn into_geometry(self, path: &Path) -> Result<Geometry> {
+        match self {
+            GeometryFile::Circular(g) => Ok(g),
+            GeometryFile::Views(v) => Geometry::from_views(v).map_err(|e| match e {
+                Error::Invalid { message, .. } | Error::TooLarge { message, .. } => {
+                    Error::format(path, "views", message)
+                }
+                other => other,
+            }),
+        }
+    }
+}
+
+/// Which geometry format `text` is in: an XML document (it starts with `<`) is RTK's;
+/// a JSON object with a `type` key is ASTRA's, one without is voxlab's. `None` for
+/// anything else.
+pub fn detect_geometry_format(text: &str) -> Option<GeometryFormat> {
+    let t = text.strip_prefix('\u{feff}').unwrap_or(text).trim_start();
+    if t.starts_with('<') {
+        Some(GeometryFormat::Rtk)
+    } else if t.starts_with('{') {
+        Some(if super::astra_geometry::json_type(t).is_some() {
+            GeometryFormat::Astra
+        } else {
+            GeometryFormat::Voxlab
+        })
+    } else {
+        None
+    }
+}
+
+/// Parses a geometry file's text in any of the formats ([`detect_geometry_format`];
+/// `path` only names it in errors). An RTK file needs the projections' `detector`
+/// grid (its pixels are not in the file); the other formats ignore it. Views are
+/// checked to describe a beam and a detector ([`check_view_geometry`]).
+///
+/// # Errors
+/// [`Error::Format`] naming the file and the field: an unknown format, an RTK file
+/// without `detector`, and each reader's errors.
+pub fn parse_geometry(
+    text: &str,
+    path: &Path,
+    detector: Option<&DetectorGrid>,
+) -> Result<GeometryFile> {
+    let Some(format) = detect_geometry_format(text) else {
+        return Err(Error::format(
+            path,
+            "geometry",
+            "not a geometry file: voxlab's and ASTRA's are JSON objects { … }, RTK's is \
+             XML <RTKThreeDCircularGeometry …>",
+        ));
+    };
+    let file = match format {
+        GeometryFormat::Voxlab => parse_voxlab_geometry(text, path)?,
+        GeometryFormat::Astra => GeometryFile::Views(
+            super::astra_geometry::parse_astra_geometry(text, path)?.view_geometry(),
+        ),
+        GeometryFormat::Rtk => {
+            let rtk = super::rtk_geometry::parse_rtk_geometry(text, path)?;
+            let Some(grid) = detector else {
+                return Err(Error::format(
+                    path,
+                    "detector",
+                    "an RTK geometry does not hold the detector's pixels: they come from \
+                     the projection image (its size, spacing and origin), which must be \
+                     given with it",
+                ));
+            };
+            GeometryFile::Views(rtk.view_geometry(grid).map_err(|e| e.in_file(path))?)
+        }
+    };
+    if let GeometryFile::Views(v) = &file {
+        check_view_geometry(v).map_err(|e| match e {
+            Error::Invalid { message, .. } | Error::TooLarge { message, .. } => {
+                Error::format(path, "views", message)
+            }
+            other => other,
+        })?;
+    }
+    Ok(file)
+}
+
+/// [`parse_geometry`] of a file's bytes (what the fuzz targets call): at most
+/// [`MAX_GEOMETRY_BYTES`] of UTF-8 text.
+///
+/// # Errors
+/// As [`parse_geometry`]; bytes that are not UTF-8 text or too many.
+pub fn parse_geometry_bytes(
+    bytes: &[u8],
+    path: &Path,
+    detector: Option<&DetectorGrid>,
+) -> Result<GeometryFile> {
+    if bytes.len() as u64 > MAX_GEOMETRY_BYTES {
+        return Err(Error::too_large(
+            format!("geometry {}", path.display()),
+            format!("{} bytes (at most {MAX_GEOMETRY_BYTES})", bytes.len()),
+        ));
+    }
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| Error::format(path, "geometry", format!("not UTF-8 text: {e}")))?;
+    parse_geometry(text, path, detector)
+}
+
+/// The most bytes a geometry file may have: RTK writes about 700 bytes per projection,
+/// so [`MAX_DETECTOR`] projections fit.
+pub const MAX_GEOMETRY_BYTES: u64 = 64 << 20;
+
+/// Reads a geometry file in any format ([`parse_geometry`]).
+///
+/// # Errors
+/// As [`parse_geometry`]; I/O errors; files over [`MAX_GEOMETRY_BYTES`].
+pub fn read_geometry_file(path: &Path, detector: Option<&DetectorGrid>) -> Result<GeometryFile> {
     let text = read_small_text(path)?;
-    geometry_from_json(&text, path)
+    parse_geometry(&text, path, detector)
+}
+
+/// Reads a geometry file in any format as a [`Geometry`]: voxlab's JSON, ASTRA's
+/// `proj_geom` JSON, or RTK's XML with the projections' `detector` grid
+/// ([`read_projections_grid`] gives it from a MetaImage or NRRD stack;
+/// [`DetectorGrid::centred`] is RTK's default for given sizes and spacings).
+///
+/// # Errors
+/// As [`read_geometry_file`] and [`GeometryFile::into_geometry`].
+pub fn read_geometry_with(path: &Path, detector: Option<&DetectorGrid>) -> Result<Geometry> {
+    read_geometry_file(path, detector)?.into_geometry(path)
+}
+
+/// Reads a geometry file ([`read_geometry_with`] without a detector grid: RTK's XML is
+/// refused, every other format read).
+pub fn read_geometry(path: &Path) -> Result<Geometry> {
+    read_geometry_with(path, None)
 }
 
 /// Writes a geometry JSON file, atomically.
@@ -548,6 +892,98 @@ pub fn write_geometry(path: &Path, g: &Geometry) -> Result<()> {
     super::write_atomic(path, |w| {
         w.write_all(text.as_bytes()).map_err(|e| Error::io(path, e))
     })
+}
+
+/// Writes a geometry given view by view as voxlab's per-view JSON, atomically.
+///
+/// # Errors
+/// [`check_view_geometry`]'s; I/O errors.
+pub fn write_view_geometry(path: &Path, g: &ViewGeometry) -> Result<()> {
+    check_view_geometry(g)?;
+    let text = view_geometry_to_json(g);
+    super::write_atomic(path, |w| {
+        w.write_all(text.as_bytes()).map_err(|e| Error::io(path, e))
+    })
+}
+
+/// Checks that views describe a beam and a detector: sizes in `1..=`[`MAX_DETECTOR`],
+/// finite vectors within [`crate::ct::MAX_LENGTH_MM`], pixel steps `u`, `v` that span a
+/// plane, a cone-beam source off the detector plane, a parallel ray across it.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the view and the vector; [`Error::TooLarge`].
+pub fn check_view_geometry(g: &ViewGeometry) -> Result<()> {
+    let what = "CT views";
+    for (name, n) in [
+        ("detector columns", g.cols),
+        ("detector rows", g.rows),
+        ("views", g.views.len()),
+    ] {
+        if n == 0 {
+            return Err(Error::invalid(what, format!("no {name}")));
+        }
+        if n > MAX_DETECTOR {
+            return Err(Error::too_large(
+                what,
+                format!("{n} {name} (at most {MAX_DETECTOR})"),
+            ));
+        }
+    }
+    for (k, v) in g.views.iter().enumerate() {
+        for (name, x) in [
+            ("source", v.source),
+            ("pixel00", v.pixel00),
+            ("u", v.u),
+            ("v", v.v),
+        ] {
+            if !x.is_finite() || x.abs().max_element() > crate::ct::MAX_LENGTH_MM {
+                return Err(Error::invalid(
+                    what,
+                    format!(
+                        "view {k}: {name} {:?} is not finite within ±{:e} mm",
+                        x.to_array(),
+                        crate::ct::MAX_LENGTH_MM
+                    ),
+                ));
+            }
+        }
+        let n = v.u.cross(v.v);
+        let (lu, lv) = (v.u.length(), v.v.length());
+        if lu < crate::ct::MIN_LENGTH_MM
+            || lv < crate::ct::MIN_LENGTH_MM
+            || n.length() <= 1e-9 * lu * lv
+        {
+            return Err(Error::invalid(
+                what,
+                format!(
+                    "view {k}: the pixel steps u {:?} and v {:?} do not span a detector plane",
+                    v.u.to_array(),
+                    v.v.to_array()
+                ),
+            ));
+        }
+        let n = n.normalize();
+        let across = if g.parallel {
+            v.source.dot(n).abs() / v.source.length()
+        } else {
+            (v.source - v.pixel00).dot(n).abs() / (v.source - v.pixel00).length()
+        };
+        if across.is_nan() || across <= 1e-9 {
+            return Err(Error::invalid(
+                what,
+                format!(
+                    "view {k}: {} (source {:?})",
+                    if g.parallel {
+                        "the rays run along the detector plane"
+                    } else {
+                        "the source lies in the detector plane"
+                    },
+                    v.source.to_array()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Reads a list of angles in degrees: one per line, blank lines and `#` comments

@@ -33,8 +33,12 @@ pub struct ReconstructArgs {
     /// With --flat: the dark-field image D (no beam; default 0), as --flat.
     #[arg(long, requires = "flat")]
     pub dark: Option<PathBuf>,
-    /// `parallel` (scikit-image's geometry; needs --angles) or a geometry JSON file (as
-    /// `voxlab project` writes). Default: <input-stem>.geometry.json beside the input.
+    /// `parallel` (scikit-image's geometry; needs --angles) or a geometry file, its
+    /// format told by its contents: voxlab's JSON (as `voxlab project` writes; circular
+    /// or view by view), ASTRA's proj_geom as JSON (cone, cone_vec, parallel3d,
+    /// parallel3d_vec), or RTK's geometry XML (its detector pixels come from the
+    /// projections' spacing and origin, as in RTK). Default:
+    /// <input-stem>.geometry.json beside the input (docs/ct.md).
     #[arg(long)]
     pub geometry: Option<String>,
     /// With --geometry parallel: a text file of angles in degrees (one per line), or a
