@@ -761,7 +761,8 @@ pub const MIN_SINE: f64 = 1e-6;
 /// `(col, row)` and the FDK distance weight.
 ///
 /// With `P̃ = (P, 1)`: `den = r2·P̃`, `col = (r0·P̃)/den`, `row = (r1·P̃)/den`, and the
-/// weight is `(r3[0]/den)²` — `(SID/(SID − w))²` for a cone beam, 1 for a parallel beam.
+/// weight is `(r3[0]/den)²` — `(SID/(SID − w))²` for a cone beam, 1 for a parallel beam
+/// (for a view given by vectors `(SID_k/depth)²`, the depth along its detector normal).
 /// Layout: four rows of four numbers, the same bytes as WGSL's `CtView` in
 /// `shaders/shared/ct_geometry.wgsl` (64 bytes).
 #[repr(C)]

@@ -11,6 +11,8 @@
 //! over the `A` views, where `(col_k, row_k, w_k)` = [`ViewMatrix::project`] — `w = 1`
 //! for a parallel beam and `w = (SID/(SID − p·e_w))²` (FDK's `U⁻²`) for a cone beam —
 //! and `q_k(·)` is [`bilinear_zero`] of the filtered projection: [`backproject_point`].
+//! A geometry given view by view ([`Geometry::from_views`]) has its own projective map
+//! per view and `w = (SID_k/depth)²` (RTK's), the rest unchanged.
 //!
 //! **Why `π/(2A)`.** The continuous inversion is `∫₀^π dθ ∫|ω|P_θ(ω)e^{2πiωs}dω` for a
 //! parallel beam, and half of `∫₀^{2π}` for a full cone-beam circle (each ray is

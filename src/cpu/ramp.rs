@@ -51,6 +51,11 @@
 //! multiplies by the angular gap and `SDD/(2·SID)` there; voxlab puts `SDD/SID` into
 //! the filter's spacing (above) and the angular factor into the backprojection.
 //!
+//! A geometry given view by view ([`crate::ct::Geometry::from_views`]) is weighted
+//! per view instead, spacing included ([`RampView`]): the cosine of each ray with the
+//! view's detector normal and the view's own isocentre spacing (RTK's weights with its
+//! source and detector offsets).
+//!
 //! # Oracle and fast path
 //! [`FilterMethod::Direct`] is the oracle: the direct circular convolution with `g`,
 //! accumulated in f64 whatever `R` is, `O(cols·P)` per row, no FFT anywhere (the
