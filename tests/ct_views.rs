@@ -505,6 +505,14 @@ fn options_that_need_a_circle_say_so() {
     let g = cone_tilted(40, 1000.0, 1500.0, (32, 32, 4.0, 4.0), 2.0, 0.0, (0.0, 0.0));
     let e = voxlab::cpu::parker::short_scan(&g).unwrap_err().to_string();
     assert!(e.contains("--short-scan") && e.contains("circular"), "{e}");
+    // D²VR's bounding cylinder is a circular orbit's.
+    let q = voxlab::ct::Projections::<f64>::zeros(&g).unwrap();
+    let grid = voxlab::cpu::d2vr::D2vrGrid::centred([8; 3], 4.0).unwrap();
+    let e = voxlab::cpu::d2vr::ProjectionField::new(&q, &g, &grid, &Default::default(), None)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("D²VR") && e.contains("circular"), "{e}");
     // FDK needs the isocentre between source and detector: a source moved to the
     // detector's side of it is refused by the filter, not by the geometry.
     let views = g
