@@ -506,10 +506,9 @@ fn per_view_json_round_trips_and_refuses_mixed_forms() {
     }
 }
 
-/// Once [`Geometry::from_views`] exists: an ASTRA `cone` file read as a [`Geometry`]
+/// An ASTRA `cone` file read as a [`Geometry`]
 /// has the projective maps of RTK's circle.
 #[test]
-#[ignore = "needs Geometry::from_views"]
 fn astra_cone_file_reads_as_rtks_circle() {
     let g = voxlab::io::projections::read_geometry(&data("astra_cone.json")).unwrap();
     let astra = astra_views("astra_cone.json");
@@ -641,10 +640,9 @@ fn hostile_xml_is_refused() {
     assert!(t.elapsed().as_secs_f64() < 5.0);
 }
 
-/// Once [`Geometry::from_views`] exists: RTK's tilted geometry with offsets, read with
+/// RTK's tilted geometry with offsets, read with
 /// its MetaImage's grid as a [`Geometry`], projects every point as RTK's matrices do.
 #[test]
-#[ignore = "needs Geometry::from_views"]
 fn rtk_xml_reads_as_a_geometry_with_rtks_matrices() {
     for case in RTK_CASES {
         let record = json(&format!("rtk_{case}.json"));

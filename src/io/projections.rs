@@ -548,8 +548,17 @@ struct EvenAngles {
     range_deg: f64,
 }
 
-/// The geometry as JSON text (always with the explicit `angles_deg` list).
+/// The geometry as JSON text: a circular orbit with the explicit `angles_deg` list, a
+/// geometry given view by view in the per-view form ([`view_geometry_to_json`]).
 pub fn geometry_to_json(g: &Geometry) -> String {
+    if let Some(views) = &g.views {
+        return view_geometry_to_json(&ViewGeometry {
+            parallel: g.beam == Beam::Parallel,
+            cols: g.cols,
+            rows: g.rows,
+            views: views.clone(),
+        });
+    }
     let (beam, sid, sdd) = match g.beam {
         Beam::Parallel => (BeamName::Parallel, None, None),
         Beam::Cone { sid, sdd } => (BeamName::Cone, Some(sid), Some(sdd)),

@@ -32,7 +32,8 @@ use crate::cpu::ramp::{filter_projections, FilterMethod};
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::io::npy::npy_f32_header;
-use crate::io::projections::{projection_shape, read_projection_lines, read_projections};
+use crate::io::projections::{projection_shape, read_projection_lines, read_projections_grid};
+use crate::io::ReadOptions;
 use crate::io::{write_part, SharedOutput};
 use crate::real::Real;
 use std::ops::Range;
@@ -376,9 +377,12 @@ fn planned(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Res
     check_distributed(a)?;
     let shape = projection_shape(&a.input)?;
     // The geometry is checked against the stack's shape; only a header is read so far.
-    let whole = match shape {
-        Some(_) => None,
-        None => Some(read_projections::<f64>(&a.input)?),
+    let (whole, header) = match shape {
+        Some(_) => (None, None),
+        None => {
+            let (p, header) = read_projections_grid::<f64>(&a.input, &ReadOptions::default())?;
+            (Some(p), header)
+        }
     };
     // A stand-in of zeros carries the shape (dropped before the lines are read).
     let stand_in = match (&whole, shape) {
@@ -389,7 +393,7 @@ fn planned(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Res
         .as_ref()
         .or(stand_in.as_ref())
         .expect("one of the two");
-    let (g, geometry_file) = geometry_for(a, shaped)?;
+    let (g, geometry_file) = geometry_for(a, shaped, header.as_ref())?;
     drop(stand_in);
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));

@@ -21,8 +21,9 @@ use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::gpu::joseph_pair::GpuJosephPair;
 use crate::io::projections::{
-    geometry_path, read_angles_txt, read_field_image, read_geometry, read_projections_with,
+    geometry_path, read_angles_txt, read_field_image, read_geometry_with, read_projections_grid,
 };
+use crate::io::rtk_geometry::DetectorGrid;
 use crate::io::ReadOptions;
 use crate::io::{write_frame, PngOptions};
 use crate::phantom::Phantom;
@@ -106,6 +107,11 @@ pub struct ReconstructRequest {
     /// With `geometry = parallel`: a text file of angles in degrees (one per line), or
     /// a count N (N angles evenly over 180°).
     pub angles: Option<String>,
+    /// With RTK's geometry XML: the detector's pixel spacing `[du, dv]` in mm, the
+    /// detector centred on RTK's origin (`−(n − 1)/2 · spacing`), for projections whose
+    /// file records no spacing (`.npy`, TIFF); it replaces the spacing and origin of a
+    /// MetaImage or NRRD input. `None`: the input's own (RTK's XML has no pixel size).
+    pub detector_spacing: Option<[f64; 2]>,
     /// Frequency window of the ramp (scikit-image's names).
     pub filter: RampFilter,
     /// The image is N × N (parallel; `None`: the detector count) or the volume N³
@@ -223,11 +229,40 @@ fn parse_angles(s: &str) -> Result<Vec<f64>> {
     read_angles_txt(Path::new(s))
 }
 
+/// The detector's pixel grid an RTK geometry XML needs: `detector_spacing` centred
+/// when given, else the input's header's (`header`).
+fn detector_grid(
+    a: &ReconstructRequest,
+    p: &Projections<f64>,
+    header: Option<&DetectorGrid>,
+) -> Result<Option<DetectorGrid>> {
+    let Some([du, dv]) = a.detector_spacing else {
+        return Ok(header.cloned());
+    };
+    for (name, s) in [("du", du), ("dv", dv)] {
+        if !(s.is_finite() && (crate::ct::MIN_LENGTH_MM..=crate::ct::MAX_LENGTH_MM).contains(&s)) {
+            return Err(Error::invalid(
+                "--detector-spacing",
+                format!(
+                    "{name} = {s} mm must be finite and in [{:e}, {:e}] mm",
+                    crate::ct::MIN_LENGTH_MM,
+                    crate::ct::MAX_LENGTH_MM
+                ),
+            ));
+        }
+    }
+    Ok(Some(DetectorGrid::centred(p.cols, p.rows, du, dv)))
+}
+
 /// The geometry of the input, and the file it was read from when found beside it.
+/// `header`: the detector grid the input's file records (MetaImage, NRRD), which an
+/// RTK geometry XML takes its pixels from.
 pub(super) fn geometry_for(
     a: &ReconstructRequest,
     p: &Projections<f64>,
+    header: Option<&DetectorGrid>,
 ) -> Result<(Geometry, Option<PathBuf>)> {
+    let grid = detector_grid(a, p, header)?;
     let mut beside_file = None;
     let g = match a.geometry.as_deref() {
         Some("parallel") => {
@@ -265,7 +300,7 @@ pub(super) fn geometry_for(
                     "the geometry file lists the angles (use --angles with --geometry parallel)",
                 ));
             }
-            read_geometry(Path::new(file))?
+            read_geometry_with(Path::new(file), grid.as_ref())?
         }
         None => {
             let beside = geometry_path(&a.input);
@@ -286,7 +321,7 @@ pub(super) fn geometry_for(
                     "--angles goes with --geometry parallel",
                 ));
             }
-            let g = read_geometry(&beside)?;
+            let g = read_geometry_with(&beside, grid.as_ref())?;
             beside_file = Some(beside);
             g
         }
@@ -432,8 +467,8 @@ pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
 /// GPU errors; [`Error::Cancelled`].
 pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstructed> {
     check_request(a)?;
-    let (p, intensity) = read_input(a)?;
-    let (g, geometry_file) = geometry_for(a, &p)?;
+    let (p, intensity, header) = read_input(a)?;
+    let (g, geometry_file) = geometry_for(a, &p, header.as_ref())?;
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));
     }
@@ -444,20 +479,28 @@ pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstruc
 
 /// The request's projections as line integrals: the input read (its `frame`), and with
 /// `flat` (and `dark`) converted from intensities by [`line_integrals`], with the
-/// report of that conversion.
+/// report of that conversion, and the detector grid the input's header records
+/// (MetaImage, NRRD; for RTK's geometry XML).
 ///
 /// # Errors
 /// The readers' errors; flat or dark images that do not match the projections' rows ×
 /// cols (naming the file); `dark` without `flat`.
-pub fn read_input(a: &ReconstructRequest) -> Result<(Projections<f64>, Option<IntensityReport>)> {
+#[allow(clippy::type_complexity)]
+pub fn read_input(
+    a: &ReconstructRequest,
+) -> Result<(
+    Projections<f64>,
+    Option<IntensityReport>,
+    Option<DetectorGrid>,
+)> {
     check_flat_dark(a)?;
     let options = ReadOptions {
         frame: a.frame,
         ..Default::default()
     };
-    let p = read_projections_with::<f64>(&a.input, &options)?;
+    let (p, header) = read_projections_grid::<f64>(&a.input, &options)?;
     let Some(flat) = &a.flat else {
-        return Ok((p, None));
+        return Ok((p, None, header));
     };
     let fields = ReadOptions::default();
     let f = read_field_image(flat, "flat", p.rows, p.cols, &fields)?;
@@ -466,7 +509,7 @@ pub fn read_input(a: &ReconstructRequest) -> Result<(Projections<f64>, Option<In
         None => None,
     };
     let (p, report) = line_integrals(&p, &f, d.as_deref())?;
-    Ok((p, Some(report)))
+    Ok((p, Some(report), header))
 }
 
 /// `dark` goes with `flat`.
@@ -616,8 +659,8 @@ pub(super) fn fbp_projections(
 /// split.
 pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPlan> {
     check_request(a)?;
-    let (p, _) = read_input(a)?;
-    let (g, _) = geometry_for(a, &p)?;
+    let (p, _, header) = read_input(a)?;
+    let (g, _) = geometry_for(a, &p, header.as_ref())?;
     p.check_against(&g)?;
     let mut writes: Vec<String> = a.out.iter().map(|o| o.display().to_string()).collect();
     writes.extend(a.error_map.iter().map(|o| o.display().to_string()));

@@ -37,7 +37,7 @@ pub struct ReconstructArgs {
     /// format told by its contents: voxlab's JSON (as `voxlab project` writes; circular
     /// or view by view), ASTRA's proj_geom as JSON (cone, cone_vec, parallel3d,
     /// parallel3d_vec), or RTK's geometry XML (its detector pixels come from the
-    /// projections' spacing and origin, as in RTK). Default:
+    /// projections' spacing and origin, as in RTK, or from --detector-spacing). Default:
     /// <input-stem>.geometry.json beside the input (docs/ct.md).
     #[arg(long)]
     pub geometry: Option<String>,
@@ -45,6 +45,11 @@ pub struct ReconstructArgs {
     /// count N (N angles evenly over 180°).
     #[arg(long)]
     pub angles: Option<String>,
+    /// With RTK's geometry XML: the detector pixel spacing DU[,DV] in mm (DV = DU when
+    /// omitted), the detector centred as RTK centres it, for projections whose file
+    /// records no spacing (.npy, TIFF); replaces a MetaImage's or NRRD's own.
+    #[arg(long, value_name = "DU[,DV]", value_delimiter = ',', num_args = 1)]
+    pub detector_spacing: Option<Vec<f64>>,
     /// Frequency window of the ramp (scikit-image's filter names).
     #[arg(long, value_parser = choice::<RampFilter>(), default_value = "ramp")]
     pub filter: RampFilter,
@@ -142,6 +147,7 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         dark: a.dark.clone(),
         geometry: a.geometry.clone(),
         angles: a.angles.clone(),
+        detector_spacing: detector_spacing(a.detector_spacing.as_deref())?,
         filter: a.filter,
         size: a.size,
         spacing: a.spacing,
@@ -301,4 +307,17 @@ fn distributed(_req: &ReconstructRequest) -> Result<ExitCode> {
          --features mpi` (Debian: apt install libopenmpi-dev libclang-dev) and run it \
          under `mpirun -n N`",
     ))
+}
+
+/// `--detector-spacing DU[,DV]` as `[du, dv]`.
+fn detector_spacing(v: Option<&[f64]>) -> Result<Option<[f64; 2]>> {
+    match v {
+        None => Ok(None),
+        Some(&[du]) => Ok(Some([du, du])),
+        Some(&[du, dv]) => Ok(Some([du, dv])),
+        Some(other) => Err(voxlab::Error::invalid(
+            "--detector-spacing",
+            format!("DU or DU,DV (mm), not {} values", other.len()),
+        )),
+    }
 }
