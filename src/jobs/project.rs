@@ -7,7 +7,7 @@
 use super::input::VolumeInput;
 use super::{Backend, Engine, Progress};
 use crate::cpu::project::{project_phantom, project_volume, Grid, ProjectOptions};
-use crate::ct::{Geometry, Projections};
+use crate::ct::{Beam, Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::io::projections::{
@@ -65,6 +65,11 @@ pub struct ProjectRequest {
     pub range: Option<f64>,
     /// A text file of angles in degrees, one per line; replaces `angles` and `range`.
     pub angles_file: Option<PathBuf>,
+    /// A geometry file (voxlab's JSON, ASTRA's `proj_geom` JSON, RTK's XML;
+    /// [`crate::io::projections::read_geometry_with`]); replaces `beam`, the angles and
+    /// the distances. RTK's XML takes its detector from `cols`, `rows`, `du`, `dv`,
+    /// centred as RTK centres it.
+    pub geometry_file: Option<PathBuf>,
     /// Detector columns.
     pub cols: usize,
     /// Detector rows (`None`: 1 parallel, 256 cone).
@@ -92,6 +97,7 @@ impl Default for ProjectRequest {
             angles: 180,
             range: None,
             angles_file: None,
+            geometry_file: None,
             cols: 256,
             rows: None,
             du: None,
@@ -124,6 +130,21 @@ pub struct Projected {
 /// Inconsistent or absurd geometry parameters.
 pub fn geometry(a: &ProjectRequest) -> Result<Geometry> {
     let cone = a.beam == BeamKind::Cone;
+    if let Some(file) = &a.geometry_file {
+        if a.angles_file.is_some() || a.range.is_some() || a.sid.is_some() || a.sdd.is_some() {
+            return Err(Error::invalid(
+                "--geometry-file",
+                "the geometry file gives the angles and distances (drop --angles-file, \
+                 --range, --sid and --sdd)",
+            ));
+        }
+        // RTK's XML holds no detector pixels: those of the request, centred as in RTK.
+        let rows = a.rows.unwrap_or(256);
+        let du = a.du.unwrap_or(1.5);
+        let grid =
+            crate::io::rtk_geometry::DetectorGrid::centred(a.cols, rows, du, a.dv.unwrap_or(du));
+        return crate::io::projections::read_geometry_with(file, Some(&grid));
+    }
     if !cone && (a.sid.is_some() || a.sdd.is_some()) {
         return Err(Error::invalid(
             "--sid/--sdd",
@@ -264,7 +285,7 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
     let layout = match a.layout {
         LayoutChoice::Stack => Layout::Stack,
         LayoutChoice::Skimage => Layout::Skimage,
-        LayoutChoice::Auto if a.beam == BeamKind::Parallel && g.rows == 1 => Layout::Skimage,
+        LayoutChoice::Auto if g.beam == Beam::Parallel && g.rows == 1 => Layout::Skimage,
         LayoutChoice::Auto => Layout::Stack,
     };
     if layout == Layout::Skimage && g.rows != 1 {

@@ -37,6 +37,12 @@ pub struct ProjectArgs {
     /// --angles and --range.
     #[arg(long, conflicts_with_all = ["angles", "range"])]
     pub angles_file: Option<PathBuf>,
+    /// A geometry file instead of --geometry and the angles: voxlab's geometry JSON
+    /// (circular or view by view), ASTRA's proj_geom as JSON or RTK's geometry XML,
+    /// told apart by their contents (docs/ct.md). With RTK's XML, --cols, --rows, --du
+    /// and --dv give its detector, centred as RTK centres it.
+    #[arg(long, conflicts_with_all = ["angles", "range", "angles_file", "sid", "sdd"])]
+    pub geometry_file: Option<PathBuf>,
     /// Detector columns.
     #[arg(long, default_value_t = 256)]
     pub cols: usize,
@@ -104,6 +110,7 @@ pub fn run(a: ProjectArgs) -> Result<ExitCode> {
         angles: a.angles,
         range: a.range,
         angles_file: a.angles_file.clone(),
+        geometry_file: a.geometry_file.clone(),
         cols: a.cols,
         rows: a.rows,
         du: a.du,
