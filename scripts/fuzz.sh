@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-60}
 shift || true
-targets=${*:-nrrd npy nifti pvm den metaimage rtk_geometry astra_geometry}
+targets=${*:-nrrd npy nifti pvm den metaimage dicom rtk_geometry astra_geometry}
 if ! cargo fuzz --version >/dev/null 2>&1; then
     echo "fuzz.sh: cargo-fuzz is missing: cargo install cargo-fuzz" >&2
     exit 1
@@ -22,6 +22,8 @@ for t in $targets; do
     mkdir -p "fuzz/corpus/$t"
     seeds=()
     [ -d "tests/corpus/seeds/$t" ] && seeds=("tests/corpus/seeds/$t")
+    # DICOM's seeds are the decoder fixtures, whose values the tests check.
+    [ "$t" = dicom ] && seeds=("tests/data/dicom")
     echo "fuzz.sh: $t for ${secs}s"
     cargo fuzz run "$t" "fuzz/corpus/$t" "${seeds[@]}" -- \
         -max_total_time="$secs" -rss_limit_mb=2048 -max_len=262144 -timeout=10
