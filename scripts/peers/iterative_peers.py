@@ -77,6 +77,47 @@ def voxlab_iterative(sino, out, extra, threads, runs):
             "stdout": first[3].strip(), "threads": threads}
 
 
+PY_VENV = os.path.join(ROOT, "target", "py-venv", "bin", "python")
+
+IRADON_SART_CHILD = textwrap.dedent("""
+    import json, sys, time
+    import numpy as np
+    from voxlab.transform import iradon_sart
+    sino = np.load(sys.argv[1])
+    theta = np.array(json.loads(sys.argv[2]), dtype=np.float64)
+    passes, runs, relaxation = int(sys.argv[3]), int(sys.argv[4]), float(sys.argv[5])
+    def run():
+        img = None
+        for _ in range(passes):
+            img = iradon_sart(sino, theta=theta, image=img, relaxation=relaxation)
+        return img
+    img = run()  # warm-up
+    times = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        img = run()
+        times.append(time.perf_counter() - t)
+    np.save(sys.argv[6], img)
+    print(json.dumps(times))
+""")
+
+
+def voxlab_iradon_sart(sino, theta, out, passes, relaxation, threads, runs):
+    """voxlab's `voxlab.transform.iradon_sart` (scikit-image's SART step for step, float64
+    on the CPU), `passes` calls each feeding the last image back, timed in a child
+    process of the test command's venv (target/py-venv, where `scripts/test.sh` installs
+    the package) on `threads` threads, after one warm-up."""
+    if not os.path.exists(PY_VENV):
+        raise RuntimeError(f"{PY_VENV} is missing: run `bash scripts/test.sh` first")
+    env = dict(bench_peers.voxlab_env(), RAYON_NUM_THREADS=str(threads))
+    r = subprocess.run([PY_VENV, "-c", IRADON_SART_CHILD, sino, json.dumps(list(theta)),
+                        str(passes), str(runs), str(relaxation), out],
+                       check=True, env=env, capture_output=True, text=True)
+    ms = [t * 1e3 / passes for t in json.loads(r.stdout.strip().splitlines()[-1])]
+    return {"ms_per_iteration_median": statistics.median(ms), "ms_per_iteration": ms,
+            "threads": threads}
+
+
 # ------------------------------------------------------------------------------------
 # ASTRA (CPU)
 # ------------------------------------------------------------------------------------
@@ -282,6 +323,7 @@ def run_case(work, views, truth, runs):
             return img
 
         med, times, img = bench_peers.timed_runs(passes, runs)
+        sk_img = img
         sk.update(ms_per_iteration_median=med * 1e3 / SART_PASSES,
                   ms_per_iteration=[t * 1e3 / SART_PASSES for t in times], threads=1,
                   rms_circle=err(img), residual_norm=fit(img))
@@ -310,6 +352,25 @@ def run_case(work, views, truth, runs):
         print(f"golden-ratio reference: {err_text(e)}", file=sys.stderr)
     group(f"SART, one view per update, λ = {SKIMAGE_RELAXATION}", SART_PASSES, "pass",
           sart_lo, peers)
+    # scikit-image's own SART (its projector, weights and step) in voxlab beside it.
+    vsk = {"tool": "voxlab",
+           "settings": f"voxlab.transform.iradon_sart(…, relaxation={SKIMAGE_RELAXATION}) "
+                       f"× {SART_PASSES}, float64"}
+    try:
+        out = os.path.join(work, f"voxlab_{views}_iradon_sart.npy")
+        vsk["all_cores"] = voxlab_iradon_sart(sino_path, theta, out, SART_PASSES,
+                                              SKIMAGE_RELAXATION, n_threads, runs)
+        img = np.load(out)
+        vsk["rms_circle"], vsk["residual_norm"] = err(img), fit(img)
+        vsk["one_thread"] = voxlab_iradon_sart(sino_path, theta, out, SART_PASSES,
+                                               SKIMAGE_RELAXATION, 1, runs)
+        if "unavailable" not in sk:
+            vsk["max_abs_diff_vs_scikit_image"] = float(np.max(np.abs(img - sk_img)))
+    except Exception as e:
+        vsk["unavailable"] = err_text(e)
+    show(views, "iradon_sart", vsk)
+    group(f"scikit-image's SART (`iradon_sart`), λ = {SKIMAGE_RELAXATION}", SART_PASSES,
+          "pass", vsk, [sk])
     group("SART, one view per update, λ = 1", SART_PASSES, "pass",
           voxlab("sart_1", ["--method", "os-sart", *it, str(SART_PASSES), "--subsets",
                             str(views)]),
@@ -407,6 +468,12 @@ def reading(res):
             out.append(line + ".")
     closer = False
     for a in sk:
+        if a["group"].startswith("scikit-image's SART"):
+            out.append(f"- {a['views']} views, scikit-image's own SART: voxlab's "
+                       "`voxlab.transform.iradon_sart`, which repeats `iradon_sart`'s "
+                       f"arithmetic, reaches RMS {a['voxlab_rms']:.5f} against "
+                       f"{a['peer_rms']:.5f} (ratio {a['ratio']:.3f}).")
+            continue
         line = (f"- {a['views']} views, SART λ = {SKIMAGE_RELAXATION}: scikit-image's "
                 f"`iradon_sart` reaches RMS {a['peer_rms']:.5f}, voxlab "
                 f"{a['voxlab_rms']:.5f} (ratio {a['ratio']:.3f})")
