@@ -359,7 +359,10 @@ fn a_geometry_file_gives_the_projection_geometry() {
         .iter()
         .zip(&b)
         .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    assert!(scale > 1.0 && worst < 1e-9 * scale, "{worst:e} of {scale}");
+    eprintln!("ASTRA cone file vs flags: worst {worst:e} of {scale}");
+    // Measured: 2.1e-11 of 63 (3.4e-13 relative): the views' rays and the circle's are
+    // built by different arithmetic and round differently.
+    assert!(scale > 1.0 && worst < 1e-11 * scale, "{worst:e} of {scale}");
 
     let rtk = d.join("rtk.npy");
     #[rustfmt::skip]

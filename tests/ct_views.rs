@@ -16,7 +16,6 @@ use voxlab::cpu::project::{
 use voxlab::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
 use voxlab::ct::{ct_to_phantom, phantom_to_ct, Geometry, ViewGeometry, ViewVectors};
 use voxlab::phantom::{Phantom, Primitive};
-use voxlab::real::slab_interval;
 
 fn none(_: usize, _: usize) {}
 
@@ -271,32 +270,7 @@ fn joseph_of_a_constant_grid_is_value_times_chord_view_by_view() {
         * DMat4::from_translation(-DVec3::new(11.5, 9.5, 13.5));
     let grid = Grid::<f64>::new(dims, affine, vec![1.5; 24 * 20 * 28]).unwrap();
     for (name, g, _) in common::per_view_cases(7, 9) {
-        let p = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
-        let (mut checked, mut worst) = (0, 0.0f64);
-        for k in 0..g.n_angles() {
-            let v = JosephView::<f64>::new(&g, k, affine);
-            for row in 0..g.rows {
-                for col in 0..g.cols {
-                    let (o, d, t0) = pixel_ray(&v, col as f64, row as f64);
-                    let (o, d) = (DVec3::from_array(o), DVec3::from_array(d));
-                    let m = d.abs().max_position();
-                    let t = |s: f64| (s - o[m]) / d[m];
-                    let inside = [-0.5, dims[m] as f64 - 0.5].iter().all(|&s| {
-                        let x = o + d * t(s);
-                        (0..3).all(|a| a == m || (x[a] >= 0.0 && x[a] <= dims[a] as f64 - 1.0))
-                            && t(s) > t0
-                    });
-                    if !inside {
-                        continue;
-                    }
-                    let hi = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64) - 0.5;
-                    let (a, b) = slab_interval(o, d, DVec3::splat(-0.5), hi).unwrap();
-                    let want = 1.5 * (b - a);
-                    worst = worst.max((p.view(k)[row * g.cols + col] - want).abs() / want);
-                    checked += 1;
-                }
-            }
-        }
+        let (checked, worst) = common::constant_grid_chords(&grid, 1.5, &g);
         eprintln!("{name}: {checked} rays, worst relative {worst:.2e}");
         assert!(
             checked > 100 && worst < 1e-12,

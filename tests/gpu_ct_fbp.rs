@@ -206,16 +206,7 @@ fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
         return;
     };
     for (name, g, grid) in common::ct_cases(75, 70) {
-        let mut rng = common::Rng(11);
-        let q = Projections::<f32>::new(
-            g.n_angles(),
-            g.rows,
-            g.cols,
-            (0..g.n_angles() * g.rows * g.cols)
-                .map(|_| (rng.unit() * 10.0 - 3.0) as f32)
-                .collect(),
-        )
-        .unwrap();
+        let q = common::random_projections_f32(&g, 11);
         let whole = voxlab::gpu::fbp::backproject(ctx, &q, &g, &grid).unwrap();
         assert!(!BackprojectionPlan::new(&ctx.limits, &g, &grid)
             .unwrap()
@@ -295,16 +286,7 @@ fn gpu_ramp_filter_of_views_in_chunks_equals_the_unchunked_one() {
     // An even number of rows keeps the pairs of lines that share a complex FFT the
     // same in every chunking.
     let g = common::cone_wobble(11, 300.0, 450.0, (40, 8, 1.0, 1.2));
-    let mut rng = common::Rng(3);
-    let p = Projections::<f32>::new(
-        g.n_angles(),
-        g.rows,
-        g.cols,
-        (0..g.n_angles() * g.rows * g.cols)
-            .map(|_| (rng.unit() * 10.0 - 3.0) as f32)
-            .collect(),
-    )
-    .unwrap();
+    let p = common::random_projections_f32(&g, 3);
     let whole = filter_projections(ctx, &p, &g, RampFilter::RamLak).unwrap();
     let mut small = voxlab::gpu::GpuContext::new().unwrap();
     // Two views' packed lines (8 rows paired into 4 lines of 128 complex values, 4 KiB

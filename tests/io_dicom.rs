@@ -29,20 +29,6 @@ fn series_copy(name: &str) -> PathBuf {
     dir
 }
 
-/// (min, max, sum, weighted sum Σ v[i]·(i mod 251 + 1)) in x-fastest order, like the
-/// reference script.
-fn stats(v: &AnyVolume) -> (f64, f64, f64, f64) {
-    let vals = v.values_f64();
-    let (mut lo, mut hi, mut sum, mut wsum) = (f64::MAX, f64::MIN, 0.0, 0.0);
-    for (i, &x) in vals.iter().enumerate() {
-        lo = lo.min(x);
-        hi = hi.max(x);
-        sum += x;
-        wsum += x * ((i % 251) + 1) as f64;
-    }
-    (lo, hi, sum, wsum)
-}
-
 fn assert_vec(got: DVec3, want: [f64; 3], tol: f64, what: &str) {
     let want = DVec3::from_array(want);
     assert!(
@@ -83,7 +69,7 @@ fn mr_series_matches_pydicom() {
         v.spacing()
     );
     // Reference: min 0, max 1059, sum 219593921, weighted sum 27553588492.
-    let (lo, hi, sum, wsum) = stats(&v);
+    let (lo, hi, sum, wsum) = common::volume_stats(&v);
     assert_eq!((lo, hi), (0.0, 1059.0));
     assert_eq!(sum, 219593921.0);
     assert_eq!(wsum, 27553588492.0);
@@ -277,7 +263,7 @@ fn uncompressed_syntaxes_match_pydicom() {
         let v = read_dicom(&root().join(CORPUS).join(name)).unwrap();
         assert_eq!(v.dims(), dims, "{name}");
         assert_eq!(v.kind(), kind, "{name}");
-        assert_eq!(stats(&v), (lo, hi, sum, wsum), "{name}");
+        assert_eq!(common::volume_stats(&v), (lo, hi, sum, wsum), "{name}");
     }
     // implicit_little: PixelSpacing 0.859375, IOP identity, IPP (-110, -109.8, -47.5),
     // SpacingBetweenSlices 6 used for the single slice's z step.

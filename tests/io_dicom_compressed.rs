@@ -161,20 +161,6 @@ fn lossy_files_match_pydicoms_decoding() {
     }
 }
 
-/// (min, max, sum, weighted sum Σ v[i]·(i mod 251 + 1)), as tests/io_dicom.rs and
-/// tests/data/dicom_reference.py compute them.
-fn stats(v: &AnyVolume) -> (f64, f64, f64, f64) {
-    let vals = v.values_f64();
-    let (mut lo, mut hi, mut sum, mut wsum) = (f64::MAX, f64::MIN, 0.0, 0.0);
-    for (i, &x) in vals.iter().enumerate() {
-        lo = lo.min(x);
-        hi = hi.max(x);
-        sum += x;
-        wsum += x * ((i % 251) + 1) as f64;
-    }
-    (lo, hi, sum, wsum)
-}
-
 #[test]
 fn bundled_compressed_files_match_pydicom() {
     // (file, dims, min, max, sum, weighted sum) printed by tests/data/dicom_reference.py
@@ -210,7 +196,7 @@ fn bundled_compressed_files_match_pydicom() {
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(v.dims(), dims, "{name}");
         assert_eq!(v.kind(), VoxelKind::I16, "{name}");
-        assert_eq!(stats(&v), (lo, hi, sum, wsum), "{name}");
+        assert_eq!(common::volume_stats(&v), (lo, hi, sum, wsum), "{name}");
     }
 }
 

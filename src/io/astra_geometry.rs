@@ -150,7 +150,7 @@ struct AnglesJson {
     rows: usize,
     #[serde(rename = "DetectorColCount")]
     cols: usize,
-    #[serde(rename = "ProjectionAngles", deserialize_with = "bounded")]
+    #[serde(rename = "ProjectionAngles", deserialize_with = "crate::json::bounded")]
     angles: Vec<f64>,
     #[serde(rename = "DistanceOriginSource", default)]
     dso: Option<f64>,
@@ -167,40 +167,8 @@ struct VectorsJson {
     rows: usize,
     #[serde(rename = "DetectorColCount")]
     cols: usize,
-    #[serde(rename = "Vectors", deserialize_with = "bounded")]
+    #[serde(rename = "Vectors", deserialize_with = "crate::json::bounded")]
     vectors: Vec<[f64; 12]>,
-}
-
-/// A JSON array of at most [`MAX_DETECTOR`] elements, refused past that before more is
-/// allocated.
-fn bounded<'de, D, T>(d: D) -> std::result::Result<Vec<T>, D::Error>
-where
-    D: serde::Deserializer<'de>,
-    T: Deserialize<'de>,
-{
-    struct V<T>(std::marker::PhantomData<T>);
-    impl<'de, T: Deserialize<'de>> serde::de::Visitor<'de> for V<T> {
-        type Value = Vec<T>;
-        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            write!(f, "a list of at most {MAX_DETECTOR} projections")
-        }
-        fn visit_seq<A: serde::de::SeqAccess<'de>>(
-            self,
-            mut seq: A,
-        ) -> std::result::Result<Vec<T>, A::Error> {
-            let mut out = Vec::new();
-            while let Some(x) = seq.next_element()? {
-                if out.len() == MAX_DETECTOR {
-                    return Err(serde::de::Error::custom(format!(
-                        "more than {MAX_DETECTOR} projections"
-                    )));
-                }
-                out.push(x);
-            }
-            Ok(out)
-        }
-    }
-    d.deserialize_seq(V(std::marker::PhantomData))
 }
 
 /// Parses ASTRA's `proj_geom` as JSON (`path` only names it in errors).

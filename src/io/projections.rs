@@ -489,33 +489,12 @@ struct ViewJson {
     v: [f64; 3],
 }
 
-/// `views`, refused past [`MAX_DETECTOR`] entries as they are read.
+/// `views`, refused past [`MAX_DETECTOR`] entries as they are read
+/// ([`crate::json::bounded`]).
 fn bounded_views<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Option<Vec<ViewJson>>, D::Error> {
-    struct V;
-    impl<'de> serde::de::Visitor<'de> for V {
-        type Value = Vec<ViewJson>;
-        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            write!(f, "a list of at most {MAX_DETECTOR} views")
-        }
-        fn visit_seq<A: serde::de::SeqAccess<'de>>(
-            self,
-            mut seq: A,
-        ) -> std::result::Result<Vec<ViewJson>, A::Error> {
-            let mut out = Vec::new();
-            while let Some(x) = seq.next_element()? {
-                if out.len() == MAX_DETECTOR {
-                    return Err(serde::de::Error::custom(format!(
-                        "more than {MAX_DETECTOR} views"
-                    )));
-                }
-                out.push(x);
-            }
-            Ok(out)
-        }
-    }
-    d.deserialize_seq(V).map(Some)
+    crate::json::bounded(d).map(Some)
 }
 
 /// The fields of [`GeometryJson`].

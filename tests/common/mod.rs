@@ -599,3 +599,68 @@ pub fn sparse_tf() -> voxlab::transfer::TransferFunction {
         faux_shading: None,
     }
 }
+
+/// Joseph's projection of a constant grid (every voxel `value`) through `g`, against
+/// `value × chord`: Joseph is exact when a ray enters and leaves through the two faces
+/// across its driving axis while its other coordinates stay between the first and
+/// last voxel centres. Returns the rays that qualify and the worst relative error.
+pub fn constant_grid_chords(
+    grid: &voxlab::cpu::project::Grid<f64>,
+    value: f64,
+    g: &voxlab::ct::Geometry,
+) -> (usize, f64) {
+    use voxlab::cpu::project::{pixel_ray, project_volume, JosephView, ProjectOptions};
+    let (dims, affine) = (grid.dims, grid.affine);
+    let p = project_volume(grid, g, &ProjectOptions::default()).unwrap();
+    let (mut checked, mut worst) = (0, 0.0f64);
+    for k in 0..g.n_angles() {
+        let v = JosephView::<f64>::new(g, k, affine);
+        for row in 0..g.rows {
+            for col in 0..g.cols {
+                // The ray in index space.
+                let (o, d, t0) = pixel_ray(&v, col as f64, row as f64);
+                let (o, d) = (DVec3::from_array(o), DVec3::from_array(d));
+                let m = d.abs().max_position();
+                let t = |s: f64| (s - o[m]) / d[m];
+                let inside = [-0.5, dims[m] as f64 - 0.5].iter().all(|&s| {
+                    let x = o + d * t(s);
+                    (0..3).all(|a| a == m || (x[a] >= 0.0 && x[a] <= dims[a] as f64 - 1.0))
+                        && t(s) > t0
+                });
+                if !inside {
+                    continue;
+                }
+                let hi = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64) - 0.5;
+                let (a, b) = voxlab::real::slab_interval(o, d, DVec3::splat(-0.5), hi).unwrap();
+                let want = value * (b - a);
+                worst = worst.max((p.view(k)[row * g.cols + col] - want).abs() / want);
+                checked += 1;
+            }
+        }
+    }
+    (checked, worst)
+}
+
+/// (min, max, sum, weighted sum Σ v[i]·(i mod 251 + 1)) of a volume's values in
+/// x-fastest order, as `tests/data/dicom_reference.py` and the DICOM fixture scripts
+/// compute them for the peers' decodings.
+pub fn volume_stats(v: &AnyVolume) -> (f64, f64, f64, f64) {
+    let vals = v.values_f64();
+    let (mut lo, mut hi, mut sum, mut wsum) = (f64::MAX, f64::MIN, 0.0, 0.0);
+    for (i, &x) in vals.iter().enumerate() {
+        lo = lo.min(x);
+        hi = hi.max(x);
+        sum += x;
+        wsum += x * ((i % 251) + 1) as f64;
+    }
+    (lo, hi, sum, wsum)
+}
+
+/// Projections shaped for `g` with values uniform in [−3, 7), from `Rng(seed)` in
+/// storage order, in f32.
+pub fn random_projections_f32(g: &voxlab::ct::Geometry, seed: u64) -> voxlab::ct::Projections<f32> {
+    let mut rng = Rng(seed);
+    let n = g.n_angles() * g.rows * g.cols;
+    let data = (0..n).map(|_| (rng.unit() * 10.0 - 3.0) as f32).collect();
+    voxlab::ct::Projections::new(g.n_angles(), g.rows, g.cols, data).unwrap()
+}
