@@ -87,7 +87,8 @@ fi
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps ./python
 "$VENV/bin/python" -m pytest -q -p no:cacheprovider python/tests
 
-# The distributed reconstruction under MPI (feature `mpi`; tests/mpi_reconstruct.rs):
+# The distributed reconstruction and render under MPI (feature `mpi`;
+# tests/mpi_reconstruct.rs, tests/mpi_render.rs):
 # OpenMPI's mpirun and library, and libclang for the mpi crate's bindings, installed
 # through apt when missing and this runs as root. Without them these tests fail,
 # unless VOXLAB_ALLOW_NO_MPI=1, in which case they say loudly that they skipped.
@@ -106,7 +107,8 @@ if ! have_mpi && [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; the
 fi
 MPI_SKIPPED=
 if have_mpi; then
-    cargo test --release --features mpi --test mpi_reconstruct --test distributed_reconstruct
+    cargo test --release --features mpi --test mpi_reconstruct --test mpi_render \
+        --test distributed_reconstruct --test distributed_render
 elif [ "${VOXLAB_ALLOW_NO_MPI:-}" = "1" ]; then
     MPI_SKIPPED=1
 else
@@ -120,7 +122,7 @@ if [ -n "$MPI_SKIPPED" ]; then
     echo
     echo "************************************************************"
     echo "*  MPI TESTS SKIPPED (no MPI, VOXLAB_ALLOW_NO_MPI=1):       *"
-    echo "*    tests/mpi_reconstruct.rs                              *"
+    echo "*    tests/mpi_reconstruct.rs, tests/mpi_render.rs         *"
     echo "************************************************************"
 fi
 

@@ -6,50 +6,12 @@
 
 mod common;
 
-use common::{root, s, scratch, stderr, voxlab};
+use common::{on_thread_ranks, root, s, scratch, stderr, voxlab};
 use std::path::{Path, PathBuf};
-use std::sync::{Barrier, Mutex};
 use voxlab::jobs::distributed::{self, Comm, Distributed};
 use voxlab::jobs::reconstruct::ReconstructRequest;
 use voxlab::jobs::{Backend, Progress};
 use voxlab::Error;
-
-/// Ranks as threads of this process: every collective meets at a barrier.
-struct Threads<'a> {
-    rank: usize,
-    shared: &'a Shared,
-}
-
-struct Shared {
-    size: usize,
-    barrier: Barrier,
-    slots: Mutex<Vec<Vec<f64>>>,
-    bytes: Mutex<Vec<u8>>,
-}
-
-impl Comm for Threads<'_> {
-    fn rank(&self) -> usize {
-        self.rank
-    }
-    fn size(&self) -> usize {
-        self.shared.size
-    }
-    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
-        self.shared.slots.lock().unwrap()[self.rank] = values.to_vec();
-        self.shared.barrier.wait();
-        let all = self.shared.slots.lock().unwrap().concat();
-        self.shared.barrier.wait();
-        all
-    }
-    fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
-        if self.rank == root {
-            *self.shared.bytes.lock().unwrap() = bytes.clone();
-        }
-        self.shared.barrier.wait();
-        *bytes = self.shared.bytes.lock().unwrap().clone();
-        self.shared.barrier.wait();
-    }
-}
 
 /// A progress whose `cancelled` is true: the way a test makes one rank fail.
 struct Stop;
@@ -65,26 +27,13 @@ fn on_ranks(
     ranks: usize,
     failing: Option<usize>,
 ) -> Vec<voxlab::Result<Distributed>> {
-    let shared = Shared {
-        size: ranks,
-        barrier: Barrier::new(ranks),
-        slots: Mutex::new(vec![Vec::new(); ranks]),
-        bytes: Mutex::new(Vec::new()),
-    };
-    std::thread::scope(|sc| {
-        let handles: Vec<_> = (0..ranks)
-            .map(|rank| {
-                let comm = Threads {
-                    rank,
-                    shared: &shared,
-                };
-                sc.spawn(move || {
-                    let progress: &dyn Progress = if failing == Some(rank) { &Stop } else { &() };
-                    distributed::run(req, &comm, progress)
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    on_thread_ranks(ranks, |comm| {
+        let progress: &dyn Progress = if failing == Some(comm.rank()) {
+            &Stop
+        } else {
+            &()
+        };
+        distributed::run(req, comm, progress)
     })
 }
 

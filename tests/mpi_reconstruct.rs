@@ -5,32 +5,8 @@
 
 mod common;
 
-use common::{root, s, scratch, stderr, voxlab};
+use common::{mpirun, root, s, scratch, stderr, voxlab};
 use std::path::Path;
-use std::process::{Command, Output};
-use std::time::{Duration, Instant};
-
-/// `mpirun -n ranks voxlab ARGS…`, killed after two minutes (a hang is a failure).
-fn mpirun(ranks: usize, args: &[&str]) -> Output {
-    let mut c = Command::new("mpirun");
-    c.args(["--oversubscribe", "-n", &ranks.to_string()])
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .arg(env!("CARGO_BIN_EXE_voxlab"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped());
-    let mut child = c.spawn().expect("mpirun (OpenMPI) on the PATH");
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed() > Duration::from_secs(120) {
-            let _ = child.kill();
-            panic!("mpirun -n {ranks} {args:?} still runs after 120 s");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    child.wait_with_output().unwrap()
-}
 
 fn ct(name: &str) -> String {
     root()

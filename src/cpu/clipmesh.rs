@@ -607,6 +607,27 @@ impl MeshRanges {
         }
     }
 
+    /// No sample.
+    pub fn none() -> Self {
+        MeshRanges {
+            count: 0,
+            range: [(0, 0); MAX_SEGMENTS],
+        }
+    }
+
+    /// These samples cut to `lo ..= hi`.
+    pub fn within(&self, lo: usize, hi: usize) -> Self {
+        let mut out = MeshRanges::none();
+        for &(a, b) in &self.range[..self.count] {
+            let (a, b) = (a.max(lo), b.min(hi));
+            if a <= b {
+                out.range[out.count] = (a, b);
+                out.count += 1;
+            }
+        }
+        out
+    }
+
     /// The samples whose midpoint (see [`step_mid`]) lies in a segment.
     pub fn new<R: Real>(segs: &Segments, n: usize, t_in: R, t_out: R, t_s: R, dt: R) -> Self {
         let mut out = MeshRanges {

@@ -114,6 +114,64 @@ impl<R: Real> Field<R> for GridField<R> {
     }
 }
 
+/// One brick of a larger grid, sampled at the larger grid's index coordinates: what a
+/// rank of a distributed render holds (`jobs::distributed_render`). `inner` holds the
+/// voxels of the box that starts at voxel `origin` of the whole grid (the brick and its
+/// ghost voxels, [`brick_ghost`]); a point `p` is sampled as `inner` at `p − origin`.
+///
+/// That subtraction is exact for every point the filter and the gradient stencil reach
+/// from the brick's own samples (`p ≥ origin` on each axis and `p < 2²³`: both are
+/// multiples of `p`'s unit in the last place, and so is the difference, which is no
+/// larger than `p`), so the taps, their weights and the sample are those of the whole
+/// grid, bit for bit. Its dimensions and value range are the whole grid's; it offers
+/// no voxel grid (no pre-classification, skipping grid or batched kernels, which
+/// index a grid directly).
+pub struct BrickField<R> {
+    pub inner: GridField<R>,
+    pub origin: [usize; 3],
+    /// The whole grid's dimensions and value range.
+    pub whole: [usize; 3],
+    pub range: (f64, f64),
+}
+
+/// The ghost voxels a brick needs on each side for `filter`: its radius, one for the
+/// gradient stencil's reach, and one so that every point it samples lies at or above
+/// the box's first voxel (see [`BrickField`]; precomputed gradients, clamped at the
+/// box's faces, are then right wherever the filter reads them).
+pub fn brick_ghost(filter: crate::settings::Filter) -> usize {
+    filter.radius().saturating_add(2)
+}
+
+impl<R: Real> BrickField<R> {
+    #[inline(always)]
+    fn local(&self, p: V3<R>) -> V3<R> {
+        let o = self.origin;
+        p - V3::new(R::of(o[0] as f64), R::of(o[1] as f64), R::of(o[2] as f64))
+    }
+}
+
+impl<R: Real> Field<R> for BrickField<R> {
+    fn dims(&self) -> [usize; 3] {
+        self.whole
+    }
+    #[inline]
+    fn value(&self, p: V3<R>) -> R {
+        self.inner.value(self.local(p))
+    }
+    #[inline]
+    fn gradient(&self, p: V3<R>) -> V3<R> {
+        match &self.inner.gradients {
+            Some(_) => self.inner.gradient(self.local(p)),
+            // The stencil's points are taken in whole-grid coordinates, as the whole
+            // grid's field takes them (`gradient_at`).
+            None => gradient_stencil(|q| self.value(q), p, self.inner.method),
+        }
+    }
+    fn value_range(&self) -> (f64, f64) {
+        self.range
+    }
+}
+
 /// An analytic phantom seen through a virtual grid of `dims` (the grid
 /// `Phantom::sample(dims)` would produce), sampled exactly at every point: no
 /// reconstruction filter stands between the ray caster and the truth.

@@ -6,6 +6,7 @@
 
 pub mod adaptive;
 pub mod clipmesh;
+pub mod composite;
 pub mod d2vr;
 pub mod dft;
 pub mod fbp;

@@ -100,6 +100,8 @@ pub(crate) struct Setup<R> {
     batched: bool,
     /// The table as the batches read it (`march::lut_pairs`), when batched.
     lut_pairs: Vec<[R; 8]>,
+    /// A brick's share of the samples, in a distributed render ([`render_owned`]).
+    own: Option<Owned<R>>,
 }
 
 /// Which loop a DVR ray's steps go through. Both give the same image to the last bit.
@@ -288,6 +290,162 @@ pub fn render_field_with<R: Real, F: Field<R>>(
     kernel: Kernel,
     cache: Option<&super::skip::MinMaxCache<R>>,
 ) -> Result<RenderOutput> {
+    let setup = setup_for(field, affine, tf, settings, kernel, cache, None)?;
+    Ok(cast_image(field, &setup, camera, settings, progress))
+}
+
+/// The samples of one brick of a tiling (`jobs::distributed_render`): those whose
+/// midpoint lies in `[lo − ½, hi − ½)` on each axis of the whole grid's index space, a
+/// face on the whole grid's border reaching to infinity, so that the bricks of a
+/// tiling own every sample of every ray exactly once.
+#[derive(Clone, Copy, Debug)]
+pub struct Owned<R> {
+    lo: [Option<R>; 3],
+    hi: [Option<R>; 3],
+}
+
+impl<R: Real> Owned<R> {
+    /// The samples of the brick of voxels `lo .. hi` of a grid of `whole` voxels.
+    pub fn new(lo: [usize; 3], hi: [usize; 3], whole: [usize; 3]) -> Self {
+        Owned {
+            lo: std::array::from_fn(|a| (lo[a] > 0).then(|| R::of(lo[a] as f64 - 0.5))),
+            hi: std::array::from_fn(|a| (hi[a] < whole[a]).then(|| R::of(hi[a] as f64 - 0.5))),
+        }
+    }
+
+    /// The steps of `steps` whose midpoints the brick owns: one run (each axis's
+    /// coordinate of the midpoints is monotone along the ray, so each face keeps a
+    /// prefix or a suffix of them), found by bisection against the exact midpoints.
+    pub(crate) fn range(&self, steps: &super::march::Steps<R>) -> Option<(usize, usize)> {
+        let (mut first, mut last) = (0usize, steps.n.checked_sub(1)?);
+        for a in 0..3 {
+            let faces = [
+                self.lo[a].map(|b| (b, true)),
+                self.hi[a].map(|b| (b, false)),
+            ];
+            for (bound, lower) in faces.into_iter().flatten() {
+                let keep = |k: usize| {
+                    let x = steps.segment(k).0 .0[a];
+                    if lower {
+                        x >= bound
+                    } else {
+                        x < bound
+                    }
+                };
+                let (k0, k1) = (keep(first), keep(last));
+                match (k0, k1) {
+                    (true, true) => {}
+                    (false, false) => return None,
+                    // A prefix: the last kept step.
+                    (true, false) => {
+                        let (mut yes, mut no) = (first, last);
+                        while no - yes > 1 {
+                            let m = yes + (no - yes) / 2;
+                            if keep(m) {
+                                yes = m
+                            } else {
+                                no = m
+                            }
+                        }
+                        last = yes;
+                    }
+                    // A suffix: the first kept step.
+                    (false, true) => {
+                        let (mut no, mut yes) = (first, last);
+                        while yes - no > 1 {
+                            let m = no + (yes - no) / 2;
+                            if keep(m) {
+                                yes = m
+                            } else {
+                                no = m
+                            }
+                        }
+                        first = yes;
+                    }
+                }
+            }
+        }
+        Some((first, last))
+    }
+}
+
+/// One brick's share of a render ([`render_owned`]).
+#[derive(Clone, Debug)]
+pub struct Partial {
+    /// Premultiplied `(C, A)` composited front to back (or back to front) from the
+    /// brick's samples alone, without background (DVR); the maximum, minimum or sum of
+    /// its samples without the window (MIP, MinIP, X-ray; undefined where `counts` is 0).
+    pub image: Frame,
+    /// Samples the brick took per ray.
+    pub counts: Vec<u32>,
+    /// Whether each ray meets the whole grid's box (within the clipping box): a ray
+    /// that does not gets the background (or the miss value) in the whole render.
+    pub hits: Vec<bool>,
+}
+
+/// Renders the samples of `own`'s brick only, for sort-last compositing: the rays,
+/// their step grids and their samples are those of the whole grid's render (`field`
+/// samples at the whole grid's coordinates, [`super::field::BrickField`]); the
+/// window, the background and the miss value are left to the composite. DVR, MIP,
+/// MinIP and X-ray.
+///
+/// # Errors
+/// Invalid settings or transfer function; other modes.
+pub fn render_owned<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    own: Owned<R>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Partial> {
+    if !matches!(
+        settings.mode,
+        Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray
+    ) || !settings.iso_surfaces.is_empty()
+    {
+        return Err(Error::invalid(
+            "mode",
+            "a brick renders DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
+             the whole ray)",
+        ));
+    }
+    let mut s = settings.clone();
+    s.window = None;
+    s.background = [0.0; 4];
+    s.sample_count = true;
+    let setup = setup_for(field, affine, tf, &s, Kernel::PerSample, None, Some(own))?;
+    let out = cast_image(field, &setup, camera, &s, progress);
+    let (w, h) = (camera.width, camera.height);
+    let mut hits = vec![false; w * h];
+    hits.par_chunks_mut(w).enumerate().for_each(|(row, hit)| {
+        for (col, x) in hit.iter_mut().enumerate() {
+            let u = R::of(super::jitter::ray_offset(&s, col, row));
+            *x = plan_ray(&setup, &camera.ray(col, row), u).is_some();
+        }
+    });
+    let counts = out
+        .samples
+        .map(|f| f.data.iter().map(|&c| c as u32).collect())
+        .unwrap_or_else(|| vec![0; w * h]);
+    Ok(Partial {
+        image: out.image,
+        counts,
+        hits,
+    })
+}
+
+/// Everything the rays of a render share, checked and built once.
+fn setup_for<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    settings: &RenderSettings,
+    kernel: Kernel,
+    cache: Option<&super::skip::MinMaxCache<R>>,
+    own: Option<Owned<R>>,
+) -> Result<Setup<R>> {
     settings.validate()?;
     tf.validate()?;
     let dims = field.dims();
@@ -350,6 +508,7 @@ pub fn render_field_with<R: Real, F: Field<R>>(
             && settings.transfer_2d.is_none()
             && kernel == Kernel::Batched,
         lut_pairs: Vec::new(),
+        own,
     };
     // Post-classification bounds what the filter samples; pre-classification the voxels.
     let skip_voxels = match settings.classification {
@@ -367,14 +526,24 @@ pub fn render_field_with<R: Real, F: Field<R>>(
         clip_mesh: super::clipmesh::resolve(settings, affine, dims, skip_voxels, &setup.base.lut)?,
         ..setup
     };
+    Ok(setup)
+}
 
+/// Casts every ray of `camera` through `setup`.
+fn cast_image<R: Real, F: Field<R>>(
+    field: &F,
+    setup: &Setup<R>,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> RenderOutput {
     let channels = if settings.mode.rgba() { 4 } else { 1 };
     let (w, h) = (camera.width, camera.height);
     let mut image = Frame::new(w, h, channels);
     let mut counts = vec![0u32; w * h];
     let done = AtomicUsize::new(0);
     // Unshaded DVR in f32 with the trilinear filter: rays in packets (`march`).
-    let packets = packet_source(field, &setup, settings);
+    let packets = packet_source(field, setup, settings);
     image
         .data
         .par_chunks_mut(w * channels)
@@ -392,7 +561,7 @@ pub fn render_field_with<R: Real, F: Field<R>>(
             for col in 0..w {
                 let ray = camera.ray(col, row);
                 let u = R::of(super::jitter::ray_offset(settings, col, row));
-                let (px, n) = cast_ray(field, &setup, settings.mode, settings.compositing, ray, u);
+                let (px, n) = cast_ray(field, setup, settings.mode, settings.compositing, ray, u);
                 for (c, v) in px.iter().take(channels).enumerate() {
                     pixels[col * channels + c] = v.f64();
                 }
@@ -400,11 +569,7 @@ pub fn render_field_with<R: Real, F: Field<R>>(
             }
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, h);
         });
-    Ok(RenderOutput::from_counts(
-        image,
-        &counts,
-        settings.sample_count,
-    ))
+    RenderOutput::from_counts(image, &counts, settings.sample_count)
 }
 
 /// The packet kernel's inputs, when it applies: the render is batched, unshaded, in
@@ -500,19 +665,27 @@ pub(crate) fn plan_ray<R: Real>(s: &Setup<R>, ray: &crate::camera::Ray, u: R) ->
         let segs = m.segments(ray.origin, ray.dir, ray.t_min);
         super::clipmesh::MeshRanges::new(&segs, n, t_in, t_out, t_s, dt)
     });
-    Some(Plan {
-        steps: super::march::Steps {
-            o,
-            d,
-            t_in,
-            t_out,
-            t_s,
-            dt,
-            n,
-        },
-        speed,
-        mesh,
-    })
+    let steps = super::march::Steps {
+        o,
+        d,
+        t_in,
+        t_out,
+        t_s,
+        dt,
+        n,
+    };
+    // A brick's steps: the same grid, its own samples only.
+    let mesh = match &s.own {
+        None => mesh,
+        Some(own) => {
+            let all = mesh.unwrap_or_else(|| super::clipmesh::MeshRanges::all(n));
+            Some(match own.range(&steps) {
+                Some((lo, hi)) => all.within(lo, hi),
+                None => super::clipmesh::MeshRanges::none(),
+            })
+        }
+    };
+    Some(Plan { steps, speed, mesh })
 }
 
 /// Casts one ray; returns the pixel (RGBA, or the scalar in channel 0) and the number

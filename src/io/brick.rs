@@ -133,18 +133,63 @@ pub fn read_brick(layout: &RawLayout, brick: &Brick, path: &Path) -> Result<AnyV
 /// `n` = 0; more bricks than a box can be cut into (a box 1 voxel wide on every axis
 /// that should hold two).
 pub fn kd_bricks(dims: [usize; 3], n: usize) -> Result<Vec<Brick>> {
+    Ok(kd_tree(dims, n)?.1)
+}
+
+/// The k-d tree of [`kd_bricks`]: its cuts, and its bricks (the leaves, in order).
+///
+/// # Errors
+/// As [`kd_bricks`].
+pub fn kd_tree(dims: [usize; 3], n: usize) -> Result<(KdTree, Vec<Brick>)> {
     if n == 0 {
         return Err(Error::invalid("bricks", "a volume needs at least one"));
     }
     let mut out = Vec::with_capacity(n);
-    split(Brick::all(dims), n, &mut out)?;
-    Ok(out)
+    let tree = split(Brick::all(dims), n, &mut out)?;
+    Ok((tree, out))
 }
 
-fn split(b: Brick, n: usize, out: &mut Vec<Brick>) -> Result<()> {
+/// A k-d tree of bricks: a leaf names its brick (its index in [`kd_tree`]'s list); a
+/// cut divides a box by the plane between voxel slices `cut − 1` and `cut` of `axis`
+/// (index coordinate `cut − ½`), `low` holding the voxels below it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum KdTree {
+    Leaf(usize),
+    Cut {
+        axis: usize,
+        cut: usize,
+        low: Box<KdTree>,
+        high: Box<KdTree>,
+    },
+}
+
+impl KdTree {
+    /// The bricks in the order a ray of index-space direction `d` meets them: at each
+    /// cut the low side first when `d` runs up the cut's axis, the high side first
+    /// otherwise (a ray parallel to the plane never crosses it, so either order is
+    /// right). Appends to `order`.
+    pub fn front_to_back(&self, d: [f64; 3], order: &mut Vec<usize>) {
+        match self {
+            KdTree::Leaf(b) => order.push(*b),
+            KdTree::Cut {
+                axis, low, high, ..
+            } => {
+                let (first, second) = if d[*axis] >= 0.0 {
+                    (low, high)
+                } else {
+                    (high, low)
+                };
+                first.front_to_back(d, order);
+                second.front_to_back(d, order);
+            }
+        }
+    }
+}
+
+fn split(b: Brick, n: usize, out: &mut Vec<Brick>) -> Result<KdTree> {
     if n == 1 {
         out.push(b);
-        return Ok(());
+        return Ok(KdTree::Leaf(out.len() - 1));
     }
     let bd = b.dims();
     let axis = (0..3).max_by_key(|&a| (bd[a], a)).unwrap_or(0);
@@ -164,6 +209,12 @@ fn split(b: Brick, n: usize, out: &mut Vec<Brick>) -> Result<()> {
     first.hi[axis] = cut;
     let mut second = b;
     second.lo[axis] = cut;
-    split(first, n1, out)?;
-    split(second, n2, out)
+    let low = Box::new(split(first, n1, out)?);
+    let high = Box::new(split(second, n2, out)?);
+    Ok(KdTree::Cut {
+        axis,
+        cut,
+        low,
+        high,
+    })
 }

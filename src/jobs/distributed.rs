@@ -52,6 +52,60 @@ pub trait Comm {
     fn all_gather(&self, values: &[f64]) -> Vec<f64>;
     /// `root`'s `bytes` on every rank (replacing theirs).
     fn broadcast(&self, root: usize, bytes: &mut Vec<u8>);
+    /// Personalised exchange: `messages[r]` goes to rank `r` (one per rank, this
+    /// rank's own included); returns what every rank sent this one, in rank order.
+    /// The default takes one broadcast per rank; MPI's is `MPI_Alltoallv`.
+    fn all_to_all(&self, messages: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+        let (me, size) = (self.rank(), self.size());
+        assert_eq!(
+            messages.len(),
+            size,
+            "all_to_all takes one message per rank"
+        );
+        (0..size)
+            .map(|root| {
+                let mut packed = Vec::new();
+                if root == me {
+                    for m in &messages {
+                        packed.extend_from_slice(&(m.len() as u64).to_le_bytes());
+                        packed.extend_from_slice(m);
+                    }
+                }
+                self.broadcast(root, &mut packed);
+                unpack(&packed).swap_remove(me)
+            })
+            .collect()
+    }
+    /// Every rank's `bytes` on `root`, in rank order (an empty list on the others).
+    /// The default takes one broadcast per rank; MPI's is `MPI_Gatherv`.
+    fn gather(&self, root: usize, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+        let (me, size) = (self.rank(), self.size());
+        let mut out = Vec::new();
+        for from in 0..size {
+            let mut b = if from == me {
+                bytes.clone()
+            } else {
+                Vec::new()
+            };
+            self.broadcast(from, &mut b);
+            if me == root {
+                out.push(b);
+            }
+        }
+        out
+    }
+}
+
+/// Length-prefixed messages (`u64` little-endian length, then the bytes) back into a
+/// list.
+fn unpack(mut packed: &[u8]) -> Vec<Vec<u8>> {
+    let mut out = Vec::new();
+    while packed.len() >= 8 {
+        let n = u64::from_le_bytes(packed[..8].try_into().expect("eight bytes")) as usize;
+        out.push(packed[8..8 + n].to_vec());
+        packed = &packed[8 + n..];
+    }
+    out
 }
 
 /// One process alone: the distributed job as a plain one.
@@ -68,12 +122,31 @@ impl Comm for Solo {
         values.to_vec()
     }
     fn broadcast(&self, _root: usize, _bytes: &mut Vec<u8>) {}
+    fn all_to_all(&self, messages: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+        messages
+    }
+    fn gather(&self, _root: usize, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+        vec![bytes]
+    }
 }
 
-/// A [`Comm`] that counts the bytes this rank sends through it.
-struct Counted<'a> {
+/// A [`Comm`] that counts the bytes this rank sends through it to other ranks.
+pub(crate) struct Counted<'a> {
     inner: &'a dyn Comm,
     sent: std::cell::Cell<u64>,
+}
+
+impl<'a> Counted<'a> {
+    pub(crate) fn new(inner: &'a dyn Comm) -> Self {
+        Counted {
+            inner,
+            sent: std::cell::Cell::new(0),
+        }
+    }
+    /// Bytes sent so far.
+    pub(crate) fn sent(&self) -> u64 {
+        self.sent.get()
+    }
 }
 
 impl Comm for Counted<'_> {
@@ -93,6 +166,23 @@ impl Comm for Counted<'_> {
             self.sent.set(self.sent.get() + 8 + bytes.len() as u64);
         }
         self.inner.broadcast(root, bytes)
+    }
+    fn all_to_all(&self, messages: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+        let me = self.rank();
+        let out: u64 = messages
+            .iter()
+            .enumerate()
+            .filter(|(r, _)| *r != me)
+            .map(|(_, m)| m.len() as u64)
+            .sum();
+        self.sent.set(self.sent.get() + out);
+        self.inner.all_to_all(messages)
+    }
+    fn gather(&self, root: usize, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+        if root != self.rank() {
+            self.sent.set(self.sent.get() + bytes.len() as u64);
+        }
+        self.inner.gather(root, bytes)
     }
 }
 
@@ -599,10 +689,7 @@ pub fn run(
     comm: &dyn Comm,
     progress: &dyn Progress,
 ) -> Result<Distributed> {
-    let counted = Counted {
-        inner: comm,
-        sent: std::cell::Cell::new(0),
-    };
+    let counted = Counted::new(comm);
     let comm: &dyn Comm = &counted;
     let rank = comm.rank();
     let pre = agree(comm, prepare(a, comm, progress))?;
@@ -690,7 +777,7 @@ pub fn run(
         bytes_written as f64,
         lo,
         hi,
-        counted.sent.get() as f64,
+        counted.sent() as f64,
     ];
     let all = comm.all_gather(&mine);
     let ranks: Vec<RankReport> = all
@@ -776,6 +863,73 @@ pub mod mpi {
             root.broadcast_into(&mut len);
             bytes.resize(len as usize, 0);
             root.broadcast_into(&mut bytes[..]);
+        }
+        fn all_to_all(&self, messages: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+            use mpi::datatype::{Partition, PartitionMut};
+            use mpi::traits::CommunicatorCollectives;
+            let size = self.size();
+            assert_eq!(
+                messages.len(),
+                size,
+                "all_to_all takes one message per rank"
+            );
+            // The lengths first, then the bytes.
+            let lens: Vec<u64> = messages.iter().map(|m| m.len() as u64).collect();
+            let mut theirs = vec![0u64; size];
+            self.world.all_to_all_into(&lens[..], &mut theirs[..]);
+            let counts = |l: &[u64]| l.iter().map(|&n| n as i32).collect::<Vec<i32>>();
+            let displs = |c: &[i32]| {
+                c.iter()
+                    .scan(0i32, |at, &n| {
+                        let d = *at;
+                        *at += n;
+                        Some(d)
+                    })
+                    .collect::<Vec<i32>>()
+            };
+            let (sc, rc) = (counts(&lens), counts(&theirs));
+            let (sd, rd) = (displs(&sc), displs(&rc));
+            let send: Vec<u8> = messages.concat();
+            let mut recv = vec![0u8; theirs.iter().sum::<u64>() as usize];
+            {
+                let s = Partition::new(&send[..], &sc[..], &sd[..]);
+                let mut r = PartitionMut::new(&mut recv[..], &rc[..], &rd[..]);
+                self.world.all_to_all_varcount_into(&s, &mut r);
+            }
+            (0..size)
+                .map(|r| recv[rd[r] as usize..(rd[r] + rc[r]) as usize].to_vec())
+                .collect()
+        }
+        fn gather(&self, root: usize, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+            use mpi::datatype::PartitionMut;
+            let size = self.size();
+            let len = bytes.len() as u64;
+            let at = self.world.process_at_rank(root as i32);
+            if self.rank() == root {
+                let mut lens = vec![0u64; size];
+                at.gather_into_root(&len, &mut lens[..]);
+                let rc: Vec<i32> = lens.iter().map(|&n| n as i32).collect();
+                let rd: Vec<i32> = rc
+                    .iter()
+                    .scan(0i32, |a, &n| {
+                        let d = *a;
+                        *a += n;
+                        Some(d)
+                    })
+                    .collect();
+                let mut recv = vec![0u8; lens.iter().sum::<u64>() as usize];
+                {
+                    let mut r = PartitionMut::new(&mut recv[..], &rc[..], &rd[..]);
+                    at.gather_varcount_into_root(&bytes[..], &mut r);
+                }
+                (0..size)
+                    .map(|r| recv[rd[r] as usize..(rd[r] + rc[r]) as usize].to_vec())
+                    .collect()
+            } else {
+                at.gather_into(&len);
+                at.gather_varcount_into(&bytes[..]);
+                Vec::new()
+            }
         }
     }
 }

@@ -264,14 +264,29 @@ impl VolumeInput {
 
 /// The centre of a volume's box in world coordinates (mm).
 pub fn volume_center(v: &AnyVolume) -> glam::DVec3 {
-    let d = v.dims().map(|n| (n as f64 - 1.0) * 0.5);
-    v.affine().transform_point3(glam::DVec3::from_array(d))
+    grid_center(v.dims(), v.affine())
 }
 
 /// A volume's extent along its index axes in mm: dims × spacing.
 pub fn volume_extent(v: &AnyVolume) -> [f64; 3] {
-    let (d, s) = (v.dims(), v.spacing());
-    [d[0] as f64 * s[0], d[1] as f64 * s[1], d[2] as f64 * s[2]]
+    grid_extent(v.dims(), v.affine())
+}
+
+/// [`volume_center`] from a grid's dimensions and affine alone.
+pub fn grid_center(dims: [usize; 3], affine: glam::DMat4) -> glam::DVec3 {
+    let d = dims.map(|n| (n as f64 - 1.0) * 0.5);
+    affine.transform_point3(glam::DVec3::from_array(d))
+}
+
+/// [`volume_extent`] from a grid's dimensions and affine alone.
+pub fn grid_extent(dims: [usize; 3], affine: glam::DMat4) -> [f64; 3] {
+    let m = glam::DMat3::from_mat4(affine);
+    let s = [m.x_axis.length(), m.y_axis.length(), m.z_axis.length()];
+    [
+        dims[0] as f64 * s[0],
+        dims[1] as f64 * s[1],
+        dims[2] as f64 * s[2],
+    ]
 }
 
 /// The transfer function `--tf auto` gives `volume` read from `input`: the `phantom`
@@ -281,12 +296,27 @@ pub fn volume_extent(v: &AnyVolume) -> [f64; 3] {
 /// # Errors
 /// None in practice (the preset is built in).
 pub fn auto_transfer(input: &VolumeInput, volume: &AnyVolume) -> Result<TransferFunction> {
+    auto_transfer_for(input, || {
+        let r = volume.value_range();
+        (r.min, r.max)
+    })
+}
+
+/// [`auto_transfer`] given the volume's value range (asked for only when needed), for
+/// a volume no process holds whole.
+///
+/// # Errors
+/// None in practice (the preset is built in).
+pub fn auto_transfer_for(
+    input: &VolumeInput,
+    range: impl FnOnce() -> (f64, f64),
+) -> Result<TransferFunction> {
     if input.is_phantom() {
         TransferFunction::preset("phantom")
     } else if input.memory.is_none() && input.source == "embedded:microct-bone" {
         TransferFunction::preset("microct-bone")
     } else {
-        let r = volume.value_range();
-        Ok(TransferFunction::auto_for_range(r.min, r.max))
+        let (lo, hi) = range();
+        Ok(TransferFunction::auto_for_range(lo, hi))
     }
 }

@@ -8,7 +8,7 @@
 //!   one frame, the median of repeated frames, jittered frames averaged, a stereo pair,
 //!   several volumes or the adaptive caster, with timings and sample counts.
 
-use super::input::{volume_center, volume_extent, VolumeInput};
+use super::input::{volume_center, VolumeInput};
 pub use super::renderer::{render, render_with_progress, PreparedScene, Rendered, Renderer, Scene};
 use super::stereo::StereoLayout;
 pub use super::Backend;
@@ -379,11 +379,31 @@ pub fn build_view(
     if let Some(path) = &a.state_file {
         return state_view(&super::view::ViewState::load(path)?, sample_count);
     }
+    let range = || {
+        let r = volume.value_range();
+        (r.min, r.max)
+    };
+    build_view_for(a, volume.dims(), volume.affine(), range, sample_count)
+}
+
+/// [`build_view`] (without a state file) for a grid of `dims` placed by `affine`,
+/// whose value range `range` gives when `--tf auto` asks for it: a volume no process
+/// holds whole (`jobs::distributed_render`).
+///
+/// # Errors
+/// Whatever the transfer functions, the camera or the settings refuse.
+pub fn build_view_for(
+    a: &SceneRequest,
+    dims: [usize; 3],
+    affine: glam::DMat4,
+    range: impl FnOnce() -> (f64, f64),
+    sample_count: bool,
+) -> Result<(TransferFunction, Camera, RenderSettings)> {
     let mut tf = if let Some(t) = &a.transfer {
         t.validate()?;
         t.clone()
     } else if a.tf == "auto" {
-        super::input::auto_transfer(&a.input, volume)?
+        super::input::auto_transfer_for(&a.input, range)?
     } else {
         TransferFunction::preset_or_file(&a.tf)?
     };
@@ -436,7 +456,7 @@ pub fn build_view(
             t.window = WindowMap::from_window_level(w, l, t.domain)?;
         }
     }
-    let camera = scene_camera(a, volume)?;
+    let camera = scene_camera(a, dims, affine)?;
     let mut settings = match &a.settings_file {
         Some(p) => crate::json::read_file::<RenderSettings>(p, "render settings JSON")?,
         None => {
@@ -476,15 +496,14 @@ pub fn build_view(
 
 /// The camera of a request for `volume`: the axis view, or the orbit around the
 /// volume's centre.
-fn scene_camera(a: &SceneRequest, volume: &AnyVolume) -> Result<Camera> {
-    let dims = volume.dims();
+fn scene_camera(a: &SceneRequest, dims: [usize; 3], affine: glam::DMat4) -> Result<Camera> {
     match &a.view.axis {
         Some(v) => {
             let view: AxisView = v.parse()?;
             let (ca, ra) = view.image_axes();
             Camera::axis_view(
                 dims,
-                volume.affine(),
+                affine,
                 view,
                 a.width.unwrap_or(dims[ca]),
                 a.height.unwrap_or(dims[ra]),
@@ -505,8 +524,8 @@ fn scene_camera(a: &SceneRequest, volume: &AnyVolume) -> Result<Camera> {
                 distance_mm: a.distance,
             };
             Camera::orbit(
-                volume_center(volume),
-                volume_extent(volume),
+                super::input::grid_center(dims, affine),
+                super::input::grid_extent(dims, affine),
                 orbit,
                 projection,
                 a.width.unwrap_or(256),

@@ -664,3 +664,127 @@ pub fn random_projections_f32(g: &voxlab::ct::Geometry, seed: u64) -> voxlab::ct
     let data = (0..n).map(|_| (rng.unit() * 10.0 - 3.0) as f32).collect();
     voxlab::ct::Projections::new(g.n_angles(), g.rows, g.cols, data).unwrap()
 }
+
+// ---------------------------------------------------------------------------------
+// Ranks as threads (the distributed jobs without MPI)
+// ---------------------------------------------------------------------------------
+
+/// Ranks as threads of this process: every collective meets at a barrier.
+pub struct Threads<'a> {
+    rank: usize,
+    shared: &'a ThreadsShared,
+}
+
+pub struct ThreadsShared {
+    size: usize,
+    barrier: std::sync::Barrier,
+    slots: std::sync::Mutex<Vec<Vec<f64>>>,
+    bytes: std::sync::Mutex<Vec<u8>>,
+}
+
+impl voxlab::jobs::distributed::Comm for Threads<'_> {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.shared.size
+    }
+    fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+        self.shared.slots.lock().unwrap()[self.rank] = values.to_vec();
+        self.shared.barrier.wait();
+        let all = self.shared.slots.lock().unwrap().concat();
+        self.shared.barrier.wait();
+        all
+    }
+    fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
+        if self.rank == root {
+            *self.shared.bytes.lock().unwrap() = bytes.clone();
+        }
+        self.shared.barrier.wait();
+        *bytes = self.shared.bytes.lock().unwrap().clone();
+        self.shared.barrier.wait();
+    }
+}
+
+/// Runs `job(comm)` on `ranks` threads, one [`Threads`] rank each; the results in rank
+/// order.
+pub fn on_thread_ranks<T: Send>(ranks: usize, job: impl Fn(&Threads) -> T + Sync) -> Vec<T> {
+    let shared = ThreadsShared {
+        size: ranks,
+        barrier: std::sync::Barrier::new(ranks),
+        slots: std::sync::Mutex::new(vec![Vec::new(); ranks]),
+        bytes: std::sync::Mutex::new(Vec::new()),
+    };
+    std::thread::scope(|sc| {
+        let handles: Vec<_> = (0..ranks)
+            .map(|rank| {
+                let comm = Threads {
+                    rank,
+                    shared: &shared,
+                };
+                let job = &job;
+                sc.spawn(move || job(&comm))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
+
+/// `mpirun --oversubscribe -n ranks voxlab ARGS…` (OpenMPI), killed after two minutes
+/// (a hang is a failure).
+pub fn mpirun(ranks: usize, args: &[&str]) -> Output {
+    use std::time::{Duration, Instant};
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "-n", &ranks.to_string()])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .arg(env!("CARGO_BIN_EXE_voxlab"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    let mut child = c.spawn().expect("mpirun (OpenMPI) on the PATH");
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("mpirun -n {ranks} {args:?} still runs after 120 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// The distributed renders' test volume: smooth and not cubic (37×29×23, odd on every
+/// axis, so bricks differ in size), placed by an oblique, anisotropic affine, written
+/// to `dir/volume.nrrd` as raw float32 (read brick by brick).
+pub fn brick_test_volume(dir: &Path) -> PathBuf {
+    use voxlab::io::nrrd::{write_nrrd, NrrdWriteOptions};
+    let dims = [37, 29, 23];
+    let rot = DMat4::from_quat(DQuat::from_euler(glam::EulerRot::ZXY, 0.3, -0.2, 0.15));
+    let affine = DMat4::from_translation(DVec3::new(-12.0, 4.0, 7.5))
+        * rot
+        * DMat4::from_scale(DVec3::new(0.8, 1.0, 1.3));
+    let mut data = Vec::with_capacity(dims.iter().product());
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let (x, y, z) = (
+                    i as f64 / 36.0 - 0.5,
+                    j as f64 / 28.0 - 0.5,
+                    k as f64 / 22.0 - 0.5,
+                );
+                let r2 = x * x + 1.3 * y * y + 0.8 * z * z;
+                let v = 1000.0 * (-6.0 * r2).exp() + 250.0 * (9.0 * x + 4.0 * y * z).sin();
+                data.push(v as f32);
+            }
+        }
+    }
+    let vol = AnyVolume::F32(Volume::with_affine(dims, affine, data).unwrap());
+    let path = dir.join("volume.nrrd");
+    let raw = NrrdWriteOptions {
+        gzip: false,
+        detached: false,
+    };
+    write_nrrd(&path, &vol, raw).unwrap();
+    path
+}

@@ -250,20 +250,10 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
 
 /// `--distributed`: every rank runs the job; rank 0 shows progress, the errors and the
 /// report.
-#[cfg(feature = "mpi")]
 fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
-    use voxlab::jobs::distributed::{mpi::Mpi, Comm};
-    let comm = Mpi::init()?;
-    let root = comm.rank() == 0;
-    let term = root.then(Terminal::bars);
-    let progress: &dyn voxlab::jobs::Progress = match &term {
-        Some(t) => t,
-        None => &(),
-    };
-    let r = voxlab::jobs::distributed::run(req, &comm, progress);
-    drop(term);
-    match r {
-        Ok(d) if root => {
+    super::on_mpi_ranks(
+        |comm, progress| voxlab::jobs::distributed::run(req, comm, progress),
+        |d| {
             let g = d.grid.dims;
             println!(
                 "wrote {} ({} {}×{}×{} volume, {} filter, {} on {} in slabs along {}; \
@@ -284,29 +274,9 @@ fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
                 d.range.1
             );
             print!("{}", d.describe());
-            Ok(ExitCode::SUCCESS)
-        }
-        Ok(_) => Ok(ExitCode::SUCCESS),
-        // Every rank holds the same error: rank 0 says it, and the others wait for
-        // that (mpirun ends the job once a rank has failed).
-        Err(e) => {
-            if root {
-                crate::report_error(&e);
-            }
-            comm.all_gather(&[0.0]);
-            Ok(ExitCode::FAILURE)
-        }
-    }
-}
-
-#[cfg(not(feature = "mpi"))]
-fn distributed(_req: &ReconstructRequest) -> Result<ExitCode> {
-    Err(voxlab::Error::invalid(
-        "--distributed",
-        "this voxlab was built without MPI: build it with `cargo build --release \
-         --features mpi` (Debian: apt install libopenmpi-dev libclang-dev) and run it \
-         under `mpirun -n N`",
-    ))
+            Ok(())
+        },
+    )
 }
 
 /// `--detector-spacing DU[,DV]` as `[du, dv]`.

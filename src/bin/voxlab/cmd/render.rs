@@ -192,6 +192,13 @@ pub struct RenderArgs {
     pub accel: AccelArgs,
     #[command(flatten)]
     pub multi: MultiArgs,
+    /// Render on the ranks of `mpirun -n N voxlab render … --distributed`: each rank
+    /// reads one brick of the volume (straight from a raw .npy, NRRD or MetaImage
+    /// file), casts every ray through it, and the pieces are composited sort-last on
+    /// the ranks; rank 0 writes the image. DVR, MIP, MinIP and X-ray on the CPU
+    /// backends. Needs a build with the `mpi` feature (docs/distributed.md).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// Extra volumes rendered together with INPUT (volume 0, placed by the identity).
@@ -411,6 +418,9 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
         repeat: r.repeat,
         volumes: r.multi.volumes()?,
     };
+    if r.distributed {
+        return distributed(&r, &req);
+    }
     let term = Terminal::bars();
     let out = voxlab::jobs::render::run(&req, &term)?;
     drop(term);
@@ -497,4 +507,50 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--distributed`: every rank renders its brick; rank 0 writes the image and reports
+/// every rank.
+fn distributed(r: &RenderArgs, req: &RenderRequest) -> Result<ExitCode> {
+    super::on_mpi_ranks(
+        |comm, progress| voxlab::jobs::distributed_render::run(req, comm, progress),
+        |d| {
+            let png = PngOptions {
+                sixteen_bit: r.sixteen_bit,
+                range: None,
+            };
+            let image = d.image.as_ref().expect("rank 0 holds the image");
+            write_frame(&r.out, image, png)?;
+            if let (Some(path), Some(samples)) = (&r.samples, &d.samples) {
+                write_frame(path, samples, png)?;
+            }
+            let v = d.dims;
+            println!(
+                "wrote {} ({}×{}, {:?}, {}×{}×{} volume in {} bricks{}, {} samples, {:.2} s, \
+                 {} on {})",
+                r.out.display(),
+                d.camera.width,
+                d.camera.height,
+                d.settings.mode,
+                v[0],
+                v[1],
+                v[2],
+                d.ranks.len(),
+                if d.reads_whole {
+                    " (read whole by every rank: not a raw file)"
+                } else {
+                    ""
+                },
+                d.total_samples,
+                d.seconds,
+                d.what,
+                match d.ranks.len() {
+                    1 => "1 rank".to_string(),
+                    n => format!("{n} ranks"),
+                },
+            );
+            print!("{}", d.describe());
+            Ok(())
+        },
+    )
 }

@@ -1,0 +1,123 @@
+//! Sort-last compositing: the pieces of one pixel that the bricks of a distributed
+//! render made (`cpu::raycast::render_owned`), joined in the order the pixel's ray
+//! meets the bricks, and the whole render's pixel made from the result.
+//!
+//! Each brick owns a run of every ray's samples (`raycast::Owned`), so the ray's
+//! samples are the bricks' runs one after another, front to back:
+//! - **DVR**: a brick's piece is its premultiplied `(C, A)`, composited from zero
+//!   (front to back, or back to front with `over`); the pieces are joined front to
+//!   back with the same operator, `C += (1 − A) C_b`, `A += (1 − A) A_b`. It equals
+//!   the single-process sum up to the reassociation of the products, and up to
+//!   `1 − ert` where early ray termination ended the ray inside a brick (a brick
+//!   behind cannot know its ray has ended: its piece adds at most `1 − A ≤ 1 − ert`).
+//! - **MIP / MinIP**: the maximum / minimum of the pieces: exactly the
+//!   single-process value, in any order, then the grey window.
+//! - **X-ray**: the sum of the pieces, front to back (the single-process sum with its
+//!   terms grouped by brick).
+//!
+//! A piece with no samples (count 0) is left out.
+
+use super::modes::window_map;
+use super::shade::over_background;
+use crate::real::Real;
+use crate::settings::{Mode, RenderSettings};
+
+/// Adds `piece` (a pixel value and its sample count), which lies behind everything in
+/// `acc`, to `acc`.
+#[inline]
+pub fn join<R: Real>(mode: Mode, acc: &mut ([R; 4], u32), piece: ([R; 4], u32)) {
+    let (v, n) = piece;
+    if n == 0 {
+        return;
+    }
+    let first = acc.1 == 0;
+    acc.1 += n;
+    let a = &mut acc.0;
+    match mode {
+        Mode::Mip if !first => a[0] = a[0].max(v[0]),
+        Mode::Minip if !first => a[0] = a[0].min(v[0]),
+        Mode::Xray if !first => a[0] = a[0] + v[0],
+        Mode::Dvr => {
+            let t = R::one() - a[3];
+            for c in 0..3 {
+                a[c] = a[c] + t * v[c];
+            }
+            a[3] = a[3] + t * v[3];
+        }
+        _ => a[0] = v[0],
+    }
+}
+
+/// The whole render's pixel from the joined pieces `acc` of a ray that `hit` the
+/// volume's box (or not): the background under DVR's colour (the background itself
+/// for a ray that missed), the window over MIP and MinIP, the miss value for a
+/// scalar ray with no samples.
+#[inline]
+pub fn finish<R: Real>(settings: &RenderSettings, acc: ([R; 4], u32), hit: bool) -> [R; 4] {
+    let bg = settings.background.map(R::of);
+    let (v, n) = acc;
+    match settings.mode {
+        Mode::Dvr if !hit => bg,
+        Mode::Dvr => over_background([v[0], v[1], v[2]], v[3], bg),
+        _ if n == 0 => [R::of(settings.miss_value), R::zero(), R::zero(), R::zero()],
+        Mode::Mip | Mode::Minip => {
+            let w = settings.window.map(|w| w.map(R::of));
+            [
+                w.map_or(v[0], |w| window_map(v[0], w)),
+                R::zero(),
+                R::zero(),
+                R::zero(),
+            ]
+        }
+        _ => [v[0], R::zero(), R::zero(), R::zero()],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joined_dvr_pieces_are_the_samples_composited_in_one_run() {
+        // Three samples (premultiplied colour, alpha) split after the first.
+        let s = [
+            ([0.2, 0.1, 0.0], 0.3),
+            ([0.5, 0.5, 0.5], 0.6),
+            ([0.0, 0.9, 0.1], 0.4),
+        ];
+        let run = |samples: &[([f64; 3], f64)]| {
+            let (mut c, mut a) = ([0.0; 3], 0.0);
+            for &(rgb, al) in samples {
+                super::super::shade::under(&mut c, &mut a, rgb, al);
+            }
+            ([c[0], c[1], c[2], a], samples.len() as u32)
+        };
+        let mut acc = ([0.0; 4], 0);
+        join(Mode::Dvr, &mut acc, run(&s[..1]));
+        join(Mode::Dvr, &mut acc, ([9.0; 4], 0)); // an empty piece changes nothing
+        join(Mode::Dvr, &mut acc, run(&s[1..]));
+        let whole = run(&s);
+        assert_eq!(acc.1, 3);
+        for c in 0..4 {
+            assert!((acc.0[c] - whole.0[c]).abs() < 1e-15, "{acc:?} {whole:?}");
+        }
+    }
+
+    #[test]
+    fn scalar_pieces_take_the_extreme_or_the_sum_and_empty_rays_miss() {
+        let s = RenderSettings {
+            mode: Mode::Mip,
+            miss_value: -7.0,
+            ..RenderSettings::default()
+        };
+        let mut acc = ([0.0f64; 4], 0);
+        join(Mode::Mip, &mut acc, ([-3.0, 0.0, 0.0, 0.0], 2));
+        join(Mode::Mip, &mut acc, ([-5.0, 0.0, 0.0, 0.0], 1));
+        assert_eq!(finish(&s, acc, true)[0], -3.0);
+        assert_eq!(finish(&s, ([0.0; 4], 0), true)[0], -7.0);
+        let mut sum = ([0.0f64; 4], 0);
+        join(Mode::Xray, &mut sum, ([1.5, 0.0, 0.0, 0.0], 2));
+        join(Mode::Xray, &mut sum, ([2.0, 0.0, 0.0, 0.0], 2));
+        assert_eq!(sum.0[0], 3.5);
+    }
+}
