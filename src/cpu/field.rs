@@ -31,6 +31,11 @@ pub trait Field<R: Real>: Sync {
     fn sampled_grid(&self) -> Option<&Grid<R>> {
         None
     }
+    /// A brick's own grid and the whole grid's voxel its voxel 0 is ([`BrickField`]):
+    /// what its empty-space skipping bounds.
+    fn brick(&self) -> Option<(&Grid<R>, [usize; 3])> {
+        None
+    }
 }
 
 /// The upper corner `n − ½` of the index-space box `[−½, n − ½]` of a grid of `dims`
@@ -169,6 +174,9 @@ impl<R: Real> Field<R> for BrickField<R> {
     }
     fn value_range(&self) -> (f64, f64) {
         self.range
+    }
+    fn brick(&self) -> Option<(&Grid<R>, [usize; 3])> {
+        Some((&self.inner.grid, self.origin))
     }
 }
 

@@ -102,6 +102,10 @@ pub(crate) struct Setup<R> {
     lut_pairs: Vec<[R; 8]>,
     /// A brick's share of the samples, in a distributed render ([`render_owned`]).
     own: Option<Owned<R>>,
+    /// Where the skipping grid's voxel 0 lies in the field's index space: a brick's
+    /// origin (its cells are walked from `o − skip_origin`; the walk's ranges keep a
+    /// step of margin each side, so its rounding cannot drop a visible sample), else 0.
+    skip_origin: V3<R>,
 }
 
 /// Which loop a DVR ray's steps go through. Both give the same image to the last bit.
@@ -509,15 +513,25 @@ fn setup_for<R: Real, F: Field<R>>(
             && kernel == Kernel::Batched,
         lut_pairs: Vec::new(),
         own,
+        skip_origin: V3::zero(),
     };
     // Post-classification bounds what the filter samples; pre-classification the voxels.
     let skip_voxels = match settings.classification {
         Classification::Post => field.sampled_grid(),
         Classification::Pre => field.voxel_values(),
     };
+    // A brick skips through the cells of its own voxels, placed at its origin.
+    let (skip_grid, skip_origin) = match (skip_voxels, field.brick()) {
+        (None, Some((g, o))) if settings.classification == Classification::Post => (
+            Some(g),
+            V3::new(R::of(o[0] as f64), R::of(o[1] as f64), R::of(o[2] as f64)),
+        ),
+        _ => (skip_voxels, V3::zero()),
+    };
     let setup = Setup {
-        skip: skip_voxels
+        skip: skip_grid
             .and_then(|g| super::skip::Skipper::cached(g, &setup.base.lut, settings, cache)),
+        skip_origin,
         lut_pairs: if setup.batched {
             super::march::lut_pairs(&setup.base.lut)
         } else {
@@ -789,7 +803,16 @@ fn cast_ray<R: Real, F: Field<R>>(
             let back = order == Compositing::BackToFront;
             let skip = s.skip.as_ref();
             let mut ranges = super::clipmesh::ClippedRanges::new(
-                super::skip::SampleRanges::new(skip, o, d, (t_in, t_out), t_s, dt, n, back),
+                super::skip::SampleRanges::new(
+                    skip,
+                    o - s.skip_origin,
+                    d,
+                    (t_in, t_out),
+                    t_s,
+                    dt,
+                    n,
+                    back,
+                ),
                 mesh_ranges,
                 back,
             );
