@@ -415,12 +415,11 @@ fn run_in<R: Real>(
     );
     let rows = |done: usize, total: usize| progress.advance(done as u64, total as u64);
     let own = Owned::new(read.brick.lo, read.brick.hi, dims);
-    let partial = agree(
-        comm,
-        super::check_cancel(progress)
-            .and_then(|_| render_owned(&field, affine, &tf, &camera, &settings, own, &rows)),
-    )?;
+    let partial = super::check_cancel(progress)
+        .and_then(|_| render_owned(&field, affine, &tf, &camera, &settings, own, &rows));
+    // This rank's own time, before it waits for the others.
     let render_seconds = t.elapsed().as_secs_f64();
+    let partial = agree(comm, partial)?;
     progress.end(render_seconds);
     let samples: u64 = partial.counts.iter().map(|&c| c as u64).sum();
 
