@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{brick_test_volume, mpirun, s, scratch, stderr, voxlab};
+use common::{brick_test_volume, mpirun, mpirun_env, s, scratch, stderr, voxlab};
 use voxlab::io::npy::read_npy_f32;
 
 #[test]
@@ -82,4 +82,32 @@ fn a_failed_distributed_render_is_one_message_and_no_file() {
         "{e}"
     );
     assert!(std::fs::read_dir(&dir).unwrap().next().is_none());
+}
+
+/// A rank that never answers (stalled on purpose) does not hang the job: the others
+/// give up after `VOXLAB_MPI_TIMEOUT` seconds in their collective, saying so.
+#[test]
+fn a_stuck_rank_ends_the_job_after_the_collective_timeout() {
+    let dir = scratch("mpi-render-stuck");
+    let out = dir.join("never.png");
+    let start = std::time::Instant::now();
+    let o = mpirun_env(
+        3,
+        &[
+            "render",
+            "phantom:sphere:16",
+            "--out",
+            s(&out),
+            "--distributed",
+        ],
+        &[("VOXLAB_MPI_TIMEOUT", "2"), ("VOXLAB_MPI_STALL_RANK", "1")],
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("no answer from the other ranks after 2 s in all_gather"),
+        "{e}"
+    );
+    assert!(start.elapsed().as_secs() < 60, "{:?}", start.elapsed());
+    assert!(!out.exists());
 }

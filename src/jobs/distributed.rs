@@ -821,26 +821,99 @@ pub mod mpi {
     use mpi::topology::SimpleCommunicator;
     use mpi::traits::{Communicator, Root};
 
+    use std::sync::{Arc, Mutex};
+    use std::time::{Duration, Instant};
+
     /// MPI, initialised for the life of this value (finalised when it is dropped).
+    ///
+    /// Every collective is watched: a rank that waits longer than the limit for the
+    /// others (one of them is stuck, or died without ending the job) says so and exits
+    /// with status 1, which makes `mpirun` end the job, instead of hanging forever. The
+    /// limit is `VOXLAB_MPI_TIMEOUT` seconds ([`DEFAULT_TIMEOUT`] without it). For the
+    /// tests of that, `VOXLAB_MPI_STALL_RANK=R` makes rank `R` stall in [`Mpi::init`].
     pub struct Mpi {
         _universe: mpi::environment::Universe,
         world: SimpleCommunicator,
+        watch: Arc<Watch>,
+    }
+
+    /// How long a rank waits in one collective before it gives up, in seconds.
+    pub const DEFAULT_TIMEOUT: f64 = 3600.0;
+
+    /// The collective a rank is in, and since when.
+    struct Watch {
+        inside: Mutex<Option<(Instant, &'static str)>>,
+    }
+
+    /// Clears the watch when the collective returns.
+    struct Inside<'a>(&'a Watch);
+
+    impl Drop for Inside<'_> {
+        fn drop(&mut self) {
+            *self.0.inside.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        }
     }
 
     impl Mpi {
-        /// Initialises MPI.
+        /// Initialises MPI and starts the watch of its collectives.
         ///
         /// # Errors
-        /// MPI already initialised in this process.
+        /// MPI already initialised in this process; a `VOXLAB_MPI_TIMEOUT` that is not
+        /// a positive number of seconds.
         pub fn init() -> Result<Mpi> {
+            let limit = match std::env::var("VOXLAB_MPI_TIMEOUT") {
+                Err(_) => DEFAULT_TIMEOUT,
+                Ok(v) => match v.trim().parse::<f64>() {
+                    Ok(t) if t > 0.0 && t.is_finite() => t,
+                    _ => {
+                        return Err(Error::invalid(
+                            "VOXLAB_MPI_TIMEOUT",
+                            format!("{v:?} is not a positive number of seconds"),
+                        ))
+                    }
+                },
+            };
             let universe = mpi::initialize().ok_or_else(|| {
                 Error::invalid("MPI", "could not be initialised (it already was)")
             })?;
             let world = universe.world();
+            let (rank, size) = (world.rank(), world.size());
+            let watch = Arc::new(Watch {
+                inside: Mutex::new(None),
+            });
+            let w = watch.clone();
+            std::thread::spawn(move || loop {
+                std::thread::sleep(Duration::from_millis(100));
+                let inside = *w.inside.lock().unwrap_or_else(|e| e.into_inner());
+                if let Some((since, what)) = inside {
+                    if since.elapsed().as_secs_f64() > limit {
+                        eprintln!(
+                            "voxlab: error: rank {rank} of {size}: no answer from the other \
+                             ranks after {limit} s in {what} (a rank is stuck or died); \
+                             ending the job (VOXLAB_MPI_TIMEOUT sets the limit)"
+                        );
+                        std::process::exit(1);
+                    }
+                }
+            });
+            if std::env::var("VOXLAB_MPI_STALL_RANK").ok().as_deref()
+                == Some(rank.to_string().as_str())
+            {
+                loop {
+                    std::thread::sleep(Duration::from_secs(1));
+                }
+            }
             Ok(Mpi {
                 _universe: universe,
                 world,
+                watch,
             })
+        }
+
+        fn enter(&self, what: &'static str) -> Inside<'_> {
+            *self.watch.inside.lock().unwrap_or_else(|e| e.into_inner()) =
+                Some((Instant::now(), what));
+            Inside(&self.watch)
         }
     }
 
@@ -852,12 +925,14 @@ pub mod mpi {
             self.world.size() as usize
         }
         fn all_gather(&self, values: &[f64]) -> Vec<f64> {
+            let _watch = self.enter("all_gather");
             use mpi::traits::CommunicatorCollectives;
             let mut out = vec![0.0; values.len() * self.size()];
             self.world.all_gather_into(values, &mut out[..]);
             out
         }
         fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
+            let _watch = self.enter("broadcast");
             let root = self.world.process_at_rank(root as i32);
             let mut len = bytes.len() as u64;
             root.broadcast_into(&mut len);
@@ -865,6 +940,7 @@ pub mod mpi {
             root.broadcast_into(&mut bytes[..]);
         }
         fn all_to_all(&self, messages: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+            let _watch = self.enter("all_to_all");
             use mpi::datatype::{Partition, PartitionMut};
             use mpi::traits::CommunicatorCollectives;
             let size = self.size();
@@ -901,6 +977,7 @@ pub mod mpi {
                 .collect()
         }
         fn gather(&self, root: usize, bytes: Vec<u8>) -> Vec<Vec<u8>> {
+            let _watch = self.enter("gather");
             use mpi::datatype::PartitionMut;
             let size = self.size();
             let len = bytes.len() as u64;

@@ -733,9 +733,15 @@ pub fn on_thread_ranks<T: Send>(ranks: usize, job: impl Fn(&Threads) -> T + Sync
 /// `mpirun --oversubscribe -n ranks voxlab ARGS…` (OpenMPI), killed after two minutes
 /// (a hang is a failure).
 pub fn mpirun(ranks: usize, args: &[&str]) -> Output {
+    mpirun_env(ranks, args, &[])
+}
+
+/// [`mpirun`] with environment variables for the ranks.
+pub fn mpirun_env(ranks: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
     use std::time::{Duration, Instant};
     let mut c = Command::new("mpirun");
     c.args(["--oversubscribe", "-n", &ranks.to_string()])
+        .envs(env.iter().copied())
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         .arg(env!("CARGO_BIN_EXE_voxlab"))
