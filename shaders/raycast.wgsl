@@ -117,8 +117,11 @@ fn tap_weight(filter_kind: u32, f: f32, m: u32) -> f32 {
 // A runtime switch over all of them, inlined 54 times by the Sobel stencil, took the
 // NVIDIA compiler minutes.
 
+// p in the whole volume's index space; a brick's texture starts at params.brick.xyz
+// (0 for a whole volume). mirrors src/cpu/field.rs: BrickField::value (the subtraction
+// is exact for the points a brick samples).
 fn sample_value(p: vec3<f32>) -> f32 {
-    return sample_tex(volume, p).x;
+    return sample_tex(volume, p - params.brick.xyz).x;
 }
 
 // ---------------------------------------------------------------- gradients
@@ -130,7 +133,7 @@ fn sample_value(p: vec3<f32>) -> f32 {
 // mirrors src/cpu/field.rs: GridField::gradient
 fn field_gradient(p: vec3<f32>) -> vec3<f32> {
     if (params.flags.z == 1u) {
-        return sample_tex(gradients, p).xyz;
+        return sample_tex(gradients, p - params.brick.xyz).xyz;
     }
     return gradient_at(p);
 }
@@ -208,6 +211,7 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     if (t_out <= t_in) {
         return Pixel(miss, 0u);
     }
+    ray_hit = true;
     let speed = length(d);
     let dt = params.box_hi.w / speed;
     let t_s = t_in - u * dt;
@@ -225,6 +229,12 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     var mr = mesh_ranges_all(n);
     if (params.clip_mesh.x == 1u) {
         mr = mesh_ranges(n, t_in, t_out, t_s, dt);
+    }
+    // A brick: the same step grid, its own samples only.
+    if (params.brick.w == 1.0) {
+        mr = mesh_ranges_within(mr, own_range(n, t_in, t_s, t_out, dt, o, d));
+    }
+    if (params.clip_mesh.x == 1u || params.brick.w == 1.0) {
         if (mode == MODE_MIP || mode == MODE_MINIP || mode == MODE_XRAY) {
             return cast_scalar_ranges(mode, mr, miss, n, t_in, t_s, t_out, dt, o, d);
         }
@@ -265,7 +275,9 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     var taken = 0u;
     let skip = params.accel.x == 1u;
     var ranges = ranges_new(skip, t_s, dt, n, back_to_front);
-    var walk = ranges_walk(o, d, t_in, t_out, back_to_front);
+    // A brick walks the cells of its own voxels from o minus its origin (as
+    // src/cpu/raycast.rs does with Setup::skip_origin).
+    var walk = ranges_walk(o - params.brick.xyz, d, t_in, t_out, back_to_front);
     var terminated = false;
     loop {
     let range = ranges_next(&ranges, &walk);
@@ -369,15 +381,108 @@ fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
     let row = params.flags2.z + local_row;
     let idx = local_row * params.image.x + col;
     mesh_pixel = idx;
+    ray_hit = false;
     let px = cast_ray(camera_ray(col, row), ray_offset(col, row));
     out_pixels[idx] = px.value;
-    out_samples[idx] = px.samples;
+    // A brick's partial image marks the rays that meet the whole volume's box in the
+    // top bit of the count (its background is left to the composite).
+    var samples = px.samples;
+    if (params.brick.w == 1.0 && ray_hit) {
+        samples = samples | 0x80000000u;
+    }
+    out_samples[idx] = samples;
 }
 
 // ---------------------------------------------------------------- clipping mesh
 struct MeshRanges {
     count: u32,
     range: array<vec2<u32>, 8>,
+}
+
+// Whether the ray being cast meets the volume's box (within the clipping box).
+var<private> ray_hit: bool;
+
+// mirrors src/cpu/clipmesh.rs: MeshRanges::within (own.x = 0: no sample)
+fn mesh_ranges_within(r: MeshRanges, own: vec3<u32>) -> MeshRanges {
+    var out: MeshRanges;
+    out.count = 0u;
+    if (own.x == 0u) {
+        return out;
+    }
+    for (var m = 0u; m < r.count; m++) {
+        let a = max(r.range[m].x, own.y);
+        let b = min(r.range[m].y, own.z);
+        if (a <= b) {
+            out.range[out.count] = vec2<u32>(a, b);
+            out.count += 1u;
+        }
+    }
+    return out;
+}
+
+// Whether step k's midpoint keeps the face (axis, bound): at or above it when lower,
+// below it otherwise.
+fn own_keeps(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>, axis: u32, bound: f32, lower: bool) -> bool {
+    let x = segment_point(k, n, t_in, t_s, t_out, dt, o, d)[axis];
+    if (lower) {
+        return x >= bound;
+    }
+    return x < bound;
+}
+
+// The run of steps whose midpoints the brick owns: (1, first, last), or x = 0 for none.
+// mirrors src/cpu/raycast.rs: Owned::range
+fn own_range(n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<u32> {
+    var first = 0u;
+    var last = n - 1u;
+    for (var face = 0u; face < 6u; face++) {
+        let axis = face % 3u;
+        let lower = face < 3u;
+        var bound = params.own_hi[axis];
+        if (lower) {
+            bound = params.own_lo[axis];
+        }
+        // A face on the volume's border reaches to infinity.
+        if (abs(bound) >= 3.0e38) {
+            continue;
+        }
+        let k0 = own_keeps(first, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower);
+        let k1 = own_keeps(last, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower);
+        if (k0 && k1) {
+            continue;
+        }
+        if (!k0 && !k1) {
+            return vec3<u32>(0u, 0u, 0u);
+        }
+        if (k0) {
+            // A prefix: the last kept step.
+            var yes = first;
+            var no = last;
+            while (no - yes > 1u) {
+                let m = yes + (no - yes) / 2u;
+                if (own_keeps(m, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower)) {
+                    yes = m;
+                } else {
+                    no = m;
+                }
+            }
+            last = yes;
+        } else {
+            // A suffix: the first kept step.
+            var no = first;
+            var yes = last;
+            while (yes - no > 1u) {
+                let m = no + (yes - no) / 2u;
+                if (own_keeps(m, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower)) {
+                    yes = m;
+                } else {
+                    no = m;
+                }
+            }
+            first = yes;
+        }
+    }
+    return vec3<u32>(1u, first, last);
 }
 
 // mirrors src/cpu/clipmesh.rs: MeshRanges::all

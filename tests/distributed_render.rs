@@ -259,8 +259,12 @@ fn refusals_and_failures_are_one_message_on_every_rank() {
     let dir = scratch("refusals");
     let file = brick_test_volume(&dir);
     let file = file.to_str().unwrap();
-    let mut gpu = request(file, Mode::Mip, Backend::Gpu);
-    gpu.scene.width = Some(8);
+    let mut stereo = request(file, Mode::Mip, Backend::Cpu);
+    stereo.stereo = Some(voxlab::jobs::render::StereoRequest {
+        layout: voxlab::jobs::stereo::StereoLayout::Anaglyph,
+        eye_separation: 65.0,
+        convergence: None,
+    });
     let mut mida = request(file, Mode::Mida, Backend::Cpu);
     mida.scene.width = Some(8);
     let mut sinc = request(file, Mode::Dvr, Backend::Cpu);
@@ -271,7 +275,7 @@ fn refusals_and_failures_are_one_message_on_every_rank() {
         Backend::Cpu,
     );
     for (req, says) in [
-        (gpu, "gpu"),
+        (stereo, "--stereo"),
         (mida, "MIDA"),
         (sinc, "--filter"),
         (missing, "missing.nrrd"),

@@ -55,6 +55,9 @@ fn raycast_params_layout_agrees() {
         ("iso_color_2", offset_of!(RaycastParams, iso_color_2)),
         ("iso_color_3", offset_of!(RaycastParams, iso_color_3)),
         ("clip_mesh", offset_of!(RaycastParams, clip_mesh)),
+        ("brick", offset_of!(RaycastParams, brick)),
+        ("own_lo", offset_of!(RaycastParams, own_lo)),
+        ("own_hi", offset_of!(RaycastParams, own_hi)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

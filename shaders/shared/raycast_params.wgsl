@@ -68,4 +68,12 @@ struct RaycastParams {
     iso_color_3: vec4<f32>,
     // Clipping mesh: x = 1 when on (segments per pixel, shaders/clipmesh.wgsl); yzw unused.
     clip_mesh: vec4<u32>,
+    // A brick of a larger volume (src/gpu/raycast.rs: BrickPlacement): xyz its first
+    // voxel's index in the whole volume, w = 1 when on; box_hi is then the whole
+    // volume's, dims the brick's.
+    brick: vec4<f32>,
+    // The faces of the samples the brick owns, lo − 1/2 and hi − 1/2 in the whole
+    // volume's index space (±3.4e38 at the volume's border).
+    own_lo: vec4<f32>,
+    own_hi: vec4<f32>,
 }

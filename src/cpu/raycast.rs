@@ -404,21 +404,8 @@ pub fn render_owned<R: Real, F: Field<R>>(
     own: Owned<R>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Partial> {
-    if !matches!(
-        settings.mode,
-        Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray
-    ) || !settings.iso_surfaces.is_empty()
-    {
-        return Err(Error::invalid(
-            "mode",
-            "a brick renders DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
-             the whole ray)",
-        ));
-    }
-    let mut s = settings.clone();
-    s.window = None;
-    s.background = [0.0; 4];
-    s.sample_count = true;
+    check_owned_settings(settings)?;
+    let s = owned_settings(settings);
     let setup = setup_for(field, affine, tf, &s, Kernel::PerSample, None, Some(own))?;
     let out = cast_image(field, &setup, camera, &s, progress);
     let (w, h) = (camera.width, camera.height);
@@ -438,6 +425,36 @@ pub fn render_owned<R: Real, F: Field<R>>(
         counts,
         hits,
     })
+}
+
+/// The modes a brick renders: DVR, MIP, MinIP and X-ray (MIDA and iso-surfaces look
+/// along the whole ray).
+///
+/// # Errors
+/// Any other mode, or iso-surfaces.
+pub fn check_owned_settings(settings: &RenderSettings) -> Result<()> {
+    if !matches!(
+        settings.mode,
+        Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray
+    ) || !settings.iso_surfaces.is_empty()
+    {
+        return Err(Error::invalid(
+            "mode",
+            "a brick renders DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
+             the whole ray)",
+        ));
+    }
+    Ok(())
+}
+
+/// A brick's settings: the window, the background and the miss value are left to the
+/// composite (`cpu::composite::finish`), and the samples are counted.
+pub fn owned_settings(settings: &RenderSettings) -> RenderSettings {
+    let mut s = settings.clone();
+    s.window = None;
+    s.background = [0.0; 4];
+    s.sample_count = true;
+    s
 }
 
 /// Everything the rays of a render share, checked and built once.

@@ -385,5 +385,6 @@ pub fn render(
             readback: bands.readback,
             total: t_start.elapsed().as_secs_f64(),
         },
+        hits: None,
     })
 }

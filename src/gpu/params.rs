@@ -60,6 +60,13 @@ pub struct RaycastParams {
     /// Clipping mesh: 1 when on (segments per pixel in binding 11, `gpu::clipmesh`),
     /// the rest unused.
     pub clip_mesh: [u32; 4],
+    /// A brick of a larger volume (`gpu::raycast::BrickPlacement`): xyz its first
+    /// voxel's index in the whole volume, w = 1 when on.
+    pub brick: [f32; 4],
+    /// The faces of the samples the brick owns, `lo − ½` and `hi − ½` in the whole
+    /// volume's index space (±f32::MAX where the face is the volume's border).
+    pub own_lo: [f32; 4],
+    pub own_hi: [f32; 4],
 }
 
 /// Parameters of the adaptive passes; twin of `shaders/shared/adaptive_params.wgsl`

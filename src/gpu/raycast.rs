@@ -92,6 +92,27 @@ pub struct GpuTimings {
 pub struct GpuRenderOutput {
     pub output: RenderOutput,
     pub timings: GpuTimings,
+    /// A brick's render ([`RaycastSession::place`]): whether each ray meets the whole
+    /// volume's box.
+    pub hits: Option<Vec<bool>>,
+}
+
+/// Where a session's volume sits as a brick of a larger one (a rank's brick in
+/// `jobs::distributed_render`): the rays, step grids and sample positions are the whole
+/// volume's, and only the samples the brick owns are taken, as
+/// `cpu::raycast::render_owned` takes them with `cpu::field::BrickField`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BrickPlacement {
+    /// The whole volume's index of the session volume's voxel 0 (the brick with its
+    /// ghost voxels).
+    pub origin: [usize; 3],
+    /// The brick proper, `lo .. hi` in the whole volume (its owned samples).
+    pub lo: [usize; 3],
+    pub hi: [usize; 3],
+    /// The whole volume's dimensions, affine and value range.
+    pub whole: [usize; 3],
+    pub affine: glam::DMat4,
+    pub range: (f64, f64),
 }
 
 /// The first tap's offset from `floor(x)` and the number of taps of a truncated filter.
@@ -535,6 +556,42 @@ pub fn render(
     RaycastSession::new(ctx, volume)?.render(tf, camera, settings, progress)
 }
 
+/// Renders the samples of one brick of a larger volume, for sort-last compositing:
+/// `brick` holds the brick's voxels with their ghost voxels, `placement` says where
+/// they sit. The GPU twin of `cpu::raycast::render_owned` (the same refusals and the
+/// same [`crate::cpu::raycast::Partial`]).
+///
+/// # Errors
+/// Invalid settings or transfer function; modes a brick does not render; as
+/// [`RaycastSession::new`] and [`RaycastSession::render`].
+pub fn render_owned(
+    ctx: &GpuContext,
+    brick: &AnyVolume,
+    placement: BrickPlacement,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<crate::cpu::raycast::Partial> {
+    crate::cpu::raycast::check_owned_settings(settings)?;
+    let s = crate::cpu::raycast::owned_settings(settings);
+    tf.validate()?;
+    let mut session = RaycastSession::new(ctx, brick)?;
+    session.place(placement)?;
+    let out = session.render(tf, camera, &s, progress)?;
+    let (w, h) = (camera.width, camera.height);
+    let counts = out
+        .output
+        .samples
+        .map(|f| f.data.iter().map(|&c| c as u32).collect())
+        .unwrap_or_else(|| vec![0; w * h]);
+    Ok(crate::cpu::raycast::Partial {
+        image: out.output.image,
+        counts,
+        hits: out.hits.unwrap_or_else(|| vec![false; w * h]),
+    })
+}
+
 /// What a [`RaycastSession`] has done since it was made, counted so that callers and
 /// tests can see which frames re-used the device's data.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -666,6 +723,8 @@ pub struct RaycastSession<'c> {
     stats: SessionStats,
     /// The session's own set-up and upload, reported with its first frame.
     pending: Option<GpuTimings>,
+    /// Set when the volume is a brick of a larger one ([`RaycastSession::place`]).
+    brick: Option<BrickPlacement>,
 }
 
 impl<'c> RaycastSession<'c> {
@@ -794,7 +853,37 @@ impl<'c> RaycastSession<'c> {
                 total: t_start.elapsed().as_secs_f64(),
                 ..GpuTimings::default()
             }),
+            brick: None,
         })
+    }
+
+    /// Makes the session's volume a brick of a larger volume: its frames take only
+    /// the samples the brick owns, of the whole volume's rays ([`BrickPlacement`];
+    /// see [`render_owned`]).
+    ///
+    /// # Errors
+    /// A placement the volume does not fit: the brick outside its own voxels, or the
+    /// voxels outside the whole volume.
+    pub fn place(&mut self, b: BrickPlacement) -> Result<()> {
+        let d = self.dims;
+        let fits = (0..3).all(|a| {
+            b.origin[a] <= b.lo[a]
+                && b.lo[a] < b.hi[a]
+                && b.hi[a] <= b.origin[a] + d[a]
+                && b.origin[a] + d[a] <= b.whole[a]
+        });
+        if !fits {
+            return Err(Error::invalid(
+                "brick placement",
+                format!(
+                    "the brick {:?} .. {:?} of a {:?} volume does not lie in the {:?} \
+                     voxels from {:?}",
+                    b.lo, b.hi, b.whole, d, b.origin
+                ),
+            ));
+        }
+        self.brick = Some(b);
+        Ok(())
     }
 
     /// The device the session lives on.
@@ -832,7 +921,12 @@ impl<'c> RaycastSession<'c> {
         let ctx = self.ctx;
         let dev = &ctx.device;
         let dims = self.dims;
-        check_loop_limit(ctx, dims, settings)?;
+        // A brick casts the whole volume's rays.
+        let (ray_dims, ray_affine, ray_range) = match &self.brick {
+            Some(b) => (b.whole, b.affine, b.range),
+            None => (dims, self.affine, self.range),
+        };
+        check_loop_limit(ctx, ray_dims, settings)?;
         if settings.hardware_filtering && !self.filterable {
             return Err(Error::Gpu(
                 "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
@@ -841,7 +935,30 @@ impl<'c> RaycastSession<'c> {
             ));
         }
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
-        let mut params = raycast_params(dims, self.affine, &lut, self.range, camera, settings)?;
+        let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;
+        if let Some(b) = &self.brick {
+            // The texture (and its skipping cells) is the brick's; the box the rays
+            // cross, the whole volume's.
+            params = accel_params(dims, settings, params);
+            params.dims = [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0];
+            params.brick = [
+                b.origin[0] as f32,
+                b.origin[1] as f32,
+                b.origin[2] as f32,
+                1.0,
+            ];
+            let face = |i: usize, open: bool, far: f32| {
+                if open {
+                    far
+                } else {
+                    i as f32 - 0.5
+                }
+            };
+            for a in 0..3 {
+                params.own_lo[a] = face(b.lo[a], b.lo[a] == 0, -f32::MAX);
+                params.own_hi[a] = face(b.hi[a], b.hi[a] >= b.whole[a], f32::MAX);
+            }
+        }
         let pre = params.flags[0] == 1;
         let precomputed = params.flags[2] == 1;
         let skipping = params.accel[0] == 1;
@@ -1100,9 +1217,21 @@ impl<'c> RaycastSession<'c> {
             timings.total += p.total;
         }
         self.stats.frames += 1;
+        // A brick's counts carry the rays' hits in their top bit.
+        let hits = self.brick.as_ref().map(|_| {
+            counts
+                .iter_mut()
+                .map(|c| {
+                    let hit = *c & 0x8000_0000 != 0;
+                    *c &= 0x7fff_ffff;
+                    hit
+                })
+                .collect()
+        });
         Ok(GpuRenderOutput {
             output: RenderOutput::from_counts(image, &counts, settings.sample_count),
             timings,
+            hits,
         })
     }
 

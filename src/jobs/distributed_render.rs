@@ -14,7 +14,8 @@
 //!
 //! # Rendering and compositing
 //! Every rank casts every ray of the image with the single-process caster, restricted
-//! to the samples its brick owns ([`crate::cpu::raycast::render_owned`]): the rays,
+//! to the samples its brick owns ([`crate::cpu::raycast::render_owned`] on the CPU
+//! backends, [`crate::gpu::raycast::render_owned`] with `--backend gpu`): the rays,
 //! their step grids and their sample positions are those of the single-process render,
 //! and each sample belongs to exactly one brick. The image is cut into one band of rows
 //! per rank; each rank sends every other rank the rectangle of that rank's band its
@@ -26,9 +27,10 @@
 //! swap sends; pixels its brick does not cover are not sent at all.
 //!
 //! # Exactness
-//! MIP and MinIP equal the single-process image exactly; X-ray and DVR equal it up to
-//! the regrouping of their sums by brick (and DVR up to `1 − ert` where early ray
-//! termination ends a ray inside a brick); `tests/distributed_render.rs` measures both.
+//! MIP and MinIP equal the single-process image (of the same backend) exactly; X-ray
+//! and DVR equal it up to the regrouping of their sums by brick (and DVR up to
+//! `1 − ert` where early ray termination ends a ray inside a brick);
+//! `tests/distributed_render.rs` and `tests/gpu_distributed_render.rs` measure both.
 
 use super::distributed::{agree, Comm, Counted};
 use super::render::{build_view_for, RenderRequest};
@@ -40,6 +42,7 @@ use crate::cpu::grid::Grid;
 use crate::cpu::raycast::{render_owned, Owned};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::gpu::raycast::{render_owned as gpu_render_owned, BrickPlacement};
 use crate::io::brick::{kd_tree, raw_layout, read_brick, Brick, KdTree, RawLayout};
 use crate::real::Real;
 use crate::settings::{Classification, Mode, RenderSettings};
@@ -83,7 +86,7 @@ pub struct DistributedRendering {
     pub camera: Camera,
     pub settings: RenderSettings,
     pub dims: [usize; 3],
-    /// `cpu f64` or `cpu f32`.
+    /// `cpu f64`, `cpu f32` or `gpu`.
     pub what: String,
     /// Whether every rank read the whole volume (not a raw file).
     pub reads_whole: bool,
@@ -131,13 +134,6 @@ impl DistributedRendering {
 /// The options `--distributed` refuses, checked before anything is read.
 fn check(req: &RenderRequest) -> Result<()> {
     let refuse = |what: &str, why: &str| Err(Error::invalid(what.to_string(), why.to_string()));
-    if req.backend == Backend::Gpu {
-        return Err(Error::Unsupported {
-            job: "a distributed render".into(),
-            backend: "gpu".into(),
-            message: "the ranks ray-cast their bricks on the CPU (--backend cpu or cpu-f32)".into(),
-        });
-    }
     let a = &req.scene;
     if req.sampling.is_some() {
         return refuse("--sampling", "does not go with --distributed");
@@ -242,8 +238,8 @@ impl Source {
         }
     }
 
-    /// The voxels of `b` in precision `R`, and how many voxels were read for them.
-    fn grid<R: Real>(&self, b: &Brick, name: &str) -> Result<(Grid<R>, u64)> {
+    /// The voxels of `b`, and how many voxels were read for them.
+    fn brick(&self, b: &Brick, name: &str) -> Result<(AnyVolume, u64)> {
         match self {
             Source::Raw(layout) => {
                 let v = read_brick(layout, b, Path::new(name))?;
@@ -255,17 +251,12 @@ impl Source {
                         first: count.first.unwrap_or(0),
                     });
                 }
-                Ok((Grid::from_any(&v), b.voxels() as u64))
+                Ok((v, b.voxels() as u64))
             }
-            Source::Whole(v) => {
-                let d = v.dims();
-                let all = Grid::<R>::from_any(v);
-                let bd = b.dims();
-                let grid = Grid::from_fn(bd, |i, j, k| {
-                    all.data[b.lo[0] + i + d[0] * (b.lo[1] + j + d[1] * (b.lo[2] + k))]
-                });
-                Ok((grid, d.iter().product::<usize>() as u64))
-            }
+            Source::Whole(v) => Ok((
+                v.crop(b.lo, b.hi)?,
+                v.dims().iter().product::<usize>() as u64,
+            )),
         }
     }
 }
@@ -275,8 +266,8 @@ impl Source {
 /// and the others `&()`).
 ///
 /// # Errors
-/// As [`super::render::run`]; options a distributed render does not take (the GPU,
-/// stereo, extra volumes, MIDA, iso-surfaces, pre-classification, filters of unbounded
+/// As [`super::render::run`]; options a distributed render does not take (stereo,
+/// extra volumes, MIDA, iso-surfaces, pre-classification, filters of unbounded
 /// reach); a volume too small to cut into one brick per rank; on more than one rank,
 /// [`Error::Rank`] with the lowest failing rank's message.
 pub fn run(
@@ -286,16 +277,17 @@ pub fn run(
 ) -> Result<DistributedRendering> {
     let counted = Counted::new(comm);
     let comm: &dyn Comm = &counted;
-    if req.backend == Backend::CpuF32 {
-        run_in::<f32>(req, comm, &counted, progress, "cpu f32")
-    } else {
-        run_in::<f64>(req, comm, &counted, progress, "cpu f64")
+    match req.backend {
+        Backend::CpuF32 => run_in::<f32>(req, comm, &counted, progress, "cpu f32"),
+        Backend::Gpu => run_in::<f32>(req, comm, &counted, progress, "gpu"),
+        Backend::Cpu | Backend::Auto => run_in::<f64>(req, comm, &counted, progress, "cpu f64"),
     }
 }
 
-/// A brick's field and what reading it took.
-struct Read<R> {
-    field: GridField<R>,
+/// A brick's voxels (with their ghost voxels) and what reading it took.
+struct Read {
+    volume: AnyVolume,
+    settings: RenderSettings,
     origin: [usize; 3],
     brick: Brick,
     voxels_read: u64,
@@ -305,12 +297,12 @@ struct Read<R> {
     source: Source,
 }
 
-fn read_mine<R: Real>(
+fn read_mine(
     req: &RenderRequest,
     ranks: usize,
     rank: usize,
     progress: &dyn Progress,
-) -> Result<Read<R>> {
+) -> Result<Read> {
     let t = Instant::now();
     check(req)?;
     let source = Source::open(req, progress)?;
@@ -324,16 +316,12 @@ fn read_mine<R: Real>(
     req.scene.accel.apply(&mut settings)?;
     check_settings(&settings)?;
     let ghosted = brick.with_ghost(brick_ghost(settings.filter), dims);
-    let (grid, voxels_read) = source.grid::<R>(&ghosted, &req.scene.input.source)?;
-    let range = crate::cpu::grid::value_range(&grid.data);
-    let field = GridField::new(
-        grid,
-        settings.filter,
-        settings.gradient,
-        settings.precompute_gradients,
-    );
+    let (volume, voxels_read) = source.brick(&ghosted, &req.scene.input.source)?;
+    let r = volume.value_range();
+    let range = (r.min, r.max);
     Ok(Read {
-        field,
+        volume,
+        settings,
         origin: ghosted.lo,
         brick,
         voxels_read,
@@ -384,7 +372,7 @@ fn run_in<R: Real>(
     let t0 = Instant::now();
     let (rank, ranks) = (comm.rank(), comm.size());
     progress.begin("reading the bricks", "ranks", 0);
-    let read = agree(comm, read_mine::<R>(req, ranks, rank, progress))?;
+    let read = agree(comm, read_mine(req, ranks, rank, progress))?;
     progress.end(read.seconds);
     let dims = read.source.dims();
     let affine = read.source.affine();
@@ -398,12 +386,6 @@ fn run_in<R: Real>(
     let (tf, camera, mut settings) = build_view_for(&req.scene, dims, affine, || range, true)?;
     req.scene.accel.apply(&mut settings)?;
     settings.sample_count = req.samples;
-    let field = BrickField {
-        inner: read.field,
-        origin: read.origin,
-        whole: dims,
-        range,
-    };
 
     // Every ray, this brick's samples.
     let t = Instant::now();
@@ -414,9 +396,34 @@ fn run_in<R: Real>(
         h as u64,
     );
     let rows = |done: usize, total: usize| progress.advance(done as u64, total as u64);
-    let own = Owned::new(read.brick.lo, read.brick.hi, dims);
-    let partial = super::check_cancel(progress)
-        .and_then(|_| render_owned(&field, affine, &tf, &camera, &settings, own, &rows));
+    let partial = super::check_cancel(progress).and_then(|_| {
+        if what == "gpu" {
+            let placement = BrickPlacement {
+                origin: read.origin,
+                lo: read.brick.lo,
+                hi: read.brick.hi,
+                whole: dims,
+                affine,
+                range,
+            };
+            let ctx = crate::gpu::GpuContext::shared()?;
+            gpu_render_owned(ctx, &read.volume, placement, &tf, &camera, &settings, &rows)
+        } else {
+            let field = BrickField {
+                inner: GridField::<R>::new(
+                    Grid::from_any(&read.volume),
+                    read.settings.filter,
+                    read.settings.gradient,
+                    read.settings.precompute_gradients,
+                ),
+                origin: read.origin,
+                whole: dims,
+                range,
+            };
+            let own = Owned::new(read.brick.lo, read.brick.hi, dims);
+            render_owned(&field, affine, &tf, &camera, &settings, own, &rows)
+        }
+    });
     // This rank's own time, before it waits for the others.
     let render_seconds = t.elapsed().as_secs_f64();
     let partial = agree(comm, partial)?;

@@ -195,8 +195,9 @@ pub struct RenderArgs {
     /// Render on the ranks of `mpirun -n N voxlab render … --distributed`: each rank
     /// reads one brick of the volume (straight from a raw .npy, NRRD or MetaImage
     /// file), casts every ray through it, and the pieces are composited sort-last on
-    /// the ranks; rank 0 writes the image. DVR, MIP, MinIP and X-ray on the CPU
-    /// backends. Needs a build with the `mpi` feature (docs/distributed.md).
+    /// the ranks; rank 0 writes the image. DVR, MIP, MinIP and X-ray, on the CPU or
+    /// (--backend gpu) each rank's GPU. Needs a build with the `mpi` feature
+    /// (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
 }
