@@ -135,7 +135,10 @@ fn iterative_on_every_rank_count(name: &str, dir: &Path, args: &[&str], bound: f
         assert!(o.status.success(), "{name}, {ranks} ranks: {}", stderr(&o));
         let text = String::from_utf8_lossy(&o.stdout).into_owned();
         assert_eq!(text.matches("rank 0: views 0..").count(), 1, "{text}");
-        assert!(text.contains(&format!("rank {}: views", ranks - 1)), "{text}");
+        assert!(
+            text.contains(&format!("rank {}: views", ranks - 1)),
+            "{text}"
+        );
         assert!(text.contains("residual ‖b − Ax‖"), "{text}");
         if ranks == 1 {
             assert!(

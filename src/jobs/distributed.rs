@@ -1,5 +1,8 @@
 //! `voxlab reconstruct --distributed`: FBP/FDK on several processes (the ranks of a
-//! [`Comm`], MPI's under `mpirun`), the volume cut into slabs, one per rank.
+//! [`Comm`], MPI's under `mpirun`), the volume cut into slabs, one per rank; SIRT and
+//! CGLS with the views cut among the ranks instead (`distributed_iterative.rs`: every
+//! rank holds the whole image, and the backprojections of the ranks' views are added
+//! by [`Comm::all_reduce_sum`] every iteration).
 //!
 //! # How the work is cut
 //! [`slab_plan`] cuts the reconstruction grid along `k` (z-slabs) or `j`, whichever
@@ -20,7 +23,8 @@
 //! rank after the phase it happened in (every phase ends with an agreement,
 //! [`agree`]), with the lowest failing rank's message; no file is left behind.
 //!
-//! Not distributed yet: the iterative methods, the GPU backend, `--truth`.
+//! Not distributed yet: OS-SART and TV, `--init fbp` and `--convergence` of the
+//! iterative methods, the GPU backend, `--truth`.
 
 use super::reconstruct::{
     check_request, extension, fbp_grid, fbp_projections, geometry_for, npy_shape, IterationLog,
