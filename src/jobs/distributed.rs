@@ -436,7 +436,7 @@ impl RankReport {
 
     /// The report from [`Self::values`].
     fn from_values(r: &[f64]) -> RankReport {
-        let range = |a: f64, b: f64| (a >= 0.0).then(|| a as usize..b as usize);
+        let range = |a: f64, b: f64| (a >= 0.0).then_some(a as usize..b as usize);
         RankReport {
             slab: range(r[0], r[1]).map(|j| Region {
                 j,
