@@ -603,6 +603,31 @@ impl Geometry {
         }
     }
 
+    /// The views `views` alone, as a geometry of their own: its view `k` is view
+    /// `views.start + k` here, with the same rays (every per-view quantity — axes,
+    /// detector points, view matrices — depends on the view's own angle or vectors
+    /// only). How `voxlab reconstruct --distributed` gives each rank its views.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for an empty range or one past the last view.
+    pub fn select_views(&self, views: std::ops::Range<usize>) -> Result<Geometry> {
+        if views.is_empty() || views.end > self.n_angles() {
+            return Err(Error::invalid(
+                "CT geometry",
+                format!(
+                    "views {}..{} of {}: give a non-empty range of them",
+                    views.start,
+                    views.end,
+                    self.n_angles()
+                ),
+            ));
+        }
+        let mut g = self.clone();
+        g.angles_deg = self.angles_deg[views.clone()].to_vec();
+        g.views = self.views.as_ref().map(|v| v[views].to_vec());
+        Ok(g)
+    }
+
     /// Every view's projective map, for upload to the GPU (`ViewMatrix<f32>` is `Pod`).
     pub fn view_matrices<R: Real>(&self) -> Vec<ViewMatrix<R>> {
         (0..self.n_angles()).map(|k| self.view_matrix(k)).collect()

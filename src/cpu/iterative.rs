@@ -297,6 +297,91 @@ pub struct Solution<R> {
 /// residual; an error (e.g. [`Error::Cancelled`]) stops the run.
 pub type OnIteration<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + Send + 'a;
 
+/// The views of a problem cut into shares, one per process (the ranks of
+/// `voxlab reconstruct --distributed`): each share holds some views' projections and
+/// its own [`MatchedPair`] over them, and every share holds the whole image. What the
+/// methods sum over the views — `Aᵀ y`, and over rays `‖r‖²`, `⟨q, q⟩` — each share
+/// sums over its own views, and [`Shares::sum`] completes the sums. One share
+/// ([`Alone`]) is the problem as [`solve`] sees it: nothing is added.
+pub trait Shares {
+    /// How many shares the views are cut into (1: this process holds them all).
+    fn count(&self) -> usize;
+    /// Replaces `values` (this share's partial sums) by the sums over every share,
+    /// elementwise, the same bits on every share. A collective: every share calls it,
+    /// in the same order.
+    fn sum(&self, values: &mut [f64]);
+}
+
+/// The whole problem in one process.
+pub struct Alone;
+
+impl Shares for Alone {
+    fn count(&self) -> usize {
+        1
+    }
+    fn sum(&self, _values: &mut [f64]) {}
+}
+
+/// This share's per-voxel partial sums (its views' `Aᵀ y`) summed over every share:
+/// `v` itself when there is one share; else in f64, rounded back to `R`.
+fn summed<R: Real>(shares: &dyn Shares, v: Vec<R>) -> Vec<R> {
+    if shares.count() == 1 {
+        return v;
+    }
+    let mut w: Vec<f64> = v.par_iter().map(|x| x.f64()).collect();
+    shares.sum(&mut w);
+    w.into_par_iter().map(R::of).collect()
+}
+
+/// This share's sums over its rays summed over every share (`s` itself when there is
+/// one).
+fn summed_scalars<const N: usize>(shares: &dyn Shares, mut s: [f64; N]) -> [f64; N] {
+    if shares.count() > 1 {
+        shares.sum(&mut s);
+    }
+    s
+}
+
+/// [`solve`] for one share of a problem cut by views ([`Shares`]): `prob` holds this
+/// share's views (its pair over them, their projections), `x0` the whole image; every
+/// share calls it with the same options and initial image, and every share returns
+/// the same image, residuals and objectives. SIRT and CGLS only (their iterations
+/// use every view at once: OS-SART's subsets and TV are not cut this way). With one
+/// share it is [`solve`], bit for bit; with more, the sums over the views are
+/// regrouped by share (`Aᵀ y` as `Σ_shares Σ_views in share`, summed in f64), and so
+/// are the residual's (its chunks of 4096 values start at each share's first ray).
+///
+/// Runs on the calling thread (not inside the thread pool, as [`solve`] does), so
+/// that a share waiting in [`Shares::sum`] never holds a worker the others need.
+///
+/// # Errors
+/// As [`solve`]; [`Error::Invalid`] for OS-SART and TV.
+pub fn solve_shared<R: Real>(
+    prob: &Problem<R>,
+    x0: Vec<R>,
+    opts: &IterativeOptions,
+    shares: &dyn Shares,
+    on_iteration: &mut Hook<R>,
+) -> Result<Solution<R>> {
+    check_problem(prob, x0.len(), opts)?;
+    let x0 = masked(x0, prob.support);
+    match opts.method {
+        Method::Sirt => sart(prob, x0, opts, false, shares, on_iteration),
+        Method::Cgls => cgls(prob, x0, opts, shares, on_iteration),
+        m => Err(Error::invalid(
+            "--method",
+            format!(
+                "{} does not run on a problem cut by views (sirt and cgls do)",
+                m.name()
+            ),
+        )),
+    }
+}
+
+/// [`OnIteration`] without `Send`: what the methods call after every iteration
+/// ([`solve_shared`] runs on the calling thread, so its hook may hold what cannot move).
+pub type Hook<'a, R> = dyn FnMut(usize, &[R], f64) -> Result<()> + 'a;
+
 /// Values per chunk of every deterministic sum.
 const CHUNK: usize = 4096;
 
@@ -397,9 +482,9 @@ pub fn solve<R: Real>(
     rayon::scope(|_| {
         let x0 = masked(x0, prob.support);
         match opts.method {
-            Method::Sirt => sart(prob, x0, opts, false, on_iteration),
-            Method::OsSart => sart(prob, x0, opts, true, on_iteration),
-            Method::Cgls => cgls(prob, x0, opts, on_iteration),
+            Method::Sirt => sart(prob, x0, opts, false, &Alone, on_iteration),
+            Method::OsSart => sart(prob, x0, opts, true, &Alone, on_iteration),
+            Method::Cgls => cgls(prob, x0, opts, &Alone, on_iteration),
             Method::Tv => tv(prob, x0, opts, on_iteration),
         }
     })
@@ -503,15 +588,22 @@ fn stalled(opts: &IterativeOptions, objective: &[f64]) -> bool {
         && (objective[k - 2] - objective[k - 1]).abs() <= opts.tolerance * objective[k - 2].abs()
 }
 
-/// SIRT (`subsets = false`) and OS-SART.
+/// SIRT (`subsets = false`) and OS-SART, on one share of the views (SIRT only) or
+/// all of them ([`Alone`]): the row weights are per ray, so per share; the column
+/// weights and the backprojection are summed over the shares.
 /// Mirrors shaders/iterative.wgsl: weight_rows (the device-resident port, src/gpu/iterative.rs).
 fn sart<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
     opts: &IterativeOptions,
     subsets: bool,
-    on_iteration: &mut OnIteration<R>,
+    shares: &dyn Shares,
+    on_iteration: &mut Hook<R>,
 ) -> Result<Solution<R>> {
+    assert!(
+        !subsets || shares.count() == 1,
+        "OS-SART runs on the whole problem"
+    );
     let pair = prob.pair;
     let all = all_views(pair);
     // Every image projected here is 0 off the support (x is masked, and so are the
@@ -532,7 +624,7 @@ fn sart<R: Real>(
     let keep = keeps_column_weights(k, pair.n_voxels(), std::mem::size_of::<R>());
     let col_w_of = |views: &[usize]| {
         let ones_y = vec![R::one(); views.len() * pair.per_view()];
-        transpose_masked(prob, &ones_y, views).map(reciprocal)
+        transpose_masked(prob, &ones_y, views).map(|c| reciprocal(summed(shares, c)))
     };
     let kept: Vec<Option<Vec<R>>> = if keep {
         groups
@@ -550,7 +642,7 @@ fn sart<R: Real>(
         support: prob.support,
     };
     let weighted = |r: &[R]| -> f64 {
-        0.5 * sum_by(r.len(), |i| {
+        sum_by(r.len(), |i| {
             let v = r[i].f64();
             row_w[i].f64() * v * v
         })
@@ -562,8 +654,9 @@ fn sart<R: Real>(
     for it in 0..=opts.iterations {
         // The residual of the current iterate (the last pass only logs it).
         let r = residual_within(prob, &x, &all, planes, None)?;
-        residual.push(norm(&r));
-        objective.push(weighted(&r));
+        let [rr, wrr] = summed_scalars(shares, [dot(&r, &r), weighted(&r)]);
+        residual.push(rr.sqrt());
+        objective.push(0.5 * wrr);
         if it > 0 {
             on_iteration(it, &x, *residual.last().unwrap_or(&0.0))?;
             if stalled(opts, &objective) {
@@ -580,7 +673,7 @@ fn sart<R: Real>(
             wr.par_iter_mut()
                 .zip(&row_w)
                 .for_each(|(v, &w)| *v = *v * w);
-            let upd = prob.pair.transpose(&wr, &all)?;
+            let upd = summed(shares, prob.pair.transpose(&wr, &all)?);
             let Some(cw) = &kept[0] else {
                 unreachable!("SIRT keeps its column weights")
             };
@@ -673,21 +766,26 @@ fn axpy<R: Real>(y: &mut [R], alpha: R, x: &[R]) {
         .for_each(|(yv, &xv)| *yv = *yv + alpha * xv);
 }
 
-/// CGLS (Hestenes–Stiefel on the normal equations).
+/// CGLS (Hestenes–Stiefel on the normal equations), on one share of the views or all
+/// of them ([`Alone`]): `r` and `q = A p` are per ray, so per share; `Aᵀ r` and the
+/// sums over rays are summed over the shares, and every share then takes the same
+/// steps on the whole image.
 /// Mirrors shaders/iterative.wgsl: cgls_alpha, cgls_beta, direction (the device-resident port, src/gpu/iterative.rs).
 fn cgls<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
     opts: &IterativeOptions,
-    on_iteration: &mut OnIteration<R>,
+    shares: &dyn Shares,
+    on_iteration: &mut Hook<R>,
 ) -> Result<Solution<R>> {
     let all = all_views(prob.pair);
     let mut r = residual_of(prob, &x, &all)?;
-    let mut s = transpose_masked(prob, &r, &all)?;
+    let mut s = summed(shares, transpose_masked(prob, &r, &all)?);
     let mut p = s.clone();
     let mut gamma = dot(&s, &s);
-    let mut residual = vec![norm(&r)];
-    let mut objective = vec![0.5 * dot(&r, &r)];
+    let [rr] = summed_scalars(shares, [dot(&r, &r)]);
+    let mut residual = vec![rr.sqrt()];
+    let mut objective = vec![0.5 * rr];
     let mut converged = false;
     let mut iterations = 0;
     for it in 1..=opts.iterations {
@@ -696,7 +794,7 @@ fn cgls<R: Real>(
             break;
         }
         let q = prob.pair.forward(&p, &all)?;
-        let qq = dot(&q, &q);
+        let [qq] = summed_scalars(shares, [dot(&q, &q)]);
         if qq == 0.0 {
             converged = true;
             break;
@@ -704,7 +802,7 @@ fn cgls<R: Real>(
         let alpha = gamma / qq;
         axpy(&mut x, R::of(alpha), &p);
         axpy(&mut r, R::of(-alpha), &q);
-        s = transpose_masked(prob, &r, &all)?;
+        s = summed(shares, transpose_masked(prob, &r, &all)?);
         let gamma_new = dot(&s, &s);
         let beta = R::of(gamma_new / gamma);
         gamma = gamma_new;
@@ -712,7 +810,8 @@ fn cgls<R: Real>(
             .zip(&s)
             .for_each(|(pv, &sv)| *pv = sv + beta * *pv);
         iterations = it;
-        let rn = norm(&r);
+        let [rr] = summed_scalars(shares, [dot(&r, &r)]);
+        let rn = rr.sqrt();
         residual.push(rn);
         objective.push(0.5 * rn * rn);
         on_iteration(it, &x, rn)?;

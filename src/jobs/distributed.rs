@@ -1,5 +1,8 @@
 //! `voxlab reconstruct --distributed`: FBP/FDK on several processes (the ranks of a
-//! [`Comm`], MPI's under `mpirun`), the volume cut into slabs, one per rank.
+//! [`Comm`], MPI's under `mpirun`), the volume cut into slabs, one per rank; SIRT and
+//! CGLS with the views cut among the ranks instead (`distributed_iterative.rs`: every
+//! rank holds the whole image, and the backprojections of the ranks' views are added
+//! by [`Comm::all_reduce_sum`] every iteration).
 //!
 //! # How the work is cut
 //! [`slab_plan`] cuts the reconstruction grid along `k` (z-slabs) or `j`, whichever
@@ -20,10 +23,11 @@
 //! rank after the phase it happened in (every phase ends with an agreement,
 //! [`agree`]), with the lowest failing rank's message; no file is left behind.
 //!
-//! Not distributed yet: the iterative methods, the GPU backend, `--truth`.
+//! Not distributed yet: OS-SART and TV, `--init fbp` and `--convergence` of the
+//! iterative methods, the GPU backend, `--truth`.
 
 use super::reconstruct::{
-    check_request, extension, fbp_grid, fbp_projections, geometry_for, npy_shape,
+    check_request, extension, fbp_grid, fbp_projections, geometry_for, npy_shape, IterationLog,
     ReconstructMethod, ReconstructRequest,
 };
 use super::{Backend, Progress};
@@ -52,6 +56,27 @@ pub trait Comm {
     fn all_gather(&self, values: &[f64]) -> Vec<f64>;
     /// `root`'s `bytes` on every rank (replacing theirs).
     fn broadcast(&self, root: usize, bytes: &mut Vec<u8>);
+    /// Every rank's `values` summed elementwise, on every rank (replacing this rank's;
+    /// each rank gives as many). The default adds the [`Comm::all_gather`]ed buffers in
+    /// rank order — rank 0's, plus rank 1's, plus … — so every rank gets the same bits,
+    /// and the same number of ranks gives the same bits from the same inputs; it holds
+    /// `size()` copies of the buffer while it adds. An override must give every rank
+    /// the same bits too.
+    fn all_reduce_sum(&self, values: &mut [f64]) {
+        use rayon::prelude::*;
+        let n = values.len();
+        let size = self.size();
+        let all = self.all_gather(values);
+        assert_eq!(all.len(), n * size, "all_reduce_sum: one buffer per rank");
+        values.par_iter_mut().enumerate().for_each(|(i, v)| {
+            // Rank 0's value first (not 0 + it: that would turn −0 into +0).
+            let mut s = all[i];
+            for r in 1..size {
+                s += all[r * n + i];
+            }
+            *v = s;
+        });
+    }
     /// Personalised exchange: `messages[r]` goes to rank `r` (one per rank, this
     /// rank's own included); returns what every rank sent this one, in rank order.
     /// The default takes one broadcast per rank; MPI's is `MPI_Alltoallv`.
@@ -160,6 +185,11 @@ impl Comm for Counted<'_> {
         self.sent.set(self.sent.get() + 8 * values.len() as u64);
         self.inner.all_gather(values)
     }
+    fn all_reduce_sum(&self, values: &mut [f64]) {
+        // This rank's contribution, as for all_gather.
+        self.sent.set(self.sent.get() + 8 * values.len() as u64);
+        self.inner.all_reduce_sum(values)
+    }
     fn broadcast(&self, root: usize, bytes: &mut Vec<u8>) {
         if root == self.rank() {
             // The length, then the bytes.
@@ -188,13 +218,22 @@ impl Comm for Counted<'_> {
 
 /// The end of a phase: `r` on every rank when it succeeded on all; otherwise, on
 /// every rank, [`Error::Rank`] with the lowest failing rank's message (one process
-/// alone gets its own error back unchanged).
+/// alone gets its own error back unchanged). An error that is already an agreement's
+/// (an [`Error::Rank`] of this many ranks, which every rank then holds: an agreement
+/// within the phase, as the iterative methods make every iteration) passes through
+/// unchanged.
 pub fn agree<T>(comm: &dyn Comm, r: Result<T>) -> Result<T> {
-    let flags = comm.all_gather(&[if r.is_ok() { 1.0 } else { 0.0 }]);
-    let Some(first) = flags.iter().position(|&f| f == 0.0) else {
+    let size = comm.size();
+    let flag = match &r {
+        Ok(_) => 1.0,
+        Err(Error::Rank { ranks, .. }) if *ranks == size && size > 1 => 2.0,
+        Err(_) => 0.0,
+    };
+    let flags = comm.all_gather(&[flag]);
+    let Some(first) = flags.iter().position(|&f| f != 1.0) else {
         return r;
     };
-    if comm.size() == 1 {
+    if size == 1 || flags[first] == 2.0 {
         return r;
     }
     let mut message = match &r {
@@ -231,7 +270,7 @@ impl SlabPlan {
 
 /// `n` slices cut into `ranks` runs differing by at most one; the ranks past the `n`th
 /// get `None`.
-fn runs(n: usize, ranks: usize) -> Vec<Option<Range<usize>>> {
+pub(super) fn runs(n: usize, ranks: usize) -> Vec<Option<Range<usize>>> {
     // With more ranks than slices, the first `n` get one each.
     let m = n.min(ranks);
     (0..ranks)
@@ -337,10 +376,12 @@ pub fn slab_plan(g: &Geometry, grid: &Grid, ranks: usize) -> Result<SlabPlan> {
 }
 
 /// What one rank did.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct RankReport {
-    /// Its slab (`None`: more ranks than slices).
+    /// FBP/FDK: its slab (`None`: more ranks than slices; an iterative method).
     pub slab: Option<Region>,
+    /// An iterative method: its views (`None`: FBP/FDK; more ranks than views).
+    pub views: Option<Range<usize>>,
     /// The detector lines it read from the file.
     pub lines_read: usize,
     /// Seconds reading, filtering, backprojecting and writing.
@@ -348,11 +389,96 @@ pub struct RankReport {
     pub filter_seconds: f64,
     pub backproject_seconds: f64,
     pub write_seconds: f64,
+    /// An iterative method: seconds building its views' matched pair, iterating (the
+    /// weights included), and of those, in the all-reduces (waiting for the other
+    /// ranks included).
+    pub pair_seconds: f64,
+    pub iterate_seconds: f64,
+    pub reduce_seconds: f64,
     /// Bytes of the output it wrote (rank 0's include the header).
     pub bytes_written: u64,
-    /// Bytes it sent to the other ranks before the reports (its all-gather inputs and
-    /// what it broadcast as the root): the agreements and the output's name.
+    /// Bytes it sent to the other ranks before the reports (its all-gather and
+    /// all-reduce inputs and what it broadcast as the root): the agreements, the
+    /// output's name and, for an iterative method, the sums over the views.
     pub bytes_sent: u64,
+}
+
+/// The number of values [`RankReport::values`] gives.
+const REPORT_VALUES: usize = 16;
+
+impl RankReport {
+    /// The report as numbers, for the all-gather at the end.
+    fn values(&self) -> [f64; REPORT_VALUES] {
+        let range =
+            |r: Option<&Range<usize>>| r.map_or([-1.0, -1.0], |r| [r.start as f64, r.end as f64]);
+        let [j0, j1] = range(self.slab.as_ref().map(|s| &s.j));
+        let [k0, k1] = range(self.slab.as_ref().map(|s| &s.k));
+        let [v0, v1] = range(self.views.as_ref());
+        [
+            j0,
+            j1,
+            k0,
+            k1,
+            v0,
+            v1,
+            self.lines_read as f64,
+            self.read_seconds,
+            self.filter_seconds,
+            self.backproject_seconds,
+            self.write_seconds,
+            self.pair_seconds,
+            self.iterate_seconds,
+            self.reduce_seconds,
+            self.bytes_written as f64,
+            self.bytes_sent as f64,
+        ]
+    }
+
+    /// The report from [`Self::values`].
+    fn from_values(r: &[f64]) -> RankReport {
+        let range = |a: f64, b: f64| (a >= 0.0).then_some(a as usize..b as usize);
+        RankReport {
+            slab: range(r[0], r[1]).map(|j| Region {
+                j,
+                k: r[2] as usize..r[3] as usize,
+            }),
+            views: range(r[4], r[5]),
+            lines_read: r[6] as usize,
+            read_seconds: r[7],
+            filter_seconds: r[8],
+            backproject_seconds: r[9],
+            write_seconds: r[10],
+            pair_seconds: r[11],
+            iterate_seconds: r[12],
+            reduce_seconds: r[13],
+            bytes_written: r[14] as u64,
+            bytes_sent: r[15] as u64,
+        }
+    }
+}
+
+/// Every rank's report, in rank order, and the smallest and largest of the values
+/// every rank wrote (`lo`, `hi`: this rank's), on every rank. Its all-gather is not
+/// counted in the reports' `bytes_sent`.
+pub(super) fn gather_reports(
+    comm: &dyn Comm,
+    mine: &RankReport,
+    (lo, hi): (f64, f64),
+) -> (Vec<RankReport>, (f64, f64)) {
+    let mut v = mine.values().to_vec();
+    v.extend_from_slice(&[lo, hi]);
+    let n = v.len();
+    let all = comm.all_gather(&v);
+    let reports = all
+        .chunks_exact(n)
+        .map(|r| RankReport::from_values(&r[..REPORT_VALUES]))
+        .collect();
+    let range = all
+        .chunks_exact(n)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), r| {
+            (l.min(r[n - 2]), h.max(r[n - 1]))
+        });
+    (reports, range)
 }
 
 /// A distributed reconstruction, as every rank knows it at the end.
@@ -363,7 +489,8 @@ pub struct Distributed {
     pub parallel: bool,
     /// `cpu f64` or `cpu f32`.
     pub what: String,
-    /// The grid axis the slabs run along: 1 (`j`) or 2 (`k`).
+    /// FBP/FDK: the grid axis the slabs run along, 1 (`j`) or 2 (`k`); 0 for an
+    /// iterative method (every rank holds the whole grid).
     pub axis: usize,
     /// The detector lines of the whole stack.
     pub total_lines: usize,
@@ -373,11 +500,17 @@ pub struct Distributed {
     pub out: PathBuf,
     /// Every rank's report, in rank order.
     pub ranks: Vec<RankReport>,
+    /// An iterative method: its residuals and objectives per iteration (the same on
+    /// every rank).
+    pub iterative: Option<IterationLog>,
 }
 
 impl Distributed {
-    /// One line per rank: its slab, what it read, its times.
+    /// One line per rank: its slab or views, what it read, its times.
     pub fn describe(&self) -> String {
+        if self.iterative.is_some() {
+            return self.describe_iterative();
+        }
         let axis = if self.axis == 1 { 'j' } else { 'k' };
         let mut s = String::new();
         for (r, rep) in self.ranks.iter().enumerate() {
@@ -404,12 +537,34 @@ impl Distributed {
 }
 
 /// The options `--distributed` refuses, checked before anything is read.
-fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
-    if a.method != ReconstructMethod::Fbp {
+pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
+    if !matches!(
+        a.method,
+        ReconstructMethod::Fbp | ReconstructMethod::Sirt | ReconstructMethod::Cgls
+    ) {
         return Err(Error::invalid(
-            "--distributed",
-            "only --method fbp runs distributed so far",
+            "--method",
+            format!(
+                "{} does not run distributed: fbp, sirt and cgls do (os-sart's subsets and \
+                 tv are not cut among ranks yet)",
+                a.method.name()
+            ),
         ));
+    }
+    if a.method != ReconstructMethod::Fbp {
+        if a.init != super::reconstruct::Init::Zero {
+            return Err(Error::invalid(
+                "--init",
+                "fbp does not go with --distributed yet (the ranks start from zero)",
+            ));
+        }
+        if a.convergence.is_some() {
+            return Err(Error::invalid(
+                "--convergence",
+                "does not go with --distributed yet (rank 0 prints the first and last \
+                 residual)",
+            ));
+        }
     }
     if a.backend == Backend::Gpu {
         return Err(Error::Unsupported {
@@ -463,6 +618,17 @@ struct Prepared {
 type Planned = (Option<Projections<f64>>, Geometry, Grid, SlabPlan);
 
 fn planned(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Result<Planned> {
+    let (whole, g, grid) = input_geometry(a, progress)?;
+    let plan = slab_plan(&g, &grid, ranks)?;
+    Ok((whole, g, grid, plan))
+}
+
+/// The request checked, the stack when it must be read whole (`None`: a 3-D C-order
+/// `.npy` stack, of which only the header is read here), the geometry and the grid.
+pub(super) fn input_geometry(
+    a: &ReconstructRequest,
+    progress: &dyn Progress,
+) -> Result<(Option<Projections<f64>>, Geometry, Grid)> {
     check_request(a)?;
     check_distributed(a)?;
     let shape = projection_shape(&a.input)?;
@@ -489,8 +655,7 @@ fn planned(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Res
         progress.note(&format!("using the geometry {}", f.display()));
     }
     let grid = fbp_grid(a, &g, progress)?;
-    let plan = slab_plan(&g, &grid, ranks)?;
-    Ok((whole, g, grid, plan))
+    Ok((whole, g, grid))
 }
 
 fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
@@ -582,6 +747,14 @@ pub fn plan(
     ranks: usize,
     progress: &dyn Progress,
 ) -> Result<DistributedPlan> {
+    if a.method.iterative().is_some() {
+        check_distributed(a)?;
+        return Err(Error::invalid(
+            "--dry-run",
+            "--distributed --dry-run plans FBP/FDK only so far (an iterative method's \
+             ranks each hold the whole grid, several copies of it while they sum)",
+        ));
+    }
     let (whole, g, grid, slabs) = planned(a, ranks, progress)?;
     let real = if a.backend == Backend::CpuF32 { 4 } else { 8 };
     let stack = (g.n_angles() * g.rows * g.cols) as u64;
@@ -689,6 +862,9 @@ pub fn run(
     comm: &dyn Comm,
     progress: &dyn Progress,
 ) -> Result<Distributed> {
+    if a.method.iterative().is_some() {
+        return super::distributed_iterative::run(a, comm, progress);
+    }
     let counted = Counted::new(comm);
     let comm: &dyn Comm = &counted;
     let rank = comm.rank();
@@ -718,89 +894,35 @@ pub fn run(
     })();
     let (values, filter_seconds, backproject_seconds) = agree(comm, computed)?;
 
-    // The output: rank 0 creates it, every rank writes its ranges, rank 0 renames it.
+    // The output: one run of `nx·nj` values per slice `k` of this rank's slab.
     let out = a.out.clone().expect("checked in prepare");
     let d = grid.dims;
-    let shape = npy_shape(d);
-    let header = npy_f32_header(&shape);
     let t = Instant::now();
-    let total = header.len() as u64 + 4 * d.iter().product::<usize>() as u64;
-    let created = if rank == 0 {
-        SharedOutput::create(&out, total).map(Some)
-    } else {
-        Ok(None)
-    };
-    let created = agree(comm, created)?;
-    let mut temp = created
-        .as_ref()
-        .map_or(Vec::new(), |c| path_bytes(c.temp_path()));
-    comm.broadcast(0, &mut temp);
-    let temp = bytes_path(temp);
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
     let mut parts: Vec<(u64, &[u8])> = Vec::new();
-    if rank == 0 {
-        parts.push((0, &header));
-    }
     if let Some(s) = &slab {
         let run = 4 * d[0] * s.j.len();
         for (n, k) in s.k.clone().enumerate() {
-            let at = header.len() + 4 * d[0] * (s.j.start + d[1] * k);
+            let at = 4 * d[0] * (s.j.start + d[1] * k);
             parts.push((at as u64, &bytes[n * run..(n + 1) * run]));
         }
     }
-    let bytes_written: u64 = parts.iter().map(|(_, b)| b.len() as u64).sum();
-    agree(comm, write_part(&temp, &out, &parts))?;
-    let committed = match created {
-        Some(c) => c.commit(),
-        None => Ok(()),
-    };
-    agree(comm, committed)?;
+    let bytes_written = write_shared_npy(comm, &out, d, parts)?;
     let write_seconds = t.elapsed().as_secs_f64();
 
     // Every rank's report and the value range.
-    let (lo, hi) = values
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v as f64), h.max(v as f64))
-        });
-    let s = slab.clone();
-    let mine = [
-        s.as_ref().map_or(-1.0, |s| s.j.start as f64),
-        s.as_ref().map_or(-1.0, |s| s.j.end as f64),
-        s.as_ref().map_or(-1.0, |s| s.k.start as f64),
-        s.as_ref().map_or(-1.0, |s| s.k.end as f64),
-        lines_read as f64,
+    let mine = RankReport {
+        slab: slab.clone(),
+        lines_read,
         read_seconds,
         filter_seconds,
         backproject_seconds,
         write_seconds,
-        bytes_written as f64,
-        lo,
-        hi,
-        counted.sent() as f64,
-    ];
-    let all = comm.all_gather(&mine);
-    let ranks: Vec<RankReport> = all
-        .chunks_exact(mine.len())
-        .map(|r| RankReport {
-            slab: (r[0] >= 0.0).then(|| Region {
-                j: r[0] as usize..r[1] as usize,
-                k: r[2] as usize..r[3] as usize,
-            }),
-            lines_read: r[4] as usize,
-            read_seconds: r[5],
-            filter_seconds: r[6],
-            backproject_seconds: r[7],
-            write_seconds: r[8],
-            bytes_written: r[9] as u64,
-            bytes_sent: r[12] as u64,
-        })
-        .collect();
-    let range = all
-        .chunks_exact(mine.len())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), r| {
-            (l.min(r[10]), h.max(r[11]))
-        });
+        bytes_written,
+        bytes_sent: counted.sent(),
+        ..Default::default()
+    };
+    let (ranks, range) = gather_reports(comm, &mine, value_range(&values));
     Ok(Distributed {
         grid,
         parallel,
@@ -810,7 +932,62 @@ pub fn run(
         range,
         out,
         ranks,
+        iterative: None,
     })
+}
+
+/// The smallest and largest of `values` (infinities when there are none).
+pub(super) fn value_range(values: &[f32]) -> (f64, f64) {
+    values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v as f64), h.max(v as f64))
+        })
+}
+
+/// Writes one float32 `.npy` file of a grid of `dims` voxels from every rank's
+/// `parts` (byte offsets into the data after the header, and the bytes): rank 0
+/// creates a temporary file beside `out` at its final length and writes the header,
+/// every rank writes its parts and syncs, and rank 0 renames the file once all have
+/// written; each step ends with an agreement ([`agree`]), so a failure anywhere leaves
+/// no file. Returns the bytes this rank wrote.
+///
+/// # Errors
+/// I/O errors on any rank, as [`Error::Rank`] on more than one.
+pub(super) fn write_shared_npy(
+    comm: &dyn Comm,
+    out: &Path,
+    dims: [usize; 3],
+    parts: Vec<(u64, &[u8])>,
+) -> Result<u64> {
+    let rank = comm.rank();
+    let header = npy_f32_header(&npy_shape(dims));
+    let total = header.len() as u64 + 4 * dims.iter().product::<usize>() as u64;
+    let created = if rank == 0 {
+        SharedOutput::create(out, total).map(Some)
+    } else {
+        Ok(None)
+    };
+    let created = agree(comm, created)?;
+    let mut temp = created
+        .as_ref()
+        .map_or(Vec::new(), |c| path_bytes(c.temp_path()));
+    comm.broadcast(0, &mut temp);
+    let temp = bytes_path(temp);
+    let skip = header.len() as u64;
+    let mut at: Vec<(u64, &[u8])> = Vec::with_capacity(parts.len() + 1);
+    if rank == 0 {
+        at.push((0, &header));
+    }
+    at.extend(parts.into_iter().map(|(o, b)| (skip + o, b)));
+    let bytes_written: u64 = at.iter().map(|(_, b)| b.len() as u64).sum();
+    agree(comm, write_part(&temp, out, &at))?;
+    let committed = match created {
+        Some(c) => c.commit(),
+        None => Ok(()),
+    };
+    agree(comm, committed)?;
+    Ok(bytes_written)
 }
 
 /// MPI's world communicator as a [`Comm`] (feature `mpi`; run under `mpirun`).

@@ -884,7 +884,7 @@ fn check_grid(a: &ReconstructRequest, grid: &Grid, parallel: bool, rows: usize) 
 }
 
 /// The inscribed disc of every z-slice ([`apply_circle_mask`]'s rule) as a support.
-fn circle_support(dims: [usize; 3]) -> Vec<bool> {
+pub(super) fn circle_support(dims: [usize; 3]) -> Vec<bool> {
     let r = (dims[0] / 2) as i64;
     (0..dims.iter().product::<usize>())
         .map(|idx| {
@@ -927,7 +927,7 @@ fn solve_in<R: crate::real::Real>(
 }
 
 /// The image in f64 and the log of a solution that took `secs`.
-fn solved<R: crate::real::Real>(
+pub(super) fn solved<R: crate::real::Real>(
     opts: &IterativeOptions,
     sol: crate::cpu::iterative::Solution<R>,
     secs: f64,
@@ -968,6 +968,32 @@ fn solve_on_device(
     Ok(solved(opts, sol, t.elapsed().as_secs_f64()))
 }
 
+/// The options of an iterative `method` on `n_views` views, the request's defaults
+/// filled in, checked.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the option.
+pub(super) fn iterative_options(
+    a: &ReconstructRequest,
+    method: Method,
+    n_views: usize,
+) -> Result<IterativeOptions> {
+    let opts = IterativeOptions {
+        method,
+        iterations: a.iterations.unwrap_or(a.method.default_iterations()),
+        subsets: a.subsets.unwrap_or(10.min(n_views)),
+        order: a.subset_order,
+        relaxation: a.relaxation.unwrap_or(1.0),
+        tv_weight: a
+            .tv_weight
+            .unwrap_or(crate::cpu::iterative::DEFAULT_TV_WEIGHT),
+        nonnegative: a.nonnegative,
+        tolerance: a.tolerance,
+    };
+    opts.check(n_views)?;
+    Ok(opts)
+}
+
 /// The iterative path of [`reconstruct`]: the same grids as FBP/FDK (parallel: the
 /// `n × n` image per detector row, supported on the inscribed disc unless
 /// `no_circle`; cone: RTK's centred grid), Joseph's matched pair, and `method`.
@@ -989,20 +1015,8 @@ fn iterative(
     let grid = reconstruction_grid(a, &g, progress)?;
     check_grid(a, &grid, parallel, g.rows)?;
     let support = (parallel && !a.no_circle).then(|| circle_support(grid.dims));
-    let iterations = a.iterations.unwrap_or(a.method.default_iterations());
-    let opts = IterativeOptions {
-        method,
-        iterations,
-        subsets: a.subsets.unwrap_or(10.min(g.n_angles())),
-        order: a.subset_order,
-        relaxation: a.relaxation.unwrap_or(1.0),
-        tv_weight: a
-            .tv_weight
-            .unwrap_or(crate::cpu::iterative::DEFAULT_TV_WEIGHT),
-        nonnegative: a.nonnegative,
-        tolerance: a.tolerance,
-    };
-    opts.check(g.n_angles())?;
+    let opts = iterative_options(a, method, g.n_angles())?;
+    let iterations = opts.iterations;
     let x0 = match a.init {
         Init::Zero => vec![0.0; grid.dims.iter().product()],
         Init::Fbp => {

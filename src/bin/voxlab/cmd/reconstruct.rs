@@ -126,11 +126,15 @@ pub struct ReconstructArgs {
     /// and the split the GPU would use) after reading the input, and write nothing.
     #[arg(long)]
     pub dry_run: bool,
-    /// FBP/FDK on the ranks of `mpirun -n N voxlab reconstruct … --distributed`: the
-    /// volume cut into one slab per rank, each rank reading only the detector rows its
-    /// slab needs from a 3-D .npy stack and writing its part of the one .npy output
-    /// (equal byte for byte to a single-process run). Needs a build with the `mpi`
-    /// feature; CPU backends only (docs/distributed.md).
+    /// Run on the ranks of `mpirun -n N voxlab reconstruct … --distributed`, writing
+    /// one .npy output together. FBP/FDK: the volume cut into one slab per rank, each
+    /// rank reading only the detector rows its slab needs from a 3-D .npy stack (equal
+    /// byte for byte to a single-process run). --method sirt or cgls: the views cut
+    /// among the ranks, each reading only its views and holding the whole image, the
+    /// backprojections summed by an all-reduce every iteration (equal to a
+    /// single-process run up to rounding; bit for bit on one rank). Needs a build with
+    /// the `mpi` feature; CPU backends only; not with os-sart, tv, --init fbp,
+    /// --convergence or --truth (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
     /// With --distributed --dry-run: the number of ranks to plan for (no MPI needed):
@@ -255,6 +259,37 @@ fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
         |comm, progress| voxlab::jobs::distributed::run(req, comm, progress),
         |d| {
             let g = d.grid.dims;
+            let on = match d.ranks.len() {
+                1 => "1 rank".to_string(),
+                n => format!("{n} ranks"),
+            };
+            if let Some(log) = &d.iterative {
+                let shape = if g[2] == 1 {
+                    format!("{}×{} image", g[0], g[1])
+                } else {
+                    format!("{}×{}×{} volume", g[0], g[1], g[2])
+                };
+                println!(
+                    "wrote {} ({} {shape}, {} iterations, {} on {on}, the views cut among \
+                     them; values {:.4} … {:.4})",
+                    d.out.display(),
+                    log.method.name().to_uppercase(),
+                    log.iterations,
+                    d.what,
+                    d.range.0,
+                    d.range.1
+                );
+                let first = log.residual.first().copied().unwrap_or(0.0);
+                let last = log.residual.last().copied().unwrap_or(0.0);
+                println!(
+                    "residual ‖b − Ax‖: {first:.6e} → {last:.6e}; objective {:.6e}; {:.2} ms \
+                     per iteration",
+                    log.objective.last().copied().unwrap_or(0.0),
+                    log.seconds_per_iteration * 1e3
+                );
+                print!("{}", d.describe());
+                return Ok(());
+            }
             println!(
                 "wrote {} ({} {}×{}×{} volume, {} filter, {} on {} in slabs along {}; \
                  values {:.4} … {:.4})",
@@ -265,10 +300,7 @@ fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
                 g[2],
                 req.filter.name(),
                 d.what,
-                match d.ranks.len() {
-                    1 => "1 rank".to_string(),
-                    n => format!("{n} ranks"),
-                },
+                on,
                 if d.axis == 1 { 'j' } else { 'k' },
                 d.range.0,
                 d.range.1

@@ -1,0 +1,297 @@
+//! `voxlab reconstruct --distributed --method sirt|cgls`: the iterative methods on the
+//! ranks of a [`Comm`], the views cut among the ranks and the image whole on each.
+//!
+//! # How the work is cut
+//! The views are cut into one contiguous run per rank (sizes differing by at most one,
+//! as [`super::distributed`] cuts slices). A rank reads only its views' detector lines
+//! from a 3-D C-order `.npy` stack (other inputs are read whole and the rest dropped),
+//! and builds Joseph's matched pair over its views alone
+//! ([`crate::ct::Geometry::select_views`]: the same rays). Every rank holds the whole
+//! image `x`. In every iteration each rank projects `x` onto its views, forms its part
+//! of the residual and backprojects it with the exact transpose into a partial image;
+//! the partials are summed by an all-reduce ([`Comm::all_reduce_sum`]), and so are the
+//! sums over rays (`‖r‖²`, SIRT's weighted `‖r‖²_R`, CGLS's `‖A p‖²`). SIRT's row
+//! weights `1 / A𝟙` are per ray, so per rank; its column weights `1 / Aᵀ𝟙` are summed
+//! once. Every rank then takes the same step on the same image: the loops are
+//! [`crate::cpu::iterative`]'s own ([`solve_shared`]).
+//!
+//! # What it equals
+//! On one rank, the single-process result bit for bit. On more, `Aᵀ r` is summed as
+//! `Σ_ranks Σ_views of the rank` (in f64, then rounded to the precision) instead of
+//! over all views in order, and the sums over rays start a chunk at each rank's first
+//! ray: the image moves by rounding only (docs/distributed.md gives the measured
+//! distances). Every rank gets the same bits (the all-reduce adds in rank order).
+//!
+//! # The output
+//! As FBP's: one float32 `.npy` file written through [`crate::io::SharedOutput`], each
+//! rank its contiguous share of the values; every phase ends with an agreement, and
+//! every iteration agrees on cancellation, so a failure on any rank fails every rank
+//! with the lowest failing rank's message and leaves no file.
+
+use super::distributed::{
+    agree, gather_reports, input_geometry, runs, value_range, write_shared_npy, Comm, Counted,
+    Distributed, RankReport,
+};
+use super::reconstruct::{
+    circle_support, iterative_options, solved, IterationLog, ReconstructRequest,
+};
+use super::{check_cancel, Backend, Progress};
+use crate::cpu::fbp::Grid;
+use crate::cpu::iterative::{solve_shared, IterativeOptions, MatchedPair, Problem, Shares};
+use crate::cpu::project::JosephPair;
+use crate::ct::{Beam, Geometry};
+use crate::error::Result;
+use crate::io::projections::read_projection_lines;
+use crate::real::Real;
+use std::cell::Cell;
+use std::ops::Range;
+use std::time::Instant;
+
+/// The [`Shares`] of a rank: the all-reduce of its [`Comm`], timed.
+struct RankShares<'a> {
+    comm: &'a dyn Comm,
+    seconds: Cell<f64>,
+}
+
+impl Shares for RankShares<'_> {
+    fn count(&self) -> usize {
+        self.comm.size()
+    }
+    fn sum(&self, values: &mut [f64]) {
+        let t = Instant::now();
+        self.comm.all_reduce_sum(values);
+        self.seconds
+            .set(self.seconds.get() + t.elapsed().as_secs_f64());
+    }
+}
+
+/// The pair of a rank without views (more ranks than views): `A x` is empty and
+/// `Aᵀ y` zero; the rank still takes part in every sum.
+struct NoViews {
+    dims: [usize; 3],
+    per_view: usize,
+}
+
+impl<R: Real> MatchedPair<R> for NoViews {
+    fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    fn n_views(&self) -> usize {
+        0
+    }
+    fn per_view(&self) -> usize {
+        self.per_view
+    }
+    fn forward(&self, _x: &[R], views: &[usize]) -> Result<Vec<R>> {
+        assert!(views.is_empty(), "a rank without views projects none");
+        Ok(Vec::new())
+    }
+    fn transpose(&self, _y: &[R], views: &[usize]) -> Result<Vec<R>> {
+        assert!(views.is_empty(), "a rank without views backprojects none");
+        Ok(vec![R::zero(); self.dims.iter().product()])
+    }
+}
+
+/// What a rank has read and set up before it iterates.
+struct Prepared {
+    /// The whole geometry.
+    g: Geometry,
+    grid: Grid,
+    opts: IterativeOptions,
+    support: Option<Vec<bool>>,
+    /// This rank's views (`None`: more ranks than views).
+    views: Option<Range<usize>>,
+    /// Their projections, view after view.
+    b: Vec<f64>,
+    lines_read: usize,
+    read_seconds: f64,
+}
+
+fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
+    let t = Instant::now();
+    let (whole, g, grid) = input_geometry(a, progress)?;
+    let method = a.method.iterative().expect("an iterative method");
+    let opts = iterative_options(a, method, g.n_angles())?;
+    let views = runs(g.n_angles(), comm.size()).swap_remove(comm.rank());
+    let per_view = g.rows * g.cols;
+    let (b, lines_read) = match (&views, whole) {
+        (None, _) => (Vec::new(), 0),
+        (Some(v), Some(p)) => (
+            p.data[v.start * per_view..v.end * per_view].to_vec(),
+            g.n_angles() * g.rows,
+        ),
+        (Some(v), None) => {
+            let lines: Vec<usize> = (v.start * g.rows..v.end * g.rows).collect();
+            let p = read_projection_lines::<f64>(&a.input, &lines)?;
+            (
+                p.data[v.start * per_view..v.end * per_view].to_vec(),
+                lines.len(),
+            )
+        }
+    };
+    let support = (g.beam == Beam::Parallel && !a.no_circle).then(|| circle_support(grid.dims));
+    Ok(Prepared {
+        g,
+        grid,
+        opts,
+        support,
+        views,
+        b,
+        lines_read,
+        read_seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// What a rank's iterations give: the image, the log, and the seconds building the
+/// pair, iterating and all-reducing.
+type Iterated = (Vec<f64>, IterationLog, [f64; 3]);
+
+/// Builds this rank's pair in `R` (agreed), then iterates.
+fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) -> Result<Iterated> {
+    let t = Instant::now();
+    let dims = pre.grid.dims;
+    let per_view = pre.g.rows * pre.g.cols;
+    let built = (|| -> Result<Box<dyn MatchedPair<R>>> {
+        check_cancel(progress)?;
+        Ok(match &pre.views {
+            Some(v) => Box::new(JosephPair::<R>::new(
+                dims,
+                pre.grid.affine,
+                &pre.g.select_views(v.clone())?,
+            )?),
+            None => Box::new(NoViews { dims, per_view }),
+        })
+    })();
+    let pair = agree(comm, built)?;
+    let pair_seconds = t.elapsed().as_secs_f64();
+    let b: Vec<R> = pre.b.iter().map(|&v| R::of(v)).collect();
+    let x0 = vec![R::zero(); dims.iter().product()];
+    let prob = Problem {
+        pair: &*pair,
+        b: &b,
+        support: pre.support.as_deref(),
+    };
+    let shares = RankShares {
+        comm,
+        seconds: Cell::new(0.0),
+    };
+    let total = pre.opts.iterations as u64;
+    // Every rank stops at the same iteration: cancellation is agreed on.
+    let mut hook = |it: usize, _: &[R], _: f64| {
+        progress.advance(it as u64, total);
+        agree(comm, check_cancel(progress))
+    };
+    let t = Instant::now();
+    let sol = solve_shared(&prob, x0, &pre.opts, &shares, &mut hook)?;
+    let secs = t.elapsed().as_secs_f64();
+    let (x, log) = solved(&pre.opts, sol, secs);
+    Ok((x, log, [pair_seconds, secs, shares.seconds.get()]))
+}
+
+/// [`super::distributed::run`] for SIRT and CGLS (module docs).
+pub(super) fn run(
+    a: &ReconstructRequest,
+    comm: &dyn Comm,
+    progress: &dyn Progress,
+) -> Result<Distributed> {
+    let counted = Counted::new(comm);
+    let comm: &dyn Comm = &counted;
+    let (rank, size) = (comm.rank(), comm.size());
+    let pre = agree(comm, prepare(a, comm, progress))?;
+    let f32_path = a.backend == Backend::CpuF32;
+    let method = pre.opts.method;
+    progress.begin(
+        &format!("{} iterations", method.name()),
+        "iterations",
+        pre.opts.iterations as u64,
+    );
+    let t = Instant::now();
+    let iterated = if f32_path {
+        iterate::<f32>(&pre, comm, progress)
+    } else {
+        iterate::<f64>(&pre, comm, progress)
+    };
+    let (x, log, [pair_seconds, iterate_seconds, reduce_seconds]) = agree(comm, iterated)?;
+    progress.end(t.elapsed().as_secs_f64());
+    if log.converged {
+        progress.note(&format!(
+            "stopped after {} iterations: the objective fell by less than {} in the last",
+            log.iterations, a.tolerance
+        ));
+    }
+
+    // Every rank holds the image: each writes its contiguous share of the values.
+    let out = a.out.clone().expect("checked by check_distributed");
+    let t = Instant::now();
+    let part = runs(x.len(), size).swap_remove(rank).unwrap_or(0..0);
+    let values: Vec<f32> = x[part.clone()].iter().map(|&v| v as f32).collect();
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let parts = if bytes.is_empty() {
+        Vec::new()
+    } else {
+        vec![(4 * part.start as u64, &bytes[..])]
+    };
+    let bytes_written = write_shared_npy(comm, &out, pre.grid.dims, parts)?;
+    let write_seconds = t.elapsed().as_secs_f64();
+
+    let mine = RankReport {
+        views: pre.views.clone(),
+        lines_read: pre.lines_read,
+        read_seconds: pre.read_seconds,
+        write_seconds,
+        pair_seconds,
+        iterate_seconds,
+        reduce_seconds,
+        bytes_written,
+        bytes_sent: counted.sent(),
+        ..Default::default()
+    };
+    let (ranks, range) = gather_reports(comm, &mine, value_range(&values));
+    Ok(Distributed {
+        grid: pre.grid,
+        parallel: pre.g.beam == Beam::Parallel,
+        what: if f32_path { "cpu f32" } else { "cpu f64" }.into(),
+        axis: 0,
+        total_lines: pre.g.n_angles() * pre.g.rows,
+        range,
+        out,
+        ranks,
+        iterative: Some(log),
+    })
+}
+
+impl Distributed {
+    /// [`Self::describe`] of an iterative method: one line per rank.
+    pub(super) fn describe_iterative(&self) -> String {
+        let iterations = self.iterative.as_ref().map_or(0, |l| l.iterations);
+        // The ranks' views tile 0..n in rank order.
+        let views = self
+            .ranks
+            .iter()
+            .filter_map(|r| r.views.as_ref().map(|v| v.end))
+            .max()
+            .unwrap_or(0);
+        let mut s = String::new();
+        for (r, rep) in self.ranks.iter().enumerate() {
+            let which = match &rep.views {
+                Some(v) => format!("views {}..{} of {views}", v.start, v.end),
+                None => "no views".into(),
+            };
+            s.push_str(&format!(
+                "rank {r}: {which}, read {} of {} detector lines in {:.3} s, pair {:.3} s, \
+                 {iterations} iterations {:.3} s (all-reduce {:.3} s), wrote {} bytes in \
+                 {:.3} s, sent {} bytes\n",
+                rep.lines_read,
+                self.total_lines,
+                rep.read_seconds,
+                rep.pair_seconds,
+                rep.iterate_seconds,
+                rep.reduce_seconds,
+                rep.bytes_written,
+                rep.write_seconds,
+                rep.bytes_sent
+            ));
+        }
+        s
+    }
+}
