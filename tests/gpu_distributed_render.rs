@@ -84,3 +84,66 @@ fn gpu_ranks_render_the_single_process_gpu_image() {
         }
     }
 }
+
+/// One GPU, a volume past the 3-D texture limit: bricks rendered one after another and
+/// composited on the host (`gpu::raycast::render_bricked`), against the unsplit render.
+#[test]
+fn bricks_past_the_texture_limit_render_the_unsplit_image() {
+    let Some(ctx) = gpu("bricks_past_the_texture_limit_render_the_unsplit_image") else {
+        return;
+    };
+    use voxlab::gpu::raycast::{brick_plan, render_bricked, RaycastSession};
+    let dir = scratch("gpu-bricked");
+    let file = brick_test_volume(&dir);
+    let volume = VolumeInput::new(file.to_str().unwrap()).read().unwrap();
+    for (mode, filter, exact) in [
+        (Mode::Mip, Filter::Trilinear, true),
+        (Mode::Minip, Filter::CatmullRom, true),
+        (Mode::Xray, Filter::Trilinear, false),
+        (Mode::Dvr, Filter::Trilinear, false),
+    ] {
+        let mut req = request(file.to_str().unwrap(), mode);
+        req.scene.filter = filter;
+        req.scene.ert = 1.0;
+        let (tf, camera, settings) =
+            voxlab::jobs::render::build_view(&req.scene, &volume, false).unwrap();
+        let want = RaycastSession::new(ctx, &volume)
+            .unwrap()
+            .render(&tf, &camera, &settings, &|_, _| {})
+            .unwrap()
+            .output
+            .image;
+        let top = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for limit in [28, 20] {
+            let (_, bricks) = brick_plan(volume.dims(), filter, limit).unwrap();
+            let (got, n) =
+                render_bricked(ctx, &volume, &tf, &camera, &settings, limit, &|_, _| {}).unwrap();
+            assert_eq!(n, bricks.len());
+            assert!(n > 1, "{mode:?}: the limit {limit} splits the volume");
+            let worst = got
+                .output
+                .image
+                .data
+                .iter()
+                .zip(&want.data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f64, f64::max);
+            eprintln!(
+                "{mode:?}, {n} bricks of ≤ {limit}: max |Δ| {worst:.3e} (image max {top:.3})"
+            );
+            if exact {
+                assert!(worst == 0.0, "{mode:?}, {n} bricks: {worst:e}");
+            } else {
+                assert!(
+                    worst <= GPU_BOUND * top.max(1.0),
+                    "{mode:?}, {n} bricks: {worst:e}"
+                );
+            }
+        }
+    }
+    // A limit below the ghost voxels cannot be met.
+    let e = brick_plan(volume.dims(), Filter::Trilinear, 6)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot be cut into bricks"), "{e}");
+}

@@ -19,6 +19,7 @@
 
 use super::modes::window_map;
 use super::shade::over_background;
+use crate::io::brick::KdTree;
 use crate::real::Real;
 use crate::settings::{Mode, RenderSettings};
 
@@ -71,6 +72,28 @@ pub fn finish<R: Real>(settings: &RenderSettings, acc: ([R; 4], u32), hit: bool)
         }
         _ => [v[0], R::zero(), R::zero(), R::zero()],
     }
+}
+
+/// One pixel of the whole render from the pieces of the bricks of `tree`
+/// (`piece(b)`: brick `b`'s value and sample count): joined in the order a ray of
+/// index-space direction `d` meets the bricks, then [`finish`]ed. Returns the pixel
+/// and the samples of all pieces; `order` is scratch space.
+#[inline]
+pub fn composite_pixel<R: Real>(
+    tree: &KdTree,
+    d: [f64; 3],
+    settings: &RenderSettings,
+    hit: bool,
+    piece: impl Fn(usize) -> ([R; 4], u32),
+    order: &mut Vec<usize>,
+) -> ([R; 4], u32) {
+    order.clear();
+    tree.front_to_back(d, order);
+    let mut acc = ([R::zero(); 4], 0u32);
+    for &b in order.iter() {
+        join(settings.mode, &mut acc, piece(b));
+    }
+    (finish(settings, acc, hit), acc.1)
 }
 
 #[cfg(test)]

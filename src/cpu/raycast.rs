@@ -427,21 +427,38 @@ pub fn render_owned<R: Real, F: Field<R>>(
     })
 }
 
-/// The modes a brick renders: DVR, MIP, MinIP and X-ray (MIDA and iso-surfaces look
-/// along the whole ray).
+/// What a brick renders (`render_owned`): DVR, MIP, MinIP and X-ray (MIDA and
+/// iso-surfaces look along the whole ray), post-classified, with a filter of finite
+/// reach (the B-spline-interpolating and full-sinc filters reach across the whole
+/// volume).
 ///
 /// # Errors
-/// Any other mode, or iso-surfaces.
-pub fn check_owned_settings(settings: &RenderSettings) -> Result<()> {
-    if !matches!(
-        settings.mode,
-        Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray
-    ) || !settings.iso_surfaces.is_empty()
+/// Any other mode, iso-surfaces, pre-classification, those filters.
+pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
+    if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
+        || !s.iso_surfaces.is_empty()
     {
         return Err(Error::invalid(
-            "mode",
-            "a brick renders DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
+            "--mode",
+            "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
              the whole ray)",
+        ));
+    }
+    if s.mode == Mode::Dvr && s.classification == Classification::Pre {
+        return Err(Error::invalid(
+            "--classification pre",
+            "does not go with bricks (post-classification does)",
+        ));
+    }
+    if s.filter.prefiltered() || s.filter == Filter::Sinc {
+        return Err(Error::invalid(
+            "--filter",
+            format!(
+                "{} reaches across the whole volume; bricks take the filters of finite \
+                 reach (nearest, trilinear, bspline, catmull-rom, lanczos2-4, \
+                 cubic-bspline-fast)",
+                s.filter.name()
+            ),
         ));
     }
     Ok(())

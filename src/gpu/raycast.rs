@@ -592,6 +592,157 @@ pub fn render_owned(
     })
 }
 
+/// The bricks a volume of `dims` is cut into so that each, with the ghost voxels of
+/// `filter`, fits `max_texels` per axis: the k-d tree of `io::brick` for the fewest
+/// bricks that fit (one when the volume fits whole).
+///
+/// # Errors
+/// No cut fits (a limit below the filter's ghost voxels).
+pub fn brick_plan(
+    dims: [usize; 3],
+    filter: Filter,
+    max_texels: usize,
+) -> Result<(crate::io::brick::KdTree, Vec<crate::io::brick::Brick>)> {
+    let ghost = crate::cpu::field::brick_ghost(filter);
+    let fits = |b: &crate::io::brick::Brick| {
+        b.with_ghost(ghost, dims)
+            .dims()
+            .iter()
+            .all(|&n| n <= max_texels)
+    };
+    let mut n = 1;
+    loop {
+        let cut = crate::io::brick::kd_tree(dims, n);
+        match cut {
+            Ok((tree, bricks)) if bricks.iter().all(fits) => return Ok((tree, bricks)),
+            Ok(_) if n < 1 << 16 => n += 1,
+            _ => {
+                return Err(Error::too_large(
+                    "volume",
+                    format!(
+                        "{dims:?} cannot be cut into bricks of at most {max_texels} texels \
+                         per axis with the {} filter's {ghost} ghost voxels",
+                        filter.name()
+                    ),
+                ))
+            }
+        }
+    }
+}
+
+/// Renders a volume larger than the adapter's 3-D texture (`max_texels` per axis, the
+/// adapter's limit or `VOXLAB_GPU_MAX_TEXTURE_3D`) on one GPU: cut into the bricks of
+/// [`brick_plan`], each rendered as a placed session ([`render_owned`]), the pieces
+/// composited on the host in each pixel's visibility order (`cpu::composite`). The
+/// same samples as one unsplit render: MIP and MinIP equal it exactly, X-ray and DVR
+/// up to the regrouping of their sums by brick. Returns the output and the number of
+/// bricks.
+///
+/// # Errors
+/// As [`render_owned`]; [`brick_plan`]'s.
+pub fn render_bricked(
+    ctx: &GpuContext,
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    max_texels: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(GpuRenderOutput, usize)> {
+    let t_start = Instant::now();
+    settings.validate()?;
+    tf.validate()?;
+    crate::cpu::raycast::check_owned_settings(settings)?;
+    volume.check_finite("volume")?;
+    let dims = volume.dims();
+    let (tree, bricks) = brick_plan(dims, settings.filter, max_texels)?;
+    let ghost = crate::cpu::field::brick_ghost(settings.filter);
+    let r = volume.value_range();
+    let range = (r.min, r.max);
+    let mut pieces = Vec::with_capacity(bricks.len());
+    let mut timings = GpuTimings::default();
+    let (w, h) = (camera.width, camera.height);
+    for (i, b) in bricks.iter().enumerate() {
+        let g = b.with_ghost(ghost, dims);
+        let placement = BrickPlacement {
+            origin: g.lo,
+            lo: b.lo,
+            hi: b.hi,
+            whole: dims,
+            affine: volume.affine(),
+            range,
+        };
+        let s = crate::cpu::raycast::owned_settings(settings);
+        let mut session = RaycastSession::new(ctx, &volume.crop(g.lo, g.hi)?)?;
+        session.place(placement)?;
+        let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
+        let out = session.render(tf, camera, &s, &rows)?;
+        for (sum, t) in [
+            (&mut timings.setup, out.timings.setup),
+            (&mut timings.upload, out.timings.upload),
+            (&mut timings.prepare, out.timings.prepare),
+            (&mut timings.kernel, out.timings.kernel),
+            (&mut timings.readback, out.timings.readback),
+        ] {
+            *sum += t;
+        }
+        timings.kernel_from_timestamps = out.timings.kernel_from_timestamps;
+        let counts: Vec<u32> = match &out.output.samples {
+            Some(f) => f.data.iter().map(|&c| c as u32).collect(),
+            None => vec![0; w * h],
+        };
+        pieces.push((out.output.image, counts, out.hits.unwrap_or_default()));
+    }
+    // The pieces joined pixel by pixel in visibility order.
+    let ch = if settings.mode.rgba() { 4 } else { 1 };
+    let mut image = Frame::new(w, h, ch);
+    let mut counts = vec![0u32; w * h];
+    let to_index = volume.affine().inverse();
+    use rayon::prelude::*;
+    image
+        .data
+        .par_chunks_mut(w * ch)
+        .zip(counts.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(row, (px_row, n_row))| {
+            let mut order = Vec::with_capacity(bricks.len());
+            for col in 0..w {
+                let p = row * w + col;
+                let d = to_index.transform_vector3(camera.ray(col, row).dir);
+                let piece = |b: usize| {
+                    let (img, n, _) = &pieces[b];
+                    let mut v = [0.0f32; 4];
+                    for (c, x) in v.iter_mut().take(ch).enumerate() {
+                        *x = img.data[p * ch + c] as f32;
+                    }
+                    (v, n[p])
+                };
+                let hit = pieces[0].2.get(p).copied().unwrap_or(false);
+                let (px, n) = crate::cpu::composite::composite_pixel(
+                    &tree,
+                    d.to_array(),
+                    settings,
+                    hit,
+                    piece,
+                    &mut order,
+                );
+                for (c, v) in px.iter().take(ch).enumerate() {
+                    px_row[col * ch + c] = *v as f64;
+                }
+                n_row[col] = n;
+            }
+        });
+    timings.total = t_start.elapsed().as_secs_f64();
+    Ok((
+        GpuRenderOutput {
+            output: RenderOutput::from_counts(image, &counts, settings.sample_count),
+            timings,
+            hits: None,
+        },
+        bricks.len(),
+    ))
+}
+
 /// What a [`RaycastSession`] has done since it was made, counted so that callers and
 /// tests can see which frames re-used the device's data.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]

@@ -36,7 +36,7 @@ use super::distributed::{agree, Comm, Counted};
 use super::render::{build_view_for, RenderRequest};
 use super::{Backend, Progress};
 use crate::camera::Camera;
-use crate::cpu::composite::{finish, join};
+use crate::cpu::composite::composite_pixel;
 use crate::cpu::field::{brick_ghost, BrickField, GridField};
 use crate::cpu::grid::Grid;
 use crate::cpu::raycast::{render_owned, Owned};
@@ -45,7 +45,7 @@ use crate::frame::Frame;
 use crate::gpu::raycast::{render_owned as gpu_render_owned, BrickPlacement};
 use crate::io::brick::{kd_tree, raw_layout, read_brick, Brick, KdTree, RawLayout};
 use crate::real::Real;
-use crate::settings::{Classification, Mode, RenderSettings};
+use crate::settings::RenderSettings;
 use crate::volume::AnyVolume;
 use glam::DMat4;
 use std::path::Path;
@@ -173,37 +173,6 @@ fn check(req: &RenderRequest) -> Result<()> {
     Ok(())
 }
 
-/// The settings' own refusals (they may come from a settings file).
-fn check_settings(s: &RenderSettings) -> Result<()> {
-    if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
-        || !s.iso_surfaces.is_empty()
-    {
-        return Err(Error::invalid(
-            "--mode",
-            "a distributed render composites DVR, MIP, MinIP or X-ray (MIDA and \
-             iso-surfaces look along the whole ray)",
-        ));
-    }
-    if s.mode == Mode::Dvr && s.classification == Classification::Pre {
-        return Err(Error::invalid(
-            "--classification pre",
-            "does not go with --distributed (post-classification does)",
-        ));
-    }
-    if s.filter.prefiltered() || s.filter == crate::settings::Filter::Sinc {
-        return Err(Error::invalid(
-            "--filter",
-            format!(
-                "{} reaches across the whole volume; a distributed render takes the \
-                 filters of finite reach (nearest, trilinear, bspline, catmull-rom, \
-                 lanczos2-4, cubic-bspline-fast)",
-                s.filter.name()
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// Where the volume comes from: a raw block each rank reads its brick of, or the whole
 /// volume, read by every rank.
 enum Source {
@@ -314,7 +283,7 @@ fn read_mine(
     let (_, _, settings) = build_view_for(&req.scene, dims, source.affine(), || (0.0, 1.0), true)?;
     let mut settings = settings;
     req.scene.accel.apply(&mut settings)?;
-    check_settings(&settings)?;
+    crate::cpu::raycast::check_owned_settings(&settings)?;
     let ghosted = brick.with_ghost(brick_ghost(settings.filter), dims);
     let (volume, voxels_read) = source.brick(&ghosted, &req.scene.input.source)?;
     let r = volume.value_range();
@@ -507,17 +476,19 @@ fn run_in<R: Real>(
         for col in 0..w {
             let p = (row - mine.start) * w + col;
             let d = to_index.transform_vector3(camera.ray(col, row).dir);
-            order.clear();
-            read.tree.front_to_back(d.to_array(), &mut order);
-            let mut acc = ([R::zero(); 4], 0u32);
-            for &b in &order {
-                join(settings.mode, &mut acc, pieces[b][p]);
-            }
-            let px = finish(&settings, acc, partial.hits[row * w + col]);
+            let hit = partial.hits[row * w + col];
+            let (px, n) = composite_pixel(
+                &read.tree,
+                d.to_array(),
+                &settings,
+                hit,
+                |b| pieces[b][p],
+                &mut order,
+            );
             for &v in px.iter().take(ch) {
                 put(&mut band_out, v);
             }
-            band_out.extend_from_slice(&acc.1.to_le_bytes());
+            band_out.extend_from_slice(&n.to_le_bytes());
         }
     }
     drop(pieces);

@@ -768,6 +768,9 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
                 .scene
                 .accel
                 .render(&renderer, &scene, &settings, progress)?;
+            if let Some(split) = &r.split {
+                progress.note(split);
+            }
             result.output = r.output;
             result.gpu_timings = r.gpu_timings;
             result.seconds = since(t);

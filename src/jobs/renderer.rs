@@ -44,6 +44,9 @@ pub struct Rendered {
     /// What the GPU session had done after this frame (a one-shot render's session
     /// made one frame), for GPU renders.
     pub gpu_session: Option<SessionStats>,
+    /// How a GPU render past the 3-D texture limit was split (`ray casting in 4
+    /// bricks …`), when it was.
+    pub split: Option<String>,
 }
 
 /// A backend made ready for renders: [`Engine`] with the ray caster's entry points.
@@ -98,13 +101,28 @@ impl Renderer {
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Rendered> {
         let (v, tf, cam) = (&scene.volume, &scene.transfer, &scene.camera);
+        let mut split = None;
         let (output, gpu_timings, gpu_session) = match (self.backend(), self.gpu()) {
             (Backend::Gpu, Some(ctx)) => {
                 settings.validate()?;
                 tf.validate()?;
-                let mut session = RaycastSession::new(ctx, v)?;
-                let g = session.render(tf, cam, settings, progress)?;
-                (g.output, Some(g.timings), Some(session.stats()))
+                let max = ctx.limits.max_texture_dimension_3d as usize;
+                if v.dims().iter().any(|&n| n > max) {
+                    // Past the 3-D texture limit: bricks, composited on the host.
+                    let (g, n) = crate::gpu::raycast::render_bricked(
+                        ctx, v, tf, cam, settings, max, progress,
+                    )?;
+                    split = Some(format!(
+                        "ray casting in {n} bricks (the {:?} volume exceeds the 3-D texture \
+                         limit of {max} texels per axis)",
+                        v.dims()
+                    ));
+                    (g.output, Some(g.timings), None)
+                } else {
+                    let mut session = RaycastSession::new(ctx, v)?;
+                    let g = session.render(tf, cam, settings, progress)?;
+                    (g.output, Some(g.timings), Some(session.stats()))
+                }
             }
             (Backend::CpuF32, _) => (
                 raycast::render::<f32>(v, tf, cam, settings, progress)?,
@@ -122,6 +140,7 @@ impl Renderer {
             backend: self.backend(),
             gpu_timings,
             gpu_session,
+            split,
         })
     }
 }
@@ -252,6 +271,7 @@ impl Renderer {
             backend: self.backend(),
             gpu_timings,
             gpu_session,
+            split: None,
         })
     }
 }
