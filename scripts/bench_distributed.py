@@ -124,7 +124,8 @@ def main():
     for j in jobs:
         base = statistics.median(times[(j, ranks[0])]) * ranks[0]
         lone = statistics.median(times[(j, 0)])
-        lines.append(f"| {j} | one process, no MPI | {lone:.2f} | {base / lone:.2f}× | | |")
+        lines.append(f"| {j} | one process, no MPI | {lone:.2f} | "
+                     f"(one rank takes {base / lone:.2f}× its time) | | |")
         for i, n in enumerate(ranks):
             m = statistics.median(times[(j, n)])
             eq = "byte for byte" if same[j][i] else "within rounding (DVR)"
