@@ -430,6 +430,23 @@ fn own_keeps(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f
     return x < bound;
 }
 
+// The last of lo..=hi where own_keeps still gives what it gives at lo (it gives the
+// other at hi), by bisection. mirrors src/cpu/raycast.rs: last_like_first
+fn last_like_first(lo: u32, hi: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>, axis: u32, bound: f32, lower: bool) -> u32 {
+    let want = own_keeps(lo, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower);
+    var a = lo;
+    var b = hi;
+    while (b - a > 1u) {
+        let m = a + (b - a) / 2u;
+        if (own_keeps(m, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower) == want) {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    return a;
+}
+
 // The run of steps whose midpoints the brick owns: (1, first, last), or x = 0 for none.
 // mirrors src/cpu/raycast.rs: Owned::range
 fn own_range(n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<u32> {
@@ -454,32 +471,13 @@ fn own_range(n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32, o: vec3<f32>, d: 
         if (!k0 && !k1) {
             return vec3<u32>(0u, 0u, 0u);
         }
+        let change = last_like_first(first, last, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower);
         if (k0) {
-            // A prefix: the last kept step.
-            var yes = first;
-            var no = last;
-            while (no - yes > 1u) {
-                let m = yes + (no - yes) / 2u;
-                if (own_keeps(m, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower)) {
-                    yes = m;
-                } else {
-                    no = m;
-                }
-            }
-            last = yes;
+            // A prefix is kept: it ends at the change.
+            last = change;
         } else {
-            // A suffix: the first kept step.
-            var no = first;
-            var yes = last;
-            while (yes - no > 1u) {
-                let m = no + (yes - no) / 2u;
-                if (own_keeps(m, n, t_in, t_s, t_out, dt, o, d, axis, bound, lower)) {
-                    yes = m;
-                } else {
-                    no = m;
-                }
-            }
-            first = yes;
+            // A suffix: it starts after the change.
+            first = change + 1u;
         }
     }
     return vec3<u32>(1u, first, last);

@@ -336,41 +336,35 @@ impl<R: Real> Owned<R> {
                         x < bound
                     }
                 };
-                let (k0, k1) = (keep(first), keep(last));
-                match (k0, k1) {
+                match (keep(first), keep(last)) {
                     (true, true) => {}
                     (false, false) => return None,
-                    // A prefix: the last kept step.
-                    (true, false) => {
-                        let (mut yes, mut no) = (first, last);
-                        while no - yes > 1 {
-                            let m = yes + (no - yes) / 2;
-                            if keep(m) {
-                                yes = m
-                            } else {
-                                no = m
-                            }
-                        }
-                        last = yes;
-                    }
-                    // A suffix: the first kept step.
-                    (false, true) => {
-                        let (mut no, mut yes) = (first, last);
-                        while yes - no > 1 {
-                            let m = no + (yes - no) / 2;
-                            if keep(m) {
-                                yes = m
-                            } else {
-                                no = m
-                            }
-                        }
-                        first = yes;
-                    }
+                    // A prefix is kept: it ends at the change.
+                    (true, false) => last = last_like_first(first, last, keep),
+                    // A suffix: it starts after the change.
+                    (false, true) => first = last_like_first(first, last, keep) + 1,
                 }
             }
         }
         Some((first, last))
     }
+}
+
+/// The last of `lo ..= hi` where the monotone `keep` still gives what it gives at
+/// `lo` (it gives the other at `hi`), by bisection.
+/// Mirrors `shaders/raycast.wgsl: last_like_first`.
+fn last_like_first(lo: usize, hi: usize, keep: impl Fn(usize) -> bool) -> usize {
+    let want = keep(lo);
+    let (mut a, mut b) = (lo, hi);
+    while b - a > 1 {
+        let m = a + (b - a) / 2;
+        if keep(m) == want {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    a
 }
 
 /// One brick's share of a render ([`render_owned`]).
