@@ -661,6 +661,7 @@ pub fn render_bricked(
     let range = (r.min, r.max);
     let mut pieces = Vec::with_capacity(bricks.len());
     let mut timings = GpuTimings::default();
+    let mut session: Option<RaycastSession> = None;
     let (w, h) = (camera.width, camera.height);
     for (i, b) in bricks.iter().enumerate() {
         let g = b.with_ghost(ghost, dims);
@@ -673,7 +674,13 @@ pub fn render_bricked(
             range,
         };
         let s = crate::cpu::raycast::owned_settings(settings);
-        let mut session = RaycastSession::new(ctx, &volume.crop(g.lo, g.hi)?)?;
+        let brick = volume.crop(g.lo, g.hi)?;
+        // One session for every brick: the pipelines compile once.
+        match session.as_mut() {
+            None => session = Some(RaycastSession::new(ctx, &brick)?),
+            Some(x) => x.replace_volume(&brick)?,
+        }
+        let session = session.as_mut().expect("made above");
         session.place(placement)?;
         let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
         let out = session.render(tf, camera, &s, &rows)?;
@@ -741,6 +748,30 @@ pub fn render_bricked(
         },
         bricks.len(),
     ))
+}
+
+/// A session's volume checked (finite, each axis within the adapter's 3-D texture
+/// limit) and converted: its dimensions, value range and f32 grid.
+fn checked_f32(
+    ctx: &GpuContext,
+    volume: &AnyVolume,
+) -> Result<([usize; 3], (f64, f64), Grid<f32>)> {
+    volume.check_finite("volume")?;
+    let dims = volume.dims();
+    let max3d = ctx.limits.max_texture_dimension_3d as usize;
+    if dims.iter().any(|&n| n > max3d) {
+        return Err(Error::too_large(
+            "volume",
+            format!("{dims:?} exceeds the adapter's 3D texture limit of {max3d} per axis"),
+        ));
+    }
+    let values = volume.to_f32();
+    let r = values.value_range();
+    let grid = Grid::<f32> {
+        dims,
+        data: values.into_data(),
+    };
+    Ok((dims, (r.min, r.max), grid))
 }
 
 /// What a [`RaycastSession`] has done since it was made, counted so that callers and
@@ -887,24 +918,7 @@ impl<'c> RaycastSession<'c> {
     /// [`Error::NonFinite`], [`Error::TooLarge`], out of GPU memory.
     pub fn new(ctx: &'c GpuContext, volume: &AnyVolume) -> Result<Self> {
         let t_start = Instant::now();
-        volume.check_finite("volume")?;
-        let dims = volume.dims();
-        let max3d = ctx.limits.max_texture_dimension_3d as usize;
-        if dims.iter().any(|&n| n > max3d) {
-            return Err(Error::too_large(
-                "volume",
-                format!("{dims:?} exceeds the adapter's 3D texture limit of {max3d} per axis"),
-            ));
-        }
-        let values = volume.to_f32();
-        let range = {
-            let r = values.value_range();
-            (r.min, r.max)
-        };
-        let grid = Grid::<f32> {
-            dims,
-            data: values.into_data(),
-        };
+        let (dims, range, grid) = checked_f32(ctx, volume)?;
         let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
         let dev = &ctx.device;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
@@ -1006,6 +1020,35 @@ impl<'c> RaycastSession<'c> {
             }),
             brick: None,
         })
+    }
+
+    /// Replaces the session's volume by `volume` (checked and uploaded as [`Self::new`]
+    /// does), dropping what was computed from the old one (B-spline coefficients,
+    /// pre-classified colours, gradients, the skipping grid) and its brick placement;
+    /// the compiled pipelines and the transfer function's tables stay. The next brick
+    /// of [`render_bricked`] renders without compiling anything again.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn replace_volume(&mut self, volume: &AnyVolume) -> Result<()> {
+        let (dims, range, grid) = checked_f32(self.ctx, volume)?;
+        let texture = self.ctx.upload_volume_r32(dims, &grid.data)?;
+        self.ctx
+            .queue
+            .submit(std::iter::empty::<wgpu::CommandBuffer>());
+        self.ctx.wait()?;
+        self.dims = dims;
+        self.affine = volume.affine();
+        self.range = range;
+        self.grid = grid;
+        self.volume = texture;
+        self.coefficients = None;
+        self.preclassified = None;
+        self.gradients = None;
+        self.minmax = None;
+        self.brick = None;
+        self.stats.volume_uploads += 1;
+        Ok(())
     }
 
     /// Makes the session's volume a brick of a larger volume: its frames take only
