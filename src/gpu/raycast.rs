@@ -750,12 +750,12 @@ pub fn render_bricked(
     ))
 }
 
+/// A volume's dimensions, value range and f32 grid.
+type Checked = ([usize; 3], (f64, f64), Grid<f32>);
+
 /// A session's volume checked (finite, each axis within the adapter's 3-D texture
-/// limit) and converted: its dimensions, value range and f32 grid.
-fn checked_f32(
-    ctx: &GpuContext,
-    volume: &AnyVolume,
-) -> Result<([usize; 3], (f64, f64), Grid<f32>)> {
+/// limit) and converted.
+fn checked_f32(ctx: &GpuContext, volume: &AnyVolume) -> Result<Checked> {
     volume.check_finite("volume")?;
     let dims = volume.dims();
     let max3d = ctx.limits.max_texture_dimension_3d as usize;
