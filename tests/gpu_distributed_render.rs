@@ -147,3 +147,51 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         .to_string();
     assert!(e.contains("cannot be cut into bricks"), "{e}");
 }
+
+/// `voxlab render --backend gpu` under a lowered 3-D texture limit: `--dry-run` prints
+/// the brick split and writes nothing; the render says how it split and writes the
+/// unsplit MIP byte for byte.
+#[test]
+fn the_command_splits_past_the_texture_limit_and_says_so() {
+    if gpu("the_command_splits_past_the_texture_limit_and_says_so").is_none() {
+        return;
+    }
+    let dir = scratch("gpu-bricked-cli");
+    let (one, split) = (dir.join("one.npy"), dir.join("split.npy"));
+    let args = |out: &std::path::Path| {
+        vec![
+            "render".to_string(),
+            "phantom:shepp-logan-modified:48".into(),
+            "--mode".into(),
+            "mip".into(),
+            "--backend".into(),
+            "gpu".into(),
+            "--width".into(),
+            "64".into(),
+            "--height".into(),
+            "64".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let run = |a: &[String], limit: Option<&str>| {
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let mut c = common::voxlab_command(&a);
+        if let Some(l) = limit {
+            c.env("VOXLAB_GPU_MAX_TEXTURE_3D", l);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
+    };
+    let mut dry = args(&split);
+    dry.push("--dry-run".into());
+    let text = run(&dry, Some("32"));
+    assert!(text.contains("split:  ray casting in"), "{text}");
+    assert!(text.contains("3-D texture 32 per axis"), "{text}");
+    assert!(!split.exists());
+    run(&args(&one), None);
+    let text = run(&args(&split), Some("32"));
+    assert!(text.contains("voxlab: ray casting in"), "{text}");
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&split).unwrap());
+}

@@ -640,6 +640,68 @@ pub struct Rendering {
     pub camera: Camera,
 }
 
+/// `voxlab render --dry-run`: what [`run`] would hold and how it would split, after
+/// loading the input (for its size) and checking the request, rendering nothing. The
+/// host side is the volume in the working precision and the image; the device side
+/// (GPU) the volume texture (or the largest brick's, past the 3-D texture limit:
+/// [`crate::gpu::raycast::brick_plan`]), a precomputed gradient texture and the image's
+/// output buffers.
+///
+/// # Errors
+/// As [`run`] up to the rendering; a volume that cannot be cut into bricks that fit.
+pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    let (scene, mut settings) = build_scene(&req.scene, req.samples, progress)?;
+    req.scene.accel.apply(&mut settings)?;
+    let dims = scene.volume.dims();
+    let voxels = dims.iter().product::<usize>() as u64;
+    let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
+    let ch = if settings.mode.rgba() { 4 } else { 1 };
+    // The image (f64) and the sample counts on the host.
+    let image = w * h * (8 * ch + 4);
+    let engine = super::Engine::open(req.backend)?;
+    let backend = engine.describe();
+    let (host, device, split) = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            let max = ctx.limits.max_texture_dimension_3d as usize;
+            let (texels, split) = if dims.iter().any(|&n| n > max) {
+                crate::cpu::raycast::check_owned_settings(&settings)?;
+                let (_, bricks) = crate::gpu::raycast::brick_plan(dims, settings.filter, max)?;
+                let ghost = crate::cpu::field::brick_ghost(settings.filter);
+                let largest = bricks
+                    .iter()
+                    .map(|b| b.with_ghost(ghost, dims).voxels() as u64)
+                    .max()
+                    .unwrap_or(0);
+                let line = format!(
+                    "ray casting in {} bricks (the {dims:?} volume exceeds the 3-D texture \
+                     limit of {max} texels per axis; the largest brick with its {ghost} ghost \
+                     voxels holds {largest} texels)",
+                    bricks.len()
+                );
+                (largest, vec![line])
+            } else {
+                (voxels, Vec::new())
+            };
+            let gradients = if settings.precompute_gradients { 16 } else { 0 };
+            let out = w * h * 20;
+            let peak = texels * (4 + gradients) + out;
+            let device = super::plan::DevicePlan::on(ctx, peak, out.max(texels * 4));
+            // The host keeps the volume as f32 (and each brick's copy).
+            (voxels * 4 + texels * 4 + image, Some(device), split)
+        }
+        (Backend::CpuF32, _) => (voxels * 4 + image, None, Vec::new()),
+        _ => (voxels * 8 + image, None, Vec::new()),
+    };
+    Ok(super::plan::MemoryPlan {
+        job: format!("render {:?}", settings.mode).to_lowercase(),
+        backend,
+        host_bytes: host,
+        device,
+        split,
+        writes: Vec::new(),
+    })
+}
+
 /// Runs `voxlab render`: see the [module docs](self).
 ///
 /// # Errors

@@ -200,6 +200,11 @@ pub struct RenderArgs {
     /// (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
+    /// Print the memory plan (host and device bytes against the adapter's limits, and
+    /// the bricks a volume past the 3-D texture limit is cut into) after loading the
+    /// input, and render and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 /// Extra volumes rendered together with INPUT (volume 0, placed by the identity).
@@ -419,6 +424,12 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
         repeat: r.repeat,
         volumes: r.multi.volumes()?,
     };
+    if r.dry_run {
+        let mut plan = voxlab::jobs::render::plan(&req, &Terminal::bars())?;
+        plan.writes.push(r.out.display().to_string());
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     if r.distributed {
         return distributed(&r, &req);
     }
