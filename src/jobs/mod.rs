@@ -39,7 +39,6 @@ pub mod convert;
 pub mod d2vr;
 pub mod demo;
 pub mod distributed;
-mod distributed_iterative;
 pub mod distributed_render;
 pub mod embedded;
 pub mod fft;

@@ -28,20 +28,20 @@
 //! every iteration agrees on cancellation, so a failure on any rank fails every rank
 //! with the lowest failing rank's message and leaves no file.
 
-use super::distributed::{
+use super::common::{
     agree, gather_reports, input_geometry, runs, value_range, write_shared_npy, Comm, Counted,
     Distributed, RankReport,
 };
-use super::reconstruct::{
-    circle_support, iterative_options, solved, IterationLog, ReconstructRequest,
-};
-use super::{check_cancel, Backend, Progress};
 use crate::cpu::fbp::Grid;
 use crate::cpu::iterative::{solve_shared, IterativeOptions, MatchedPair, Problem, Shares};
 use crate::cpu::project::JosephPair;
 use crate::ct::{Beam, Geometry};
 use crate::error::Result;
 use crate::io::projections::read_projection_lines;
+use crate::jobs::reconstruct::{
+    circle_support, iterative_options, solved, IterationLog, ReconstructRequest,
+};
+use crate::jobs::{check_cancel, Backend, Progress};
 use crate::real::Real;
 use std::cell::Cell;
 use std::ops::Range;
@@ -188,7 +188,7 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     Ok((x, log, [pair_seconds, secs, shares.seconds.get()]))
 }
 
-/// [`super::distributed::run`] for SIRT and CGLS (module docs).
+/// [`super::run`] for SIRT and CGLS (module docs).
 pub(super) fn run(
     a: &ReconstructRequest,
     comm: &dyn Comm,
