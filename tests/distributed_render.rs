@@ -9,6 +9,8 @@
 
 mod common;
 
+use voxlab::metrics::max_abs_error;
+
 use common::{brick_test_volume, on_thread_ranks, scratch};
 use voxlab::jobs::distributed_render::{self, DistributedRendering};
 use voxlab::jobs::input::VolumeInput;
@@ -112,12 +114,7 @@ fn early_termination_costs_at_most_one_minus_the_threshold() {
     for ranks in 2..=4 {
         let got = on_ranks(&req, ranks);
         let img = got[0].as_ref().unwrap().image.clone().unwrap();
-        let worst = img
-            .data
-            .iter()
-            .zip(&want.data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f64, f64::max);
+        let worst = max_abs_error(&img.data, &want.data);
         eprintln!("ert 0.9, {ranks} ranks: max |Δ| {worst:.3e}");
         assert!(worst <= 0.1 + 1e-12, "{ranks} ranks: {worst:e}");
     }
@@ -180,12 +177,7 @@ fn one_to_four_ranks_render_the_single_process_image() {
                 (img.width, img.height, img.channels),
                 (want.width, want.height, want.channels)
             );
-            let worst = img
-                .data
-                .iter()
-                .zip(&want.data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f64, f64::max);
+            let worst = max_abs_error(&img.data, &want.data);
             eprintln!("{name}, {ranks} ranks: max |Δ| {worst:.3e} (image max {top:.3})");
             if exact || ranks == 1 {
                 // One rank owns every sample of every ray: the sums are not regrouped.

@@ -6,6 +6,8 @@
 
 mod common;
 
+use voxlab::metrics::max_abs_error;
+
 use common::{brick_test_volume, gpu, on_thread_ranks, scratch};
 use voxlab::jobs::distributed_render;
 use voxlab::jobs::input::VolumeInput;
@@ -66,12 +68,7 @@ fn gpu_ranks_render_the_single_process_gpu_image() {
             let d = got[0].as_ref().unwrap();
             assert_eq!(d.what, "gpu");
             let img = d.image.as_ref().unwrap();
-            let worst = img
-                .data
-                .iter()
-                .zip(&want.data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f64, f64::max);
+            let worst = max_abs_error(&img.data, &want.data);
             eprintln!("{name}, {ranks} ranks: max |Δ| {worst:.3e} (image max {top:.3})");
             if exact || ranks == 1 {
                 assert!(worst == 0.0, "{name}, {ranks} ranks: {worst:e}");
@@ -120,14 +117,7 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
                 render_bricked(ctx, &volume, &tf, &camera, &settings, limit, &|_, _| {}).unwrap();
             assert_eq!(n, bricks.len());
             assert!(n > 1, "{mode:?}: the limit {limit} splits the volume");
-            let worst = got
-                .output
-                .image
-                .data
-                .iter()
-                .zip(&want.data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f64, f64::max);
+            let worst = max_abs_error(&got.output.image.data, &want.data);
             eprintln!(
                 "{mode:?}, {n} bricks of ≤ {limit}: max |Δ| {worst:.3e} (image max {top:.3})"
             );

@@ -6,6 +6,8 @@
 
 mod common;
 
+use voxlab::metrics::max_abs_error;
+
 use common::{brick_test_volume, mpirun, mpirun_env, s, scratch, stderr, voxlab};
 use voxlab::io::npy::read_npy_f32;
 
@@ -53,11 +55,7 @@ fn one_to_four_mpi_ranks_render_the_single_process_image() {
                 );
             } else {
                 let (_, got) = read_npy_f32(&out).unwrap();
-                let worst = got
-                    .iter()
-                    .zip(&want_values)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0f32, f32::max);
+                let worst = max_abs_error(&got, &want_values);
                 // f64 pixels written as f32: at most one rounding apart.
                 assert!(worst <= 1e-7, "{name}, {ranks} ranks: {worst:e}");
             }
