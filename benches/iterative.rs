@@ -2,7 +2,9 @@
 //! the peers' problem (`scripts/peers/iterative_peers.py`): Joseph's matched pair
 //! (`cpu::project::JosephPair`) on a 256² parallel grid seen from 180 views of 256
 //! bins (scikit-image's geometry), in f64 and f32 on all rayon threads — the forward
-//! pass `A x` and the transpose `Aᵀ y` over every view, the same over one view (an
+//! pass `A x` and the transpose `Aᵀ y` over every view (as `JosephPair::transpose`
+//! runs it — in f32 on a CPU with AVX-512F a gather — and by planes, the pair
+//! `without_gather`), the same over one view (an
 //! OS-SART update with one view per subset), and a whole SIRT iteration
 //! (`cpu::iterative::solve`, 10 iterations, divided by 10). A second table times
 //! OS-SART with one view per subset as the peers' comparison runs it (λ = 0.15, the
@@ -58,6 +60,8 @@ fn row<R: Real>(args: &BenchArgs, n: usize, views: usize) {
     let one = [views / 3];
     let fwd = time(args.runs, || pair.forward(&x, &all));
     let tr = time(args.runs, || pair.transpose(&b, &all));
+    let planes = problem::<R>(n, views).0.without_gather();
+    let tr_planes = time(args.runs, || planes.transpose(&b, &all));
     let b1 = pair.forward(&x, &one);
     let fwd1 = time(args.runs, || pair.forward(&x, &one));
     let tr1 = time(args.runs, || pair.transpose(&b1, &one));
@@ -77,9 +81,10 @@ fn row<R: Real>(args: &BenchArgs, n: usize, views: usize) {
     }) / 10.0;
     let ms = |t: f64| format!("{:.2}", t * 1e3);
     println!(
-        "| {name} | {} | {} | {} | {} | {} |",
+        "| {name} | {} | {} | {} | {} | {} | {} |",
         ms(fwd),
         ms(tr),
+        ms(tr_planes),
         ms(fwd1),
         ms(tr1),
         ms(sirt)
@@ -132,9 +137,9 @@ fn main() {
     let (n, views) = if args.smoke { (32, 12) } else { (256, 180) };
     println!("threads: {}", rayon::current_num_threads());
     println!(
-        "| problem | A x (ms) | Aᵀ y (ms) | A x, one view | Aᵀ y, one view | SIRT iteration |"
+        "| problem | A x (ms) | Aᵀ y (ms) | Aᵀ y by planes | A x, one view | Aᵀ y, one view | SIRT iteration |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
     row::<f64>(&args, n, views);
     row::<f32>(&args, n, views);
     println!();

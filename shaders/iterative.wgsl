@@ -85,7 +85,7 @@ fn reciprocal(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // out ← 0 where a (the support: 1 inside, 0 outside) is 0.
-// mirrors src/cpu/iterative.rs: masked
+// mirrors src/cpu/project.rs: masked
 @compute @workgroup_size(WORKGROUP)
 fn mask(@builtin(global_invocation_id) gid: vec3<u32>) {
     let id = index(gid);

@@ -12,7 +12,7 @@ use voxlab::cpu::iterative::{
     dot, solve, subset_order, IterativeOptions, Method, Problem, Solution, SubsetOrder,
 };
 use voxlab::cpu::project::{
-    project_phantom, project_volume, Grid, JosephPair, ProjectOptions, SartUpdate, GATHER_MAX_VIEWS,
+    project_phantom, project_volume, Grid, JosephPair, ProjectOptions, SartUpdate,
 };
 use voxlab::cpu::ramp::RampFilter;
 use voxlab::ct::Geometry;
@@ -130,10 +130,33 @@ fn the_flat_layout_gives_the_same_numbers_bit_for_bit() {
             rays.forward(&x, &views),
             "{name} forward"
         );
+        // The flat transpose gathers where its vector kernel runs (f32 on a CPU with
+        // AVX-512F); without the gather it runs by planes.
+        let by_planes = JosephPair::<R>::new(dims, affine, g)
+            .unwrap()
+            .without_gather();
+        let want = rays.transpose(&y, &views);
+        assert_eq!(flat.transpose(&y, &views), want, "{name} transpose");
+        assert_eq!(by_planes.transpose(&y, &views), want, "{name} by planes");
+        // With a support: the masked transpose, whichever way it runs.
+        let support: Vec<bool> = random(flat.n_voxels(), 11)
+            .iter()
+            .map(|v| *v > -0.5)
+            .collect();
+        let masked: Vec<R> = want
+            .iter()
+            .zip(&support)
+            .map(|(&v, &keep)| if keep { v } else { R::zero() })
+            .collect();
         assert_eq!(
-            flat.transpose(&y, &views),
-            rays.transpose(&y, &views),
-            "{name} transpose"
+            flat.transpose_on(&y, &views, Some(&support)),
+            masked,
+            "{name}"
+        );
+        assert_eq!(
+            by_planes.transpose_on(&y, &views, Some(&support)),
+            masked,
+            "{name}"
         );
         let sub = [nv - 1, nv / 2, 0, 1];
         let ys = &y[..sub.len() * pv];
@@ -216,14 +239,17 @@ fn the_one_pass_sart_update_gives_the_same_numbers_bit_for_bit() {
         let support: Vec<bool> = random(n, 63).iter().map(|v| *v > -0.6).collect();
         let mut subsets: Vec<Vec<usize>> = (0..nv).map(|k| vec![k]).collect();
         subsets.push(vec![nv - 1, nv / 2, 0, 1]);
-        subsets.push((0..nv).step_by(3).take(GATHER_MAX_VIEWS).collect());
-        // Past GATHER_MAX_VIEWS views the update is left to the caller's steps.
-        assert!(!pair.has_sart_update(&vec![0; GATHER_MAX_VIEWS + 1]));
+        subsets.push((0..nv).step_by(3).collect());
+        subsets.push(all(nv));
+        // The transpose by planes, which the gather must equal.
+        let plain = JosephPair::<R>::new(dims, affine, g)
+            .unwrap()
+            .without_gather();
         for views in &subsets {
             assert!(pair.has_sart_update(views), "{name}: {views:?}");
             let ys = &y[..views.len() * pv];
             let ones = vec![R::one(); ys.len()];
-            let (u, sums) = (pair.transpose(ys, views), pair.transpose(&ones, views));
+            let (u, sums) = (plain.transpose(ys, views), plain.transpose(&ones, views));
             for (mask, nonnegative) in [(None, false), (Some(&support[..]), true)] {
                 let lambda = R::of(0.7);
                 let mut got = x0.clone();
@@ -259,18 +285,20 @@ fn the_one_pass_sart_update_gives_the_same_numbers_bit_for_bit() {
                 assert_eq!(diff, 0, "{name} {} {views:?} {mask:?}", R::NAME);
             }
         }
-        // Whole runs: OS-SART with one view per subset and with three, from the pair
-        // with and without the gather (the solver takes it where it is fast: f32 on a
-        // CPU with AVX-512F).
+        // Whole runs: OS-SART with one view per subset, with three and with one
+        // subset of every view, SIRT and CGLS, from the pair with and without the
+        // gather (the solver takes it where it is fast: f32 on a CPU with AVX-512F).
         let b: Vec<R> = pair.forward(&x0, &all(nv));
-        let plain = JosephPair::<R>::new(dims, affine, g)
-            .unwrap()
-            .without_gather();
         assert!(!plain.has_sart_update(&[0]));
-        for (subsets, nonnegative) in [(nv, false), (nv.div_ceil(3), true)] {
-            assert!(plain.n_views() / subsets <= GATHER_MAX_VIEWS);
+        for (method, subsets, nonnegative) in [
+            (Method::OsSart, nv, false),
+            (Method::OsSart, nv.div_ceil(3), true),
+            (Method::OsSart, 1, true),
+            (Method::Sirt, 1, true),
+            (Method::Cgls, 1, false),
+        ] {
             let o = IterativeOptions {
-                method: Method::OsSart,
+                method,
                 iterations: 3,
                 subsets,
                 relaxation: 0.6,
@@ -279,8 +307,9 @@ fn the_one_pass_sart_update_gives_the_same_numbers_bit_for_bit() {
             };
             let one = run_on(&pair, &b, Some(&support), &o, &mut Vec::new());
             let two = run_on(&plain, &b, Some(&support), &o, &mut Vec::new());
-            assert_eq!(one.x, two.x, "{name} {} {subsets} subsets", R::NAME);
-            assert_eq!(one.residual, two.residual, "{name} {}", R::NAME);
+            let case = format!("{name} {} {method:?}, {subsets} subsets", R::NAME);
+            assert_eq!(one.x, two.x, "{case}");
+            assert_eq!(one.residual, two.residual, "{case}");
         }
     }
     for (name, g, dims, affine) in gather_cases() {

@@ -24,7 +24,7 @@
 //! Every sum over voxels or rays is taken in fixed chunks in a fixed order, so the
 //! results do not depend on the thread count; [`JosephPair`] is deterministic too.
 
-use super::project::{JosephPair, SartUpdate, SupportPlanes};
+use super::project::{masked, JosephPair, SartUpdate, SupportPlanes};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use rayon::prelude::*;
@@ -180,6 +180,18 @@ pub trait MatchedPair<R>: Sync {
     /// # Errors
     /// Device failures (a GPU pair).
     fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>>;
+    /// `M·Aᵀ y` over `views`: [`Self::transpose`] with the voxels off `support` set
+    /// to `+0` (all kept when `None`); a pair may skip them
+    /// ([`JosephPair::transpose_on`]).
+    ///
+    /// # Errors
+    /// Device failures (a GPU pair).
+    fn transpose_on(&self, y: &[R], views: &[usize], support: Option<&[bool]>) -> Result<Vec<R>>
+    where
+        R: Real,
+    {
+        Ok(masked(self.transpose(y, views)?, support))
+    }
     /// What [`Self::forward_within`] needs to skip the planes where every tap of a ray
     /// lies off `support` ([`JosephPair::support_planes`]); `None` when the pair has
     /// no such narrowing.
@@ -238,6 +250,9 @@ impl<R: Real> MatchedPair<R> for JosephPair<R> {
     }
     fn transpose(&self, y: &[R], views: &[usize]) -> Result<Vec<R>> {
         Ok(JosephPair::transpose(self, y, views))
+    }
+    fn transpose_on(&self, y: &[R], views: &[usize], support: Option<&[bool]>) -> Result<Vec<R>> {
+        Ok(JosephPair::transpose_on(self, y, views, support))
     }
     fn support_planes(&self, support: &[bool]) -> Option<SupportPlanes> {
         JosephPair::support_planes(self, support)
@@ -426,19 +441,6 @@ fn reciprocal<R: Real>(v: Vec<R>) -> Vec<R> {
         .collect()
 }
 
-/// `x` with the voxels outside `support` set to 0.
-/// Mirrors shaders/iterative.wgsl: mask (the device-resident port, src/gpu/iterative.rs).
-fn masked<R: Real>(mut x: Vec<R>, support: Option<&[bool]>) -> Vec<R> {
-    if let Some(m) = support {
-        x.par_iter_mut().zip(m).for_each(|(v, &keep)| {
-            if !keep {
-                *v = R::zero();
-            }
-        });
-    }
-    x
-}
-
 /// The views of subset `s` of `k`: `s, s + k, s + 2k, …`.
 pub fn subset_views(n_views: usize, k: usize, s: usize) -> Vec<usize> {
     (s..n_views).step_by(k).collect()
@@ -576,7 +578,7 @@ fn residual_within<R: Real>(
 
 /// `Aᵀ y` on the support.
 fn transpose_masked<R: Real>(prob: &Problem<R>, y: &[R], views: &[usize]) -> Result<Vec<R>> {
-    Ok(masked(prob.pair.transpose(y, views)?, prob.support))
+    prob.pair.transpose_on(y, views, prob.support)
 }
 
 /// Has the objective stopped falling (by the tolerance)?
@@ -673,7 +675,7 @@ fn sart<R: Real>(
             wr.par_iter_mut()
                 .zip(&row_w)
                 .for_each(|(v, &w)| *v = *v * w);
-            let upd = summed(shares, prob.pair.transpose(&wr, &all)?);
+            let upd = summed(shares, transpose_masked(prob, &wr, &all)?);
             let Some(cw) = &kept[0] else {
                 unreachable!("SIRT keeps its column weights")
             };
@@ -686,7 +688,7 @@ fn sart<R: Real>(
             if one_pass[s] && pair.sart_update(&mut x, &wr, views, &step)? {
                 continue;
             }
-            let upd = prob.pair.transpose(&wr, views)?;
+            let upd = transpose_masked(prob, &wr, views)?;
             let fresh;
             let cw = if let Some(Some(cw)) = kept.get(s) {
                 cw

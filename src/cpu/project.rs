@@ -39,7 +39,7 @@ use glam::{DMat3, DMat4, DVec3};
 use rayon::prelude::*;
 
 mod gather;
-pub use gather::{sart_voxel, SartUpdate, GATHER_MAX_VIEWS};
+pub use gather::{sart_voxel, SartUpdate};
 
 /// Exact projections of `phantom` (f64): one line integral per detector pixel centre.
 pub fn project_phantom(phantom: &Phantom, g: &Geometry) -> Result<Projections<f64>> {
@@ -1294,6 +1294,19 @@ const FORWARD_PIECES: usize = 4;
 /// The largest ray table a [`JosephPair`] keeps (bytes).
 pub const RAY_TABLE_BYTES: usize = 512 << 20;
 
+/// `x` with the voxels outside `support` set to `+0` (`x` itself when `None`).
+/// Mirrors shaders/iterative.wgsl: mask (the device-resident port, src/gpu/iterative.rs).
+pub fn masked<R: Real>(mut x: Vec<R>, support: Option<&[bool]>) -> Vec<R> {
+    if let Some(m) = support {
+        x.par_iter_mut().zip(m).for_each(|(v, &keep)| {
+            if !keep {
+                *v = R::zero();
+            }
+        });
+    }
+    x
+}
+
 impl<R: Real> JosephPair<R> {
     /// The pair for a grid of `dims` voxels with index-to-world `affine`, seen in
     /// geometry `g`.
@@ -1517,11 +1530,36 @@ impl<R: Real> JosephPair<R> {
     /// that order; the result is one value per voxel, each the sum over the views (in
     /// order), rows and columns of `weight · y`.
     pub fn transpose(&self, y: &[R], views: &[usize]) -> Vec<R> {
+        self.transpose_on(y, views, None)
+    }
+
+    /// [`Self::transpose`] with the voxels off `support` set to `+0` (all kept when
+    /// `None`): `M·Aᵀ y`. Where the gather's vector kernel runs
+    /// ([`Self::has_fast_sart_update`]: f32 parallel 2-D views on a CPU with
+    /// AVX-512F) every voxel gathers its own terms and the voxels off the support
+    /// cost nothing; elsewhere the transpose runs by planes and is masked after. The
+    /// same numbers either way, bit for bit (module `gather`).
+    pub fn transpose_on(&self, y: &[R], views: &[usize], support: Option<&[bool]>) -> Vec<R> {
         assert_eq!(
             y.len(),
             views.len() * self.per_view(),
             "JosephPair::transpose: projection size"
         );
+        if let Some(m) = support {
+            assert_eq!(
+                m.len(),
+                self.n_voxels(),
+                "JosephPair::transpose: support size"
+            );
+        }
+        match self.transpose_gather(y, views, support) {
+            Some(u) => u,
+            None => masked(self.transpose_unmasked(y, views), support),
+        }
+    }
+
+    /// [`Self::transpose`] without the gather.
+    fn transpose_unmasked(&self, y: &[R], views: &[usize]) -> Vec<R> {
         match &self.table {
             Some(_) if self.flat.is_some() => self.transpose_flat(y, views),
             Some(table) => self.transpose_by_planes(table, y, views),

@@ -1,5 +1,6 @@
-//! The transpose of the flat 2-D layout as a **gather**, and OS-SART's update in one
-//! pass over the image ([`JosephPair::sart_update`]).
+//! The transpose of the flat 2-D layout as a **gather** ([`JosephPair::transpose`]'s
+//! fast path), and OS-SART's update in one pass over the image
+//! ([`JosephPair::sart_update`]).
 //!
 //! In a parallel view every ray has the same slope `ka` and weight `w`, and the ray
 //! positions `xa0` are evenly spaced: `xa0_c ≈ α + c·δ` for ray `c` (`|δ|` the ray
@@ -15,6 +16,12 @@
 //! order), so the sums are those of [`JosephPair::transpose`] bit for bit. Terms the
 //! planes skip (a zero tap weight or a zero value) add a zero here, which changes no
 //! sum: a sum that starts at `+0` is never `−0`.
+//!
+//! On a CPU with AVX-512 scatters are slow (each of the sixteen lanes a store of its
+//! own, and on some CPUs worse), so in f32 there the gather is the transpose: the
+//! transpose by planes adds every ray's two taps with a gather and a scatter, the
+//! gather reads each voxel's two or three rays per view from registers
+//! (`cargo bench --bench iterative`).
 //!
 //! The column sums `Aᵀ𝟙` of the same views are the same terms with `y = 1`. So one
 //! pass over the image gives, voxel by voxel, OS-SART's `Aᵀ_S y` and `Aᵀ_S 𝟙` and
@@ -55,13 +62,6 @@ const FAR: f64 = -4_194_304.0;
 
 /// Voxels per task of [`JosephPair::sart_update`].
 const VOXELS_PER_TASK: usize = 2048;
-
-/// Views per OS-SART subset up to which [`JosephPair::sart_update`] runs: a voxel
-/// gathers two or three rays per view, so the gather's work grows with the views,
-/// while the transpose by planes and stored column weights cost about the same for
-/// one view as for many (`cargo bench --bench iterative`: 10 subsets of 18 views
-/// still gain).
-pub const GATHER_MAX_VIEWS: usize = 32;
 
 /// One view of the flat layout laid out for the gather (module docs): its rays are
 /// parallel (one `ka`, one `w`), evenly spaced up to `ε`, and none of them takes a
@@ -293,16 +293,16 @@ pub fn sart_voxel<R: Real>(x: R, u: R, sum: R, keep: bool, lambda: R, nonnegativ
 
 impl<R: Real> JosephPair<R> {
     /// Whether [`Self::sart_update`] runs for `views`: a 2-D problem on the flat
-    /// layout, every view of `views` parallel and evenly spaced (module docs), at most
-    /// [`GATHER_MAX_VIEWS`] of them.
+    /// layout, every view of `views` parallel and evenly spaced (module docs).
     pub fn has_sart_update(&self, views: &[usize]) -> bool {
         self.calls(&[], views).is_some()
     }
 
-    /// Whether [`Self::sart_update`] runs for `views` on its vector kernel (f32 on a
-    /// CPU with AVX-512F, every view's candidates within the kernel's window): only
-    /// then is one pass faster than the transpose by planes with stored column
-    /// weights, and only then does `cpu::iterative`'s OS-SART take it.
+    /// Whether the gather runs for `views` on its vector kernel (f32 on a CPU with
+    /// AVX-512F, every view's candidates within the kernel's window): only then is
+    /// one pass faster than the transpose by planes with stored column weights, and
+    /// only then does `cpu::iterative`'s OS-SART take it, and [`Self::transpose`]
+    /// gather.
     pub fn has_fast_sart_update(&self, views: &[usize]) -> bool {
         #[cfg(target_arch = "x86_64")]
         if let (Some(flat), Some((_, n0))) = (&self.flat, self.calls(&[], views)) {
@@ -329,7 +329,7 @@ impl<R: Real> JosephPair<R> {
     /// zeros on either side; empty: only whether it runs), and the lines' length.
     fn calls<'a>(&'a self, y: &'a [R], views: &[usize]) -> Option<(Vec<Call<'a, R>>, usize)> {
         let flat = self.flat.as_ref()?;
-        if views.is_empty() || views.len() > GATHER_MAX_VIEWS {
+        if views.is_empty() {
             return None;
         }
         let gv: Vec<&GatherView<R>> = views
@@ -397,11 +397,7 @@ impl<R: Real> JosephPair<R> {
         if !self.has_sart_update(views) {
             return false;
         }
-        let pv = self.per_view();
-        let mut padded = vec![R::zero(); views.len() * (pv + 2 * PAD)];
-        for (dst, src) in padded.chunks_mut(pv + 2 * PAD).zip(y.chunks(pv)) {
-            dst[PAD..PAD + pv].copy_from_slice(src);
-        }
+        let padded = self.padded(y, views.len());
         let Some((calls, n0)) = self.calls(&padded, views) else {
             return false;
         };
@@ -412,7 +408,7 @@ impl<R: Real> JosephPair<R> {
                 let first = t * VOXELS_PER_TASK;
                 let ms = step.support.map(|m| &m[first..first + xs.len()]);
                 #[cfg(target_arch = "x86_64")]
-                if sart_range_f32(calls, n0, first, xs, ms, step) {
+                if gather_range_f32(calls, n0, first, xs, ms, Some(step)) {
                     return;
                 }
                 for (j, xv) in xs.iter_mut().enumerate() {
@@ -428,19 +424,62 @@ impl<R: Real> JosephPair<R> {
             });
         true
     }
+
+    /// `y` (`views` views of values) with [`PAD`] zeros on either side of each view.
+    fn padded(&self, y: &[R], views: usize) -> Vec<R> {
+        let pv = self.per_view();
+        let mut padded = vec![R::zero(); views * (pv + 2 * PAD)];
+        for (dst, src) in padded.chunks_mut(pv + 2 * PAD).zip(y.chunks(pv)) {
+            dst[PAD..PAD + pv].copy_from_slice(src);
+        }
+        padded
+    }
+
+    /// [`Self::transpose`] of `y` over `views` as a gather on the vector kernel,
+    /// with the voxels off `support` set to `+0` (`M·Aᵀ y`): the numbers of the
+    /// transpose by planes bit for bit (module docs); `None` where the kernel does
+    /// not run ([`Self::has_fast_sart_update`]).
+    pub(super) fn transpose_gather(
+        &self,
+        y: &[R],
+        views: &[usize],
+        support: Option<&[bool]>,
+    ) -> Option<Vec<R>> {
+        if !self.has_fast_sart_update(views) {
+            return None;
+        }
+        let padded = self.padded(y, views.len());
+        let (calls, n0) = self.calls(&padded, views)?;
+        let calls = &calls;
+        let mut out = vec![R::zero(); self.n_voxels()];
+        let ran = out
+            .par_chunks_mut(VOXELS_PER_TASK)
+            .enumerate()
+            .map(|(t, us)| {
+                let first = t * VOXELS_PER_TASK;
+                let ms = support.map(|m| &m[first..first + us.len()]);
+                #[cfg(target_arch = "x86_64")]
+                return gather_range_f32(calls, n0, first, us, ms, None);
+                #[cfg(not(target_arch = "x86_64"))]
+                false
+            })
+            .all(|ran| ran);
+        ran.then_some(out)
+    }
 }
 
-/// [`JosephPair::sart_update`] on voxels `first ..` with the f32 kernel, when the
-/// pair is f32, the CPU has AVX-512F and every view's candidates fit the kernel's
-/// window (`simd`); `false` (and nothing done) otherwise.
+/// The gather on voxels `first ..` with the f32 kernel, when the pair is f32, the
+/// CPU has AVX-512F and every view's candidates fit the kernel's window (`simd`):
+/// with a `step`, [`JosephPair::sart_update`] of `xs`; without, `xs` (zeros) takes
+/// `M·Aᵀ y` ([`JosephPair::transpose_gather`]). `false` (and nothing done) otherwise.
 #[cfg(target_arch = "x86_64")]
-fn sart_range_f32<R: Real>(
+fn gather_range_f32<R: Real>(
     calls: &[Call<R>],
     n0: usize,
     first: usize,
     xs: &mut [R],
     ms: Option<&[bool]>,
-    step: &SartUpdate<R>,
+    step: Option<&SartUpdate<R>>,
 ) -> bool {
     let Some(xs) = as_f32_mut(xs) else {
         return false;
@@ -469,13 +508,18 @@ fn sart_range_f32<R: Real>(
             ends_axis: c.ends_axis,
         });
     }
+    let Some(step) = step else {
+        // SAFETY: the CPU has AVX-512F; every call is `simd`.
+        unsafe { gather_range_f32x16::<false>(&c32, n0, first, xs, ms, 0.0, false) };
+        return true;
+    };
     let (lambda, nonneg) = (step.relaxation.f64() as f32, step.nonnegative);
     // SAFETY: the CPU has AVX-512F; every call is `simd`.
     unsafe {
         match c32.as_slice() {
             [one] if one.across => sart_view_f32x16::<true>(one, n0, first, xs, ms, lambda, nonneg),
             [one] => sart_view_f32x16::<false>(one, n0, first, xs, ms, lambda, nonneg),
-            _ => sart_range_f32x16(&c32, n0, first, xs, ms, lambda, nonneg),
+            _ => gather_range_f32x16::<true>(&c32, n0, first, xs, ms, lambda, nonneg),
         }
     };
     true
@@ -496,17 +540,19 @@ struct Call32<'a> {
     ends_axis: bool,
 }
 
-/// [`JosephPair::sart_update`] on voxels `first ..` in f32 with AVX-512: sixteen voxels
-/// of a line at a time, [`gather_voxel`] and [`sart_voxel`] in every lane with the same
-/// operations in the same order, so the same numbers bit for bit. A lane's candidate
-/// rays come from a window of 32 rays (two loads and a permute per array instead of
-/// gathers); vectors off the support skip the rays.
+/// [`JosephPair::sart_update`] (`UPDATE`) or the masked transpose (not `UPDATE`: `xs`
+/// holds zeros and takes `M·Aᵀ y`; `lambda` and `nonneg` are unused) on voxels
+/// `first ..` in f32 with AVX-512: sixteen voxels of a line at a time,
+/// [`gather_voxel`] (without the column sums for the transpose) and [`sart_voxel`]
+/// in every lane with the same operations in the same order, so the same numbers bit
+/// for bit. A lane's candidate rays come from a window of 32 rays (two loads and a
+/// permute per array instead of gathers); vectors off the support skip the rays.
 ///
 /// # Safety
 /// The CPU has AVX-512F, and every call is `simd` ([`GatherView`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn sart_range_f32x16(
+unsafe fn gather_range_f32x16<const UPDATE: bool>(
     calls: &[Call32],
     n0: usize,
     first: usize,
@@ -562,7 +608,7 @@ unsafe fn sart_range_f32x16(
             // rays + 32, inside the padded arrays.
             let px = unsafe { xs.as_mut_ptr().add(j) };
             if keep == 0 {
-                if nonneg {
+                if UPDATE && nonneg {
                     unsafe {
                         let x = _mm512_maskz_loadu_ps(tail, px);
                         _mm512_mask_storeu_ps(px, tail, _mm512_max_ps(x, zero));
@@ -617,7 +663,9 @@ unsafe fn sart_range_f32x16(
                         let on = e0 | e1;
                         let ha = _mm512_mul_ps(w, wa);
                         pu = _mm512_mask_add_ps(pu, on, pu, _mm512_mul_ps(ha, yc));
-                        pc = _mm512_mask_add_ps(pc, on, pc, ha);
+                        if UPDATE {
+                            pc = _mm512_mask_add_ps(pc, on, pc, ha);
+                        }
                     }
                 }
                 // (Else no lane's candidates are rays.)
@@ -626,6 +674,11 @@ unsafe fn sart_range_f32x16(
                     c = _mm512_add_ps(c, pc);
                     (pu, pc) = (zero, zero);
                 }
+            }
+            if !UPDATE {
+                // The masked transpose: `u` on the support, the zeros of xs off it.
+                unsafe { _mm512_mask_storeu_ps(px, keep, u) };
+                continue;
             }
             // sart_voxel.
             let (u, c) = (_mm512_maskz_mov_ps(keep, u), _mm512_maskz_mov_ps(keep, c));
