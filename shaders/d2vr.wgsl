@@ -6,9 +6,13 @@
 // llvmpipe's 65535-iteration limit (see shaders/raycast.wgsl): the host sizes chunks.
 // Same sample positions, step rule, classification, shading and compositing as
 // src/cpu/raycast.rs: cast_ray with the field of src/cpu/d2vr.rs: ProjectionField.
-// The generated module d2vr_tap (src/gpu/d2vr.rs: shader_source) defines
-// `fn tap(i: u32) -> f32`, element i of the projections in their storage precision
-// (f32 or f16 pairs), which shared/ct_geometry.wgsl's bilinear_zero reads.
+// The generated module d2vr_tap (src/gpu/d2vr.rs: tap_wgsl) binds the filtered
+// projections (angle, row, col), col fastest, as f32 bits or f16 pairs, in one storage
+// binding (3) or in runs of whole views over several (3, 8, 9, …), and defines
+// `fn tap(i: u32) -> f32`, element i of the projections in their storage precision,
+// which shared/ct_geometry.wgsl's bilinear_zero reads.
+// An image larger than one binding of accumulators runs in bands of rows
+// [chunk.z, chunk.z + chunk.w); acc and counts hold the band.
 
 #import ct_geometry
 #import raycast_params
@@ -23,11 +27,10 @@
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var<uniform> dp: D2vrParams;
 @group(0) @binding(2) var<storage, read> views: array<CtView>;
-// Filtered projections (angle, row, col), col fastest: f32 bits, or f16 pairs.
-@group(0) @binding(3) var<storage, read> proj: array<u32>;
 @group(0) @binding(4) var<storage, read> lut: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read> occupancy: array<u32>;
-// Per pixel: DVR (r, g, b, a) accumulated front to back; else x = MIP/MinIP/X-ray value.
+// Per pixel of the band: DVR (r, g, b, a) accumulated front to back; else x =
+// MIP/MinIP/X-ray value.
 @group(0) @binding(6) var<storage, read_write> acc: array<vec4<f32>>;
 // Per pixel: samples on the ray (0 = miss), samples visited, value and gradient
 // reconstructions.
@@ -176,11 +179,11 @@ fn shade_sample(p: vec3<f32>, rgb: vec3<f32>, l: vec3<f32>, h: vec3<f32>) -> vec
 @compute @workgroup_size(8, 8)
 fn d2vr_chunk(@builtin(global_invocation_id) id: vec3<u32>) {
     let col = id.x;
-    let row = id.y;
-    if (col >= params.image.x || row >= params.image.y) {
+    let row = dp.chunk.z + id.y;
+    if (col >= params.image.x || id.y >= dp.chunk.w || row >= params.image.y) {
         return;
     }
-    let idx = row * params.image.x + col;
+    let idx = id.y * params.image.x + col;
     let mode = params.image.z;
     let ray = camera_ray(col, row);
     let o = vec3<f32>(

@@ -1,7 +1,8 @@
 //! D²VR on the GPU (`gpu::d2vr`) against the CPU f64 oracle (`cpu::d2vr`): the shared
 //! parameter layout and shader validity (naga, no device), parity over one case table
 //! (mode × gradient × cylinder × beam, occupancy), the 16-bit projection storage with
-//! its own bound, and the refusals.
+//! its own bound, the split past one binding (projections over several bindings, the
+//! image in bands: the unsplit image bit for bit), and the refusals.
 
 mod common;
 mod d2vr_scene;
@@ -10,7 +11,7 @@ use common::wgsl_struct_layout;
 use d2vr_scene as sc;
 use std::mem::{offset_of, size_of};
 use voxlab::cpu::d2vr::{self as cd2vr, D2vrGradient, D2vrOptions, OccupancyMask};
-use voxlab::gpu::d2vr::{self as gd2vr, D2vrParams, ProjStorage};
+use voxlab::gpu::d2vr::{self as gd2vr, D2vrParams, D2vrSplit, ProjStorage};
 use voxlab::settings::{Compositing, Mode, RenderSettings};
 use wgpu::naga;
 
@@ -50,15 +51,17 @@ fn d2vr_params_layout_agrees() {
 #[test]
 fn d2vr_shader_validates() {
     for storage in [ProjStorage::F32, ProjStorage::F16] {
-        let src = gd2vr::shader_source(storage);
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{storage:?}: {e:?}"));
+        for parts in [1, 2, 3, gd2vr::MAX_PROJECTION_PARTS] {
+            let src = gd2vr::shader_source(storage, parts);
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{storage:?} {parts}: {e:?}"));
+        }
     }
 }
 
@@ -200,4 +203,152 @@ fn gpu_refuses_back_to_front() {
         ProjStorage::F32,
     );
     assert!(r.is_err());
+}
+
+/// Limits with a storage binding of `bytes` (and room for every projection binding).
+fn limits(bytes: u64) -> wgpu::Limits {
+    wgpu::Limits {
+        max_storage_buffer_binding_size: bytes,
+        max_storage_buffers_per_shader_stage: 16,
+        ..wgpu::Limits::default()
+    }
+}
+
+#[test]
+fn the_split_plan_cuts_whole_views_and_rows_and_refuses_what_cannot_fit() {
+    // 64 views of 48 × 48 values: 9216 bytes a view in f32, 4608 in f16 pairs.
+    let g = sc::cone();
+    let one = D2vrSplit::new(&limits(1 << 27), &g, ProjStorage::F32, (128, 128)).unwrap();
+    assert_eq!((one.views.count(), one.rows.count()), (1, 1));
+    assert!(one.describe().is_empty());
+    // 150 000 bytes: 16 whole views a binding (147 456 bytes), 73 rows of 128 pixels
+    // (2048 bytes each) a band.
+    let s = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F32, (128, 128)).unwrap();
+    assert_eq!((s.views.per_piece, s.views.count()), (16, 4));
+    assert_eq!((s.rows.per_piece, s.rows.count()), (73, 2));
+    assert_eq!(s.part_bytes(16), 147_456);
+    assert_eq!(s.largest_buffer(), 73 * 2048);
+    assert_eq!(s.device_bytes(), 4 * 147_456 + 2 * 73 * 2048);
+    assert_eq!(
+        s.describe(),
+        [
+            "D²VR projections in 4 bindings of 16 views (one storage binding each)",
+            "D²VR image in 2 bands of 73 rows"
+        ]
+    );
+    let h = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F16, (128, 128)).unwrap();
+    assert_eq!((h.views.per_piece, h.views.count()), (32, 2));
+    assert_eq!(h.part_bytes(32), 147_456);
+    // f16 pairs of an odd number of values round up to whole words.
+    let odd = voxlab::ct::Geometry::parallel_stack(
+        3,
+        5,
+        1.0,
+        1.0,
+        voxlab::ct::Geometry::even_angles(7, 180.0),
+    )
+    .unwrap();
+    // 15 values a view: two views are 30 values (60 bytes), one is 8 words.
+    let o = D2vrSplit::new(&limits(64), &odd, ProjStorage::F16, (4, 4)).unwrap();
+    assert_eq!((o.views.per_piece, o.views.count()), (2, 4));
+    assert_eq!(o.part_bytes(2), 60);
+    assert_eq!(o.part_bytes(1), 32);
+    // 40 000 bytes: 4 views a binding in f32 is 16 bindings, more than the renderer
+    // binds; in f16, 8 views a binding is 8.
+    let e = D2vrSplit::new(&limits(40_000), &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    assert!(e.to_string().contains("16 storage bindings"), "{e}");
+    let f = D2vrSplit::new(&limits(40_000), &g, ProjStorage::F16, (32, 32)).unwrap();
+    assert_eq!(f.views.count(), gd2vr::MAX_PROJECTION_PARTS);
+    // An adapter with fewer storage buffers per stage binds fewer.
+    let few = wgpu::Limits {
+        max_storage_buffers_per_shader_stage: 7,
+        ..limits(150_000)
+    };
+    let e = D2vrSplit::new(&few, &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    assert!(e.to_string().contains("more than the 2"), "{e}");
+    // One view, or one image row, larger than a binding.
+    let e = D2vrSplit::new(&limits(9000), &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    assert!(e.to_string().contains("one view (9216 bytes)"), "{e}");
+    let e = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F16, (10_000, 2)).unwrap_err();
+    assert!(
+        e.to_string().contains("one image row (160000 bytes)"),
+        "{e}"
+    );
+}
+
+#[test]
+fn split_renders_equal_the_unsplit_bit_for_bit() {
+    let Some(ctx) = common::gpu("split_renders_equal_the_unsplit_bit_for_bit") else {
+        return;
+    };
+    let mut small = voxlab::gpu::GpuContext::new().unwrap();
+    small.limits.max_storage_buffer_binding_size = 150_000;
+    let ph = sc::phantom();
+    let cam = sc::camera(128);
+    let grid = sc::grid();
+    let tf = sc::tf();
+    let cases = [
+        (Mode::Dvr, D2vrGradient::Gfr, "cone", true),
+        (Mode::Dvr, D2vrGradient::Gfs, "parallel", false),
+        (Mode::Mip, D2vrGradient::Gfr, "cone", false),
+        (Mode::Xray, D2vrGradient::Gfr, "parallel", false),
+        (Mode::Dvr, D2vrGradient::Gfr, "odd", false),
+    ];
+    for (mode, gradient, beam, occ) in cases {
+        let g = match beam {
+            "cone" => sc::cone(),
+            "parallel" => sc::parallel(),
+            // 47 × 47 values a view and 63 views: a binding of f16 pairs starts and
+            // ends mid-word of the unsplit packing.
+            _ => {
+                let d = sc::EXTENT / 47.0;
+                let angles = voxlab::ct::Geometry::even_angles(63, 180.0);
+                voxlab::ct::Geometry::parallel_stack(47, 47, d, d, angles).unwrap()
+            }
+        };
+        let q32 = sc::to_f32(&sc::filtered(&ph, &g));
+        let mask = occ
+            .then(|| OccupancyMask::from_projections(&sc::raw(&ph, &g), &g, &grid, 1e-9).unwrap());
+        let o = D2vrOptions {
+            gradient,
+            cylinder: true,
+            value_range: (0.0, 1.5),
+        };
+        let s = settings(mode);
+        for storage in [ProjStorage::F32, ProjStorage::F16] {
+            let run = |c: &voxlab::gpu::GpuContext| {
+                gd2vr::render_d2vr(
+                    c,
+                    &q32,
+                    &g,
+                    &grid,
+                    &tf,
+                    &cam,
+                    &s,
+                    &o,
+                    mask.as_ref(),
+                    storage,
+                )
+                .unwrap()
+            };
+            let (whole, split) = (run(ctx), run(&small));
+            let case = format!("{mode:?} {gradient:?} {beam} occ={occ} {storage:?}");
+            assert_eq!(whole.split.views.count(), 1, "{case}");
+            assert!(split.split.views.count() > 1, "{case}: {:?}", split.split);
+            assert_eq!(split.split.rows.count(), 2, "{case}");
+            assert!(
+                split.render.image.data.iter().any(|&v| v != 0.0),
+                "{case}: blank"
+            );
+            let (a, b) = (&split.render.image.data, &whole.render.image.data);
+            assert_eq!(a.len(), b.len(), "{case}");
+            let differ = a
+                .iter()
+                .zip(b)
+                .filter(|(x, y)| x.to_bits() != y.to_bits())
+                .count();
+            assert_eq!(differ, 0, "{case}: {differ} of {} values differ", a.len());
+            assert_eq!(split.stats, whole.stats, "{case}");
+        }
+    }
 }

@@ -15,8 +15,10 @@ struct D2vrParams {
     cylinder: vec4<f32>,
     // Detector columns, rows, number of views, storage (0 f32, 1 f16 pairs).
     det: vec4<u32>,
-    // Gradient (0 GFS, 1 GFR), cylinder on, occupancy on, unused.
+    // Gradient (0 GFS, 1 GFR), cylinder on, occupancy on; w = values per projection
+    // binding (whole views; with one binding, every value).
     flags: vec4<u32>,
-    // Samples [x, y) of every ray in this dispatch; z, w unused.
+    // Samples [x, y) of every ray in this dispatch; the band's first row z and its
+    // rows w.
     chunk: vec4<u32>,
 }

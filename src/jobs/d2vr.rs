@@ -132,17 +132,35 @@ fn projections<R: Real>(a: &D2vrRequest) -> Result<(Projections<R>, Geometry)> {
         let data = p.data.iter().map(|&v| R::of(v)).collect();
         return Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g.clone()));
     }
+    let g = geometry(a)?;
     if let Some(name) = a.input.strip_prefix("phantom:") {
         let ph = crate::phantom::Phantom::by_name(name)?;
+        let p = crate::cpu::project::project_phantom(&ph, &g)?;
+        let data = p.data.iter().map(|&v| R::of(v)).collect();
+        Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g))
+    } else {
+        let path = PathBuf::from(&a.input);
+        Ok((crate::io::projections::read_projections_for(&path, &g)?, g))
+    }
+}
+
+/// The geometry of the projections `a` names: given in memory, the phantom's
+/// (`beam`, `angles`, `detector`), or read from the stack's geometry JSON.
+fn geometry(a: &D2vrRequest) -> Result<Geometry> {
+    if let Some(m) = &a.memory {
+        return Ok(m.1.clone());
+    }
+    if let Some(name) = a.input.strip_prefix("phantom:") {
+        crate::phantom::Phantom::by_name(name)?;
         let d = 384.0 / a.detector.max(1) as f64;
-        let g = match a.beam {
+        match a.beam {
             BeamKind::Parallel => Geometry::parallel_stack(
                 a.detector,
                 a.detector,
                 256.0 / a.detector.max(1) as f64,
                 256.0 / a.detector.max(1) as f64,
                 Geometry::even_angles(a.angles, 180.0),
-            )?,
+            ),
             BeamKind::Cone => Geometry::cone_rtk(
                 600.0,
                 900.0,
@@ -151,27 +169,80 @@ fn projections<R: Real>(a: &D2vrRequest) -> Result<(Projections<R>, Geometry)> {
                 d,
                 d,
                 Geometry::even_angles(a.angles, 360.0),
-            )?,
-        };
-        let p = crate::cpu::project::project_phantom(&ph, &g)?;
-        let data = p.data.iter().map(|&v| R::of(v)).collect();
-        Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g))
+            ),
+        }
     } else {
         let path = PathBuf::from(&a.input);
         let gpath = a
             .geometry
             .clone()
             .unwrap_or_else(|| crate::io::projections::geometry_path(&path));
-        let g = crate::io::projections::read_geometry(&gpath)?;
-        Ok((crate::io::projections::read_projections_for(&path, &g)?, g))
+        crate::io::projections::read_geometry(&gpath)
     }
 }
 
-/// Renders.
+/// `voxlab d2vr --dry-run`: the memory plan of [`run`] (host bytes of the projections,
+/// their filtered copies and the image; on the GPU the device bytes against the
+/// planner's limits and the split, [`crate::gpu::d2vr::D2vrSplit`]), from the
+/// geometry alone: nothing is projected, read past the geometry, or rendered.
 ///
 /// # Errors
-/// Bad options, projections or geometry; GPU errors; [`Error::Cancelled`].
-pub fn run(a: &D2vrRequest, progress: &dyn Progress) -> Result<D2vrRendering> {
+/// Bad options or geometry; a GPU render that cannot fit even split.
+pub fn plan(a: &D2vrRequest) -> Result<super::plan::MemoryPlan> {
+    check_request(a)?;
+    let g = geometry(a)?;
+    g.validate()?;
+    let engine = Engine::open(a.backend)?;
+    let values = (g.n_angles() * g.rows * g.cols) as u64;
+    let pixels = (a.size * a.size) as u64;
+    let real = if engine.backend() == Backend::Cpu {
+        8
+    } else {
+        4
+    };
+    // The raw and filtered projections, the image (f64 RGBA) and its sample counts, the
+    // occupancy mask.
+    let mut host = 2 * real * values + pixels * (4 * 8 + 4);
+    // The occupancy mask: one u32 per voxel of the virtual grid.
+    let mask = if a.occupancy {
+        4 * (a.grid as u64).pow(3)
+    } else {
+        4
+    };
+    host += mask;
+    let (device, split) = match engine.gpu() {
+        Some(ctx) => {
+            use crate::gpu::d2vr::{D2vrSplit, ProjStorage};
+            let storage = if a.f16_projections {
+                ProjStorage::F16
+            } else {
+                ProjStorage::F32
+            };
+            let s = D2vrSplit::new(&ctx.limits, &g, storage, (a.size, a.size))?;
+            // The f32 copy the upload packs, and the accumulators read back.
+            host += 4 * values + 32 * pixels;
+            let matrices = 48 * g.n_angles() as u64;
+            let device = super::plan::DevicePlan::on(
+                ctx,
+                s.device_bytes() + matrices + mask,
+                s.largest_buffer(),
+            );
+            (Some(device), s.describe())
+        }
+        None => (None, Vec::new()),
+    };
+    Ok(super::plan::MemoryPlan {
+        job: format!("d2vr {:?}", a.mode).to_lowercase(),
+        backend: engine.describe(),
+        host_bytes: host,
+        device,
+        split,
+        writes: Vec::new(),
+    })
+}
+
+/// The options [`run`] refuses before any work.
+fn check_request(a: &D2vrRequest) -> Result<()> {
     if a.f16_projections && a.backend != Backend::Gpu {
         return Err(Error::unsupported(
             "D²VR with 16-bit projections",
@@ -179,6 +250,15 @@ pub fn run(a: &D2vrRequest, progress: &dyn Progress) -> Result<D2vrRendering> {
             "16-bit projections are a GPU storage format (use the gpu backend)",
         ));
     }
+    Ok(())
+}
+
+/// Renders.
+///
+/// # Errors
+/// Bad options, projections or geometry; GPU errors; [`Error::Cancelled`].
+pub fn run(a: &D2vrRequest, progress: &dyn Progress) -> Result<D2vrRendering> {
+    check_request(a)?;
     let engine = Engine::open(a.backend)?;
     match engine.backend() {
         Backend::Cpu => run_on::<f64>(a, engine, progress),
@@ -263,6 +343,9 @@ fn run_on<R: Real + rustfft::FftNum>(
                 mask.as_ref(),
                 storage,
             )?;
+            for line in o.split.describe() {
+                progress.note(&line);
+            }
             (o.render, o.stats)
         }
         None => {

@@ -81,6 +81,11 @@ pub struct D2vrArgs {
     /// projections), gpu-f16 (16-bit projections on the GPU), or auto.
     #[arg(long, default_value = "cpu-f32")]
     pub backend: String,
+    /// Print the memory plan (host bytes, device bytes against the adapter's limits,
+    /// and how the GPU would bind the projections and band the image) from the
+    /// geometry, and render and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: D2vrArgs) -> Result<ExitCode> {
@@ -121,6 +126,12 @@ pub fn run(a: D2vrArgs) -> Result<ExitCode> {
         f16_projections,
         memory: None,
     };
+    if a.dry_run {
+        let mut plan = voxlab::jobs::d2vr::plan(&req)?;
+        plan.writes.push(a.out.display().to_string());
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let term = Terminal::bars();
     let o = voxlab::jobs::d2vr::run(&req, &term)?;
     drop(term);
