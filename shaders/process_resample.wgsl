@@ -95,5 +95,6 @@ fn resample(@builtin(global_invocation_id) gid: vec3<u32>,
     }
     let q = vec4<f32>(vec3<f32>(v), 1.0);
     let p = vec3<f32>(dot(params.m0, q), dot(params.m1, q), dot(params.m2, q));
-    dst[out_index(v)] = sample_volume(p);
+    // dst holds the output voxels from params.op.z on (a slab of the output).
+    dst[out_index(v) - params.op.z] = sample_volume(p);
 }

@@ -273,3 +273,70 @@ fn process_dry_run_prints_the_slabs_and_writes_nothing() {
     }
     assert!(!out.exists());
 }
+
+#[test]
+fn a_split_gpu_resample_says_so_and_writes_the_unsplit_volume() {
+    if common::gpu("a_split_gpu_resample_says_so_and_writes_the_unsplit_volume").is_none() {
+        return;
+    }
+    let dir = scratch("split-resample");
+    let input = voxlab::phantom::Phantom::shepp_logan()
+        .sample([16, 16, 16])
+        .unwrap();
+    let src = dir.join("in.nrrd");
+    voxlab::io::write_volume(&src, &input.into()).unwrap();
+    let run = |out: &std::path::Path, binding: Option<&str>, extra: &[&str]| {
+        let mut args = vec![
+            "process",
+            s(&src),
+            "--op",
+            "resample",
+            "--dims",
+            "24,20,28",
+            "--filter",
+            "lanczos3",
+            "--backend",
+            "gpu",
+            "--out",
+            s(out),
+        ];
+        args.extend_from_slice(extra);
+        common::voxlab_with_binding(&args, binding)
+    };
+    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
+    let o = run(&whole, None, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("slabs"), "{}", stderr(&o));
+    // Output slices of 24 × 20 × 4 = 1,920 bytes, input slices of 1,024: 10 KiB hold 5
+    // output and 10 input slices; Lanczos-3 reaches 3 input slices either side.
+    let o = run(&split, Some("10KiB"), &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o)
+            .contains("resampling in 6 slabs of 5 slices (each reading at most 10 input slices)"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&split).unwrap()
+    );
+    let never = dir.join("never.npy");
+    let o = run(&never, Some("10KiB"), &["--dry-run"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("split:  resampling in 6 slabs of 5 slices"),
+        "{text}"
+    );
+    assert!(!never.exists());
+    // One output slice with its reach of input slices past the binding.
+    let o = run(&never, Some("4KiB"), &[]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("input slices of 1024 bytes"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!never.exists());
+}

@@ -190,8 +190,30 @@ fn gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit() {
     let v = input();
     let dims = v.dims();
     for (name, case) in cases(&v) {
+        if let Case::Resample(spec) = &case {
+            // Resampling: output slabs of 1, 3 and 5 slices, each from its own run of
+            // input slices.
+            let (to_in, _) = cp::resample_plan(dims, v.affine(), spec).unwrap();
+            let whole = gp::resample(ctx, &v, spec).unwrap();
+            for per_piece in [1, 3, 5] {
+                let plan =
+                    gp::ResamplePlan::in_slabs(dims, to_in, spec.dims, spec.filter, per_piece)
+                        .unwrap();
+                assert!(plan.is_split(), "{name}");
+                let split = gp::resample_planned(ctx, &v, spec, &plan).unwrap();
+                let first = split
+                    .grid
+                    .data
+                    .iter()
+                    .zip(&whole.grid.data)
+                    .position(|(a, b)| a.to_bits() != b.to_bits());
+                assert_eq!(first, None, "{name}, {}", plan.describe());
+                assert_eq!(split.affine, whole.affine);
+            }
+            continue;
+        }
         let plan = match &case {
-            Case::Resample(_) => continue,
+            Case::Resample(_) => unreachable!(),
             Case::Gaussian(s) => gp::ProcessPlan::gaussian(&ctx.limits, dims, *s),
             Case::Median(k) => gp::ProcessPlan::median(&ctx.limits, dims, *k),
             Case::Gradient => gp::ProcessPlan::gradient_magnitude(&ctx.limits, dims),
@@ -249,4 +271,47 @@ fn a_processing_plan_keeps_the_ghost_slices_within_one_binding() {
     // Everything fits: one slab, whatever the reach.
     let p = gp::ProcessPlan::median(&limits(1 << 20), [20, 18, 16], 5).unwrap();
     assert!(!p.is_split());
+}
+
+#[test]
+fn a_resampling_plan_fits_each_output_slab_and_its_input_slices_in_one_binding() {
+    let limits = |bytes: u64| wgpu::Limits {
+        max_storage_buffer_binding_size: bytes,
+        ..wgpu::Limits::default()
+    };
+    let identity = glam::DMat4::IDENTITY;
+    let (input, output) = ([20, 18, 16], [20, 18, 16]);
+    // The same grid, trilinear: output slice k reads input slices k − 1 … k + 2 (its
+    // taps k and k + 1, and one more on either side for the shader's rounding).
+    let one = gp::ResamplePlan::new(&limits(1 << 20), input, identity, output, Filter::Trilinear)
+        .unwrap();
+    assert!(!one.is_split());
+    assert_eq!(one.inputs, vec![(0..16)]);
+    // Slices of 1,440 bytes; 14,400 bytes hold 10. Inside the volume d output slices
+    // read d + 3 input ones, at its ends fewer: slabs of 8 read 10 and 9.
+    let p =
+        gp::ResamplePlan::new(&limits(14_400), input, identity, output, Filter::Trilinear).unwrap();
+    assert_eq!((p.slabs.per_piece, p.slabs.count()), (8, 2));
+    assert_eq!(p.inputs, [0..10, 7..16]);
+    assert_eq!(
+        p.describe(),
+        "resampling in 2 slabs of 8 slices (each reading at most 10 input slices)"
+    );
+    // Lanczos-4 reaches 4 slices: one output slice reads 10 input slices, which 10 fit
+    // and 9 do not.
+    let p =
+        gp::ResamplePlan::new(&limits(14_400), input, identity, output, Filter::Lanczos4).unwrap();
+    assert_eq!((p.slabs.per_piece, p.largest_input()), (1, 10));
+    let e = gp::ResamplePlan::new(&limits(12_960), input, identity, output, Filter::Lanczos4)
+        .unwrap_err();
+    assert!(e.to_string().contains("reads 10 input slices"), "{e}");
+    // Halving every axis: an output slab of 10 × 9 × k reads about 2k input slices.
+    let half = glam::DMat4::from_translation(glam::DVec3::splat(0.5))
+        * glam::DMat4::from_scale(glam::DVec3::splat(2.0));
+    let p =
+        gp::ResamplePlan::new(&limits(14_400), input, half, [10, 9, 8], Filter::Trilinear).unwrap();
+    assert_eq!((p.slabs.per_piece, p.slabs.count()), (4, 2));
+    assert_eq!(p.inputs, [0..9, 7..16]);
+    // The sinc has no GPU port.
+    assert!(gp::ResamplePlan::new(&limits(14_400), input, identity, output, Filter::Sinc).is_err());
 }

@@ -4,13 +4,15 @@
 // tests/gpu_layout.rs checks the offsets with naga.
 
 struct ProcessParams {
-    // The input grid: nx, ny, nz, 0.
+    // The input grid: nx, ny, nz, and the first of its slices the src buffer holds (a
+    // slab of the input; 0 when it holds them all).
     in_dims: vec4<u32>,
     // The output grid: nx, ny, nz, and the first output voxel (linear index) of this
     // dispatch.
     out_dims: vec4<u32>,
     // x: filter code (resample) or window side k (median); y: kernel radius (Lanczos
-    // order, Gaussian radius); z: axis (Gaussian pass); w: voxels in this dispatch.
+    // order, Gaussian radius); z: axis (Gaussian pass), or the first output voxel the
+    // dst buffer holds (resample: a slab of the output); w: voxels in this dispatch.
     op: vec4<u32>,
     // Rows of a 3 × 4 matrix: the output-index → input-index map (resample), or the
     // index → world gradient map L⁻ᵀ (gradient magnitude; w unused).
@@ -48,8 +50,9 @@ fn clamped(i: i32, n: u32) -> u32 {
     return u32(clamp(i, 0, i32(n) - 1));
 }
 
+// Voxel (i, j, k) of the input grid, k within the slices the src buffer holds.
 fn in_at(i: u32, j: u32, k: u32) -> f32 {
-    return src[i + params.in_dims.x * (j + params.in_dims.y * k)];
+    return src[i + params.in_dims.x * (j + params.in_dims.y * (k - params.in_dims.w))];
 }
 
 // scipy's 'reflect' rule: d c b a | a b c d | d c b a (period 2n).

@@ -26,7 +26,11 @@
 //! voxels on lavapipe) into z-slabs ([`ProcessPlan`]), each read with the filter's
 //! radius of ghost slices on either side, so that every output voxel sees the very
 //! values it sees unsplit: a split result equals the unsplit one bit for bit.
-//! Resampling is not split yet: its output must fit one binding.
+//! Resampling splits its output into z-slabs ([`ResamplePlan`]), each read from the run
+//! of input slices its taps reach (found from the output slab's corners through the
+//! output → input map, widened by the filter's reach and one slice for the shader's
+//! f32 rounding); the shader keeps the unsplit map and only offsets the slices it
+//! indexes, so a split result equals the unsplit one bit for bit too.
 
 use super::context::GpuContext;
 use super::plan::{binding_limit, count_of, Pieces};
@@ -39,7 +43,8 @@ use crate::cpu::process::{
 use crate::error::{Error, Result};
 use crate::settings::Filter;
 use crate::volume::Volume;
-use glam::DMat4;
+use glam::{DMat4, DVec4};
+use std::ops::Range;
 use wgpu::util::DeviceExt;
 
 /// `shaders/shared/process_params.wgsl`: the WGSL twin of [`ProcessParams`] and the
@@ -69,11 +74,12 @@ const WORKGROUP: u64 = 64;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct ProcessParams {
-    /// Input grid nx, ny, nz, 0.
+    /// Input grid nx, ny, nz, and the first of its slices the input buffer holds.
     pub in_dims: [u32; 4],
     /// Output grid nx, ny, nz, and the first output voxel of this dispatch.
     pub out_dims: [u32; 4],
-    /// Filter code or window side; radius; axis; voxels in this dispatch.
+    /// Filter code or window side; radius; axis (Gaussian) or the first output voxel
+    /// the output buffer holds (resampling); voxels in this dispatch.
     pub op: [u32; 4],
     /// Rows of the output → input index map, or of `L⁻ᵀ`.
     pub m0: [f32; 4],
@@ -163,7 +169,19 @@ impl Op {
         taps: u64,
     ) -> Result<()> {
         let [nx, ny, nz, _] = base.out_dims.map(|x| x as u64);
-        let total = nx * ny * nz;
+        self.run_range(ctx, base, (src, dst, extra), taps, 0..nx * ny * nz)
+    }
+
+    /// [`Self::run`] over the output voxels `voxels` (linear indices) alone.
+    fn run_range(
+        &self,
+        ctx: &GpuContext,
+        base: ProcessParams,
+        (src, dst, extra): (&wgpu::Buffer, &wgpu::Buffer, Option<&wgpu::Buffer>),
+        taps: u64,
+        voxels: Range<u64>,
+    ) -> Result<()> {
+        let total = voxels.end;
         let per = (WORK_PER_DISPATCH / taps.max(1)).clamp(WORKGROUP, 1 << 24);
         let mut resources = vec![
             self.params.as_entire_binding(),
@@ -179,7 +197,7 @@ impl Op {
             &resources,
         );
         let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1) as u64;
-        let mut first = 0u64;
+        let mut first = voxels.start;
         while first < total {
             let count = per.min(total - first);
             let mut p = base;
@@ -242,16 +260,212 @@ fn filter_code(filter: Filter) -> Result<(u32, u32, u64)> {
     })
 }
 
-/// [`crate::cpu::process::resample`] on the GPU (f32).
+/// How [`resample`] fits the planner's limits (module docs): the output in z-slabs,
+/// each read from its run of input slices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResamplePlan {
+    /// Output slices per slab.
+    pub slabs: Pieces,
+    /// The input slices each slab reads (all of them when the job is not split).
+    pub inputs: Vec<Range<usize>>,
+}
+
+impl ResamplePlan {
+    /// The plan for resampling a volume of `in_dims` onto `out_dims` through the
+    /// output-index → input-index map `to_in` with `filter`, under `limits`: one piece
+    /// when the input and the output each fit a binding; else the most output slices
+    /// per slab whose output and input slices both fit one.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for the full sinc; [`Error::TooLarge`] when one output slice
+    /// or the input slices it reads exceed a binding.
+    pub fn new(
+        limits: &wgpu::Limits,
+        in_dims: [usize; 3],
+        to_in: DMat4,
+        out_dims: [usize; 3],
+        filter: Filter,
+    ) -> Result<Self> {
+        let (_, radius, _) = filter_code(filter)?;
+        let limit = binding_limit(limits);
+        let in_slice = (in_dims[0] * in_dims[1]) as u64 * 4;
+        let out_slice = (out_dims[0] * out_dims[1]) as u64 * 4;
+        let nz = out_dims[2];
+        if in_slice * in_dims[2] as u64 <= limit && out_slice * nz as u64 <= limit {
+            return Ok(ResamplePlan {
+                slabs: Pieces {
+                    total: nz,
+                    per_piece: nz.max(1),
+                },
+                inputs: std::iter::once(0..in_dims[2]).collect(),
+            });
+        }
+        let what = "GPU resampling";
+        let fit_out = Pieces::plan(what, "output slice", nz, out_slice, limit, 1)?.per_piece;
+        let fit_in = Pieces::plan(what, "input slice", in_dims[2], in_slice, limit, 1)?.per_piece;
+        let inputs_for = |per: usize| input_runs(in_dims, to_in, out_dims, radius, per);
+        let fits = |per: usize| inputs_for(per).iter().all(|r| r.len() <= fit_in);
+        if !fits(1) {
+            let need = inputs_for(1).iter().map(Range::len).max().unwrap_or(0);
+            return Err(Error::too_large(
+                what,
+                format!(
+                    "one output slice reads {need} input slices of {in_slice} bytes, more \
+                     than the storage-binding limit of {limit} bytes: use --backend cpu"
+                ),
+            ));
+        }
+        // The most output slices per slab that fit (bisection: fewer slices never
+        // read more input).
+        let (mut lo, mut hi) = (1, fit_out.min(nz).max(1));
+        while lo < hi {
+            let mid = (lo + hi).div_ceil(2);
+            if fits(mid) {
+                lo = mid;
+            } else {
+                hi = mid - 1;
+            }
+        }
+        Ok(ResamplePlan {
+            slabs: Pieces {
+                total: nz,
+                per_piece: lo,
+            },
+            inputs: inputs_for(lo),
+        })
+    }
+
+    /// The output in slabs of `per_piece` slices, each with the input slices its taps
+    /// reach, whatever the limits (tests run every split with it).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for the full sinc.
+    pub fn in_slabs(
+        in_dims: [usize; 3],
+        to_in: DMat4,
+        out_dims: [usize; 3],
+        filter: Filter,
+        per_piece: usize,
+    ) -> Result<Self> {
+        let (_, radius, _) = filter_code(filter)?;
+        let per_piece = per_piece.clamp(1, out_dims[2].max(1));
+        Ok(ResamplePlan {
+            slabs: Pieces {
+                total: out_dims[2],
+                per_piece,
+            },
+            inputs: input_runs(in_dims, to_in, out_dims, radius, per_piece),
+        })
+    }
+
+    /// Whether the output is cut at all.
+    pub fn is_split(&self) -> bool {
+        self.slabs.is_split()
+    }
+
+    /// The most input slices one slab reads.
+    pub fn largest_input(&self) -> usize {
+        self.inputs.iter().map(Range::len).max().unwrap_or(0)
+    }
+
+    /// One line for the user: "resampling in 4 slabs of 16 slices (each reading at
+    /// most 40 input slices)".
+    pub fn describe(&self) -> String {
+        format!(
+            "resampling in {} of {} (each reading at most {})",
+            count_of(self.slabs.count(), "slab"),
+            count_of(self.slabs.per_piece, "slice"),
+            count_of(self.largest_input(), "input slice")
+        )
+    }
+}
+
+/// The input slices of each slab of `per` output slices ([`input_slices`], the
+/// filter's reach `radius` taps).
+fn input_runs(
+    in_dims: [usize; 3],
+    to_in: DMat4,
+    out_dims: [usize; 3],
+    radius: u32,
+    per: usize,
+) -> Vec<Range<usize>> {
+    let reach = (radius as usize).max(1);
+    Pieces {
+        total: out_dims[2],
+        per_piece: per,
+    }
+    .ranges()
+    .map(|r| input_slices(in_dims, to_in, out_dims, r, reach))
+    .collect()
+}
+
+/// The input slices the taps of output slices `out_z` reach: the extremes of the input
+/// z coordinate over the slab's corners (the map is affine), widened by `reach` taps
+/// and one slice for the shader's f32 rounding, clamped into the volume as the taps are.
+fn input_slices(
+    in_dims: [usize; 3],
+    to_in: DMat4,
+    out_dims: [usize; 3],
+    out_z: Range<usize>,
+    reach: usize,
+) -> Range<usize> {
+    let mut zs = Vec::with_capacity(8);
+    for x in [0, out_dims[0].max(1) - 1] {
+        for y in [0, out_dims[1].max(1) - 1] {
+            for z in [out_z.start, out_z.end.max(out_z.start + 1) - 1] {
+                let p = to_in * DVec4::new(x as f64, y as f64, z as f64, 1.0);
+                zs.push(p.z);
+            }
+        }
+    }
+    let lo = zs.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+    let hi = zs.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+    let last = in_dims[2] as f64 - 1.0;
+    let first = (lo.floor() - reach as f64).clamp(0.0, last) as usize;
+    let end = (hi.floor() + reach as f64 + 2.0).clamp(first as f64 + 1.0, last + 1.0) as usize;
+    first..end
+}
+
+/// [`crate::cpu::process::resample`] on the GPU (f32), in the slabs of
+/// [`ResamplePlan::new`] under the context's limits.
 ///
 /// # Errors
 /// As the CPU version; also [`Error::Invalid`] for the full sinc,
-/// [`Error::TooLarge`] past the storage-binding limit, [`Error::Gpu`] on device failure.
+/// [`Error::TooLarge`] as [`ResamplePlan::new`], [`Error::Gpu`] on device failure.
 pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Result<Field<f32>> {
+    let (to_in, _) = resample_plan(vol.dims(), vol.affine(), spec)?;
+    let plan = ResamplePlan::new(&ctx.limits, vol.dims(), to_in, spec.dims, spec.filter)?;
+    resample_planned(ctx, vol, spec, &plan)
+}
+
+/// [`resample`] in the slabs of `plan`.
+///
+/// # Errors
+/// As [`resample`]; [`Error::Invalid`] for a plan made for other output dimensions.
+pub fn resample_planned(
+    ctx: &GpuContext,
+    vol: &Volume<f32>,
+    spec: &ResampleSpec,
+    plan: &ResamplePlan,
+) -> Result<Field<f32>> {
     let (code, radius, taps) = filter_code(spec.filter)?;
     let (to_in, affine) = resample_plan(vol.dims(), vol.affine(), spec)?;
+    if plan.slabs.total != spec.dims[2] || plan.inputs.len() != plan.slabs.count() {
+        return Err(Error::invalid(
+            "resampling plan",
+            format!(
+                "made for {} output slices, not {}",
+                plan.slabs.total, spec.dims[2]
+            ),
+        ));
+    }
     let n_out = spec.dims.iter().product::<usize>();
-    let out_bytes = check_binding(ctx, "resampled volume", n_out)?;
+    if n_out > u32::MAX as usize {
+        return Err(Error::too_large(
+            "resampled volume",
+            format!("{n_out} voxels exceed the shaders' 32-bit voxel index: use --backend cpu"),
+        ));
+    }
     let host: Vec<f32> = if spec.filter.prefiltered() {
         prepare(&Grid::<f64>::from_volume(vol), spec.filter)
             .data
@@ -261,19 +475,41 @@ pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Res
     } else {
         vol.data().to_vec()
     };
-    let src = upload(ctx, "volume", &host)?;
-    let dst = ctx.storage_buffer("resampled volume", out_bytes)?;
     let [m0, m1, m2] = rows(to_in);
-    let p = ProcessParams {
-        in_dims: u32_dims(vol.dims()),
-        out_dims: u32_dims(spec.dims),
-        op: [code, radius, 0, 0],
-        m0,
-        m1,
-        m2,
-    };
-    Op::new(ctx, "process_resample", "resample")?.run(ctx, p, &src, &dst, None, taps)?;
-    Ok(field(spec.dims, read_f32(ctx, &dst, n_out)?, affine))
+    let op = Op::new(ctx, "process_resample", "resample")?;
+    let in_slice = vol.dims()[0] * vol.dims()[1];
+    let out_slice = spec.dims[0] * spec.dims[1];
+    let mut data = Vec::with_capacity(n_out);
+    for (slab, input) in plan.slabs.ranges().zip(&plan.inputs) {
+        let src = upload(
+            ctx,
+            "volume",
+            &host[input.start * in_slice..input.end * in_slice],
+        )?;
+        let out = out_slice * slab.len();
+        let dst = ctx.storage_buffer(
+            "resampled volume",
+            check_binding(ctx, "resampled volume", out)?,
+        )?;
+        let first = (slab.start * out_slice) as u64;
+        let p = ProcessParams {
+            in_dims: [
+                vol.dims()[0] as u32,
+                vol.dims()[1] as u32,
+                vol.dims()[2] as u32,
+                input.start as u32,
+            ],
+            out_dims: u32_dims(spec.dims),
+            op: [code, radius, first as u32, 0],
+            m0,
+            m1,
+            m2,
+        };
+        let voxels = first..first + out as u64;
+        op.run_range(ctx, p, (&src, &dst, None), taps, voxels)?;
+        data.extend(read_f32(ctx, &dst, out)?);
+    }
+    Ok(field(spec.dims, data, affine))
 }
 
 /// [`crate::cpu::process::gaussian`] on the GPU (f32): three separable passes.

@@ -215,6 +215,7 @@ pub fn plan(a: &ProcessRequest, progress: &dyn Progress) -> Result<super::plan::
         (Backend::Gpu, Some(ctx)) => {
             let plan = match a.op {
                 Op::Resample => None,
+                // (Resampling plans its own slabs below.)
                 Op::Gaussian => Some(ProcessPlan::gaussian(
                     &ctx.limits,
                     vol.dims(),
@@ -227,22 +228,18 @@ pub fn plan(a: &ProcessRequest, progress: &dyn Progress) -> Result<super::plan::
             };
             let slice = (vol.dims()[0] * vol.dims()[1]) as u64 * 4;
             let (peak, largest, split) = match plan {
-                // Resampling: the input and the output whole.
+                // Resampling: each output slab and the input slices it reads.
                 None => {
-                    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-                    let largest = (voxels * 4).max(out_voxels * 4);
-                    if largest > limit {
-                        return Err(Error::too_large(
-                            "GPU resampling",
-                            format!(
-                                "{} in one buffer exceed the storage binding of {} (resampling \
-                                 is not split): use --backend cpu",
-                                crate::gpu::plan::human_bytes(largest),
-                                crate::gpu::plan::human_bytes(limit)
-                            ),
-                        ));
-                    }
-                    ((voxels + out_voxels) * 4, largest, Vec::new())
+                    let spec = spec.as_ref().expect("spec");
+                    let r = resample_split(ctx, &vol, spec)?;
+                    let input = r.largest_input() as u64 * slice;
+                    let out = (r.slabs.per_piece * spec.dims[0] * spec.dims[1]) as u64 * 4;
+                    let split = if r.is_split() {
+                        vec![r.describe()]
+                    } else {
+                        Vec::new()
+                    };
+                    (input + out, input.max(out), split)
                 }
                 Some(p) => {
                     let input = (p.slabs.per_piece + 2 * p.ghost).min(p.slabs.total) as u64 * slice;
@@ -288,7 +285,14 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
             (Backend::Gpu, Some(ctx)) => {
                 use crate::gpu::process as gp;
                 match a.op {
-                    Op::Resample => gp::resample(ctx, &vol, &spec.expect("spec")),
+                    Op::Resample => {
+                        let spec = spec.expect("spec");
+                        let plan = resample_split(ctx, &vol, &spec)?;
+                        if plan.is_split() {
+                            progress.note(&plan.describe());
+                        }
+                        gp::resample_planned(ctx, &vol, &spec, &plan)
+                    }
                     Op::Gaussian => {
                         let sigma = sigma.expect("sigma");
                         let plan = gp::ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
@@ -329,6 +333,16 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
         seconds: t.elapsed().as_secs_f64(),
         engine,
     })
+}
+
+/// How the GPU resamples `vol` under the context's limits.
+fn resample_split(
+    ctx: &crate::gpu::GpuContext,
+    vol: &crate::volume::Volume<f32>,
+    spec: &cp::ResampleSpec,
+) -> Result<crate::gpu::process::ResamplePlan> {
+    let (to_in, _) = cp::resample_plan(vol.dims(), vol.affine(), spec)?;
+    crate::gpu::process::ResamplePlan::new(&ctx.limits, vol.dims(), to_in, spec.dims, spec.filter)
 }
 
 /// Tells the user how a split GPU operation is cut.
