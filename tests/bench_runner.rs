@@ -496,3 +496,55 @@ fn merge_replaces_rerun_cases_and_keeps_the_rest_in_suite_order() {
     let e = old.merge(other, &order).unwrap_err().to_string();
     assert!(e.contains("another CPU"), "{e}");
 }
+
+/// The roofline: on an adapter whose part is known, every GPU throughput in GFLOP/s or
+/// GB/s is set against the data-sheet peak; on one that is not (lavapipe), the page
+/// says there is no peak.
+#[test]
+fn the_roofline_sets_gpu_throughput_against_the_parts_peak() {
+    let Some(mut r) = timed_report() else { return };
+    // The adapter the test ran on: a software rasteriser, no peak.
+    let adapter = r.machine.adapter.clone().unwrap();
+    if adapter.peak.is_none() {
+        assert!(r.cases[0]
+            .gpu
+            .throughput
+            .iter()
+            .all(|t| t.of_peak.is_none()));
+        let md = r.to_markdown();
+        assert!(md.contains("## Roofline"), "{md}");
+        assert!(md.contains("is not in the table of GPUs"), "{md}");
+    }
+    // The same run as if on an H200 (4800 GB/s, 67 TFLOP/s FP32): 300 GFLOP/s is
+    // 300 / 67,000 of the FP32 peak; rays have no peak.
+    let a = r.machine.adapter.as_mut().unwrap();
+    a.name = "NVIDIA H200".into();
+    a.peak = Some(voxlab::bench::machine::AdapterPeak {
+        part: "NVIDIA H200 (SXM, HBM3e)".into(),
+        memory_gbps: 4800.0,
+        fp32_tflops: 67.0,
+    });
+    r.apply_peak();
+    let gpu = &r.cases[0].gpu.throughput;
+    assert_eq!(gpu[0].of_peak, None);
+    assert_eq!(gpu[1].of_peak, Some(300.0 / 67_000.0));
+    // The CPU columns are never set against the GPU's peak.
+    assert!(r.cases[0]
+        .cpu_f32
+        .throughput
+        .iter()
+        .all(|t| t.of_peak.is_none()));
+    let md = r.to_markdown();
+    for want in [
+        "## Roofline",
+        "NVIDIA H200 (SXM, HBM3e)'s data-sheet peaks: 4800 GB/s",
+        "| raycast/timed | 4 | 10.0 ms | 300 GFLOP/s | 67000 GFLOP/s | 0.4 % |",
+    ] {
+        assert!(md.contains(want), "'{want}' not in:\n{md}");
+    }
+    let back: Report = serde_json::from_str(&r.to_json()).unwrap();
+    assert_eq!(
+        back.machine.adapter.unwrap().peak.unwrap().memory_gbps,
+        4800.0
+    );
+}

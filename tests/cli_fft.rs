@@ -129,6 +129,21 @@ fn fft_checks_the_gpu_variants() {
         assert_eq!(c["reference"], "exact-dft");
         assert!(c["rel_l2"].as_f64().unwrap() < 1e-6, "{c}");
         assert!(c["kernel_median_s"].as_f64().unwrap() > 0.0, "{c}");
+        assert!(c["kernel_gbps"].as_f64().unwrap() > 0.0, "{c}");
+    }
+    // Dispatches per transform: Stockham does each axis of 8 and 16 in workgroup
+    // memory (one each); the split-stream passes are log2 n − 1 per axis (its last
+    // two stages are one), 2 + 3.
+    assert_eq!(cases[0]["dispatches"], 2);
+    assert_eq!(cases[1]["dispatches"], 5);
+    // The roofline against the adapter's peak, where the part is known (not lavapipe).
+    match r["adapter_peak"].as_object() {
+        None => assert!(cases[0]["of_peak_bandwidth"].is_null()),
+        Some(p) => {
+            let want =
+                cases[0]["kernel_gbps"].as_f64().unwrap() / p["memory_gbps"].as_f64().unwrap();
+            assert_eq!(cases[0]["of_peak_bandwidth"].as_f64(), Some(want));
+        }
     }
     for c in &cases[2..] {
         assert!(

@@ -47,6 +47,32 @@ pub struct Adapter {
     /// Whether the device has timestamp queries, i.e. whether kernel times are measured
     /// on the GPU itself rather than by the host's clock around a waited submission.
     pub timestamp_queries: bool,
+    /// The part's data-sheet peaks, when [`crate::gpu::peak`] knows it (the roofline).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak: Option<AdapterPeak>,
+}
+
+/// An adapter's data-sheet peaks as the report records them.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AdapterPeak {
+    pub part: String,
+    /// Peak memory bandwidth, 1e9 bytes per second.
+    pub memory_gbps: f64,
+    /// Peak dense FP32 rate, 1e12 operations per second.
+    pub fp32_tflops: f64,
+}
+
+impl AdapterPeak {
+    /// The peak of the throughput unit `unit` in that unit's scale
+    /// ([`super::report::unit_scale`]): GB/s against the memory bandwidth, GFLOP/s
+    /// against the FP32 rate; `None` for the other units.
+    pub fn of_unit(&self, unit: super::case::Unit) -> Option<f64> {
+        match unit {
+            super::case::Unit::Bytes => Some(self.memory_gbps),
+            super::case::Unit::Flops => Some(self.fp32_tflops * 1e3),
+            _ => None,
+        }
+    }
 }
 
 impl Adapter {
@@ -59,6 +85,11 @@ impl Adapter {
             driver: s.driver.clone(),
             driver_info: s.driver_info.clone(),
             timestamp_queries: ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            peak: crate::gpu::peak::peak_of(&s.name).map(|p| AdapterPeak {
+                part: p.part.to_string(),
+                memory_gbps: p.memory_gbps,
+                fp32_tflops: p.fp32_tflops,
+            }),
         }
     }
 }

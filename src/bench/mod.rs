@@ -513,7 +513,7 @@ pub fn run_suite_until(
         });
         reports.push(r);
     }
-    report::Report {
+    let mut report = report::Report {
         machine,
         suite: opts.suite,
         runs: opts.runs.max(1),
@@ -524,7 +524,9 @@ pub fn run_suite_until(
         cases: reports,
         seconds: start.elapsed().as_secs_f64(),
         merged: Vec::new(),
-    }
+    };
+    report.apply_peak();
+    report
 }
 
 /// One line for a finished case: its status and headline figures.

@@ -169,6 +169,11 @@ pub struct Throughput {
     pub value: f64,
     /// GPU only: over the median end-to-end time.
     pub value_end_to_end: Option<f64>,
+    /// GPU only: `value` as a fraction of the adapter's data-sheet peak for the unit
+    /// (memory bandwidth for GB/s, FP32 rate for GFLOP/s), where the part is known
+    /// ([`Report::apply_peak`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub of_peak: Option<f64>,
 }
 
 /// The scale and label of a unit's throughput.
@@ -192,6 +197,7 @@ pub fn throughput(work: &[Work], seconds: f64, end_to_end: Option<f64>) -> Vec<T
                 label: label.to_string(),
                 value: w.amount / seconds / scale,
                 value_end_to_end: end_to_end.map(|t| w.amount / t / scale),
+                of_peak: None,
             }
         })
         .collect()
@@ -394,6 +400,19 @@ pub struct MergedRun {
 }
 
 impl Report {
+    /// Sets every GPU throughput's fraction of the adapter's peak (the roofline), when
+    /// the machine's adapter has a known peak; clears them otherwise.
+    pub fn apply_peak(&mut self) {
+        let peak = self.machine.adapter.as_ref().and_then(|a| a.peak.clone());
+        for c in &mut self.cases {
+            for t in &mut c.gpu.throughput {
+                t.of_peak = peak
+                    .as_ref()
+                    .and_then(|p| crate::gpu::peak::fraction(t.value, p.of_unit(t.unit)));
+            }
+        }
+    }
+
     /// Folds `newer` (a later run on the same machine and adapter, same suite) into
     /// this report: its cases replace those with the same id and the others join in
     /// `order` (the ids of the whole suite, in report order; ids not in it go last).
@@ -450,6 +469,7 @@ impl Report {
             cases: ids,
             seconds: newer.seconds,
         });
+        self.apply_peak();
         Ok(())
     }
 
@@ -861,6 +881,7 @@ fn markdown(r: &Report) -> String {
         }
         let _ = writeln!(s);
     }
+    roofline(r, &mut s);
     let problems = r.problems();
     let _ = writeln!(s, "## Result\n");
     if problems.is_empty() {
@@ -876,6 +897,67 @@ fn markdown(r: &Report) -> String {
         }
     }
     s
+}
+
+/// The roofline section: every GPU kernel throughput in GB/s or GFLOP/s against the
+/// adapter's data-sheet peak ([`crate::gpu::peak`]), or why there is none.
+fn roofline(r: &Report, s: &mut String) {
+    let Some(adapter) = &r.machine.adapter else {
+        return;
+    };
+    let _ = writeln!(s, "## Roofline\n");
+    let Some(peak) = &adapter.peak else {
+        let _ = writeln!(
+            s,
+            "{} is not in the table of GPUs whose peaks voxlab knows (`src/gpu/peak.rs`): \
+             no fraction of peak is given.\n",
+            adapter.name
+        );
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "GPU kernel throughput against the {}'s data-sheet peaks: {} GB/s memory \
+         bandwidth, {} TFLOP/s FP32. The bytes are those each case counts (one read and \
+         one write of its data per pass): where a kernel reads its data more than once, \
+         its real traffic is higher than the figure.\n",
+        peak.part,
+        sig3(peak.memory_gbps),
+        sig3(peak.fp32_tflops)
+    );
+    let _ = writeln!(
+        s,
+        "| case | size | GPU kernel | achieved | peak | of peak |\n|---|---|---|---|---|---|"
+    );
+    let mut any = false;
+    for c in r.cases.iter().filter(|c| c.gpu.status == Status::Passed) {
+        for t in &c.gpu.throughput {
+            let (Some(f), Some(p)) = (t.of_peak, peak.of_unit(t.unit)) else {
+                continue;
+            };
+            any = true;
+            let _ = writeln!(
+                s,
+                "| {}/{} | {} | {} | {} {} | {} {} | {:.1} % |",
+                c.family,
+                c.name,
+                c.size,
+                c.gpu
+                    .kernel
+                    .as_ref()
+                    .map_or("—".to_string(), |k| fmt_seconds(k.median)),
+                sig3(t.value),
+                t.label,
+                sig3(p),
+                t.label,
+                100.0 * f
+            );
+        }
+    }
+    if !any {
+        let _ = writeln!(s, "| (no case counts bytes or FLOPs) | | | | | |");
+    }
+    let _ = writeln!(s);
 }
 
 fn xml_escape(s: &str) -> String {

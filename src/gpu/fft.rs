@@ -511,6 +511,9 @@ pub struct FftTimings {
     pub readback: f64,
     /// Everything, end to end.
     pub total: f64,
+    /// The compute dispatches of the transform (one per pass; several transforms
+    /// when it was split).
+    pub dispatches: usize,
 }
 
 /// What [`fft_nd_timed`] returns: the transform, and where the time went.
@@ -661,6 +664,7 @@ pub fn fft_nd_planned(
         timings.upload += t.upload;
         timings.kernel += t.kernel;
         timings.readback += t.readback;
+        timings.dispatches += t.dispatches;
         timings.kernel_from_timestamps &= t.kernel_from_timestamps;
     };
     let mut work = data.to_vec();
@@ -934,6 +938,16 @@ impl GpuFftPlan {
     /// The shape this plan transforms.
     pub fn shape(&self) -> &[usize] {
         &self.shape
+    }
+
+    /// The compute dispatches one run records: one per pass (none when every
+    /// transformed axis has length 1).
+    pub fn dispatches(&self) -> usize {
+        if self.pong.is_some() {
+            self.passes.len()
+        } else {
+            0
+        }
     }
 
     /// The plan for the already validated `shape` along `axes`.
@@ -1216,6 +1230,7 @@ impl GpuFftPlan {
                 kernel_from_timestamps: query.is_some(),
                 readback,
                 total: 0.0,
+                dispatches: self.dispatches(),
             },
         )
     }

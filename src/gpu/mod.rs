@@ -38,6 +38,7 @@ pub mod joseph_pair;
 pub mod multi;
 pub mod params;
 pub mod parker;
+pub mod peak;
 pub mod plan;
 pub mod preintegrate;
 pub mod probe;

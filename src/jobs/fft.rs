@@ -14,7 +14,9 @@
 //! end to end without set-up (upload, passes, readback), and the pass time (from
 //! timestamp queries when the adapter has them) is reported apart. GFLOP/s is the
 //! conventional `5·N·log2 N / t`; GB/s counts one read and one write of the array,
-//! `2·N·sizeof(complex) / t`.
+//! `2·N·sizeof(complex) / t`. For the GPU the report adds the compute dispatches of
+//! one transform and the roofline: the pass time's GB/s against the adapter's peak
+//! memory bandwidth, where [`crate::gpu::peak`] knows the part.
 
 use super::BackendSet;
 use crate::cpu::dft::{dft_nd, Direction, Normalization};
@@ -136,6 +138,13 @@ pub struct CaseResult {
     /// GPU only: how the transform was split past one storage binding ("FFT in 4
     /// slabs along axis 1 …"); `None` when it ran in one piece.
     pub split: Option<String>,
+    /// GPU only: the compute dispatches of one transform.
+    pub dispatches: Option<usize>,
+    /// GPU only: `2·N·sizeof(complex)` over the median pass time, 1e9 bytes per second.
+    pub kernel_gbps: Option<f64>,
+    /// GPU only: `kernel_gbps` as a fraction of the adapter's peak memory bandwidth
+    /// (`None` when the part is not in [`crate::gpu::peak`]'s table).
+    pub of_peak_bandwidth: Option<f64>,
 }
 
 /// Everything `voxlab fft` measured.
@@ -145,6 +154,8 @@ pub struct Report {
     pub threads: usize,
     /// The GPU adapter, when one was used.
     pub adapter: Option<String>,
+    /// Its data-sheet peaks, when the part is known ([`crate::gpu::peak`]).
+    pub adapter_peak: Option<crate::gpu::peak::Peak>,
     pub cases: Vec<CaseResult>,
     pub passed: bool,
 }
@@ -186,6 +197,9 @@ fn case(
         gbps: (2 * total * bytes_per_value) as f64 / median_s / 1e9,
         skipped: None,
         split: None,
+        dispatches: None,
+        kernel_gbps: kernel.map(|k| (2 * total * bytes_per_value) as f64 / k.0 / 1e9),
+        of_peak_bandwidth: None,
     }
 }
 
@@ -307,6 +321,11 @@ pub fn run(
                 8,
             );
             c.split = crate::gpu::fft::split_plan(ctx, shape)?.map(|p| p.describe());
+            c.dispatches = Some(first.timings.dispatches);
+            let peak = crate::gpu::peak::peak_of(&ctx.summary.name).map(|p| p.memory_gbps);
+            c.of_peak_bandwidth = c
+                .kernel_gbps
+                .and_then(|g| crate::gpu::peak::fraction(g, peak));
             push(c, &mut cases);
         }
     }
@@ -318,6 +337,9 @@ pub fn run(
             let s = &g.summary;
             format!("{} ({}, {})", s.name, s.backend, s.driver_info)
         }),
+        adapter_peak: gpu
+            .filter(|_| backends.gpu())
+            .and_then(|g| crate::gpu::peak::peak_of(&g.summary.name)),
         cases,
         passed,
     })
@@ -341,8 +363,12 @@ pub fn format_case(c: &CaseResult) -> String {
         .split
         .as_ref()
         .map_or(String::new(), |s| format!("  ({s})"));
+    let dispatches = c.dispatches.map_or("-".to_string(), |d| d.to_string());
+    let of_peak = c
+        .of_peak_bandwidth
+        .map_or("-".to_string(), |f| format!("{:.1} %", 100.0 * f));
     format!(
-        "{shape:<14} {:<17} {:<12} {:>10.2e} {:>9.1e} {:<4} {:>10.3} {:>10} {:>8.3} {:>7.3}{split}",
+        "{shape:<14} {:<17} {:<12} {:>10.2e} {:>9.1e} {:<4} {:>10.3} {:>10} {:>8.3} {:>7.3} {dispatches:>5} {of_peak:>7}{split}",
         c.backend,
         c.reference,
         c.rel_l2,
@@ -356,7 +382,7 @@ pub fn format_case(c: &CaseResult) -> String {
 }
 
 /// The header of the text table.
-pub const TABLE_HEADER: &str = "shape          backend           reference        rel L2       tol ok    median ms  kernel ms  GFLOP/s    GB/s";
+pub const TABLE_HEADER: &str = "shape          backend           reference        rel L2       tol ok    median ms  kernel ms  GFLOP/s    GB/s  disp  % peak";
 
 /// The 1-D transform of every line of `data` (row-major, `shape`, last axis fastest)
 /// along each axis of `axes` in turn (an axis listed twice is transformed twice), then
