@@ -352,3 +352,55 @@ fn a_1_gib_spectrum_renders_from_slabs() {
     }
     assert!(r.passed, "{}", r.message);
 }
+
+/// `voxlab fvr` under a lowered binding limit binds the spectrum in z-slabs, says so,
+/// and writes the unsplit image byte for byte; `--dry-run` prints that split and writes
+/// nothing; a spectrum that needs more slabs than the renderer binds is refused.
+#[test]
+fn a_split_cli_fvr_says_so_and_writes_the_unsplit_image() {
+    if common::gpu("a_split_cli_fvr_says_so_and_writes_the_unsplit_image").is_none() {
+        return;
+    }
+    let dir = common::scratch("cli-fvr-split");
+    let run = |out: &std::path::Path, binding: Option<&str>, extra: &[&str]| {
+        let mut args = vec![
+            "fvr",
+            "phantom:shepp-logan:16",
+            "--backend",
+            "gpu",
+            "--out",
+            common::s(out),
+        ];
+        args.extend_from_slice(extra);
+        common::voxlab_with_binding(&args, binding)
+    };
+    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
+    let o = run(&whole, None, &[]);
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    assert!(!common::stderr(&o).contains("z-slabs"));
+    // Padded to 32³: planes of 32 × 32 complex f32, 8 KiB; 48 KiB hold 6 planes.
+    let o = run(&split, Some("48KiB"), &[]);
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    let line = "FVR spectrum in 6 z-slabs of 6 planes (one storage binding each)";
+    assert!(common::stderr(&o).contains(line), "{}", common::stderr(&o));
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&split).unwrap()
+    );
+    let never = dir.join("never.npy");
+    let o = run(&never, Some("48KiB"), &["--dry-run"]);
+    assert!(o.status.success(), "{}", common::stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    for want in ["dry run: fvr lanczos3 (padded 32³) on gpu", line] {
+        assert!(text.contains(want), "no '{want}' in:\n{text}");
+    }
+    assert!(!never.exists());
+    // 8 KiB a slab is one plane: 32 slabs, more than 8.
+    let o = run(&never, Some("8KiB"), &["--dry-run"]);
+    assert!(!o.status.success());
+    assert!(
+        common::stderr(&o).contains("need more than 8 storage bindings"),
+        "{}",
+        common::stderr(&o)
+    );
+}

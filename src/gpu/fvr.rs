@@ -150,6 +150,62 @@ pub struct GpuFvrSpectrum<'a> {
     fft: Option<GpuFftPlan>,
 }
 
+/// How an `M³` spectrum is bound: `slabs` z-slabs of `depth` whole `M × M` planes
+/// (the last shorter), one storage binding each (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SpectrumSlabs {
+    pub depth: usize,
+    pub slabs: usize,
+}
+
+impl SpectrumSlabs {
+    /// The slabs of an `m³` spectrum with at most `max_slab_bytes` per slab (and at most
+    /// the adapter's limits in `limits`).
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] when one plane exceeds a slab, or the spectrum needs more
+    /// slabs than [`MAX_SLABS`] (or than the adapter's storage buffers per shader stage,
+    /// less the one of the slice).
+    pub fn new(limits: &wgpu::Limits, m: usize, max_slab_bytes: u64) -> Result<Self> {
+        let limit = max_slab_bytes
+            .min(limits.max_storage_buffer_binding_size)
+            .min(limits.max_buffer_size);
+        let plane = (m * m) as u64 * 8;
+        let max_slabs =
+            MAX_SLABS.min((limits.max_storage_buffers_per_shader_stage as usize).saturating_sub(1));
+        let depth = (limit / plane.max(1)).min(m as u64) as usize;
+        let slabs = if depth == 0 {
+            usize::MAX
+        } else {
+            m.div_ceil(depth)
+        };
+        if slabs > max_slabs {
+            let bytes = (m as u64).pow(3).saturating_mul(8);
+            return Err(Error::too_large(
+                "GPU FVR spectrum",
+                format!(
+                    "{m}³ complex f32 values ({bytes} bytes) need more than {max_slabs} \
+                     storage bindings of at most {limit} bytes \
+                     (max_storage_buffer_binding_size): use a smaller --padding or \
+                     volume, or --backend cpu"
+                ),
+            ));
+        }
+        Ok(SpectrumSlabs { depth, slabs })
+    }
+
+    /// One line for the user ("FVR spectrum in 3 z-slabs of 96 planes (one storage
+    /// binding each)"); `None` when it is one binding.
+    pub fn describe(&self) -> Option<String> {
+        (self.slabs > 1).then(|| {
+            format!(
+                "FVR spectrum in {} z-slabs of {} planes (one storage binding each)",
+                self.slabs, self.depth
+            )
+        })
+    }
+}
+
 impl<'a> GpuFvrSpectrum<'a> {
     /// Uploads the centred spectrum (rounded to f32), in as few z-slabs as the adapter's
     /// per-binding limit (`max_storage_buffer_binding_size`, `max_buffer_size`) allows.
@@ -175,30 +231,7 @@ impl<'a> GpuFvrSpectrum<'a> {
     ) -> Result<Self> {
         let data = spectrum.spectrum();
         let m = spectrum.side();
-        let limit = max_slab_bytes
-            .min(ctx.limits.max_storage_buffer_binding_size)
-            .min(ctx.limits.max_buffer_size);
-        let plane = (m * m) as u64 * 8;
-        let max_slabs = MAX_SLABS
-            .min((ctx.limits.max_storage_buffers_per_shader_stage as usize).saturating_sub(1));
-        let depth = (limit / plane).min(m as u64) as usize;
-        let slabs = if depth == 0 {
-            usize::MAX
-        } else {
-            m.div_ceil(depth)
-        };
-        if slabs > max_slabs {
-            let bytes = (data.len() as u64).saturating_mul(8);
-            return Err(Error::too_large(
-                "GPU FVR spectrum",
-                format!(
-                    "{m}³ complex f32 values ({bytes} bytes) need more than {max_slabs} \
-                     storage bindings of at most {limit} bytes \
-                     (max_storage_buffer_binding_size): use a smaller --padding or \
-                     volume, or --backend cpu"
-                ),
-            ));
-        }
+        let SpectrumSlabs { depth, slabs } = SpectrumSlabs::new(&ctx.limits, m, max_slab_bytes)?;
         // One slab at a time: the host holds at most one slab in f32.
         let buffers: Vec<wgpu::Buffer> = (0..slabs)
             .map(|k| {

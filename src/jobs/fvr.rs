@@ -58,18 +58,8 @@ pub struct FvrImage {
 /// Bad input or options (anisotropic voxels, a padded side the GPU cannot transform);
 /// GPU errors; [`Error::Cancelled`](crate::Error::Cancelled).
 pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
-    let view = match &a.view.axis {
-        Some(v) => FvrView::Axis(v.parse()?),
-        None => FvrView::Orbit {
-            azimuth_deg: a.view.azimuth,
-            elevation_deg: a.view.elevation,
-        },
-    };
-    let engine = Engine::open_for(
-        "Fourier volume rendering",
-        a.backend,
-        &[Backend::Cpu, Backend::CpuF32, Backend::Gpu],
-    )?;
+    let view = view_of(a)?;
+    let engine = open(a)?;
     let vol = a.input.load(progress)?.to_f32();
     let m = padded_side(vol.dims(), a.padding)?;
     let spectrum = stage(
@@ -86,7 +76,11 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
         0,
         || match (engine.backend(), engine.gpu()) {
             (Backend::Gpu, Some(ctx)) => {
-                use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum};
+                use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum, SpectrumSlabs};
+                let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+                if let Some(line) = SpectrumSlabs::new(&ctx.limits, m, limit)?.describe() {
+                    progress.note(&line);
+                }
                 let t_up = std::time::Instant::now();
                 let uploaded = GpuFvrSpectrum::upload(ctx, &spectrum)?;
                 let up = t_up.elapsed().as_secs_f64();
@@ -103,4 +97,68 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
         },
     )?;
     Ok(FvrImage { frame, engine })
+}
+
+/// The view `a` asks for.
+fn view_of(a: &FvrRequest) -> Result<FvrView> {
+    Ok(match &a.view.axis {
+        Some(v) => FvrView::Axis(v.parse()?),
+        None => FvrView::Orbit {
+            azimuth_deg: a.view.azimuth,
+            elevation_deg: a.view.elevation,
+        },
+    })
+}
+
+fn open(a: &FvrRequest) -> Result<Engine> {
+    Engine::open_for(
+        "Fourier volume rendering",
+        a.backend,
+        &[Backend::Cpu, Backend::CpuF32, Backend::Gpu],
+    )
+}
+
+/// `voxlab fvr --dry-run`: the memory plan of [`run`] after reading the volume (for its
+/// size) and checking the options: the host's padded complex f64 spectrum and image;
+/// on the GPU the spectrum's f32 slabs and the slice against the planner's limits, and
+/// how many slabs it is bound in. Nothing is transformed or written.
+///
+/// # Errors
+/// As [`run`] up to the work; [`crate::Error::TooLarge`] for a spectrum that cannot
+/// be bound even split, [`crate::Error::Invalid`] for a padded side the GPU FFT cannot
+/// transform.
+pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    view_of(a)?;
+    let engine = open(a)?;
+    let vol = a.input.load(progress)?;
+    let m = padded_side(vol.dims(), a.padding)? as u64;
+    // The volume (f32), the padded complex f64 spectrum and the f64 image.
+    let host = 4 * vol.dims().iter().product::<usize>() as u64 + 16 * m.pow(3) + 8 * m * m;
+    let (device, split) = match engine.gpu() {
+        Some(ctx) => {
+            use crate::gpu::fvr::SpectrumSlabs;
+            if !m.is_power_of_two() {
+                return Err(crate::Error::invalid(
+                    "--padding",
+                    format!("the padded side {m} is not a power of two, which the GPU FFT needs"),
+                ));
+            }
+            let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+            let slabs = SpectrumSlabs::new(&ctx.limits, m as usize, limit)?;
+            let slab = slabs.depth as u64 * m * m * 8;
+            // The spectrum's slabs, the slice and the FFT's second buffer.
+            let peak = 8 * m.pow(3) + 2 * 8 * m * m;
+            let device = super::plan::DevicePlan::on(ctx, peak, slab.max(8 * m * m));
+            (Some(device), slabs.describe().into_iter().collect())
+        }
+        None => (None, Vec::new()),
+    };
+    Ok(super::plan::MemoryPlan {
+        job: format!("fvr {} (padded {m}³)", a.kernel.name()),
+        backend: engine.describe(),
+        host_bytes: host,
+        device,
+        split,
+        writes: Vec::new(),
+    })
 }

@@ -43,6 +43,11 @@ pub struct FvrArgs {
     /// Write 16-bit PNG.
     #[arg(long)]
     pub sixteen_bit: bool,
+    /// Print the memory plan (host bytes, device bytes against the adapter's limits,
+    /// and the slabs the GPU would bind the spectrum in) after reading the volume, and
+    /// transform and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: FvrArgs) -> Result<ExitCode> {
@@ -55,6 +60,12 @@ pub fn run(a: FvrArgs) -> Result<ExitCode> {
         deapodize: a.deapodize,
         backend: a.backend,
     };
+    if a.dry_run {
+        let mut plan = voxlab::jobs::fvr::plan(&req, &Terminal::lines())?;
+        plan.writes.push(a.out.display().to_string());
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let image = voxlab::jobs::fvr::run(&req, &Terminal::lines())?;
     let frame = &image.frame;
     write_frame(
