@@ -880,7 +880,30 @@ fn a_failing_rank_fails_every_iterating_rank_and_leaves_no_file() {
     );
     let rel = common::max_rel(&read_f32(&dir.join("three.npy")), &want);
     assert!(rel <= FILE_F64_BOUND, "{rel:e}");
-    // An iterative method's dry run is refused, naming the option.
+    // The dry run of an iterative method plans the views the ranks then take.
+    let text = distributed::dry_run(&three, 3, &()).unwrap();
+    for want in [
+        "dry run: reconstruct cgls (3 iterations) on 3 ranks",
+        // A 2-D sinogram is read whole by every rank.
+        "rank 0: views 0..1 (1), reads 2 lines",
+        "rank 1: views 1..2 (1), reads 2 lines",
+        "rank 2: no views (more ranks than views)",
+        // The 16 × 16 image in f64 and three sums.
+        "sends:  2.0 KiB per rank and iteration",
+    ] {
+        assert!(text.contains(want), "no '{want}' in:\n{text}");
+    }
+    for (r, rep) in d.ranks.iter().enumerate() {
+        assert_eq!(rep.views, [Some(0..1), Some(1..2), None][r]);
+        assert_eq!(rep.lines_read, [2, 2, 0][r]);
+        // Every iteration's all-reduce, besides the set-up's sums and the reports.
+        assert!(
+            rep.bytes_sent >= 3 * (16 * 16 * 8 + 24),
+            "{}",
+            rep.bytes_sent
+        );
+    }
+    // (The fbp plan itself names the iterative one.)
     let e = distributed::plan(&few, 3, &()).unwrap_err();
-    assert!(e.to_string().contains("--dry-run"), "{e}");
+    assert!(e.to_string().contains("dry_run"), "{e}");
 }

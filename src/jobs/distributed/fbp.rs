@@ -245,8 +245,8 @@ pub fn plan(
         check_distributed(a)?;
         return Err(Error::invalid(
             "--dry-run",
-            "--distributed --dry-run plans FBP/FDK only so far (an iterative method's \
-             ranks each hold the whole grid, several copies of it while they sum)",
+            "an iterative method's ranks cut the views, not the grid: plan them with \
+             jobs::distributed::dry_run (what the command line calls)",
         ));
     }
     let (whole, g, grid, slabs) = planned(a, ranks, progress)?;

@@ -295,3 +295,145 @@ impl Distributed {
         s
     }
 }
+
+/// What SIRT or CGLS on `ranks` ranks would do ([`plan`]): each rank's views, what it
+/// reads and holds, and what it sends.
+#[derive(Clone, Debug)]
+pub struct ViewsPlan {
+    pub grid: Grid,
+    /// `sirt` or `cgls`.
+    pub method: String,
+    pub iterations: usize,
+    /// Each rank's views (`None`: more ranks than views).
+    pub views: Vec<Option<Range<usize>>>,
+    /// Detector lines per view, and of the whole stack.
+    pub rows: usize,
+    pub total_lines: usize,
+    /// Whether every rank reads the whole stack (not a 3-D C-order `.npy`).
+    pub reads_whole: bool,
+    /// Each rank's large host arrays at their peak (bytes): its projections (f64,
+    /// read, and their residual), the image and the solver's vectors (four, f64, as
+    /// the single-process plan counts them), and the all-reduce's copies of the
+    /// partial image (one per rank, f64).
+    pub host_bytes: Vec<u64>,
+    /// Bytes each rank sends per iteration: its partial image and its sums, f64.
+    pub bytes_per_iteration: u64,
+    pub out: std::path::PathBuf,
+    pub out_bytes: u64,
+}
+
+impl ViewsPlan {
+    /// The plan as text, one rank per line.
+    pub fn describe(&self) -> String {
+        use crate::gpu::plan::human_bytes;
+        let d = self.grid.dims;
+        let ranks = self.views.len();
+        let mut s = format!(
+            "dry run: reconstruct {} ({} iterations) on {ranks} ranks (nothing is computed or \
+             written)\n\
+             grid:   {}×{}×{}, whole on every rank; the views cut among the ranks, their \
+             backprojections summed every iteration; the stack holds {} detector lines{}\n",
+            self.method,
+            self.iterations,
+            d[0],
+            d[1],
+            d[2],
+            self.total_lines,
+            if self.reads_whole {
+                " (read whole by every rank: not a 3-D C-order .npy)"
+            } else {
+                ""
+            }
+        );
+        for (r, (views, host)) in self.views.iter().zip(&self.host_bytes).enumerate() {
+            let host = human_bytes(*host);
+            match views {
+                Some(v) => {
+                    let lines = if self.reads_whole {
+                        self.total_lines
+                    } else {
+                        v.len() * self.rows
+                    };
+                    s += &format!(
+                        "rank {r}: views {}..{} ({}), reads {lines} lines, host {host} at \
+                         the peak\n",
+                        v.start,
+                        v.end,
+                        v.len()
+                    );
+                }
+                None => s += &format!("rank {r}: no views (more ranks than views), host {host}\n"),
+            }
+        }
+        s += &format!(
+            "sends:  {} per rank and iteration ({} in {} iterations)\n\
+             would write: {} ({} bytes)\n",
+            human_bytes(self.bytes_per_iteration),
+            human_bytes(self.bytes_per_iteration * self.iterations as u64),
+            self.iterations,
+            self.out.display(),
+            self.out_bytes
+        );
+        s
+    }
+}
+
+/// `voxlab reconstruct --distributed --dry-run --ranks N` for SIRT and CGLS: how [`run`]
+/// on `ranks` ranks would cut the views and what each rank would read, hold and send,
+/// after reading the input's header and geometry (no MPI needed), computing and
+/// writing nothing.
+///
+/// # Errors
+/// As [`run`] up to the work.
+pub(super) fn plan(
+    a: &ReconstructRequest,
+    ranks: usize,
+    progress: &dyn Progress,
+) -> Result<ViewsPlan> {
+    let (whole, g, grid) = input_geometry(a, progress)?;
+    let method = a.method.iterative().expect("an iterative method");
+    let opts = iterative_options(a, method, g.n_angles())?;
+    if ranks == 0 {
+        return Err(crate::Error::invalid(
+            "ranks",
+            "a distributed job needs at least one",
+        ));
+    }
+    let views = runs(g.n_angles(), ranks);
+    let voxels = grid.dims.iter().product::<usize>() as u64;
+    let per_view = (g.rows * g.cols) as u64;
+    let host_bytes = views
+        .iter()
+        .map(|v| {
+            let rays = v.as_ref().map_or(0, |v| v.len() as u64) * per_view;
+            // A stack read whole is held whole while the rank keeps its views.
+            let read = if whole.is_some() {
+                g.n_angles() as u64 * per_view * 8
+            } else {
+                0
+            };
+            read + 2 * rays * 8
+                + 4 * voxels * 8
+                + if ranks > 1 {
+                    ranks as u64 * voxels * 8
+                } else {
+                    0
+                }
+        })
+        .collect();
+    let shape = crate::jobs::reconstruct::npy_shape(grid.dims);
+    Ok(ViewsPlan {
+        method: a.method.name().to_string(),
+        iterations: opts.iterations,
+        views,
+        rows: g.rows,
+        total_lines: g.n_angles() * g.rows,
+        reads_whole: whole.is_some(),
+        host_bytes,
+        // The partial image and up to three sums over rays, f64, to every other rank.
+        bytes_per_iteration: if ranks > 1 { voxels * 8 + 24 } else { 0 },
+        out: a.out.clone().expect("checked by check_distributed"),
+        out_bytes: crate::io::npy::npy_f32_header(&shape).len() as u64 + 4 * voxels,
+        grid,
+    })
+}

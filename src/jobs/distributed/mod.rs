@@ -23,6 +23,8 @@
 //! rank after the phase it happened in (every phase ends with an agreement,
 //! [`agree`]), with the lowest failing rank's message; no file is left behind.
 //!
+//! `--dry-run --ranks N` ([`dry_run`]) prints either cut without MPI.
+//!
 //! Not distributed yet: OS-SART and TV, `--init fbp` and `--convergence` of the
 //! iterative methods, the GPU backend, `--truth`.
 
@@ -35,10 +37,25 @@ pub use common::mpi;
 pub(crate) use common::Counted;
 pub use common::{agree, Comm, Distributed, RankReport, Solo};
 pub use fbp::{plan, region_lines, slab_plan, DistributedPlan, SlabPlan};
+pub use iterative::ViewsPlan;
 
 use super::reconstruct::ReconstructRequest;
 use super::Progress;
 use crate::error::Result;
+
+/// What `voxlab reconstruct --distributed --dry-run --ranks N` prints: the slab plan
+/// of FBP/FDK ([`plan`]) or the view plan of SIRT and CGLS ([`ViewsPlan`]), after
+/// reading the input's header and geometry, computing and writing nothing.
+///
+/// # Errors
+/// As [`run`] up to the work.
+pub fn dry_run(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) -> Result<String> {
+    if a.method.iterative().is_some() {
+        Ok(iterative::plan(a, ranks, progress)?.describe())
+    } else {
+        Ok(plan(a, ranks, progress)?.describe())
+    }
+}
 
 /// Reconstructs on every rank of `comm` and writes one `.npy` file (module docs):
 /// FBP/FDK in slabs, SIRT and CGLS with the views cut among the ranks. Every rank calls

@@ -179,8 +179,10 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
                 "--distributed --dry-run plans for a number of ranks: give --ranks N",
             ));
         };
-        let plan = voxlab::jobs::distributed::plan(&req, ranks, &Terminal::bars())?;
-        print!("{}", plan.describe());
+        print!(
+            "{}",
+            voxlab::jobs::distributed::dry_run(&req, ranks, &Terminal::bars())?
+        );
         return Ok(ExitCode::SUCCESS);
     }
     if a.distributed {
