@@ -296,7 +296,7 @@ impl Distributed {
     }
 }
 
-/// What SIRT or CGLS on `ranks` ranks would do ([`plan`]): each rank's views, what it
+/// What SIRT or CGLS on `ranks` ranks would do ([`super::dry_run`]): each rank's views, what it
 /// reads and holds, and what it sends.
 #[derive(Clone, Debug)]
 pub struct ViewsPlan {
