@@ -252,3 +252,38 @@ fn a_gpu_fft_past_a_lowered_binding_is_split_and_gives_the_same_numbers() {
         .collect();
     assert_eq!(how, want);
 }
+
+/// `--dry-run` prints each shape's plan (and the split a lowered binding forces) and
+/// transforms and writes nothing.
+#[test]
+fn fft_dry_run_prints_each_shapes_plan_and_writes_nothing() {
+    if common::gpu("fft_dry_run_prints_each_shapes_plan_and_writes_nothing").is_none() {
+        return;
+    }
+    let json = scratch("cli-fft-dry-run").join("never.json");
+    let args = [
+        "fft",
+        "64x32",
+        "12",
+        "--backend",
+        "gpu",
+        "--json",
+        s(&json),
+        "--dry-run",
+    ];
+    let o = common::voxlab_with_binding(&args, Some("4KiB"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    for want in [
+        "dry run: fft 64x32 on gpu",
+        // 64 × 32 complex f32: 16 KiB in 4 KiB slabs, two ping-pong buffers of one.
+        "split:  FFT in 4 slabs along axis 1 (axis 0's lines), then 4 slabs along axis 0",
+        "the largest buffer 4.0 KiB",
+        "dry run: fft 12 on gpu",
+        "split:  GPU: not run (an axis is not a power of two)",
+    ] {
+        assert!(text.contains(want), "no '{want}' in:\n{text}");
+    }
+    assert!(!text.contains("rel L2"), "{text}");
+    assert!(!json.exists());
+}

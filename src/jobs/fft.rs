@@ -479,6 +479,73 @@ fn dft_1d(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
     crate::cpu::dft::dft_1d(line, dir, Normalization::None)
 }
 
+/// `voxlab fft --dry-run`: the memory plan of [`run`] for each shape, computing
+/// nothing: the host's arrays (the input in f64 and f32, the reference, every
+/// backend's output), and on the GPU the device's two ping-pong buffers of the whole
+/// array or of its largest slab against the planner's limits, with the split
+/// ([`crate::gpu::fft::split_plan`]).
+///
+/// # Errors
+/// [`Error::TooLarge`] for a GPU transform that cannot be split to fit (a 1-D array
+/// past one binding).
+pub fn plan(
+    shapes: &[Vec<usize>],
+    backends: BackendSet,
+    gpu: Option<&GpuContext>,
+) -> Result<Vec<super::plan::MemoryPlan>> {
+    shapes
+        .iter()
+        .map(|shape| {
+            let n: u64 = shape.iter().map(|&a| a as u64).product();
+            let exact = n as f64 * shape.iter().sum::<usize>() as f64 <= EXACT_WORK_LIMIT;
+            let ctx = gpu.filter(|_| backends.gpu());
+            // The input (f64, f32), the f64 FFT, the reference DFT, the f32 output and
+            // the GPU's.
+            let host = 16 * n + 8 * n + 16 * n + if exact { 16 * n } else { 0 } + 16 * n;
+            let name = shape
+                .iter()
+                .map(|a| a.to_string())
+                .collect::<Vec<_>>()
+                .join("x");
+            let (device, split) = match ctx {
+                Some(ctx) if shape.iter().all(|a| a.is_power_of_two()) => {
+                    let (piece, split) = match crate::gpu::fft::split_plan(ctx, shape)? {
+                        None => (8 * n, Vec::new()),
+                        Some(p) => {
+                            let inner: u64 = shape[2..].iter().map(|&a| a as u64).product();
+                            let (n0, n1) = (shape[0] as u64, shape[1] as u64);
+                            let first = n0 * p.axis0_lines.per_piece as u64 * inner * 8;
+                            let second = p.other_axes.per_piece as u64 * n1 * inner * 8;
+                            (first.max(second), vec![p.describe()])
+                        }
+                    };
+                    // Two ping-pong buffers of the piece, and the twiddle tables.
+                    let twiddles: u64 = shape.iter().map(|&a| 8 * a as u64).sum();
+                    let device = super::plan::DevicePlan::on(ctx, 2 * piece + twiddles, piece);
+                    (Some(device), split)
+                }
+                Some(_) => (
+                    None,
+                    vec!["GPU: not run (an axis is not a power of two)".to_string()],
+                ),
+                None => (None, Vec::new()),
+            };
+            Ok(super::plan::MemoryPlan {
+                job: format!("fft {name}"),
+                backend: match ctx {
+                    Some(c) if backends.cpu() => format!("cpu and gpu ({})", c.summary.name),
+                    Some(c) => format!("gpu ({})", c.summary.name),
+                    None => "cpu".to_string(),
+                },
+                host_bytes: host,
+                device,
+                split,
+                writes: Vec::new(),
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

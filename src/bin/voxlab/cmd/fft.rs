@@ -24,6 +24,11 @@ pub struct FftArgs {
     /// Also write every number to this JSON file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Print each shape's memory plan (host bytes, device bytes against the adapter's
+    /// limits, and the slabs a GPU transform past one binding would use) and transform
+    /// nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: FftArgs) -> Result<ExitCode> {
@@ -41,6 +46,14 @@ pub fn run(a: FftArgs) -> Result<ExitCode> {
     let (ctx, line) = fft::open(a.backend)?;
     if let Some(line) = line {
         println!("{line}");
+    }
+    if a.dry_run {
+        for mut plan in fft::plan(&shapes, a.backend, ctx)? {
+            plan.writes
+                .extend(a.json.iter().map(|j| j.display().to_string()));
+            print!("{}", plan.describe());
+        }
+        return Ok(ExitCode::SUCCESS);
     }
     println!(
         "forward, unnormalised; {} timed run(s) after 1 warm-up; {} CPU threads",
