@@ -907,3 +907,37 @@ fn a_failing_rank_fails_every_iterating_rank_and_leaves_no_file() {
     let e = distributed::plan(&few, 3, &()).unwrap_err();
     assert!(e.to_string().contains("dry_run"), "{e}");
 }
+
+/// The all-reduce goes a chunk at a time (holding every rank's copy of one chunk, not
+/// of the whole image): every chunk size gives the same bits, on every rank, as adding
+/// the ranks' values in rank order (rank 0's first, so a −0 stays −0).
+#[test]
+fn the_chunked_all_reduce_adds_in_rank_order_whatever_the_chunk() {
+    let n = 23;
+    let value = |rank: usize, i: usize| -> f64 {
+        if i == 5 {
+            -0.0
+        } else {
+            ((rank * 7919 + i * 104_729) % 1000) as f64 * 0.1 - 37.3 + 1e-9 * i as f64
+        }
+    };
+    let want: Vec<f64> = (0..n)
+        .map(|i| (1..3).fold(value(0, i), |s, r| s + value(r, i)))
+        .collect();
+    assert!(want[5].is_sign_negative() && want[5] == 0.0);
+    for chunk in [1, 3, 7, n, distributed::REDUCE_CHUNK] {
+        let got = on_thread_ranks(3, |comm| {
+            let mut v: Vec<f64> = (0..n).map(|i| value(comm.rank(), i)).collect();
+            if chunk == distributed::REDUCE_CHUNK {
+                comm.all_reduce_sum(&mut v);
+            } else {
+                distributed::all_reduce_sum_in_chunks(comm, &mut v, chunk);
+            }
+            v
+        });
+        for v in got {
+            let same = v.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "chunk {chunk}: {v:?}");
+        }
+    }
+}

@@ -32,23 +32,12 @@ pub trait Comm {
     /// Every rank's `values` summed elementwise, on every rank (replacing this rank's;
     /// each rank gives as many). The default adds the [`Comm::all_gather`]ed buffers in
     /// rank order — rank 0's, plus rank 1's, plus … — so every rank gets the same bits,
-    /// and the same number of ranks gives the same bits from the same inputs; it holds
-    /// `size()` copies of the buffer while it adds. An override must give every rank
-    /// the same bits too.
+    /// and the same number of ranks gives the same bits from the same inputs. It goes
+    /// [`REDUCE_CHUNK`] values at a time ([`all_reduce_sum_in_chunks`]), so it holds
+    /// `size()` copies of one chunk, not of the buffer, while it adds. An override must
+    /// give every rank the same bits too.
     fn all_reduce_sum(&self, values: &mut [f64]) {
-        use rayon::prelude::*;
-        let n = values.len();
-        let size = self.size();
-        let all = self.all_gather(values);
-        assert_eq!(all.len(), n * size, "all_reduce_sum: one buffer per rank");
-        values.par_iter_mut().enumerate().for_each(|(i, v)| {
-            // Rank 0's value first (not 0 + it: that would turn −0 into +0).
-            let mut s = all[i];
-            for r in 1..size {
-                s += all[r * n + i];
-            }
-            *v = s;
-        });
+        all_reduce_sum_in_chunks(self, values, REDUCE_CHUNK);
     }
     /// Personalised exchange: `messages[r]` goes to rank `r` (one per rank, this
     /// rank's own included); returns what every rank sent this one, in rank order.
@@ -229,6 +218,31 @@ pub(super) fn runs(n: usize, ranks: usize) -> Vec<Option<Range<usize>>> {
     (0..ranks)
         .map(|r| (r < m).then(|| r * n / m..(r + 1) * n / m))
         .collect()
+}
+
+/// Values per all-gather of [`Comm::all_reduce_sum`] (8 MiB of f64).
+pub const REDUCE_CHUNK: usize = 1 << 20;
+
+/// [`Comm::all_reduce_sum`]'s default, `chunk` values at a time: each chunk is
+/// all-gathered and added in rank order, so the sums are the same bits whatever the
+/// chunk (every value is summed alone). A collective: every rank calls it with as many
+/// values and the same `chunk`.
+pub fn all_reduce_sum_in_chunks<C: Comm + ?Sized>(comm: &C, values: &mut [f64], chunk: usize) {
+    use rayon::prelude::*;
+    let size = comm.size();
+    for part in values.chunks_mut(chunk.max(1)) {
+        let n = part.len();
+        let all = comm.all_gather(part);
+        assert_eq!(all.len(), n * size, "all_reduce_sum: one buffer per rank");
+        part.par_iter_mut().enumerate().for_each(|(i, v)| {
+            // Rank 0's value first (not 0 + it: that would turn −0 into +0).
+            let mut s = all[i];
+            for r in 1..size {
+                s += all[r * n + i];
+            }
+            *v = s;
+        });
+    }
 }
 
 /// What one rank did.

@@ -313,8 +313,8 @@ pub struct ViewsPlan {
     pub reads_whole: bool,
     /// Each rank's large host arrays at their peak (bytes): its projections (f64,
     /// read, and their residual), the image and the solver's vectors (four, f64, as
-    /// the single-process plan counts them), and the all-reduce's copies of the
-    /// partial image (one per rank, f64).
+    /// the single-process plan counts them), and the all-reduce's copies of one chunk
+    /// of the partial image (one per rank, f64, [`super::REDUCE_CHUNK`] values).
     pub host_bytes: Vec<u64>,
     /// Bytes each rank sends per iteration: its partial image and its sums, f64.
     pub bytes_per_iteration: u64,
@@ -412,13 +412,13 @@ pub(super) fn plan(
             } else {
                 0
             };
-            read + 2 * rays * 8
-                + 4 * voxels * 8
-                + if ranks > 1 {
-                    ranks as u64 * voxels * 8
-                } else {
-                    0
-                }
+            // The all-reduce holds every rank's copy of one chunk.
+            let gathered = if ranks > 1 {
+                ranks as u64 * voxels.min(super::common::REDUCE_CHUNK as u64) * 8
+            } else {
+                0
+            };
+            read + 2 * rays * 8 + 4 * voxels * 8 + gathered
         })
         .collect();
     let shape = crate::jobs::reconstruct::npy_shape(grid.dims);

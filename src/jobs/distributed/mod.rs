@@ -35,7 +35,9 @@ mod iterative;
 #[cfg(feature = "mpi")]
 pub use common::mpi;
 pub(crate) use common::Counted;
-pub use common::{agree, Comm, Distributed, RankReport, Solo};
+pub use common::{
+    agree, all_reduce_sum_in_chunks, Comm, Distributed, RankReport, Solo, REDUCE_CHUNK,
+};
 pub use fbp::{plan, region_lines, slab_plan, DistributedPlan, SlabPlan};
 pub use iterative::ViewsPlan;
 
