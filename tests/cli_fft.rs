@@ -280,7 +280,7 @@ fn fft_dry_run_prints_each_shapes_plan_and_writes_nothing() {
         "split:  FFT in 4 slabs along axis 1 (axis 0's lines), then 4 slabs along axis 0",
         "the largest buffer 4.0 KiB",
         "dry run: fft 12 on gpu",
-        "split:  GPU: not run (an axis is not a power of two)",
+        "split:  GPU: skipped: invalid fft axis 0: length 12 is not a power of two",
     ] {
         assert!(text.contains(want), "no '{want}' in:\n{text}");
     }

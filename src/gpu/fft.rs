@@ -810,6 +810,14 @@ fn validate(ctx: &GpuContext, len: usize, shape: &[usize], axes: &[usize]) -> Re
             ),
         ));
     }
+    check_lengths(shape, axes)
+}
+
+/// Whether the GPU FFT takes the lengths of `axes` of `shape`: powers of two only.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the first axis that is not one.
+pub fn check_lengths(shape: &[usize], axes: &[usize]) -> Result<()> {
     for &axis in axes {
         let n = shape[axis];
         if n > 0 && !n.is_power_of_two() {

@@ -326,6 +326,25 @@ pub struct FvrTimings {
     pub total: f64,
 }
 
+/// Whether the GPU renders an `m³` spectrum: its inverse 2-D FFT needs `m` a power of
+/// two.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the cube side, with how to choose one.
+pub fn check_side(m: usize) -> Result<()> {
+    if !m.is_power_of_two() {
+        return Err(Error::invalid(
+            "FVR cube side",
+            format!(
+                "{m} is not a power of two, which the GPU FFT needs: choose --padding and \
+                 the volume size so that padding × max(dims) is one (e.g. a 32³ volume with padding 2: 64), \
+                 or use --backend cpu"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// [`crate::cpu::fvr::fvr_project`] on the GPU: the same image within the f32
 /// tolerance `tests/gpu_fvr.rs` states.
 ///
@@ -357,16 +376,7 @@ pub fn fvr_project_timed(
     let (code, radius) = kernel_code(kernel)?;
     let cpu = spectrum.cpu;
     let m = cpu.side();
-    if !m.is_power_of_two() {
-        return Err(Error::invalid(
-            "FVR cube side",
-            format!(
-                "{m} is not a power of two, which the GPU FFT needs: choose --padding and \
-                 the volume size so that padding × max(dims) is one (e.g. a 32³ volume with padding 2: 64), \
-                 or use --backend cpu"
-            ),
-        ));
-    }
+    check_side(m)?;
     let plan = SlicePlan::new(cpu, view)?;
     let g = &plan.geometry;
     let params = FvrParams {

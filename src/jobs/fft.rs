@@ -507,8 +507,9 @@ pub fn plan(
                 .map(|a| a.to_string())
                 .collect::<Vec<_>>()
                 .join("x");
-            let (device, split) = match ctx {
-                Some(ctx) if shape.iter().all(|a| a.is_power_of_two()) => {
+            let axes: Vec<usize> = (0..shape.len()).collect();
+            let (device, split) = match (ctx, crate::gpu::fft::check_lengths(shape, &axes)) {
+                (Some(ctx), Ok(())) => {
                     let (piece, split) = match crate::gpu::fft::split_plan(ctx, shape)? {
                         None => (8 * n, Vec::new()),
                         Some(p) => {
@@ -524,11 +525,9 @@ pub fn plan(
                     let device = super::plan::DevicePlan::on(ctx, 2 * piece + twiddles, piece);
                     (Some(device), split)
                 }
-                Some(_) => (
-                    None,
-                    vec!["GPU: not run (an axis is not a power of two)".to_string()],
-                ),
-                None => (None, Vec::new()),
+                // As run reports it: the GPU case skipped, saying why.
+                (Some(_), Err(e)) => (None, vec![format!("GPU: skipped: {e}")]),
+                (None, _) => (None, Vec::new()),
             };
             Ok(super::plan::MemoryPlan {
                 job: format!("fft {name}"),

@@ -136,13 +136,8 @@ pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::Memo
     let host = 4 * vol.dims().iter().product::<usize>() as u64 + 16 * m.pow(3) + 8 * m * m;
     let (device, split) = match engine.gpu() {
         Some(ctx) => {
-            use crate::gpu::fvr::SpectrumSlabs;
-            if !m.is_power_of_two() {
-                return Err(crate::Error::invalid(
-                    "--padding",
-                    format!("the padded side {m} is not a power of two, which the GPU FFT needs"),
-                ));
-            }
+            use crate::gpu::fvr::{check_side, SpectrumSlabs};
+            check_side(m as usize)?;
             let limit = crate::gpu::plan::binding_limit(&ctx.limits);
             let slabs = SpectrumSlabs::new(&ctx.limits, m as usize, limit)?;
             let slab = slabs.depth as u64 * m * m * 8;
