@@ -99,8 +99,8 @@ fn fft_falls_back_to_the_f64_fft_as_reference_for_large_shapes() {
     assert_eq!(cases[0]["rel_l2"], 0.0);
 }
 
-/// Both GPU variants, checked against the exact DFT; a non-power-of-two shape is
-/// skipped on the GPU, not failed.
+/// Both GPU variants, checked against the exact DFT, on a power-of-two shape and on a
+/// length that runs Bluestein's algorithm.
 #[test]
 fn fft_checks_the_gpu_variants() {
     if common::gpu("fft_checks_the_gpu_variants").is_none() {
@@ -125,7 +125,7 @@ fn fft_checks_the_gpu_variants() {
             "gpu-split-stream"
         ]
     );
-    for c in &cases[..2] {
+    for c in cases {
         assert_eq!(c["reference"], "exact-dft");
         assert!(c["rel_l2"].as_f64().unwrap() < 1e-6, "{c}");
         assert!(c["kernel_median_s"].as_f64().unwrap() > 0.0, "{c}");
@@ -145,12 +145,11 @@ fn fft_checks_the_gpu_variants() {
             assert_eq!(cases[0]["of_peak_bandwidth"].as_f64(), Some(want));
         }
     }
-    for c in &cases[2..] {
-        assert!(
-            c["skipped"].as_str().unwrap().contains("power of two"),
-            "{c}"
-        );
-    }
+    // Length 12 runs Bluestein's algorithm with M = 32: a load, the forward passes, a
+    // multiplication, the inverse passes and a store; Stockham does each length-32
+    // FFT in one dispatch, the split stream in 4.
+    assert_eq!(cases[2]["dispatches"], 5);
+    assert_eq!(cases[3]["dispatches"], 11);
 }
 
 /// Without a usable adapter, `--backend all` says so and runs the CPU; `--backend gpu`
@@ -280,7 +279,10 @@ fn fft_dry_run_prints_each_shapes_plan_and_writes_nothing() {
         "split:  FFT in 4 slabs along axis 1 (axis 0's lines), then 4 slabs along axis 0",
         "the largest buffer 4.0 KiB",
         "dry run: fft 12 on gpu",
-        "split:  GPU: skipped: invalid fft axis 0: length 12 is not a power of two",
+        // Bluestein's two work buffers of M = 32 values (256 bytes each) next to the
+        // two data buffers of 96 bytes, and the tables: the chirp (12 values), the
+        // kernel and the inner twiddles both ways (32 each), 8 bytes a value.
+        "device: 1.5 KiB at once, the largest buffer 256 B",
     ] {
         assert!(text.contains(want), "no '{want}' in:\n{text}");
     }

@@ -76,11 +76,17 @@ fn to_f64(x: &[Complex<f32>]) -> Vec<C> {
 // Without a device
 // ---------------------------------------------------------------------------------
 
+/// Powers of two run the variant's passes; every other length runs Bluestein's
+/// algorithm through the twins of `shaders/fft_bluestein.wgsl` and the same passes of
+/// length `M` (1000 and 1025 take `M` past `LOCAL_MAX_N`).
+const TWIN_LENGTHS: [usize; 21] = [
+    1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 3, 5, 6, 7, 12, 17, 100, 127, 1000, 1025,
+];
+
 #[test]
 fn cpu_twins_match_the_exact_dft() {
     let mut rng = common::Rng(0x5eed_f0f7);
-    for log2n in 0..=10 {
-        let n = 1usize << log2n;
+    for n in TWIN_LENGTHS {
         let x = random_complex(&mut rng, n);
         for dir in [Direction::Forward, Direction::Inverse] {
             let want = dft_1d(&x, dir, Normalization::None);
@@ -126,6 +132,118 @@ fn pass_plans_have_the_promised_lengths() {
         assert_eq!(ss(l).len() as u32, l - 1, "split stream, log2 N = {l}");
         assert_eq!(st(l).len() as u32, l.div_ceil(2), "Stockham, log2 N = {l}");
     }
+    // Bluestein: M is the least power of two ≥ 2n − 1; a load, the forward passes of
+    // length M, a multiplication, the inverse passes and a store.
+    use fft::FftStep::*;
+    assert_eq!(fft::bluestein_length(16), None);
+    assert_eq!(fft::bluestein_length(1), None);
+    assert_eq!(fft::bluestein_length(3), Some(8));
+    assert_eq!(fft::bluestein_length(12), Some(32));
+    assert_eq!(fft::bluestein_length(17), Some(64));
+    assert_eq!(fft::bluestein_length(1000), Some(2048));
+    assert_eq!(
+        fft::axis_plan(GpuFftVariant::Stockham, 100),
+        [
+            BluesteinLoad,
+            Inner {
+                pass: StockhamLocal,
+                inverse: false
+            },
+            BluesteinMultiply,
+            Inner {
+                pass: StockhamLocal,
+                inverse: true
+            },
+            BluesteinStore
+        ]
+    );
+    assert_eq!(
+        fft::axis_plan(GpuFftVariant::StockhamGlobal, 12),
+        [
+            BluesteinLoad,
+            Inner {
+                pass: Radix2 { span: 1 },
+                inverse: false
+            },
+            Inner {
+                pass: Radix4 { span: 2 },
+                inverse: false
+            },
+            Inner {
+                pass: Radix4 { span: 8 },
+                inverse: false
+            },
+            BluesteinMultiply,
+            Inner {
+                pass: Radix2 { span: 1 },
+                inverse: true
+            },
+            Inner {
+                pass: Radix4 { span: 2 },
+                inverse: true
+            },
+            Inner {
+                pass: Radix4 { span: 8 },
+                inverse: true
+            },
+            BluesteinStore
+        ]
+    );
+    for variant in GpuFftVariant::ALL {
+        for n in [3usize, 5, 12, 100, 1000, 1025] {
+            let m = fft::bluestein_length(n).unwrap();
+            assert!(
+                m >= 2 * n - 1 && m < 4 * n && m.is_power_of_two(),
+                "n = {n}"
+            );
+            let inner = fft::plan(variant, m.trailing_zeros()).len();
+            assert_eq!(
+                fft::axis_plan(variant, n).len(),
+                3 + 2 * inner,
+                "{variant:?} n = {n}"
+            );
+        }
+        assert_eq!(
+            fft::axis_plan(variant, 64),
+            fft::plan(variant, 6)
+                .into_iter()
+                .map(Pass)
+                .collect::<Vec<_>>()
+        );
+    }
+}
+
+/// The chirp is exact where it must be (c_0 = 1, and c_j = c_{j+2n}'s period folded
+/// into j² mod 2n), and Bluestein's kernel spectrum is the DFT of the wrapped
+/// conjugate chirp divided by M.
+#[test]
+fn bluestein_tables_are_the_chirp_and_its_kernel() {
+    for n in [3usize, 7, 12, 100] {
+        for dir in [Direction::Forward, Direction::Inverse] {
+            let c = fft::bluestein_chirp(n, dir);
+            assert_eq!(c[0], C::new(1.0, 0.0));
+            let sign = if dir == Direction::Forward { -1.0 } else { 1.0 };
+            for (j, v) in c.iter().enumerate() {
+                let angle = sign * std::f64::consts::PI * (j * j) as f64 / n as f64;
+                assert!(
+                    (v - C::from_polar(1.0, angle)).norm() < 1e-12,
+                    "n {n} j {j}"
+                );
+            }
+            let m = fft::bluestein_length(n).unwrap();
+            let mut b = vec![C::new(0.0, 0.0); m];
+            for j in 0..n {
+                b[j] = c[j].conj();
+                b[(m - j) % m] = c[j].conj();
+            }
+            let want: Vec<C> = dft_1d(&b, Direction::Forward, Normalization::None)
+                .iter()
+                .map(|v| v / m as f64)
+                .collect();
+            let got = fft::bluestein_kernel(n, m, dir);
+            assert!(rel_l2(&got, &want) < 1e-14, "n {n} {dir:?}");
+        }
+    }
 }
 
 #[test]
@@ -150,17 +268,21 @@ fn fft_params_layout_agrees() {
 }
 
 #[test]
-fn both_shaders_validate() {
-    for variant in GpuFftVariant::ALL {
-        let src = variant.shader_source();
+fn every_fft_shader_validates() {
+    let bluestein = voxlab::gpu::shaders::resolve("fft_bluestein");
+    let sources = GpuFftVariant::ALL
+        .map(|v| (format!("{v:?}"), v.shader_source()))
+        .into_iter()
+        .chain([("Bluestein".to_string(), bluestein)]);
+    for (variant, src) in sources {
         let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{variant:?}: {}", e.emit_to_string(&src)));
+            .unwrap_or_else(|e| panic!("{variant}: {}", e.emit_to_string(&src)));
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
             naga::valid::Capabilities::all(),
         )
         .validate(&module)
-        .unwrap_or_else(|e| panic!("{variant:?}: {e:?}"));
+        .unwrap_or_else(|e| panic!("{variant}: {e:?}"));
     }
 }
 
@@ -262,6 +384,14 @@ parity_cases! {
     nd_256x128: Case::Nd(&[256, 128]);
     nd_32x32x32: Case::Nd(&[32, 32, 32]);
     nd_4x1x8: Case::Nd(&[4, 1, 8]);
+    bluestein_lines_3: Case::Lines { n: 3, lines: 7 };
+    bluestein_lines_100: Case::Lines { n: 100, lines: 5 };
+    bluestein_lines_1000: Case::Lines { n: 1000, lines: 3 };
+    bluestein_lines_3000: Case::Lines { n: 3000, lines: 2 };
+    bluestein_nd_12x20: Case::Nd(&[12, 20]);
+    bluestein_nd_6x8x10: Case::Nd(&[6, 8, 10]);
+    bluestein_nd_3x5x7: Case::Nd(&[3, 5, 7]);
+    bluestein_nd_17x1x9: Case::Nd(&[17, 1, 9]);
 }
 
 /// A delta at the origin transforms to a constant, exactly: every twiddle that meets a
@@ -291,51 +421,50 @@ fn delta_transforms_to_a_constant() {
     }
 }
 
-/// Lengths the GPU cannot do are typed errors naming the axis and the way out.
+/// A shape that does not describe the data is a typed error; so is a line length that
+/// does not divide it.
 #[test]
-fn non_power_of_two_is_refused() {
-    let Some(ctx) = common::gpu("non_power_of_two_is_refused") else {
+fn mismatched_shapes_are_refused() {
+    let Some(ctx) = common::gpu("mismatched_shapes_are_refused") else {
         return;
     };
     let x = vec![Complex::new(1.0f32, 0.0); 24];
     for variant in GpuFftVariant::ALL {
-        let e = fft::fft_nd(
-            ctx,
-            &x,
-            &[3, 8],
-            Direction::Forward,
-            Normalization::Unitary,
-            variant,
-        )
-        .expect_err("3 is not a power of two");
+        let (dir, norm) = (Direction::Forward, Normalization::Unitary);
+        let e = fft::fft_nd(ctx, &x, &[4, 8], dir, norm, variant)
+            .expect_err("the shape does not fit the data");
         assert!(matches!(e, voxlab::Error::Invalid { .. }), "{e:?}");
-        let msg = e.to_string();
-        assert!(
-            msg.contains("axis 0") && msg.contains("power of two"),
-            "{msg}"
-        );
-        assert!(msg.contains("cpu::fft::fft_nd"), "{msg}");
-        let e = fft::fft_lines(
-            ctx,
-            &x,
-            12,
-            Direction::Forward,
-            Normalization::Unitary,
-            variant,
-        )
-        .expect_err("12 is not a power of two");
-        assert!(e.to_string().contains("axis 1"), "{e}");
-        let e = fft::fft_nd(
-            ctx,
-            &x,
-            &[4, 8],
-            Direction::Forward,
-            Normalization::Unitary,
-            variant,
-        )
-        .expect_err("the shape does not fit the data");
-        assert!(matches!(e, voxlab::Error::Invalid { .. }), "{e:?}");
+        assert!(e.to_string().contains("does not describe 24 values"), "{e}");
+        let e = fft::fft_lines(ctx, &x, 5, dir, norm, variant).expect_err("5 does not divide 24");
+        assert!(e.to_string().contains("does not divide"), "{e}");
     }
+}
+
+/// A transform records one dispatch per step of every axis's plan: a power-of-two
+/// axis its passes, any other axis Bluestein's load, passes, multiplication, passes
+/// and store; `fft_nd_timed` reports that count.
+#[test]
+fn dispatches_follow_the_axis_plans() {
+    let Some(ctx) = common::gpu("dispatches_follow_the_axis_plans") else {
+        return;
+    };
+    let (dir, norm) = (Direction::Forward, Normalization::Unitary);
+    for variant in GpuFftVariant::ALL {
+        for shape in [&[12usize, 16][..], &[64], &[5, 6, 7], &[1, 3]] {
+            let want: usize = shape
+                .iter()
+                .map(|&n| fft::axis_plan(variant, n).len())
+                .sum();
+            let plan = fft::GpuFftPlan::new(ctx, shape, dir, norm, variant).unwrap();
+            assert_eq!(plan.dispatches(), want, "{variant:?} {shape:?}");
+            let x = vec![Complex::new(1.0f32, 0.0); shape.iter().product()];
+            let t = fft::fft_nd_timed(ctx, &x, shape, dir, norm, variant).unwrap();
+            assert_eq!(t.timings.dispatches, want, "{variant:?} {shape:?}");
+        }
+    }
+    // Stockham with M ≤ LOCAL_MAX_N: five dispatches for a length-12 axis, one for 16.
+    let plan = fft::GpuFftPlan::new(ctx, &[12, 16], dir, norm, GpuFftVariant::Stockham).unwrap();
+    assert_eq!(plan.dispatches(), 6);
 }
 
 /// An array over one storage binding is refused before anything is allocated on the
@@ -518,7 +647,7 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
         return;
     };
     let mut rng = common::Rng(0x2ea1);
-    for n in [1usize, 2, 4, 8, 64, 1024, 4096, 1 << 16] {
+    for n in [1usize, 2, 4, 8, 64, 1024, 4096, 1 << 16, 3, 6, 100, 1000] {
         let a: Vec<f32> = (0..n).map(|_| 2.0 * rng.unit() as f32 - 1.0).collect();
         let b: Vec<f32> = (0..n).map(|_| 2.0 * rng.unit() as f32 - 1.0).collect();
         let (a64, b64): (Vec<f64>, Vec<f64>) = (
@@ -546,8 +675,6 @@ fn two_real_ffts_match_the_cpu_and_the_dft() {
     }
     let e = fft::two_real_ffts(ctx, &[1.0; 4], &[1.0; 8]).unwrap_err();
     assert!(e.to_string().contains("4 and 8"), "{e}");
-    let e = fft::two_real_ffts(ctx, &[1.0; 6], &[1.0; 6]).unwrap_err();
-    assert!(e.to_string().contains("power of two"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------
@@ -610,11 +737,13 @@ large_cases! {
 
 /// Shapes and split plans (slabs along axis 1 for axis 0's lines, slabs along axis 0
 /// for the other axes), remainders included.
-const SPLITS: [(&[usize], usize, usize); 4] = [
+const SPLITS: [(&[usize], usize, usize); 6] = [
     (&[64, 32], 5, 7),
     (&[16, 8, 32], 3, 5),
     (&[8, 64, 4], 64, 1),
     (&[32, 16, 16], 1, 32),
+    (&[12, 20, 6], 7, 5),
+    (&[20, 16, 3], 3, 4),
 ];
 
 #[test]
@@ -665,4 +794,12 @@ fn an_fft_in_slabs_equals_the_unsplit_one_bit_for_bit() {
     // 8 columns of 64 values (512 bytes each) and 16 rows of 32 values (256 bytes).
     assert_eq!((p.axis0_lines.per_piece, p.axis0_lines.count()), (8, 4));
     assert_eq!((p.other_axes.per_piece, p.other_axes.count()), (16, 4));
+    // Bluestein's work lines count: a column of 12 values takes M = 32 on the device
+    // (256 bytes, 16 columns a piece); a row of 20 takes M = 64 (512 bytes, 8 rows).
+    let p = fft::FftSplitPlan::new(&limits, &[12, 20]).unwrap();
+    assert_eq!((p.axis0_lines.per_piece, p.axis0_lines.count()), (16, 2));
+    assert_eq!((p.other_axes.per_piece, p.other_axes.count()), (8, 2));
+    assert_eq!(fft::work_len(&[12, 20], &[0, 1]), 12 * 64);
+    assert_eq!(fft::work_len(&[12, 20], &[0]), 20 * 32);
+    assert_eq!(fft::work_len(&[16, 32], &[0, 1]), 0);
 }

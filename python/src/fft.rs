@@ -46,8 +46,8 @@ fn c2c(
     Ok(data.into_pyarray(py).reshape(shape)?.into_any().unbind())
 }
 
-/// `a` transformed along every axis on the GPU in f32 (power-of-two lengths), times
-/// `scale`; returns complex64.
+/// `a` transformed along every axis on the GPU in f32 (any lengths: Bluestein's algorithm
+/// for those that are not powers of two), times `scale`; returns complex64.
 #[pyfunction]
 fn c2c_gpu(
     py: Python<'_>,

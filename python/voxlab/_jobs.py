@@ -71,7 +71,7 @@ def fvr(
     ``padding``: the zero-padded cube's side over the largest dimension (1: none, the
     image wraps around: ghosting); ``deapodize``: divide by the kernel's spatial
     transfer; ``view`` (``"+z"`` …) or ``azimuth``/``elevation`` (degrees).
-    ``backend``: cpu, cpu-f32, gpu (padded side a power of two)."""
+    ``backend``: cpu, cpu-f32, gpu."""
     req: Dict[str, Any] = {"kernel": kernel, "padding": int(padding),
                            "deapodize": bool(deapodize), "backend": backend}
     _view(req, options)

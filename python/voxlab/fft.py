@@ -13,9 +13,10 @@ Beyond numpy:
 
 - ``backend="gpu"`` on ``fft``, ``ifft``, ``fft2``, ``ifft2``, ``fftn`` and ``ifftn`` runs
   voxlab's GPU FFT (Stockham, float32; the result is complex64) when the transform
-  covers every axis of the array (after ``s``/``n``) and every length is a power of
-  two; otherwise it raises :class:`voxlab.UnsupportedError` saying why. Real
-  transforms run on the CPU only.
+  covers every axis of the array (after ``s``/``n``); otherwise it raises
+  :class:`voxlab.UnsupportedError` saying why. Every length is taken: powers of two
+  directly, other lengths by Bluestein's algorithm on the GPU. Real transforms run on
+  the CPU only.
 - :func:`dft`: the exact O(N²) DFT of the library's oracle (``cpu::dft``), float64.
 
 ``fftshift``, ``ifftshift``, ``fftfreq`` and ``rfftfreq`` are numpy's own (they move and
@@ -154,10 +155,6 @@ def _check_backend(backend):
         raise ValueError(f"backend must be 'cpu' or 'gpu'; got {backend!r}")
 
 
-def _is_pow2(n):
-    return n >= 1 and (n & (n - 1)) == 0
-
-
 def _gpu_fftn(a, s, axes, is_forward, norm):
     """The whole-array transform on the GPU (complex64), or UnsupportedError."""
     nd = a.ndim
@@ -172,11 +169,6 @@ def _gpu_fftn(a, s, axes, is_forward, norm):
     x = a
     for ns, ax in zip(s, norm_axes):
         x = _fit(x, ns, ax)
-    bad = [n for n in x.shape if not _is_pow2(n)]
-    if bad:
-        raise UnsupportedError(
-            f"the GPU FFT takes power-of-two lengths; shape {x.shape} has {bad} "
-            "(use backend='cpu')")
     dir_norm = norm if is_forward else _swap_direction(norm)
     fct = _factor(dir_norm, int(np.prod(x.shape)))
     x = np.ascontiguousarray(x, dtype=np.complex128)

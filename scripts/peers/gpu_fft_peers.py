@@ -2,7 +2,7 @@
 """cuFFT (through CuPy) on the sizes of voxlab's FFT suite: complex64, forward.
 
 The GPU peer for `cargo bench --bench fft` / `voxlab fft --backend gpu`: the same
-shapes (2-D 256², 512², 1024²; 3-D 64³, 128³, 256³), the same input (random complex
+shapes (2-D 256², 512², 1024², 1000²; 3-D 64³, 128³, 256³, 100³), the same input (random complex
 values, uniform in [-1, 1) in both parts, unnormalised forward transform over every
 axis), and the same two times:
 
@@ -40,8 +40,10 @@ try:
 except ImportError as e:  # pragma: no cover - depends on the machine
     sys.exit(f"gpu_fft_peers.py needs CuPy and an NVIDIA GPU: {e}")
 
-# voxlab's FFT suite (benches/fft.rs): 2-D and 3-D power-of-two shapes.
-SHAPES = ["256x256", "512x512", "1024x1024", "64x64x64", "128x128x128", "256x256x256"]
+# voxlab's FFT suite (`voxlab bench`, full): 2-D and 3-D power-of-two shapes, and
+# 1000² and 100³, lengths voxlab's GPU FFT takes by Bluestein's algorithm.
+SHAPES = ["256x256", "512x512", "1024x1024", "1000x1000",
+          "64x64x64", "128x128x128", "256x256x256", "100x100x100"]
 
 
 def parse_shape(s):

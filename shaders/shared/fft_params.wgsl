@@ -3,7 +3,8 @@
 // padding; tests/gpu_fft.rs checks the offsets with naga.
 
 struct FftParams {
-    // Length of every line (a power of two) and its base-2 logarithm.
+    // Length of every line (a power of two, except in Bluestein's load and store, where
+    // it is the data's length and log2n is that of span = M) and its base-2 logarithm.
     n: u32,
     log2n: u32,
     // Distance in elements between neighbours of a line: 1 along the last axis, the

@@ -91,7 +91,13 @@ fn flat_complex<T: Copy + Into<f64>>(data: &[Complex<T>]) -> Vec<f64> {
 pub fn cases(suite: Suite) -> Vec<Case> {
     let (sizes2, sizes3, fvr_sizes): (&[usize], &[usize], &[usize]) = match suite {
         Suite::Quick => (&[32], &[16], &[16]),
-        Suite::Full => (&[256, 512, 1024], &[64, 128, 256], &[64, 128, 256]),
+        // 1000² and 100³: lengths that are not powers of two (Bluestein's algorithm
+        // on the GPU, mixed radix in rustfft).
+        Suite::Full => (
+            &[256, 512, 1024, 1000],
+            &[64, 128, 256, 100],
+            &[64, 128, 256],
+        ),
     };
     let mut out = Vec::new();
     for &n in sizes2 {

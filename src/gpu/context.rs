@@ -203,20 +203,24 @@ impl GpuContext {
         format!(
             "adapter:      {}\nbackend:      {}\ntype:         {}{}\ndriver:       {} ({})\n\
              vendor/device: {:#06x}/{:#06x}\n\
-             limits:       3D texture {} per axis, storage binding {} MiB, buffer {} MiB,\n              \
+             limits:       3D texture {} per axis, storage binding {}, buffer {},\n              \
              workgroup {} invocations ({}×{}×{}), {} KiB workgroup memory\n\
              features:     FLOAT32_FILTERABLE {}, TEXTURE_FORMAT_16BIT_NORM {}, TIMESTAMP_QUERY {}",
             s.name,
             s.backend,
             s.device_type,
-            if s.is_cpu() { " (a CPU emulating a GPU)" } else { "" },
+            if s.is_cpu() {
+                " (a CPU emulating a GPU)"
+            } else {
+                ""
+            },
             s.driver,
             s.driver_info,
             s.vendor,
             s.device,
             l.max_texture_dimension_3d,
-            l.max_storage_buffer_binding_size >> 20,
-            l.max_buffer_size >> 20,
+            super::plan::human_bytes(l.max_storage_buffer_binding_size),
+            super::plan::human_bytes(l.max_buffer_size),
             l.max_compute_invocations_per_workgroup,
             l.max_compute_workgroup_size_x,
             l.max_compute_workgroup_size_y,

@@ -1,5 +1,6 @@
-//! The GPU Fourier transform: power-of-two complex FFTs in f32, two algorithms (three
-//! variants) that compute the same thing as [`crate::cpu::dft::dft_nd`] (same
+//! The GPU Fourier transform: complex FFTs of any length in f32, two algorithms (three
+//! variants) for powers of two and Bluestein's algorithm for every other length, that
+//! compute the same thing as [`crate::cpu::dft::dft_nd`] (same
 //! [`Direction`], same [`Normalization`], DC at index 0, row-major arrays with the last
 //! axis fastest). Accuracy and timings measured on lavapipe: `docs/fft.md`.
 //!
@@ -41,12 +42,24 @@
 //! [`stockham_reference`] run the same pass plans on the CPU in f64, so the algorithm
 //! can be checked without a device.
 //!
-//! **Limits.** Power-of-two lengths only: any other length is refused with
-//! [`Error::Invalid`] naming the axis (Bluestein's algorithm, which would reduce other
-//! lengths to powers of two, is out of scope for now: use [`crate::cpu::fft::fft_nd`]).
-//! The whole array must fit one storage binding
-//! (`max_storage_buffer_binding_size`, 128 MiB on lavapipe, i.e. 16 Mi complex values);
-//! larger arrays are refused with [`Error::TooLarge`].
+//! **Any length.** An axis whose length `n` is not a power of two runs Bluestein's
+//! algorithm (Bluestein, *A linear filtering approach to the computation of discrete
+//! Fourier transform*, IEEE Trans. Audio Electroacoust. 18(4), 1970): with the chirp
+//! `c_j = exp(∓iπ·j²/n)`, `X_k = c_k·Σ_j (x_j·c_j)·conj(c_{k−j})`, a circular
+//! convolution of length `M = 2^⌈log2(2n − 1)⌉` done by two power-of-two FFTs of the
+//! same variant on work lines of `M` values: a load (`x·c`, zero-padded), the forward
+//! passes, a multiplication by the kernel's spectrum `B/M`, the inverse passes and a
+//! store (`c·conv`), [`axis_plan`]. The chirp (`j²` reduced modulo `2n` in integers) and
+//! `B/M` are made in f64 on the CPU and rounded once to f32, like the twiddles. Shader:
+//! `shaders/fft_bluestein.wgsl`; CPU twins: [`bluestein_load_element`],
+//! [`bluestein_multiply_element`], [`bluestein_store_element`], run by
+//! [`reference_line`].
+//!
+//! **Limits.** In one run the array, and Bluestein's work lines (`M` values per line of
+//! the longest such axis), must each fit one storage binding
+//! (`max_storage_buffer_binding_size`, 128 MiB on lavapipe, i.e. 16 Mi complex values).
+//! [`fft_nd_timed`] splits a larger N-D array into slabs ([`FftSplitPlan`]); a 1-D
+//! array past one binding is refused with [`Error::TooLarge`].
 //!
 //! ```no_run
 //! use rustfft::num_complex::Complex;
@@ -124,7 +137,8 @@ impl GpuFftVariant {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct FftParams {
-    /// Line length (a power of two).
+    /// Line length (Bluestein's steps: the data's length, which need not be a power of
+    /// two).
     pub n: u32,
     /// `log2 n`.
     pub log2n: u32,
@@ -227,6 +241,102 @@ pub fn plan(variant: GpuFftVariant, log2n: u32) -> Vec<FftPass> {
             passes
         }
     }
+}
+
+/// One dispatch of the transform along one axis: a pass of the power-of-two FFT along
+/// the axis itself, or a step of Bluestein's algorithm for any other length
+/// (`shaders/fft_bluestein.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FftStep {
+    /// A pass along the axis (its length is a power of two).
+    Pass(FftPass),
+    /// `bluestein_load`: `a_j = x_j·c_j` into the work lines of length `M`, zero-padded.
+    BluesteinLoad,
+    /// A pass of the length-`M` FFT of the work lines: forward before the
+    /// multiplication, inverse (unscaled) after it.
+    Inner { pass: FftPass, inverse: bool },
+    /// `bluestein_multiply`: the work spectra times `B/M`.
+    BluesteinMultiply,
+    /// `bluestein_store`: `X_k = c_k·conv_k` back into the data, times the scale.
+    BluesteinStore,
+}
+
+impl FftStep {
+    fn entry_point(self) -> &'static str {
+        match self {
+            FftStep::Pass(p) | FftStep::Inner { pass: p, .. } => p.entry_point(),
+            FftStep::BluesteinLoad => "bluestein_load",
+            FftStep::BluesteinMultiply => "bluestein_multiply",
+            FftStep::BluesteinStore => "bluestein_store",
+        }
+    }
+}
+
+/// The dispatches of the transform of one axis of length `n`: the variant's passes
+/// ([`plan`]) for a power of two; otherwise Bluestein's algorithm, a load, the forward
+/// passes of length `M = `[`bluestein_length`]`(n)`, a multiplication, the inverse
+/// passes and a store (for [`GpuFftVariant::Stockham`] and `M ≤ LOCAL_MAX_N`, five
+/// dispatches in all).
+pub fn axis_plan(variant: GpuFftVariant, n: usize) -> Vec<FftStep> {
+    match bluestein_length(n) {
+        None => plan(variant, n.trailing_zeros())
+            .into_iter()
+            .map(FftStep::Pass)
+            .collect(),
+        Some(m) => {
+            let inner = plan(variant, m.trailing_zeros());
+            let pass = |inverse| move |pass| FftStep::Inner { pass, inverse };
+            std::iter::once(FftStep::BluesteinLoad)
+                .chain(inner.iter().copied().map(pass(false)))
+                .chain([FftStep::BluesteinMultiply])
+                .chain(inner.iter().copied().map(pass(true)))
+                .chain([FftStep::BluesteinStore])
+                .collect()
+        }
+    }
+}
+
+/// The padded length of Bluestein's algorithm for an axis of length `n`: `None` when
+/// `n` is a power of two (or 0), which the FFT passes take directly; otherwise the
+/// least power of two `M ≥ 2n − 1`, so that a circular convolution of length `M` holds
+/// the linear one of the `n` chirped values with the `2n − 1` taps of the chirp.
+pub fn bluestein_length(n: usize) -> Option<usize> {
+    (n > 0 && !n.is_power_of_two()).then(|| (2 * n - 1).next_power_of_two())
+}
+
+/// The values one line of length `n` occupies on the device while it is transformed:
+/// `n`, or Bluestein's `M` (less than `4n`).
+pub fn device_line_length(n: usize) -> usize {
+    bluestein_length(n).unwrap_or(n)
+}
+
+/// Bluestein's chirp `c_j = exp(∓iπ·j²/n)`, `j = 0 … n−1` (− forward), exact in f64:
+/// `j²` is reduced modulo `2n` in integers, then `c_j = `[`twiddle`]`(j² mod 2n, 2n)`, so
+/// no large angle is ever rounded.
+pub fn bluestein_chirp(n: usize, dir: Direction) -> Vec<Complex<f64>> {
+    let period = 2 * n as u128;
+    (0..n)
+        .map(|j| twiddle(((j as u128 * j as u128) % period) as usize, 2 * n, dir))
+        .collect()
+}
+
+/// The spectrum of Bluestein's kernel divided by `M`: `FFT_M(b) / M`, where
+/// `b_m = conj(c_m)` for `|m| < n` (negative `m` wrapped to `M + m`) and 0 elsewhere,
+/// `c` the chirp of [`bluestein_chirp`]. Made in f64 ([`crate::cpu::fft::fft_nd`]),
+/// once per plan; the division makes the unscaled inverse FFT of the product the
+/// convolution itself.
+pub fn bluestein_kernel(n: usize, m: usize, dir: Direction) -> Vec<Complex<f64>> {
+    let chirp = bluestein_chirp(n, dir);
+    let mut b = vec![Complex::new(0.0, 0.0); m];
+    for (j, c) in chirp.iter().enumerate() {
+        b[j] = c.conj();
+        if j > 0 {
+            b[m - j] = c.conj();
+        }
+    }
+    crate::cpu::fft::fft_nd(&mut b, &[m], Direction::Forward, Normalization::None);
+    let scale = 1.0 / m as f64;
+    b.iter().map(|v| v * scale).collect()
 }
 
 /// The twiddle table `exp(∓2πi·m/n)`, `m = 0 … n−1`, exact in f64 ([`twiddle`]).
@@ -394,6 +504,81 @@ pub fn stockham_radix2_butterfly(
     dst[out + ns as usize] = v0 - v1;
 }
 
+/// Work value `j` of line `line` in Bluestein's load: `x_j·c_j` for `j < n` (the
+/// data's element `j`, [`element_address`]), 0 for the padding up to `M`.
+/// mirrors shaders/fft_bluestein.wgsl: bluestein_load_element
+pub fn bluestein_load_element(
+    src: &[Complex<f64>],
+    chirp: &[Complex<f64>],
+    p: &FftParams,
+    line: u32,
+    j: u32,
+) -> Complex<f64> {
+    if j >= p.n {
+        return Complex::new(0.0, 0.0);
+    }
+    src[element_address(p, line, j) as usize] * chirp[j as usize]
+}
+
+/// Work value `g` (line `g / M`, bin `g mod M`) times the kernel's spectrum `B/M`.
+/// mirrors shaders/fft_bluestein.wgsl: bluestein_multiply_element
+pub fn bluestein_multiply_element(
+    src: &[Complex<f64>],
+    kernel: &[Complex<f64>],
+    p: &FftParams,
+    g: u32,
+) -> Complex<f64> {
+    src[g as usize] * kernel[(g % p.span) as usize]
+}
+
+/// Output `k` of line `line` in Bluestein's store: the convolution's value `k` times
+/// `c_k`, times the scale.
+/// mirrors shaders/fft_bluestein.wgsl: bluestein_store_element
+pub fn bluestein_store_element(
+    src: &[Complex<f64>],
+    chirp: &[Complex<f64>],
+    p: &FftParams,
+    line: u32,
+    k: u32,
+) -> Complex<f64> {
+    src[(line * p.span + k) as usize] * chirp[k as usize] * p.scale as f64
+}
+
+/// Bluestein's algorithm on one line of any length on the CPU, in f64, through the
+/// twins of `shaders/fft_bluestein.wgsl` and the variant's power-of-two passes: the
+/// unscaled transform, as the GPU computes it.
+fn bluestein_reference(
+    line: &[Complex<f64>],
+    dir: Direction,
+    variant: GpuFftVariant,
+    m: usize,
+) -> Vec<Complex<f64>> {
+    let n = line.len();
+    let chirp = bluestein_chirp(n, dir);
+    let kernel = bluestein_kernel(n, m, dir);
+    let p = FftParams {
+        n: n as u32,
+        log2n: m.trailing_zeros(),
+        stride: 1,
+        batch: 1,
+        stage: 0,
+        direction: (dir == Direction::Inverse) as u32,
+        span: m as u32,
+        scale: 1.0,
+    };
+    let a: Vec<_> = (0..m as u32)
+        .map(|j| bluestein_load_element(line, &chirp, &p, 0, j))
+        .collect();
+    let spectrum = reference_line(&a, Direction::Forward, variant);
+    let product: Vec<_> = (0..m as u32)
+        .map(|g| bluestein_multiply_element(&spectrum, &kernel, &p, g))
+        .collect();
+    let conv = reference_line(&product, Direction::Inverse, variant);
+    (0..n as u32)
+        .map(|k| bluestein_store_element(&conv, &chirp, &p, 0, k))
+        .collect()
+}
+
 /// The parameters of `pass` on lines of length `n` (scale 1, one contiguous line).
 fn line_params(n: usize, dir: Direction, pass: FftPass) -> FftParams {
     FftParams {
@@ -408,18 +593,21 @@ fn line_params(n: usize, dir: Direction, pass: FftPass) -> FftParams {
     }
 }
 
-/// Runs the pass plan of `variant` on one line on the CPU, in f64, with the twins of
-/// the shader functions: the unscaled transform, as the GPU computes it.
-///
-/// # Panics
-/// If the length is not a power of two.
+/// Runs the plan of `variant` ([`axis_plan`]) on one line on the CPU, in f64, with the
+/// twins of the shader functions: the unscaled transform, as the GPU computes it
+/// (Bluestein's algorithm for a length that is not a power of two).
 pub fn reference_line(
     line: &[Complex<f64>],
     dir: Direction,
     variant: GpuFftVariant,
 ) -> Vec<Complex<f64>> {
     let n = line.len();
-    assert!(n.is_power_of_two(), "length {n} is not a power of two");
+    if let Some(m) = bluestein_length(n) {
+        return bluestein_reference(line, dir, variant, m);
+    }
+    if n == 0 {
+        return Vec::new();
+    }
     let tw = twiddle_table(n, dir);
     let mut src = line.to_vec();
     let mut dst = vec![Complex::new(0.0, 0.0); n];
@@ -480,9 +668,9 @@ pub fn stockham_reference(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<
 /// (`cpu::dft::dft_nd`'s conventions). Uploads, runs, reads back.
 ///
 /// # Errors
-/// [`Error::Invalid`] when the shape does not describe the data or an axis length is
-/// not a power of two; [`Error::TooLarge`] when the array exceeds one storage binding;
-/// [`Error::Gpu`] when the device fails.
+/// [`Error::Invalid`] when the shape does not describe the data; [`Error::TooLarge`]
+/// when the array (or Bluestein's work lines) exceeds one storage binding and cannot be
+/// split (a 1-D array); [`Error::Gpu`] when the device fails.
 pub fn fft_nd(
     ctx: &GpuContext,
     data: &[Complex<f32>],
@@ -548,15 +736,17 @@ pub fn fft_nd_timed(
 /// # Errors
 /// As [`FftSplitPlan::new`].
 pub fn split_plan(ctx: &GpuContext, shape: &[usize]) -> Result<Option<FftSplitPlan>> {
-    if !too_large_for_one_binding(ctx, shape.iter().product()) {
+    if !too_large_for_one_binding(ctx, shape) {
         return Ok(None);
     }
     FftSplitPlan::new(&ctx.limits, shape).map(Some)
 }
 
-/// Whether `len` complex values exceed one binding of the planner's limits (or the
-/// shader's 32-bit indices).
-fn too_large_for_one_binding(ctx: &GpuContext, len: usize) -> bool {
+/// Whether the array of `shape`, or Bluestein's work lines for it, exceed one binding
+/// of the planner's limits (or the shader's 32-bit indices).
+fn too_large_for_one_binding(ctx: &GpuContext, shape: &[usize]) -> bool {
+    let axes: Vec<usize> = (0..shape.len()).collect();
+    let len = shape.iter().product::<usize>().max(work_len(shape, &axes));
     (len as u64).saturating_mul(8) > super::plan::binding_limit(&ctx.limits)
         || len > u32::MAX as usize / 4
 }
@@ -595,20 +785,28 @@ impl FftSplitPlan {
                 ),
             ));
         }
+        // A slice's bytes on the device: its values, or Bluestein's work lines for
+        // them (M values a line instead of n), whichever is larger.
         let inner: usize = shape[2..].iter().product();
         let axis0_lines = Pieces::plan(
             "GPU FFT data",
             "column of lines along axis 0",
             shape[1],
-            (shape[0] * inner) as u64 * 8,
+            (device_line_length(shape[0]) * inner) as u64 * 8,
             limit,
             1,
         )?;
+        let slice: usize = shape[1..].iter().product();
+        let other_slice = (1..shape.len())
+            .filter(|&a| shape[a] > 0)
+            .map(|a| slice / shape[a] * device_line_length(shape[a]))
+            .max()
+            .unwrap_or(0);
         let other_axes = Pieces::plan(
             "GPU FFT data",
             "slice across axis 0",
             shape[0],
-            (shape[1] * inner) as u64 * 8,
+            other_slice as u64 * 8,
             limit,
             1,
         )?;
@@ -790,7 +988,7 @@ pub fn fft_lines(
     Ok(transform(ctx, input, &[data.len() / n, n], &[1], dir, norm, variant)?.data)
 }
 
-/// Checks the input and refuses what the GPU FFT cannot do.
+/// Checks the input and refuses what the GPU FFT cannot do in one binding.
 fn validate(ctx: &GpuContext, len: usize, shape: &[usize], axes: &[usize]) -> Result<()> {
     let total = shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n));
     if total != Some(len) {
@@ -799,39 +997,53 @@ fn validate(ctx: &GpuContext, len: usize, shape: &[usize], axes: &[usize]) -> Re
             format!("shape {shape:?} does not describe {len} values"),
         ));
     }
-    let bytes = (len as u64).saturating_mul(8);
     let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-    if bytes > limit || len > u32::MAX as usize / 4 {
-        return Err(Error::too_large(
-            "GPU FFT data",
-            format!(
-                "{len} complex values ({bytes} bytes) exceed the adapter's storage-binding \
-                 limit of {limit} bytes (max_storage_buffer_binding_size): use cpu::fft::fft_nd"
-            ),
-        ));
-    }
-    check_lengths(shape, axes)
-}
-
-/// Whether the GPU FFT takes the lengths of `axes` of `shape`: powers of two only.
-///
-/// # Errors
-/// [`Error::Invalid`] naming the first axis that is not one.
-pub fn check_lengths(shape: &[usize], axes: &[usize]) -> Result<()> {
-    for &axis in axes {
-        let n = shape[axis];
-        if n > 0 && !n.is_power_of_two() {
-            return Err(Error::invalid(
-                format!("fft axis {axis}"),
+    let work = work_len(shape, axes);
+    for (what, values) in [("data", len), ("Bluestein work lines", work)] {
+        let bytes = (values as u64).saturating_mul(8);
+        if bytes > limit || values > u32::MAX as usize / 4 {
+            return Err(Error::too_large(
+                format!("GPU FFT {what}"),
                 format!(
-                    "length {n} is not a power of two; the GPU FFT handles powers of two only \
-                     (Bluestein's algorithm for other lengths is not implemented): \
-                     use the CPU path, cpu::fft::fft_nd, which takes every length"
+                    "{values} complex values ({bytes} bytes) exceed the adapter's \
+                     storage-binding limit of {limit} bytes \
+                     (max_storage_buffer_binding_size): use cpu::fft::fft_nd"
                 ),
             ));
         }
     }
     Ok(())
+}
+
+/// The complex values of each of Bluestein's two work buffers for the transform of
+/// `axes` of `shape`: the most any one such axis needs, `M` per line
+/// ([`bluestein_length`]); 0 when every length is a power of two.
+pub fn work_len(shape: &[usize], axes: &[usize]) -> usize {
+    let total: usize = shape.iter().product();
+    axes.iter()
+        .filter_map(|&a| bluestein_length(shape[a]).map(|m| total / shape[a] * m))
+        .max()
+        .unwrap_or(0)
+}
+
+/// The device memory of one unsplit transform of `axes` of `shape` (bytes): the two
+/// ping-pong data buffers, Bluestein's two work buffers and the tables (twiddles,
+/// chirps, kernels); and the largest single buffer.
+pub fn device_bytes(shape: &[usize], axes: &[usize]) -> (u64, u64) {
+    let data = 8 * shape.iter().map(|&a| a as u64).product::<u64>();
+    let work = 8 * work_len(shape, axes) as u64;
+    let tables: u64 = axes
+        .iter()
+        .map(|&a| {
+            let n = shape[a] as u64;
+            match bluestein_length(shape[a]) {
+                // The chirp, the kernel, and the inner forward and inverse twiddles.
+                Some(m) => 8 * (n + 3 * m as u64),
+                None => 8 * n,
+            }
+        })
+        .sum();
+    (2 * data + 2 * work + tables, data.max(work))
 }
 
 /// The workgroup counts for `invocations` (rows of at most the per-dimension limit).
@@ -870,27 +1082,66 @@ pub struct GpuFftPlan {
     shape: Vec<usize>,
     total: usize,
     factor: f32,
-    /// `(axis, pass)` for every pass of the whole transform.
-    passes: Vec<(usize, FftPass)>,
+    /// Every dispatch of the whole transform, in order.
+    steps: Vec<Step>,
+    /// Which data buffer holds the result after the last step (0: the input's).
+    result: usize,
     layout: wgpu::BindGroupLayout,
     /// `layout` as a pipeline layout (also used by the two-real split).
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
-    /// One uniform buffer of [`FftParams`] per pass.
-    uniforms: Vec<wgpu::Buffer>,
-    /// The twiddle table of each pass's axis, as an index into `tables`.
-    table_of_pass: Vec<usize>,
+    /// The tables the steps bind (twiddles, Bluestein's chirps and kernels).
     tables: Vec<wgpu::Buffer>,
     /// The second ping-pong buffer (`None` when there is no pass).
     pong: Option<wgpu::Buffer>,
+    /// Bluestein's two work buffers (`None` when every axis is a power of two).
+    work: Option<[wgpu::Buffer; 2]>,
     query: Option<super::context::TimestampPair>,
+}
+
+/// A buffer a step reads or writes: one of the two data buffers (0 the input's, 1 the
+/// plan's own) or one of Bluestein's two work buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Slot {
+    Data(usize),
+    Work(usize),
+}
+
+/// One recorded dispatch of a [`GpuFftPlan`].
+struct Step {
+    entry: &'static str,
+    /// Its [`FftParams`].
+    uniform: wgpu::Buffer,
+    src: Slot,
+    dst: Slot,
+    /// Index into [`GpuFftPlan::tables`] of what binding 3 holds.
+    table: usize,
+    invocations: u32,
+}
+
+/// The tables a plan uploads, each once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Table {
+    Twiddles(usize, Direction),
+    Chirp(usize, Direction),
+    Kernel(usize, Direction),
+}
+
+impl Table {
+    fn values(self) -> Vec<Complex<f64>> {
+        match self {
+            Table::Twiddles(n, dir) => twiddle_table(n, dir),
+            Table::Chirp(n, dir) => bluestein_chirp(n, dir),
+            Table::Kernel(n, dir) => bluestein_kernel(n, device_line_length(n), dir),
+        }
+    }
 }
 
 impl GpuFftPlan {
     /// Prepares the N-D transform of every axis of an array of `shape`.
     ///
     /// # Errors
-    /// As [`fft_nd`] (power-of-two axes, one storage binding), [`Error::Gpu`] when a
+    /// As [`fft_nd`] (one storage binding, no split), [`Error::Gpu`] when a
     /// shader fails to compile.
     pub fn new(
         ctx: &GpuContext,
@@ -948,11 +1199,11 @@ impl GpuFftPlan {
         &self.shape
     }
 
-    /// The compute dispatches one run records: one per pass (none when every
-    /// transformed axis has length 1).
+    /// The compute dispatches one run records: one per step of [`axis_plan`] of every
+    /// axis (none when every transformed axis has length 1).
     pub fn dispatches(&self) -> usize {
         if self.pong.is_some() {
-            self.passes.len()
+            self.steps.len()
         } else {
             0
         }
@@ -970,12 +1221,12 @@ impl GpuFftPlan {
         let total: usize = shape.iter().product();
         let transformed: usize = axes.iter().map(|&a| shape[a]).product();
         let factor = norm.apply(1.0, transformed, dir) as f32;
-        let passes: Vec<(usize, FftPass)> = axes
+        let planned: Vec<(usize, FftStep)> = axes
             .iter()
             .flat_map(|&axis| {
-                plan(variant, shape[axis].trailing_zeros())
+                axis_plan(variant, shape[axis])
                     .into_iter()
-                    .map(move |p| (axis, p))
+                    .map(move |s| (axis, s))
             })
             .collect();
         let dev = &ctx.device;
@@ -1012,85 +1263,176 @@ impl GpuFftPlan {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let mut pipelines: Vec<(&'static str, wgpu::ComputePipeline)> = Vec::new();
-        let mut uniforms = Vec::with_capacity(passes.len());
-        let mut table_of_pass = Vec::with_capacity(passes.len());
-        let mut tables = Vec::new();
-        let mut pong = None;
-        if total > 0 && !passes.is_empty() {
-            let module = ctx.shader(
-                match variant {
-                    GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
-                    GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
-                },
-                &variant.shader_source(),
-            )?;
-            for (_, p) in &passes {
-                let entry = p.entry_point();
-                if !pipelines.iter().any(|(e, _)| *e == entry) {
-                    let pl = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: Some(&pipeline_layout),
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    });
-                    pipelines.push((entry, pl));
-                }
-            }
-            // One twiddle table per transformed axis.
-            tables = axes
-                .iter()
-                .map(|&axis| {
-                    let t: Vec<[f32; 2]> = twiddle_table(shape[axis], dir)
-                        .iter()
-                        .map(|w| [w.re as f32, w.im as f32])
-                        .collect();
-                    dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("fft twiddles"),
-                        contents: bytemuck::cast_slice(&t),
-                        usage: wgpu::BufferUsages::STORAGE,
-                    })
-                })
-                .collect();
-            let last = passes.len() - 1;
-            for (i, &(axis, pass)) in passes.iter().enumerate() {
-                let n = shape[axis];
-                let params = FftParams {
-                    n: n as u32,
-                    log2n: n.trailing_zeros(),
-                    stride: shape[axis + 1..].iter().product::<usize>() as u32,
-                    batch: (total / n) as u32,
-                    stage: pass.stage(),
-                    direction: (dir == Direction::Inverse) as u32,
-                    span: pass.span(),
-                    scale: if i == last { factor } else { 1.0 },
-                };
-                uniforms.push(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("fft params"),
-                    contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                }));
-                table_of_pass.push(axes.iter().position(|&a| a == axis).unwrap_or(0));
-            }
-            pong = Some(ctx.storage_buffer("fft data b", (total * 8) as u64)?);
-        }
-        let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        Ok(GpuFftPlan {
+        let mut plan = GpuFftPlan {
             shape: shape.to_vec(),
             total,
             factor,
-            passes,
+            steps: Vec::with_capacity(planned.len()),
+            result: 0,
             layout,
             pipeline_layout,
-            pipelines,
-            uniforms,
-            table_of_pass,
-            tables,
-            pong,
-            query: timestamps.then(|| ctx.timestamp_pair()),
-        })
+            pipelines: Vec::new(),
+            tables: Vec::new(),
+            pong: None,
+            work: None,
+            query: None,
+        };
+        if total == 0 || planned.is_empty() {
+            return Ok(plan);
+        }
+        let variant_module = ctx.shader(
+            match variant {
+                GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
+                GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
+            },
+            &variant.shader_source(),
+        )?;
+        let bluestein_module = if planned.iter().any(|(_, s)| *s == FftStep::BluesteinLoad) {
+            Some(ctx.shader(
+                "fft_bluestein.wgsl",
+                &super::shaders::resolve("fft_bluestein"),
+            )?)
+        } else {
+            None
+        };
+        let mut table_keys: Vec<Table> = Vec::new();
+        let mut table_of = |key: Table| match table_keys.iter().position(|&k| k == key) {
+            Some(i) => i,
+            None => {
+                table_keys.push(key);
+                table_keys.len() - 1
+            }
+        };
+        // The data's ping-pong buffer holding the current values, and the work's.
+        let (mut data, mut work) = (0usize, 0usize);
+        let last = planned.len() - 1;
+        for (i, &(axis, step)) in planned.iter().enumerate() {
+            let n = shape[axis];
+            let m = device_line_length(n);
+            let batch = total / n;
+            let mut params = FftParams {
+                n: n as u32,
+                log2n: m.trailing_zeros(),
+                stride: shape[axis + 1..].iter().product::<usize>() as u32,
+                batch: batch as u32,
+                stage: 0,
+                direction: (dir == Direction::Inverse) as u32,
+                span: m as u32,
+                scale: if i == last { factor } else { 1.0 },
+            };
+            let (src, dst, table, invocations) = match step {
+                FftStep::Pass(pass) => {
+                    params.stage = pass.stage();
+                    params.span = pass.span();
+                    data ^= 1;
+                    let items = pass.items_per_line(n as u32) as usize * batch;
+                    (
+                        Slot::Data(data ^ 1),
+                        Slot::Data(data),
+                        table_of(Table::Twiddles(n, dir)),
+                        items,
+                    )
+                }
+                FftStep::BluesteinLoad => {
+                    work = 0;
+                    let chirp = table_of(Table::Chirp(n, dir));
+                    (Slot::Data(data), Slot::Work(0), chirp, m * batch)
+                }
+                FftStep::Inner { pass, inverse } => {
+                    let inner_dir = if inverse {
+                        Direction::Inverse
+                    } else {
+                        Direction::Forward
+                    };
+                    params = FftParams {
+                        n: m as u32,
+                        log2n: m.trailing_zeros(),
+                        stride: 1,
+                        batch: batch as u32,
+                        stage: pass.stage(),
+                        direction: inverse as u32,
+                        span: pass.span(),
+                        scale: 1.0,
+                    };
+                    work ^= 1;
+                    let items = pass.items_per_line(m as u32) as usize * batch;
+                    (
+                        Slot::Work(work ^ 1),
+                        Slot::Work(work),
+                        table_of(Table::Twiddles(m, inner_dir)),
+                        items,
+                    )
+                }
+                FftStep::BluesteinMultiply => {
+                    work ^= 1;
+                    let kernel = table_of(Table::Kernel(n, dir));
+                    (Slot::Work(work ^ 1), Slot::Work(work), kernel, m * batch)
+                }
+                FftStep::BluesteinStore => {
+                    data ^= 1;
+                    let chirp = table_of(Table::Chirp(n, dir));
+                    (Slot::Work(work), Slot::Data(data), chirp, n * batch)
+                }
+            };
+            let entry = step.entry_point();
+            if !plan.pipelines.iter().any(|(e, _)| *e == entry) {
+                let module = match step {
+                    FftStep::Pass(_) | FftStep::Inner { .. } => &variant_module,
+                    _ => bluestein_module
+                        .as_ref()
+                        .expect("made for Bluestein's steps"),
+                };
+                let pl = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&plan.pipeline_layout),
+                    module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
+                plan.pipelines.push((entry, pl));
+            }
+            plan.steps.push(Step {
+                entry,
+                uniform: dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                }),
+                src,
+                dst,
+                table,
+                invocations: invocations as u32,
+            });
+        }
+        plan.result = data;
+        plan.tables = table_keys
+            .iter()
+            .map(|key| {
+                let t: Vec<[f32; 2]> = key
+                    .values()
+                    .iter()
+                    .map(|w| [w.re as f32, w.im as f32])
+                    .collect();
+                dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fft table"),
+                    contents: bytemuck::cast_slice(&t),
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+            })
+            .collect();
+        plan.pong = Some(ctx.storage_buffer("fft data b", (total * 8) as u64)?);
+        let work_len = work_len(shape, axes);
+        if work_len > 0 {
+            let bytes = (work_len * 8) as u64;
+            plan.work = Some([
+                ctx.storage_buffer("fft Bluestein work a", bytes)?,
+                ctx.storage_buffer("fft Bluestein work b", bytes)?,
+            ]);
+        }
+        let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        plan.query = timestamps.then(|| ctx.timestamp_pair());
+        Ok(plan)
     }
 
     /// Runs the plan on complex f32 values already on the device (`[re, im]` pairs,
@@ -1128,32 +1470,34 @@ impl GpuFftPlan {
         let Some(pong) = &self.pong else {
             return ping;
         };
-        let passes = &self.passes;
-        let bufs = [ping, pong];
+        let data = [ping, pong];
+        let buffer = |slot| match (slot, &self.work) {
+            (Slot::Data(i), _) => data[i],
+            (Slot::Work(i), Some(work)) => &work[i],
+            (Slot::Work(_), None) => unreachable!("Bluestein's steps come with work buffers"),
+        };
         let query = self.query.as_ref();
-        let last = passes.len() - 1;
-        for (i, &(axis, pass)) in passes.iter().enumerate() {
-            let n = self.shape[axis];
+        let last = self.steps.len() - 1;
+        for (i, step) in self.steps.iter().enumerate() {
             let bind = ctx.bind_group(
                 "fft pass",
                 &self.layout,
                 &[
-                    self.uniforms[i].as_entire_binding(),
-                    bufs[i % 2].as_entire_binding(),
-                    bufs[(i + 1) % 2].as_entire_binding(),
-                    self.tables[self.table_of_pass[i]].as_entire_binding(),
+                    step.uniform.as_entire_binding(),
+                    buffer(step.src).as_entire_binding(),
+                    buffer(step.dst).as_entire_binding(),
+                    self.tables[step.table].as_entire_binding(),
                 ],
             );
             let pipeline = &self
                 .pipelines
                 .iter()
-                .find(|(e, _)| *e == pass.entry_point())
+                .find(|(e, _)| *e == step.entry)
                 .expect("every entry point has a pipeline")
                 .1;
-            let batch = (self.total / n) as u32;
-            let (x, y) = workgroups(ctx, pass.items_per_line(n as u32) * batch);
+            let (x, y) = workgroups(ctx, step.invocations);
             let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(pass.entry_point()),
+                label: Some(step.entry),
                 // The first pass writes the start, the last the end (a pass must
                 // write at least one, so the middle ones write none).
                 timestamp_writes: query.filter(|_| i == 0 || i == last).map(|q| {
@@ -1171,7 +1515,7 @@ impl GpuFftPlan {
         if let Some(q) = query {
             q.resolve(enc);
         }
-        bufs[passes.len() % 2]
+        data[self.result]
     }
 
     fn execute(&self, ctx: &GpuContext, input: Input<'_>) -> Result<GpuFftOutput> {
@@ -1247,7 +1591,7 @@ impl GpuFftPlan {
 /// The two spectra `(A, B)` of [`two_real_ffts`].
 pub type TwoSpectra = (Vec<Complex<f32>>, Vec<Complex<f32>>);
 
-/// The unscaled forward FFTs of two real lines of the same power-of-two length through
+/// The unscaled forward FFTs of two real lines of the same length (any length) through
 /// one complex GPU FFT: the port of [`crate::cpu::fft::two_real_ffts`]. `z = a + i·b` is
 /// uploaded, transformed once (Stockham) and split on the device by the Hermitian
 /// symmetry of real-input spectra, `A_k = (Z_k + conj(Z_{N−k})) / 2` and
@@ -1257,7 +1601,7 @@ pub type TwoSpectra = (Vec<Complex<f32>>, Vec<Complex<f32>>);
 /// each.
 ///
 /// # Errors
-/// [`Error::Invalid`] when the lengths differ or are not a power of two;
+/// [`Error::Invalid`] when the lengths differ;
 /// [`Error::TooLarge`] when the `2N` outputs exceed one storage binding;
 /// [`Error::Gpu`] on device failure.
 pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectra> {

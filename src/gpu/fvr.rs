@@ -146,8 +146,8 @@ pub struct GpuFvrSpectrum<'a> {
     /// The `M²` slice, transformed in place.
     slice: wgpu::Buffer,
     bind: wgpu::BindGroup,
-    /// The inverse `M × M` FFT (`None` when `M` is not a power of two).
-    fft: Option<GpuFftPlan>,
+    /// The inverse `M × M` FFT (Bluestein's algorithm when `M` is not a power of two).
+    fft: GpuFftPlan,
 }
 
 /// How an `M³` spectrum is bound: `slabs` z-slabs of `depth` whole `M × M` planes
@@ -270,17 +270,13 @@ impl<'a> GpuFvrSpectrum<'a> {
         let mut resources = vec![params.as_entire_binding(), slice.as_entire_binding()];
         resources.extend(buffers.iter().map(|b| b.as_entire_binding()));
         let bind = ctx.bind_group("fvr slice", &pipeline.get_bind_group_layout(0), &resources);
-        let fft = if m.is_power_of_two() {
-            Some(GpuFftPlan::new(
-                ctx,
-                &[m, m],
-                Direction::Inverse,
-                Normalization::Unnormalized,
-                GpuFftVariant::Stockham,
-            )?)
-        } else {
-            None
-        };
+        let fft = GpuFftPlan::new(
+            ctx,
+            &[m, m],
+            Direction::Inverse,
+            Normalization::Unnormalized,
+            GpuFftVariant::Stockham,
+        )?;
         ctx.wait()?;
         Ok(GpuFvrSpectrum {
             cpu: spectrum,
@@ -326,31 +322,12 @@ pub struct FvrTimings {
     pub total: f64,
 }
 
-/// Whether the GPU renders an `m³` spectrum: its inverse 2-D FFT needs `m` a power of
-/// two.
-///
-/// # Errors
-/// [`Error::Invalid`] naming the cube side, with how to choose one.
-pub fn check_side(m: usize) -> Result<()> {
-    if !m.is_power_of_two() {
-        return Err(Error::invalid(
-            "FVR cube side",
-            format!(
-                "{m} is not a power of two, which the GPU FFT needs: choose --padding and \
-                 the volume size so that padding × max(dims) is one (e.g. a 32³ volume with padding 2: 64), \
-                 or use --backend cpu"
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// [`crate::cpu::fvr::fvr_project`] on the GPU: the same image within the f32
 /// tolerance `tests/gpu_fvr.rs` states.
 ///
 /// # Errors
-/// As the CPU version; also [`Error::Invalid`] for the Dirichlet kernel or a cube side
-/// that is not a power of two (the GPU FFT's limit), [`Error::Gpu`] on device failure.
+/// As the CPU version; also [`Error::Invalid`] for the Dirichlet kernel,
+/// [`Error::Gpu`] on device failure.
 pub fn fvr_project(
     ctx: &GpuContext,
     spectrum: &GpuFvrSpectrum,
@@ -376,7 +353,6 @@ pub fn fvr_project_timed(
     let (code, radius) = kernel_code(kernel)?;
     let cpu = spectrum.cpu;
     let m = cpu.side();
-    check_side(m)?;
     let plan = SlicePlan::new(cpu, view)?;
     let g = &plan.geometry;
     let params = FvrParams {
@@ -394,12 +370,7 @@ pub fn fvr_project_timed(
         du: plan.du as f32,
     };
 
-    let Some(fft_plan) = &spectrum.fft else {
-        return Err(Error::invalid(
-            "FVR cube side",
-            format!("{m} is not a power of two"),
-        ));
-    };
+    let fft_plan = &spectrum.fft;
     let dev = &ctx.device;
     ctx.queue
         .write_buffer(&spectrum.params, 0, bytemuck::bytes_of(&params));

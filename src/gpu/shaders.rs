@@ -72,6 +72,7 @@ registry! {
     CLIPMESH = "clipmesh" => "clipmesh.wgsl",
     D2VR = "d2vr" => "d2vr.wgsl",
     FBP_BACKPROJECT = "fbp_backproject" => "fbp_backproject.wgsl",
+    FFT_BLUESTEIN = "fft_bluestein" => "fft_bluestein.wgsl",
     FFT_SPLIT_STREAM = "fft_split_stream" => "fft_split_stream.wgsl",
     FFT_STOCKHAM = "fft_stockham" => "fft_stockham.wgsl",
     FFT_TWO_REAL = "fft_two_real" => "fft_two_real.wgsl",

@@ -481,9 +481,10 @@ fn dft_1d(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
 
 /// `voxlab fft --dry-run`: the memory plan of [`run`] for each shape, computing
 /// nothing: the host's arrays (the input in f64 and f32, the reference, every
-/// backend's output), and on the GPU the device's two ping-pong buffers of the whole
-/// array or of its largest slab against the planner's limits, with the split
-/// ([`crate::gpu::fft::split_plan`]).
+/// backend's output), and on the GPU the device's two ping-pong buffers (and, for a
+/// length that is not a power of two, Bluestein's two work buffers) of the whole array
+/// or of its largest slab against the planner's limits, with the split
+/// ([`crate::gpu::fft::split_plan`], [`crate::gpu::fft::device_bytes`]).
 ///
 /// # Errors
 /// [`Error::TooLarge`] for a GPU transform that cannot be split to fit (a 1-D array
@@ -508,26 +509,26 @@ pub fn plan(
                 .collect::<Vec<_>>()
                 .join("x");
             let axes: Vec<usize> = (0..shape.len()).collect();
-            let (device, split) = match (ctx, crate::gpu::fft::check_lengths(shape, &axes)) {
-                (Some(ctx), Ok(())) => {
-                    let (piece, split) = match crate::gpu::fft::split_plan(ctx, shape)? {
-                        None => (8 * n, Vec::new()),
+            let (device, split) = match ctx {
+                Some(ctx) => {
+                    use crate::gpu::fft::device_bytes;
+                    let ((peak, largest), split) = match crate::gpu::fft::split_plan(ctx, shape)? {
+                        None => (device_bytes(shape, &axes), Vec::new()),
                         Some(p) => {
-                            let inner: u64 = shape[2..].iter().map(|&a| a as u64).product();
-                            let (n0, n1) = (shape[0] as u64, shape[1] as u64);
-                            let first = n0 * p.axis0_lines.per_piece as u64 * inner * 8;
-                            let second = p.other_axes.per_piece as u64 * n1 * inner * 8;
-                            (first.max(second), vec![p.describe()])
+                            // The larger of the two phases' pieces: a band of axis 1
+                            // (axis 0's lines), a slab of axis 0 (the other axes).
+                            let mut band = shape.clone();
+                            band[1] = p.axis0_lines.per_piece;
+                            let mut slab = shape.clone();
+                            slab[0] = p.other_axes.per_piece;
+                            let (a, b) =
+                                (device_bytes(&band, &[0]), device_bytes(&slab, &axes[1..]));
+                            ((a.0.max(b.0), a.1.max(b.1)), vec![p.describe()])
                         }
                     };
-                    // Two ping-pong buffers of the piece, and the twiddle tables.
-                    let twiddles: u64 = shape.iter().map(|&a| 8 * a as u64).sum();
-                    let device = super::plan::DevicePlan::on(ctx, 2 * piece + twiddles, piece);
-                    (Some(device), split)
+                    (Some(super::plan::DevicePlan::on(ctx, peak, largest)), split)
                 }
-                // As run reports it: the GPU case skipped, saying why.
-                (Some(_), Err(e)) => (None, vec![format!("GPU: skipped: {e}")]),
-                (None, _) => (None, Vec::new()),
+                None => (None, Vec::new()),
             };
             Ok(super::plan::MemoryPlan {
                 job: format!("fft {name}"),

@@ -125,8 +125,7 @@ fn open(a: &FvrRequest) -> Result<Engine> {
 ///
 /// # Errors
 /// As [`run`] up to the work; [`crate::Error::TooLarge`] for a spectrum that cannot
-/// be bound even split, [`crate::Error::Invalid`] for a padded side the GPU FFT cannot
-/// transform.
+/// be bound even split.
 pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
     view_of(a)?;
     let engine = open(a)?;
@@ -136,14 +135,17 @@ pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::Memo
     let host = 4 * vol.dims().iter().product::<usize>() as u64 + 16 * m.pow(3) + 8 * m * m;
     let (device, split) = match engine.gpu() {
         Some(ctx) => {
-            use crate::gpu::fvr::{check_side, SpectrumSlabs};
-            check_side(m as usize)?;
+            use crate::gpu::fvr::SpectrumSlabs;
             let limit = crate::gpu::plan::binding_limit(&ctx.limits);
             let slabs = SpectrumSlabs::new(&ctx.limits, m as usize, limit)?;
             let slab = slabs.depth as u64 * m * m * 8;
-            // The spectrum's slabs, the slice and the FFT's second buffer.
-            let peak = 8 * m.pow(3) + 2 * 8 * m * m;
-            let device = super::plan::DevicePlan::on(ctx, peak, slab.max(8 * m * m));
+            // The spectrum's slabs, and the inverse 2-D FFT of the slice: its two
+            // buffers (the slice is the first), Bluestein's work buffers where M is not
+            // a power of two, and the tables.
+            let side = m as usize;
+            let (fft, fft_largest) = crate::gpu::fft::device_bytes(&[side, side], &[0, 1]);
+            let peak = 8 * m.pow(3) + fft;
+            let device = super::plan::DevicePlan::on(ctx, peak, slab.max(fft_largest));
             (Some(device), slabs.describe().into_iter().collect())
         }
         None => (None, Vec::new()),

@@ -35,9 +35,9 @@ pub struct FvrArgs {
     /// Who computes: cpu (f64 throughout), cpu-f32 (the f64 spectrum rounded to
     /// complex f32, then slice and inverse 2-D FFT in f32), gpu: the CPU still
     /// builds the 3-D spectrum in f64, which is then uploaded as f32; the slice (nearest,
-    /// trilinear, lanczos2/3/4) and the inverse 2-D FFT run on the GPU. gpu needs the
-    /// padded side padding × max(dims) (rounded up to even) to be a power of two. auto:
-    /// the GPU when a hardware adapter exists, else cpu.
+    /// trilinear, lanczos2/3/4) and the inverse 2-D FFT run on the GPU (any padded
+    /// side: Bluestein's algorithm where it is not a power of two). auto: the GPU when a
+    /// hardware adapter exists, else cpu.
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
     pub backend: Backend,
     /// Write 16-bit PNG.
