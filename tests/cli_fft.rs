@@ -264,6 +264,7 @@ fn fft_dry_run_prints_each_shapes_plan_and_writes_nothing() {
         "fft",
         "64x32",
         "12",
+        "4096",
         "--backend",
         "gpu",
         "--json",
@@ -283,6 +284,9 @@ fn fft_dry_run_prints_each_shapes_plan_and_writes_nothing() {
         // two data buffers of 96 bytes, and the tables: the chirp (12 values), the
         // kernel and the inner twiddles both ways (32 each), 8 bytes a value.
         "device: 1.5 KiB at once, the largest buffer 256 B",
+        // A 1-D array past the binding: four steps over its 64 × 64 view.
+        "dry run: fft 4096 on gpu",
+        "split:  FFT in four steps as 64 × 64: 8 slabs along axis 1",
     ] {
         assert!(text.contains(want), "no '{want}' in:\n{text}");
     }

@@ -467,8 +467,8 @@ fn dispatches_follow_the_axis_plans() {
     assert_eq!(plan.dispatches(), 6);
 }
 
-/// An array over one storage binding is refused before anything is allocated on the
-/// device.
+/// A 1-D array over one storage binding whose length is prime (no four-step view) is
+/// refused before anything is allocated on the device.
 #[test]
 fn oversized_data_is_refused() {
     let Some(ctx) = common::gpu("oversized_data_is_refused") else {
@@ -482,7 +482,9 @@ fn oversized_data_is_refused() {
         eprintln!("oversized_data_is_refused: the binding limit is {limit} bytes; not allocating that much on the host");
         return;
     }
-    let len = (limit / 8 + 1) as usize;
+    // The least prime past the binding (2^24 + 1 = 97 · 257 · 673 would be split).
+    let is_prime = |n: usize| n > 1 && (2..=n.isqrt()).all(|d| !n.is_multiple_of(d));
+    let len = ((limit / 8 + 1) as usize..).find(|&n| is_prime(n)).unwrap();
     let x = vec![Complex::new(0.0f32, 0.0); len];
     let e = fft::fft_nd(
         ctx,
@@ -498,6 +500,7 @@ fn oversized_data_is_refused() {
         e.to_string().contains("max_storage_buffer_binding_size"),
         "{e}"
     );
+    assert!(e.to_string().contains("no factor"), "{e}");
 }
 
 /// The workgroup-memory Stockham path runs the same butterflies on the same twiddles
@@ -764,6 +767,7 @@ fn an_fft_in_slabs_equals_the_unsplit_one_bit_for_bit() {
                 total: shape[0],
                 per_piece: slab,
             },
+            four_step: None,
         };
         for variant in [GpuFftVariant::Stockham, GpuFftVariant::SplitStream] {
             for (dir, norm) in [
@@ -802,4 +806,66 @@ fn an_fft_in_slabs_equals_the_unsplit_one_bit_for_bit() {
     assert_eq!(fft::work_len(&[12, 20], &[0, 1]), 12 * 64);
     assert_eq!(fft::work_len(&[12, 20], &[0]), 20 * 32);
     assert_eq!(fft::work_len(&[16, 32], &[0, 1]), 0);
+    // A 1-D array is cut as its four-step view [N2, N1], N2 the largest divisor ≤ √N.
+    assert_eq!(fft::four_step_factors(4096), Some([64, 64]));
+    assert_eq!(fft::four_step_factors(12288), Some([96, 128]));
+    assert_eq!(fft::four_step_factors(1000), Some([25, 40]));
+    assert_eq!(fft::four_step_factors(6), Some([2, 3]));
+    assert_eq!(fft::four_step_factors(4099), None);
+    assert_eq!(fft::four_step_factors(2), None);
+    let p = fft::FftSplitPlan::new(&limits, &[4096]).unwrap();
+    assert_eq!(p.four_step, Some([64, 64]));
+    assert_eq!(p.view(&[4096]), [64, 64]);
+    assert_eq!((p.axis0_lines.per_piece, p.axis0_lines.count()), (8, 8));
+    assert_eq!((p.other_axes.per_piece, p.other_axes.count()), (8, 8));
+    assert!(p
+        .describe()
+        .starts_with("FFT in four steps as 64 × 64: 8 slabs"));
+    let e = fft::FftSplitPlan::new(&limits, &[4099]).unwrap_err();
+    assert!(matches!(e, voxlab::Error::TooLarge { .. }), "{e:?}");
+    assert!(e.to_string().contains("no factor"), "{e}");
+}
+
+/// A 1-D transform past one binding runs in four steps (columns, twiddles, rows,
+/// transpose): against the oracle within the parity bound, and against the unsplit
+/// GPU transform within rounding (another factorisation of the same sum, so not to
+/// the bit). Lengths: powers of two, a Bluestein row length (12288 = 96 × 128, the
+/// columns of 96 by Bluestein), 1000 = 25 × 40 (both Bluestein), and the least, 6.
+#[test]
+fn a_1d_fft_past_one_binding_runs_in_four_steps() {
+    let Some(ctx) = common::gpu("a_1d_fft_past_one_binding_runs_in_four_steps") else {
+        return;
+    };
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 4096,
+        ..wgpu::Limits::default()
+    };
+    let mut rng = common::Rng(0x4_57e9);
+    for n in [4096usize, 1 << 16, 12288, 1000, 6] {
+        let plan = fft::FftSplitPlan::new(&limits, &[n]).unwrap();
+        let tol = REL_L2_PER_STAGE * (n as f64).log2();
+        let x32 = to_f32(&random_complex(&mut rng, n));
+        let x = to_f64(&x32);
+        for variant in [GpuFftVariant::Stockham, GpuFftVariant::SplitStream] {
+            for (dir, norm) in [
+                (Direction::Forward, Normalization::Unnormalized),
+                (Direction::Inverse, Normalization::Unitary),
+            ] {
+                let got = fft::fft_nd_planned(ctx, &x32, &[n], dir, norm, variant, &plan)
+                    .unwrap()
+                    .data;
+                let want = oracle(&Case::Lines { n, lines: 1 }, &x, dir, norm);
+                let name = format!("gpu_fft_four_step_{n}_{variant:?}_{dir:?}");
+                let e = assert_rel_l2(&name, &[n], &got, &want, tol);
+                let whole = fft::fft_nd(ctx, &x32, &[n], dir, norm, variant).unwrap();
+                let d = rel_l2(&got, &to_f64(&whole));
+                eprintln!(
+                    "gpu fft four steps N={n:<6} {variant:<11?} {dir:<7?} rel L2 {e:.2e} \
+                     (bound {tol:.1e}); against the unsplit GPU {d:.2e} ({})",
+                    plan.describe()
+                );
+                assert!(d <= 2.0 * tol, "{name}: {d:e} from the unsplit transform");
+            }
+        }
+    }
 }

@@ -58,8 +58,9 @@
 //! **Limits.** In one run the array, and Bluestein's work lines (`M` values per line of
 //! the longest such axis), must each fit one storage binding
 //! (`max_storage_buffer_binding_size`, 128 MiB on lavapipe, i.e. 16 Mi complex values).
-//! [`fft_nd_timed`] splits a larger N-D array into slabs ([`FftSplitPlan`]); a 1-D
-//! array past one binding is refused with [`Error::TooLarge`].
+//! [`fft_nd_timed`] splits a larger N-D array into slabs ([`FftSplitPlan`]) and takes a
+//! larger 1-D array in four steps over a 2-D view of it; only a prime length past one
+//! binding is refused, with [`Error::TooLarge`].
 //!
 //! ```no_run
 //! use rustfft::num_complex::Complex;
@@ -670,7 +671,7 @@ pub fn stockham_reference(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<
 /// # Errors
 /// [`Error::Invalid`] when the shape does not describe the data; [`Error::TooLarge`]
 /// when the array (or Bluestein's work lines) exceeds one storage binding and cannot be
-/// split (a 1-D array); [`Error::Gpu`] when the device fails.
+/// split (a prime 1-D length); [`Error::Gpu`] when the device fails.
 pub fn fft_nd(
     ctx: &GpuContext,
     data: &[Complex<f32>],
@@ -757,33 +758,62 @@ fn too_large_for_one_binding(ctx: &GpuContext, shape: &[usize]) -> bool {
 /// the host); then every other axis, in slabs cut along axis 0 (contiguous). Both
 /// phases run unscaled and the host applies the transform's factor once, as the
 /// unsplit path's last pass does, so each line sees the same operations: a split
-/// transform equals the unsplit one bit for bit.
+/// N-D transform equals the unsplit one bit for bit.
+///
+/// A 1-D array of length `N = N2·N1` is taken in four steps (Bailey, *FFTs in external
+/// or hierarchical memory*, J. Supercomputing 4, 1990) over the view `[N2, N1]`
+/// (`x[n1 + N1·n2]` at row `n2`, column `n1`): the phase-1 FFTs of length `N2` down
+/// the columns; the twiddles `exp(∓2πi·n1·k2/N)` on the host (exact in f64, one
+/// rounding); the phase-2 FFTs of length `N1` along the rows; and the transpose
+/// `X[k2 + N2·k1] = Z[k2][k1]` on the host. Another factorisation of the same sum, so
+/// it agrees with the unsplit transform to rounding, not to the bit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FftSplitPlan {
     /// Phase 1: slices along axis 1 per slab.
     pub axis0_lines: Pieces,
     /// Phase 2: slices along axis 0 per slab.
     pub other_axes: Pieces,
+    /// A 1-D transform's four-step view `[N2, N1]` (`None` for an N-D array).
+    pub four_step: Option<[usize; 2]>,
+}
+
+/// The four-step view `[N2, N1]` of a 1-D length `n`: `N2` the largest divisor of `n`
+/// not above `√n`, `N1 = n / N2`; `None` when there is none but 1 (a prime, 1).
+pub fn four_step_factors(n: usize) -> Option<[usize; 2]> {
+    let root = n.isqrt();
+    (2..=root)
+        .rev()
+        .find(|d| n.is_multiple_of(*d))
+        .map(|d| [d, n / d])
 }
 
 impl FftSplitPlan {
     /// The plan for `shape` under `limits`.
     ///
     /// # Errors
-    /// [`Error::TooLarge`] for a 1-D array past one binding, or when one slab's slice
+    /// [`Error::TooLarge`] for a prime 1-D length (no four-step view), or when one slab's slice
     /// alone exceeds a binding.
     pub fn new(limits: &wgpu::Limits, shape: &[usize]) -> Result<Self> {
         // The shaders index values in 32 bits (at most u32::MAX / 4 values per buffer).
         let limit = super::plan::binding_limit(limits).min(u32::MAX as u64 / 4 * 8);
+        if let [n] = *shape {
+            let Some(view) = four_step_factors(n) else {
+                return Err(Error::too_large(
+                    "GPU FFT data",
+                    format!(
+                        "a 1-D transform of {n} values exceeds one storage binding of \
+                         {limit} bytes (max_storage_buffer_binding_size) and {n} has no \
+                         factor to split it into four steps: use cpu::fft::fft_nd"
+                    ),
+                ));
+            };
+            return Ok(FftSplitPlan {
+                four_step: Some(view),
+                ..Self::new(limits, &view)?
+            });
+        }
         if shape.len() < 2 {
-            return Err(Error::too_large(
-                "GPU FFT data",
-                format!(
-                    "a 1-D transform of {} values cannot be split across storage bindings \
-                     of {limit} bytes (max_storage_buffer_binding_size): use cpu::fft::fft_nd",
-                    shape.first().copied().unwrap_or(0)
-                ),
-            ));
+            return Err(Error::invalid("fft shape", "a 0-D array has no axis"));
         }
         // A slice's bytes on the device: its values, or Bluestein's work lines for
         // them (M values a line instead of n), whichever is larger.
@@ -813,16 +843,30 @@ impl FftSplitPlan {
         Ok(FftSplitPlan {
             axis0_lines,
             other_axes,
+            four_step: None,
         })
+    }
+
+    /// The array the two phases cut: the four-step view of a 1-D transform, else
+    /// `shape` itself.
+    pub fn view(&self, shape: &[usize]) -> Vec<usize> {
+        match self.four_step {
+            Some(view) => view.to_vec(),
+            None => shape.to_vec(),
+        }
     }
 
     /// One line for the user: "FFT in 4 slabs along axis 1, then 4 along axis 0".
     pub fn describe(&self) -> String {
-        format!(
-            "FFT in {} along axis 1 (axis 0's lines), then {} along axis 0 (the other axes)",
+        let slabs = format!(
+            "{} along axis 1 (axis 0's lines), then {} along axis 0 (the other axes)",
             super::plan::count_of(self.axis0_lines.count(), "slab"),
             super::plan::count_of(self.other_axes.count(), "slab"),
-        )
+        );
+        match self.four_step {
+            Some([n2, n1]) => format!("FFT in four steps as {n2} × {n1}: {slabs}"),
+            None => format!("FFT in {slabs}"),
+        }
     }
 }
 
@@ -840,9 +884,14 @@ pub fn fft_nd_planned(
     plan: &FftSplitPlan,
 ) -> Result<GpuFftOutput> {
     let t_start = Instant::now();
-    if shape.len() < 2
-        || plan.axis0_lines.total != shape[1]
-        || plan.other_axes.total != shape[0]
+    let view = plan.view(shape);
+    let view_fits = match plan.four_step {
+        Some([n2, n1]) => shape.len() == 1 && n2 * n1 == shape[0],
+        None => shape.len() >= 2,
+    };
+    if !view_fits
+        || plan.axis0_lines.total != view[1]
+        || plan.other_axes.total != view[0]
         || shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n)) != Some(data.len())
     {
         return Err(Error::invalid(
@@ -850,6 +899,7 @@ pub fn fft_nd_planned(
             format!("does not fit shape {shape:?} with {} values", data.len()),
         ));
     }
+    let shape = &view[..];
     let (n0, n1) = (shape[0], shape[1]);
     let inner: usize = shape[2..].iter().product();
     let others: Vec<usize> = (1..shape.len()).collect();
@@ -890,6 +940,9 @@ pub fn fft_nd_planned(
             work[i * row + band.start * inner..][..w].copy_from_slice(&out.data[i * w..][..w]);
         }
     }
+    if plan.four_step.is_some() {
+        four_step_twiddles(&mut work, n0, n1, dir);
+    }
     // Phase 2: the other axes, a contiguous slab of axis-0 indices at a time.
     for slab in plan.other_axes.ranges() {
         let part = &mut work[slab.start * row..slab.end * row];
@@ -911,11 +964,36 @@ pub fn fft_nd_planned(
     if factor != 1.0 {
         work.iter_mut().for_each(|v| *v *= factor);
     }
+    if plan.four_step.is_some() {
+        // X[k2 + N2·k1] = Z[k2][k1]: the transpose of the [N2, N1] view.
+        let mut out = vec![Complex::new(0.0, 0.0); work.len()];
+        for (k2, row) in work.chunks(n1).enumerate() {
+            for (k1, v) in row.iter().enumerate() {
+                out[k1 * n0 + k2] = *v;
+            }
+        }
+        work = out;
+    }
     timings.total = t_start.elapsed().as_secs_f64();
     Ok(GpuFftOutput {
         data: work,
         timings,
     })
+}
+
+/// The four-step twiddles: `Y[k2][n1] ·= exp(∓2πi·n1·k2/N)` over the `[N2, N1]` view
+/// (`N = N2·N1`), the factor in f64 by the oracle's exact [`twiddle`] (its index
+/// reduced modulo `N`) and the product rounded once to f32.
+fn four_step_twiddles(work: &mut [Complex<f32>], n2: usize, n1: usize, dir: Direction) {
+    use rayon::prelude::*;
+    let n = n2 * n1;
+    work.par_chunks_mut(n1).enumerate().for_each(|(k2, row)| {
+        for (j, v) in row.iter_mut().enumerate() {
+            let w = twiddle(j * k2 % n, n, dir);
+            let p = Complex::new(v.re as f64, v.im as f64) * w;
+            *v = Complex::new(p.re as f32, p.im as f32);
+        }
+    });
 }
 
 /// [`fft_nd_timed`] of complex f32 values (`[re, im]` pairs) already on the device:

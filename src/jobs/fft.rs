@@ -487,7 +487,7 @@ fn dft_1d(line: &[Complex<f64>], dir: Direction) -> Vec<Complex<f64>> {
 /// ([`crate::gpu::fft::split_plan`], [`crate::gpu::fft::device_bytes`]).
 ///
 /// # Errors
-/// [`Error::TooLarge`] for a GPU transform that cannot be split to fit (a 1-D array
+/// [`Error::TooLarge`] for a GPU transform that cannot be split to fit (a prime 1-D length
 /// past one binding).
 pub fn plan(
     shapes: &[Vec<usize>],
@@ -517,12 +517,14 @@ pub fn plan(
                         Some(p) => {
                             // The larger of the two phases' pieces: a band of axis 1
                             // (axis 0's lines), a slab of axis 0 (the other axes).
-                            let mut band = shape.clone();
+                            // (A 1-D transform is cut as its four-step view.)
+                            let view = p.view(shape);
+                            let mut band = view.clone();
                             band[1] = p.axis0_lines.per_piece;
-                            let mut slab = shape.clone();
+                            let mut slab = view.clone();
                             slab[0] = p.other_axes.per_piece;
-                            let (a, b) =
-                                (device_bytes(&band, &[0]), device_bytes(&slab, &axes[1..]));
+                            let others: Vec<usize> = (1..view.len()).collect();
+                            let (a, b) = (device_bytes(&band, &[0]), device_bytes(&slab, &others));
                             ((a.0.max(b.0), a.1.max(b.1)), vec![p.describe()])
                         }
                     };
