@@ -213,22 +213,154 @@ impl FvrGeometry {
     }
 }
 
-/// The centred 3-D spectrum of a zero-padded volume, ready for many views, with its
-/// elements in precision `R` (f64, the oracle, unless rounded by
-/// [`FvrSpectrum::to_f32`]).
-#[derive(Clone, Debug)]
-pub struct FvrSpectrum<R = f64> {
+/// Where a volume sits in its zero-padded `M³` cube, and the voxel geometry: all a
+/// view needs besides the spectrum (the slice's frame, its crop and scale). Shared by
+/// [`FvrSpectrum`] (the CPU's f64 spectrum) and `gpu::fvr::GpuFvrSpectrum` (the
+/// spectrum transformed on the GPU).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FvrLayout {
     /// The cube side `M`.
     m: usize,
-    /// `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
-    spectrum: Vec<Complex<R>>,
-    /// The original volume in f64 (for the Dirichlet kernel), `[z][y][x]`.
-    values: Vec<f64>,
     dims: [usize; 3],
     /// The integer placement offset of the volume in the cube.
     offset: [usize; 3],
     spacing: f64,
     affine: DMat4,
+}
+
+impl FvrLayout {
+    /// The cube of side [`padded_side`]`(dims, padding)` for `volume`, which must have
+    /// isotropic, unsheared voxels; the volume is centred in it.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for anisotropic or sheared voxels or a bad padding;
+    /// [`Error::TooLarge`] for a cube past the volume limit.
+    pub fn new(volume: &Volume<f32>, padding: usize) -> Result<Self> {
+        let dims = volume.dims();
+        let spacing = isotropic_spacing(volume.affine())?;
+        let m = padded_side(dims, padding)?;
+        Ok(FvrLayout {
+            m,
+            dims,
+            offset: dims.map(|n| (m - n) / 2),
+            spacing,
+            affine: volume.affine(),
+        })
+    }
+
+    /// The cube side `M`.
+    pub fn side(&self) -> usize {
+        self.m
+    }
+
+    /// The volume's voxel size (mm).
+    pub fn spacing(&self) -> f64 {
+        self.spacing
+    }
+
+    /// The volume's size in voxels, x fastest.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Where voxel `(i, j, k)` of the volume goes in the cube before the forward FFT:
+    /// its position `r = n + offset − M/2` about the cube's centre, wrapped modulo `M`
+    /// (the `ifftshift` of the padded cube, so that the centre is at index 0).
+    pub fn cube_index(&self, voxel: [usize; 3]) -> [usize; 3] {
+        let (m, half) = (self.m, self.m / 2);
+        std::array::from_fn(|a| (voxel[a] + self.offset[a] + m - half) % m)
+    }
+
+    /// Resolves a view: its orthonormal image frame in index space and image size.
+    pub fn geometry(&self, view: FvrView) -> Result<FvrGeometry> {
+        let dims = self.dims;
+        let center = DVec3::from_array(dims.map(|n| (n as f64 - 1.0) * 0.5));
+        let n = *dims.iter().max().expect("three axes");
+        let unit = |a: usize| DVec3::from_array(std::array::from_fn(|i| (i == a) as u8 as f64));
+        let (forward, right, up, width, height) = match view {
+            FvrView::Axis(v) => {
+                let (a, sign) = v.axis();
+                let (ca, ra) = v.image_axes();
+                (unit(a) * sign, unit(ca), -unit(ra), dims[ca], dims[ra])
+            }
+            FvrView::Orbit {
+                azimuth_deg,
+                elevation_deg,
+            } => {
+                let s = self.spacing;
+                let extent = dims.map(|d| d as f64 * s);
+                let cam = Camera::orbit(
+                    self.affine.transform_point3(center),
+                    extent,
+                    Orbit {
+                        azimuth_deg,
+                        elevation_deg,
+                        distance_mm: None,
+                    },
+                    Projection::Orthographic {
+                        width_mm: 0.0,
+                        height_mm: 0.0,
+                    },
+                    1,
+                    1,
+                )?;
+                let inv = DMat3::from_mat4(self.affine).inverse();
+                let to_index = |v: DVec3| (inv * v).normalize();
+                (
+                    to_index(cam.forward),
+                    to_index(cam.right),
+                    to_index(cam.up),
+                    n,
+                    n,
+                )
+            }
+            FvrView::Basis { forward, right, up } => {
+                let f = forward.normalize();
+                let r = (right - f * right.dot(f)).normalize();
+                let u = f.cross(r);
+                let u = if u.dot(up) < 0.0 { -u } else { u };
+                if !(f.is_finite() && r.is_finite() && u.is_finite()) {
+                    return Err(Error::invalid(
+                        "view basis",
+                        "forward and right must be finite, non-zero and not parallel",
+                    ));
+                }
+                (f, r, u, n, n)
+            }
+        };
+        Ok(FvrGeometry {
+            center,
+            forward,
+            right,
+            up,
+            width,
+            height,
+            affine: self.affine,
+        })
+    }
+
+    /// The in-plane coordinates (voxels, relative to the cube origin) of pixel
+    /// `(0, 0)`'s ray: pixel `(col, row)` sits at `(c_r + col, c_u − row)`.
+    pub(crate) fn pixel_origin(&self, g: &FvrGeometry) -> (f64, f64) {
+        let half = (self.m / 2) as f64;
+        let rel = g.center + DVec3::from_array(self.offset.map(|o| o as f64)) - DVec3::splat(half);
+        let cr = rel.dot(g.right) + 0.5 - g.width as f64 * 0.5;
+        let cu = rel.dot(g.up) - 0.5 + g.height as f64 * 0.5;
+        (cr, cu)
+    }
+}
+
+/// The centred 3-D spectrum of a zero-padded volume, ready for many views, with its
+/// elements in precision `R` (f64, the oracle, unless rounded by
+/// [`FvrSpectrum::to_f32`]).
+#[derive(Clone, Debug)]
+pub struct FvrSpectrum<R = f64> {
+    /// The cube, the volume's place in it, its voxel geometry.
+    layout: FvrLayout,
+    /// `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
+    spectrum: Vec<Complex<R>>,
+    /// The original volume in f64 (for the Dirichlet kernel), `[z][y][x]`.
+    values: Vec<f64>,
 }
 
 /// The most multiply-adds a Dirichlet slice may take (`N³·M²`).
@@ -317,21 +449,17 @@ impl FvrSpectrum<f64> {
     /// its centred 3-D spectrum (f64). `padding` is the oversampling factor (2 is the
     /// usual choice; 1 pads only to an even cube).
     pub fn new(volume: &Volume<f32>, padding: usize) -> Result<Self> {
-        let dims = volume.dims();
-        let spacing = isotropic_spacing(volume.affine())?;
+        let layout = FvrLayout::new(volume, padding)?;
         volume.check_finite("volume for Fourier volume rendering")?;
-        let m = padded_side(dims, padding)?;
-        let offset = dims.map(|n| (m - n) / 2);
-        let half = m / 2;
+        let (m, dims) = (layout.m, layout.dims);
         let values: Vec<f64> = volume.data().iter().map(|&v| v as f64).collect();
         let mut cube = vec![Complex::new(0.0, 0.0); m * m * m];
-        // ifftshift of the padded cube: position r = n + o − M/2 lands at r mod M.
-        let wrap = |n: usize, a: usize| (n + offset[a] + m - half) % m;
         for k in 0..dims[2] {
             for j in 0..dims[1] {
                 for i in 0..dims[0] {
                     let v = values[(k * dims[1] + j) * dims[0] + i];
-                    cube[(wrap(k, 2) * m + wrap(j, 1)) * m + wrap(i, 0)] = Complex::new(v, 0.0);
+                    let [x, y, z] = layout.cube_index([i, j, k]);
+                    cube[(z * m + y) * m + x] = Complex::new(v, 0.0);
                 }
             }
         }
@@ -343,13 +471,9 @@ impl FvrSpectrum<f64> {
         );
         fftshift_cube_in_place(&mut cube, m);
         Ok(FvrSpectrum {
-            m,
+            layout,
             spectrum: cube,
             values,
-            dims,
-            offset,
-            spacing,
-            affine: volume.affine(),
         })
     }
 
@@ -358,17 +482,13 @@ impl FvrSpectrum<f64> {
     /// kernel.
     pub fn to_f32(&self) -> FvrSpectrum<f32> {
         FvrSpectrum {
-            m: self.m,
+            layout: self.layout,
             spectrum: self
                 .spectrum
                 .par_iter()
                 .map(|c| Complex::new(c.re as f32, c.im as f32))
                 .collect(),
             values: self.values.clone(),
-            dims: self.dims,
-            offset: self.offset,
-            spacing: self.spacing,
-            affine: self.affine,
         }
     }
 }
@@ -376,12 +496,17 @@ impl FvrSpectrum<f64> {
 impl<R: SpectrumReal> FvrSpectrum<R> {
     /// The cube side `M`.
     pub fn side(&self) -> usize {
-        self.m
+        self.layout.m
     }
 
     /// The volume's voxel size (mm).
     pub fn spacing(&self) -> f64 {
-        self.spacing
+        self.layout.spacing
+    }
+
+    /// The cube and the volume's place in it.
+    pub fn layout(&self) -> &FvrLayout {
+        &self.layout
     }
 
     /// The centred spectrum, `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
@@ -389,72 +514,10 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
         &self.spectrum
     }
 
-    /// Resolves a view: its orthonormal image frame in index space and image size.
+    /// Resolves a view: its orthonormal image frame in index space and image size
+    /// ([`FvrLayout::geometry`]).
     pub fn geometry(&self, view: FvrView) -> Result<FvrGeometry> {
-        let dims = self.dims;
-        let center = DVec3::from_array(dims.map(|n| (n as f64 - 1.0) * 0.5));
-        let n = *dims.iter().max().expect("three axes");
-        let unit = |a: usize| DVec3::from_array(std::array::from_fn(|i| (i == a) as u8 as f64));
-        let (forward, right, up, width, height) = match view {
-            FvrView::Axis(v) => {
-                let (a, sign) = v.axis();
-                let (ca, ra) = v.image_axes();
-                (unit(a) * sign, unit(ca), -unit(ra), dims[ca], dims[ra])
-            }
-            FvrView::Orbit {
-                azimuth_deg,
-                elevation_deg,
-            } => {
-                let s = self.spacing;
-                let extent = dims.map(|d| d as f64 * s);
-                let cam = Camera::orbit(
-                    self.affine.transform_point3(center),
-                    extent,
-                    Orbit {
-                        azimuth_deg,
-                        elevation_deg,
-                        distance_mm: None,
-                    },
-                    Projection::Orthographic {
-                        width_mm: 0.0,
-                        height_mm: 0.0,
-                    },
-                    1,
-                    1,
-                )?;
-                let inv = DMat3::from_mat4(self.affine).inverse();
-                let to_index = |v: DVec3| (inv * v).normalize();
-                (
-                    to_index(cam.forward),
-                    to_index(cam.right),
-                    to_index(cam.up),
-                    n,
-                    n,
-                )
-            }
-            FvrView::Basis { forward, right, up } => {
-                let f = forward.normalize();
-                let r = (right - f * right.dot(f)).normalize();
-                let u = f.cross(r);
-                let u = if u.dot(up) < 0.0 { -u } else { u };
-                if !(f.is_finite() && r.is_finite() && u.is_finite()) {
-                    return Err(Error::invalid(
-                        "view basis",
-                        "forward and right must be finite, non-zero and not parallel",
-                    ));
-                }
-                (f, r, u, n, n)
-            }
-        };
-        Ok(FvrGeometry {
-            center,
-            forward,
-            right,
-            up,
-            width,
-            height,
-            affine: self.affine,
-        })
+        self.layout.geometry(view)
     }
 
     /// Interpolates the centred spectrum at frequency `kappa` (bins, `[x, y, z]`).
@@ -462,8 +525,8 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
     /// sum to 1 per axis, `round` half away from zero for the nearest kernel).
     /// The weights are computed in f64 and rounded to `R`; the sum runs in `R`.
     pub fn sample(&self, kernel: Kernel, kappa: DVec3) -> Complex<R> {
-        let m = self.m as i64;
-        let half = (self.m / 2) as f64;
+        let m = self.layout.m as i64;
+        let half = (self.layout.m / 2) as f64;
         let g = [kappa.x + half, kappa.y + half, kappa.z + half];
         // Periodic index; taps lie within one period of the cube, so mostly no division.
         let wrap = |i: i64| {
@@ -477,7 +540,7 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
         };
         if kernel == Kernel::Nearest {
             let i = g.map(|v| wrap(v.round() as i64));
-            return self.spectrum[(i[2] * self.m + i[1]) * self.m + i[0]];
+            return self.spectrum[(i[2] * self.layout.m + i[1]) * self.layout.m + i[0]];
         }
         let r: i64 = match kernel {
             Kernel::Trilinear => 1,
@@ -518,13 +581,13 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
     fn sum_taps<const T: usize>(&self, idx: &[[usize; 8]; 3], w: &[[R; 8]; 3]) -> Complex<R> {
         let zero = Complex::new(R::zero(), R::zero());
         // Away from the cube's edge the x taps are one contiguous run (same sum).
-        let x_run =
-            (idx[0][0] + T <= self.m && idx[0][T - 1] == idx[0][0] + T - 1).then_some(idx[0][0]);
+        let x_run = (idx[0][0] + T <= self.layout.m && idx[0][T - 1] == idx[0][0] + T - 1)
+            .then_some(idx[0][0]);
         let mut acc = zero;
         for tz in 0..T {
             let mut az = zero;
             for ty in 0..T {
-                let row = (idx[2][tz] * self.m + idx[1][ty]) * self.m;
+                let row = (idx[2][tz] * self.layout.m + idx[1][ty]) * self.layout.m;
                 let mut ax = zero;
                 if let Some(x0) = x_run {
                     let line: &[Complex<R>; T] = self.spectrum[row + x0..row + x0 + T]
@@ -548,18 +611,18 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
     /// The spectrum of the padded grid evaluated exactly at `kappa` (the Dirichlet
     /// kernel): `Σ_r f(r) e^{−2πi κ·r/M}`, `r = n + o − M/2`.
     pub fn sample_exact(&self, kappa: DVec3) -> Complex<f64> {
-        let m = self.m as f64;
-        let half = (self.m / 2) as f64;
+        let m = self.layout.m as f64;
+        let half = (self.layout.m / 2) as f64;
         let phases = |a: usize, k: f64| -> Vec<Complex<f64>> {
-            (0..self.dims[a])
+            (0..self.layout.dims[a])
                 .map(|n| {
-                    let r = (n + self.offset[a]) as f64 - half;
+                    let r = (n + self.layout.offset[a]) as f64 - half;
                     Complex::from_polar(1.0, -2.0 * PI * k * r / m)
                 })
                 .collect()
         };
         let (px, py, pz) = (phases(0, kappa.x), phases(1, kappa.y), phases(2, kappa.z));
-        let [nx, ny, _] = self.dims;
+        let [nx, ny, _] = self.layout.dims;
         let mut acc = Complex::new(0.0, 0.0);
         for (k, ez) in pz.iter().enumerate() {
             let mut az = Complex::new(0.0, 0.0);
@@ -574,16 +637,6 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
             acc += az * ez;
         }
         acc
-    }
-
-    /// The in-plane coordinates (voxels, relative to the cube origin) of pixel
-    /// `(0, 0)`'s ray: pixel `(col, row)` sits at `(c_r + col, c_u − row)`.
-    fn pixel_origin(&self, g: &FvrGeometry) -> (f64, f64) {
-        let half = (self.m / 2) as f64;
-        let rel = g.center + DVec3::from_array(self.offset.map(|o| o as f64)) - DVec3::splat(half);
-        let cr = rel.dot(g.right) + 0.5 - g.width as f64 * 0.5;
-        let cu = rel.dot(g.up) - 0.5 + g.height as f64 * 0.5;
-        (cr, cu)
     }
 }
 
@@ -652,11 +705,11 @@ pub fn fvr_project<R: SpectrumReal>(
     kernel: Kernel,
     deapodize: bool,
 ) -> Result<Frame> {
-    let plan = SlicePlan::new(spectrum, view)?;
+    let plan = SlicePlan::new(&spectrum.layout, view)?;
     let g = &plan.geometry;
-    let m = spectrum.m;
+    let m = spectrum.layout.m;
     if kernel == Kernel::Dirichlet {
-        let n: usize = spectrum.dims.iter().product();
+        let n: usize = spectrum.layout.dims.iter().product();
         let work = n as f64 * (m * m) as f64;
         if work > MAX_DIRICHLET_WORK {
             return Err(Error::too_large(
@@ -738,7 +791,7 @@ pub fn fvr_project<R: SpectrumReal>(
         Direction::Inverse,
         Normalization::Unnormalized,
     );
-    Ok(plan.crop(spectrum, kernel, deapodize, |i| slice[i].re.f64()))
+    Ok(plan.crop(&spectrum.layout, kernel, deapodize, |i| slice[i].re.f64()))
 }
 
 /// A view resolved for slicing: its geometry, the in-plane position `(c_r, c_u)` of
@@ -758,16 +811,16 @@ pub(crate) struct SlicePlan {
 
 impl SlicePlan {
     /// Resolves `view`; refuses an image wider than the padded cube.
-    pub fn new<R: SpectrumReal>(spectrum: &FvrSpectrum<R>, view: FvrView) -> Result<Self> {
-        let g = spectrum.geometry(view)?;
-        let m = spectrum.m;
+    pub fn new(layout: &FvrLayout, view: FvrView) -> Result<Self> {
+        let g = layout.geometry(view)?;
+        let m = layout.m;
         if g.width > m || g.height > m {
             return Err(Error::invalid(
                 "FVR image size",
                 format!("{}×{} exceeds the padded cube side {m}", g.width, g.height),
             ));
         }
-        let (cr, cu) = spectrum.pixel_origin(&g);
+        let (cr, cu) = layout.pixel_origin(&g);
         let ((nr, dr), (nu, du)) = (split(cr), split(cu));
         Ok(SlicePlan {
             geometry: g,
@@ -783,17 +836,17 @@ impl SlicePlan {
     /// The image from the inverse-transformed slice (`re(i)`: the real part of its
     /// element `i`, `[y][x]`, DC at 0): crop with wrap-around, scale by the voxel size,
     /// optionally de-apodise.
-    pub fn crop<R: SpectrumReal>(
+    pub fn crop(
         &self,
-        spectrum: &FvrSpectrum<R>,
+        layout: &FvrLayout,
         kernel: Kernel,
         deapodize: bool,
         re: impl Fn(usize) -> f64 + Sync,
     ) -> Frame {
         let g = &self.geometry;
-        let m = spectrum.m;
+        let m = layout.m;
         let mut frame = Frame::new(g.width, g.height, 1);
-        let s = spectrum.spacing;
+        let s = layout.spacing;
         // The transfer is separable: one factor per column and one per row, computed
         // once (for Lanczos kernels each is a numerical integral).
         let (tx, ty): (Vec<f64>, Vec<f64>) = if deapodize {

@@ -1,8 +1,15 @@
 //! Fourier volume rendering on the GPU: the port of [`crate::cpu::fvr::fvr_project`].
 //!
-//! The CPU builds the centred 3-D spectrum in f64 ([`FvrSpectrum::new`]); it is
-//! uploaded once as complex f32 ([`GpuFvrSpectrum::upload`]) and stays on the GPU for
-//! every view.
+//! The centred 3-D spectrum is made once and stays on the GPU for every view, in one of
+//! two ways:
+//! - [`GpuFvrSpectrum::compute`] makes it on the GPU: the host fills the padded cube
+//!   in complex f32 (the volume's values at [`FvrLayout::cube_index`], the `ifftshift`
+//!   of the padded cube, times `(−1)^(x+y+z)` so that the transform comes out centred,
+//!   the `fftshift` folded into an exact sign), uploads it, and the forward 3-D FFT
+//!   ([`GpuFftPlan`], Stockham; Bluestein's algorithm for a side that is not a power of
+//!   two) transforms it in place on the device. `voxlab fvr --backend gpu` does this.
+//! - [`GpuFvrSpectrum::upload`] uploads the CPU's f64 spectrum ([`FvrSpectrum::new`])
+//!   rounded to complex f32 (the parity tests hold both to the CPU oracle).
 //!
 //! **Spectra larger than one storage binding.** `M³` complex f32 values take `8·M³`
 //! bytes: 128 MiB for `M = 256`, 1 GiB for `M = 512`, beyond what many adapters bind at
@@ -12,9 +19,12 @@
 //! shader's `spectrum_at` picks the slab with a `switch` on `z / depth`
 //! ([`slab_bindings_wgsl`] generates the bindings and the switch for the slab count).
 //! One slab — the whole spectrum in one binding — is the common case.
-//! [`GpuFvrSpectrum::upload_in_slabs`] takes the per-slab limit explicitly (tests force
-//! several slabs on small spectra with it). The forward 3-D FFT stays on the CPU (f64);
-//! the upload converts and sends one slab at a time.
+//! [`GpuFvrSpectrum::upload_in_slabs`] and [`GpuFvrSpectrum::compute_in_slabs`] take
+//! the per-slab limit explicitly (tests force several slabs on small spectra with
+//! them). The upload converts and sends one slab at a time; a computed spectrum that
+//! needs several slabs (or whose cube exceeds one binding) is transformed by the GPU
+//! FFT in slabs through the host ([`crate::gpu::fft::fft_nd_timed`]), then uploaded
+//! slab by slab.
 //!
 //! Per view:
 //! 1. `shaders/fvr_slice.wgsl: extract_slice` interpolates the central slice, one
@@ -24,8 +34,8 @@
 //!    argument as `cpu::filter::sin_pi` does; like the CPU it samples the rows
 //!    `k_u ≤ 0` and writes the rows `k_u > 0` as their Hermitian conjugates);
 //! 2. the inverse 2-D FFT of the slice, in place in the slice's buffer (no host round
-//!    trip), with a [`GpuFftPlan`] made once at upload (Stockham; `M` must be a power
-//!    of two), and the readback of the `M²` result;
+//!    trip), with a [`GpuFftPlan`] made once at upload (Stockham; Bluestein's
+//!    algorithm where `M` is not a power of two), and the readback of the `M²` result;
 //! 3. the host crops, scales and optionally de-apodises exactly as the CPU does
 //!    (the shared `SlicePlan::crop`, in f64).
 //!
@@ -33,15 +43,16 @@
 //!
 //! Everything that does not depend on the view (the slice pipeline, the slice buffer,
 //! the parameter buffer and bind group, the inverse FFT's pipelines, twiddle tables and
-//! ping-pong buffer) is built once by [`GpuFvrSpectrum::upload`]; a view only writes
+//! ping-pong buffer) is built once with the spectrum; a view only writes
 //! 48 bytes of parameters and records the dispatches.
 
 use super::context::GpuContext;
 use super::fft::{GpuFftPlan, GpuFftVariant};
 use crate::cpu::dft::{Direction, Normalization};
-use crate::cpu::fvr::{FvrSpectrum, FvrView, Kernel, SlicePlan};
+use crate::cpu::fvr::{FvrLayout, FvrSpectrum, FvrView, Kernel, SlicePlan};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::volume::Volume;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -134,8 +145,9 @@ fn kernel_code(kernel: Kernel) -> Result<(u32, u32)> {
 /// pipeline, the slice and parameter buffers, and the inverse 2-D FFT plan made once,
 /// reused by every view. Views share the slice and parameter buffers: render the views
 /// of one `GpuFvrSpectrum` one after another, not from several threads at once.
-pub struct GpuFvrSpectrum<'a> {
-    cpu: &'a FvrSpectrum,
+pub struct GpuFvrSpectrum {
+    /// The cube and the volume's place in it (the view's frame, crop and scale).
+    layout: FvrLayout,
     /// `M × M` planes per slab.
     slab_depth: usize,
     /// The slabs, each ≤ the per-binding limit; kept alive for the bind group.
@@ -194,6 +206,28 @@ impl SpectrumSlabs {
         Ok(SpectrumSlabs { depth, slabs })
     }
 
+    /// Creates the storage buffers of the slabs of an `m³` spectrum, each filled from
+    /// `planes(range)`: the complex f32 values (`[re, im]`) of that range of `M × M`
+    /// planes, made one slab at a time (the host holds at most one slab in f32).
+    fn upload(
+        &self,
+        ctx: &GpuContext,
+        m: usize,
+        planes: impl Fn(std::ops::Range<usize>) -> Vec<[f32; 2]>,
+    ) -> Vec<wgpu::Buffer> {
+        (0..self.slabs)
+            .map(|k| {
+                let host = planes(k * self.depth..((k + 1) * self.depth).min(m));
+                ctx.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("fvr spectrum slab"),
+                        contents: bytemuck::cast_slice(&host),
+                        usage: wgpu::BufferUsages::STORAGE,
+                    })
+            })
+            .collect()
+    }
+
     /// One line for the user ("FVR spectrum in 3 z-slabs of 96 planes (one storage
     /// binding each)"); `None` when it is one binding.
     pub fn describe(&self) -> Option<String> {
@@ -206,13 +240,13 @@ impl SpectrumSlabs {
     }
 }
 
-impl<'a> GpuFvrSpectrum<'a> {
+impl GpuFvrSpectrum {
     /// Uploads the centred spectrum (rounded to f32), in as few z-slabs as the adapter's
     /// per-binding limit (`max_storage_buffer_binding_size`, `max_buffer_size`) allows.
     ///
     /// # Errors
     /// As [`GpuFvrSpectrum::upload_in_slabs`].
-    pub fn upload(ctx: &GpuContext, spectrum: &'a FvrSpectrum) -> Result<Self> {
+    pub fn upload(ctx: &GpuContext, spectrum: &FvrSpectrum) -> Result<Self> {
         let limit = crate::gpu::plan::binding_limit(&ctx.limits);
         Self::upload_in_slabs(ctx, spectrum, limit)
     }
@@ -226,26 +260,112 @@ impl<'a> GpuFvrSpectrum<'a> {
     /// stage, less the slice's).
     pub fn upload_in_slabs(
         ctx: &GpuContext,
-        spectrum: &'a FvrSpectrum,
+        spectrum: &FvrSpectrum,
         max_slab_bytes: u64,
     ) -> Result<Self> {
         let data = spectrum.spectrum();
         let m = spectrum.side();
-        let SpectrumSlabs { depth, slabs } = SpectrumSlabs::new(&ctx.limits, m, max_slab_bytes)?;
-        // One slab at a time: the host holds at most one slab in f32.
-        let buffers: Vec<wgpu::Buffer> = (0..slabs)
-            .map(|k| {
-                let planes = &data[k * depth * m * m..((k + 1) * depth).min(m) * m * m];
-                let host: Vec<[f32; 2]> =
-                    planes.iter().map(|v| [v.re as f32, v.im as f32]).collect();
-                ctx.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("fvr spectrum slab"),
-                        contents: bytemuck::cast_slice(&host),
-                        usage: wgpu::BufferUsages::STORAGE,
-                    })
-            })
+        let plan = SpectrumSlabs::new(&ctx.limits, m, max_slab_bytes)?;
+        let buffers = plan.upload(ctx, m, |planes| {
+            data[planes.start * m * m..planes.end * m * m]
+                .iter()
+                .map(|v| [v.re as f32, v.im as f32])
+                .collect()
+        });
+        Self::with_slabs(ctx, *spectrum.layout(), plan.depth, buffers)
+    }
+
+    /// The centred spectrum of `volume` zero-padded by `padding` (as
+    /// [`FvrSpectrum::new`]), computed on the GPU in f32 and kept there, in as few
+    /// z-slabs as the adapter's per-binding limit allows: the padded cube is filled on
+    /// the host (the volume's values at [`FvrLayout::cube_index`], times
+    /// `(−1)^(x+y+z)`, which makes the transform come out centred: for an even side
+    /// `M`, `fftshift(X)_k = Σ_n x_n·(−1)^n·exp(−2πi·nk/M)`, and the sign is exact),
+    /// uploaded, and transformed by the forward 3-D Stockham FFT ([`GpuFftPlan`];
+    /// Bluestein's algorithm where `M` is not a power of two) in place on the device.
+    /// A cube that fits no single binding (or needs several slabs) is transformed in
+    /// slabs through the host ([`crate::gpu::fft::fft_nd_timed`]) and uploaded in
+    /// z-slabs. The CPU's f64 spectrum is never made.
+    ///
+    /// # Errors
+    /// As [`FvrSpectrum::new`] (anisotropic voxels, non-finite values, a cube past the
+    /// volume limit) and [`GpuFvrSpectrum::upload_in_slabs`]; [`Error::Gpu`] on device
+    /// failure.
+    pub fn compute(ctx: &GpuContext, volume: &Volume<f32>, padding: usize) -> Result<Self> {
+        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+        Self::compute_in_slabs(ctx, volume, padding, limit)
+    }
+
+    /// [`GpuFvrSpectrum::compute`] with at most `max_slab_bytes` per slab of the
+    /// spectrum (as [`GpuFvrSpectrum::upload_in_slabs`]).
+    ///
+    /// # Errors
+    /// As [`GpuFvrSpectrum::compute`].
+    pub fn compute_in_slabs(
+        ctx: &GpuContext,
+        volume: &Volume<f32>,
+        padding: usize,
+        max_slab_bytes: u64,
+    ) -> Result<Self> {
+        let layout = FvrLayout::new(volume, padding)?;
+        volume.check_finite("volume for Fourier volume rendering")?;
+        let m = layout.side();
+        let plan = SpectrumSlabs::new(&ctx.limits, m, max_slab_bytes)?;
+        let cube = centred_cube(&layout, volume.data());
+        let shape = [m, m, m];
+        let (dir, norm) = (Direction::Forward, Normalization::Unnormalized);
+        let variant = GpuFftVariant::Stockham;
+        if plan.slabs == 1 && super::fft::split_plan(ctx, &shape)?.is_none() {
+            // One binding: transform in place on the device and keep the result.
+            let bytes = (cube.len() * 8) as u64;
+            let buffer = ctx
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fvr spectrum slab"),
+                    contents: bytemuck::cast_slice(&cube),
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                });
+            drop(cube);
+            let fft = GpuFftPlan::new(ctx, &shape, dir, norm, variant)?;
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            let out = fft.encode_in_place(ctx, &mut enc, &buffer);
+            if !std::ptr::eq(out, &buffer) {
+                enc.copy_buffer_to_buffer(out, 0, &buffer, 0, bytes);
+            }
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait()?;
+            drop(fft);
+            return Self::with_slabs(ctx, layout, plan.depth, vec![buffer]);
+        }
+        // Past one binding: the FFT in slabs through the host, then the z-slabs.
+        let x: Vec<rustfft::num_complex::Complex<f32>> = cube
+            .iter()
+            .map(|v| rustfft::num_complex::Complex::new(v[0], v[1]))
             .collect();
+        drop(cube);
+        let data = super::fft::fft_nd_timed(ctx, &x, &shape, dir, norm, variant)?.data;
+        drop(x);
+        let buffers = plan.upload(ctx, m, |planes| {
+            data[planes.start * m * m..planes.end * m * m]
+                .iter()
+                .map(|v| [v.re, v.im])
+                .collect()
+        });
+        Self::with_slabs(ctx, layout, plan.depth, buffers)
+    }
+
+    /// The slice pipeline, buffers, bind group and inverse FFT around the spectrum's
+    /// z-slabs of `depth` planes.
+    fn with_slabs(
+        ctx: &GpuContext,
+        layout: FvrLayout,
+        depth: usize,
+        buffers: Vec<wgpu::Buffer>,
+    ) -> Result<Self> {
+        let m = layout.side();
+        let slabs = buffers.len();
         let module = ctx.shader(
             &format!("fvr_slice.wgsl ({slabs} slabs)"),
             &shader_source(slabs),
@@ -279,7 +399,7 @@ impl<'a> GpuFvrSpectrum<'a> {
         )?;
         ctx.wait()?;
         Ok(GpuFvrSpectrum {
-            cpu: spectrum,
+            layout,
             slab_depth: depth,
             slabs: buffers,
             pipeline,
@@ -290,9 +410,9 @@ impl<'a> GpuFvrSpectrum<'a> {
         })
     }
 
-    /// The CPU spectrum this was uploaded from.
-    pub fn cpu(&self) -> &FvrSpectrum {
-        self.cpu
+    /// The cube and the volume's place in it.
+    pub fn layout(&self) -> &FvrLayout {
+        &self.layout
     }
 
     /// How many z-slabs (storage buffers) hold the spectrum.
@@ -320,6 +440,26 @@ pub struct FvrTimings {
     pub crop: f64,
     /// Everything.
     pub total: f64,
+}
+
+/// The padded cube of [`GpuFvrSpectrum::compute`] as complex f32 (`[re, im]`): voxel
+/// `(i, j, k)`'s value at [`FvrLayout::cube_index`] `(x, y, z)`, negated when
+/// `x + y + z` is odd, zero elsewhere.
+fn centred_cube(layout: &FvrLayout, values: &[f32]) -> Vec<[f32; 2]> {
+    let m = layout.side();
+    let [nx, ny, nz] = layout.dims();
+    let mut cube = vec![[0.0f32; 2]; m * m * m];
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let v = values[(k * ny + j) * nx + i];
+                let [x, y, z] = layout.cube_index([i, j, k]);
+                let sign = if (x + y + z) % 2 == 1 { -1.0 } else { 1.0 };
+                cube[(z * m + y) * m + x] = [sign * v, 0.0];
+            }
+        }
+    }
+    cube
 }
 
 /// [`crate::cpu::fvr::fvr_project`] on the GPU: the same image within the f32
@@ -351,9 +491,9 @@ pub fn fvr_project_timed(
 ) -> Result<(Frame, FvrTimings)> {
     let t0 = Instant::now();
     let (code, radius) = kernel_code(kernel)?;
-    let cpu = spectrum.cpu;
-    let m = cpu.side();
-    let plan = SlicePlan::new(cpu, view)?;
+    let layout = &spectrum.layout;
+    let m = layout.side();
+    let plan = SlicePlan::new(layout, view)?;
     let g = &plan.geometry;
     let params = FvrParams {
         m: m as u32,
@@ -400,7 +540,7 @@ pub fn fvr_project_timed(
     let fft = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let frame = plan.crop(cpu, kernel, deapodize, |i| image[i].re as f64);
+    let frame = plan.crop(layout, kernel, deapodize, |i| image[i].re as f64);
     let crop = t.elapsed().as_secs_f64();
     Ok((
         frame,

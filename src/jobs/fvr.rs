@@ -62,40 +62,45 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
     let engine = open(a)?;
     let vol = a.input.load(progress)?.to_f32();
     let m = padded_side(vol.dims(), a.padding)?;
-    let spectrum = stage(
-        progress,
-        &format!("3-D FFT of the {m}³ padded volume"),
-        "volume",
-        0,
-        || FvrSpectrum::new(&vol, a.padding),
-    )?;
-    let frame = stage(
-        progress,
-        &format!("{} slice and 2-D inverse FFT ({m}²)", a.kernel.name()),
-        "view",
-        0,
-        || match (engine.backend(), engine.gpu()) {
-            (Backend::Gpu, Some(ctx)) => {
-                use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum, SpectrumSlabs};
-                let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-                if let Some(line) = SpectrumSlabs::new(&ctx.limits, m, limit)?.describe() {
-                    progress.note(&line);
-                }
-                let t_up = std::time::Instant::now();
-                let uploaded = GpuFvrSpectrum::upload(ctx, &spectrum)?;
-                let up = t_up.elapsed().as_secs_f64();
-                let (frame, tm) = fvr_project_timed(ctx, &uploaded, view, a.kernel, a.deapodize)?;
+    let fft_stage = format!("3-D FFT of the {m}³ padded volume");
+    let view_stage = format!("{} slice and 2-D inverse FFT ({m}²)", a.kernel.name());
+    let frame = match (engine.backend(), engine.gpu()) {
+        (Backend::Gpu, Some(ctx)) => {
+            use crate::gpu::fvr::{fvr_project_timed, GpuFvrSpectrum, SpectrumSlabs};
+            let limit = crate::gpu::plan::binding_limit(&ctx.limits);
+            if let Some(line) = SpectrumSlabs::new(&ctx.limits, m, limit)?.describe() {
+                progress.note(&line);
+            }
+            // The spectrum is transformed and kept on the GPU (f32).
+            let t_up = std::time::Instant::now();
+            let spectrum = stage(
+                progress,
+                &format!("{fft_stage} on the GPU"),
+                "volume",
+                0,
+                || GpuFvrSpectrum::compute(ctx, &vol, a.padding),
+            )?;
+            let up = t_up.elapsed().as_secs_f64();
+            stage(progress, &view_stage, "view", 0, || {
+                let (frame, tm) = fvr_project_timed(ctx, &spectrum, view, a.kernel, a.deapodize)?;
                 progress.note(&format!(
-                    "GPU ({}): spectrum upload {up:.3} s; view {:.3} s (setup {:.3}, slice {:.3}, \
-                     inverse FFT and readback {:.3}, crop {:.3})",
+                    "GPU ({}): spectrum (upload and 3-D FFT) {up:.3} s; view {:.3} s (setup \
+                     {:.3}, slice {:.3}, inverse FFT and readback {:.3}, crop {:.3})",
                     ctx.summary.name, tm.total, tm.setup, tm.slice, tm.fft, tm.crop
                 ));
                 Ok(frame)
-            }
-            (Backend::CpuF32, _) => fvr_project(&spectrum.to_f32(), view, a.kernel, a.deapodize),
-            _ => fvr_project(&spectrum, view, a.kernel, a.deapodize),
-        },
-    )?;
+            })?
+        }
+        (backend, _) => {
+            let spectrum = stage(progress, &fft_stage, "volume", 0, || {
+                FvrSpectrum::new(&vol, a.padding)
+            })?;
+            stage(progress, &view_stage, "view", 0, || match backend {
+                Backend::CpuF32 => fvr_project(&spectrum.to_f32(), view, a.kernel, a.deapodize),
+                _ => fvr_project(&spectrum, view, a.kernel, a.deapodize),
+            })?
+        }
+    };
     Ok(FvrImage { frame, engine })
 }
 
@@ -119,9 +124,10 @@ fn open(a: &FvrRequest) -> Result<Engine> {
 }
 
 /// `voxlab fvr --dry-run`: the memory plan of [`run`] after reading the volume (for its
-/// size) and checking the options: the host's padded complex f64 spectrum and image;
-/// on the GPU the spectrum's f32 slabs and the slice against the planner's limits, and
-/// how many slabs it is bound in. Nothing is transformed or written.
+/// size) and checking the options: on the CPU the host's padded complex f64 spectrum
+/// and image; on the GPU the padded f32 cube, its 3-D FFT on the device (or in slabs
+/// through the host), the spectrum's f32 slabs and the slice against the planner's
+/// limits, and how many slabs it is bound in. Nothing is transformed or written.
 ///
 /// # Errors
 /// As [`run`] up to the work; [`crate::Error::TooLarge`] for a spectrum that cannot
@@ -131,22 +137,40 @@ pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::Memo
     let engine = open(a)?;
     let vol = a.input.load(progress)?;
     let m = padded_side(vol.dims(), a.padding)? as u64;
-    // The volume (f32), the padded complex f64 spectrum and the f64 image.
-    let host = 4 * vol.dims().iter().product::<usize>() as u64 + 16 * m.pow(3) + 8 * m * m;
-    let (device, split) = match engine.gpu() {
+    let voxels = vol.dims().iter().product::<usize>() as u64;
+    // The CPU: the volume (f32), the padded complex f64 spectrum and the f64 image.
+    let mut host = 4 * voxels + 16 * m.pow(3) + 8 * m * m;
+    let (device, split) = match engine.gpu().filter(|_| engine.backend() == Backend::Gpu) {
         Some(ctx) => {
+            use crate::gpu::fft::{device_bytes, split_plan};
             use crate::gpu::fvr::SpectrumSlabs;
             let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-            let slabs = SpectrumSlabs::new(&ctx.limits, m as usize, limit)?;
-            let slab = slabs.depth as u64 * m * m * 8;
-            // The spectrum's slabs, and the inverse 2-D FFT of the slice: its two
-            // buffers (the slice is the first), Bluestein's work buffers where M is not
-            // a power of two, and the tables.
             let side = m as usize;
-            let (fft, fft_largest) = crate::gpu::fft::device_bytes(&[side, side], &[0, 1]);
-            let peak = 8 * m.pow(3) + fft;
-            let device = super::plan::DevicePlan::on(ctx, peak, slab.max(fft_largest));
-            (Some(device), slabs.describe().into_iter().collect())
+            let slabs = SpectrumSlabs::new(&ctx.limits, side, limit)?;
+            let slab = slabs.depth as u64 * m * m * 8;
+            let cube = [side; 3];
+            let fft3_split = split_plan(ctx, &cube)?;
+            let mut split: Vec<String> = slabs.describe().into_iter().collect();
+            // The 3-D FFT: in place on the device when the cube fits one binding (its
+            // two buffers, Bluestein's work buffers, the tables), else in slabs
+            // through the host (whose pieces fit a binding each).
+            let (fft3, fft3_largest) = match &fft3_split {
+                None if slabs.slabs == 1 => device_bytes(&cube, &[0, 1, 2]),
+                _ => {
+                    split.extend(fft3_split.map(|p| p.describe()));
+                    (0, 0)
+                }
+            };
+            // Then per view: the spectrum's slabs, and the inverse 2-D FFT of the
+            // slice (its two buffers, the slice being the first, Bluestein's work
+            // buffers where M is not a power of two, and the tables).
+            let (fft2, fft2_largest) = device_bytes(&[side, side], &[0, 1]);
+            let peak = fft3.max(8 * m.pow(3) + fft2);
+            let largest = slab.max(fft2_largest).max(fft3_largest);
+            // The host: the volume, the padded f32 cube (and the result of a split
+            // FFT), the f64 image.
+            host = 4 * voxels + 8 * m.pow(3) * if fft3 == 0 { 3 } else { 1 } + 8 * m * m;
+            (Some(super::plan::DevicePlan::on(ctx, peak, largest)), split)
         }
         None => (None, Vec::new()),
     };

@@ -33,11 +33,11 @@ pub struct FvrArgs {
     #[arg(long)]
     pub deapodize: bool,
     /// Who computes: cpu (f64 throughout), cpu-f32 (the f64 spectrum rounded to
-    /// complex f32, then slice and inverse 2-D FFT in f32), gpu: the CPU still
-    /// builds the 3-D spectrum in f64, which is then uploaded as f32; the slice (nearest,
-    /// trilinear, lanczos2/3/4) and the inverse 2-D FFT run on the GPU (any padded
-    /// side: Bluestein's algorithm where it is not a power of two). auto: the GPU when a
-    /// hardware adapter exists, else cpu.
+    /// complex f32, then slice and inverse 2-D FFT in f32), gpu: the padded volume
+    /// is uploaded as f32 and its 3-D spectrum made on the GPU, then the slice
+    /// (nearest, trilinear, lanczos2/3/4) and the inverse 2-D FFT run there too (any
+    /// padded side: Bluestein's algorithm where it is not a power of two). auto: the GPU
+    /// when a hardware adapter exists, else cpu.
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
     pub backend: Backend,
     /// Write 16-bit PNG.
