@@ -38,9 +38,55 @@ fn at(ix: u32, iy: u32, iz: u32) -> vec2<f32> {
     return spectrum_at(slab, (z * p.m + iy) * p.m + ix);
 }
 
+// The most voxels along x the Dirichlet sum takes (its phases are kept per invocation);
+// the CPU's work limit (src/cpu/fvr.rs: MAX_DIRICHLET_WORK, N³·M² with M ≥ N) keeps N
+// below 84. Rust twin: src/gpu/fvr.rs: DIRICHLET_MAX_NX.
+const DIRICHLET_MAX_NX: u32 = 128u;
+
+// e^{−2πi·k·r/M}: the angle reduced to a fraction of a turn first.
+fn dirichlet_phase(k: f32, r: f32) -> vec2<f32> {
+    let turns = k * r / f32(p.m);
+    let a = -2.0 * PI * (turns - round(turns));
+    return vec2<f32>(cos(a), sin(a));
+}
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+}
+
+// The spectrum of the padded grid evaluated exactly at kappa: the sum over every voxel
+// of its value times e^{−2πi κ·r/M}, r = n + offset − M/2, separable per axis (the x
+// phases kept, summed along x, then y, then z), in f32.
+// mirrors src/cpu/fvr.rs: FvrSpectrum::sample_exact
+fn dirichlet(kappa: vec3<f32>) -> vec2<f32> {
+    let half = f32(p.m / 2u);
+    var px: array<vec2<f32>, DIRICHLET_MAX_NX>;
+    for (var i = 0u; i < p.nx; i++) {
+        px[i] = dirichlet_phase(kappa.x, f32(i + p.ox) - half);
+    }
+    var acc = vec2<f32>(0.0);
+    for (var k = 0u; k < p.nz; k++) {
+        var az = vec2<f32>(0.0);
+        for (var j = 0u; j < p.ny; j++) {
+            let row = (k * p.ny + j) * p.nx;
+            var ax = vec2<f32>(0.0);
+            for (var i = 0u; i < p.nx; i++) {
+                ax += px[i] * values[row + i];
+            }
+            az += cmul(ax, dirichlet_phase(kappa.y, f32(j + p.oy) - half));
+        }
+        acc += cmul(az, dirichlet_phase(kappa.z, f32(k + p.oz) - half));
+    }
+    return acc;
+}
+
 // src/cpu/fvr.rs: FvrSpectrum::sample — the centred spectrum at frequency kappa (bins,
-// [x, y, z]), weights normalised to sum to 1 per axis.
+// [x, y, z]), weights normalised to sum to 1 per axis; the Dirichlet kernel is the
+// exact sum.
 fn sample(kappa: vec3<f32>) -> vec2<f32> {
+    if p.kernel == 3u {
+        return dirichlet(kappa);
+    }
     let half = f32(p.m / 2u);
     var g = kappa + vec3<f32>(half);
     if p.kernel == 0u {

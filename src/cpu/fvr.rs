@@ -263,6 +263,32 @@ impl FvrLayout {
         self.dims
     }
 
+    /// Where the volume's voxel `(0, 0, 0)` sits in the cube, `⌊(M − n)/2⌋` per axis.
+    pub fn offset(&self) -> [usize; 3] {
+        self.offset
+    }
+
+    /// Refuses a Dirichlet slice past [`MAX_DIRICHLET_WORK`] multiply-adds
+    /// (`N³` voxels for each of the `M²` samples).
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] saying how much work it would be.
+    pub fn check_dirichlet_work(&self) -> Result<()> {
+        let n: usize = self.dims.iter().product();
+        let m = self.m;
+        let work = n as f64 * (m * m) as f64;
+        if work > MAX_DIRICHLET_WORK {
+            return Err(Error::too_large(
+                "Dirichlet slice",
+                format!(
+                    "{n} voxels × {m}² samples = {work:.1e} operations (limit \
+                     {MAX_DIRICHLET_WORK:.0e}); the exact kernel is for small volumes"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// Where voxel `(i, j, k)` of the volume goes in the cube before the forward FFT:
     /// its position `r = n + offset − M/2` about the cube's centre, wrapped modulo `M`
     /// (the `ifftshift` of the padded cube, so that the centre is at index 0).
@@ -509,6 +535,11 @@ impl<R: SpectrumReal> FvrSpectrum<R> {
         &self.layout
     }
 
+    /// The volume's values in f64, `[z][y][x]` (the Dirichlet kernel's input).
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
     /// The centred spectrum, `[z][y][x]`, frequency `κ` at index `M/2 + κ`.
     pub fn spectrum(&self) -> &[Complex<R>] {
         &self.spectrum
@@ -709,17 +740,7 @@ pub fn fvr_project<R: SpectrumReal>(
     let g = &plan.geometry;
     let m = spectrum.layout.m;
     if kernel == Kernel::Dirichlet {
-        let n: usize = spectrum.layout.dims.iter().product();
-        let work = n as f64 * (m * m) as f64;
-        if work > MAX_DIRICHLET_WORK {
-            return Err(Error::too_large(
-                "Dirichlet slice",
-                format!(
-                    "{n} voxels × {m}² samples = {work:.1e} operations (limit \
-                     {MAX_DIRICHLET_WORK:.0e}); the exact kernel is for small volumes"
-                ),
-            ));
-        }
+        spectrum.layout.check_dirichlet_work()?;
     }
     let (dr, du) = (plan.dr, plan.du);
     let half = (m / 2) as i64;

@@ -39,7 +39,11 @@
 //! 3. the host crops, scales and optionally de-apodises exactly as the CPU does
 //!    (the shared `SlicePlan::crop`, in f64).
 //!
-//! The Dirichlet kernel stays on the CPU (refused here with a clear error).
+//! The Dirichlet kernel reads the volume, not the spectrum: `dirichlet` in the shader
+//! sums every voxel's value times `e^{−2πi κ·r/M}` for each sample, separably (the x
+//! phases kept per invocation, the angles reduced to a fraction of a turn), in f32 —
+//! the port of `FvrSpectrum::sample_exact`, under the CPU's work limit. The volume's
+//! f32 values are kept on the device beside the spectrum for it.
 //!
 //! Everything that does not depend on the view (the slice pipeline, the slice buffer,
 //! the parameter buffer and bind group, the inverse FFT's pipelines, twiddle tables and
@@ -62,6 +66,12 @@ pub const PARAMS_WGSL: &str = super::shaders::FVR_PARAMS;
 /// Invocations per workgroup (`WORKGROUP` in `shaders/fvr_slice.wgsl`).
 const WORKGROUP: u32 = 64;
 
+/// The most voxels along x the GPU's Dirichlet sum takes (it keeps the x phases per
+/// invocation; `DIRICHLET_MAX_NX` in `shaders/fvr_slice.wgsl`). The work limit
+/// [`crate::cpu::fvr::MAX_DIRICHLET_WORK`] keeps every cube it admits below it
+/// (`N³·M² ≤ 4e9` with `M ≥ N`: `N ≤ 83`); a longer, thin volume is refused.
+pub const DIRICHLET_MAX_NX: usize = 128;
+
 /// The most z-slabs a spectrum may be split into (storage bindings 2 … 9; the slice is
 /// binding 1). An adapter offering fewer storage buffers per shader stage lowers it.
 pub const MAX_SLABS: usize = 8;
@@ -81,6 +91,11 @@ pub fn slab_bindings_wgsl(slabs: usize) -> String {
             k + 2
         );
     }
+    s += &format!(
+        "// The volume's values, [z][y][x] (the Dirichlet kernel's sum).\n\
+         @group(0) @binding({}) var<storage, read> values: array<f32>;\n",
+        slabs + 2
+    );
     s += "fn spectrum_at(slab: u32, i: u32) -> vec2<f32> {\n";
     if slabs == 1 {
         s += "    return spectrum0[i];\n";
@@ -103,7 +118,7 @@ pub fn shader_source(slabs: usize) -> String {
 }
 
 /// Parameters of one slice extraction, shared with
-/// `shaders/shared/fvr_params.wgsl: FvrParams` (48 bytes, twelve 4-byte scalars, no
+/// `shaders/shared/fvr_params.wgsl: FvrParams` (80 bytes, twenty 4-byte scalars, no
 /// padding; `tests/gpu_fvr.rs` checks the layout).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -125,19 +140,26 @@ pub struct FvrParams {
     /// Sub-voxel offsets of the phase ramp.
     pub dr: f32,
     pub du: f32,
+    /// The volume's size in voxels and its placement offset in the cube (the
+    /// Dirichlet kernel's sum).
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub ox: u32,
+    pub oy: u32,
+    pub oz: u32,
+    /// Padding to a multiple of 16 bytes.
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
-/// The kernel code and radius of [`FvrParams`], or an error for the Dirichlet kernel.
-fn kernel_code(kernel: Kernel) -> Result<(u32, u32)> {
+/// The kernel code and radius of [`FvrParams`].
+fn kernel_code(kernel: Kernel) -> (u32, u32) {
     match kernel {
-        Kernel::Nearest => Ok((0, 0)),
-        Kernel::Trilinear => Ok((1, 1)),
-        Kernel::Dirichlet => Err(Error::invalid(
-            "FVR kernel",
-            "dirichlet runs on the CPU only (use --backend cpu, or a truncated kernel \
-             such as lanczos3 on the GPU)",
-        )),
-        k => Ok((2, k.lanczos_order().expect("a Lanczos kernel") as u32)),
+        Kernel::Nearest => (0, 0),
+        Kernel::Trilinear => (1, 1),
+        Kernel::Dirichlet => (3, 0),
+        k => (2, k.lanczos_order().expect("a Lanczos kernel") as u32),
     }
 }
 
@@ -160,6 +182,10 @@ pub struct GpuFvrSpectrum {
     bind: wgpu::BindGroup,
     /// The inverse `M × M` FFT (Bluestein's algorithm when `M` is not a power of two).
     fft: GpuFftPlan,
+    /// The volume's values in f32, `[z][y][x]` (the Dirichlet kernel's sum), or a
+    /// placeholder when they exceed one binding (`values_bound` false).
+    _values: wgpu::Buffer,
+    values_bound: bool,
 }
 
 /// How an `M³` spectrum is bound: `slabs` z-slabs of `depth` whole `M × M` planes
@@ -177,14 +203,14 @@ impl SpectrumSlabs {
     /// # Errors
     /// [`Error::TooLarge`] when one plane exceeds a slab, or the spectrum needs more
     /// slabs than [`MAX_SLABS`] (or than the adapter's storage buffers per shader stage,
-    /// less the one of the slice).
+    /// less those of the slice and the volume's values).
     pub fn new(limits: &wgpu::Limits, m: usize, max_slab_bytes: u64) -> Result<Self> {
         let limit = max_slab_bytes
             .min(limits.max_storage_buffer_binding_size)
             .min(limits.max_buffer_size);
         let plane = (m * m) as u64 * 8;
         let max_slabs =
-            MAX_SLABS.min((limits.max_storage_buffers_per_shader_stage as usize).saturating_sub(1));
+            MAX_SLABS.min((limits.max_storage_buffers_per_shader_stage as usize).saturating_sub(2));
         let depth = (limit / plane.max(1)).min(m as u64) as usize;
         let slabs = if depth == 0 {
             usize::MAX
@@ -272,7 +298,8 @@ impl GpuFvrSpectrum {
                 .map(|v| [v.re as f32, v.im as f32])
                 .collect()
         });
-        Self::with_slabs(ctx, *spectrum.layout(), plan.depth, buffers)
+        let values: Vec<f32> = spectrum.values().iter().map(|&v| v as f32).collect();
+        Self::with_slabs(ctx, *spectrum.layout(), plan.depth, buffers, &values)
     }
 
     /// The centred spectrum of `volume` zero-padded by `padding` (as
@@ -337,7 +364,7 @@ impl GpuFvrSpectrum {
             ctx.queue.submit([enc.finish()]);
             ctx.wait()?;
             drop(fft);
-            return Self::with_slabs(ctx, layout, plan.depth, vec![buffer]);
+            return Self::with_slabs(ctx, layout, plan.depth, vec![buffer], volume.data());
         }
         // Past one binding: the FFT in slabs through the host, then the z-slabs.
         let x: Vec<rustfft::num_complex::Complex<f32>> = cube
@@ -353,16 +380,17 @@ impl GpuFvrSpectrum {
                 .map(|v| [v.re, v.im])
                 .collect()
         });
-        Self::with_slabs(ctx, layout, plan.depth, buffers)
+        Self::with_slabs(ctx, layout, plan.depth, buffers, volume.data())
     }
 
     /// The slice pipeline, buffers, bind group and inverse FFT around the spectrum's
-    /// z-slabs of `depth` planes.
+    /// z-slabs of `depth` planes, with the volume's `values` for the Dirichlet kernel.
     fn with_slabs(
         ctx: &GpuContext,
         layout: FvrLayout,
         depth: usize,
         buffers: Vec<wgpu::Buffer>,
+        values: &[f32],
     ) -> Result<Self> {
         let m = layout.side();
         let slabs = buffers.len();
@@ -387,8 +415,22 @@ impl GpuFvrSpectrum {
             mapped_at_creation: false,
         });
         let slice = ctx.storage_buffer("fvr slice", (m * m * 8) as u64)?;
+        let values_bound =
+            (values.len() as u64 * 4) <= crate::gpu::plan::binding_limit(&ctx.limits);
+        let values_buffer = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("fvr volume values"),
+                contents: if values_bound && !values.is_empty() {
+                    bytemuck::cast_slice(values)
+                } else {
+                    &[0; 4]
+                },
+                usage: wgpu::BufferUsages::STORAGE,
+            });
         let mut resources = vec![params.as_entire_binding(), slice.as_entire_binding()];
         resources.extend(buffers.iter().map(|b| b.as_entire_binding()));
+        resources.push(values_buffer.as_entire_binding());
         let bind = ctx.bind_group("fvr slice", &pipeline.get_bind_group_layout(0), &resources);
         let fft = GpuFftPlan::new(
             ctx,
@@ -407,6 +449,8 @@ impl GpuFvrSpectrum {
             slice,
             bind,
             fft,
+            _values: values_buffer,
+            values_bound,
         })
     }
 
@@ -490,8 +534,27 @@ pub fn fvr_project_timed(
     deapodize: bool,
 ) -> Result<(Frame, FvrTimings)> {
     let t0 = Instant::now();
-    let (code, radius) = kernel_code(kernel)?;
+    let (code, radius) = kernel_code(kernel);
     let layout = &spectrum.layout;
+    if kernel == Kernel::Dirichlet {
+        layout.check_dirichlet_work()?;
+        if layout.dims()[0] > DIRICHLET_MAX_NX {
+            return Err(Error::too_large(
+                "GPU Dirichlet slice",
+                format!(
+                    "{} voxels along x exceed the {DIRICHLET_MAX_NX} the GPU's sum keeps: \
+                     use --backend cpu",
+                    layout.dims()[0]
+                ),
+            ));
+        }
+        if !spectrum.values_bound {
+            return Err(Error::too_large(
+                "GPU Dirichlet slice",
+                "the volume's f32 values exceed one storage binding: use --backend cpu",
+            ));
+        }
+    }
     let m = layout.side();
     let plan = SlicePlan::new(layout, view)?;
     let g = &plan.geometry;
@@ -508,6 +571,14 @@ pub fn fvr_project_timed(
         up_z: g.up.z as f32,
         dr: plan.dr as f32,
         du: plan.du as f32,
+        nx: layout.dims()[0] as u32,
+        ny: layout.dims()[1] as u32,
+        nz: layout.dims()[2] as u32,
+        ox: layout.offset()[0] as u32,
+        oy: layout.offset()[1] as u32,
+        oz: layout.offset()[2] as u32,
+        pad0: 0,
+        pad1: 0,
     };
 
     let fft_plan = &spectrum.fft;

@@ -35,7 +35,7 @@ pub struct FvrArgs {
     /// Who computes: cpu (f64 throughout), cpu-f32 (the f64 spectrum rounded to
     /// complex f32, then slice and inverse 2-D FFT in f32), gpu: the padded volume
     /// is uploaded as f32 and its 3-D spectrum made on the GPU, then the slice
-    /// (nearest, trilinear, lanczos2/3/4) and the inverse 2-D FFT run there too (any
+    /// (every kernel, dirichlet included) and the inverse 2-D FFT run there too (any
     /// padded side: Bluestein's algorithm where it is not a power of two). auto: the GPU
     /// when a hardware adapter exists, else cpu.
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
