@@ -349,15 +349,15 @@ fn the_dirichlet_kernel_on_the_gpu_matches_the_cpu_oracle() {
     let data = (0..129 * 4).map(|i| (i % 7) as f32).collect();
     let long = Volume::new([129, 2, 2], [1.0; 3], data).unwrap();
     let g = GpuFvrSpectrum::compute(ctx, &long, 1).unwrap();
-    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false)
-        .err()
-        .expect("129 voxels along x are refused");
+    let Err(e) = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false) else {
+        panic!("129 voxels along x are refused");
+    };
     assert!(e.to_string().contains("voxels along x"), "{e}");
     // 64³ voxels × 128² samples = 4.3e9 > 4e9.
     let g = GpuFvrSpectrum::compute(ctx, &shepp_logan(64), 2).unwrap();
-    let e = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false)
-        .err()
-        .expect("past the work limit");
+    let Err(e) = gfvr::fvr_project(ctx, &g, ORBIT, Kernel::Dirichlet, false) else {
+        panic!("past the work limit");
+    };
     assert!(
         e.to_string()
             .contains("the exact kernel is for small volumes"),
