@@ -347,13 +347,6 @@ fn what_it_does_not_take_is_refused_clearly() {
     let cases = [
         (
             ReconstructRequest {
-                method: voxlab::jobs::reconstruct::ReconstructMethod::OsSart,
-                ..base.clone()
-            },
-            "--method: os-sart does not run distributed",
-        ),
-        (
-            ReconstructRequest {
                 method: voxlab::jobs::reconstruct::ReconstructMethod::Tv,
                 ..base.clone()
             },
@@ -494,7 +487,7 @@ fn the_dry_run_plans_what_the_ranks_then_do() {
 /// (non-negative) and CGLS on scikit-image's 2-D sinogram (read whole by every rank)
 /// and on RTK's cone-beam stack (each rank reads its views' lines).
 fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
-    use voxlab::jobs::reconstruct::ReconstructMethod::{Cgls, Sirt};
+    use voxlab::jobs::reconstruct::ReconstructMethod::{Cgls, OsSart, Sirt};
     let skimage = ReconstructRequest {
         input: ct("skimage_radon64.npy"),
         geometry: Some("parallel".into()),
@@ -523,7 +516,7 @@ fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
             ReconstructRequest {
                 method: Cgls,
                 iterations: Some(5),
-                ..skimage
+                ..skimage.clone()
             },
         ),
         (
@@ -540,6 +533,28 @@ fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
             ReconstructRequest {
                 method: Cgls,
                 iterations: Some(4),
+                ..cone.clone()
+            },
+        ),
+        // OS-SART: each subset's views are spread over the ranks (interleaved subsets
+        // against contiguous runs of views), its update summed before the next subset.
+        (
+            "scikit-image's sinogram, OS-SART ≥ 0, 5 subsets, 3 iterations",
+            ReconstructRequest {
+                method: OsSart,
+                iterations: Some(3),
+                subsets: Some(5),
+                nonnegative: true,
+                ..skimage.clone()
+            },
+        ),
+        (
+            "RTK's cone-beam stack onto 24³, OS-SART, 3 random subsets, 3 iterations",
+            ReconstructRequest {
+                method: OsSart,
+                iterations: Some(3),
+                subsets: Some(3),
+                subset_order: voxlab::cpu::iterative::SubsetOrder::Random,
                 ..cone
             },
         ),
@@ -554,14 +569,14 @@ fn read_f32(p: &Path) -> Vec<f64> {
 /// `max |Δ| / max |single|` of the written files (float32), on 2–4 ranks, for the
 /// f64 and the f32 backend. In f64 the file shows the images' difference (below) only
 /// where it moves a value across an f32 rounding boundary (2⁻²⁴ of the value at
-/// most) or where CGLS has amplified it. Measured on a 2-core x86-64, the four cases:
-/// f64 0 for SIRT and the cone's CGLS, 2.8e-13 for CGLS on scikit-image's sinogram (5
-/// iterations); f32 ≤ 5.0e-7 (SIRT), ≤ 7.3e-7 (CGLS).
+/// most) or where CGLS has amplified it. Measured on a 2-core x86-64, the six cases:
+/// f64 0 for SIRT, OS-SART and the cone's CGLS, 2.8e-13 for CGLS on scikit-image's
+/// sinogram (5 iterations); f32 ≤ 5.0e-7 (SIRT), ≤ 2.8e-7 (OS-SART), ≤ 7.3e-7 (CGLS).
 const FILE_F64_BOUND: f64 = 1.2e-7;
 const FILE_F32_BOUND: f64 = 2e-6;
 
 #[test]
-fn sirt_and_cgls_on_one_to_four_ranks_follow_the_single_process_file() {
+fn sirt_os_sart_and_cgls_on_one_to_four_ranks_follow_the_single_process_file() {
     let dir = scratch("distributed-iterative");
     for (name, req) in iterative_cases() {
         for backend in [Backend::Cpu, Backend::CpuF32] {
@@ -899,6 +914,27 @@ fn a_failing_rank_fails_every_iterating_rank_and_leaves_no_file() {
         // Every iteration's all-reduce, besides the set-up's sums and the reports.
         assert!(
             rep.bytes_sent >= 3 * (16 * 16 * 8 + 24),
+            "{}",
+            rep.bytes_sent
+        );
+    }
+    // OS-SART sends one partial image per subset (its column weights, kept, once).
+    let subsets = ReconstructRequest {
+        method: voxlab::jobs::reconstruct::ReconstructMethod::OsSart,
+        subsets: Some(2),
+        out: Some(dir.join("os-sart.npy")),
+        ..few.clone()
+    };
+    let text = distributed::dry_run(&subsets, 3, &()).unwrap();
+    // Two 16 × 16 images in f64 and two sums: 4112 bytes.
+    assert!(
+        text.contains("sends:  4.0 KiB per rank and iteration"),
+        "{text}"
+    );
+    let d = on_ranks(&subsets, 3, None).swap_remove(0).unwrap();
+    for rep in &d.ranks {
+        assert!(
+            rep.bytes_sent >= 3 * (2 * 16 * 16 * 8 + 16),
             "{}",
             rep.bytes_sent
         );

@@ -153,7 +153,7 @@ fn iterative_on_every_rank_count(name: &str, dir: &Path, args: &[&str], bound: f
 }
 
 #[test]
-fn sirt_and_cgls_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
+fn sirt_os_sart_and_cgls_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
     let dir = scratch("mpi-iterative");
     iterative_on_every_rank_count(
         "sirt-skimage",
@@ -191,5 +191,26 @@ fn sirt_and_cgls_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
             "cpu-f32",
         ],
         2e-6,
+    );
+    // OS-SART: every subset's update summed over the ranks.
+    iterative_on_every_rank_count(
+        "os-sart-cone",
+        &dir,
+        &[
+            &ct("rtk_joseph32.npy"),
+            "--geometry",
+            &ct("rtk_geometry.json"),
+            "--size",
+            "24",
+            "--spacing",
+            "2.5",
+            "--method",
+            "os-sart",
+            "--subsets",
+            "4",
+            "--iterations",
+            "2",
+        ],
+        1.2e-7,
     );
 }

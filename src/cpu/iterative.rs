@@ -325,6 +325,12 @@ pub trait Shares {
     /// elementwise, the same bits on every share. A collective: every share calls it,
     /// in the same order.
     fn sum(&self, values: &mut [f64]);
+    /// Where this share's `local` views lie among the problem's: `(first, total)`, its
+    /// views being `first .. first + local` of `total` (OS-SART's subsets are cut from
+    /// the whole problem's views). One share: `(0, local)`.
+    fn views(&self, local: usize) -> (usize, usize) {
+        (0, local)
+    }
 }
 
 /// The whole problem in one process.
@@ -360,17 +366,19 @@ fn summed_scalars<const N: usize>(shares: &dyn Shares, mut s: [f64; N]) -> [f64;
 /// [`solve`] for one share of a problem cut by views ([`Shares`]): `prob` holds this
 /// share's views (its pair over them, their projections), `x0` the whole image; every
 /// share calls it with the same options and initial image, and every share returns
-/// the same image, residuals and objectives. SIRT and CGLS only (their iterations
-/// use every view at once: OS-SART's subsets and TV are not cut this way). With one
-/// share it is [`solve`], bit for bit; with more, the sums over the views are
-/// regrouped by share (`Aᵀ y` as `Σ_shares Σ_views in share`, summed in f64), and so
-/// are the residual's (its chunks of 4096 values start at each share's first ray).
+/// the same image, residuals and objectives. SIRT, OS-SART and CGLS (OS-SART's subsets
+/// are cut from the whole problem's views, [`Shares::views`]: each share updates with
+/// its views of a subset, and the update and column weights are summed over the
+/// shares, subset by subset; TV is not cut this way). With one share it is [`solve`],
+/// bit for bit; with more, the sums over the views are regrouped by share (`Aᵀ y` as
+/// `Σ_shares Σ_views in share`, summed in f64), and so are the residual's (its chunks
+/// of 4096 values start at each share's first ray).
 ///
 /// Runs on the calling thread (not inside the thread pool, as [`solve`] does), so
 /// that a share waiting in [`Shares::sum`] never holds a worker the others need.
 ///
 /// # Errors
-/// As [`solve`]; [`Error::Invalid`] for OS-SART and TV.
+/// As [`solve`]; [`Error::Invalid`] for TV.
 pub fn solve_shared<R: Real>(
     prob: &Problem<R>,
     x0: Vec<R>,
@@ -378,15 +386,16 @@ pub fn solve_shared<R: Real>(
     shares: &dyn Shares,
     on_iteration: &mut Hook<R>,
 ) -> Result<Solution<R>> {
-    check_problem(prob, x0.len(), opts)?;
+    check_problem_of(prob, x0.len(), opts, shares.views(prob.pair.n_views()).1)?;
     let x0 = masked(x0, prob.support);
     match opts.method {
         Method::Sirt => sart(prob, x0, opts, false, shares, on_iteration),
+        Method::OsSart => sart(prob, x0, opts, true, shares, on_iteration),
         Method::Cgls => cgls(prob, x0, opts, shares, on_iteration),
         m => Err(Error::invalid(
             "--method",
             format!(
-                "{} does not run on a problem cut by views (sirt and cgls do)",
+                "{} does not run on a problem cut by views (sirt, os-sart and cgls do)",
                 m.name()
             ),
         )),
@@ -498,8 +507,19 @@ pub fn solve<R: Real>(
 /// # Errors
 /// [`Error::Invalid`] naming the option or the array.
 pub fn check_problem<R>(prob: &Problem<R>, n_x0: usize, opts: &IterativeOptions) -> Result<()> {
+    check_problem_of(prob, n_x0, opts, prob.pair.n_views())
+}
+
+/// [`check_problem`] for a problem of `views` views in all, of which `prob` may hold a
+/// share (the options, OS-SART's subsets among them, are checked against all).
+fn check_problem_of<R>(
+    prob: &Problem<R>,
+    n_x0: usize,
+    opts: &IterativeOptions,
+    views: usize,
+) -> Result<()> {
     let pair = prob.pair;
-    opts.check(pair.n_views())?;
+    opts.check(views)?;
     let n = pair.n_voxels();
     let rays = pair.n_views() * pair.per_view();
     if n_x0 != n {
@@ -602,10 +622,6 @@ fn sart<R: Real>(
     shares: &dyn Shares,
     on_iteration: &mut Hook<R>,
 ) -> Result<Solution<R>> {
-    assert!(
-        !subsets || shares.count() == 1,
-        "OS-SART runs on the whole problem"
-    );
     let pair = prob.pair;
     let all = all_views(pair);
     // Every image projected here is 0 off the support (x is masked, and so are the
@@ -615,13 +631,25 @@ fn sart<R: Real>(
     let ones_x = masked(vec![R::one(); pair.n_voxels()], prob.support);
     let row_w = reciprocal(pair.forward_within(&ones_x, &all, planes)?);
     let k = if subsets { opts.subsets } else { 1 };
-    let groups: Vec<Vec<usize>> = (0..k).map(|s| subset_views(pair.n_views(), k, s)).collect();
+    // The subsets of the whole problem's views; a share takes its own views of each
+    // (as indices among them), and sums each subset's update over the shares.
+    let (first, total) = shares.views(pair.n_views());
+    let mine = first..first + pair.n_views();
+    let groups: Vec<Vec<usize>> = (0..k)
+        .map(|s| {
+            subset_views(total, k, s)
+                .into_iter()
+                .filter(|v| mine.contains(v))
+                .map(|v| v - first)
+                .collect()
+        })
+        .collect();
     // The subsets whose update the pair makes in one pass (computing their column
-    // weights as it goes); the others keep their column weights while they fit, else
-    // recompute them.
+    // weights as it goes: one share only, since the update must be summed first); the
+    // others keep their column weights while they fit, else recompute them.
     let one_pass: Vec<bool> = groups
         .iter()
-        .map(|v| subsets && pair.has_sart_update(v))
+        .map(|v| subsets && shares.count() == 1 && pair.has_sart_update(v))
         .collect();
     let keep = keeps_column_weights(k, pair.n_voxels(), std::mem::size_of::<R>());
     let col_w_of = |views: &[usize]| {
@@ -688,7 +716,7 @@ fn sart<R: Real>(
             if one_pass[s] && pair.sart_update(&mut x, &wr, views, &step)? {
                 continue;
             }
-            let upd = transpose_masked(prob, &wr, views)?;
+            let upd = summed(shares, transpose_masked(prob, &wr, views)?);
             let fresh;
             let cw = if let Some(Some(cw)) = kept.get(s) {
                 cw

@@ -408,17 +408,11 @@ impl Distributed {
 
 /// The options `--distributed` refuses, checked before anything is read.
 pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
-    if !matches!(
-        a.method,
-        ReconstructMethod::Fbp | ReconstructMethod::Sirt | ReconstructMethod::Cgls
-    ) {
+    if a.method == ReconstructMethod::Tv {
         return Err(Error::invalid(
             "--method",
-            format!(
-                "{} does not run distributed: fbp, sirt and cgls do (os-sart's subsets and \
-                 tv are not cut among ranks yet)",
-                a.method.name()
-            ),
+            "tv does not run distributed: fbp, sirt, os-sart and cgls do (tv's dual \
+             field and power iteration are not cut among ranks yet)",
         ));
     }
     if a.method != ReconstructMethod::Fbp {

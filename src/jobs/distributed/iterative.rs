@@ -1,5 +1,6 @@
-//! `voxlab reconstruct --distributed --method sirt|cgls`: the iterative methods on the
-//! ranks of a [`Comm`], the views cut among the ranks and the image whole on each.
+//! `voxlab reconstruct --distributed --method sirt|os-sart|cgls`: the iterative methods
+//! on the ranks of a [`Comm`], the views cut among the ranks and the image whole on
+//! each.
 //!
 //! # How the work is cut
 //! The views are cut into one contiguous run per rank (sizes differing by at most one,
@@ -14,6 +15,15 @@
 //! weights `1 / A𝟙` are per ray, so per rank; its column weights `1 / Aᵀ𝟙` are summed
 //! once. Every rank then takes the same step on the same image: the loops are
 //! [`crate::cpu::iterative`]'s own ([`solve_shared`]).
+//!
+//! OS-SART's subsets are cut from all the views (`s, s + k, s + 2k, …`), so each
+//! subset has views on every rank: a rank projects `x` onto its views of the subset,
+//! backprojects its weighted residual, and the partial updates (and the subset's
+//! column weights, when they are not kept from the first pass) are all-reduced before
+//! every rank applies the same update; then the next subset. One all-reduce of an
+//! image per subset: `k` per iteration instead of SIRT's one. (The one-pass update of
+//! a single process, which updates `x` view by view, is not used on more than one
+//! rank: the update must be summed first.)
 //!
 //! # What it equals
 //! On one rank, the single-process result bit for bit. On more, `Aᵀ r` is summed as
@@ -47,10 +57,14 @@ use std::cell::Cell;
 use std::ops::Range;
 use std::time::Instant;
 
-/// The [`Shares`] of a rank: the all-reduce of its [`Comm`], timed.
+/// The [`Shares`] of a rank: the all-reduce of its [`Comm`], timed, and where its
+/// views lie among all.
 struct RankShares<'a> {
     comm: &'a dyn Comm,
     seconds: Cell<f64>,
+    /// The rank's first view and the problem's view count.
+    first_view: usize,
+    total_views: usize,
 }
 
 impl Shares for RankShares<'_> {
@@ -62,6 +76,9 @@ impl Shares for RankShares<'_> {
         self.comm.all_reduce_sum(values);
         self.seconds
             .set(self.seconds.get() + t.elapsed().as_secs_f64());
+    }
+    fn views(&self, _local: usize) -> (usize, usize) {
+        (self.first_view, self.total_views)
     }
 }
 
@@ -174,6 +191,8 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     let shares = RankShares {
         comm,
         seconds: Cell::new(0.0),
+        first_view: pre.views.as_ref().map_or(0, |v| v.start),
+        total_views: pre.g.n_angles(),
     };
     let total = pre.opts.iterations as u64;
     // Every rank stops at the same iteration: cancellation is agreed on.
@@ -188,7 +207,7 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     Ok((x, log, [pair_seconds, secs, shares.seconds.get()]))
 }
 
-/// [`super::run`] for SIRT and CGLS (module docs).
+/// [`super::run`] for SIRT, OS-SART and CGLS (module docs).
 pub(super) fn run(
     a: &ReconstructRequest,
     comm: &dyn Comm,
@@ -296,12 +315,12 @@ impl Distributed {
     }
 }
 
-/// What SIRT or CGLS on `ranks` ranks would do ([`super::dry_run`]): each rank's views, what it
-/// reads and holds, and what it sends.
+/// What SIRT, OS-SART or CGLS on `ranks` ranks would do ([`super::dry_run`]): each rank's
+/// views, what it reads and holds, and what it sends.
 #[derive(Clone, Debug)]
 pub struct ViewsPlan {
     pub grid: Grid,
-    /// `sirt` or `cgls`.
+    /// `sirt`, `os-sart` or `cgls`.
     pub method: String,
     pub iterations: usize,
     /// Each rank's views (`None`: more ranks than views).
@@ -378,7 +397,7 @@ impl ViewsPlan {
     }
 }
 
-/// `voxlab reconstruct --distributed --dry-run --ranks N` for SIRT and CGLS: how [`run`]
+/// `voxlab reconstruct --distributed --dry-run --ranks N` for SIRT, OS-SART and CGLS: how [`run`]
 /// on `ranks` ranks would cut the views and what each rank would read, hold and send,
 /// after reading the input's header and geometry (no MPI needed), computing and
 /// writing nothing.
@@ -402,6 +421,16 @@ pub(super) fn plan(
     let views = runs(g.n_angles(), ranks);
     let voxels = grid.dims.iter().product::<usize>() as u64;
     let per_view = (g.rows * g.cols) as u64;
+    // OS-SART: each subset's update is summed over the ranks, and its column weights
+    // too unless every subset's are kept (then they are summed once).
+    let os_sart = method == crate::cpu::iterative::Method::OsSart;
+    let real = if a.backend == Backend::CpuF32 { 4 } else { 8 };
+    let keep = crate::cpu::iterative::keeps_column_weights(opts.subsets, voxels as usize, real);
+    let kept_weights = if os_sart && keep {
+        opts.subsets as u64 * voxels * real as u64
+    } else {
+        0
+    };
     let host_bytes = views
         .iter()
         .map(|v| {
@@ -418,7 +447,7 @@ pub(super) fn plan(
             } else {
                 0
             };
-            read + 2 * rays * 8 + 4 * voxels * 8 + gathered
+            read + 2 * rays * 8 + 4 * voxels * 8 + gathered + kept_weights
         })
         .collect();
     let shape = crate::jobs::reconstruct::npy_shape(grid.dims);
@@ -430,8 +459,14 @@ pub(super) fn plan(
         total_lines: g.n_angles() * g.rows,
         reads_whole: whole.is_some(),
         host_bytes,
-        // The partial image and up to three sums over rays, f64, to every other rank.
-        bytes_per_iteration: if ranks > 1 { voxels * 8 + 24 } else { 0 },
+        // The partial image and up to three sums over rays, f64, to every other rank;
+        // OS-SART one partial update per subset (and its column weights when they are
+        // not kept) and two sums.
+        bytes_per_iteration: match (ranks > 1, os_sart) {
+            (false, _) => 0,
+            (true, false) => voxels * 8 + 24,
+            (true, true) => opts.subsets as u64 * voxels * 8 * if keep { 1 } else { 2 } + 16,
+        },
         out: a.out.clone().expect("checked by check_distributed"),
         out_bytes: crate::io::npy::npy_f32_header(&shape).len() as u64 + 4 * voxels,
         grid,
