@@ -347,13 +347,6 @@ fn what_it_does_not_take_is_refused_clearly() {
     let cases = [
         (
             ReconstructRequest {
-                method: voxlab::jobs::reconstruct::ReconstructMethod::Tv,
-                ..base.clone()
-            },
-            "--method: tv does not run distributed",
-        ),
-        (
-            ReconstructRequest {
                 method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
                 init: voxlab::jobs::reconstruct::Init::Fbp,
                 ..base.clone()
@@ -487,7 +480,7 @@ fn the_dry_run_plans_what_the_ranks_then_do() {
 /// (non-negative) and CGLS on scikit-image's 2-D sinogram (read whole by every rank)
 /// and on RTK's cone-beam stack (each rank reads its views' lines).
 fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
-    use voxlab::jobs::reconstruct::ReconstructMethod::{Cgls, OsSart, Sirt};
+    use voxlab::jobs::reconstruct::ReconstructMethod::{Cgls, OsSart, Sirt, Tv};
     let skimage = ReconstructRequest {
         input: ct("skimage_radon64.npy"),
         geometry: Some("parallel".into()),
@@ -555,6 +548,24 @@ fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
                 iterations: Some(3),
                 subsets: Some(3),
                 subset_order: voxlab::cpu::iterative::SubsetOrder::Random,
+                ..cone.clone()
+            },
+        ),
+        // TV: ‖A‖'s power iteration and every Aᵀp summed over the ranks.
+        (
+            "scikit-image's sinogram, TV ≥ 0, 8 iterations",
+            ReconstructRequest {
+                method: Tv,
+                iterations: Some(8),
+                nonnegative: true,
+                ..skimage.clone()
+            },
+        ),
+        (
+            "RTK's cone-beam stack onto 24³, TV, 6 iterations",
+            ReconstructRequest {
+                method: Tv,
+                iterations: Some(6),
                 ..cone
             },
         ),
@@ -569,14 +580,15 @@ fn read_f32(p: &Path) -> Vec<f64> {
 /// `max |Δ| / max |single|` of the written files (float32), on 2–4 ranks, for the
 /// f64 and the f32 backend. In f64 the file shows the images' difference (below) only
 /// where it moves a value across an f32 rounding boundary (2⁻²⁴ of the value at
-/// most) or where CGLS has amplified it. Measured on a 2-core x86-64, the six cases:
-/// f64 0 for SIRT, OS-SART and the cone's CGLS, 2.8e-13 for CGLS on scikit-image's
-/// sinogram (5 iterations); f32 ≤ 5.0e-7 (SIRT), ≤ 2.8e-7 (OS-SART), ≤ 7.3e-7 (CGLS).
+/// most) or where CGLS has amplified it. Measured on a 2-core x86-64, the eight cases:
+/// f64 0 for SIRT, OS-SART, TV and the cone's CGLS, 2.8e-13 for CGLS on scikit-image's
+/// sinogram (5 iterations); f32 ≤ 5.0e-7 (SIRT), ≤ 2.8e-7 (OS-SART), ≤ 1.9e-7 (TV),
+/// ≤ 7.3e-7 (CGLS).
 const FILE_F64_BOUND: f64 = 1.2e-7;
 const FILE_F32_BOUND: f64 = 2e-6;
 
 #[test]
-fn sirt_os_sart_and_cgls_on_one_to_four_ranks_follow_the_single_process_file() {
+fn the_iterative_methods_on_one_to_four_ranks_follow_the_single_process_file() {
     let dir = scratch("distributed-iterative");
     for (name, req) in iterative_cases() {
         for backend in [Backend::Cpu, Backend::CpuF32] {

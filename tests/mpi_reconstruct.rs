@@ -153,7 +153,7 @@ fn iterative_on_every_rank_count(name: &str, dir: &Path, args: &[&str], bound: f
 }
 
 #[test]
-fn sirt_os_sart_and_cgls_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
+fn the_iterative_methods_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
     let dir = scratch("mpi-iterative");
     iterative_on_every_rank_count(
         "sirt-skimage",
@@ -212,5 +212,24 @@ fn sirt_os_sart_and_cgls_on_one_to_four_mpi_ranks_follow_the_single_process_file
             "2",
         ],
         1.2e-7,
+    );
+    // TV: the power iteration's and every iteration's Aᵀ sums over the ranks.
+    iterative_on_every_rank_count(
+        "tv-skimage-f32",
+        &dir,
+        &[
+            &ct("skimage_radon64.npy"),
+            "--geometry",
+            "parallel",
+            "--angles",
+            &ct("skimage_theta.txt"),
+            "--method",
+            "tv",
+            "--iterations",
+            "5",
+            "--backend",
+            "cpu-f32",
+        ],
+        2e-6,
     );
 }

@@ -366,10 +366,12 @@ fn summed_scalars<const N: usize>(shares: &dyn Shares, mut s: [f64; N]) -> [f64;
 /// [`solve`] for one share of a problem cut by views ([`Shares`]): `prob` holds this
 /// share's views (its pair over them, their projections), `x0` the whole image; every
 /// share calls it with the same options and initial image, and every share returns
-/// the same image, residuals and objectives. SIRT, OS-SART and CGLS (OS-SART's subsets
-/// are cut from the whole problem's views, [`Shares::views`]: each share updates with
-/// its views of a subset, and the update and column weights are summed over the
-/// shares, subset by subset; TV is not cut this way). With one share it is [`solve`],
+/// the same image, residuals and objectives. Every method: OS-SART's subsets are cut
+/// from the whole problem's views ([`Shares::views`]): each share updates with its
+/// views of a subset, and the update and column weights are summed over the shares,
+/// subset by subset; TV's `Aᵀp` and its power iteration's `AᵀA v` are summed over the
+/// shares, its dual field and gradients are image-sized and computed alike on every
+/// share, its dual `p` per ray on the ray's share. With one share it is [`solve`],
 /// bit for bit; with more, the sums over the views are regrouped by share (`Aᵀ y` as
 /// `Σ_shares Σ_views in share`, summed in f64), and so are the residual's (its chunks
 /// of 4096 values start at each share's first ray).
@@ -378,7 +380,7 @@ fn summed_scalars<const N: usize>(shares: &dyn Shares, mut s: [f64; N]) -> [f64;
 /// that a share waiting in [`Shares::sum`] never holds a worker the others need.
 ///
 /// # Errors
-/// As [`solve`]; [`Error::Invalid`] for TV.
+/// As [`solve`].
 pub fn solve_shared<R: Real>(
     prob: &Problem<R>,
     x0: Vec<R>,
@@ -392,13 +394,7 @@ pub fn solve_shared<R: Real>(
         Method::Sirt => sart(prob, x0, opts, false, shares, on_iteration),
         Method::OsSart => sart(prob, x0, opts, true, shares, on_iteration),
         Method::Cgls => cgls(prob, x0, opts, shares, on_iteration),
-        m => Err(Error::invalid(
-            "--method",
-            format!(
-                "{} does not run on a problem cut by views (sirt, os-sart and cgls do)",
-                m.name()
-            ),
-        )),
+        Method::Tv => tv(prob, x0, opts, shares, on_iteration),
     }
 }
 
@@ -496,7 +492,7 @@ pub fn solve<R: Real>(
             Method::Sirt => sart(prob, x0, opts, false, &Alone, on_iteration),
             Method::OsSart => sart(prob, x0, opts, true, &Alone, on_iteration),
             Method::Cgls => cgls(prob, x0, opts, &Alone, on_iteration),
-            Method::Tv => tv(prob, x0, opts, on_iteration),
+            Method::Tv => tv(prob, x0, opts, &Alone, on_iteration),
         }
     })
 }
@@ -905,7 +901,7 @@ fn gradient_transpose<R: Real>(q: &[Vec<R>], axes: &[usize], dims: [usize; 3], i
 
 /// `‖A‖` by 20 power iterations on `AᵀA` (from the support's ones), raised by 1 %.
 /// Mirrors shaders/iterative.wgsl: normalise (the device-resident port, src/gpu/iterative.rs).
-fn operator_norm<R: Real>(prob: &Problem<R>) -> Result<f64> {
+fn operator_norm<R: Real>(prob: &Problem<R>, shares: &dyn Shares) -> Result<f64> {
     let all = all_views(prob.pair);
     let mut v = masked(vec![R::one(); prob.pair.n_voxels()], prob.support);
     let mut est = 0.0;
@@ -916,7 +912,10 @@ fn operator_norm<R: Real>(prob: &Problem<R>) -> Result<f64> {
         }
         let inv = R::of(1.0 / nv);
         v.par_iter_mut().for_each(|x| *x = *x * inv);
-        let w = transpose_masked(prob, &prob.pair.forward(&v, &all)?, &all)?;
+        let w = summed(
+            shares,
+            transpose_masked(prob, &prob.pair.forward(&v, &all)?, &all)?,
+        );
         est = norm(&w).sqrt();
         v = w;
     }
@@ -966,13 +965,14 @@ fn tv<R: Real>(
     prob: &Problem<R>,
     mut x: Vec<R>,
     opts: &IterativeOptions,
-    on_iteration: &mut OnIteration<R>,
+    shares: &dyn Shares,
+    on_iteration: &mut Hook<R>,
 ) -> Result<Solution<R>> {
     let pair = prob.pair;
     let dims = pair.dims();
     let all = all_views(pair);
     let axes = live_axes(dims);
-    let norm_a = operator_norm(prob)?;
+    let norm_a = operator_norm(prob, shares)?;
     let steps = TvSteps::new(norm_a, axes.len(), opts.tv_weight);
     let (sigma, tau) = (R::of(steps.step), R::of(steps.step));
     let radius = R::of(steps.radius);
@@ -982,23 +982,24 @@ fn tv<R: Real>(
     let mut q: Vec<Vec<R>> = axes.iter().map(|_| vec![R::zero(); n]).collect();
     let mut xbar = x.clone();
     let mut ax_prev = pair.forward(&x, &all)?;
-    let objective_of = |x: &[R], ax: &[R]| {
-        let data = 0.5
-            * sum_by(ax.len(), |i| {
+    // ‖A x − b‖² over every share's rays, and with it the residual and the objective
+    // `½‖A x − b‖² + w·TV(x)` (TV(x) of the whole image, the same on every share).
+    let logged = |x: &[R], ax: &[R]| {
+        let [rr] = summed_scalars(
+            shares,
+            [sum_by(ax.len(), |i| {
                 let d = ax[i].f64() - prob.b[i].f64();
                 d * d
-            });
-        data + opts.tv_weight * total_variation(x, dims)
+            })],
+        );
+        (
+            rr.sqrt(),
+            0.5 * rr + opts.tv_weight * total_variation(x, dims),
+        )
     };
-    let resid_of = |ax: &[R]| {
-        sum_by(ax.len(), |i| {
-            let d = ax[i].f64() - prob.b[i].f64();
-            d * d
-        })
-        .sqrt()
-    };
-    let mut residual = vec![resid_of(&ax_prev)];
-    let mut objective = vec![objective_of(&x, &ax_prev)];
+    let (r0, o0) = logged(&x, &ax_prev);
+    let mut residual = vec![r0];
+    let mut objective = vec![o0];
     let mut converged = false;
     let mut iterations = 0;
     let one = R::one();
@@ -1014,9 +1015,9 @@ fn tv<R: Real>(
                 .zip(&ax_prev)
                 .map(|(&a, &b)| (a + b) / two)
                 .collect();
-            let rn = resid_of(&ax);
+            let (rn, obj) = logged(&x, &ax);
             residual.push(rn);
-            objective.push(objective_of(&x, &ax));
+            objective.push(obj);
             on_iteration(it - 1, &x, rn)?;
             ax_prev = ax;
             if stalled(opts, &objective) {
@@ -1031,7 +1032,7 @@ fn tv<R: Real>(
         // Dual of TV: q ← proj_{|q| ≤ w/μ}(q + σ μ ∇x̄).
         tv_dual_step(&mut q, &xbar, &axes, dims, sigma * mu_r, radius);
         // Primal: x ← proj(x − τ(Aᵀp + μ ∇ᵀq)); x̄ ← 2x_new − x.
-        let atp = transpose_masked(prob, &p, &all)?;
+        let atp = summed(shares, transpose_masked(prob, &p, &all)?);
         let q_ref = &q;
         let axes_ref = &axes;
         let new: Vec<R> = (0..n)
@@ -1056,9 +1057,9 @@ fn tv<R: Real>(
     }
     if !converged && iterations == opts.iterations {
         let ax = pair.forward(&x, &all)?;
-        let rn = resid_of(&ax);
+        let (rn, obj) = logged(&x, &ax);
         residual.push(rn);
-        objective.push(objective_of(&x, &ax));
+        objective.push(obj);
         on_iteration(iterations, &x, rn)?;
         if stalled(opts, &objective) {
             converged = true;

@@ -408,13 +408,6 @@ impl Distributed {
 
 /// The options `--distributed` refuses, checked before anything is read.
 pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
-    if a.method == ReconstructMethod::Tv {
-        return Err(Error::invalid(
-            "--method",
-            "tv does not run distributed: fbp, sirt, os-sart and cgls do (tv's dual \
-             field and power iteration are not cut among ranks yet)",
-        ));
-    }
     if a.method != ReconstructMethod::Fbp {
         if a.init != crate::jobs::reconstruct::Init::Zero {
             return Err(Error::invalid(

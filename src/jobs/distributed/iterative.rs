@@ -1,6 +1,6 @@
-//! `voxlab reconstruct --distributed --method sirt|os-sart|cgls`: the iterative methods
-//! on the ranks of a [`Comm`], the views cut among the ranks and the image whole on
-//! each.
+//! `voxlab reconstruct --distributed --method sirt|os-sart|cgls|tv`: the iterative
+//! methods on the ranks of a [`Comm`], the views cut among the ranks and the image
+//! whole on each.
 //!
 //! # How the work is cut
 //! The views are cut into one contiguous run per rank (sizes differing by at most one,
@@ -24,6 +24,11 @@
 //! image per subset: `k` per iteration instead of SIRT's one. (The one-pass update of
 //! a single process, which updates `x` view by view, is not used on more than one
 //! rank: the update must be summed first.)
+//!
+//! TV (Chambolle–Pock): `‖A‖`'s power iteration sums `AᵀA v` over the ranks (20
+//! images, once); each iteration sums `Aᵀp` (one image) and `‖A x − b‖²`; the dual
+//! `p` lives on the rays, so on their rank; the dual field `q`, the gradients and the
+//! primal step are image-sized and computed alike on every rank.
 //!
 //! # What it equals
 //! On one rank, the single-process result bit for bit. On more, `Aᵀ r` is summed as
@@ -207,7 +212,7 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     Ok((x, log, [pair_seconds, secs, shares.seconds.get()]))
 }
 
-/// [`super::run`] for SIRT, OS-SART and CGLS (module docs).
+/// [`super::run`] for SIRT, OS-SART, CGLS and TV (module docs).
 pub(super) fn run(
     a: &ReconstructRequest,
     comm: &dyn Comm,
@@ -315,12 +320,12 @@ impl Distributed {
     }
 }
 
-/// What SIRT, OS-SART or CGLS on `ranks` ranks would do ([`super::dry_run`]): each rank's
-/// views, what it reads and holds, and what it sends.
+/// What SIRT, OS-SART, CGLS or TV on `ranks` ranks would do ([`super::dry_run`]): each
+/// rank's views, what it reads and holds, and what it sends.
 #[derive(Clone, Debug)]
 pub struct ViewsPlan {
     pub grid: Grid,
-    /// `sirt`, `os-sart` or `cgls`.
+    /// `sirt`, `os-sart`, `cgls` or `tv`.
     pub method: String,
     pub iterations: usize,
     /// Each rank's views (`None`: more ranks than views).
@@ -397,7 +402,7 @@ impl ViewsPlan {
     }
 }
 
-/// `voxlab reconstruct --distributed --dry-run --ranks N` for SIRT, OS-SART and CGLS: how [`run`]
+/// `voxlab reconstruct --distributed --dry-run --ranks N` for the iterative methods: how [`run`]
 /// on `ranks` ranks would cut the views and what each rank would read, hold and send,
 /// after reading the input's header and geometry (no MPI needed), computing and
 /// writing nothing.
@@ -422,8 +427,21 @@ pub(super) fn plan(
     let voxels = grid.dims.iter().product::<usize>() as u64;
     let per_view = (g.rows * g.cols) as u64;
     // OS-SART: each subset's update is summed over the ranks, and its column weights
-    // too unless every subset's are kept (then they are summed once).
-    let os_sart = method == crate::cpu::iterative::Method::OsSart;
+    // too unless every subset's are kept (then they are summed once). TV: one image
+    // (`Aᵀp`) and one sum per iteration, and it holds its dual field (one image per
+    // live axis) and the dual `p` of its rays besides.
+    use crate::cpu::iterative::Method;
+    let os_sart = method == Method::OsSart;
+    let tv = method == Method::Tv;
+    let tv_extra = |rays: u64| {
+        if tv {
+            crate::cpu::iterative::live_axes(grid.dims).len() as u64 * voxels * 8
+                + rays * 8
+                + 2 * voxels * 8
+        } else {
+            0
+        }
+    };
     let real = if a.backend == Backend::CpuF32 { 4 } else { 8 };
     let keep = crate::cpu::iterative::keeps_column_weights(opts.subsets, voxels as usize, real);
     let kept_weights = if os_sart && keep {
@@ -447,7 +465,7 @@ pub(super) fn plan(
             } else {
                 0
             };
-            read + 2 * rays * 8 + 4 * voxels * 8 + gathered + kept_weights
+            read + 2 * rays * 8 + 4 * voxels * 8 + gathered + kept_weights + tv_extra(rays)
         })
         .collect();
     let shape = crate::jobs::reconstruct::npy_shape(grid.dims);
@@ -462,10 +480,11 @@ pub(super) fn plan(
         // The partial image and up to three sums over rays, f64, to every other rank;
         // OS-SART one partial update per subset (and its column weights when they are
         // not kept) and two sums.
-        bytes_per_iteration: match (ranks > 1, os_sart) {
-            (false, _) => 0,
-            (true, false) => voxels * 8 + 24,
-            (true, true) => opts.subsets as u64 * voxels * 8 * if keep { 1 } else { 2 } + 16,
+        bytes_per_iteration: match (ranks > 1, os_sart, tv) {
+            (false, _, _) => 0,
+            (true, true, _) => opts.subsets as u64 * voxels * 8 * if keep { 1 } else { 2 } + 16,
+            (true, _, true) => voxels * 8 + 8,
+            (true, false, false) => voxels * 8 + 24,
         },
         out: a.out.clone().expect("checked by check_distributed"),
         out_bytes: crate::io::npy::npy_f32_header(&shape).len() as u64 + 4 * voxels,

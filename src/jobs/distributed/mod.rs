@@ -46,7 +46,7 @@ use super::Progress;
 use crate::error::Result;
 
 /// What `voxlab reconstruct --distributed --dry-run --ranks N` prints: the slab plan
-/// of FBP/FDK ([`plan`]) or the view plan of SIRT, OS-SART and CGLS ([`ViewsPlan`]), after
+/// of FBP/FDK ([`plan`]) or the view plan of the iterative methods ([`ViewsPlan`]), after
 /// reading the input's header and geometry, computing and writing nothing.
 ///
 /// # Errors
@@ -60,7 +60,7 @@ pub fn dry_run(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) ->
 }
 
 /// Reconstructs on every rank of `comm` and writes one `.npy` file (module docs):
-/// FBP/FDK in slabs, SIRT, OS-SART and CGLS with the views cut among the ranks. Every rank calls
+/// FBP/FDK in slabs, the iterative methods with the views cut among the ranks. Every rank calls
 /// it with the same request; `progress` reports this rank's part (give rank 0 a
 /// terminal and the others `&()`).
 ///

@@ -129,11 +129,11 @@ pub struct ReconstructArgs {
     /// Run on the ranks of `mpirun -n N voxlab reconstruct … --distributed`, writing
     /// one .npy output together. FBP/FDK: the volume cut into one slab per rank, each
     /// rank reading only the detector rows its slab needs from a 3-D .npy stack (equal
-    /// byte for byte to a single-process run). --method sirt, os-sart or cgls: the
+    /// byte for byte to a single-process run). --method sirt, os-sart, cgls or tv: the
     /// views cut among the ranks, each reading only its views and holding the whole
     /// image, the backprojections summed by an all-reduce every iteration (os-sart:
     /// every subset) (equal to a single-process run up to rounding; bit for bit on one
-    /// rank). Needs a build with the `mpi` feature; CPU backends only; not with tv,
+    /// rank). Needs a build with the `mpi` feature; CPU backends only; not with
     /// --init fbp, --convergence or --truth (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
