@@ -355,14 +355,6 @@ fn what_it_does_not_take_is_refused_clearly() {
         ),
         (
             ReconstructRequest {
-                method: voxlab::jobs::reconstruct::ReconstructMethod::Cgls,
-                convergence: Some(dir.join("log.csv")),
-                ..base.clone()
-            },
-            "--convergence",
-        ),
-        (
-            ReconstructRequest {
                 method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
                 truth: Some("phantom:shepp-logan".into()),
                 ..base.clone()
@@ -954,6 +946,44 @@ fn a_failing_rank_fails_every_iterating_rank_and_leaves_no_file() {
     // (The fbp plan itself names the iterative one.)
     let e = distributed::plan(&few, 3, &()).unwrap_err();
     assert!(e.to_string().contains("dry_run"), "{e}");
+}
+
+/// `--convergence` on ranks: rank 0 writes the log every rank holds, as one process
+/// writes its own (on one rank, the same bytes); on three, the log the ranks report.
+#[test]
+fn the_ranks_write_the_convergence_log() {
+    let dir = scratch("distributed-convergence");
+    let (_, base) = iterative_cases().swap_remove(1);
+    let single = ReconstructRequest {
+        out: Some(dir.join("single.npy")),
+        convergence: Some(dir.join("single.csv")),
+        ..base.clone()
+    };
+    voxlab::jobs::reconstruct::run(&single, &()).unwrap();
+    for ranks in [1, 3] {
+        let csv = dir.join(format!("ranks{ranks}.csv"));
+        let _ = std::fs::remove_file(&csv);
+        let many = ReconstructRequest {
+            out: Some(dir.join(format!("ranks{ranks}.npy"))),
+            convergence: Some(csv.clone()),
+            ..base.clone()
+        };
+        let d = on_ranks(&many, ranks, None).swap_remove(0).unwrap();
+        let text = std::fs::read_to_string(&csv).unwrap();
+        assert_eq!(text, d.iterative.as_ref().unwrap().csv(), "{ranks} ranks");
+        assert_eq!(
+            text.lines().count(),
+            1 + 1 + 5,
+            "header, x0 and 5 iterations"
+        );
+        if ranks == 1 {
+            assert_eq!(
+                text,
+                std::fs::read_to_string(dir.join("single.csv")).unwrap()
+            );
+        }
+    }
+    assert!(temp_files(&dir).is_empty(), "{:?}", temp_files(&dir));
 }
 
 /// The all-reduce goes a chunk at a time (holding every rank's copy of one chunk, not

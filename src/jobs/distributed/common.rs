@@ -415,13 +415,6 @@ pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
                 "fbp does not go with --distributed yet (the ranks start from zero)",
             ));
         }
-        if a.convergence.is_some() {
-            return Err(Error::invalid(
-                "--convergence",
-                "does not go with --distributed yet (rank 0 prints the first and last \
-                 residual)",
-            ));
-        }
     }
     if a.backend == Backend::Gpu {
         return Err(Error::Unsupported {

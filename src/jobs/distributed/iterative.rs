@@ -256,6 +256,19 @@ pub(super) fn run(
         vec![(4 * part.start as u64, &bytes[..])]
     };
     let bytes_written = write_shared_npy(comm, &out, pre.grid.dims, parts)?;
+    // Every rank holds the same log: rank 0 writes `--convergence` (atomically, as
+    // one process does), and every rank agrees on how that went.
+    let convergence = match (&a.convergence, rank) {
+        (Some(path), 0) => {
+            let text = log.csv();
+            crate::io::write_atomic(path, |w| {
+                w.write_all(text.as_bytes())
+                    .map_err(|e| crate::Error::io(path.clone(), e))
+            })
+        }
+        _ => Ok(()),
+    };
+    agree(comm, convergence)?;
     let write_seconds = t.elapsed().as_secs_f64();
 
     let mine = RankReport {
