@@ -408,13 +408,11 @@ impl Distributed {
 
 /// The options `--distributed` refuses, checked before anything is read.
 pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
-    if a.method != ReconstructMethod::Fbp {
-        if a.init != crate::jobs::reconstruct::Init::Zero {
-            return Err(Error::invalid(
-                "--init",
-                "fbp does not go with --distributed yet (the ranks start from zero)",
-            ));
-        }
+    if a.method != ReconstructMethod::Fbp && a.init != crate::jobs::reconstruct::Init::Zero {
+        return Err(Error::invalid(
+            "--init",
+            "fbp does not go with --distributed yet (the ranks start from zero)",
+        ));
     }
     if a.backend == Backend::Gpu {
         return Err(Error::Unsupported {
