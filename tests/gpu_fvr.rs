@@ -19,12 +19,15 @@ use wgpu::naga;
 
 /// Largest relative L2 error `‖gpu − cpu‖₂ / ‖cpu‖₂` allowed. The GPU samples an f32
 /// copy of the f64 spectrum with f32 weights and runs an f32 FFT. Measured on lavapipe
-/// (Mesa's Vulkan on the CPU) over the cases below: 5.4e-8 … 1.0e-6 (worst: Shepp–Logan
+/// (Mesa's Vulkan on the CPU) over the cases below: 5.4e-8 … 5.4e-7 (worst: Shepp–Logan
 /// 32³, explicit oblique basis, Lanczos-3, de-apodised; the `M = 24` cases, through
-/// Bluestein's algorithm, 9.9e-8 … 3.8e-7). The bound leaves a factor of about 5.
+/// Bluestein's algorithm, 9.9e-8 … 2.6e-7; the spectrum made on the GPU, 6.1e-8 …
+/// 5.5e-7; Dirichlet, 8.3e-8 … 3.2e-7). The same cases measured up to 1.0e-6 with the
+/// shader as compiled before the Dirichlet sum was added to it: the compiled code's
+/// rounding moves these figures by up to 2×. The bound leaves a factor of 5 or more.
 const TOL_REL_L2: f64 = 5e-6;
 /// Largest `max |gpu − cpu| / max |cpu|` allowed. Measured on lavapipe: 7.6e-8 …
-/// 1.0e-6 (worst: the same case).
+/// 5.6e-7 (worst: Shepp–Logan 32³, orbit view, trilinear, de-apodised).
 const TOL_MAX_REL: f64 = 5e-6;
 
 #[test]
@@ -168,6 +171,39 @@ fn check(
     voxlab::metrics::check_parity(label, oracle, port, tol, Some(&dir)).unwrap()
 }
 
+/// The parity checks of one test against [`TOL_REL_L2`] and [`TOL_MAX_REL`]: each
+/// printed, the worst errors kept, every failure listed at the end.
+#[derive(Default)]
+struct Tally {
+    worst_l2: f64,
+    worst_max: f64,
+    failures: Vec<String>,
+}
+
+impl Tally {
+    /// Holds `port` to `oracle` ([`check`]), prints and records the errors.
+    fn check(&mut self, label: &str, oracle: &Frame, port: &Frame) {
+        let tol = voxlab::metrics::Tolerance::rel_l2(TOL_REL_L2).with_max_abs_rel(TOL_MAX_REL);
+        let r = check(label, oracle, port, tol);
+        let (l2, max) = (r.stats.rel_l2, r.stats.max_abs_rel);
+        eprintln!("{label}: rel L2 {l2:.2e}, max/peak {max:.2e}");
+        self.worst_l2 = self.worst_l2.max(l2);
+        self.worst_max = self.worst_max.max(max);
+        if !r.passed {
+            self.failures.push(r.message);
+        }
+    }
+
+    /// Prints the worst errors (after `what`) and fails on any failure.
+    fn finish(self, what: &str) {
+        eprintln!(
+            "{what}: worst rel L2 {:.2e}, max/peak {:.2e}",
+            self.worst_l2, self.worst_max
+        );
+        assert!(self.failures.is_empty(), "{:#?}", self.failures);
+    }
+}
+
 #[test]
 fn gpu_fvr_matches_the_cpu_oracle() {
     let Some(ctx) = common::gpu("gpu_fvr_matches_the_cpu_oracle") else {
@@ -193,8 +229,7 @@ fn gpu_fvr_matches_the_cpu_oracle() {
             [one, split]
         })
         .collect();
-    let mut failures = Vec::new();
-    let (mut worst_l2, mut worst_max) = (0.0f64, 0.0f64);
+    let mut tally = Tally::default();
     for case in cases() {
         let (name, cpu_spectrum, _) = &spectra[case.volume];
         let oracle =
@@ -210,21 +245,13 @@ fn gpu_fvr_matches_the_cpu_oracle() {
             );
             let port = gfvr::fvr_project(ctx, up, case.view, case.kernel, case.deapodize)
                 .unwrap_or_else(|e| panic!("{label}: {e}"));
-            let tol = voxlab::metrics::Tolerance::rel_l2(TOL_REL_L2).with_max_abs_rel(TOL_MAX_REL);
-            let r = check(&label, &oracle, &port, tol);
-            let (l2, max) = (r.stats.rel_l2, r.stats.max_abs_rel);
-            eprintln!("{label}: rel L2 {l2:.2e}, max/peak {max:.2e}");
-            worst_l2 = worst_l2.max(l2);
-            worst_max = worst_max.max(max);
-            if !r.passed {
-                failures.push(r.message);
-            }
+            tally.check(&label, &oracle, &port);
             images.push(port);
         }
         // The slabs change only where a value is read from: the same arithmetic, the
         // same image to the bit.
         if images[0].data != images[1].data {
-            failures.push(format!(
+            tally.failures.push(format!(
                 "{name}, {:?}, {}: the split spectrum's image differs from the \
                  one-binding image",
                 case.view,
@@ -232,11 +259,10 @@ fn gpu_fvr_matches_the_cpu_oracle() {
             ));
         }
     }
-    eprintln!(
-        "worst: rel L2 {worst_l2:.2e}, max/peak {worst_max:.2e} ({:.1} s)",
+    tally.finish(&format!(
+        "uploaded spectra ({:.1} s)",
         t.elapsed().as_secs_f64()
-    );
-    assert!(failures.is_empty(), "{failures:#?}");
+    ));
 }
 
 /// The spectrum transformed on the GPU (`GpuFvrSpectrum::compute`: the padded cube
@@ -251,9 +277,7 @@ fn a_spectrum_computed_on_the_gpu_matches_the_cpu_oracle() {
         return;
     };
     let volumes = volumes();
-    let tol = voxlab::metrics::Tolerance::rel_l2(TOL_REL_L2).with_max_abs_rel(TOL_MAX_REL);
-    let (mut worst_l2, mut worst_max) = (0.0f64, 0.0f64);
-    let mut failures = Vec::new();
+    let mut tally = Tally::default();
     for (v, (name, volume, planes)) in volumes.iter().enumerate() {
         let cpu = FvrSpectrum::new(volume, 2).unwrap();
         let m = cpu.side() as u64;
@@ -273,25 +297,17 @@ fn a_spectrum_computed_on_the_gpu_matches_the_cpu_oracle() {
             );
             let port = gfvr::fvr_project(ctx, &one, case.view, case.kernel, case.deapodize)
                 .unwrap_or_else(|e| panic!("{label}: {e}"));
-            let r = check(&label, &oracle, &port, tol);
-            eprintln!(
-                "{label}: rel L2 {:.2e}, max/peak {:.2e}",
-                r.stats.rel_l2, r.stats.max_abs_rel
-            );
-            worst_l2 = worst_l2.max(r.stats.rel_l2);
-            worst_max = worst_max.max(r.stats.max_abs_rel);
-            if !r.passed {
-                failures.push(r.message);
-            }
+            tally.check(&label, &oracle, &port);
             let slabbed =
                 gfvr::fvr_project(ctx, &split, case.view, case.kernel, case.deapodize).unwrap();
             if slabbed.data != port.data {
-                failures.push(format!("{label}: the z-slab spectrum's image differs"));
+                tally
+                    .failures
+                    .push(format!("{label}: the z-slab spectrum's image differs"));
             }
         }
     }
-    eprintln!("GPU spectrum, worst: rel L2 {worst_l2:.2e}, max/peak {worst_max:.2e}");
-    assert!(failures.is_empty(), "{failures:#?}");
+    tally.finish("GPU spectrum");
     // The CPU's checks hold: non-finite values are refused before any upload.
     let mut bad = random_volume(8, 3);
     bad.data_mut()[5] = f32::NAN;
@@ -310,9 +326,7 @@ fn the_dirichlet_kernel_on_the_gpu_matches_the_cpu_oracle() {
     let Some(ctx) = common::gpu("the_dirichlet_kernel_on_the_gpu_matches_the_cpu_oracle") else {
         return;
     };
-    let tol = voxlab::metrics::Tolerance::rel_l2(TOL_REL_L2).with_max_abs_rel(TOL_MAX_REL);
-    let (mut worst_l2, mut worst_max) = (0.0f64, 0.0f64);
-    let mut failures = Vec::new();
+    let mut tally = Tally::default();
     for (name, volume) in [
         ("random 8³", random_volume(8, 0xd1c)),
         ("Shepp–Logan 12³", shepp_logan(12)),
@@ -327,24 +341,16 @@ fn the_dirichlet_kernel_on_the_gpu_matches_the_cpu_oracle() {
             let label = format!("{name}, {view:?}, dirichlet");
             let port = gfvr::fvr_project(ctx, &uploaded, view, Kernel::Dirichlet, false)
                 .unwrap_or_else(|e| panic!("{label}: {e}"));
-            let r = check(&label, &oracle, &port, tol);
-            eprintln!(
-                "{label}: rel L2 {:.2e}, max/peak {:.2e}",
-                r.stats.rel_l2, r.stats.max_abs_rel
-            );
-            worst_l2 = worst_l2.max(r.stats.rel_l2);
-            worst_max = worst_max.max(r.stats.max_abs_rel);
-            if !r.passed {
-                failures.push(r.message);
-            }
+            tally.check(&label, &oracle, &port);
             let again = gfvr::fvr_project(ctx, &computed, view, Kernel::Dirichlet, false).unwrap();
             if again.data != port.data {
-                failures.push(format!("{label}: the computed spectrum's image differs"));
+                tally
+                    .failures
+                    .push(format!("{label}: the computed spectrum's image differs"));
             }
         }
     }
-    eprintln!("Dirichlet, worst: rel L2 {worst_l2:.2e}, max/peak {worst_max:.2e}");
-    assert!(failures.is_empty(), "{failures:#?}");
+    tally.finish("Dirichlet");
     // Past the x phases one invocation keeps, and past the work limit: clear refusals.
     let data = (0..129 * 4).map(|i| (i % 7) as f32).collect();
     let long = Volume::new([129, 2, 2], [1.0; 3], data).unwrap();
