@@ -402,15 +402,24 @@ fn cli_backend_gpu_matches_backend_cpu() {
     if common::gpu("cli_backend_gpu_matches_backend_cpu").is_none() {
         return;
     }
-    let dir = common::scratch("cli");
+    for (kernel, size) in [("trilinear", "16"), ("dirichlet", "10")] {
+        cli_gpu_against_cpu(kernel, size);
+    }
+}
+
+/// `voxlab fvr phantom:shepp-logan:SIZE --kernel KERNEL` on both backends: the same
+/// image within the parity bound.
+fn cli_gpu_against_cpu(kernel: &str, size: &str) {
+    let dir = common::scratch(&format!("cli-{kernel}"));
+    let phantom = format!("phantom:shepp-logan:{size}");
     let mut images = Vec::new();
     for backend in ["cpu", "gpu"] {
         let out = dir.join(format!("{backend}.npy"));
         let o = common::voxlab(&[
             "fvr",
-            "phantom:shepp-logan:16",
+            &phantom,
             "--kernel",
-            "trilinear",
+            kernel,
             "--backend",
             backend,
             "--out",
@@ -429,7 +438,7 @@ fn cli_backend_gpu_matches_backend_cpu() {
     assert_eq!(images[0].0, images[1].0, "shape");
     let dims: Vec<usize> = images[0].0.iter().rev().copied().collect();
     common::assert_parity_array(
-        "gpu_fvr_cli_backend_gpu_matches_backend_cpu",
+        &format!("gpu_fvr_cli_backend_gpu_matches_backend_cpu_{kernel}"),
         &dims,
         &images[0].1,
         &images[1].1,
