@@ -202,36 +202,20 @@ fn a_split_gpu_gaussian_says_so_and_writes_the_unsplit_volume() {
         .unwrap();
     let src = dir.join("in.nrrd");
     voxlab::io::write_volume(&src, &input.into()).unwrap();
-    let run = |out: &std::path::Path, binding: Option<&str>| {
-        let args = [
-            "process",
-            s(&src),
-            "--op",
-            "gaussian",
-            "--sigma",
-            "1",
-            "--backend",
-            "gpu",
-            "--out",
-            s(out),
-        ];
-        // 16 × 16 slices of 1,024 bytes: 10 fit, 4 ghosts on either side.
-        common::voxlab_with_binding(&args, binding)
-    };
-    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
-    let o = run(&whole, None);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(&split, Some("10240"));
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("processing in 8 slabs of 2 slices (4 ghost slices on either side)"),
-        "{}",
-        stderr(&o)
-    );
-    assert_eq!(
-        std::fs::read(&whole).unwrap(),
-        std::fs::read(&split).unwrap()
-    );
+    let args = [
+        "process",
+        s(&src),
+        "--op",
+        "gaussian",
+        "--sigma",
+        "1",
+        "--backend",
+        "gpu",
+    ];
+    // 16 × 16 slices of 1,024 bytes: 10 fit, 4 ghosts on either side.
+    let line = "processing in 8 slabs of 2 slices (4 ghost slices on either side)";
+    let quiet = common::split_writes_the_unsplit_file(&dir, &args, "10240", &[line]);
+    assert!(!quiet.contains("slabs"), "{quiet}");
 }
 
 #[test]
@@ -285,42 +269,27 @@ fn a_split_gpu_resample_says_so_and_writes_the_unsplit_volume() {
         .unwrap();
     let src = dir.join("in.nrrd");
     voxlab::io::write_volume(&src, &input.into()).unwrap();
+    let args = [
+        "process",
+        s(&src),
+        "--op",
+        "resample",
+        "--dims",
+        "24,20,28",
+        "--filter",
+        "lanczos3",
+        "--backend",
+        "gpu",
+    ];
     let run = |out: &std::path::Path, binding: Option<&str>, extra: &[&str]| {
-        let mut args = vec![
-            "process",
-            s(&src),
-            "--op",
-            "resample",
-            "--dims",
-            "24,20,28",
-            "--filter",
-            "lanczos3",
-            "--backend",
-            "gpu",
-            "--out",
-            s(out),
-        ];
-        args.extend_from_slice(extra);
-        common::voxlab_with_binding(&args, binding)
+        let all = [&args[..], &["--out", s(out)], extra].concat();
+        common::voxlab_with_binding(&all, binding)
     };
-    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
-    let o = run(&whole, None, &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(!stderr(&o).contains("slabs"), "{}", stderr(&o));
     // Output slices of 24 × 20 × 4 = 1,920 bytes, input slices of 1,024: 10 KiB hold 5
     // output and 10 input slices; Lanczos-3 reaches 3 input slices either side.
-    let o = run(&split, Some("10KiB"), &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o)
-            .contains("resampling in 6 slabs of 5 slices (each reading at most 10 input slices)"),
-        "{}",
-        stderr(&o)
-    );
-    assert_eq!(
-        std::fs::read(&whole).unwrap(),
-        std::fs::read(&split).unwrap()
-    );
+    let line = "resampling in 6 slabs of 5 slices (each reading at most 10 input slices)";
+    let quiet = common::split_writes_the_unsplit_file(&dir, &args, "10KiB", &[line]);
+    assert!(!quiet.contains("slabs"), "{quiet}");
     let never = dir.join("never.npy");
     let o = run(&never, Some("10KiB"), &["--dry-run"]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -499,31 +499,15 @@ fn a_split_cli_fvr_says_so_and_writes_the_unsplit_image() {
         return;
     }
     let dir = common::scratch("cli-fvr-split");
+    let args = ["fvr", "phantom:shepp-logan:16", "--backend", "gpu"];
     let run = |out: &std::path::Path, binding: Option<&str>, extra: &[&str]| {
-        let mut args = vec![
-            "fvr",
-            "phantom:shepp-logan:16",
-            "--backend",
-            "gpu",
-            "--out",
-            common::s(out),
-        ];
-        args.extend_from_slice(extra);
-        common::voxlab_with_binding(&args, binding)
+        let all = [&args[..], &["--out", common::s(out)], extra].concat();
+        common::voxlab_with_binding(&all, binding)
     };
-    let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
-    let o = run(&whole, None, &[]);
-    assert!(o.status.success(), "{}", common::stderr(&o));
-    assert!(!common::stderr(&o).contains("z-slabs"));
     // Padded to 32³: planes of 32 × 32 complex f32, 8 KiB; 48 KiB hold 6 planes.
-    let o = run(&split, Some("48KiB"), &[]);
-    assert!(o.status.success(), "{}", common::stderr(&o));
     let line = "FVR spectrum in 6 z-slabs of 6 planes (one storage binding each)";
-    assert!(common::stderr(&o).contains(line), "{}", common::stderr(&o));
-    assert_eq!(
-        std::fs::read(&whole).unwrap(),
-        std::fs::read(&split).unwrap()
-    );
+    let quiet = common::split_writes_the_unsplit_file(&dir, &args, "48KiB", &[line]);
+    assert!(!quiet.contains("z-slabs"), "{quiet}");
     let never = dir.join("never.npy");
     let o = run(&never, Some("48KiB"), &["--dry-run"]);
     assert!(o.status.success(), "{}", common::stderr(&o));

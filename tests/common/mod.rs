@@ -136,6 +136,36 @@ pub fn voxlab_with_binding(args: &[&str], binding: Option<&str>) -> Output {
     c.output().expect("the voxlab binary runs")
 }
 
+/// The checks of every "a split GPU job writes the unsplit file" command-line test:
+/// `voxlab ARGS --out DIR/whole.npy` under the adapter's own binding limit and
+/// `voxlab ARGS --out DIR/split.npy` under `binding` (`VOXLAB_GPU_MAX_BINDING`) both
+/// succeed and write the same bytes, and the split run says every line of `says` on
+/// stderr. Returns the unsplit run's stderr (for what it must not say).
+pub fn split_writes_the_unsplit_file(
+    dir: &Path,
+    args: &[&str],
+    binding: &str,
+    says: &[&str],
+) -> String {
+    let run = |name: &str, binding: Option<&str>| {
+        let out = dir.join(name);
+        let with_out = [args, &["--out", s(&out)]].concat();
+        let o = voxlab_with_binding(&with_out, binding);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        (std::fs::read(&out).unwrap(), stderr(&o))
+    };
+    let (whole, quiet) = run("whole.npy", None);
+    let (split, said) = run("split.npy", Some(binding));
+    for line in says {
+        assert!(said.contains(line), "{args:?}: no '{line}' in:\n{said}");
+    }
+    assert!(
+        whole == split,
+        "{args:?}: the split file differs from the unsplit one"
+    );
+    quiet
+}
+
 /// Runs `voxlab` with `args` (see [`voxlab_command`]).
 pub fn voxlab(args: &[&str]) -> Output {
     voxlab_command(args)
