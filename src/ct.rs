@@ -124,6 +124,24 @@ pub struct ViewGeometry {
 pub const MAX_DETECTOR: usize = 1 << 16;
 
 impl Geometry {
+    /// Checks that a stack of `[angles, rows, cols]` has the shape the geometry
+    /// describes.
+    pub fn check_stack(&self, [angles, rows, cols]: [usize; 3]) -> Result<()> {
+        if (angles, rows, cols) != (self.n_angles(), self.rows, self.cols) {
+            return Err(Error::invalid(
+                "projections",
+                format!(
+                    "stack is {angles}×{rows}×{cols} (angles×rows×cols) but the geometry \
+                     describes {}×{}×{}",
+                    self.n_angles(),
+                    self.rows,
+                    self.cols
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// scikit-image's parallel-beam 2-D geometry: `cols` detector bins of 1 (pixel)
     /// unit, the rotation centre at bin `cols / 2` (integer division), one row.
     pub fn parallel_skimage(cols: usize, angles_deg: Vec<f64>) -> Result<Self> {
@@ -921,21 +939,7 @@ impl<T: Copy + Default> Projections<T> {
 
     /// Checks that the stack has the shape `g` describes.
     pub fn check_against(&self, g: &Geometry) -> Result<()> {
-        if (self.angles, self.rows, self.cols) != (g.n_angles(), g.rows, g.cols) {
-            return Err(Error::invalid(
-                "projections",
-                format!(
-                    "stack is {}×{}×{} (angles×rows×cols) but the geometry describes {}×{}×{}",
-                    self.angles,
-                    self.rows,
-                    self.cols,
-                    g.n_angles(),
-                    g.rows,
-                    g.cols
-                ),
-            ));
-        }
-        Ok(())
+        g.check_stack([self.angles, self.rows, self.cols])
     }
 
     /// The image of projection `k` (`rows × cols`, column fastest).
@@ -950,22 +954,183 @@ impl<T: Copy + Default> Projections<T> {
         &mut self.data[k * n..(k + 1) * n]
     }
 
+    /// Its lines `ids` (`view·rows + row`, increasing) as [`Lines`].
+    ///
+    /// # Errors
+    /// As [`Lines::new`].
+    pub fn lines(&self, ids: &[usize]) -> Result<Lines<T>> {
+        let total = self.angles * self.rows;
+        if let Some(&bad) = ids.iter().find(|&&id| id >= total) {
+            return Err(Error::invalid(
+                "detector lines",
+                format!("line {bad} is past the stack's {total} lines"),
+            ));
+        }
+        let data = ids
+            .iter()
+            .flat_map(|&id| &self.data[id * self.cols..(id + 1) * self.cols])
+            .copied()
+            .collect();
+        Lines::new([self.angles, self.rows, self.cols], ids.to_vec(), data)
+    }
+
     /// Every detector line zero-padded to `cols ≥ self.cols` bins, bin `self.cols / 2`
     /// moved to `cols / 2` (scikit-image's `_sinogram_circle_to_square`, which `iradon`
     /// applies for `circle=True`).
     pub fn padded_centred(&self, cols: usize) -> Self {
-        let n = self.cols;
-        let before = cols / 2 - n / 2;
-        let mut data = vec![T::default(); self.angles * self.rows * cols];
-        for (dst, src) in data.chunks_mut(cols).zip(self.data.chunks(n)) {
-            dst[before..before + n].copy_from_slice(src);
-        }
         Projections {
             angles: self.angles,
             rows: self.rows,
             cols,
+            data: pad_lines_centred(&self.data, self.cols, cols),
+        }
+    }
+}
+
+/// Lines of `n` values zero-padded to `cols ≥ n`, bin `n / 2` moved to `cols / 2`
+/// ([`Projections::padded_centred`], [`Lines::padded_centred`]).
+fn pad_lines_centred<T: Copy + Default>(data: &[T], n: usize, cols: usize) -> Vec<T> {
+    let before = cols / 2 - n / 2;
+    let mut out = vec![T::default(); data.len() / n.max(1) * cols];
+    for (dst, src) in out.chunks_mut(cols).zip(data.chunks(n)) {
+        dst[before..before + n].copy_from_slice(src);
+    }
+    out
+}
+
+/// Some detector lines of a stack shaped `angles × rows × cols`: line `ids[n]`
+/// (`view·rows + row`, increasing) holds `data[n·cols..(n + 1)·cols]`. What a rank of
+/// a distributed reconstruction reads, weighs and filters instead of the whole stack
+/// (`cpu::ramp::filter_lines`, `cpu::fbp::backproject_region`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lines<T> {
+    pub angles: usize,
+    pub rows: usize,
+    pub cols: usize,
+    pub ids: Vec<usize>,
+    pub data: Vec<T>,
+}
+
+impl<T: Copy + Default> Lines<T> {
+    /// Wraps `data`, checking that the ids increase, lie in the stack and match the
+    /// data's length.
+    pub fn new([angles, rows, cols]: [usize; 3], ids: Vec<usize>, data: Vec<T>) -> Result<Self> {
+        let bad = |m: String| Err(Error::invalid("detector lines", m));
+        let total = angles
+            .checked_mul(rows)
+            .ok_or_else(|| Error::too_large("detector lines", format!("{angles}×{rows} lines")))?;
+        if ids.windows(2).any(|w| w[0] >= w[1]) {
+            return bad("line ids must increase".into());
+        }
+        if let Some(&last) = ids.last() {
+            if last >= total {
+                return bad(format!("line {last} is past the stack's {total} lines"));
+            }
+        }
+        if ids.len().checked_mul(cols) != Some(data.len()) {
+            return bad(format!(
+                "{} values for {} lines of {cols}",
+                data.len(),
+                ids.len()
+            ));
+        }
+        Ok(Lines {
+            angles,
+            rows,
+            cols,
+            ids,
+            data,
+        })
+    }
+
+    /// Every line of `p`.
+    pub fn all(p: Projections<T>) -> Self {
+        Lines {
+            angles: p.angles,
+            rows: p.rows,
+            cols: p.cols,
+            ids: (0..p.angles * p.rows).collect(),
+            data: p.data,
+        }
+    }
+
+    /// Checks that the stack the lines come from has the shape `g` describes.
+    pub fn check_against(&self, g: &Geometry) -> Result<()> {
+        g.check_stack([self.angles, self.rows, self.cols])
+    }
+
+    /// The same lines with `f` applied to every value.
+    pub fn map<U>(&self, f: impl Fn(T) -> U) -> Lines<U> {
+        Lines {
+            angles: self.angles,
+            rows: self.rows,
+            cols: self.cols,
+            ids: self.ids.clone(),
+            data: self.data.iter().map(|&v| f(v)).collect(),
+        }
+    }
+
+    /// The same lines with new values (as many), for a filter's output.
+    pub fn with_data<U>(&self, data: Vec<U>) -> Lines<U> {
+        assert_eq!(data.len(), self.data.len(), "one value for each");
+        Lines {
+            angles: self.angles,
+            rows: self.rows,
+            cols: self.cols,
+            ids: self.ids.clone(),
             data,
         }
+    }
+
+    /// [`Projections::padded_centred`] on these lines.
+    pub fn padded_centred(&self, cols: usize) -> Self {
+        Lines {
+            angles: self.angles,
+            rows: self.rows,
+            cols,
+            ids: self.ids.clone(),
+            data: pad_lines_centred(&self.data, self.cols, cols),
+        }
+    }
+}
+
+/// The detector lines a backprojection reads, by view and row: a whole
+/// [`Projections`] stack or some of its [`Lines`].
+pub trait DetectorLines<T>: Sync {
+    /// `[angles, rows, cols]` of the whole stack.
+    fn shape(&self) -> [usize; 3];
+    /// Row `row` of view `view`, `None` when it is not held.
+    fn line(&self, view: usize, row: usize) -> Option<&[T]>;
+    /// Whether every line is held.
+    fn whole(&self) -> bool;
+}
+
+impl<T: Sync> DetectorLines<T> for Projections<T> {
+    fn shape(&self) -> [usize; 3] {
+        [self.angles, self.rows, self.cols]
+    }
+    fn line(&self, view: usize, row: usize) -> Option<&[T]> {
+        let at = (view * self.rows + row) * self.cols;
+        (view < self.angles && row < self.rows).then(|| &self.data[at..at + self.cols])
+    }
+    fn whole(&self) -> bool {
+        true
+    }
+}
+
+impl<T: Sync> DetectorLines<T> for Lines<T> {
+    fn shape(&self) -> [usize; 3] {
+        [self.angles, self.rows, self.cols]
+    }
+    fn line(&self, view: usize, row: usize) -> Option<&[T]> {
+        if view >= self.angles || row >= self.rows {
+            return None;
+        }
+        let n = self.ids.binary_search(&(view * self.rows + row)).ok()?;
+        Some(&self.data[n * self.cols..(n + 1) * self.cols])
+    }
+    fn whole(&self) -> bool {
+        self.ids.len() == self.angles * self.rows
     }
 }
 

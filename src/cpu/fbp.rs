@@ -45,9 +45,15 @@
 //! denominator are constant and only the row moves, so each view costs one division
 //! per column and a 1-D walk down two detector columns, read from a transposed copy of
 //! the view. All of these agree with the per-point sum to rounding (tests).
+//!
+//! [`backproject_region`] evaluates the same sums on a box of the grid, bit for bit,
+//! from the whole stack or from only the lines the box reads ([`region_rows`],
+//! [`crate::ct::Lines`]: a distributed rank's). The views are then copied as one band
+//! of rows, and each voxel's row, computed in the whole detector, is moved into the
+//! band by an integer after its floor, which changes no rounding.
 
 use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
-use crate::ct::{bilinear_zero, Beam, Geometry, Projections, ViewMatrix};
+use crate::ct::{bilinear_zero, Beam, DetectorLines, Geometry, Projections, ViewMatrix};
 use crate::error::{Error, Result};
 use crate::real::{as_f32, as_f32_mut, Real};
 use crate::volume::{check_dims, Volume};
@@ -171,6 +177,105 @@ fn check_inputs<R: Copy + Default>(filtered: &Projections<R>, g: &Geometry) -> R
     filtered.check_against(g)
 }
 
+/// The detector rows the voxels of `region` read in each view of `g`: the rows between
+/// those of the region box's corners (a projection maps the box into the hull of its
+/// corners' images, so the extreme rows are corners'), one more on each side for the
+/// bilinear taps and rounding; the whole view when a corner lies at or behind the
+/// source.
+pub fn region_rows(g: &Geometry, grid: &Grid, region: &Region) -> Vec<std::ops::Range<usize>> {
+    let d = grid.dims;
+    let mut corners = Vec::with_capacity(8);
+    for i in [0, d[0] - 1] {
+        for j in [region.j.start, region.j.end - 1] {
+            for k in [region.k.start, region.k.end - 1] {
+                corners.push(grid.point(i, j, k).to_array());
+            }
+        }
+    }
+    g.view_matrices::<f64>()
+        .iter()
+        .map(|m| {
+            let rows: Option<Vec<f64>> = corners
+                .iter()
+                .map(|&p| m.project(p).map(|(_, r, _)| r))
+                .collect();
+            match rows {
+                None => 0..g.rows,
+                Some(r) => {
+                    let lo = r.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+                    let hi = r.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+                    let first = (lo.floor() - 1.0).max(0.0);
+                    let last = (hi.floor() + 2.0).min(g.rows as f64 - 1.0);
+                    if last < first {
+                        0..0
+                    } else {
+                        first as usize..last as usize + 1
+                    }
+                }
+            }
+        })
+        .collect()
+}
+
+/// The detector rows of every view a backprojection copies and reads, `first` to
+/// `first + len − 1`. Rows are addressed by their index `iy = row + 1` in a
+/// zero-bordered view, so the window's bordered copy holds rows `first − 1` to
+/// `first + len`.
+#[derive(Clone, Copy, Debug)]
+struct Window {
+    first: usize,
+    len: usize,
+}
+
+impl Window {
+    /// The bordered row `iy ∈ [0, rows]` of the whole view in the window's bordered
+    /// copy (clamped into it: a voxel of the region never reads outside it, and one
+    /// outside the detector reads with weight zero).
+    #[inline(always)]
+    fn local(self, iy: usize) -> usize {
+        iy.saturating_sub(self.first).min(self.len)
+    }
+
+    /// The rows of `filtered` a backprojection of `region` copies: every row of a
+    /// whole stack, else the rows [`region_rows`] names in any view, each of which
+    /// `filtered` must hold.
+    fn of<R, L: DetectorLines<R> + ?Sized>(
+        filtered: &L,
+        g: &Geometry,
+        grid: &Grid,
+        region: &Region,
+    ) -> Result<Window> {
+        if filtered.whole() {
+            return Ok(Window {
+                first: 0,
+                len: g.rows,
+            });
+        }
+        let bands = region_rows(g, grid, region);
+        for (v, band) in bands.iter().enumerate() {
+            if let Some(r) = band.clone().find(|&r| filtered.line(v, r).is_none()) {
+                return Err(Error::invalid(
+                    "backprojection lines",
+                    format!("the region reads row {r} of view {v}, which the lines do not hold"),
+                ));
+            }
+        }
+        let first = bands
+            .iter()
+            .filter(|b| !b.is_empty())
+            .map(|b| b.start)
+            .min();
+        let end = bands.iter().map(|b| b.end).max().unwrap_or(0);
+        Ok(match first {
+            Some(first) => Window {
+                first,
+                len: end - first,
+            },
+            None => Window { first: 0, len: 0 },
+        })
+    }
+}
+
 /// [`backproject_point`] at every point of `points` (CT world mm), in parallel.
 pub fn reconstruct_points<R: Real>(
     filtered: &Projections<R>,
@@ -225,16 +330,24 @@ impl Region {
 /// the whole grid bit for bit (the slabs of a distributed reconstruction). Returns the
 /// region's voxels in its own order ([`Region`]).
 ///
+/// `filtered` is the whole filtered stack, or only some of its lines
+/// ([`crate::ct::Lines`]): then it must hold the rows [`region_rows`] names, and only
+/// the band of rows they span is copied, so a slab's memory follows the slab, not the
+/// detector. A voxel's row is computed in the whole detector and moved into the band
+/// by an integer, so the sums are those of the whole stack bit for bit.
+///
 /// # Errors
-/// As [`backproject`]; a region outside the grid or empty.
-pub fn backproject_region<R: Real>(
-    filtered: &Projections<R>,
+/// As [`backproject`]; a region outside the grid or empty; lines that miss a row the
+/// region reads.
+pub fn backproject_region<R: Real, L: DetectorLines<R> + ?Sized>(
+    filtered: &L,
     g: &Geometry,
     grid: &Grid,
     region: &Region,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<R>> {
-    check_inputs(filtered, g)?;
+    g.validate()?;
+    g.check_stack(filtered.shape())?;
     check_dims(grid.dims)?;
     if region.j.is_empty()
         || region.k.is_empty()
@@ -252,6 +365,7 @@ pub fn backproject_region<R: Real>(
     let n = region.voxels(grid.dims[0]);
     let views = g.view_matrices::<R>();
     let (cols, rows) = (g.cols, g.rows);
+    let window = Window::of(filtered, g, grid, region)?;
     let parallel = matches!(g.beam, Beam::Parallel);
     // A cone beam on a grid with its j axis along the rotation axis: column by column.
     let along_axis = |r: &[R; 4]| {
@@ -266,29 +380,37 @@ pub fn backproject_region<R: Real>(
         let scale = R::of(backprojection_scale(g.n_angles()));
         let mut data = vec![R::zero(); n];
         backproject_columns(
-            filtered, g, grid, region, &views, scale, &mut data, progress,
+            filtered, window, g, grid, region, &views, scale, &mut data, progress,
         );
         return Ok(data);
     }
-    // Zero-bordered copies of every detector row: [0, row…, 0].
+    let Window { first, len } = window;
+    // Zero-bordered copies of the window's detector rows: [0, row…, 0].
     let pc = cols + 2;
-    let mut padded = vec![R::zero(); g.n_angles() * rows * pc];
-    padded
-        .par_chunks_mut(pc)
-        .zip(filtered.data.par_chunks(cols))
-        .for_each(|(d, s)| d[1..=cols].copy_from_slice(s));
-    // Cone beam: zero-bordered copies of every view, (rows + 2) × (cols + 2), so the
-    // four bilinear taps need no per-tap bounds test.
-    let (pcol, prow) = (cols + 2, rows + 2);
+    let mut padded = if parallel {
+        vec![R::zero(); g.n_angles() * len * pc]
+    } else {
+        Vec::new()
+    };
+    padded.par_chunks_mut(pc).enumerate().for_each(|(n, d)| {
+        if let Some(s) = filtered.line(n / len, first + n % len) {
+            d[1..=cols].copy_from_slice(s);
+        }
+    });
+    // Cone beam: zero-bordered copies of every view's window, (len + 2) × (cols + 2),
+    // so the four bilinear taps need no per-tap bounds test.
+    let (pcol, prow) = (cols + 2, len + 2);
     let padded2 = if parallel {
         Vec::new()
     } else {
         let mut p2 = vec![R::zero(); g.n_angles() * prow * pcol];
         p2.par_chunks_mut(prow * pcol)
-            .zip(filtered.data.par_chunks(rows * cols))
-            .for_each(|(d, s)| {
-                for (r, src) in s.chunks(cols).enumerate() {
-                    d[(r + 1) * pcol + 1..(r + 1) * pcol + 1 + cols].copy_from_slice(src);
+            .enumerate()
+            .for_each(|(v, d)| {
+                for r in 0..len {
+                    if let Some(src) = filtered.line(v, first + r) {
+                        d[(r + 1) * pcol + 1..(r + 1) * pcol + 1 + cols].copy_from_slice(src);
+                    }
                 }
             });
         p2
@@ -328,10 +450,13 @@ pub fn backproject_region<R: Real>(
                     }
                     let ty = y - fy;
                     let iy = fy.to_i64().unwrap_or(-2);
-                    let base = v * rows * pc;
+                    let base = v * len * pc;
+                    // Rows outside the window are zero taps, as rows off the detector:
+                    // the region reads none of them (`Window::of`).
                     let row_of = |r: i64| -> Option<&[R]> {
-                        (r >= 0 && r < rows as i64)
-                            .then(|| &padded[base + r as usize * pc..base + (r as usize + 1) * pc])
+                        let l = r - first as i64;
+                        (r >= 0 && r < rows as i64 && l >= 0 && l < len as i64)
+                            .then(|| &padded[base + l as usize * pc..base + (l as usize + 1) * pc])
                     };
                     let line_ref: &[R] = if ty == R::zero() {
                         match row_of(iy) {
@@ -370,6 +495,7 @@ pub fn backproject_region<R: Real>(
                         img,
                         pcol,
                         [cols, rows],
+                        window,
                         [a0, a1, a2],
                         [b0, b1, b2],
                         m.rows[3][0],
@@ -397,8 +523,9 @@ pub fn backproject_region<R: Real>(
 /// (tests). Blocks of whole `z`-slices run in parallel, each accumulating `[k][i][j]`
 /// (j fastest) in a buffer sized to stay in cache, visited view after view.
 #[allow(clippy::too_many_arguments)]
-fn backproject_columns<R: Real>(
-    filtered: &Projections<R>,
+fn backproject_columns<R: Real, L: DetectorLines<R> + ?Sized>(
+    filtered: &L,
+    window: Window,
     g: &Geometry,
     grid: &Grid,
     region: &Region,
@@ -409,16 +536,20 @@ fn backproject_columns<R: Real>(
 ) {
     let (cols, rows) = (g.cols, g.rows);
     let (nx, ny, nz, j0) = (grid.dims[0], region.j.len(), region.k.len(), region.j.start);
-    let (pcol, prow) = (cols + 2, rows + 2);
-    // Transposed, zero-bordered views: imgt[v][c + 1][r + 1] = q_v(r, c), then 32
-    // zeros so that a 32-value window from any column stays inside.
+    let (pcol, prow) = (cols + 2, window.len + 2);
+    // Transposed, zero-bordered views of the window's rows: imgt[v][c + 1][r + 1] =
+    // q_v(first + r, c), then 32 zeros so that a 32-value window from any column stays
+    // inside.
     let mut imgt = vec![R::zero(); views.len() * pcol * prow + 32];
     imgt.par_chunks_mut(pcol * prow)
-        .zip(filtered.data.par_chunks(rows * cols))
-        .for_each(|(d, s)| {
-            for (r, src) in s.chunks(cols).enumerate() {
-                for (c, &v) in src.iter().enumerate() {
-                    d[(c + 1) * prow + r + 1] = v;
+        .take(views.len())
+        .enumerate()
+        .for_each(|(v, d)| {
+            for r in 0..window.len {
+                if let Some(src) = filtered.line(v, window.first + r) {
+                    for (c, &x) in src.iter().enumerate() {
+                        d[(c + 1) * prow + r + 1] = x;
+                    }
                 }
             }
         });
@@ -471,7 +602,7 @@ fn backproject_columns<R: Real>(
                             w2: w * w,
                         };
                         let line = &mut acc[(kk * nx + i) * ny..(kk * nx + i + 1) * ny];
-                        column_line(line, j0, pair, rows, a1 + fi * b1, c1, inv);
+                        column_line(line, j0, pair, rows, window, a1 + fi * b1, c1, inv);
                     }
                 }
             }
@@ -502,7 +633,8 @@ struct ColumnPair<'a, R> {
 /// `out[j] += w²·bilinear(t_j)` along one voxel column whose first voxel is `j0` of
 /// the grid, `t_j = (n1 + (j0 + j)·c1)·inv + 1`
 /// (the bordered row), zero where `t_j ∉ [0, rows + 1)` (the border rule of
-/// [`bilinear_zero`]). The same arithmetic as [`cone_line_from`] once the row is known.
+/// [`bilinear_zero`]); the columns hold the `window`'s rows. The same arithmetic as
+/// [`cone_line_from`] once the row is known.
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn column_line<R: Real>(
@@ -510,11 +642,13 @@ fn column_line<R: Real>(
     j0: usize,
     p: ColumnPair<R>,
     rows: usize,
+    window: Window,
     n1: R,
     c1: R,
     inv: R,
 ) {
-    assert!(p.c0.len() >= rows + 2 + 32 && p.c1.len() >= rows + 2 + 32);
+    let len = window.len;
+    assert!(p.c0.len() >= len + 2 + 32 && p.c1.len() >= len + 2 + 32);
     #[cfg(target_arch = "x86_64")]
     {
         if let (Some(o32), Some(c0), Some(c1v)) = (as_f32_mut(out), as_f32(p.c0), as_f32(p.c1)) {
@@ -532,17 +666,17 @@ fn column_line<R: Real>(
                 // SAFETY: the CPU has the features each function is compiled for.
                 let done = unsafe {
                     if std::arch::is_x86_feature_detected!("avx512f") {
-                        column_line_f32x16(o32, j0, q, rows, n1, c1, inv)
+                        column_line_f32x16(o32, j0, q, rows, window, n1, c1, inv)
                     } else {
-                        column_line_f32x8(o32, j0, q, rows, n1, c1, inv)
+                        column_line_f32x8(o32, j0, q, rows, window, n1, c1, inv)
                     }
                 };
-                column_line_from(o32, j0, done, q, rows, n1, c1, inv);
+                column_line_from(o32, j0, done, q, rows, window, n1, c1, inv);
                 return;
             }
         }
     }
-    column_line_from(out, j0, 0, p, rows, n1, c1, inv);
+    column_line_from(out, j0, 0, p, rows, window, n1, c1, inv);
 }
 
 /// The loop of [`column_line`] from voxel `start` on, branch-free: outside voxels add
@@ -555,12 +689,14 @@ fn column_line_from<R: Real>(
     start: usize,
     p: ColumnPair<R>,
     rows: usize,
+    window: Window,
     n1: R,
     c1: R,
     inv: R,
 ) {
     let (zero, one, lim) = (R::zero(), R::one(), R::of(rows as f64 + 1.0));
-    let (c0, c1v, tx, w2) = (&p.c0[..rows + 2], &p.c1[..rows + 2], p.tx, p.w2);
+    let len = window.len;
+    let (c0, c1v, tx, w2) = (&p.c0[..len + 2], &p.c1[..len + 2], p.tx, p.w2);
     let ux = one - tx;
     for (j, acc) in out.iter_mut().enumerate().skip(start) {
         // Integers below 2^24 are exact in f32.
@@ -569,8 +705,9 @@ fn column_line_from<R: Real>(
         let t = if inside { t } else { zero };
         let iy = ((t.f64() as i32).max(0) as usize).min(rows);
         let ty = t - R::of(iy as i32 as f64);
-        let top = c0[iy] * ux + c1v[iy] * tx;
-        let bottom = c0[iy + 1] * ux + c1v[iy + 1] * tx;
+        let ly = window.local(iy);
+        let top = c0[ly] * ux + c1v[ly] * tx;
+        let bottom = c0[ly + 1] * ux + c1v[ly + 1] * tx;
         let v = w2 * (top * (one - ty) + bottom * ty);
         *acc = *acc + if inside { v } else { zero };
     }
@@ -589,12 +726,18 @@ unsafe fn column_line_f32x16(
     j0: usize,
     p: ColumnPair<f32>,
     rows: usize,
+    window: Window,
     n1: f32,
     c1: f32,
     inv: f32,
 ) -> usize {
     use std::arch::x86_64::*;
-    assert!(p.c0.len() >= rows + 2 + 32 && p.c1.len() >= rows + 2 + 32);
+    let len = window.len;
+    assert!(p.c0.len() >= len + 2 + 32 && p.c1.len() >= len + 2 + 32);
+    let (wfirst, wlen) = (
+        _mm512_set1_epi32(window.first as i32),
+        _mm512_set1_epi32(len as i32),
+    );
     let n = out.len() / 16 * 16;
     let set = _mm512_set1_ps;
     let (one, zero) = (set(1.0), _mm512_setzero_ps());
@@ -616,12 +759,14 @@ unsafe fn column_line_f32x16(
         let t = _mm512_maskz_mov_ps(inside, t);
         let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(t), zi), mr);
         let ty = _mm512_sub_ps(t, _mm512_cvtepi32_ps(iy));
+        // Window::local, lane by lane: the taps' place in the columns.
+        let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen);
         // All lanes inside: rows are monotone in j, so the ends bound them.
         let first = _mm512_cvtsi512_si32(iy);
         let last = _mm_extract_epi32::<3>(_mm512_extracti32x4_epi32::<3>(iy));
         let (lo, hi) = (first.min(last), first.max(last));
-        // SAFETY: 0 ≤ iy ≤ rows, so every tap lies in the columns' first rows + 2
-        // values; a window [lo, lo + 32) with lo ≤ rows lies in the asserted length;
+        // SAFETY: 0 ≤ iy ≤ len, so every tap lies in the columns' first len + 2
+        // values; a window [lo, lo + 32) with lo ≤ len lies in the asserted length;
         // all below 2³¹ (checked by the caller); k + 16 ≤ out.len().
         unsafe {
             let (g00, g01, g10, g11) = if inside == 0xffff && hi - lo < 31 {
@@ -670,12 +815,18 @@ unsafe fn column_line_f32x8(
     j0: usize,
     p: ColumnPair<f32>,
     rows: usize,
+    window: Window,
     n1: f32,
     c1: f32,
     inv: f32,
 ) -> usize {
     use std::arch::x86_64::*;
-    assert!(p.c0.len() >= rows + 2 && p.c1.len() >= rows + 2);
+    let len = window.len;
+    assert!(p.c0.len() >= len + 2 && p.c1.len() >= len + 2);
+    let (wfirst, wlen) = (
+        _mm256_set1_epi32(window.first as i32),
+        _mm256_set1_epi32(len as i32),
+    );
     let n = out.len() / 8 * 8;
     let set = _mm256_set1_ps;
     let (one, zero) = (set(1.0), _mm256_setzero_ps());
@@ -699,6 +850,8 @@ unsafe fn column_line_f32x8(
         let t = _mm256_and_ps(inside, t);
         let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(t), zi), mr);
         let ty = _mm256_sub_ps(t, _mm256_cvtepi32_ps(iy));
+        // Window::local, lane by lane.
+        let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen);
         // SAFETY: as in column_line_f32x16.
         unsafe {
             let iy1 = _mm256_add_epi32(iy, _mm256_set1_epi32(1));
@@ -882,14 +1035,17 @@ fn accumulate_run_body<R: Real>(out: &mut [R], line: &[R], lo: usize, a1: R, b: 
 }
 
 /// `out[i] += w_i² · bilinear_zero(view, c_i, r_i)` along one voxel line of a cone
-/// beam, with `(c, r, den) = (a + i·b) / den` and `w = r30 / den`; `img` is the view
-/// zero-bordered to `(rows + 2) × pcol`. Same arithmetic as [`backproject_point`].
+/// beam, with `(c, r, den) = (a + i·b) / den` and `w = r30 / den`; `img` is the view's
+/// `window` of rows zero-bordered to `(window.len + 2) × pcol` (the whole view when the
+/// window is). Same arithmetic as [`backproject_point`].
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn cone_line<R: Real>(
     out: &mut [R],
     img: &[R],
     pcol: usize,
     [cols, rows]: [usize; 2],
+    window: Window,
     a: [R; 3],
     b: [R; 3],
     r30: R,
@@ -899,20 +1055,22 @@ fn cone_line<R: Real>(
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU has the features the function is compiled for.
-            unsafe { cone_line_avx2(out, img, pcol, [cols, rows], a, b, r30) };
+            unsafe { cone_line_avx2(out, img, pcol, [cols, rows], window, a, b, r30) };
             return;
         }
     }
-    cone_line_from(out, 0, img, pcol, [cols, rows], a, b, r30);
+    cone_line_from(out, 0, img, pcol, [cols, rows], window, a, b, r30);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn cone_line_avx2<R: Real>(
     out: &mut [R],
     img: &[R],
     pcol: usize,
     size: [usize; 2],
+    window: Window,
     a: [R; 3],
     b: [R; 3],
     r30: R,
@@ -922,31 +1080,37 @@ unsafe fn cone_line_avx2<R: Real>(
         let f = |v: [R; 3]| v.map(|x| x.f64() as f32);
         let (a, b, r30) = (f(a), f(b), r30.f64() as f32);
         let done = if std::arch::is_x86_feature_detected!("avx512f") {
-            unsafe { cone_line_f32x16(out, img, pcol, size, a, b, r30) }
+            unsafe { cone_line_f32x16(out, img, pcol, size, window, a, b, r30) }
         } else {
-            unsafe { cone_line_f32x8(out, img, pcol, size, a, b, r30) }
+            unsafe { cone_line_f32x8(out, img, pcol, size, window, a, b, r30) }
         };
         // The tail, with the same arithmetic (voxel indices continue at `done`).
-        cone_line_from(out, done, img, pcol, size, a, b, r30);
+        cone_line_from(out, done, img, pcol, size, window, a, b, r30);
         return;
     }
-    cone_line_from(out, 0, img, pcol, size, a, b, r30);
+    cone_line_from(out, 0, img, pcol, size, window, a, b, r30);
 }
 
 /// [`cone_line_f32x8`] with AVX-512: sixteen voxels at a time, the same operations.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn cone_line_f32x16(
     out: &mut [f32],
     img: &[f32],
     pcol: usize,
     [cols, rows]: [usize; 2],
+    window: Window,
     a: [f32; 3],
     b: [f32; 3],
     r30: f32,
 ) -> usize {
     use std::arch::x86_64::*;
-    assert!(img.len() >= (rows + 2) * pcol && pcol >= cols + 2);
+    assert!(img.len() >= (window.len + 2) * pcol && pcol >= cols + 2);
+    let (wfirst, wlen) = (
+        _mm512_set1_epi32(window.first as i32),
+        _mm512_set1_epi32(window.len as i32),
+    );
     let n = out.len() / 16 * 16;
     let set = _mm512_set1_ps;
     let (one, zero) = (set(1.0), _mm512_setzero_ps());
@@ -981,7 +1145,9 @@ unsafe fn cone_line_f32x16(
         let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(t), zi), mr);
         let tx = _mm512_sub_ps(s, _mm512_cvtepi32_ps(ix));
         let ty = _mm512_sub_ps(t, _mm512_cvtepi32_ps(iy));
-        let p = _mm512_add_epi32(_mm512_mullo_epi32(iy, vp), ix);
+        // Window::local, lane by lane.
+        let ly = _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen);
+        let p = _mm512_add_epi32(_mm512_mullo_epi32(ly, vp), ix);
         // SAFETY: as in cone_line_f32x8.
         unsafe {
             let g = |off: usize| _mm512_i32gather_ps::<4>(p, base.add(off));
@@ -1008,17 +1174,23 @@ unsafe fn cone_line_f32x16(
 /// 8); the caller does the rest. Needs `img.len() < 2³¹`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn cone_line_f32x8(
     out: &mut [f32],
     img: &[f32],
     pcol: usize,
     [cols, rows]: [usize; 2],
+    window: Window,
     a: [f32; 3],
     b: [f32; 3],
     r30: f32,
 ) -> usize {
     use std::arch::x86_64::*;
-    assert!(img.len() >= (rows + 2) * pcol && pcol >= cols + 2);
+    assert!(img.len() >= (window.len + 2) * pcol && pcol >= cols + 2);
+    let (wfirst, wlen) = (
+        _mm256_set1_epi32(window.first as i32),
+        _mm256_set1_epi32(window.len as i32),
+    );
     let n = out.len() / 8 * 8;
     let set = _mm256_set1_ps;
     let (one, zero) = (set(1.0), _mm256_setzero_ps());
@@ -1062,8 +1234,10 @@ unsafe fn cone_line_f32x8(
         let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(t), zi), mr);
         let tx = _mm256_sub_ps(s, _mm256_cvtepi32_ps(ix));
         let ty = _mm256_sub_ps(t, _mm256_cvtepi32_ps(iy));
-        let p = _mm256_add_epi32(_mm256_mullo_epi32(iy, vp), ix);
-        // SAFETY: as in cone_line_from, p + pcol + 1 < (rows + 2)·pcol ≤ img.len()
+        // Window::local, lane by lane.
+        let ly = _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen);
+        let p = _mm256_add_epi32(_mm256_mullo_epi32(ly, vp), ix);
+        // SAFETY: as in cone_line_from, p + pcol + 1 < (len + 2)·pcol ≤ img.len()
         // (asserted above, and below 2³¹ so the i32 offsets hold); k + 8 ≤ out.len().
         unsafe {
             let g = |off: usize| _mm256_i32gather_ps::<4>(base.add(off), p);
@@ -1096,13 +1270,14 @@ fn cone_line_from<R: Real>(
     img: &[R],
     pcol: usize,
     [cols, rows]: [usize; 2],
+    window: Window,
     a: [R; 3],
     b: [R; 3],
     r30: R,
 ) {
     let (limc, limr) = (R::of(cols as f64 + 1.0), R::of(rows as f64 + 1.0));
     let (zero, one) = (R::zero(), R::one());
-    assert!(img.len() >= (rows + 2) * pcol && pcol >= cols + 2);
+    assert!(img.len() >= (window.len + 2) * pcol && pcol >= cols + 2);
     for (k, acc) in out.iter_mut().enumerate().skip(start) {
         // Integers below 2^24 are exact in f32.
         let fi = R::of(k as i32 as f64);
@@ -1121,9 +1296,9 @@ fn cone_line_from<R: Real>(
         let ix = ((s.f64() as i32).max(0) as usize).min(cols);
         let iy = ((t.f64() as i32).max(0) as usize).min(rows);
         let (tx, ty) = (s - R::of(ix as i32 as f64), t - R::of(iy as i32 as f64));
-        let p = iy * pcol + ix;
-        // SAFETY: ix ≤ cols and iy ≤ rows, so p + pcol + 1 ≤ (rows + 1)·pcol + cols + 1
-        // < (rows + 2)·pcol ≤ img.len() (asserted above).
+        let p = window.local(iy) * pcol + ix;
+        // SAFETY: ix ≤ cols and local(iy) ≤ len, so p + pcol + 1 ≤ (len + 1)·pcol + cols
+        // + 1 < (len + 2)·pcol ≤ img.len() (asserted above).
         let tap = |q: usize| unsafe { *img.get_unchecked(q) };
         let top = tap(p) * (one - tx) + tap(p + 1) * tx;
         let bottom = tap(p + pcol) * (one - tx) + tap(p + pcol + 1) * tx;
@@ -1235,29 +1410,39 @@ mod tests {
             slow.copy_from_slice(&reference);
             assert_eq!(fast, slow, "n {n}, a {a}, b {b}");
         }
-        // Cone beam: a 23 × 17 view, bordered.
+        // Cone beam: a 23 × 17 view, bordered; the whole view and a band of its
+        // rows (whose taps are clamped into the band).
         let (cols, rows) = (23, 17);
         let pcol = cols + 2;
-        let img: Vec<f32> = (0..(rows + 2) * pcol)
-            .map(|q| {
-                let (r, c) = (q / pcol, q % pcol);
-                if r == 0 || r == rows + 1 || c == 0 || c == cols + 1 {
-                    0.0
-                } else {
-                    noise(q)
-                }
-            })
-            .collect();
-        for (n, a, b) in [
-            (53, [-5.0f32, 3.0, 1.2], [0.61, 0.2, 0.013]),
-            (19, [30.0, -2.0, 0.9], [-1.7, 0.9, -0.02]),
-            (40, [2.0, 8.0, -0.5], [0.3, 0.1, 0.05]),
+        for window in [
+            Window {
+                first: 0,
+                len: rows,
+            },
+            Window { first: 5, len: 6 },
         ] {
-            let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 7)).collect();
-            let mut slow = fast.clone();
-            cone_line(&mut fast, &img, pcol, [cols, rows], a, b, 0.8);
-            cone_line_from(&mut slow, 0, &img, pcol, [cols, rows], a, b, 0.8);
-            assert_eq!(fast, slow, "n {n}");
+            let len = window.len;
+            let img: Vec<f32> = (0..(len + 2) * pcol)
+                .map(|q| {
+                    let (r, c) = (q / pcol, q % pcol);
+                    if r == 0 || r == len + 1 || c == 0 || c == cols + 1 {
+                        0.0
+                    } else {
+                        noise(q)
+                    }
+                })
+                .collect();
+            for (n, a, b) in [
+                (53, [-5.0f32, 3.0, 1.2], [0.61, 0.2, 0.013]),
+                (19, [30.0, -2.0, 0.9], [-1.7, 0.9, -0.02]),
+                (40, [2.0, 8.0, -0.5], [0.3, 0.1, 0.05]),
+            ] {
+                let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 7)).collect();
+                let mut slow = fast.clone();
+                cone_line(&mut fast, &img, pcol, [cols, rows], window, a, b, 0.8);
+                cone_line_from(&mut slow, 0, &img, pcol, [cols, rows], window, a, b, 0.8);
+                assert_eq!(fast, slow, "n {n}, {window:?}");
+            }
         }
         // Cone beam along the rotation axis: two bordered columns of 40 rows plus the
         // 32-value overhang; rows spread less and more than a 32-wide window, voxels
@@ -1275,25 +1460,35 @@ mod tests {
                 .collect()
         };
         let (c0, c1) = (col(11), col(500));
-        for (n, n1, c1s, inv) in [
-            (64, 3.0f32, 0.7f32, 0.9f32),
-            (37, -10.0, 1.1, 0.8),
-            (50, 45.0, -0.6, 1.05),
-            (48, 1.0, 3.5, 0.7),
-            (16, 2.0, 0.0, 1.0),
+        // The whole columns, and a band of rows 6..26 read from the same values (the
+        // band's copies need only be long enough).
+        for window in [
+            Window {
+                first: 0,
+                len: rows,
+            },
+            Window { first: 6, len: 20 },
         ] {
-            let pair = ColumnPair {
-                c0: &c0,
-                c1: &c1,
-                tx: 0.37,
-                w2: 1.3,
-            };
-            let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 3)).collect();
-            let mut slow = fast.clone();
-            column_line(&mut fast, 0, pair, rows, n1, c1s, inv);
-            column_line_from(&mut slow, 0, 0, pair, rows, n1, c1s, inv);
-            assert_eq!(fast, slow, "n {n}, n1 {n1}, c1 {c1s}");
-            assert!(slow.iter().any(|&x| x != 0.0));
+            for (n, n1, c1s, inv) in [
+                (64, 3.0f32, 0.7f32, 0.9f32),
+                (37, -10.0, 1.1, 0.8),
+                (50, 45.0, -0.6, 1.05),
+                (48, 1.0, 3.5, 0.7),
+                (16, 2.0, 0.0, 1.0),
+            ] {
+                let pair = ColumnPair {
+                    c0: &c0,
+                    c1: &c1,
+                    tx: 0.37,
+                    w2: 1.3,
+                };
+                let mut fast: Vec<f32> = (0..n).map(|i| noise(i + 3)).collect();
+                let mut slow = fast.clone();
+                column_line(&mut fast, 0, pair, rows, window, n1, c1s, inv);
+                column_line_from(&mut slow, 0, 0, pair, rows, window, n1, c1s, inv);
+                assert_eq!(fast, slow, "n {n}, n1 {n1}, c1 {c1s}, {window:?}");
+                assert!(slow.iter().any(|&x| x != 0.0));
+            }
         }
     }
 }

@@ -28,7 +28,7 @@
 //! `ParkerShortScanImageFilter` has the same place in its FDK pipeline); the GPU port
 //! is `gpu::parker::weigh` (`shaders/parker.wgsl`).
 
-use crate::ct::{Beam, Geometry, Projections};
+use crate::ct::{Beam, Geometry, Lines, Projections};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use rayon::prelude::*;
@@ -172,7 +172,27 @@ pub fn weights(g: &Geometry) -> Result<Vec<f64>> {
 /// infinite values.
 pub fn weigh<R: Real>(p: &Projections<R>, g: &Geometry) -> Result<Projections<R>> {
     p.check_against(g)?;
-    if p.data.iter().any(|v| !v.is_finite()) {
+    let data = weigh_data(&p.data, &|n| n, g)?;
+    Projections::new(p.angles, g.rows, g.cols, data)
+}
+
+/// [`weigh`] on some lines of a stack (a distributed rank's).
+///
+/// # Errors
+/// As [`weigh`].
+pub fn weigh_lines<R: Real>(p: &Lines<R>, g: &Geometry) -> Result<Lines<R>> {
+    p.check_against(g)?;
+    Ok(p.with_data(weigh_data(&p.data, &|n| p.ids[n], g)?))
+}
+
+/// Lines of `g.cols` values times Parker's weights, line `n` of `data` being line
+/// `id(n)` (`view·rows + row`) of the stack.
+fn weigh_data<R: Real>(
+    data: &[R],
+    id: &(dyn Fn(usize) -> usize + Sync),
+    g: &Geometry,
+) -> Result<Vec<R>> {
+    if data.iter().any(|v| !v.is_finite()) {
         return Err(Error::invalid(
             "projections",
             "contain NaN or infinite values",
@@ -180,17 +200,14 @@ pub fn weigh<R: Real>(p: &Projections<R>, g: &Geometry) -> Result<Projections<R>
     }
     let w = weights(g)?;
     let (rows, cols) = (g.rows, g.cols);
-    let mut data = p.data.clone();
+    let mut data = data.to_vec();
     if cols > 0 && rows > 0 {
-        data.par_chunks_mut(rows * cols)
-            .zip(w.par_chunks(cols))
-            .for_each(|(view, wv)| {
-                for line in view.chunks_mut(cols) {
-                    for (x, &wc) in line.iter_mut().zip(wv) {
-                        *x = R::of(x.f64() * wc);
-                    }
-                }
-            });
+        data.par_chunks_mut(cols).enumerate().for_each(|(n, line)| {
+            let view = id(n) / rows;
+            for (x, &wc) in line.iter_mut().zip(&w[view * cols..(view + 1) * cols]) {
+                *x = R::of(x.f64() * wc);
+            }
+        });
     }
-    Projections::new(p.angles, rows, cols, data)
+    Ok(data)
 }

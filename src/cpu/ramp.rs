@@ -64,7 +64,7 @@
 //! precision `R`, rayon over rows.
 
 use crate::cpu::dft::{dft_1d, Direction, Normalization};
-use crate::ct::{Beam, Geometry, Projections};
+use crate::ct::{Beam, Geometry, Lines, Projections};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use glam::DVec3;
@@ -336,11 +336,18 @@ pub fn ramp_views(g: &Geometry) -> Result<Option<Vec<RampView>>> {
 /// # Errors
 /// As [`ramp_views`].
 pub fn preweight<R: Real>(p: &Projections<R>, g: &Geometry) -> Result<Vec<f64>> {
-    let mut out: Vec<f64> = p.data.iter().map(|v| v.f64()).collect();
+    preweight_lines(&p.data, &|n| n, g)
+}
+
+/// [`preweight`] of lines of `g.cols` values: line `n` of `data` is line `id(n)`
+/// (`view·rows + row`) of the stack.
+fn preweight_lines<R: Real>(data: &[R], id: &LineId, g: &Geometry) -> Result<Vec<f64>> {
+    let mut out: Vec<f64> = data.iter().map(|v| v.f64()).collect();
     if let Some(rv) = ramp_views(g)? {
         out.par_chunks_mut(g.cols)
             .enumerate()
-            .for_each(|(line, row_data)| {
+            .for_each(|(n, row_data)| {
+                let line = id(n);
                 let (k, r) = (line / g.rows, line % g.rows);
                 for (c, x) in row_data.iter_mut().enumerate() {
                     *x *= rv[k].weight(c as f64, r as f64);
@@ -351,8 +358,8 @@ pub fn preweight<R: Real>(p: &Projections<R>, g: &Geometry) -> Result<Vec<f64>> 
     if let Beam::Cone { sdd, .. } = g.beam {
         out.par_chunks_mut(g.cols)
             .enumerate()
-            .for_each(|(line, row_data)| {
-                let v = (((line % g.rows) as f64) - g.cv) * g.dv;
+            .for_each(|(n, row_data)| {
+                let v = (((id(n) % g.rows) as f64) - g.cv) * g.dv;
                 for (c, x) in row_data.iter_mut().enumerate() {
                     let u = (c as f64 - g.cu) * g.du;
                     *x *= cosine_weight(sdd, u, v);
@@ -373,9 +380,45 @@ pub fn filter_projections<R: Real + FftNum>(
 ) -> Result<Projections<R>> {
     g.validate()?;
     p.check_against(g)?;
+    let out = filter_data(&p.data, &|n| n, g, filter, method)?;
+    Projections::new(p.angles, p.rows, p.cols, out)
+}
+
+/// [`filter_projections`] of some lines of a stack. Each line is filtered as in the
+/// whole stack; with [`FilterMethod::Fft`] the lines `2m` and `2m + 1` share one
+/// complex transform, so when `p` holds both lines of every pair it holds either of
+/// (as a distributed rank's lines do), its lines are those of the whole stack's
+/// filtered bit for bit.
+///
+/// # Errors
+/// As [`filter_projections`].
+pub fn filter_lines<R: Real + FftNum>(
+    p: &Lines<R>,
+    g: &Geometry,
+    filter: RampFilter,
+    method: FilterMethod,
+) -> Result<Lines<R>> {
+    g.validate()?;
+    p.check_against(g)?;
+    let out = filter_data(&p.data, &|n| p.ids[n], g, filter, method)?;
+    Ok(p.with_data(out))
+}
+
+/// Which line of the stack (`view·rows + row`) line `n` of some data is.
+type LineId<'a> = dyn Fn(usize) -> usize + Sync + 'a;
+
+/// The filter of [`filter_projections`] on lines of `g.cols` values, line `n` of
+/// `data` being line `id(n)` of the stack (its weights depend on the view and row).
+fn filter_data<R: Real + FftNum>(
+    data: &[R],
+    id: &LineId,
+    g: &Geometry,
+    filter: RampFilter,
+    method: FilterMethod,
+) -> Result<Vec<R>> {
     let cols = g.cols;
     let pl = padded_length(cols);
-    if p.data.iter().any(|v| !v.is_finite()) {
+    if data.iter().any(|v| !v.is_finite()) {
         return Err(Error::invalid(
             "projections",
             "contain NaN or infinite values",
@@ -391,16 +434,15 @@ pub fn filter_projections<R: Real + FftNum>(
     if filter == RampFilter::None {
         // No ramp: the (pre-weighted) values per mm, exactly, with no transform's
         // round trip (the GPU's FFT path rounds them in f32).
-        let data = preweight(p, g)?
+        return Ok(preweight_lines(data, id, g)?
             .iter()
             .map(|&v| R::of(v * inv_du))
-            .collect();
-        return Projections::new(p.angles, p.rows, p.cols, data);
+            .collect());
     }
-    let mut out = vec![R::zero(); p.data.len()];
+    let mut out = vec![R::zero(); data.len()];
     match method {
         FilterMethod::Direct => {
-            let w = preweight(p, g)?;
+            let w = preweight_lines(data, id, g)?;
             let k: Vec<f64> = ramp_kernel(pl, filter);
             out.par_chunks_mut(cols)
                 .zip(w.par_chunks(cols))
@@ -443,7 +485,8 @@ pub fn filter_projections<R: Real + FftNum>(
             let scratch_len = fwd
                 .get_inplace_scratch_len()
                 .max(inv.get_inplace_scratch_len());
-            let weight = |line: usize, c: usize| -> R {
+            let weight = |n: usize, c: usize| -> R {
+                let line = id(n);
                 match (&weights, &views) {
                     (_, Some(v)) => {
                         R::of(v[line / g.rows].weight(c as f64, (line % g.rows) as f64))
@@ -453,7 +496,7 @@ pub fn filter_projections<R: Real + FftNum>(
                 }
             };
             out.par_chunks_mut(2 * cols)
-                .zip(p.data.par_chunks(2 * cols))
+                .zip(data.par_chunks(2 * cols))
                 .enumerate()
                 .for_each_init(
                     || {
@@ -463,8 +506,7 @@ pub fn filter_projections<R: Real + FftNum>(
                         )
                     },
                     |(z, scratch), (pair, (o, x))| {
-                        // Zero lines filter to zeros (`o` already is): a distributed
-                        // rank's unread lines cost nothing.
+                        // Zero lines filter to zeros (`o` already is).
                         if x.iter().all(|&v| v == R::zero()) {
                             return;
                         }
@@ -496,5 +538,5 @@ pub fn filter_projections<R: Real + FftNum>(
                 );
         }
     }
-    Projections::new(p.angles, p.rows, p.cols, out)
+    Ok(out)
 }

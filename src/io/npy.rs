@@ -202,14 +202,18 @@ pub fn npy_float_shape(path: &Path) -> Result<(Vec<usize>, bool)> {
 }
 
 /// [`read_npy_f64`] of only some lines of a C-order float array, a line being a run of
-/// `shape.last()` values (line `l` holds the values `l·n … l·n + n − 1`): the whole
-/// array's values, read exactly where `lines` says and zero elsewhere. Only the lines
-/// asked for are read from the file (one seek per run of consecutive lines).
+/// `shape.last()` values (line `l` holds the values `l·n … l·n + n − 1`): the array's
+/// shape, the lines of `lines` in increasing order (each once) and their values, line
+/// after line. Only those lines are read from the file (one seek per run of
+/// consecutive lines) or held.
 ///
 /// # Errors
 /// As [`read_npy_f64`]; a Fortran-order file (whose lines are not contiguous); a line
 /// past the array.
-pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, Vec<f64>)> {
+pub fn read_npy_f64_lines(
+    path: &Path,
+    lines: &[usize],
+) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
     use std::io::{Seek, SeekFrom};
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
@@ -231,12 +235,12 @@ pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, V
             format!("line {bad} is past the array's {total_lines} lines"),
         ));
     }
-    let mut values = super::reserve::<f64>(h.count, path)?;
-    values.resize(h.count, 0.0);
     let big = h.endian == Endian::Big;
     let mut wanted = lines.to_vec();
     wanted.sort_unstable();
     wanted.dedup();
+    let mut values = super::reserve::<f64>(wanted.len() * n, path)?;
+    values.resize(wanted.len() * n, 0.0);
     let mut bytes = Vec::new();
     let mut at = 0;
     while at < wanted.len() {
@@ -252,11 +256,11 @@ pub fn read_npy_f64_lines(path: &Path, lines: &[usize]) -> Result<(Vec<usize>, V
             .seek(SeekFrom::Start(h.data_offset + (first * n * size) as u64))
             .and_then(|_| reader.read_exact(&mut bytes))
             .map_err(|e| super::read_error(path, e))?;
-        let dst = &mut values[first * n..first * n + count];
+        let dst = &mut values[at * n..at * n + count];
         decode_f64(&bytes, size, big, dst);
         at = end;
     }
-    Ok((h.shape, values))
+    Ok((h.shape, wanted, values))
 }
 
 /// Where a C-order volume `.npy` file (a 2-D or 3-D array of a volume dtype) keeps its

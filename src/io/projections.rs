@@ -91,7 +91,7 @@ use super::npy::{npy_float_shape, read_npy_f64, read_npy_f64_lines, write_npy_f3
 use super::nrrd::{write_nrrd, NrrdWriteOptions};
 pub use super::rtk_geometry::DetectorGrid;
 use super::{choose_frame, read_volume_with, ReadOptions};
-use crate::ct::{Beam, Geometry, Projections, ViewGeometry, ViewVectors, MAX_DETECTOR};
+use crate::ct::{Beam, Geometry, Lines, Projections, ViewGeometry, ViewVectors, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::real::Real;
 use crate::volume::{max_voxels, AnyVolume, Volume};
@@ -298,15 +298,31 @@ pub fn projection_shape(path: &Path) -> Result<Option<[usize; 3]>> {
     })
 }
 
-/// [`read_projections`] of a stack [`projection_shape`] accepts, reading only the
-/// detector lines `lines` (line `a·rows + r` is row `r` of view `a`); every other line
-/// is zero. The values read are checked as [`read_projections`] checks them.
+/// Only the detector lines `lines` (line `a·rows + r` is row `r` of view `a`) of a
+/// stack [`projection_shape`] accepts, in increasing order, each once; nothing else
+/// of the file is read or held. The values read are checked as [`read_projections`]
+/// checks them.
 ///
 /// # Errors
-/// As [`read_projections`]; a line past the stack.
-pub fn read_projection_lines<R: Real>(path: &Path, lines: &[usize]) -> Result<Projections<R>> {
-    let (shape, values) = read_npy_f64_lines(path, lines)?;
-    from_array(path, &shape, values)
+/// As [`read_projections`]; a line past the stack; a file that is not a 3-D stack.
+pub fn read_projection_lines<R: Real>(path: &Path, lines: &[usize]) -> Result<Lines<R>> {
+    let (shape, ids, values) = read_npy_f64_lines(path, lines)?;
+    let [angles, rows, cols] = match *shape {
+        [a, r, c] => [a, r, c],
+        _ => {
+            return Err(Error::format(
+                path,
+                "shape",
+                format!("reading by detector lines needs a 3-D (angle, row, col) stack, not shape {shape:?}"),
+            ))
+        }
+    };
+    check_stack(path, &shape, [angles, rows, cols], &values)?;
+    Lines::new(
+        [angles, rows, cols],
+        ids,
+        values.into_iter().map(R::of).collect(),
+    )
 }
 
 /// [`read_projections`], then checks the stack's shape against `geometry`.
@@ -335,6 +351,30 @@ fn from_array<R: Real>(path: &Path, shape: &[usize], values: Vec<f64>) -> Result
             )))
         }
     };
+    check_stack(path, shape, [angles, rows, cols], &values)?;
+    let data: Vec<R> = if shape.len() == 2 {
+        // values[d * angles + a] → data[a * cols + d]
+        let mut out = vec![R::zero(); values.len()];
+        for (i, v) in values.iter().enumerate() {
+            let (d, a) = (i / angles, i % angles);
+            out[a * cols + d] = R::of(*v);
+        }
+        out
+    } else {
+        values.into_iter().map(R::of).collect()
+    };
+    Projections::new(angles, rows, cols, data)
+}
+
+/// The checks [`read_projections`] makes of a stack's shape and values (`values` may
+/// be some of its lines only).
+fn check_stack(
+    path: &Path,
+    shape: &[usize],
+    [angles, rows, cols]: [usize; 3],
+    values: &[f64],
+) -> Result<()> {
+    let bad_shape = |m: String| Error::format(path, "shape", m);
     for (name, n) in [("angles", angles), ("rows", rows), ("columns", cols)] {
         if n == 0 {
             return Err(bad_shape(format!("shape {shape:?} has no {name}")));
@@ -359,18 +399,7 @@ fn from_array<R: Real>(path: &Path, shape: &[usize], values: Vec<f64>) -> Result
             format!("sample {k} is {} (projections must be finite)", values[k]),
         ));
     }
-    let data: Vec<R> = if shape.len() == 2 {
-        // values[d * angles + a] → data[a * cols + d]
-        let mut out = vec![R::zero(); values.len()];
-        for (i, v) in values.iter().enumerate() {
-            let (d, a) = (i / angles, i % angles);
-            out[a * cols + d] = R::of(*v);
-        }
-        out
-    } else {
-        values.into_iter().map(R::of).collect()
-    };
-    Projections::new(angles, rows, cols, data)
+    Ok(())
 }
 
 /// Writes a stack as `.npy` (in the stack's precision) or NRRD (`float`), atomically.

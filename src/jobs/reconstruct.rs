@@ -16,7 +16,7 @@ use crate::cpu::iterative::{IterativeOptions, Method, Problem, SubsetOrder};
 use crate::cpu::project::JosephPair;
 use crate::cpu::ramp::RampFilter;
 use crate::ct::flat_field::{line_integrals, IntensityReport};
-use crate::ct::{ct_to_phantom, Beam, Geometry, Projections, MAX_DETECTOR};
+use crate::ct::{ct_to_phantom, Beam, Geometry, Lines, Projections, MAX_DETECTOR};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::gpu::joseph_pair::GpuJosephPair;
@@ -336,12 +336,13 @@ pub(super) fn geometry_for(
     Ok((g, beside_file))
 }
 
-/// The padded stack and geometry of iradon's `circle=True` (`_sinogram_circle_to_square`):
-/// `ceil(√2·cols)` bins, old bin `cols//2` moved to the new centre.
-fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64>, Geometry)> {
-    let diag = crate::ct::circle_diagonal(p.cols);
+/// The geometry of iradon's `circle=True` padding (`_sinogram_circle_to_square`) and
+/// its width: `ceil(√2·cols)` bins, old bin `cols//2` moved to the new centre (the
+/// lines are padded by `padded_centred`).
+fn circle_geometry(g: &Geometry) -> (Geometry, usize) {
+    let diag = crate::ct::circle_diagonal(g.cols);
     let mut g2 = g.clone();
-    let shift = (diag / 2 - p.cols / 2) as f64;
+    let shift = (diag / 2 - g.cols / 2) as f64;
     g2.cols = diag;
     g2.cu = g.cu + shift;
     // Views given by vectors: old column c is new column c + shift.
@@ -350,7 +351,7 @@ fn pad_for_circle(p: &Projections<f64>, g: &Geometry) -> Result<(Projections<f64
             v.pixel00 -= v.u * shift;
         }
     }
-    Ok((p.padded_centred(diag), g2))
+    (g2, diag)
 }
 
 /// The `.npy` shape a reconstruction is written in: `(ny, nx)` for one slice, else
@@ -636,17 +637,38 @@ pub(super) fn fbp_projections(
     p: Projections<f64>,
     g: Geometry,
 ) -> Result<(Projections<f64>, Geometry)> {
-    let parallel = g.beam == Beam::Parallel;
-    let (p, g) = if parallel && !a.no_circle {
-        pad_for_circle(&p, &g)?
+    Ok(match fbp_geometry(a, g)? {
+        (g, Some(diag)) => (p.padded_centred(diag), g),
+        (g, None) => (p, g),
+    })
+}
+
+/// [`fbp_projections`] of some lines of the stack (a distributed rank's).
+pub(super) fn fbp_lines(
+    a: &ReconstructRequest,
+    p: Lines<f64>,
+    g: Geometry,
+) -> Result<(Lines<f64>, Geometry)> {
+    Ok(match fbp_geometry(a, g)? {
+        (g, Some(diag)) => (p.padded_centred(diag), g),
+        (g, None) => (p, g),
+    })
+}
+
+/// The geometry [`fbp_projections`] gives and the width its lines are padded to, if
+/// they are.
+fn fbp_geometry(a: &ReconstructRequest, g: Geometry) -> Result<(Geometry, Option<usize>)> {
+    let (g, pad) = if g.beam == Beam::Parallel && !a.no_circle {
+        let (g, diag) = circle_geometry(&g);
+        (g, Some(diag))
     } else {
-        (p, g)
+        (g, None)
     };
     if a.short_scan {
         // A clear error for a parallel beam or a wrong span.
         crate::cpu::parker::short_scan(&g)?;
     }
-    Ok((p, g))
+    Ok((g, pad))
 }
 
 /// `voxlab reconstruct --dry-run`: the memory plan of [`run`] — host bytes, device

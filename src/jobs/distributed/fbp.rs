@@ -5,13 +5,13 @@ use super::common::{
     agree, check_distributed, gather_reports, input_geometry, runs, value_range, write_shared_npy,
     Comm, Counted, Distributed, RankReport,
 };
-use crate::cpu::fbp::{backproject_region, circle_mask_region, Grid, Region};
-use crate::cpu::ramp::{filter_projections, FilterMethod};
-use crate::ct::{Beam, Geometry, Projections};
+use crate::cpu::fbp::{backproject_region, circle_mask_region, region_rows, Grid, Region};
+use crate::cpu::ramp::{filter_lines, FilterMethod};
+use crate::ct::{Beam, Geometry, Lines, Projections};
 use crate::error::{Error, Result};
 use crate::io::npy::npy_f32_header;
 use crate::io::projections::read_projection_lines;
-use crate::jobs::reconstruct::{fbp_projections, npy_shape, ReconstructRequest};
+use crate::jobs::reconstruct::{fbp_lines, npy_shape, ReconstructRequest};
 use crate::jobs::{Backend, Progress};
 use crate::real::Real;
 use std::path::PathBuf;
@@ -36,40 +36,12 @@ impl SlabPlan {
     }
 }
 
-/// The detector lines the voxels of `region` need in the filtered stack of `g`, with
-/// each line's FFT partner (see the module docs).
+/// The detector lines the voxels of `region` need in the filtered stack of `g`
+/// ([`region_rows`]), with each line's FFT partner (see the module docs).
 pub fn region_lines(g: &Geometry, grid: &Grid, region: &Region) -> Vec<usize> {
-    let d = grid.dims;
-    let mut corners = Vec::with_capacity(8);
-    for i in [0, d[0] - 1] {
-        for j in [region.j.start, region.j.end - 1] {
-            for k in [region.k.start, region.k.end - 1] {
-                corners.push(grid.point(i, j, k).to_array());
-            }
-        }
-    }
     let total = g.n_angles() * g.rows;
     let mut lines = Vec::new();
-    for (a, m) in g.view_matrices::<f64>().iter().enumerate() {
-        let rows: Option<Vec<f64>> = corners
-            .iter()
-            .map(|&p| m.project(p).map(|(_, r, _)| r))
-            .collect();
-        // A corner at or behind the source: the whole view.
-        let band = match rows {
-            None => 0..g.rows,
-            Some(r) => {
-                let lo = r.iter().fold(f64::INFINITY, |m, &v| m.min(v));
-                let hi = r.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
-                let first = (lo.floor() - 1.0).max(0.0);
-                let last = (hi.floor() + 2.0).min(g.rows as f64 - 1.0);
-                if last < first {
-                    0..0
-                } else {
-                    first as usize..last as usize + 1
-                }
-            }
-        };
+    for (a, band) in region_rows(g, grid, region).into_iter().enumerate() {
         for r in band {
             let line = a * g.rows + r;
             lines.push(line);
@@ -132,9 +104,9 @@ pub fn slab_plan(g: &Geometry, grid: &Grid, ranks: usize) -> Result<SlabPlan> {
         },
     )
 }
-/// The projections this rank reads, their geometry, the grid and the plan.
+/// The detector lines this rank reads, their geometry, the grid and the plan.
 struct Prepared {
-    p: Projections<f64>,
+    p: Lines<f64>,
     g: Geometry,
     grid: Grid,
     plan: SlabPlan,
@@ -157,7 +129,8 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
     let (whole, g, grid, plan) = planned(a, comm.size(), progress)?;
     let mine = &plan.lines[comm.rank()];
     let (p, lines_read) = match whole {
-        Some(p) => (p, plan.total_lines),
+        // Read whole: only this rank's lines are kept.
+        Some(p) => (p.lines(mine)?, plan.total_lines),
         None => (read_projection_lines::<f64>(&a.input, mine)?, mine.len()),
     };
     Ok(Prepared {
@@ -177,8 +150,10 @@ pub struct DistributedPlan {
     pub slabs: SlabPlan,
     /// Whether every rank would read the whole stack (not a 3-D C-order `.npy`).
     pub reads_whole: bool,
-    /// Each rank's large host arrays at their peak (bytes): the projections (f64),
-    /// their weighted and filtered copies, the slab and its bytes to write.
+    /// Each rank's large host arrays at their peak (bytes): its detector lines (f64),
+    /// their padded, weighted and filtered copies, the bordered band of rows the
+    /// backprojection reads, the slab and its bytes to write (the whole stack too,
+    /// while it is read, when the file is read whole).
     pub host_bytes: Vec<u64>,
     /// The output and its size in bytes.
     pub out: PathBuf,
@@ -251,21 +226,40 @@ pub fn plan(
     }
     let (whole, g, grid, slabs) = planned(a, ranks, progress)?;
     let real = if a.backend == Backend::CpuF32 { 4 } else { 8 };
-    let stack = (g.n_angles() * g.rows * g.cols) as u64;
     // A parallel sinogram is padded to the circle's diagonal.
-    let padded = if g.beam == Beam::Parallel && !a.no_circle {
-        stack * ((2.0f64).sqrt() * g.cols as f64).ceil() as u64 / g.cols as u64
+    let pcols = if g.beam == Beam::Parallel && !a.no_circle {
+        crate::ct::circle_diagonal(g.cols)
     } else {
-        stack
-    };
+        g.cols
+    } as u64;
+    let stack = (g.n_angles() * g.rows * g.cols) as u64;
     let host_bytes = slabs
         .slabs
         .iter()
-        .map(|s| {
-            let voxels = s.as_ref().map_or(0, |s| s.voxels(grid.dims[0])) as u64;
-            // Read (f64), padded (f64), its narrowed and filtered copies, the slab and
-            // its f32 values and bytes.
-            8 * stack + 8 * padded + 2 * real * padded + voxels * (real + 8)
+        .zip(&slabs.lines)
+        .map(|(s, lines)| {
+            let Some(s) = s else {
+                return 0;
+            };
+            let voxels = s.voxels(grid.dims[0]) as u64;
+            let lines = lines.len() as u64;
+            // The band of rows every view's bordered copy holds.
+            let bands = region_rows(&g, &grid, s);
+            let first = bands
+                .iter()
+                .filter(|b| !b.is_empty())
+                .map(|b| b.start)
+                .min();
+            let band = first.map_or(0, |f| bands.iter().map(|b| b.end).max().unwrap_or(f) - f);
+            let bordered = (g.n_angles() * (band + 2)) as u64 * (pcols + 2);
+            // Read (f64), padded (f64) and weighted, narrowed and filtered copies, the
+            // band, the slab and its f32 values and bytes.
+            let read = if whole.is_some() { 8 * stack } else { 0 };
+            read + 8 * lines * g.cols as u64
+                + 8 * lines * pcols
+                + 2 * real * lines * pcols
+                + real * bordered
+                + voxels * (real + 8)
         })
         .collect();
     let d = grid.dims;
@@ -280,12 +274,12 @@ pub fn plan(
     })
 }
 
-/// This rank's slab, filtered and backprojected in `R`, masked to the circle for a
-/// parallel beam (unless `no_circle`), as f32; and the seconds filtering and
+/// This rank's slab, its lines filtered and backprojected in `R`, masked to the circle
+/// for a parallel beam (unless `no_circle`), as f32; and the seconds filtering and
 /// backprojecting.
 fn slab_values<R: Real + rustfft::FftNum>(
     a: &ReconstructRequest,
-    p: &Projections<R>,
+    p: &Lines<R>,
     g: &Geometry,
     grid: &Grid,
     slab: &Region,
@@ -293,14 +287,14 @@ fn slab_values<R: Real + rustfft::FftNum>(
 ) -> Result<(Vec<f32>, f64, f64)> {
     let t = Instant::now();
     let q = if a.short_scan {
-        filter_projections(
-            &crate::cpu::parker::weigh(p, g)?,
+        filter_lines(
+            &crate::cpu::parker::weigh_lines(p, g)?,
             g,
             a.filter,
             FilterMethod::Fft,
         )?
     } else {
-        filter_projections(p, g, a.filter, FilterMethod::Fft)?
+        filter_lines(p, g, a.filter, FilterMethod::Fft)?
     };
     let filter_seconds = t.elapsed().as_secs_f64();
     let t = Instant::now();
@@ -351,9 +345,9 @@ pub(super) fn run(
         let Some(slab) = &slab else {
             return Ok((Vec::new(), 0.0, 0.0));
         };
-        let (p, g) = fbp_projections(a, p, g.clone())?;
+        let (p, g) = fbp_lines(a, p, g.clone())?;
         if f32_path {
-            slab_values(a, &p.narrow()?, &g, &grid, slab, progress)
+            slab_values(a, &p.map(|v| v as f32), &g, &grid, slab, progress)
         } else {
             slab_values(a, &p, &g, &grid, slab, progress)
         }

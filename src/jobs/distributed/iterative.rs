@@ -144,11 +144,9 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
         ),
         (Some(v), None) => {
             let lines: Vec<usize> = (v.start * g.rows..v.end * g.rows).collect();
+            // Only this rank's views' lines, which are consecutive.
             let p = read_projection_lines::<f64>(&a.input, &lines)?;
-            (
-                p.data[v.start * per_view..v.end * per_view].to_vec(),
-                lines.len(),
-            )
+            (p.data, lines.len())
         }
     };
     let support = (g.beam == Beam::Parallel && !a.no_circle).then(|| circle_support(grid.dims));

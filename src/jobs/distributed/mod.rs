@@ -10,7 +10,10 @@
 //! view, into a band of detector rows (the extreme rows are those of the slab box's
 //! corners, since a projection maps the box to the hull of its corners' images), and a
 //! rank reads only those rows, one more on each side for the bilinear taps, from a 3-D
-//! `.npy` stack (other files are read whole). The ramp filter transforms two detector
+//! `.npy` stack (other files are read whole, and only the rank's lines are kept), and
+//! holds only them: they are weighted and filtered as [`crate::ct::Lines`], and the
+//! backprojection copies the band of rows the slab reads, so a rank's memory follows
+//! its slab, not the detector. The ramp filter transforms two detector
 //! lines in one complex FFT (lines `2m` and `2m + 1`, [`crate::cpu::ramp`]), so each
 //! line's partner is read too: the filtered lines a slab uses are then bit for bit
 //! those of the whole stack, and so is the slab ([`crate::cpu::fbp::backproject_region`]). The result
@@ -25,8 +28,8 @@
 //!
 //! `--dry-run --ranks N` ([`dry_run`]) prints either cut without MPI.
 //!
-//! Not distributed yet: OS-SART and TV, `--init fbp` and `--convergence` of the
-//! iterative methods, the GPU backend, `--truth`.
+//! Not distributed yet: `--init fbp` of the iterative methods, the GPU backend,
+//! `--truth`.
 
 mod common;
 mod fbp;
