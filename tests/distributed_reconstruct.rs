@@ -348,14 +348,6 @@ fn what_it_does_not_take_is_refused_clearly() {
         (
             ReconstructRequest {
                 method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
-                init: voxlab::jobs::reconstruct::Init::Fbp,
-                ..base.clone()
-            },
-            "--init",
-        ),
-        (
-            ReconstructRequest {
-                method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
                 truth: Some("phantom:shepp-logan".into()),
                 ..base.clone()
             },
@@ -472,6 +464,7 @@ fn the_dry_run_plans_what_the_ranks_then_do() {
 /// (non-negative) and CGLS on scikit-image's 2-D sinogram (read whole by every rank)
 /// and on RTK's cone-beam stack (each rank reads its views' lines).
 fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
+    use voxlab::jobs::reconstruct::Init;
     use voxlab::jobs::reconstruct::ReconstructMethod::{Cgls, OsSart, Sirt, Tv};
     let skimage = ReconstructRequest {
         input: ct("skimage_radon64.npy"),
@@ -558,6 +551,27 @@ fn iterative_cases() -> Vec<(&'static str, ReconstructRequest)> {
             ReconstructRequest {
                 method: Tv,
                 iterations: Some(6),
+                ..cone.clone()
+            },
+        ),
+        // `--init fbp`: FBP/FDK in slabs first, the slabs all-reduced into the image
+        // every rank starts from.
+        (
+            "scikit-image's sinogram, SIRT from FBP (Hann), 3 iterations",
+            ReconstructRequest {
+                method: Sirt,
+                iterations: Some(3),
+                init: Init::Fbp,
+                filter: voxlab::cpu::ramp::RampFilter::Hann,
+                ..skimage.clone()
+            },
+        ),
+        (
+            "RTK's cone-beam stack onto 24³, CGLS from FDK, 3 iterations",
+            ReconstructRequest {
+                method: Cgls,
+                iterations: Some(3),
+                init: Init::Fbp,
                 ..cone
             },
         ),
@@ -1018,4 +1032,43 @@ fn the_chunked_all_reduce_adds_in_rank_order_whatever_the_chunk() {
             assert!(same, "chunk {chunk}: {v:?}");
         }
     }
+}
+
+/// `--init fbp` on ranks: the dry run names the slab plan of the FBP/FDK that comes
+/// first, and each rank then reads its views' lines and its slab's.
+#[test]
+fn the_fbp_start_is_planned_and_read_by_slabs() {
+    let dir = scratch("distributed-init");
+    let (_, req) = iterative_cases().pop().unwrap();
+    assert_eq!(req.init, voxlab::jobs::reconstruct::Init::Fbp);
+    let req = ReconstructRequest {
+        out: Some(dir.join("cgls.npy")),
+        ..req
+    };
+    let text = distributed::dry_run(&req, 3, &()).unwrap();
+    let fdk = ReconstructRequest {
+        method: voxlab::jobs::reconstruct::ReconstructMethod::Fbp,
+        init: voxlab::jobs::reconstruct::Init::Zero,
+        iterations: None,
+        ..req.clone()
+    };
+    let slabs = distributed::plan(&fdk, 3, &()).unwrap().slabs;
+    let read: Vec<String> = slabs.lines.iter().map(|l| l.len().to_string()).collect();
+    let want = format!(
+        "start:  --init fbp, FBP/FDK in slabs along j (ranks read {} lines)",
+        read.join(", ")
+    );
+    assert!(text.contains(&want), "no '{want}' in:\n{text}");
+    let d = on_ranks(&req, 3, None).swap_remove(0).unwrap();
+    let rows = 40;
+    for (r, rep) in d.ranks.iter().enumerate() {
+        let views = rep.views.as_ref().unwrap().len();
+        assert_eq!(
+            rep.lines_read,
+            views * rows + slabs.lines[r].len(),
+            "rank {r}"
+        );
+        assert!(rep.backproject_seconds > 0.0, "rank {r}");
+    }
+    assert!(d.describe().contains("FBP start"), "{}", d.describe());
 }

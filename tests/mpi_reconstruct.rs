@@ -232,4 +232,26 @@ fn the_iterative_methods_on_one_to_four_mpi_ranks_follow_the_single_process_file
         ],
         2e-6,
     );
+    // `--init fbp`: FDK in slabs first, all-reduced into the image every rank starts
+    // from.
+    iterative_on_every_rank_count(
+        "sirt-from-fdk-cone",
+        &dir,
+        &[
+            &ct("rtk_joseph32.npy"),
+            "--geometry",
+            &ct("rtk_geometry.json"),
+            "--size",
+            "24",
+            "--spacing",
+            "2.5",
+            "--method",
+            "sirt",
+            "--init",
+            "fbp",
+            "--iterations",
+            "3",
+        ],
+        1.2e-7,
+    );
 }

@@ -233,7 +233,7 @@ fn parse_angles(s: &str) -> Result<Vec<f64>> {
 /// when given, else the input's header's (`header`).
 fn detector_grid(
     a: &ReconstructRequest,
-    p: &Projections<f64>,
+    [_, rows, cols]: [usize; 3],
     header: Option<&DetectorGrid>,
 ) -> Result<Option<DetectorGrid>> {
     let Some([du, dv]) = a.detector_spacing else {
@@ -251,18 +251,19 @@ fn detector_grid(
             ));
         }
     }
-    Ok(Some(DetectorGrid::centred(p.cols, p.rows, du, dv)))
+    Ok(Some(DetectorGrid::centred(cols, rows, du, dv)))
 }
 
-/// The geometry of the input, and the file it was read from when found beside it.
-/// `header`: the detector grid the input's file records (MetaImage, NRRD), which an
-/// RTK geometry XML takes its pixels from.
+/// The geometry of the input, a stack of `shape` (`[angles, rows, cols]`), and the file
+/// it was read from when found beside it. `header`: the detector grid the input's file
+/// records (MetaImage, NRRD), which an RTK geometry XML takes its pixels from.
 pub(super) fn geometry_for(
     a: &ReconstructRequest,
-    p: &Projections<f64>,
+    shape: [usize; 3],
     header: Option<&DetectorGrid>,
 ) -> Result<(Geometry, Option<PathBuf>)> {
-    let grid = detector_grid(a, p, header)?;
+    let [n, rows, cols] = shape;
+    let grid = detector_grid(a, shape, header)?;
     let mut beside_file = None;
     let g = match a.geometry.as_deref() {
         Some("parallel") => {
@@ -274,24 +275,23 @@ pub(super) fn geometry_for(
                 ));
             };
             let angles = parse_angles(angles)?;
-            if angles.len() != p.angles {
+            if angles.len() != n {
                 return Err(Error::invalid(
                     "--angles",
                     format!(
-                        "{} angles given, but {} holds {} projections ({})",
+                        "{} angles given, but {} holds {n} projections ({})",
                         angles.len(),
                         a.input.display(),
-                        p.angles,
-                        if p.rows == 1 {
-                            format!("a (detector, angle) = ({}, {}) sinogram", p.cols, p.angles)
+                        if rows == 1 {
+                            format!("a (detector, angle) = ({cols}, {n}) sinogram")
                         } else {
-                            format!("(angle, row, col) = ({}, {}, {})", p.angles, p.rows, p.cols)
+                            format!("(angle, row, col) = ({n}, {rows}, {cols})")
                         }
                     ),
                 ));
             }
             let du = a.spacing.unwrap_or(1.0);
-            Geometry::parallel_stack(p.cols, p.rows, du, du, angles)?
+            Geometry::parallel_stack(cols, rows, du, du, angles)?
         }
         Some(file) => {
             if a.angles.is_some() {
@@ -326,7 +326,7 @@ pub(super) fn geometry_for(
             g
         }
     };
-    p.check_against(&g).map_err(|e| match e {
+    g.check_stack(shape).map_err(|e| match e {
         Error::Invalid { message, .. } => Error::invalid(
             format!("projections {} vs geometry", a.input.display()),
             message,
@@ -469,7 +469,7 @@ pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
 pub fn run(a: &ReconstructRequest, progress: &dyn Progress) -> Result<Reconstructed> {
     check_request(a)?;
     let (p, intensity, header) = read_input(a)?;
-    let (g, geometry_file) = geometry_for(a, &p, header.as_ref())?;
+    let (g, geometry_file) = geometry_for(a, [p.angles, p.rows, p.cols], header.as_ref())?;
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));
     }
@@ -630,6 +630,27 @@ pub(super) fn fbp_grid(
     Ok(grid)
 }
 
+/// The FBP/FDK job `--init fbp` runs first: `a`'s input, geometry, grid, filter and
+/// backend, no outputs and none of the iterative options.
+pub(super) fn init_request(a: &ReconstructRequest) -> ReconstructRequest {
+    ReconstructRequest {
+        method: ReconstructMethod::Fbp,
+        out: None,
+        truth: None,
+        error_map: None,
+        convergence: None,
+        iterations: None,
+        subsets: None,
+        subset_order: SubsetOrder::Sequential,
+        relaxation: None,
+        tv_weight: None,
+        nonnegative: false,
+        init: Init::Zero,
+        tolerance: 0.0,
+        ..a.clone()
+    }
+}
+
 /// The projections an FBP/FDK job backprojects and their geometry: a parallel sinogram
 /// padded to the inscribed circle's diagonal unless `no_circle`; a short scan checked.
 pub(super) fn fbp_projections(
@@ -682,7 +703,7 @@ fn fbp_geometry(a: &ReconstructRequest, g: Geometry) -> Result<(Geometry, Option
 pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPlan> {
     check_request(a)?;
     let (p, _, header) = read_input(a)?;
-    let (g, _) = geometry_for(a, &p, header.as_ref())?;
+    let (g, _) = geometry_for(a, [p.angles, p.rows, p.cols], header.as_ref())?;
     p.check_against(&g)?;
     let mut writes: Vec<String> = a.out.iter().map(|o| o.display().to_string()).collect();
     writes.extend(a.error_map.iter().map(|o| o.display().to_string()));
@@ -1042,23 +1063,7 @@ fn iterative(
     let x0 = match a.init {
         Init::Zero => vec![0.0; grid.dims.iter().product()],
         Init::Fbp => {
-            let first = ReconstructRequest {
-                method: ReconstructMethod::Fbp,
-                out: None,
-                truth: None,
-                error_map: None,
-                convergence: None,
-                iterations: None,
-                subsets: None,
-                subset_order: SubsetOrder::Sequential,
-                relaxation: None,
-                tv_weight: None,
-                nonnegative: false,
-                init: Init::Zero,
-                tolerance: 0.0,
-                ..a.clone()
-            };
-            reconstruct(&first, p.clone(), g.clone(), None, progress)?
+            reconstruct(&init_request(a), p.clone(), g.clone(), None, progress)?
                 .reconstruction
                 .data
         }

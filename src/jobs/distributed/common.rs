@@ -10,8 +10,7 @@ use crate::io::projections::{projection_shape, read_projections_grid};
 use crate::io::ReadOptions;
 use crate::io::{write_part, SharedOutput};
 use crate::jobs::reconstruct::{
-    check_request, extension, fbp_grid, geometry_for, npy_shape, IterationLog, ReconstructMethod,
-    ReconstructRequest,
+    check_request, extension, fbp_grid, geometry_for, npy_shape, IterationLog, ReconstructRequest,
 };
 use crate::jobs::{Backend, Progress};
 use std::ops::Range;
@@ -408,12 +407,6 @@ impl Distributed {
 
 /// The options `--distributed` refuses, checked before anything is read.
 pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
-    if a.method != ReconstructMethod::Fbp && a.init != crate::jobs::reconstruct::Init::Zero {
-        return Err(Error::invalid(
-            "--init",
-            "fbp does not go with --distributed yet (the ranks start from zero)",
-        ));
-    }
     if a.backend == Backend::Gpu {
         return Err(Error::Unsupported {
             job: "a distributed reconstruction".into(),
@@ -461,24 +454,16 @@ pub(super) fn input_geometry(
     check_distributed(a)?;
     let shape = projection_shape(&a.input)?;
     // The geometry is checked against the stack's shape; only a header is read so far.
-    let (whole, header) = match shape {
-        Some(_) => (None, None),
+    // A stack read by lines: its shape alone, nothing of it held yet.
+    let (whole, header, shape) = match shape {
+        Some(shape) => (None, None, shape),
         None => {
             let (p, header) = read_projections_grid::<f64>(&a.input, &ReadOptions::default())?;
-            (Some(p), header)
+            let shape = [p.angles, p.rows, p.cols];
+            (Some(p), header, shape)
         }
     };
-    // A stand-in of zeros carries the shape (dropped before the lines are read).
-    let stand_in = match (&whole, shape) {
-        (None, Some([n, r, c])) => Some(Projections::new(n, r, c, vec![0.0; n * r * c])?),
-        _ => None,
-    };
-    let shaped = whole
-        .as_ref()
-        .or(stand_in.as_ref())
-        .expect("one of the two");
-    let (g, geometry_file) = geometry_for(a, shaped, header.as_ref())?;
-    drop(stand_in);
+    let (g, geometry_file) = geometry_for(a, shape, header.as_ref())?;
     if let Some(f) = &geometry_file {
         progress.note(&format!("using the geometry {}", f.display()));
     }

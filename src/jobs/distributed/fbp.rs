@@ -274,9 +274,31 @@ pub fn plan(
     })
 }
 
-/// This rank's slab, its lines filtered and backprojected in `R`, masked to the circle
-/// for a parallel beam (unless `no_circle`), as f32; and the seconds filtering and
+/// This rank's slab (none: no values), its lines prepared ([`fbp_lines`]), filtered
+/// and backprojected in the request's precision, masked to the circle for a parallel
+/// beam (unless `no_circle`), widened to f64 (exactly); and the seconds filtering and
 /// backprojecting.
+fn slab(
+    a: &ReconstructRequest,
+    p: Lines<f64>,
+    g: &Geometry,
+    grid: &Grid,
+    slab: Option<&Region>,
+    progress: &dyn Progress,
+) -> Result<(Vec<f64>, f64, f64)> {
+    crate::jobs::check_cancel(progress)?;
+    let Some(slab) = slab else {
+        return Ok((Vec::new(), 0.0, 0.0));
+    };
+    let (p, g) = fbp_lines(a, p, g.clone())?;
+    if a.backend == Backend::CpuF32 {
+        slab_values(a, &p.map(|v| v as f32), &g, grid, slab, progress)
+    } else {
+        slab_values(a, &p, &g, grid, slab, progress)
+    }
+}
+
+/// [`slab`] in `R`.
 fn slab_values<R: Real + rustfft::FftNum>(
     a: &ReconstructRequest,
     p: &Lines<R>,
@@ -284,7 +306,7 @@ fn slab_values<R: Real + rustfft::FftNum>(
     grid: &Grid,
     slab: &Region,
     progress: &dyn Progress,
-) -> Result<(Vec<f32>, f64, f64)> {
+) -> Result<(Vec<f64>, f64, f64)> {
     let t = Instant::now();
     let q = if a.short_scan {
         filter_lines(
@@ -306,10 +328,57 @@ fn slab_values<R: Real + rustfft::FftNum>(
         circle_mask_region(grid.dims, slab, &mut v)?;
     }
     Ok((
-        v.iter().map(|x| x.f64() as f32).collect(),
+        v.iter().map(|x| x.f64()).collect(),
         filter_seconds,
         t.elapsed().as_secs_f64(),
     ))
+}
+
+/// What [`whole_image`] gives a rank.
+pub(super) struct WholeImage {
+    pub grid: Grid,
+    /// The image, voxel `(i, j, k)` at `(k·ny + j)·nx + i`.
+    pub image: Vec<f64>,
+    /// The detector lines this rank read for its slab, and its seconds reading,
+    /// filtering and backprojecting.
+    pub lines_read: usize,
+    pub seconds: [f64; 3],
+}
+
+/// FBP/FDK of `a` in slabs on the ranks of `comm` (as [`run`] computes them), after
+/// which every rank holds the whole image: the slabs, each in a zero image, summed by
+/// [`Comm::all_reduce_sum`] — exact, since they do not overlap, so the image is the
+/// single process's bit for bit. `--init fbp` of the iterative methods on ranks.
+///
+/// # Errors
+/// As [`run`] up to the writing.
+pub(super) fn whole_image(
+    a: &ReconstructRequest,
+    comm: &dyn Comm,
+    progress: &dyn Progress,
+) -> Result<WholeImage> {
+    let pre = agree(comm, prepare(a, comm, progress))?;
+    let mine = pre.plan.slabs[comm.rank()].clone();
+    let computed = slab(a, pre.p, &pre.g, &pre.grid, mine.as_ref(), progress);
+    let (values, filter_seconds, backproject_seconds) = agree(comm, computed)?;
+    let d = pre.grid.dims;
+    let mut image = vec![0.0; d.iter().product()];
+    if let Some(s) = &mine {
+        let lines = values.chunks(d[0]);
+        let at =
+            s.k.clone()
+                .flat_map(|k| s.j.clone().map(move |j| (k * d[1] + j) * d[0]));
+        for (line, at) in lines.zip(at) {
+            image[at..at + d[0]].copy_from_slice(line);
+        }
+    }
+    comm.all_reduce_sum(&mut image);
+    Ok(WholeImage {
+        grid: pre.grid,
+        image,
+        lines_read: pre.lines_read,
+        seconds: [pre.read_seconds, filter_seconds, backproject_seconds],
+    })
 }
 
 /// Reconstructs on every rank of `comm` and writes one `.npy` file (module docs). Every
@@ -338,21 +407,12 @@ pub(super) fn run(
         read_seconds,
     } = pre;
     let parallel = g.beam == Beam::Parallel;
-    let slab = plan.slabs[rank].clone();
+    let slab_of_rank = plan.slabs[rank].clone();
     let f32_path = a.backend == Backend::CpuF32;
-    let computed = (|| -> Result<(Vec<f32>, f64, f64)> {
-        crate::jobs::check_cancel(progress)?;
-        let Some(slab) = &slab else {
-            return Ok((Vec::new(), 0.0, 0.0));
-        };
-        let (p, g) = fbp_lines(a, p, g.clone())?;
-        if f32_path {
-            slab_values(a, &p.map(|v| v as f32), &g, &grid, slab, progress)
-        } else {
-            slab_values(a, &p, &g, &grid, slab, progress)
-        }
-    })();
+    let computed = slab(a, p, &g, &grid, slab_of_rank.as_ref(), progress);
     let (values, filter_seconds, backproject_seconds) = agree(comm, computed)?;
+    let values: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+    let slab = slab_of_rank;
 
     // The output: one run of `nx·nj` values per slice `k` of this rank's slab.
     let out = a.out.clone().expect("checked in prepare");

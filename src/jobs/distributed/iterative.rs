@@ -30,6 +30,10 @@
 //! `p` lives on the rays, so on their rank; the dual field `q`, the gradients and the
 //! primal step are image-sized and computed alike on every rank.
 //!
+//! `--init fbp`: the FBP/FDK image is made first as the distributed FBP makes it, in
+//! slabs ([`super::fbp::whole_image`]), and all-reduced into the whole image on every
+//! rank: the single process's first iterate, bit for bit.
+//!
 //! # What it equals
 //! On one rank, the single-process result bit for bit. On more, `Aᵀ r` is summed as
 //! `Σ_ranks Σ_views of the rank` (in f64, then rounded to the precision) instead of
@@ -54,7 +58,7 @@ use crate::ct::{Beam, Geometry};
 use crate::error::Result;
 use crate::io::projections::read_projection_lines;
 use crate::jobs::reconstruct::{
-    circle_support, iterative_options, solved, IterationLog, ReconstructRequest,
+    circle_support, init_request, iterative_options, solved, Init, IterationLog, ReconstructRequest,
 };
 use crate::jobs::{check_cancel, Backend, Progress};
 use crate::real::Real;
@@ -166,8 +170,14 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
 /// pair, iterating and all-reducing.
 type Iterated = (Vec<f64>, IterationLog, [f64; 3]);
 
-/// Builds this rank's pair in `R` (agreed), then iterates.
-fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) -> Result<Iterated> {
+/// Builds this rank's pair in `R` (agreed), then iterates from `x0` (the whole image,
+/// every rank the same; zeros when `None`).
+fn iterate<R: Real>(
+    pre: &Prepared,
+    x0: Option<&[f64]>,
+    comm: &dyn Comm,
+    progress: &dyn Progress,
+) -> Result<Iterated> {
     let t = Instant::now();
     let dims = pre.grid.dims;
     let per_view = pre.g.rows * pre.g.cols;
@@ -185,7 +195,10 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     let pair = agree(comm, built)?;
     let pair_seconds = t.elapsed().as_secs_f64();
     let b: Vec<R> = pre.b.iter().map(|&v| R::of(v)).collect();
-    let x0 = vec![R::zero(); dims.iter().product()];
+    let x0: Vec<R> = match x0 {
+        Some(x0) => x0.iter().map(|&v| R::of(v)).collect(),
+        None => vec![R::zero(); dims.iter().product()],
+    };
     let prob = Problem {
         pair: &*pair,
         b: &b,
@@ -210,6 +223,15 @@ fn iterate<R: Real>(pre: &Prepared, comm: &dyn Comm, progress: &dyn Progress) ->
     Ok((x, log, [pair_seconds, secs, shares.seconds.get()]))
 }
 
+/// The distributed FBP/FDK `--init fbp` runs first (`None` from zero): the single
+/// process's, keeping the output its checks ask for (it writes nothing).
+fn start_request(a: &ReconstructRequest) -> Option<ReconstructRequest> {
+    (a.init == Init::Fbp).then(|| ReconstructRequest {
+        out: a.out.clone(),
+        ..init_request(a)
+    })
+}
+
 /// [`super::run`] for SIRT, OS-SART, CGLS and TV (module docs).
 pub(super) fn run(
     a: &ReconstructRequest,
@@ -220,6 +242,22 @@ pub(super) fn run(
     let comm: &dyn Comm = &counted;
     let (rank, size) = (comm.rank(), comm.size());
     let pre = agree(comm, prepare(a, comm, progress))?;
+    // `--init fbp`: FBP/FDK in slabs, then the whole image on every rank (the single
+    // process's, bit for bit).
+    let init = match start_request(a) {
+        None => None,
+        Some(first) => {
+            let w = super::fbp::whole_image(&first, comm, progress)?;
+            if w.grid != pre.grid {
+                return Err(crate::Error::invalid(
+                    "--init fbp",
+                    "the FBP grid is not the iterative method's",
+                ));
+            }
+            Some(w)
+        }
+    };
+    let x0 = init.as_ref().map(|w| &w.image[..]);
     let f32_path = a.backend == Backend::CpuF32;
     let method = pre.opts.method;
     progress.begin(
@@ -229,9 +267,9 @@ pub(super) fn run(
     );
     let t = Instant::now();
     let iterated = if f32_path {
-        iterate::<f32>(&pre, comm, progress)
+        iterate::<f32>(&pre, x0, comm, progress)
     } else {
-        iterate::<f64>(&pre, comm, progress)
+        iterate::<f64>(&pre, x0, comm, progress)
     };
     let (x, log, [pair_seconds, iterate_seconds, reduce_seconds]) = agree(comm, iterated)?;
     progress.end(t.elapsed().as_secs_f64());
@@ -269,10 +307,13 @@ pub(super) fn run(
     agree(comm, convergence)?;
     let write_seconds = t.elapsed().as_secs_f64();
 
+    let [init_read, init_filter, init_backproject] = init.as_ref().map_or([0.0; 3], |w| w.seconds);
     let mine = RankReport {
         views: pre.views.clone(),
-        lines_read: pre.lines_read,
-        read_seconds: pre.read_seconds,
+        lines_read: pre.lines_read + init.as_ref().map_or(0, |w| w.lines_read),
+        read_seconds: pre.read_seconds + init_read,
+        filter_seconds: init_filter,
+        backproject_seconds: init_backproject,
         write_seconds,
         pair_seconds,
         iterate_seconds,
@@ -312,8 +353,15 @@ impl Distributed {
                 Some(v) => format!("views {}..{} of {views}", v.start, v.end),
                 None => "no views".into(),
             };
+            // `--init fbp`: the FBP/FDK slab's filtering and backprojection.
+            let init = rep.filter_seconds + rep.backproject_seconds;
+            let init = if init > 0.0 {
+                format!(", FBP start {init:.3} s")
+            } else {
+                String::new()
+            };
             s.push_str(&format!(
-                "rank {r}: {which}, read {} of {} detector lines in {:.3} s, pair {:.3} s, \
+                "rank {r}: {which}, read {} of {} detector lines in {:.3} s{init}, pair {:.3} s, \
                  {iterations} iterations {:.3} s (all-reduce {:.3} s), wrote {} bytes in \
                  {:.3} s, sent {} bytes\n",
                 rep.lines_read,
@@ -355,6 +403,9 @@ pub struct ViewsPlan {
     pub bytes_per_iteration: u64,
     pub out: std::path::PathBuf,
     pub out_bytes: u64,
+    /// `--init fbp`: the FBP/FDK in slabs that comes first (its host bytes are in
+    /// `host_bytes`'s peaks).
+    pub init: Option<super::DistributedPlan>,
 }
 
 impl ViewsPlan {
@@ -400,6 +451,27 @@ impl ViewsPlan {
                 None => s += &format!("rank {r}: no views (more ranks than views), host {host}\n"),
             }
         }
+        if let Some(init) = &self.init {
+            let lines: Vec<String> = init
+                .slabs
+                .lines
+                .iter()
+                .map(|l| {
+                    if init.reads_whole {
+                        init.slabs.total_lines
+                    } else {
+                        l.len()
+                    }
+                    .to_string()
+                })
+                .collect();
+            s += &format!(
+                "start:  --init fbp, FBP/FDK in slabs along {} (ranks read {} lines), the \
+                 slabs all-reduced into the image on every rank\n",
+                if init.slabs.axis == 1 { 'j' } else { 'k' },
+                lines.join(", ")
+            );
+        }
         s += &format!(
             "sends:  {} per rank and iteration ({} in {} iterations)\n\
              would write: {} ({} bytes)\n",
@@ -436,6 +508,10 @@ pub(super) fn plan(
     }
     let views = runs(g.n_angles(), ranks);
     let voxels = grid.dims.iter().product::<usize>() as u64;
+    let init = match start_request(a) {
+        None => None,
+        Some(first) => Some(super::fbp::plan(&first, ranks, progress)?),
+    };
     let per_view = (g.rows * g.cols) as u64;
     // OS-SART: each subset's update is summed over the ranks, and its column weights
     // too unless every subset's are kept (then they are summed once). TV: one image
@@ -478,6 +554,17 @@ pub(super) fn plan(
             };
             read + 2 * rays * 8 + 4 * voxels * 8 + gathered + kept_weights + tv_extra(rays)
         })
+        .enumerate()
+        .map(|(r, iterating)| {
+            // `--init fbp`: the slab's peak, its whole image and the all-reduce's copies,
+            // beside this rank's views' projections.
+            let start = init.as_ref().map_or(0, |i| {
+                let rays = views[r].as_ref().map_or(0, |v| v.len() as u64) * per_view;
+                let gathered = ranks as u64 * voxels.min(super::common::REDUCE_CHUNK as u64) * 8;
+                rays * 8 + i.host_bytes[r] + voxels * 8 + gathered
+            });
+            iterating.max(start)
+        })
         .collect();
     let shape = crate::jobs::reconstruct::npy_shape(grid.dims);
     Ok(ViewsPlan {
@@ -500,5 +587,6 @@ pub(super) fn plan(
         out: a.out.clone().expect("checked by check_distributed"),
         out_bytes: crate::io::npy::npy_f32_header(&shape).len() as u64 + 4 * voxels,
         grid,
+        init,
     })
 }

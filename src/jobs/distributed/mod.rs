@@ -28,8 +28,7 @@
 //!
 //! `--dry-run --ranks N` ([`dry_run`]) prints either cut without MPI.
 //!
-//! Not distributed yet: `--init fbp` of the iterative methods, the GPU backend,
-//! `--truth`.
+//! Not distributed yet: the GPU backend, `--truth`.
 
 mod common;
 mod fbp;
@@ -68,8 +67,8 @@ pub fn dry_run(a: &ReconstructRequest, ranks: usize, progress: &dyn Progress) ->
 /// terminal and the others `&()`).
 ///
 /// # Errors
-/// As [`super::reconstruct::run`]; options `--distributed` does not take (OS-SART, TV,
-/// the GPU, `--truth`, an output that is not `.npy`); on more than one rank,
+/// As [`super::reconstruct::run`]; options `--distributed` does not take (the GPU,
+/// `--truth`, `--flat`/`--frame`, an output that is not `.npy`); on more than one rank,
 /// [`crate::Error::Rank`] with the lowest failing rank's message.
 pub fn run(
     a: &ReconstructRequest,

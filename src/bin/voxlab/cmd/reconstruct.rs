@@ -133,8 +133,9 @@ pub struct ReconstructArgs {
     /// views cut among the ranks, each reading only its views and holding the whole
     /// image, the backprojections summed by an all-reduce every iteration (os-sart:
     /// every subset) (equal to a single-process run up to rounding; bit for bit on one
-    /// rank; --convergence is written by rank 0). Needs a build with the `mpi` feature;
-    /// CPU backends only; not with --init fbp or --truth (docs/distributed.md).
+    /// rank; --convergence is written by rank 0; --init fbp starts from the FBP made in
+    /// slabs). Needs a build with the `mpi` feature; CPU backends only; not with --truth
+    /// (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
     /// With --distributed --dry-run: the number of ranks to plan for (no MPI needed):
