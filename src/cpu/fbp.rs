@@ -664,11 +664,21 @@ fn column_line<R: Real>(
                 };
                 let (n1, c1, inv) = (f(n1), f(c1), f(inv));
                 // SAFETY: the CPU has the features each function is compiled for.
+                let band = window.first != 0 || window.len != rows;
                 let done = unsafe {
-                    if std::arch::is_x86_feature_detected!("avx512f") {
-                        column_line_f32x16(o32, j0, q, rows, window, n1, c1, inv)
-                    } else {
-                        column_line_f32x8(o32, j0, q, rows, window, n1, c1, inv)
+                    match (std::arch::is_x86_feature_detected!("avx512f"), band) {
+                        (true, true) => {
+                            column_line_f32x16::<true>(o32, j0, q, rows, window, n1, c1, inv)
+                        }
+                        (true, false) => {
+                            column_line_f32x16::<false>(o32, j0, q, rows, window, n1, c1, inv)
+                        }
+                        (false, true) => {
+                            column_line_f32x8::<true>(o32, j0, q, rows, window, n1, c1, inv)
+                        }
+                        (false, false) => {
+                            column_line_f32x8::<false>(o32, j0, q, rows, window, n1, c1, inv)
+                        }
                     }
                 };
                 column_line_from(o32, j0, done, q, rows, window, n1, c1, inv);
@@ -721,7 +731,7 @@ fn column_line_from<R: Real>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn column_line_f32x16(
+unsafe fn column_line_f32x16<const BAND: bool>(
     out: &mut [f32],
     j0: usize,
     p: ColumnPair<f32>,
@@ -759,8 +769,13 @@ unsafe fn column_line_f32x16(
         let t = _mm512_maskz_mov_ps(inside, t);
         let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(t), zi), mr);
         let ty = _mm512_sub_ps(t, _mm512_cvtepi32_ps(iy));
-        // Window::local, lane by lane: the taps' place in the columns.
-        let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen);
+        // Window::local, lane by lane: the taps' place in the columns (the identity on
+        // whole columns: iy ≤ rows).
+        let iy = if BAND {
+            _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen)
+        } else {
+            iy
+        };
         // All lanes inside: rows are monotone in j, so the ends bound them.
         let first = _mm512_cvtsi512_si32(iy);
         let last = _mm_extract_epi32::<3>(_mm512_extracti32x4_epi32::<3>(iy));
@@ -810,7 +825,7 @@ unsafe fn column_line_f32x16(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn column_line_f32x8(
+unsafe fn column_line_f32x8<const BAND: bool>(
     out: &mut [f32],
     j0: usize,
     p: ColumnPair<f32>,
@@ -850,8 +865,12 @@ unsafe fn column_line_f32x8(
         let t = _mm256_and_ps(inside, t);
         let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(t), zi), mr);
         let ty = _mm256_sub_ps(t, _mm256_cvtepi32_ps(iy));
-        // Window::local, lane by lane.
-        let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen);
+        // Window::local, lane by lane (the identity on whole columns).
+        let iy = if BAND {
+            _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen)
+        } else {
+            iy
+        };
         // SAFETY: as in column_line_f32x16.
         unsafe {
             let iy1 = _mm256_add_epi32(iy, _mm256_set1_epi32(1));
@@ -1079,10 +1098,20 @@ unsafe fn cone_line_avx2<R: Real>(
     if let (true, Some(out), Some(img)) = (short, as_f32_mut(out), as_f32(img)) {
         let f = |v: [R; 3]| v.map(|x| x.f64() as f32);
         let (a, b, r30) = (f(a), f(b), r30.f64() as f32);
-        let done = if std::arch::is_x86_feature_detected!("avx512f") {
-            unsafe { cone_line_f32x16(out, img, pcol, size, window, a, b, r30) }
-        } else {
-            unsafe { cone_line_f32x8(out, img, pcol, size, window, a, b, r30) }
+        let band = window.first != 0 || window.len != size[1];
+        let done = match (std::arch::is_x86_feature_detected!("avx512f"), band) {
+            (true, true) => unsafe {
+                cone_line_f32x16::<true>(out, img, pcol, size, window, a, b, r30)
+            },
+            (true, false) => unsafe {
+                cone_line_f32x16::<false>(out, img, pcol, size, window, a, b, r30)
+            },
+            (false, true) => unsafe {
+                cone_line_f32x8::<true>(out, img, pcol, size, window, a, b, r30)
+            },
+            (false, false) => unsafe {
+                cone_line_f32x8::<false>(out, img, pcol, size, window, a, b, r30)
+            },
         };
         // The tail, with the same arithmetic (voxel indices continue at `done`).
         cone_line_from(out, done, img, pcol, size, window, a, b, r30);
@@ -1095,7 +1124,7 @@ unsafe fn cone_line_avx2<R: Real>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn cone_line_f32x16(
+unsafe fn cone_line_f32x16<const BAND: bool>(
     out: &mut [f32],
     img: &[f32],
     pcol: usize,
@@ -1145,8 +1174,12 @@ unsafe fn cone_line_f32x16(
         let iy = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(t), zi), mr);
         let tx = _mm512_sub_ps(s, _mm512_cvtepi32_ps(ix));
         let ty = _mm512_sub_ps(t, _mm512_cvtepi32_ps(iy));
-        // Window::local, lane by lane.
-        let ly = _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen);
+        // Window::local, lane by lane (the identity on a whole view: iy ≤ rows).
+        let ly = if BAND {
+            _mm512_min_epi32(_mm512_max_epi32(_mm512_sub_epi32(iy, wfirst), zi), wlen)
+        } else {
+            iy
+        };
         let p = _mm512_add_epi32(_mm512_mullo_epi32(ly, vp), ix);
         // SAFETY: as in cone_line_f32x8.
         unsafe {
@@ -1175,7 +1208,7 @@ unsafe fn cone_line_f32x16(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn cone_line_f32x8(
+unsafe fn cone_line_f32x8<const BAND: bool>(
     out: &mut [f32],
     img: &[f32],
     pcol: usize,
@@ -1234,8 +1267,12 @@ unsafe fn cone_line_f32x8(
         let iy = _mm256_min_epi32(_mm256_max_epi32(_mm256_cvttps_epi32(t), zi), mr);
         let tx = _mm256_sub_ps(s, _mm256_cvtepi32_ps(ix));
         let ty = _mm256_sub_ps(t, _mm256_cvtepi32_ps(iy));
-        // Window::local, lane by lane.
-        let ly = _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen);
+        // Window::local, lane by lane (the identity on a whole view: iy ≤ rows).
+        let ly = if BAND {
+            _mm256_min_epi32(_mm256_max_epi32(_mm256_sub_epi32(iy, wfirst), zi), wlen)
+        } else {
+            iy
+        };
         let p = _mm256_add_epi32(_mm256_mullo_epi32(ly, vp), ix);
         // SAFETY: as in cone_line_from, p + pcol + 1 < (len + 2)·pcol ≤ img.len()
         // (asserted above, and below 2³¹ so the i32 offsets hold); k + 8 ≤ out.len().

@@ -485,8 +485,8 @@ fn filter_data<R: Real + FftNum>(
             let scratch_len = fwd
                 .get_inplace_scratch_len()
                 .max(inv.get_inplace_scratch_len());
-            let weight = |n: usize, c: usize| -> R {
-                let line = id(n);
+            // The weight of column `c` of line `line` of the stack.
+            let weight = |line: usize, c: usize| -> R {
                 match (&weights, &views) {
                     (_, Some(v)) => {
                         R::of(v[line / g.rows].weight(c as f64, (line % g.rows) as f64))
@@ -514,10 +514,11 @@ fn filter_data<R: Real + FftNum>(
                         for v in z.iter_mut() {
                             *v = Complex::new(R::zero(), R::zero());
                         }
+                        let (l0, l1) = (id(2 * pair), if two { id(2 * pair + 1) } else { 0 });
                         for c in 0..cols {
-                            let a = x[c] * weight(2 * pair, c);
+                            let a = x[c] * weight(l0, c);
                             let b = if two {
-                                x[cols + c] * weight(2 * pair + 1, c)
+                                x[cols + c] * weight(l1, c)
                             } else {
                                 R::zero()
                             };
