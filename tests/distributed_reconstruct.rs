@@ -1072,3 +1072,29 @@ fn the_fbp_start_is_planned_and_read_by_slabs() {
     }
     assert!(d.describe().contains("FBP start"), "{}", d.describe());
 }
+
+/// A value that is not finite in the lines a rank reads fails every rank, naming the
+/// file and where the value is, and leaves no file.
+#[test]
+fn a_nan_in_a_ranks_lines_is_named_by_view_row_and_column() {
+    use voxlab::io::projections::{read_projections, write_projections, Layout};
+    let dir = scratch("distributed-nan");
+    let mut p = read_projections::<f64>(&ct("rtk_joseph32.npy")).unwrap();
+    // View 5, row 20 (mid-detector: every rank of two reads it), column 7.
+    let (rows, cols) = (p.rows, p.cols);
+    p.data[(5 * rows + 20) * cols + 7] = f64::NAN;
+    let bad = dir.join("nan.npy");
+    write_projections(&bad, &p, Layout::Stack, None).unwrap();
+    let out = dir.join("never.npy");
+    let req = ReconstructRequest {
+        input: bad.clone(),
+        ..rtk(out.clone())
+    };
+    for r in on_ranks(&req, 2, None) {
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("nan.npy"), "{e}");
+        assert!(e.contains("view 5, row 20, column 7 is NaN"), "{e}");
+    }
+    assert!(!out.exists());
+    assert!(temp_files(&dir).is_empty(), "{:?}", temp_files(&dir));
+}

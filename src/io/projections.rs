@@ -317,7 +317,17 @@ pub fn read_projection_lines<R: Real>(path: &Path, lines: &[usize]) -> Result<Li
             ))
         }
     };
-    check_stack(path, &shape, [angles, rows, cols], &values)?;
+    // A value that is not finite is named by its view, row and column.
+    let at = |k: usize| {
+        let line = ids[k / cols];
+        format!(
+            "view {}, row {}, column {}",
+            line / rows,
+            line % rows,
+            k % cols
+        )
+    };
+    check_stack(path, &shape, [angles, rows, cols], &values, &at)?;
     Lines::new(
         [angles, rows, cols],
         ids,
@@ -351,7 +361,9 @@ fn from_array<R: Real>(path: &Path, shape: &[usize], values: Vec<f64>) -> Result
             )))
         }
     };
-    check_stack(path, shape, [angles, rows, cols], &values)?;
+    check_stack(path, shape, [angles, rows, cols], &values, &|k| {
+        format!("sample {k}")
+    })?;
     let data: Vec<R> = if shape.len() == 2 {
         // values[d * angles + a] → data[a * cols + d]
         let mut out = vec![R::zero(); values.len()];
@@ -367,12 +379,13 @@ fn from_array<R: Real>(path: &Path, shape: &[usize], values: Vec<f64>) -> Result
 }
 
 /// The checks [`read_projections`] makes of a stack's shape and values (`values` may
-/// be some of its lines only).
+/// be some of its lines only; `at(k)` names value `k` in a message).
 fn check_stack(
     path: &Path,
     shape: &[usize],
     [angles, rows, cols]: [usize; 3],
     values: &[f64],
+    at: &dyn Fn(usize) -> String,
 ) -> Result<()> {
     let bad_shape = |m: String| Error::format(path, "shape", m);
     for (name, n) in [("angles", angles), ("rows", rows), ("columns", cols)] {
@@ -396,7 +409,7 @@ fn check_stack(
         return Err(Error::format(
             path,
             "data",
-            format!("sample {k} is {} (projections must be finite)", values[k]),
+            format!("{} is {} (projections must be finite)", at(k), values[k]),
         ));
     }
     Ok(())
