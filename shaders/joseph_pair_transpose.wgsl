@@ -18,7 +18,7 @@
 @group(0) @binding(4) var<storage, read> list: array<u32>;
 // [slot][row][col]
 @group(0) @binding(5) var<storage, read> proj: array<f32>;
-// [z][y][x]
+// [z][y][x], from voxel out_base on
 @group(0) @binding(6) var<storage, read_write> out: array<f32>;
 
 const WORKGROUP: u32 = 64u;
@@ -84,7 +84,7 @@ fn transpose(@builtin(global_invocation_id) gid: vec3<u32>) {
     let per_view = tp.cols * tp.rows;
     var acc = 0.0;
     if tp.accumulate != 0u {
-        acc = out[vi];
+        acc = out[vi - tp.out_base];
     }
     for (var slot = tp.slot_lo; slot < tp.slot_hi; slot++) {
         let k = list[slot];
@@ -109,5 +109,5 @@ fn transpose(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         acc += part;
     }
-    out[vi] = acc;
+    out[vi - tp.out_base] = acc;
 }

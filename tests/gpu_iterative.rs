@@ -333,3 +333,65 @@ fn the_device_iteration_follows_the_f64_oracle() {
         }
     }
 }
+
+/// `max |split − whole| / max |whole|` of `A x` with the grid in slabs: each slab
+/// projected as a grid of its own and the slabs' projections added, as the split GPU
+/// projection does (`tests/gpu_ct_project.rs`). Measured on lavapipe: ≤ 2.9e-6 (the
+/// oblique cone), 0 where a slab holds the whole grid. The transpose in pieces is the
+/// whole pair's bit for bit.
+const TOL_SPLIT_FORWARD: f64 = 1e-5;
+
+#[test]
+fn a_pair_past_one_binding_is_the_whole_pair() {
+    use voxlab::gpu::joseph_pair::PairPlan;
+    let Some(ctx) = common::gpu("a_pair_past_one_binding_is_the_whole_pair") else {
+        return;
+    };
+    let mut split = 0;
+    for (name, g, dims, affine) in cases() {
+        let whole = GpuJosephPair::new(ctx, dims, affine, &g).unwrap();
+        assert!(!whole.plan().is_split(), "{name}");
+        // A binding of about a third of the grid and a third of the projections.
+        let n: usize = dims.iter().product();
+        let rays = g.n_angles() * g.cols * g.rows;
+        let mut limits = ctx.limits.clone();
+        let (slice, per_view) = (dims[0] * dims[1], g.cols * g.rows);
+        let third = n.min(rays) / 3;
+        limits.max_storage_buffer_binding_size = 4 * third.max(slice).max(per_view) as u64;
+        let plan = PairPlan::new(&limits, dims, &g).unwrap();
+        let cut = GpuJosephPair::planned(ctx, dims, affine, &g, plan).unwrap();
+        if plan.is_split() {
+            split += 1;
+        }
+        eprintln!("{name}: {}", plan.describe());
+        let x = narrow(&smooth(dims, [0.31, 0.17, 0.23]));
+        let y = narrow(&random(rays, 5));
+        let all: Vec<usize> = (0..g.n_angles()).collect();
+        // All views, and an OS-SART-like subset out of order.
+        let sub: Vec<usize> = (0..g.n_angles()).rev().step_by(2).collect();
+        for views in [&all, &sub] {
+            let pv = g.cols * g.rows;
+            let ys: Vec<f32> = views
+                .iter()
+                .flat_map(|&k| y[k * pv..(k + 1) * pv].to_vec())
+                .collect();
+            let (tw, tc) = (
+                whole.transpose(&ys, views).unwrap(),
+                cut.transpose(&ys, views).unwrap(),
+            );
+            assert!(
+                tw.iter().zip(&tc).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{name}: the transpose in pieces differs ({} views)",
+                views.len()
+            );
+            let (fw, fc) = (
+                widen(&whole.forward(&x, views).unwrap()),
+                widen(&cut.forward(&x, views).unwrap()),
+            );
+            let e = max_rel(&fc, &fw);
+            eprintln!("{name}: {} views, forward {e:.2e}", views.len());
+            assert!(e <= TOL_SPLIT_FORWARD, "{name}: forward {e:e}");
+        }
+    }
+    assert!(split >= 3, "{split} cases were cut");
+}

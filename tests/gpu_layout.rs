@@ -207,7 +207,7 @@ fn transpose_params_and_joseph_footprint_layouts_agree() {
         ("slot_hi", offset_of!(TransposeParams, slot_hi)),
         ("accumulate", offset_of!(TransposeParams, accumulate)),
         ("row_stride", offset_of!(TransposeParams, row_stride)),
-        ("_pad", offset_of!(TransposeParams, _pad)),
+        ("out_base", offset_of!(TransposeParams, out_base)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

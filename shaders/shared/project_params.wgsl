@@ -56,7 +56,8 @@ struct TransposeParams {
     accumulate: u32,
     // Invocations per row of the 2-D dispatch grid.
     row_stride: u32,
-    _pad: u32,
+    // The voxel the output buffer starts at (a slab of the grid's, past one binding).
+    out_base: u32,
 }
 
 // One view's footprint map (src/cpu/project.rs: JosephFootprint<f32>, three rows of

@@ -19,6 +19,10 @@
 //! [`Batch::Fixed`]). TV's power iteration for `‖A‖` reads one scalar back before
 //! the first iteration.
 //!
+//! It needs a whole pair: past one binding the pair is cut into pieces
+//! ([`super::joseph_pair::PairPlan`]) and the iterations run on the host
+//! ([`fits_on_device`] says which).
+//!
 //! The mirror pointers: `residual` ↔ `residual_of`, `weight_rows` ↔ the weighted
 //! residual of `sart`, `reciprocal`, `mask` ↔ `masked`, `sart_update` ↔ `update`,
 //! `axpy`, `direction`, `cgls_alpha` / `cgls_beta` ↔ `cgls`, `normalise` ↔
@@ -517,6 +521,27 @@ impl Pacer<'_> {
     }
 }
 
+/// Whether [`solve`] can hold `method`'s problem on `pair`'s device: a whole pair
+/// (not [`super::joseph_pair::PairPlan::is_split`]) and, for TV, a dual field within
+/// one storage binding. Where it cannot, the iterations run on the host with the
+/// pair in pieces ([`crate::cpu::iterative::solve`] over the pair's [`MatchedPair`]).
+pub fn fits_on_device(pair: &GpuJosephPair, method: Method) -> bool {
+    fits(&pair.plan(), pair.dims(), method, &pair.context().limits)
+}
+
+/// [`fits_on_device`] for a pair of `plan` on a grid of `dims` under `limits`,
+/// before any pair is made (the dry run).
+pub fn fits(
+    plan: &super::joseph_pair::PairPlan,
+    dims: [usize; 3],
+    method: Method,
+    limits: &wgpu::Limits,
+) -> bool {
+    let n: usize = dims.iter().product();
+    let tv = (live_axes(dims).len().max(1) * n * 4) as u64;
+    !plan.is_split() && (method != Method::Tv || tv <= limits.max_storage_buffer_binding_size)
+}
+
 /// [`crate::cpu::iterative::solve`] with the whole iteration on the device of `pair`
 /// (module docs): the same options, checks and [`Solution`] (in f32; the log's
 /// sums are the device's f32 reductions). `on_batch(iterations, residual)` is
@@ -543,6 +568,16 @@ pub fn solve(
     };
     check_problem(&prob, x0.len(), opts)?;
     let ctx = pair.context();
+    if pair.plan().is_split() {
+        return Err(Error::too_large(
+            "GPU iterative reconstruction",
+            format!(
+                "the device-resident solver needs a whole pair, this one is cut ({}): \
+                 run crate::cpu::iterative::solve over it",
+                pair.plan().describe()
+            ),
+        ));
+    }
     let n = pair.n_voxels();
     let nv = pair.n_views();
     let rays = nv * pair.per_view();

@@ -19,16 +19,21 @@
 //! Either way every dispatch does bounded work (a slow software device must never
 //! run one dispatch for many seconds).
 //!
+//! Past one storage binding the pair is cut ([`PairPlan`]): the grid in z-slabs and
+//! the projections in chunks of views, each piece in its own buffers, and only the
+//! [`MatchedPair`] way in is open (the iterations then run on the host).
+//!
 //! [`JosephPair`]: crate::cpu::project::JosephPair
 //! [`JosephPair::transpose_voxel`]: crate::cpu::project::JosephPair::transpose_voxel
 
 use super::context::GpuContext;
+use super::plan::{binding_limit, count_of, Pieces};
 use super::project::{views_per_dispatch, ForwardKernel, SAMPLES_PER_DISPATCH};
 use crate::cpu::iterative::MatchedPair;
 use crate::cpu::project::{joseph_views, view_axes, JosephFootprint, JosephView};
 use crate::ct::Geometry;
 use crate::error::{Error, Result};
-use glam::{DMat3, DMat4};
+use glam::{DMat3, DMat4, DVec3};
 use wgpu::util::DeviceExt;
 
 /// Invocations per workgroup (`WORKGROUP` in `shaders/joseph_pair_transpose.wgsl`).
@@ -55,13 +60,107 @@ pub struct TransposeParams {
     pub slot_hi: u32,
     pub accumulate: u32,
     pub row_stride: u32,
-    pub _pad: u32,
+    /// The voxel the output buffer starts at (a slab's first, past one binding).
+    pub out_base: u32,
+}
+
+/// How a [`GpuJosephPair`] cuts a problem that exceeds one storage binding: the grid
+/// in z-slabs and the projections in chunks of views, each piece in its own
+/// buffers. `Aᵀ` gathers every voxel's sum view by view in order, so a slab's voxels
+/// and a later chunk's views (added to what the earlier left) give the unsplit sums
+/// bit for bit; `A` projects each slab as a grid of its own and adds the slabs'
+/// projections, as the split GPU projection does
+/// ([`super::project::ProjectionPlan`]): the unsplit values up to the order of their
+/// f32 additions. A split pair serves [`MatchedPair`] only; the device-resident
+/// solver ([`super::iterative`]) needs a whole one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PairPlan {
+    /// z-slices of the grid per slab.
+    pub slabs: Pieces,
+    /// Views per chunk of projections.
+    pub views: Pieces,
+}
+
+impl PairPlan {
+    /// The plan for a grid of `dims` seen in `g` under `limits`.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] when one slice of the grid or one projection alone exceeds a
+    /// binding, or the grid has 2³² voxels or more.
+    pub fn new(limits: &wgpu::Limits, dims: [usize; 3], g: &Geometry) -> Result<PairPlan> {
+        let limit = binding_limit(limits).min(u32::MAX as u64 / 4 * 4);
+        let [nx, ny, nz] = dims;
+        if dims.iter().product::<usize>() >= u32::MAX as usize {
+            return Err(Error::too_large(
+                "GPU iterative reconstruction",
+                format!("a {nx}×{ny}×{nz} grid: the GPU pair indexes voxels with 32 bits"),
+            ));
+        }
+        let slice = (nx * ny) as u64 * 4;
+        let per_view = (g.cols * g.rows) as u64 * 4;
+        Ok(PairPlan {
+            slabs: Pieces::plan(
+                "GPU iterative grid",
+                "slice of the grid",
+                nz,
+                slice,
+                limit,
+                1,
+            )?,
+            views: Pieces::plan(
+                "GPU iterative projections",
+                "projection",
+                g.n_angles(),
+                per_view,
+                limit,
+                1,
+            )?,
+        })
+    }
+
+    /// Whether anything is cut.
+    pub fn is_split(&self) -> bool {
+        self.slabs.is_split() || self.views.is_split()
+    }
+
+    /// One line for the user: "the pair in 4 slabs of 8 slices and 3 chunks of 20
+    /// views, the iterations on the host".
+    pub fn describe(&self) -> String {
+        format!(
+            "the pair in {} of {} and {} of {}, the iterations on the host",
+            count_of(self.slabs.count(), "slab"),
+            count_of(self.slabs.per_piece, "slice"),
+            count_of(self.views.count(), "chunk"),
+            count_of(self.views.per_piece, "view")
+        )
+    }
+
+    /// Device bytes of a pair on this plan for `g`: the pieces' buffers (a slab in
+    /// and out, a chunk of projections in and out), the rays and the view list.
+    pub fn device_bytes(&self, dims: [usize; 3], g: &Geometry) -> u64 {
+        let slab = (self.slabs.per_piece * dims[0] * dims[1]) as u64 * 4;
+        let chunk = (self.views.per_piece * g.cols * g.rows) as u64 * 4;
+        let per_view = (size_of::<JosephView<f32>>() + size_of::<JosephFootprint<f32>>() + 8)
+            as u64
+            * self.slabs.count() as u64;
+        2 * slab + 2 * chunk + per_view * g.n_angles() as u64
+    }
 }
 
 /// The complete WGSL module of the transpose: `shaders/joseph_pair_transpose.wgsl` and its
 /// imports.
 pub fn transpose_source() -> String {
     super::shaders::resolve("joseph_pair_transpose")
+}
+
+/// One transpose dispatch: voxels `v0 .. v0 + nv` (the output buffer starting at
+/// `out_base`), slots `s0 .. s1`, added to the output when `add`.
+#[derive(Clone, Copy)]
+struct Transpose {
+    voxels: (usize, usize),
+    slots: (usize, usize),
+    out_base: usize,
+    add: bool,
 }
 
 /// Joseph's projector and its exact transpose on one GPU (module docs).
@@ -82,17 +181,40 @@ pub struct GpuJosephPair<'c> {
     projections: wgpu::Buffer,
     grid_out: wgpu::Buffer,
     projections_out: wgpu::Buffer,
+    plan: PairPlan,
+    /// The rays of every slab past the first, each slab seen as a grid of its own
+    /// (the first slab's are `views`).
+    slab_views: Vec<wgpu::Buffer>,
 }
 
 impl<'c> GpuJosephPair<'c> {
     /// The pair for a grid of `dims` voxels with index-to-world `affine`, seen in
     /// geometry `g`, on `ctx`.
     ///
+    /// The grid and the projections are cut as [`PairPlan::new`] plans them under the
+    /// context's limits.
+    ///
     /// # Errors
-    /// [`Error::Invalid`] for an invalid geometry or affine; [`Error::TooLarge`] when
-    /// the grid or all the projections do not fit one storage binding (or u32
-    /// indices); [`Error::Gpu`] on device failure.
+    /// [`Error::Invalid`] for an invalid geometry or affine; [`Error::TooLarge`] as
+    /// [`PairPlan::new`]; [`Error::Gpu`] on device failure.
     pub fn new(ctx: &'c GpuContext, dims: [usize; 3], affine: DMat4, g: &Geometry) -> Result<Self> {
+        g.validate()?;
+        let plan = PairPlan::new(&ctx.limits, dims, g)?;
+        Self::planned(ctx, dims, affine, g, plan)
+    }
+
+    /// [`Self::new`] cut as `plan` says (a plan under lower limits than the context's
+    /// cuts it further).
+    ///
+    /// # Errors
+    /// As [`Self::new`]; [`Error::Invalid`] for a plan made for another problem.
+    pub fn planned(
+        ctx: &'c GpuContext,
+        dims: [usize; 3],
+        affine: DMat4,
+        g: &Geometry,
+        plan: PairPlan,
+    ) -> Result<Self> {
         g.validate()?;
         let det = DMat3::from_mat4(affine).determinant();
         if !affine.is_finite() || !det.is_finite() || det.abs() < 1e-300 {
@@ -101,22 +223,30 @@ impl<'c> GpuJosephPair<'c> {
                 "the index-to-world affine must be finite and invertible",
             ));
         }
-        let n_voxels: usize = dims.iter().product();
+        if plan.slabs.total != dims[2] || plan.views.total != g.n_angles() {
+            return Err(Error::invalid(
+                "GPU pair plan",
+                format!(
+                    "made for {} slices and {} views, not {dims:?} and {}",
+                    plan.slabs.total,
+                    plan.views.total,
+                    g.n_angles()
+                ),
+            ));
+        }
         let per_view = g.cols * g.rows;
-        let rays = g.n_angles() * per_view;
-        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-        for (what, count) in [("grid", n_voxels), ("projections", rays)] {
-            let bytes = (count as u64).saturating_mul(4);
-            if bytes > limit || count > u32::MAX as usize {
-                return Err(Error::too_large(
-                    "GPU iterative reconstruction",
-                    format!(
-                        "the {what} ({count} f32 values, {bytes} bytes) exceed the adapter's \
-                         storage-binding limit of {limit} bytes: use a smaller grid, fewer \
-                         views or --backend cpu-f32"
-                    ),
-                ));
-            }
+        let slab = plan.slabs.per_piece * dims[0] * dims[1];
+        let chunk = plan.views.per_piece * per_view;
+        let limit = binding_limit(&ctx.limits);
+        if (slab.max(chunk) as u64) * 4 > limit {
+            return Err(Error::too_large(
+                "GPU pair plan",
+                format!(
+                    "a piece of {} bytes exceeds the storage-binding limit of {limit} bytes: \
+                     use PairPlan::new",
+                    slab.max(chunk) * 4
+                ),
+            ));
         }
         let dev = &ctx.device;
         let init = |label: &str, contents: &[u8]| {
@@ -142,6 +272,16 @@ impl<'c> GpuJosephPair<'c> {
             .map(|a| a.map_or(3, |m| m as u32))
             .collect();
         let views = init("joseph views", bytemuck::cast_slice(&views32));
+        let slab_views = plan
+            .slabs
+            .ranges()
+            .skip(1)
+            .map(|s| {
+                let moved = affine * DMat4::from_translation(DVec3::new(0.0, 0.0, s.start as f64));
+                let v: Vec<JosephView<f32>> = joseph_views(g, moved);
+                init("joseph slab views", bytemuck::cast_slice(&v))
+            })
+            .collect();
         let footprints = init("joseph footprints", bytemuck::cast_slice(&foot));
         let axes = init("joseph view axes", bytemuck::cast_slice(&axes));
         let buffer = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
@@ -154,10 +294,10 @@ impl<'c> GpuJosephPair<'c> {
         };
         let input = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let list = buffer("view list", g.n_angles() * 4, input);
-        let grid = buffer("grid in", n_voxels * 4, input);
-        let projections = buffer("projections in", rays * 4, input);
-        let grid_out = ctx.storage_buffer("grid out", (n_voxels * 4) as u64)?;
-        let projections_out = ctx.storage_buffer("projections out", (rays * 4) as u64)?;
+        let grid = buffer("grid in", slab * 4, input);
+        let projections = buffer("projections in", chunk * 4, input);
+        let grid_out = ctx.storage_buffer("grid out", (slab * 4) as u64)?;
+        let projections_out = ctx.storage_buffer("projections out", (chunk * 4) as u64)?;
         let module = ctx.shader("joseph_pair_transpose.wgsl", &transpose_source())?;
         let transpose_pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("project transpose"),
@@ -185,7 +325,14 @@ impl<'c> GpuJosephPair<'c> {
             projections,
             grid_out,
             projections_out,
+            plan,
+            slab_views,
         })
+    }
+
+    /// How the pair cuts its problem ([`PairPlan`]).
+    pub fn plan(&self) -> PairPlan {
+        self.plan
     }
 
     /// The device this pair runs on.
@@ -256,7 +403,8 @@ impl<'c> GpuJosephPair<'c> {
     }
 
     /// Queues `out ← A x` over the first `n` views of `list`: `x` one f32 per voxel,
-    /// `out` at least `n × per_view` values (`[slot][row][col]`). Nothing waits.
+    /// `out` at least `n × per_view` values (`[slot][row][col]`). Nothing waits. For a
+    /// whole pair (not [`PairPlan::is_split`]).
     pub fn enqueue_forward(
         &self,
         x: &wgpu::Buffer,
@@ -279,7 +427,7 @@ impl<'c> GpuJosephPair<'c> {
     /// Queues `out ← Aᵀ y` over the first `n` views of `list` (`n ≥ 1`): `y` holds
     /// `n × per_view` values in the list's order, `out` one per voxel. With `pace`,
     /// waits for the device after every range of views (keeps a software device's
-    /// queue short when nothing else bounds it).
+    /// queue short when nothing else bounds it). For a whole pair.
     ///
     /// # Errors
     /// [`Error::Gpu`] when a wait fails.
@@ -291,19 +439,39 @@ impl<'c> GpuJosephPair<'c> {
         out: &wgpu::Buffer,
         pace: bool,
     ) -> Result<()> {
+        self.queue_transpose([list, y, out], n, 0..self.n_voxels(), false, pace)
+    }
+
+    /// Queues `Aᵀ` over the first `n` views of `list` for the voxels `voxels` into
+    /// `out`, which holds them from `voxels.start` on; `add`: onto what `out` holds
+    /// (an earlier chunk of views), else over it.
+    fn queue_transpose(
+        &self,
+        [list, y, out]: [&wgpu::Buffer; 3],
+        n: usize,
+        voxels: std::ops::Range<usize>,
+        add: bool,
+        pace: bool,
+    ) -> Result<()> {
         // Bounded work per dispatch: voxels × slots × footprint pixels. Slots outside
         // (each later range adds to the sums), so every voxel sums its views in order.
-        let nvox = self.n_voxels();
+        let nvox = voxels.len();
         let budget = SAMPLES_PER_DISPATCH / PIXELS_PER_VOXEL_VIEW;
-        let voxels = nvox.min(budget).max(1);
-        let slots = (budget / voxels).clamp(1, crate::gpu::context::LLVMPIPE_LOOP_LIMIT);
+        let per = nvox.min(budget).max(1);
+        let slots = (budget / per).clamp(1, crate::gpu::context::LLVMPIPE_LOOP_LIMIT);
         let mut s0 = 0;
         while s0 < n {
             let s1 = (s0 + slots).min(n);
-            let mut v0 = 0;
-            while v0 < nvox {
-                let nv = voxels.min(nvox - v0);
-                self.dispatch_transpose((v0, nv), (s0, s1), [list, y, out]);
+            let mut v0 = voxels.start;
+            while v0 < voxels.end {
+                let nv = per.min(voxels.end - v0);
+                let step = Transpose {
+                    voxels: (v0, nv),
+                    slots: (s0, s1),
+                    out_base: voxels.start,
+                    add: add || s0 > 0,
+                };
+                self.dispatch_transpose(step, [list, y, out]);
                 v0 += nv;
             }
             if pace {
@@ -314,14 +482,15 @@ impl<'c> GpuJosephPair<'c> {
         Ok(())
     }
 
-    /// One transpose dispatch: voxels `v0 .. v0 + nv`, slots `s0 .. s1`; `buffers`
-    /// are the view list, the projections and the output grid.
-    fn dispatch_transpose(
-        &self,
-        (v0, nv): (usize, usize),
-        (s0, s1): (usize, usize),
-        [list, proj, out]: [&wgpu::Buffer; 3],
-    ) {
+    /// One transpose dispatch (`step`); `buffers` are the view list, the projections
+    /// and the output grid.
+    fn dispatch_transpose(&self, step: Transpose, [list, proj, out]: [&wgpu::Buffer; 3]) {
+        let Transpose {
+            voxels: (v0, nv),
+            slots: (s0, s1),
+            out_base,
+            add,
+        } = step;
         let dev = &self.ctx.device;
         let max_x = self.ctx.limits.max_compute_workgroups_per_dimension.max(1);
         let groups = (nv as u32).div_ceil(WORKGROUP).max(1);
@@ -337,9 +506,9 @@ impl<'c> GpuJosephPair<'c> {
             n_voxels: nv as u32,
             slot_lo: s0 as u32,
             slot_hi: s1 as u32,
-            accumulate: u32::from(s0 > 0),
+            accumulate: u32::from(add),
             row_stride: x * WORKGROUP,
-            _pad: 0,
+            out_base: out_base as u32,
         };
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("transpose params"),
@@ -394,21 +563,42 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
             ));
         }
         self.upload_list(views)?;
-        self.ctx
-            .queue
-            .write_buffer(&self.grid, 0, bytemuck::cast_slice(x));
-        // One binding's worth of views at a time, each read back as it finishes.
+        // Slab by slab, each a grid of its own; a dispatch's views at most one
+        // binding's worth (and one chunk of the plan), each read back as it finishes
+        // and added to the earlier slabs' sums.
         let pv = self.per_view();
-        let (chunk, shape) = self.forward_plan();
-        let mut out = Vec::with_capacity(views.len() * pv);
-        let mut k0 = 0;
-        while k0 < views.len() {
-            let n = chunk.min(views.len() - k0);
-            let bufs = [&self.views, &self.grid, &self.list, &self.projections_out];
-            self.forward_kernel
-                .dispatch(self.ctx, shape, (k0, n), 0, bufs);
-            out.extend(self.read(&self.projections_out, n * pv)?);
-            k0 += n;
+        let [nx, ny, _] = self.dims;
+        let limit = self.ctx.limits.max_storage_buffer_binding_size;
+        let mut out = vec![0.0f32; views.len() * pv];
+        for (s, slab) in self.plan.slabs.ranges().enumerate() {
+            self.ctx.queue.write_buffer(
+                &self.grid,
+                0,
+                bytemuck::cast_slice(&x[slab.start * nx * ny..slab.end * nx * ny]),
+            );
+            let rays = if s == 0 {
+                &self.views
+            } else {
+                &self.slab_views[s - 1]
+            };
+            let dims = [nx, ny, slab.len()];
+            let chunk = views_per_dispatch(dims, pv, limit).min(self.plan.views.per_piece);
+            let shape = [nx, ny, slab.len(), self.cols, self.rows];
+            let mut k0 = 0;
+            while k0 < views.len() {
+                let n = chunk.min(views.len() - k0);
+                let bufs = [rays, &self.grid, &self.list, &self.projections_out];
+                self.forward_kernel
+                    .dispatch(self.ctx, shape, (k0, n), 0, bufs);
+                let got = self.read(&self.projections_out, n * pv)?;
+                let dst = &mut out[k0 * pv..(k0 + n) * pv];
+                if s == 0 {
+                    dst.copy_from_slice(&got);
+                } else {
+                    dst.iter_mut().zip(&got).for_each(|(d, v)| *d += v);
+                }
+                k0 += n;
+            }
         }
         Ok(out)
     }
@@ -429,17 +619,27 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
         if views.is_empty() {
             return Ok(vec![0.0; n]);
         }
-        self.upload_list(views)?;
-        self.ctx
-            .queue
-            .write_buffer(&self.projections, 0, bytemuck::cast_slice(y));
-        self.enqueue_transpose(
-            &self.projections,
-            &self.list,
-            views.len(),
-            &self.grid_out,
-            true,
-        )?;
-        self.read(&self.grid_out, n)
+        self.check_views(views)?;
+        // Slab by slab of voxels; for each, the views chunk by chunk, every later chunk
+        // added to the sums the earlier left (the unsplit sums, bit for bit).
+        let slice = self.dims[0] * self.dims[1];
+        let per = self.plan.views.per_piece.max(1);
+        let mut out = Vec::with_capacity(n);
+        for slab in self.plan.slabs.ranges() {
+            let voxels = slab.start * slice..slab.end * slice;
+            for (c, chunk) in views.chunks(per).enumerate() {
+                self.upload_list(chunk)?;
+                let at = c * per * pv;
+                self.ctx.queue.write_buffer(
+                    &self.projections,
+                    0,
+                    bytemuck::cast_slice(&y[at..at + chunk.len() * pv]),
+                );
+                let bufs = [&self.list, &self.projections, &self.grid_out];
+                self.queue_transpose(bufs, chunk.len(), voxels.clone(), c > 0, true)?;
+            }
+            out.extend(self.read(&self.grid_out, voxels.len())?);
+        }
+        Ok(out)
     }
 }

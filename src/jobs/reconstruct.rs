@@ -716,6 +716,7 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
         // (SIRT/CGLS/OS-SART keep three image-sized ones, TV its dual field too).
         let vectors = if method == Method::Tv { 7 } else { 4 };
         let host = 2 * read + vectors * voxels * 8;
+        let mut split = Vec::new();
         let (backend, device) = match a.backend {
             Backend::Gpu => {
                 let engine = Engine::open(Backend::Gpu)?;
@@ -724,25 +725,23 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
                     .ok_or_else(|| Error::NoAdapter(NO_GPU.into()))?;
                 let rays = (p.data.len() * 4) as u64;
                 let largest = rays.max(voxels * 4 * if method == Method::Tv { 3 } else { 1 });
-                let dev = DevicePlan::on(ctx, 2 * rays + vectors * voxels * 4, largest);
+                let pair = crate::gpu::joseph_pair::PairPlan::new(&ctx.limits, grid.dims, &g)?;
+                let dev = if !crate::gpu::iterative::fits(&pair, grid.dims, method, &ctx.limits) {
+                    // The pair in pieces, the iterations on the host (in f32).
+                    split.push(format!("GPU iterative: {}", pair.describe()));
+                    let bytes = pair.device_bytes(grid.dims, &g);
+                    let piece = (pair.slabs.per_piece * grid.dims[0] * grid.dims[1])
+                        .max(pair.views.per_piece * g.rows * g.cols)
+                        as u64
+                        * 4;
+                    DevicePlan::on(ctx, bytes, piece)
+                } else {
+                    DevicePlan::on(ctx, 2 * rays + vectors * voxels * 4, largest)
+                };
                 (format!("gpu ({})", ctx.summary.name), Some(dev))
             }
             Backend::CpuF32 => ("cpu f32".into(), None),
             _ => ("cpu f64".into(), None),
-        };
-        let split = match &device {
-            Some(d) if d.largest_buffer_bytes > d.max_binding_bytes => {
-                return Err(Error::too_large(
-                    "GPU iterative reconstruction",
-                    format!(
-                        "a vector of {} exceeds the storage binding of {}, and the GPU \
-                         solver holds its problem whole: use --backend cpu-f32",
-                        crate::gpu::plan::human_bytes(d.largest_buffer_bytes),
-                        crate::gpu::plan::human_bytes(d.max_binding_bytes)
-                    ),
-                ))
-            }
-            _ => Vec::new(),
         };
         return Ok(MemoryPlan {
             job: format!("reconstruct {method:?}").to_lowercase(),
@@ -1081,10 +1080,21 @@ fn iterative(
     let ((data, log), what) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
             let pair = GpuJosephPair::new(ctx, dims, affine, &g)?;
-            (
-                solve_on_device(&pair, &p.data, s, &x0, &opts, progress)?,
-                format!("gpu ({}), f32", ctx.summary.name),
-            )
+            let name = &ctx.summary.name;
+            if crate::gpu::iterative::fits_on_device(&pair, method) {
+                (
+                    solve_on_device(&pair, &p.data, s, &x0, &opts, progress)?,
+                    format!("gpu ({name}), f32"),
+                )
+            } else {
+                // Past one binding: the pair in pieces, the iterations on the host.
+                let plan = pair.plan().describe();
+                progress.note(&format!("GPU iterative: {plan}"));
+                (
+                    solve_in::<f32>(&pair, &p.data, s, &x0, &opts, progress)?,
+                    format!("gpu ({name}), f32, {plan}"),
+                )
+            }
         }
         (Backend::CpuF32, _) => {
             let pair = JosephPair::<f32>::new(dims, affine, &g)?;
