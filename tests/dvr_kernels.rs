@@ -239,3 +239,64 @@ fn fast_kernels_equal_the_per_sample_loop_on_integer_and_thin_volumes() {
         assert_same(&fast, &slow, "two voxels wide");
     }
 }
+
+/// A brick of a distributed render (`render_owned`: a `BrickField` that samples its
+/// voxels and ghost voxels at the whole grid's coordinates, and only its own samples):
+/// the packet kernel (unshaded) and the batches (shaded), sampling at the brick's
+/// origin, against the per-sample loop, for every brick of three and of four, over the
+/// case list's trilinear cases, in f32.
+#[test]
+fn fast_kernels_equal_the_per_sample_loop_on_bricks() {
+    use voxlab::cpu::field::{brick_ghost, BrickField, GridField};
+    use voxlab::cpu::grid::Grid;
+    use voxlab::cpu::raycast::{render_owned_with, Owned};
+    let vol = volume(40);
+    let whole = Grid::<f32>::from_any(&vol);
+    let d = vol.dims();
+    let range = (whole.data.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+        (lo.min(v as f64), hi.max(v as f64))
+    });
+    let mut compared = 0;
+    for c in CASES.iter().filter(|c| c.filter == Filter::Trilinear) {
+        let tf = TransferFunction::preset(c.tf).unwrap();
+        let cam = camera(&vol, c.cam);
+        let s = settings(c, d);
+        for n in [3, 4] {
+            let (_, bricks) = voxlab::io::brick::kd_tree(d, n).unwrap();
+            for b in &bricks {
+                let g = brick_ghost(s.filter);
+                let lo: [usize; 3] = std::array::from_fn(|a| b.lo[a].saturating_sub(g));
+                let hi: [usize; 3] = std::array::from_fn(|a| (b.hi[a] + g).min(d[a]));
+                let dims: [usize; 3] = std::array::from_fn(|a| hi[a] - lo[a]);
+                let mut data = Vec::with_capacity(dims.iter().product());
+                for z in lo[2]..hi[2] {
+                    for y in lo[1]..hi[1] {
+                        let at = (z * d[1] + y) * d[0];
+                        data.extend_from_slice(&whole.data[at + lo[0]..at + hi[0]]);
+                    }
+                }
+                let field = BrickField {
+                    inner: GridField::new(Grid { dims, data }, s.filter, s.gradient, false),
+                    origin: lo,
+                    whole: d,
+                    range,
+                };
+                let own = || Owned::new(b.lo, b.hi, d);
+                let render = |k: Kernel| {
+                    render_owned_with(&field, vol.affine(), &tf, &cam, &s, own(), none(), k)
+                        .unwrap()
+                };
+                let (fast, slow) = (render(Kernel::Batched), render(Kernel::PerSample));
+                let what = format!("{}, brick {:?}..{:?} of {n}", c.name, b.lo, b.hi);
+                let differing = (fast.image.data.iter())
+                    .zip(&slow.image.data)
+                    .filter(|(a, b)| a.to_bits() != b.to_bits())
+                    .count();
+                assert_eq!(differing, 0, "{what}: {differing} values differ");
+                assert!(fast.counts == slow.counts, "{what}: sample counts differ");
+                compared += slow.counts.iter().filter(|&&k| k > 0).count();
+            }
+        }
+    }
+    assert!(compared > 10_000, "{compared} rays with samples compared");
+}

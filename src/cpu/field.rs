@@ -129,8 +129,10 @@ impl<R: Real> Field<R> for GridField<R> {
 /// multiples of `p`'s unit in the last place, and so is the difference, which is no
 /// larger than `p`), so the taps, their weights and the sample are those of the whole
 /// grid, bit for bit. Its dimensions and value range are the whole grid's; it offers
-/// no voxel grid (no pre-classification, skipping grid or batched kernels, which
-/// index a grid directly).
+/// no voxel grid (no pre-classification or per-ray batches, which index a grid
+/// directly), but its own grid and origin ([`Field::brick`]): empty-space skipping
+/// walks its cells from there, and the packet kernel samples it at `p − origin` as it
+/// does (`cpu::march::Source::origin`).
 pub struct BrickField<R> {
     pub inner: GridField<R>,
     pub origin: [usize; 3],

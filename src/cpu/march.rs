@@ -105,6 +105,10 @@ pub fn segment_t<R: Real>(k: usize, n: usize, t_in: R, t_s: R, t_out: R, dt: R) 
 #[derive(Clone, Copy)]
 pub struct Source<'a, R> {
     pub grid: &'a Grid<R>,
+    /// Where `grid`'s voxel 0 lies in the index space the rays are in: zero for a
+    /// whole grid, a brick's origin ([`super::field::BrickField`]): a point `p` is
+    /// sampled at `p − origin`, as the brick's field samples it (exactly).
+    pub origin: [R; 3],
     pub filter: Filter,
     pub lut: &'a LutR<R>,
     /// The table as [`lut_pairs`] lays it out for the vector path.
@@ -115,6 +119,14 @@ pub struct Source<'a, R> {
     pub ref_step: R,
     /// The opacity-correction exponent of a full step: the step over `Δs₀`.
     pub e_full: R,
+}
+
+impl<R: Real> Source<'_, R> {
+    /// [`Self::origin`] as a point.
+    #[inline(always)]
+    pub fn local_origin(&self) -> V3<R> {
+        V3::new(self.origin[0], self.origin[1], self.origin[2])
+    }
 }
 
 /// The 1D table laid out for the vector path: entry `i` holds, per channel, the value
@@ -202,7 +214,9 @@ impl<R: Real> Batch<R> {
         for l in 0..m {
             let (p, len) = steps.segment(k0 + l);
             let e = steps.exponent(k0 + l, len, src.speed, src.ref_step, src.e_full);
-            let c = src.lut.classify(sample(src.grid, src.filter, p));
+            let c = src
+                .lut
+                .classify(sample(src.grid, src.filter, p - src.local_origin()));
             for (a, (&x, &v)) in p.0.iter().zip(&c).enumerate() {
                 self.p[a][l] = x;
                 self.rgb[a][l] = v;
@@ -344,6 +358,8 @@ mod simd {
             len = _mm512_mask_blend_ps(ends, len, _mm512_sub_ps(tb, ta));
         }
         let p = [0, 1, 2].map(|a| _mm512_add_ps(g.o[a], _mm512_mul_ps(g.d[a], mid)));
+        // In the grid's own index space (a brick's: the exact subtraction of its field).
+        let q = [0, 1, 2].map(|a| _mm512_sub_ps(p[a], _mm512_set1_ps(src.origin[a])));
         let (lim, neg_lim) = (_mm512_set1_ps(1e9), _mm512_set1_ps(-1e9));
         let mut moderate = 0xffffu16;
         if CHECK {
@@ -361,9 +377,9 @@ mod simd {
         let clamp = |i: __m512i, n: usize| {
             _mm512_min_epi32(_mm512_max_epi32(i, zero_i), _mm512_set1_epi32(n as i32 - 1))
         };
-        let (ix, fx) = floor(p[0]);
-        let (iy, fy) = floor(p[1]);
-        let (iz, fz) = floor(p[2]);
+        let (ix, fx) = floor(q[0]);
+        let (iy, fy) = floor(q[1]);
+        let (iz, fz) = floor(q[2]);
         // Row offsets of the clamped taps, each one product (no chained multiplies).
         let nx = _mm512_set1_epi32(dims[0] as i32);
         let nxy = _mm512_set1_epi32((dims[0] * dims[1]) as i32);
@@ -627,7 +643,7 @@ mod simd {
                 let st = pk.steps(l);
                 let k = pk.k[l] as usize;
                 let (p, len) = st.segment(k);
-                let v = super::sample(src.grid, src.filter, p);
+                let v = super::sample(src.grid, src.filter, p - src.local_origin());
                 let q = src.lut.classify(v);
                 for a in 0..3 {
                     rgb[a][l] = q[a];

@@ -398,9 +398,34 @@ pub fn render_owned<R: Real, F: Field<R>>(
     own: Owned<R>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Partial> {
+    render_owned_with(
+        field,
+        affine,
+        tf,
+        camera,
+        settings,
+        own,
+        progress,
+        Kernel::Batched,
+    )
+}
+
+/// [`render_owned`] with the kernel chosen: `Batched` takes the packet kernel where it
+/// applies (unshaded DVR in f32, trilinear, AVX-512), as a whole render does.
+#[allow(clippy::too_many_arguments)]
+pub fn render_owned_with<R: Real, F: Field<R>>(
+    field: &F,
+    affine: DMat4,
+    tf: &TransferFunction,
+    camera: &Camera,
+    settings: &RenderSettings,
+    own: Owned<R>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    kernel: Kernel,
+) -> Result<Partial> {
     check_owned_settings(settings)?;
     let s = owned_settings(settings);
-    let setup = setup_for(field, affine, tf, &s, Kernel::PerSample, None, Some(own))?;
+    let setup = setup_for(field, affine, tf, &s, kernel, None, Some(own))?;
     let out = cast_image(field, &setup, camera, &s, progress);
     let (w, h) = (camera.width, camera.height);
     let mut hits = vec![false; w * h];
@@ -623,7 +648,12 @@ fn packet_source<'a, R: Real, F: Field<R>>(
     settings: &RenderSettings,
 ) -> Option<(super::march::Source<'a, f32>, &'a Setup<f32>)> {
     use std::any::TypeId;
-    let grid = field.sampled_grid()?;
+    // A whole grid, or a brick sampled at its origin (a distributed render's).
+    let (grid, origin) = match (field.sampled_grid(), field.brick()) {
+        (Some(g), _) => (g, [0.0f32; 3]),
+        (None, Some((g, o))) => (g, o.map(|x| x as f32)),
+        (None, None) => return None,
+    };
     if TypeId::of::<R>() != TypeId::of::<f32>() || !setup.batched || setup.base.shade {
         return None;
     }
@@ -636,6 +666,7 @@ fn packet_source<'a, R: Real, F: Field<R>>(
     };
     let src = super::march::Source {
         grid,
+        origin,
         filter: s.base.filter,
         lut: &s.base.lut,
         pairs: &s.lut_pairs,
@@ -643,7 +674,8 @@ fn packet_source<'a, R: Real, F: Field<R>>(
         ref_step: s.base.ref_step,
         e_full: s.base.step / s.base.ref_step,
     };
-    let d = grid.dims;
+    // A brick's rays run through the whole grid's box.
+    let d = field.dims();
     let diag = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64).sqrt();
     let max_steps = (diag / settings.step).ceil() + 3.0;
     (max_steps < (1 << 24) as f64 && super::march::packets_usable(&src, max_steps as usize))
@@ -844,9 +876,16 @@ fn cast_ray<R: Real, F: Field<R>>(
                 mesh_ranges,
                 back,
             );
-            let batched = match field.sampled_grid() {
-                Some(grid) if s.batched && !back => Some(super::march::Source {
+            // A whole grid, or a brick sampled at its origin (as its field samples it).
+            let sampled = match (field.sampled_grid(), field.brick()) {
+                (Some(g), _) => Some((g, [R::zero(); 3])),
+                (None, Some((g, o))) => Some((g, o.map(|x| R::of(x as f64)))),
+                (None, None) => None,
+            };
+            let batched = match sampled {
+                Some((grid, origin)) if s.batched && !back => Some(super::march::Source {
                     grid,
+                    origin,
                     filter: b.filter,
                     lut: &b.lut,
                     pairs: &s.lut_pairs,
@@ -971,7 +1010,7 @@ fn cast_row_packets(
             let mut r = ClippedRanges::new(
                 SampleRanges::new(
                     skip,
-                    st.o,
+                    st.o - s.skip_origin,
                     st.d,
                     (st.t_in, st.t_out),
                     st.t_s,
