@@ -155,81 +155,66 @@ fn iterative_on_every_rank_count(name: &str, dir: &Path, args: &[&str], bound: f
 #[test]
 fn the_iterative_methods_on_one_to_four_mpi_ranks_follow_the_single_process_file() {
     let dir = scratch("mpi-iterative");
+    // RTK's cone-beam example onto 24³ (spacing 2.5), then the method's flags.
+    let (stack, geometry) = (ct("rtk_joseph32.npy"), ct("rtk_geometry.json"));
+    // scikit-image's sinogram with its angles, then the method's flags.
+    let (sino, theta) = (ct("skimage_radon64.npy"), ct("skimage_theta.txt"));
+    let sinogram = |rest: &[&'static str]| {
+        let mut v = vec![&sino[..], "--geometry", "parallel", "--angles", &theta];
+        v.extend_from_slice(rest);
+        v
+    };
+    let cone24 = |rest: &[&'static str]| {
+        let mut v = vec![
+            &stack[..],
+            "--geometry",
+            &geometry,
+            "--size",
+            "24",
+            "--spacing",
+            "2.5",
+        ];
+        v.extend_from_slice(rest);
+        v
+    };
     iterative_on_every_rank_count(
         "sirt-skimage",
         &dir,
-        &[
-            &ct("skimage_radon64.npy"),
-            "--geometry",
-            "parallel",
-            "--angles",
-            &ct("skimage_theta.txt"),
-            "--method",
-            "sirt",
-            "--iterations",
-            "6",
-            "--nonnegative",
-        ],
+        &sinogram(&["--method", "sirt", "--iterations", "6", "--nonnegative"]),
         1.2e-7,
     );
     iterative_on_every_rank_count(
         "cgls-cone-f32",
         &dir,
-        &[
-            &ct("rtk_joseph32.npy"),
-            "--geometry",
-            &ct("rtk_geometry.json"),
-            "--size",
-            "24",
-            "--spacing",
-            "2.5",
+        &cone24(&[
             "--method",
             "cgls",
             "--iterations",
             "4",
             "--backend",
             "cpu-f32",
-        ],
+        ]),
         2e-6,
     );
     // OS-SART: every subset's update summed over the ranks.
     iterative_on_every_rank_count(
         "os-sart-cone",
         &dir,
-        &[
-            &ct("rtk_joseph32.npy"),
-            "--geometry",
-            &ct("rtk_geometry.json"),
-            "--size",
-            "24",
-            "--spacing",
-            "2.5",
-            "--method",
-            "os-sart",
-            "--subsets",
-            "4",
-            "--iterations",
-            "2",
-        ],
+        &cone24(&["--method", "os-sart", "--subsets", "4", "--iterations", "2"]),
         1.2e-7,
     );
     // TV: the power iteration's and every iteration's Aᵀ sums over the ranks.
     iterative_on_every_rank_count(
         "tv-skimage-f32",
         &dir,
-        &[
-            &ct("skimage_radon64.npy"),
-            "--geometry",
-            "parallel",
-            "--angles",
-            &ct("skimage_theta.txt"),
+        &sinogram(&[
             "--method",
             "tv",
             "--iterations",
             "5",
             "--backend",
             "cpu-f32",
-        ],
+        ]),
         2e-6,
     );
     // `--init fbp`: FDK in slabs first, all-reduced into the image every rank starts
@@ -237,21 +222,7 @@ fn the_iterative_methods_on_one_to_four_mpi_ranks_follow_the_single_process_file
     iterative_on_every_rank_count(
         "sirt-from-fdk-cone",
         &dir,
-        &[
-            &ct("rtk_joseph32.npy"),
-            "--geometry",
-            &ct("rtk_geometry.json"),
-            "--size",
-            "24",
-            "--spacing",
-            "2.5",
-            "--method",
-            "sirt",
-            "--init",
-            "fbp",
-            "--iterations",
-            "3",
-        ],
+        &cone24(&["--method", "sirt", "--init", "fbp", "--iterations", "3"]),
         1.2e-7,
     );
 }
