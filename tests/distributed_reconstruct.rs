@@ -123,10 +123,26 @@ fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
             "7",
         ],
     );
-    // RTK's example as NRRD: read whole by every rank.
+    // RTK's example as a gzip NRRD: read whole by every rank; as a raw detached one:
+    // read by lines.
     let nrrd = dir.join("rtk.nrrd");
     let stack = voxlab::io::read_volume(&ct("rtk_joseph32.npy")).unwrap();
     voxlab::io::nrrd::write_nrrd(&nrrd, &stack, Default::default()).unwrap();
+    let nhdr = dir.join("rtk.nhdr");
+    let raw = voxlab::io::nrrd::NrrdWriteOptions {
+        gzip: false,
+        detached: true,
+    };
+    voxlab::io::nrrd::write_nrrd(&nhdr, &stack, raw).unwrap();
+    // RTK's own projections of ellipsoids (compressed MetaImage, a geometry XML that
+    // needs the header's detector grid), uncompressed: read by lines.
+    let rtk_mha = |case: &str| {
+        let mha = dir.join(format!("rtk_{case}.mha"));
+        let v = voxlab::io::read_volume(&ct(&format!("rtk_{case}_ellipsoids.mha"))).unwrap();
+        let plain = voxlab::io::metaimage::MetaImageWriteOptions { compress: false };
+        voxlab::io::metaimage::write_metaimage(&mha, &v, plain).unwrap();
+        mha
+    };
     let geometry = |p: &Path| Some(p.display().to_string());
     let base = ReconstructRequest::default;
     vec![
@@ -179,6 +195,37 @@ fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
                 geometry: geometry(&ct("rtk_geometry.json")),
                 size: Some(32),
                 spacing: Some(2.0),
+                ..base()
+            },
+        ),
+        (
+            "RTK's example from a raw NRRD, read by lines",
+            ReconstructRequest {
+                input: nhdr,
+                geometry: geometry(&ct("rtk_geometry.json")),
+                size: Some(32),
+                spacing: Some(2.0),
+                ..base()
+            },
+        ),
+        (
+            "RTK's circular scan from an uncompressed MetaImage and RTK's XML, read by lines",
+            ReconstructRequest {
+                input: rtk_mha("circular"),
+                geometry: geometry(&ct("rtk_circular.xml")),
+                size: Some(20),
+                spacing: Some(4.0),
+                ..base()
+            },
+        ),
+        (
+            "RTK's tilted scan from an uncompressed MetaImage and RTK's XML, read by lines, f32",
+            ReconstructRequest {
+                input: rtk_mha("tilted"),
+                geometry: geometry(&ct("rtk_tilted.xml")),
+                size: Some(20),
+                spacing: Some(4.0),
+                backend: Backend::CpuF32,
                 ..base()
             },
         ),
@@ -240,6 +287,22 @@ fn one_to_four_ranks_write_the_single_process_file_byte_for_byte() {
             assert!(got == want, "{name}, {ranks} ranks: the files differ");
             let d = results[0].as_ref().unwrap();
             assert_eq!(d.ranks.len(), ranks);
+            // A file read by lines: four ranks read fewer lines than the stack holds; a
+            // file read whole: every rank reads all.
+            if name.contains("read by lines") && ranks == 4 {
+                assert!(
+                    d.ranks.iter().all(|r| r.lines_read < d.total_lines),
+                    "{name}: {}",
+                    d.describe()
+                );
+            }
+            if name.contains("read whole") {
+                assert!(
+                    d.ranks.iter().all(|r| r.lines_read == d.total_lines),
+                    "{name}: {}",
+                    d.describe()
+                );
+            }
             // Every grid here has at least four slices along one axis: all ranks work.
             assert!(
                 d.ranks.iter().all(|r| r.slab.is_some()),

@@ -3,7 +3,9 @@
 //! with the affine moved to its first voxel, for every voxel type, from `.npy` and
 //! raw NRRD (attached, detached, `byte skip: -1`) and MetaImage (`.mha`, `.mhd`);
 //! compressed files are not random
-//! access; the k-d bricks tile the volume.
+//! access; the k-d bricks tile the volume. A projection stack in such a file is read
+//! by detector lines (`io::projections::read_projection_lines`), each line the whole
+//! stack's bit for bit.
 
 mod common;
 
@@ -14,7 +16,8 @@ use voxlab::io::brick::{kd_bricks, raw_layout, read_brick, Brick};
 use voxlab::io::metaimage::{write_metaimage, MetaImageWriteOptions};
 use voxlab::io::npy::write_npy_volume;
 use voxlab::io::nrrd::{write_nrrd, NrrdWriteOptions};
-use voxlab::io::read_volume;
+use voxlab::io::projections::{line_stack, read_projection_lines, read_projections_grid};
+use voxlab::io::{read_volume, ReadOptions};
 use voxlab::volume::{AnyVolume, Volume};
 
 /// A larger volume than the samples, so that bricks have room: 9×7×6 of `f32`s.
@@ -216,4 +219,162 @@ fn kd_bricks_tile_the_volume_in_balanced_boxes() {
     }
     assert!(kd_bricks([2, 1, 1], 3).is_err());
     assert!(kd_bricks([4, 4, 4], 0).is_err());
+}
+
+/// The line sets each stack is read by: one line, the last, every line, every third,
+/// and runs with gaps.
+fn line_sets(total: usize) -> Vec<Vec<usize>> {
+    vec![
+        vec![0],
+        vec![total - 1],
+        (0..total).collect(),
+        (1..total).step_by(3).collect(),
+        (0..total)
+            .filter(|l| l % 5 < 2 || *l == total - 1)
+            .collect(),
+    ]
+}
+
+/// A projection stack (x, y, z = column, row, view) stored in one uncompressed block is
+/// read by detector lines: each line read alone is the whole read's bit for bit, in
+/// f64 and f32, for every voxel type and every random-access format, and the header
+/// gives the detector grid the whole read gives.
+#[test]
+fn detector_lines_are_the_whole_stacks_bit_for_bit() {
+    let dir = scratch("brick-lines");
+    let affine = DMat4::from_scale_rotation_translation(
+        DVec3::new(0.5, 0.75, 1.0),
+        glam::DQuat::IDENTITY,
+        DVec3::new(-2.0, -1.5, 0.0),
+    );
+    // The f32 sample holds NaNs (a stack refuses them): the larger volume stands in.
+    let mut vols = sample_volumes(affine);
+    vols[3] = larger(affine);
+    let mut checked = 0;
+    for (i, v) in vols.iter().enumerate() {
+        for path in files(&dir, &format!("lines{i}"), v) {
+            let name = path.display().to_string();
+            let whole = read_projections_grid::<f64>(&path, &ReadOptions::default());
+            if name.ends_with(".npy") && !matches!(v, AnyVolume::F32(_)) {
+                // A projection .npy is float: read whole or by lines, it is refused.
+                assert!(whole.is_err(), "{name}");
+                assert!(line_stack(&path).is_err(), "{name}");
+                continue;
+            }
+            let (whole, grid) = whole.unwrap();
+            let stack = line_stack(&path).unwrap().expect("read by lines");
+            assert_eq!(
+                stack.shape,
+                [whole.angles, whole.rows, whole.cols],
+                "{name}"
+            );
+            assert_eq!(stack.grid, grid, "{name}");
+            assert_eq!(grid.is_some(), !name.ends_with(".npy"), "{name}");
+            let whole32 = voxlab::io::projections::read_projections::<f32>(&path).unwrap();
+            for ids in line_sets(whole.angles * whole.rows) {
+                let got = read_projection_lines::<f64>(&path, &ids).unwrap();
+                let want = whole.lines(&ids).unwrap();
+                assert_eq!(got.ids, want.ids, "{name}");
+                assert_eq!(
+                    got.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    want.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    "{name} {ids:?}"
+                );
+                let got = read_projection_lines::<f32>(&path, &ids).unwrap();
+                let want = whole32.lines(&ids).unwrap();
+                assert_eq!(
+                    got.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    want.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    "{name} {ids:?} f32"
+                );
+            }
+            checked += 1;
+        }
+    }
+    // u8, u16, i16: NRRD ×2 and MetaImage ×2 each; f32: those and .npy.
+    assert_eq!(checked, 3 * 4 + 5);
+    // Big-endian, data at the end of the file: the lines are the values written.
+    let path = dir.join("skip.nrrd");
+    let values: Vec<u16> = (0..4 * 3 * 2).map(|i| (i * 2731) as u16).collect();
+    let mut bytes = b"NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 3 2\n\
+encoding: raw\nendian: big\nbyte skip: -1\n\n"
+        .to_vec();
+    bytes.extend_from_slice(b"junk");
+    for v in &values {
+        bytes.extend_from_slice(&v.to_be_bytes());
+    }
+    std::fs::write(&path, bytes).unwrap();
+    let got = read_projection_lines::<f64>(&path, &[4, 1]).unwrap();
+    assert_eq!(got.ids, [1, 4]);
+    let want: Vec<f64> = [4..8, 16..20]
+        .into_iter()
+        .flatten()
+        .map(|k| values[k] as f64)
+        .collect();
+    assert_eq!(got.data, want);
+}
+
+/// What cannot be read by lines is said: a compressed or 2-D file has no line stack
+/// (it is read whole), asking for its lines names the file; a line past the stack and
+/// a NaN in the lines read are named.
+#[test]
+fn detector_lines_refuse_what_they_cannot_read() {
+    let dir = scratch("brick-lines-bad");
+    let v = larger(DMat4::IDENTITY);
+    let gz = dir.join("gz.nrrd");
+    write_nrrd(&gz, &v, NrrdWriteOptions::default()).unwrap();
+    assert!(line_stack(&gz).unwrap().is_none());
+    let e = read_projection_lines::<f64>(&gz, &[0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("gz.nrrd") && e.contains("detector lines"), "{e}");
+    let zmha = dir.join("z.mha");
+    write_metaimage(&zmha, &v, MetaImageWriteOptions { compress: true }).unwrap();
+    assert!(line_stack(&zmha).unwrap().is_none());
+    // One slice: a 2-D scikit-image sinogram, read whole.
+    let flat: AnyVolume = Volume::new([6, 5, 1], [1.0; 3], vec![1.0f32; 30])
+        .unwrap()
+        .into();
+    let sino = dir.join("sino.nrrd");
+    write_nrrd(
+        &sino,
+        &flat,
+        NrrdWriteOptions {
+            gzip: false,
+            detached: false,
+        },
+    )
+    .unwrap();
+    assert!(line_stack(&sino).unwrap().is_none());
+    let raw = dir.join("v.nrrd");
+    write_nrrd(
+        &raw,
+        &v,
+        NrrdWriteOptions {
+            gzip: false,
+            detached: false,
+        },
+    )
+    .unwrap();
+    let e = read_projection_lines::<f64>(&raw, &[3, 42])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("v.nrrd") && e.contains("line 42") && e.contains("42 lines"),
+        "{e}"
+    );
+    // A NaN at (column 2, row 1, view 3): named when its line is read, not otherwise.
+    let mut data: Vec<f32> = (0..9 * 7 * 6).map(|i| i as f32).collect();
+    data[2 + 9 * (1 + 7 * 3)] = f32::NAN;
+    let nan: AnyVolume = Volume::new([9, 7, 6], [1.0; 3], data).unwrap().into();
+    let path = dir.join("nan.mha");
+    write_metaimage(&path, &nan, MetaImageWriteOptions { compress: false }).unwrap();
+    let e = read_projection_lines::<f64>(&path, &[0, 22, 23])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("nan.mha") && e.contains("view 3, row 1, column 2"),
+        "{e}"
+    );
+    assert!(read_projection_lines::<f64>(&path, &[0, 21, 23]).is_ok());
 }

@@ -1,6 +1,6 @@
 //! `mpirun -n N voxlab reconstruct … --distributed` (feature `mpi`, OpenMPI's mpirun)
 //! on 1–4 ranks against the single-process command: the output files are equal byte
-//! for byte (FBP/FDK; SIRT and CGLS on one rank, within rounding on more); a failure
+//! for byte (FBP/FDK, from `.npy` and from a MetaImage read by lines; SIRT and CGLS on one rank, within rounding on more); a failure
 //! on the ranks is one clear message and no file, in bounded time.
 #![cfg(feature = "mpi")]
 
@@ -73,6 +73,24 @@ fn one_to_four_mpi_ranks_write_the_single_process_file_byte_for_byte() {
             "cpu-f32",
             "--filter",
             "hann",
+        ],
+    );
+    // RTK's own projections as an uncompressed MetaImage (read by lines) with its XML
+    // geometry, which takes the detector grid from the MetaImage's header.
+    let mha = dir.join("rtk_tilted.mha");
+    let o = voxlab(&["convert", &ct("rtk_tilted_ellipsoids.mha"), s(&mha)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    same_file_on_every_rank_count(
+        "rtk-tilted-mha",
+        &dir,
+        &[
+            s(&mha),
+            "--geometry",
+            &ct("rtk_tilted.xml"),
+            "--size",
+            "20",
+            "--spacing",
+            "4",
         ],
     );
 }

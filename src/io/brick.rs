@@ -9,6 +9,8 @@
 //! reads one box of it, one seek per run of `x` (a row of the box), and decodes the
 //! samples exactly as the whole-file reader does, so a brick equals the same box cut
 //! from the whole volume, bit for bit, with the affine moved to the brick's first voxel.
+//! [`read_lines`] reads whole lines of `x` the same way (a projection stack's detector
+//! lines, [`crate::io::projections::read_projection_lines`]).
 
 use super::read_samples;
 pub use super::RawLayout;
@@ -122,6 +124,64 @@ pub fn read_brick(layout: &RawLayout, brick: &Brick, path: &Path) -> Result<AnyV
     )?;
     let lo = DVec3::new(brick.lo[0] as f64, brick.lo[1] as f64, brick.lo[2] as f64);
     samples.into_volume(bd, layout.affine * DMat4::from_translation(lo))
+}
+
+/// Reads whole lines of `x` from the block `layout` describes (`path`, the file the
+/// user named, in errors): line `y + ny·z` holds the voxels `(0..nx, y, z)`. Returns
+/// the lines read (`lines` sorted, each once) and their values in f64, line after
+/// line, decoded as the whole-file reader decodes them (so each value is the whole
+/// volume's, bit for bit); one seek per run of consecutive lines, nothing else read
+/// or held.
+///
+/// # Errors
+/// A line past the volume's `ny·nz`; more values than a volume may hold; I/O errors.
+pub fn read_lines(
+    layout: &RawLayout,
+    lines: &[usize],
+    path: &Path,
+) -> Result<(Vec<usize>, Vec<f64>)> {
+    let [nx, ny, nz] = layout.dims;
+    let total = ny * nz;
+    if let Some(&bad) = lines.iter().find(|&&l| l >= total) {
+        return Err(Error::invalid(
+            format!("lines of {}", path.display()),
+            format!("line {bad} is past the volume's {total} lines of x"),
+        ));
+    }
+    let mut wanted = lines.to_vec();
+    wanted.sort_unstable();
+    wanted.dedup();
+    let count = wanted.len() * nx;
+    if count > max_voxels() {
+        return Err(Error::too_large(
+            format!("lines of {}", path.display()),
+            format!("{count} values (limit {})", max_voxels()),
+        ));
+    }
+    let mut values = super::reserve::<f64>(count, path)?;
+    values.resize(count, 0.0);
+    let size = layout.stored.size();
+    let (file, _) = super::open(&layout.data)?;
+    let mut reader = BufReader::new(file);
+    super::read_line_runs(
+        &mut reader,
+        &layout.data,
+        layout.offset,
+        nx * size,
+        &wanted,
+        |at, bytes| {
+            let n = bytes.len() / size;
+            let samples = read_samples(&mut &bytes[..], layout.stored, layout.endian, n, path)?;
+            for (v, x) in values[at * nx..at * nx + n]
+                .iter_mut()
+                .zip(samples.into_f32())
+            {
+                *v = f64::from(x);
+            }
+            Ok(())
+        },
+    )?;
+    Ok((wanted, values))
 }
 
 /// Cuts a volume of `dims` into `n` bricks by a k-d tree: the box's longest axis is

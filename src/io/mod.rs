@@ -822,6 +822,41 @@ pub struct RawLayout {
     pub affine: DMat4,
 }
 
+/// Reads the lines `wanted` (increasing, each once) of a block of equal lines of
+/// `line_bytes` bytes that starts at byte `offset` of `reader` (`path` names it in
+/// errors): one seek and one read per run of consecutive lines, each run's bytes given
+/// to `take` with the index in `wanted` of its first line. The one line reader of the
+/// formats read line by line ([`npy::read_npy_f64_lines`], [`brick::read_lines`]).
+///
+/// # Errors
+/// I/O errors; `take`'s.
+pub(crate) fn read_line_runs<R: Read + io::Seek>(
+    reader: &mut R,
+    path: &Path,
+    offset: u64,
+    line_bytes: usize,
+    wanted: &[usize],
+    mut take: impl FnMut(usize, &[u8]) -> Result<()>,
+) -> Result<()> {
+    let mut bytes = Vec::new();
+    let mut at = 0;
+    while at < wanted.len() {
+        let first = wanted[at];
+        let mut end = at + 1;
+        while end < wanted.len() && wanted[end] == wanted[end - 1] + 1 {
+            end += 1;
+        }
+        bytes.resize((end - at) * line_bytes, 0);
+        reader
+            .seek(io::SeekFrom::Start(offset + (first * line_bytes) as u64))
+            .and_then(|_| reader.read_exact(&mut bytes))
+            .map_err(|e| read_error(path, e))?;
+        take(at, &bytes)?;
+        at = end;
+    }
+    Ok(())
+}
+
 /// Byte order of multi-byte samples in a file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Endian {

@@ -214,7 +214,6 @@ pub fn read_npy_f64_lines(
     path: &Path,
     lines: &[usize],
 ) -> Result<(Vec<usize>, Vec<usize>, Vec<f64>)> {
-    use std::io::{Seek, SeekFrom};
     let (file, len) = open(path)?;
     let mut reader = BufReader::new(file);
     let h = read_header(&mut reader, len, path, FLOAT_TYPES, FLOAT_TYPES_TEXT)?;
@@ -241,25 +240,22 @@ pub fn read_npy_f64_lines(
     wanted.dedup();
     let mut values = super::reserve::<f64>(wanted.len() * n, path)?;
     values.resize(wanted.len() * n, 0.0);
-    let mut bytes = Vec::new();
-    let mut at = 0;
-    while at < wanted.len() {
-        // A run of consecutive lines: one seek, one read.
-        let first = wanted[at];
-        let mut end = at + 1;
-        while end < wanted.len() && wanted[end] == wanted[end - 1] + 1 {
-            end += 1;
-        }
-        let count = (end - at) * n;
-        bytes.resize(count * size, 0);
-        reader
-            .seek(SeekFrom::Start(h.data_offset + (first * n * size) as u64))
-            .and_then(|_| reader.read_exact(&mut bytes))
-            .map_err(|e| super::read_error(path, e))?;
-        let dst = &mut values[at * n..at * n + count];
-        decode_f64(&bytes, size, big, dst);
-        at = end;
-    }
+    super::read_line_runs(
+        &mut reader,
+        path,
+        h.data_offset,
+        n * size,
+        &wanted,
+        |at, bytes| {
+            decode_f64(
+                bytes,
+                size,
+                big,
+                &mut values[at * n..at * n + bytes.len() / size],
+            );
+            Ok(())
+        },
+    )?;
     Ok((h.shape, wanted, values))
 }
 

@@ -40,6 +40,14 @@
 //! `(detector, frame)` array). [`crate::ct::flat_field`] turns intensities into line
 //! integrals with them.
 //!
+//! # By detector lines
+//!
+//! A 3-D stack stored uncompressed in one block — a C-order float `.npy`, a raw NRRD, a
+//! binary MetaImage ([`line_stack`]) — can also be read a few detector lines at a time
+//! ([`read_projection_lines`]): only those lines are read from the file or held, each
+//! the whole read's bit for bit. The distributed reconstruction reads its ranks'
+//! lines so.
+//!
 //! Every read refuses non-finite samples, arrays that are not 2-D or 3-D, and sizes
 //! past [`crate::volume::max_voxels`] (before allocating); truncated files and wrong
 //! dtypes are format errors from the readers. Writes are atomic
@@ -87,6 +95,7 @@
 //! [`read_angles_txt`]: one angle in degrees per line; blank lines and `#` comments
 //! (whole-line or trailing) are ignored.
 
+use super::brick::{raw_layout, read_lines};
 use super::npy::{npy_float_shape, read_npy_f64, read_npy_f64_lines, write_npy_f32, write_npy_f64};
 use super::nrrd::{write_nrrd, NrrdWriteOptions};
 pub use super::rtk_geometry::DetectorGrid;
@@ -178,12 +187,16 @@ pub fn read_projections_grid<R: Real>(
         Ok(super::Format::MetaImage | super::Format::Nrrd)
     );
     let grid = match affine {
-        Some(a) if shape.len() == 3 && with_grid => {
-            Some(DetectorGrid::from_affine(p.cols, p.rows, &a).map_err(|e| e.in_file(path))?)
-        }
+        Some(a) if shape.len() == 3 && with_grid => Some(header_grid(path, p.cols, p.rows, &a)?),
         _ => None,
     };
     Ok((p, grid))
+}
+
+/// The detector grid a stack's header affine describes ([`DetectorGrid::from_affine`]),
+/// its errors naming `path`.
+fn header_grid(path: &Path, cols: usize, rows: usize, affine: &DMat4) -> Result<DetectorGrid> {
+    DetectorGrid::from_affine(cols, rows, affine).map_err(|e| e.in_file(path))
 }
 
 /// Reads a flat- or dark-field file (`what`: `"flat"` or `"dark"`) for projections of
@@ -282,31 +295,75 @@ pub fn field_image(
     )
 }
 
-/// The `(angles, rows, cols)` of a projection file that can be read detector line by
-/// detector line ([`read_projection_lines`]): a 3-D C-order float `.npy` stack. `None`
-/// for every other file [`read_projections`] reads (read whole).
+/// A projection file that can be read detector line by detector line
+/// ([`read_projection_lines`]), from its header alone: its `(angles, rows, cols)` and
+/// the detector grid of a MetaImage or NRRD header (as [`read_projections_grid`]
+/// gives it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineStack {
+    pub shape: [usize; 3],
+    pub grid: Option<DetectorGrid>,
+}
+
+/// The [`LineStack`] of `path` when its detector lines can be read alone: a 3-D C-order
+/// float `.npy` stack, or a 3-D stack stored uncompressed in one block — a raw-encoded
+/// NRRD (`.nrrd`, or `.nhdr` and its data file) or a binary MetaImage (`.mha`, or
+/// `.mhd` and one data file), as [`super::brick::raw_layout`] finds them. `None` for
+/// every other file [`read_projections`] reads (read whole): compressed or text data,
+/// Fortran order, a 2-D sinogram, a file of several stacks, other formats.
 ///
 /// # Errors
-/// A `.npy` file whose header is bad or whose data is short.
-pub fn projection_shape(path: &Path) -> Result<Option<[usize; 3]>> {
-    if extension(path).as_deref() != Some("npy") {
-        return Ok(None);
+/// A bad header; a file too short for the data its header announces; a header whose
+/// projection axis moves the pixels within the detector plane.
+pub fn line_stack(path: &Path) -> Result<Option<LineStack>> {
+    if extension(path).as_deref() == Some("npy") {
+        return Ok(match npy_float_shape(path)? {
+            (shape, false) if shape.len() == 3 => Some(LineStack {
+                shape: [shape[0], shape[1], shape[2]],
+                grid: None,
+            }),
+            _ => None,
+        });
     }
-    Ok(match npy_float_shape(path)? {
-        (shape, false) if shape.len() == 3 => Some([shape[0], shape[1], shape[2]]),
+    Ok(match raw_layout(path)? {
+        Some(l) if l.dims[2] > 1 => {
+            let [cols, rows, angles] = l.dims;
+            Some(LineStack {
+                shape: [angles, rows, cols],
+                grid: Some(header_grid(path, cols, rows, &l.affine)?),
+            })
+        }
         _ => None,
     })
 }
 
 /// Only the detector lines `lines` (line `a·rows + r` is row `r` of view `a`) of a
-/// stack [`projection_shape`] accepts, in increasing order, each once; nothing else
-/// of the file is read or held. The values read are checked as [`read_projections`]
-/// checks them.
+/// stack [`line_stack`] accepts, in increasing order, each once; nothing else of the
+/// file is read or held. The values are the whole stack's ([`read_projections`]) bit
+/// for bit, and checked as it checks them.
 ///
 /// # Errors
-/// As [`read_projections`]; a line past the stack; a file that is not a 3-D stack.
+/// As [`read_projections`]; a line past the stack; a file [`line_stack`] refuses.
 pub fn read_projection_lines<R: Real>(path: &Path, lines: &[usize]) -> Result<Lines<R>> {
-    let (shape, ids, values) = read_npy_f64_lines(path, lines)?;
+    let (shape, ids, values) = if extension(path).as_deref() == Some("npy") {
+        read_npy_f64_lines(path, lines)?
+    } else {
+        match raw_layout(path)? {
+            Some(l) if l.dims[2] > 1 => {
+                let [cols, rows, angles] = l.dims;
+                let (ids, values) = read_lines(&l, lines, path)?;
+                (vec![angles, rows, cols], ids, values)
+            }
+            _ => {
+                return Err(Error::format(
+                    path,
+                    "encoding",
+                    "this file cannot be read by detector lines (only a 3-D .npy stack, \
+                     a raw NRRD or an uncompressed MetaImage can)",
+                ))
+            }
+        }
+    };
     let [angles, rows, cols] = match *shape {
         [a, r, c] => [a, r, c],
         _ => {

@@ -6,7 +6,7 @@ use crate::cpu::fbp::{Grid, Region};
 use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::io::npy::npy_f32_header;
-use crate::io::projections::{projection_shape, read_projections_grid};
+use crate::io::projections::{line_stack, read_projections_grid};
 use crate::io::ReadOptions;
 use crate::io::{write_part, SharedOutput};
 use crate::jobs::reconstruct::{
@@ -422,7 +422,7 @@ pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
                 "--frame"
             },
             "does not go with --distributed yet (the ranks read line integrals from a \
-             3-D .npy stack): convert on one process first",
+             stack of line integrals): convert on one process first",
         ));
     }
     if a.truth.is_some() {
@@ -444,19 +444,19 @@ pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
     Ok(out)
 }
 
-/// The request checked, the stack when it must be read whole (`None`: a 3-D C-order
-/// `.npy` stack, of which only the header is read here), the geometry and the grid.
+/// The request checked, the stack when it must be read whole (`None`: a stack read by
+/// lines, [`line_stack`], of which only the header is read here), the geometry and the
+/// grid.
 pub(super) fn input_geometry(
     a: &ReconstructRequest,
     progress: &dyn Progress,
 ) -> Result<(Option<Projections<f64>>, Geometry, Grid)> {
     check_request(a)?;
     check_distributed(a)?;
-    let shape = projection_shape(&a.input)?;
     // The geometry is checked against the stack's shape; only a header is read so far.
-    // A stack read by lines: its shape alone, nothing of it held yet.
-    let (whole, header, shape) = match shape {
-        Some(shape) => (None, None, shape),
+    // A stack read by lines: its shape and detector grid alone, nothing of it held yet.
+    let (whole, header, shape) = match line_stack(&a.input)? {
+        Some(l) => (None, l.grid, l.shape),
         None => {
             let (p, header) = read_projections_grid::<f64>(&a.input, &ReadOptions::default())?;
             let shape = [p.angles, p.rows, p.cols];

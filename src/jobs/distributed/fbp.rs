@@ -148,7 +148,8 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
 pub struct DistributedPlan {
     pub grid: Grid,
     pub slabs: SlabPlan,
-    /// Whether every rank would read the whole stack (not a 3-D C-order `.npy`).
+    /// Whether every rank would read the whole stack (not a stack
+    /// [`crate::io::projections::line_stack`] accepts).
     pub reads_whole: bool,
     /// Each rank's large host arrays at their peak (bytes): its detector lines (f64),
     /// their padded, weighted and filtered copies, the bordered band of rows the
@@ -175,7 +176,7 @@ impl DistributedPlan {
             d[2],
             self.slabs.total_lines,
             if self.reads_whole {
-                " (read whole by every rank: not a 3-D C-order .npy)"
+                " (read whole by every rank: not a 3-D .npy, raw NRRD or binary MetaImage)"
             } else {
                 ""
             }

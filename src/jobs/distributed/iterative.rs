@@ -5,7 +5,8 @@
 //! # How the work is cut
 //! The views are cut into one contiguous run per rank (sizes differing by at most one,
 //! as [`super::distributed`] cuts slices). A rank reads only its views' detector lines
-//! from a 3-D C-order `.npy` stack (other inputs are read whole and the rest dropped),
+//! from a 3-D stack stored in one uncompressed block ([`crate::io::projections::line_stack`]:
+//! `.npy`, raw NRRD, binary MetaImage; other inputs are read whole and the rest dropped),
 //! and builds Joseph's matched pair over its views alone
 //! ([`crate::ct::Geometry::select_views`]: the same rays). Every rank holds the whole
 //! image `x`. In every iteration each rank projects `x` onto its views, forms its part
@@ -392,7 +393,8 @@ pub struct ViewsPlan {
     /// Detector lines per view, and of the whole stack.
     pub rows: usize,
     pub total_lines: usize,
-    /// Whether every rank reads the whole stack (not a 3-D C-order `.npy`).
+    /// Whether every rank reads the whole stack (not a stack
+    /// [`crate::io::projections::line_stack`] accepts).
     pub reads_whole: bool,
     /// Each rank's large host arrays at their peak (bytes): its projections (f64,
     /// read, and their residual), the image and the solver's vectors (four, f64, as
@@ -426,7 +428,7 @@ impl ViewsPlan {
             d[2],
             self.total_lines,
             if self.reads_whole {
-                " (read whole by every rank: not a 3-D C-order .npy)"
+                " (read whole by every rank: not a 3-D .npy, raw NRRD or binary MetaImage)"
             } else {
                 ""
             }

@@ -10,7 +10,8 @@
 //! view, into a band of detector rows (the extreme rows are those of the slab box's
 //! corners, since a projection maps the box to the hull of its corners' images), and a
 //! rank reads only those rows, one more on each side for the bilinear taps, from a 3-D
-//! `.npy` stack (other files are read whole, and only the rank's lines are kept), and
+//! stack in one uncompressed block (`.npy`, raw NRRD, binary MetaImage; other files are
+//! read whole, and only the rank's lines are kept), and
 //! holds only them: they are weighted and filtered as [`crate::ct::Lines`], and the
 //! backprojection copies the band of rows the slab reads, so a rank's memory follows
 //! its slab, not the detector. The ramp filter transforms two detector
