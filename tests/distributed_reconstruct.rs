@@ -1161,3 +1161,159 @@ fn a_nan_in_a_ranks_lines_is_named_by_view_row_and_column() {
     assert!(!out.exists());
     assert!(temp_files(&dir).is_empty(), "{:?}", temp_files(&dir));
 }
+
+/// Intensities with a flat and a dark field (`--flat`, `--dark`) on 1–4 ranks: each rank
+/// converts only its lines, so FDK writes the single process's file byte for byte, from
+/// a MetaImage read by lines and from a gzip NRRD read whole; SIRT too on one rank, and
+/// with the views cut among the ranks their conversion counts add up to the single
+/// process's.
+#[test]
+fn intensities_with_flat_and_dark_fields_on_ranks_are_the_single_process_file() {
+    use voxlab::io::metaimage::{write_metaimage, MetaImageWriteOptions};
+    use voxlab::volume::{AnyVolume, Volume};
+    let dir = scratch("distributed-flat");
+    let (cone, cone_g) = projected(
+        &dir,
+        "cone",
+        &[
+            "--geometry",
+            "cone",
+            "--angles",
+            "24",
+            "--cols",
+            "40",
+            "--rows",
+            "37",
+            "--du",
+            "8",
+        ],
+    );
+    let p = voxlab::io::projections::read_projections::<f64>(&cone).unwrap();
+    let (a, r, c) = (p.angles, p.rows, p.cols);
+    let pixels = r * c;
+    let flat: Vec<f64> = (0..pixels)
+        .map(|k| 4000.0 + 300.0 * ((k as f64) * 0.37).sin())
+        .collect();
+    let mut dark: Vec<f64> = (0..pixels).map(|k| 50.0 + (k % 13) as f64).collect();
+    dark[3 * c + 5] = flat[3 * c + 5] + 1.0; // a dead pixel
+                                             // Attenuation scaled to at most e⁻², so only the sample made so below is starved.
+    let scale = 2.0 / p.data.iter().fold(0.0f64, |m, &v| m.max(v));
+    let mut i: Vec<f64> = (0..a * pixels)
+        .map(|n| {
+            let (f, d) = (flat[n % pixels], dark[n % pixels]);
+            d + (f - d) * (-scale * p.data[n]).exp()
+        })
+        .collect();
+    i[5 * pixels + 20 * c + 7] = dark[20 * c + 7] - 3.0; // starved
+    i[9 * pixels + 2 * c + 1] = flat[2 * c + 1] + 40.0; // above the flat
+    let vol = |dims: [usize; 3], v: &[f64]| -> AnyVolume {
+        let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+        Volume::new(dims, [1.0; 3], v).unwrap().into()
+    };
+    let mha = dir.join("i.mha");
+    let plain = MetaImageWriteOptions { compress: false };
+    write_metaimage(&mha, &vol([c, r, a], &i), plain).unwrap();
+    let gz = dir.join("i.nrrd");
+    voxlab::io::nrrd::write_nrrd(&gz, &vol([c, r, a], &i), Default::default()).unwrap();
+    // Three flat frames averaging to `flat`; one dark image.
+    let frames: Vec<f64> = [-2.0, 0.5, 1.5]
+        .iter()
+        .flat_map(|d| flat.iter().map(move |f| f + d))
+        .collect();
+    let flat_file = dir.join("flat.mha");
+    write_metaimage(&flat_file, &vol([c, r, 3], &frames), plain).unwrap();
+    let dark_file = dir.join("dark.mha");
+    write_metaimage(&dark_file, &vol([c, r, 1], &dark), plain).unwrap();
+    let with_fields = |input: &Path| ReconstructRequest {
+        input: input.to_path_buf(),
+        geometry: Some(cone_g.display().to_string()),
+        size: Some(27),
+        flat: Some(flat_file.clone()),
+        dark: Some(dark_file.clone()),
+        ..Default::default()
+    };
+    let sirt = |input: &Path| ReconstructRequest {
+        method: voxlab::jobs::reconstruct::ReconstructMethod::Sirt,
+        iterations: Some(3),
+        ..with_fields(input)
+    };
+    for (name, req, by_lines) in [
+        ("FDK from a MetaImage", with_fields(&mha), true),
+        ("FDK from a gzip NRRD", with_fields(&gz), false),
+        ("SIRT from a MetaImage", sirt(&mha), true),
+    ] {
+        let single = dir.join("single.npy");
+        let one = ReconstructRequest {
+            out: Some(single.clone()),
+            ..req.clone()
+        };
+        let done =
+            voxlab::jobs::reconstruct::run(&one, &()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let want_counts = done.intensity.expect("converted");
+        assert_eq!(
+            (
+                want_counts.dead_pixels,
+                want_counts.starved,
+                want_counts.above_flat
+            ),
+            (1, 1, 1),
+            "{name}: {want_counts:?}"
+        );
+        let want = std::fs::read(&single).unwrap();
+        let iterative = req.method.iterative().is_some();
+        for ranks in 1..=4 {
+            if iterative && ranks > 1 {
+                continue;
+            }
+            let out = dir.join(format!("ranks{ranks}.npy"));
+            let many = ReconstructRequest {
+                out: Some(out.clone()),
+                ..req.clone()
+            };
+            let results = on_ranks(&many, ranks, None);
+            let d = results[0]
+                .as_ref()
+                .unwrap_or_else(|e| panic!("{name}, {ranks} ranks: {e}"));
+            assert!(
+                std::fs::read(&out).unwrap() == want,
+                "{name}, {ranks} ranks: the files differ"
+            );
+            let counts = d.intensity().expect("converted on the ranks");
+            assert_eq!(
+                (counts.pixels, counts.dead_pixels),
+                (pixels, 1),
+                "{name}: {counts:?}"
+            );
+            if iterative {
+                assert_eq!(counts, want_counts, "{name}");
+            }
+            if by_lines && ranks == 4 && !iterative {
+                assert!(d.ranks.iter().all(|r| r.lines_read < d.total_lines));
+            }
+        }
+    }
+    // The views cut among 3 ranks: each converts its own views once; the counts add
+    // up to the single process's.
+    let req = ReconstructRequest {
+        out: Some(dir.join("sirt3.npy")),
+        ..sirt(&mha)
+    };
+    let one = ReconstructRequest {
+        out: Some(dir.join("sirt1.npy")),
+        ..sirt(&mha)
+    };
+    let want = voxlab::jobs::reconstruct::run(&one, &()).unwrap().intensity;
+    let results = on_ranks(&req, 3, None);
+    assert_eq!(results[0].as_ref().unwrap().intensity(), want);
+    // --dark without --flat is refused on the ranks as on one process.
+    let req = ReconstructRequest {
+        flat: None,
+        out: Some(dir.join("never.npy")),
+        ..with_fields(&mha)
+    };
+    for r in on_ranks(&req, 2, None) {
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("--dark") && e.contains("--flat"), "{e}");
+    }
+    assert!(!dir.join("never.npy").exists());
+}

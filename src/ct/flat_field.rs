@@ -39,7 +39,7 @@
 //! assert_eq!((report.starved, report.dead_pixels), (1, 0));
 //! ```
 
-use super::Projections;
+use super::{Lines, Projections};
 use crate::error::{Error, Result};
 
 /// The smallest ratio `(I − D)/(F − D)` the logarithm is taken of: the smallest
@@ -159,7 +159,43 @@ pub fn line_integrals(
     flat: &[f64],
     dark: Option<&[f64]>,
 ) -> Result<(Projections<f64>, IntensityReport)> {
-    let pixels = intensities.rows * intensities.cols;
+    let (rows, cols) = (intensities.rows, intensities.cols);
+    let row_of = |m: usize| m % rows.max(1);
+    let (out, report) = convert(&intensities.data, rows, cols, row_of, flat, dark)?;
+    let p = Projections::new(intensities.angles, rows, cols, out)?;
+    Ok((p, report))
+}
+
+/// [`line_integrals`] of some detector lines of a stack (a rank's, in a distributed
+/// reconstruction): each line converted with its own row of the flat and dark images,
+/// so every value is the whole stack's bit for bit. The report counts these lines'
+/// samples (the dead pixels are the images', as for the whole stack).
+///
+/// # Errors
+/// As [`line_integrals`].
+pub fn line_integrals_lines(
+    intensities: &Lines<f64>,
+    flat: &[f64],
+    dark: Option<&[f64]>,
+) -> Result<(Lines<f64>, IntensityReport)> {
+    let (rows, cols) = (intensities.rows, intensities.cols);
+    let ids = &intensities.ids;
+    let (out, report) = convert(&intensities.data, rows, cols, |m| ids[m] % rows, flat, dark)?;
+    let shape = [intensities.angles, rows, cols];
+    Ok((Lines::new(shape, ids.clone(), out)?, report))
+}
+
+/// The one body of [`line_integrals`] and [`line_integrals_lines`]: `data` is lines of
+/// `cols` values, line `m` on detector row `row_of(m)`.
+fn convert(
+    data: &[f64],
+    rows: usize,
+    cols: usize,
+    row_of: impl Fn(usize) -> usize,
+    flat: &[f64],
+    dark: Option<&[f64]>,
+) -> Result<(Vec<f64>, IntensityReport)> {
+    let pixels = rows * cols;
     let size = |what: &str, n: usize| -> Result<()> {
         if n == pixels {
             Ok(())
@@ -167,8 +203,7 @@ pub fn line_integrals(
             Err(Error::invalid(
                 what,
                 format!(
-                    "{n} pixels, but the projections have rows × cols = {} × {} = {pixels}",
-                    intensities.rows, intensities.cols
+                    "{n} pixels, but the projections have rows × cols = {rows} × {cols} = {pixels}"
                 ),
             ))
         }
@@ -179,29 +214,31 @@ pub fn line_integrals(
         size("dark field", d.len())?;
         check_finite("dark field", d)?;
     }
-    check_finite("projections", &intensities.data)?;
+    check_finite("projections", data)?;
     let dark_at = |k: usize| dark.map_or(0.0, |d| d[k]);
     let mut report = IntensityReport {
-        samples: intensities.data.len(),
+        samples: data.len(),
         pixels,
         ..Default::default()
     };
     let live: Vec<bool> = (0..pixels).map(|k| flat[k] - dark_at(k) > 0.0).collect();
     report.dead_pixels = live.iter().filter(|l| !**l).count();
-    let mut out = vec![0.0f64; intensities.data.len()];
-    if pixels > 0 {
-        for (view_in, view_out) in intensities
-            .data
-            .chunks_exact(pixels)
-            .zip(out.chunks_exact_mut(pixels))
+    let mut out = vec![0.0f64; data.len()];
+    if cols > 0 {
+        for (m, (line_in, line_out)) in data
+            .chunks_exact(cols)
+            .zip(out.chunks_exact_mut(cols))
+            .enumerate()
         {
-            for k in 0..pixels {
+            let first = row_of(m) * cols;
+            for (c, (&i, o)) in line_in.iter().zip(line_out.iter_mut()).enumerate() {
+                let k = first + c;
                 if !live[k] {
                     continue;
                 }
                 let d = dark_at(k);
-                let (p, how) = line_integral(view_in[k], d, flat[k] - d);
-                view_out[k] = p;
+                let (p, how) = line_integral(i, d, flat[k] - d);
+                *o = p;
                 match how {
                     Sample::Plain => {}
                     Sample::AboveFlat => report.above_flat += 1,
@@ -214,8 +251,7 @@ pub fn line_integrals(
             }
         }
     }
-    let p = Projections::new(intensities.angles, intensities.rows, intensities.cols, out)?;
-    Ok((p, report))
+    Ok((out, report))
 }
 
 fn check_finite(what: &str, values: &[f64]) -> Result<()> {
@@ -281,5 +317,35 @@ mod tests {
         let i = Projections::new(1, 1, 2, vec![1.0, 1.0]).unwrap();
         let e = line_integrals(&i, &[1.0], None).unwrap_err().to_string();
         assert!(e.contains("flat field") && e.contains("rows × cols"), "{e}");
+    }
+
+    /// Some lines converted alone are the whole stack's lines, bit for bit, and count
+    /// their own samples.
+    #[test]
+    fn lines_convert_as_the_whole_stack_does() {
+        let (angles, rows, cols) = (3, 4, 5);
+        let n = angles * rows * cols;
+        let i: Vec<f64> = (0..n).map(|k| ((k * 37) % 101) as f64 + 0.5).collect();
+        let flat: Vec<f64> = (0..rows * cols).map(|k| 80.0 + k as f64).collect();
+        let mut dark: Vec<f64> = (0..rows * cols).map(|k| (k % 7) as f64).collect();
+        dark[6] = flat[6]; // one dead pixel: row 1, column 1
+        let p = Projections::new(angles, rows, cols, i).unwrap();
+        let (whole, all) = line_integrals(&p, &flat, Some(&dark)).unwrap();
+        assert!(all.above_flat > 0 && all.starved > 0, "{all:?}");
+        let ids = vec![1, 2, 5, 11];
+        let some = p.lines(&ids).unwrap();
+        let (got, r) = line_integrals_lines(&some, &flat, Some(&dark)).unwrap();
+        let want = whole.lines(&ids).unwrap();
+        assert_eq!(got.ids, ids);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&got.data), bits(&want.data));
+        // Line 5 is row 1 of view 1: its column 1 is the dead pixel, 0.
+        assert_eq!(got.data[2 * cols + 1], 0.0);
+        assert_eq!((r.samples, r.pixels, r.dead_pixels), (4 * cols, 20, 1));
+        // Every line once: the whole stack's counts.
+        let every: Vec<usize> = (0..angles * rows).collect();
+        let (_, counts) =
+            line_integrals_lines(&p.lines(&every).unwrap(), &flat, Some(&dark)).unwrap();
+        assert_eq!(counts, all);
     }
 }

@@ -500,17 +500,35 @@ pub fn read_input(
         ..Default::default()
     };
     let (p, header) = read_projections_grid::<f64>(&a.input, &options)?;
-    let Some(flat) = &a.flat else {
+    let Some((f, d)) = read_fields(a, p.rows, p.cols)? else {
         return Ok((p, None, header));
-    };
-    let fields = ReadOptions::default();
-    let f = read_field_image(flat, "flat", p.rows, p.cols, &fields)?;
-    let d = match &a.dark {
-        Some(dark) => Some(read_field_image(dark, "dark", p.rows, p.cols, &fields)?),
-        None => None,
     };
     let (p, report) = line_integrals(&p, &f, d.as_deref())?;
     Ok((p, Some(report), header))
+}
+
+/// The request's flat image and dark image (`None`: no `flat`), each averaged over its
+/// frames ([`read_field_image`]) for projections of `rows × cols` pixels.
+///
+/// # Errors
+/// As [`read_field_image`]; `dark` without `flat`.
+#[allow(clippy::type_complexity)]
+pub fn read_fields(
+    a: &ReconstructRequest,
+    rows: usize,
+    cols: usize,
+) -> Result<Option<(Vec<f64>, Option<Vec<f64>>)>> {
+    check_flat_dark(a)?;
+    let Some(flat) = &a.flat else {
+        return Ok(None);
+    };
+    let fields = ReadOptions::default();
+    let f = read_field_image(flat, "flat", rows, cols, &fields)?;
+    let d = match &a.dark {
+        Some(dark) => Some(read_field_image(dark, "dark", rows, cols, &fields)?),
+        None => None,
+    };
+    Ok(Some((f, d)))
 }
 
 /// `dark` goes with `flat`.

@@ -3,14 +3,16 @@
 //! checks and writing of a distributed reconstruction's `.npy` output.
 
 use crate::cpu::fbp::{Grid, Region};
-use crate::ct::{Geometry, Projections};
+use crate::ct::flat_field::{line_integrals_lines, IntensityReport};
+use crate::ct::{Geometry, Lines, Projections};
 use crate::error::{Error, Result};
 use crate::io::npy::npy_f32_header;
-use crate::io::projections::{line_stack, read_projections_grid};
+use crate::io::projections::{line_stack, read_projection_lines, read_projections_grid};
 use crate::io::ReadOptions;
 use crate::io::{write_part, SharedOutput};
 use crate::jobs::reconstruct::{
-    check_request, extension, fbp_grid, geometry_for, npy_shape, IterationLog, ReconstructRequest,
+    check_request, extension, fbp_grid, geometry_for, npy_shape, read_fields, IterationLog,
+    ReconstructRequest,
 };
 use crate::jobs::{Backend, Progress};
 use std::ops::Range;
@@ -270,10 +272,12 @@ pub struct RankReport {
     /// all-reduce inputs and what it broadcast as the root): the agreements, the
     /// output's name and, for an iterative method, the sums over the views.
     pub bytes_sent: u64,
+    /// With `--flat`: the counts of its lines' conversion from intensities.
+    pub intensity: Option<IntensityReport>,
 }
 
 /// The number of values [`RankReport::values`] gives.
-const REPORT_VALUES: usize = 16;
+const REPORT_VALUES: usize = 22;
 
 impl RankReport {
     /// The report as numbers, for the all-gather at the end.
@@ -283,6 +287,16 @@ impl RankReport {
         let [j0, j1] = range(self.slab.as_ref().map(|s| &s.j));
         let [k0, k1] = range(self.slab.as_ref().map(|s| &s.k));
         let [v0, v1] = range(self.views.as_ref());
+        let i = self.intensity.map_or([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0], |i| {
+            [
+                i.samples as f64,
+                i.pixels as f64,
+                i.dead_pixels as f64,
+                i.starved as f64,
+                i.clamped as f64,
+                i.above_flat as f64,
+            ]
+        });
         [
             j0,
             j1,
@@ -300,6 +314,12 @@ impl RankReport {
             self.reduce_seconds,
             self.bytes_written as f64,
             self.bytes_sent as f64,
+            i[0],
+            i[1],
+            i[2],
+            i[3],
+            i[4],
+            i[5],
         ]
     }
 
@@ -322,6 +342,14 @@ impl RankReport {
             reduce_seconds: r[13],
             bytes_written: r[14] as u64,
             bytes_sent: r[15] as u64,
+            intensity: (r[16] >= 0.0).then(|| IntensityReport {
+                samples: r[16] as usize,
+                pixels: r[17] as usize,
+                dead_pixels: r[18] as usize,
+                starved: r[19] as usize,
+                clamped: r[20] as usize,
+                above_flat: r[21] as usize,
+            }),
         }
     }
 }
@@ -375,6 +403,22 @@ pub struct Distributed {
 }
 
 impl Distributed {
+    /// With `--flat`: the conversion from intensities over every rank's lines — the
+    /// counts summed over the ranks (a line several ranks read counted by each; the
+    /// views of an iterative method are read once, so there the sums are the single
+    /// process's), the dead pixels the flat image's.
+    pub fn intensity(&self) -> Option<IntensityReport> {
+        let mut it = self.ranks.iter().filter_map(|r| r.intensity);
+        let first = it.next()?;
+        Some(it.fold(first, |s, r| IntensityReport {
+            samples: s.samples + r.samples,
+            starved: s.starved + r.starved,
+            clamped: s.clamped + r.clamped,
+            above_flat: s.above_flat + r.above_flat,
+            ..s
+        }))
+    }
+
     /// One line per rank: its slab or views, what it read, its times.
     pub fn describe(&self) -> String {
         if self.iterative.is_some() {
@@ -414,15 +458,11 @@ pub(super) fn check_distributed(a: &ReconstructRequest) -> Result<PathBuf> {
             message: "the ranks reconstruct on the CPU (--backend cpu or cpu-f32)".into(),
         });
     }
-    if a.flat.is_some() || a.frame.is_some() {
+    if a.frame.is_some() {
         return Err(Error::invalid(
-            if a.flat.is_some() {
-                "--flat"
-            } else {
-                "--frame"
-            },
-            "does not go with --distributed yet (the ranks read line integrals from a \
-             stack of line integrals): convert on one process first",
+            "--frame",
+            "does not go with --distributed yet (the ranks read their lines from a file \
+             of one stack): pick the frame on one process first (voxlab convert --frame)",
         ));
     }
     if a.truth.is_some() {
@@ -469,6 +509,31 @@ pub(super) fn input_geometry(
     }
     let grid = fbp_grid(a, &g, progress)?;
     Ok((whole, g, grid))
+}
+
+/// This rank's detector lines `ids` as line integrals: taken from the stack read whole
+/// (`whole`) or read from the file by lines, then, with `--flat` (and `--dark`),
+/// converted from intensities line by line ([`line_integrals_lines`]: each value the
+/// single process's bit for bit), with the counts of that conversion.
+///
+/// # Errors
+/// The readers' errors; flat or dark images that do not fit the detector.
+pub(super) fn rank_lines(
+    a: &ReconstructRequest,
+    whole: Option<&Projections<f64>>,
+    ids: &[usize],
+) -> Result<(Lines<f64>, Option<IntensityReport>)> {
+    let p = match whole {
+        Some(p) => p.lines(ids)?,
+        None => read_projection_lines::<f64>(&a.input, ids)?,
+    };
+    match read_fields(a, p.rows, p.cols)? {
+        None => Ok((p, None)),
+        Some((flat, dark)) => {
+            let (p, report) = line_integrals_lines(&p, &flat, dark.as_deref())?;
+            Ok((p, Some(report)))
+        }
+    }
 }
 
 /// The bytes of a path, to send it to the other ranks.

@@ -2,15 +2,15 @@
 //! its slab needs (see the module docs of [`super`]).
 
 use super::common::{
-    agree, check_distributed, gather_reports, input_geometry, runs, value_range, write_shared_npy,
-    Comm, Counted, Distributed, RankReport,
+    agree, check_distributed, gather_reports, input_geometry, rank_lines, runs, value_range,
+    write_shared_npy, Comm, Counted, Distributed, RankReport,
 };
 use crate::cpu::fbp::{backproject_region, circle_mask_region, region_rows, Grid, Region};
 use crate::cpu::ramp::{filter_lines, FilterMethod};
+use crate::ct::flat_field::IntensityReport;
 use crate::ct::{Beam, Geometry, Lines, Projections};
 use crate::error::{Error, Result};
 use crate::io::npy::npy_f32_header;
-use crate::io::projections::read_projection_lines;
 use crate::jobs::reconstruct::{fbp_lines, npy_shape, ReconstructRequest};
 use crate::jobs::{Backend, Progress};
 use crate::real::Real;
@@ -107,6 +107,8 @@ pub fn slab_plan(g: &Geometry, grid: &Grid, ranks: usize) -> Result<SlabPlan> {
 /// The detector lines this rank reads, their geometry, the grid and the plan.
 struct Prepared {
     p: Lines<f64>,
+    /// With `--flat`: the counts of the lines' conversion.
+    intensity: Option<IntensityReport>,
     g: Geometry,
     grid: Grid,
     plan: SlabPlan,
@@ -128,13 +130,16 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
     let t = Instant::now();
     let (whole, g, grid, plan) = planned(a, comm.size(), progress)?;
     let mine = &plan.lines[comm.rank()];
-    let (p, lines_read) = match whole {
-        // Read whole: only this rank's lines are kept.
-        Some(p) => (p.lines(mine)?, plan.total_lines),
-        None => (read_projection_lines::<f64>(&a.input, mine)?, mine.len()),
+    // Read whole: only this rank's lines are kept.
+    let lines_read = if whole.is_some() {
+        plan.total_lines
+    } else {
+        mine.len()
     };
+    let (p, intensity) = rank_lines(a, whole.as_ref(), mine)?;
     Ok(Prepared {
         p,
+        intensity,
         g,
         grid,
         plan,
@@ -401,6 +406,7 @@ pub(super) fn run(
     let pre = agree(comm, prepare(a, comm, progress))?;
     let Prepared {
         p,
+        intensity,
         g,
         grid,
         plan,
@@ -441,6 +447,7 @@ pub(super) fn run(
         write_seconds,
         bytes_written,
         bytes_sent: counted.sent(),
+        intensity,
         ..Default::default()
     };
     let (ranks, range) = gather_reports(comm, &mine, value_range(&values));

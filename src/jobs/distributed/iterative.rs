@@ -49,15 +49,15 @@
 //! with the lowest failing rank's message and leaves no file.
 
 use super::common::{
-    agree, gather_reports, input_geometry, runs, value_range, write_shared_npy, Comm, Counted,
-    Distributed, RankReport,
+    agree, gather_reports, input_geometry, rank_lines, runs, value_range, write_shared_npy, Comm,
+    Counted, Distributed, RankReport,
 };
 use crate::cpu::fbp::Grid;
 use crate::cpu::iterative::{solve_shared, IterativeOptions, MatchedPair, Problem, Shares};
 use crate::cpu::project::JosephPair;
+use crate::ct::flat_field::IntensityReport;
 use crate::ct::{Beam, Geometry};
 use crate::error::Result;
-use crate::io::projections::read_projection_lines;
 use crate::jobs::reconstruct::{
     circle_support, init_request, iterative_options, solved, Init, IterationLog, ReconstructRequest,
 };
@@ -132,6 +132,8 @@ struct Prepared {
     b: Vec<f64>,
     lines_read: usize,
     read_seconds: f64,
+    /// With `--flat`: the counts of its views' conversion.
+    intensity: Option<IntensityReport>,
 }
 
 fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> Result<Prepared> {
@@ -140,18 +142,21 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
     let method = a.method.iterative().expect("an iterative method");
     let opts = iterative_options(a, method, g.n_angles())?;
     let views = runs(g.n_angles(), comm.size()).swap_remove(comm.rank());
-    let per_view = g.rows * g.cols;
-    let (b, lines_read) = match (&views, whole) {
-        (None, _) => (Vec::new(), 0),
-        (Some(v), Some(p)) => (
-            p.data[v.start * per_view..v.end * per_view].to_vec(),
-            g.n_angles() * g.rows,
-        ),
-        (Some(v), None) => {
+    let mut intensity = None;
+    let (b, lines_read) = match &views {
+        None => (Vec::new(), 0),
+        Some(v) => {
+            // Only this rank's views' lines, which are consecutive (the rest dropped
+            // when the file was read whole).
             let lines: Vec<usize> = (v.start * g.rows..v.end * g.rows).collect();
-            // Only this rank's views' lines, which are consecutive.
-            let p = read_projection_lines::<f64>(&a.input, &lines)?;
-            (p.data, lines.len())
+            let read = if whole.is_some() {
+                g.n_angles() * g.rows
+            } else {
+                lines.len()
+            };
+            let (p, counts) = rank_lines(a, whole.as_ref(), &lines)?;
+            intensity = counts;
+            (p.data, read)
         }
     };
     let support = (g.beam == Beam::Parallel && !a.no_circle).then(|| circle_support(grid.dims));
@@ -164,6 +169,7 @@ fn prepare(a: &ReconstructRequest, comm: &dyn Comm, progress: &dyn Progress) -> 
         b,
         lines_read,
         read_seconds: t.elapsed().as_secs_f64(),
+        intensity,
     })
 }
 
@@ -321,6 +327,7 @@ pub(super) fn run(
         reduce_seconds,
         bytes_written,
         bytes_sent: counted.sent(),
+        intensity: pre.intensity,
         ..Default::default()
     };
     let (ranks, range) = gather_reports(comm, &mine, value_range(&values));

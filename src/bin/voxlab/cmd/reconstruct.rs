@@ -128,14 +128,15 @@ pub struct ReconstructArgs {
     pub dry_run: bool,
     /// Run on the ranks of `mpirun -n N voxlab reconstruct … --distributed`, writing
     /// one .npy output together. FBP/FDK: the volume cut into one slab per rank, each
-    /// rank reading only the detector rows its slab needs from a 3-D .npy stack (equal
-    /// byte for byte to a single-process run). --method sirt, os-sart, cgls or tv: the
+    /// rank reading only the detector rows its slab needs from a 3-D .npy, raw NRRD or
+    /// uncompressed MetaImage stack (other files are read whole) and converting only
+    /// those with --flat/--dark (equal byte for byte to a single-process run). --method sirt, os-sart, cgls or tv: the
     /// views cut among the ranks, each reading only its views and holding the whole
     /// image, the backprojections summed by an all-reduce every iteration (os-sart:
     /// every subset) (equal to a single-process run up to rounding; bit for bit on one
     /// rank; --convergence is written by rank 0; --init fbp starts from the FBP made in
     /// slabs). Needs a build with the `mpi` feature; CPU backends only; not with --truth
-    /// (docs/distributed.md).
+    /// or --frame (docs/distributed.md).
     #[arg(long)]
     pub distributed: bool,
     /// With --distributed --dry-run: the number of ranks to plan for (no MPI needed):
@@ -262,6 +263,9 @@ fn distributed(req: &ReconstructRequest) -> Result<ExitCode> {
         |comm, progress| voxlab::jobs::distributed::run(req, comm, progress),
         |d| {
             let g = d.grid.dims;
+            if let Some(report) = d.intensity() {
+                println!("{} (on the ranks' lines)", report.summary());
+            }
             let on = match d.ranks.len() {
                 1 => "1 rank".to_string(),
                 n => format!("{n} ranks"),
