@@ -727,43 +727,64 @@ impl<R: Real> ClippedRanges<R> {
     }
 }
 
-/// MIP, MinIP or X-ray over the samples of `ranges` only; `value(k)` gives sample
-/// `k`'s value and step length. Rays with no sample inside return `miss`.
+/// A MIP, MinIP or X-ray pixel as its samples come in, in ray order.
+pub struct ScalarSum<R> {
+    mode: Mode,
+    taken: u32,
+    best: Option<R>,
+    sum: R,
+}
+
+impl<R: Real> ScalarSum<R> {
+    /// Takes the next sample: its value and its step's length. The maximum (minimum)
+    /// keeps the first of equal values, so which zero a ray of `+0` and `−0` keeps
+    /// does not depend on how the compiler lays out a `max` (whose sign of zero is
+    /// unspecified).
+    #[inline(always)]
+    pub fn take(&mut self, v: R, len: R) {
+        self.taken += 1;
+        match (self.mode, self.best) {
+            (Mode::Xray, _) => self.sum = self.sum + v * len,
+            (Mode::Mip, Some(b)) if v <= b => {}
+            (Mode::Minip, Some(b)) if v >= b => {}
+            _ => self.best = Some(v),
+        }
+    }
+}
+
+/// MIP, MinIP or X-ray over the samples of `ranges` only (every sample of a ray with
+/// no mesh: [`MeshRanges::all`]); `values(lo, hi, sum)` gives samples `lo ..= hi`,
+/// in order, to `sum` ([`ScalarSum::take`]). Rays with no sample inside return `miss`.
 pub fn cast_scalar_ranges<R: Real>(
     mode: Mode,
     ranges: &MeshRanges,
     miss: [R; 4],
     window: Option<[R; 2]>,
-    mut value: impl FnMut(usize) -> (R, R),
+    mut values: impl FnMut(usize, usize, &mut ScalarSum<R>),
 ) -> ([R; 4], u32) {
-    let mut taken = 0u32;
-    let mut best: Option<R> = None;
-    let mut sum = R::zero();
+    let mut s = ScalarSum {
+        mode,
+        taken: 0,
+        best: None,
+        sum: R::zero(),
+    };
     for &(lo, hi) in &ranges.range[..ranges.count] {
-        for k in lo..=hi {
-            let (v, len) = value(k);
-            taken += 1;
-            match mode {
-                Mode::Xray => sum = sum + v * len,
-                Mode::Mip => best = Some(best.map_or(v, |b| b.max(v))),
-                _ => best = Some(best.map_or(v, |b| b.min(v))),
-            }
-        }
+        values(lo, hi, &mut s);
     }
-    if taken == 0 {
+    if s.taken == 0 {
         return (miss, 0);
     }
     let out = match mode {
-        Mode::Xray => sum,
+        Mode::Xray => s.sum,
         _ => {
-            let b = best.unwrap_or(R::zero());
+            let b = s.best.unwrap_or(R::zero());
             match window {
                 Some(w) => super::modes::window_map(b, w),
                 None => b,
             }
         }
     };
-    ([out, R::zero(), R::zero(), R::zero()], taken)
+    ([out, R::zero(), R::zero(), R::zero()], s.taken)
 }
 
 /// Re-exported for the settings: a mesh shared between settings clones.

@@ -242,6 +242,63 @@ impl<R: Real> Batch<R> {
     }
 }
 
+/// Whether [`values`] samples in vector lanes for a ray of `n` steps from `src`: f32,
+/// the trilinear filter, an AVX-512 CPU, indices that fit the lanes. Elsewhere it
+/// takes the steps one at a time, which a caller does as well without the batch.
+pub fn values_in_lanes<R: Real>(src: &Source<R>, n: usize) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>()
+            && src.filter == Filter::Trilinear
+            && simd::usable(src.grid.data.len(), src.grid.dims[0], src.pairs.len(), n)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = (src, n);
+        false
+    }
+}
+
+/// The filtered values and lengths of steps `k0 .. k0 + m` of a ray (`1 ≤ m ≤
+/// BATCH`, `k0 + m ≤ n`) into `value[..m]` and `len[..m]`: what MIP, MinIP and X-ray
+/// take of each step — `sample(grid, filter, p − origin)` at the step's midpoint `p`,
+/// and the step's length — to the bit as [`Steps::segment`] and `filter::sample` give
+/// them. In f32 with the trilinear filter on an AVX-512 CPU the sixteen steps are
+/// sampled in the lanes of one register.
+pub fn values<R: Real>(
+    src: &Source<R>,
+    steps: &Steps<R>,
+    k0: usize,
+    m: usize,
+    value: &mut [R; BATCH],
+    len: &mut [R; BATCH],
+) {
+    debug_assert!((1..=BATCH).contains(&m) && k0 + m <= steps.n);
+    #[cfg(target_arch = "x86_64")]
+    {
+        if values_in_lanes(src, steps.n) {
+            // SAFETY: R is f32 (checked by `values_in_lanes`), so these have f32's layout.
+            let (s, st, v, l) = unsafe {
+                (
+                    &*(src as *const Source<R> as *const Source<f32>),
+                    &*(steps as *const Steps<R> as *const Steps<f32>),
+                    &mut *(value as *mut [R; BATCH] as *mut [f32; BATCH]),
+                    &mut *(len as *mut [R; BATCH] as *mut [f32; BATCH]),
+                )
+            };
+            // SAFETY: `values_in_lanes` checked the CPU's features and the index ranges.
+            if unsafe { simd::values_f32x16(s, st, k0, m, v, l) } {
+                return;
+            }
+        }
+    }
+    for l in 0..m {
+        let (p, length) = steps.segment(k0 + l);
+        value[l] = sample(src.grid, src.filter, p - src.local_origin());
+        len[l] = length;
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 mod simd {
     use super::{Batch, Packet, Source, Steps, BATCH, PACKET};
@@ -547,6 +604,53 @@ mod simd {
         _mm512_storeu_ps(b.alpha.as_mut_ptr(), c.alpha);
         _mm512_storeu_ps(b.alpha_step.as_mut_ptr(), c.alpha_step);
         b.visible = (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(c.alpha, _mm512_setzero_ps()) & live) as u32;
+        true
+    }
+
+    /// [`super::values`] in sixteen f32 lanes with the trilinear filter. Returns `false`
+    /// (and fills nothing) when a coordinate is out of the range where the scalar path
+    /// floors by truncation; the caller then takes the scalar path.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F and [`usable`] must hold.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn values_f32x16(
+        src: &Source<f32>,
+        st: &Steps<f32>,
+        k0: usize,
+        m: usize,
+        value: &mut [f32; BATCH],
+        len: &mut [f32; BATCH],
+    ) -> bool {
+        let lanes = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        let live: __mmask16 = if m >= BATCH { 0xffff } else { (1u16 << m) - 1 };
+        // Lanes past the batch repeat step k0 (valid indices; their results are unused).
+        let k = _mm512_mask_add_epi32(
+            _mm512_set1_epi32(k0 as i32),
+            live,
+            _mm512_set1_epi32(k0 as i32),
+            lanes,
+        );
+        let g = Lanes {
+            o: st.o.0.map(|x| _mm512_set1_ps(x)),
+            d: st.d.0.map(|x| _mm512_set1_ps(x)),
+            t_in: _mm512_set1_ps(st.t_in),
+            t_out: _mm512_set1_ps(st.t_out),
+            t_s: _mm512_set1_ps(st.t_s),
+            dt: _mm512_set1_ps(st.dt),
+            n: _mm512_set1_epi32(st.n as i32),
+            speed: _mm512_set1_ps(src.speed),
+        };
+        let taps = place::<true>(src, &g, k);
+        if taps.moderate & live != live {
+            return false;
+        }
+        // `reconstruct` leaves out the scalar sums' leading `0 +`, which only changes
+        // the sign of a zero result: adding +0 restores it (a max or min of the values
+        // could otherwise keep a −0 the scalar path never gives).
+        let v = _mm512_add_ps(reconstruct(src, &taps), _mm512_setzero_ps());
+        _mm512_storeu_ps(value.as_mut_ptr(), v);
+        _mm512_storeu_ps(len.as_mut_ptr(), taps.len);
         true
     }
 

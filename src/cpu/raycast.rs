@@ -100,6 +100,8 @@ pub(crate) struct Setup<R> {
     batched: bool,
     /// The table as the batches read it (`march::lut_pairs`), when batched.
     lut_pairs: Vec<[R; 8]>,
+    /// MIP, MinIP and X-ray take their steps' values in batches (`march::values`).
+    batched_values: bool,
     /// A brick's share of the samples, in a distributed render ([`render_owned`]).
     own: Option<Owned<R>>,
     /// Where the skipping grid's voxel 0 lies in the field's index space: a brick's
@@ -565,6 +567,8 @@ fn setup_for<R: Real, F: Field<R>>(
             && settings.transfer_2d.is_none()
             && kernel == Kernel::Batched,
         lut_pairs: Vec::new(),
+        batched_values: matches!(settings.mode, Mode::Mip | Mode::Minip | Mode::Xray)
+            && kernel == Kernel::Batched,
         own,
         skip_origin: V3::zero(),
     };
@@ -809,51 +813,22 @@ fn cast_ray<R: Real, F: Field<R>>(
             .unwrap_or(1),
         speed,
     };
-    let has_mesh = plan.mesh.is_some();
     let mesh_ranges = plan
         .mesh
         .unwrap_or_else(|| super::clipmesh::MeshRanges::all(n));
-    if has_mesh && matches!(mode, Mode::Mip | Mode::Minip | Mode::Xray) {
-        let value = |k: usize| {
-            let (p, len) = segment(k);
-            (field.value(p), len)
-        };
-        return super::clipmesh::cast_scalar_ranges(
+    match mode {
+        // Over the steps inside the clipping mesh (all of them without one).
+        Mode::Mip | Mode::Minip | Mode::Xray => super::clipmesh::cast_scalar_ranges(
             mode,
             &mesh_ranges,
             miss,
             s.modes.window,
-            value,
-        );
-    }
-    match mode {
+            |lo, hi, sum| each_value(field, s, speed, &steps, lo, hi, |v, len| sum.take(v, len)),
+        ),
         Mode::Mida => super::modes::cast_mida(field, b, &s.modes, &span, ray.dir),
         Mode::Iso => super::modes::cast_iso(field, b, &s.modes, &span, ray.dir, false),
         Mode::Dvr if !s.modes.iso.is_empty() => {
             super::modes::cast_iso(field, b, &s.modes, &span, ray.dir, true)
-        }
-        Mode::Mip | Mode::Minip => {
-            let mut best = field.value(segment(0).0);
-            for k in 1..n {
-                let v = field.value(segment(k).0);
-                best = if mode == Mode::Mip {
-                    best.max(v)
-                } else {
-                    best.min(v)
-                };
-            }
-            if let Some(window) = s.modes.window {
-                best = super::modes::window_map(best, window);
-            }
-            ([best, R::zero(), R::zero(), R::zero()], n as u32)
-        }
-        Mode::Xray => {
-            let mut sum = R::zero();
-            for k in 0..n {
-                let (p, len) = segment(k);
-                sum = sum + field.value(p) * len;
-            }
-            ([sum, R::zero(), R::zero(), R::zero()], n as u32)
         }
         Mode::Dvr => {
             let (light, half) = light_half(b.light, ray.dir);
@@ -950,6 +925,57 @@ fn cast_ray<R: Real, F: Field<R>>(
             }
             (over_background(c, a, b.bg), taken)
         }
+    }
+}
+
+/// Gives `take(value, length)` steps `lo ..= hi` of a ray in order (MIP, MinIP,
+/// X-ray): in batches through `march::values` where they run in vector lanes (f32,
+/// trilinear, AVX-512, on a whole grid or a brick sampled at its origin), else one at
+/// a time through the field; the same values either way.
+#[inline]
+fn each_value<R: Real, F: Field<R>>(
+    field: &F,
+    s: &Setup<R>,
+    speed: R,
+    steps: &super::march::Steps<R>,
+    lo: usize,
+    hi: usize,
+    mut take: impl FnMut(R, R),
+) {
+    use super::march::BATCH;
+    let sampled = match (field.sampled_grid(), field.brick()) {
+        (Some(g), _) => Some((g, [R::zero(); 3])),
+        (None, Some((g, o))) => Some((g, o.map(|x| R::of(x as f64)))),
+        (None, None) => None,
+    };
+    let lanes = sampled
+        .filter(|_| s.batched_values)
+        .map(|(grid, origin)| super::march::Source {
+            grid,
+            origin,
+            filter: s.base.filter,
+            lut: &s.base.lut,
+            pairs: &s.lut_pairs,
+            speed,
+            ref_step: s.base.ref_step,
+            e_full: s.base.step / s.base.ref_step,
+        });
+    let Some(src) = lanes.filter(|src| super::march::values_in_lanes(src, steps.n)) else {
+        for k in lo..=hi {
+            let (p, len) = steps.segment(k);
+            take(field.value(p), len);
+        }
+        return;
+    };
+    let (mut value, mut len) = ([R::zero(); BATCH], [R::zero(); BATCH]);
+    let mut k = lo;
+    while k <= hi {
+        let m = (hi + 1 - k).min(BATCH);
+        super::march::values(&src, steps, k, m, &mut value, &mut len);
+        for l in 0..m {
+            take(value[l], len[l]);
+        }
+        k += m;
     }
 }
 
