@@ -6,18 +6,23 @@
 //! block: a C-order `.npy` array, a raw-encoded NRRD (attached or detached, any byte
 //! skip, no line skip), or an uncompressed binary MetaImage (`.mha`, or `.mhd` with one
 //! data file). [`raw_layout`] says where that block is; [`read_brick`]
-//! reads one box of it, one seek per run of `x` (a row of the box), and decodes the
+//! reads one box of it, one positioned read per run of rows of `x` that follow each
+//! other in the file, and decodes the
 //! samples exactly as the whole-file reader does, so a brick equals the same box cut
 //! from the whole volume, bit for bit, with the affine moved to the brick's first voxel.
 //! [`read_lines`] reads whole lines of `x` the same way (a projection stack's detector
 //! lines, [`crate::io::projections::read_projection_lines`]).
+//!
+//! The reads are positioned (`pread`), not a memory map: a file that shrinks while it
+//! is mapped kills the process with a bus error when the lost pages are touched, where
+//! a read gives an error naming the file; and the samples are decoded into a new
+//! buffer anyway, so a map would save no copy.
 
 use super::read_samples;
 pub use super::RawLayout;
 use crate::error::{Error, Result};
 use crate::volume::{check_dims, max_voxels, AnyVolume};
 use glam::{DMat4, DVec3};
-use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// A box of voxels: `lo[a] .. hi[a]` along each axis (x, y, z).
@@ -103,17 +108,31 @@ pub fn read_brick(layout: &RawLayout, brick: &Brick, path: &Path) -> Result<AnyV
     let mut bytes = super::reserve::<u8>(brick.voxels() * size, path)?;
     bytes.resize(brick.voxels() * size, 0);
     let (file, _) = super::open(&layout.data)?;
-    let mut reader = BufReader::new(file);
+    // The box's rows of x, in file order; rows that follow each other in the file (a
+    // box as wide as the volume) are read as one run: one positioned read per run.
     let mut at = 0;
+    let mut run: Option<(u64, usize)> = None;
+    let mut read = |(start, len): (u64, usize), at: &mut usize| {
+        super::read_at(&file, start, &mut bytes[*at..*at + len])
+            .map_err(|e| super::read_error(&layout.data, e))?;
+        *at += len;
+        Ok::<(), Error>(())
+    };
     for k in brick.lo[2]..brick.hi[2] {
         for j in brick.lo[1]..brick.hi[1] {
-            let first = brick.lo[0] + d[0] * (j + d[1] * k);
-            reader
-                .seek(SeekFrom::Start(layout.offset + (first * size) as u64))
-                .and_then(|_| reader.read_exact(&mut bytes[at..at + row]))
-                .map_err(|e| super::read_error(&layout.data, e))?;
-            at += row;
+            let start = layout.offset + ((brick.lo[0] + d[0] * (j + d[1] * k)) * size) as u64;
+            run = match run {
+                Some((s, len)) if s + len as u64 == start => Some((s, len + row)),
+                Some(done) => {
+                    read(done, &mut at)?;
+                    Some((start, row))
+                }
+                None => Some((start, row)),
+            };
         }
+    }
+    if let Some(done) = run {
+        read(done, &mut at)?;
     }
     let samples = read_samples(
         &mut &bytes[..],
@@ -130,7 +149,7 @@ pub fn read_brick(layout: &RawLayout, brick: &Brick, path: &Path) -> Result<AnyV
 /// user named, in errors): line `y + ny·z` holds the voxels `(0..nx, y, z)`. Returns
 /// the lines read (`lines` sorted, each once) and their values in f64, line after
 /// line, decoded as the whole-file reader decodes them (so each value is the whole
-/// volume's, bit for bit); one seek per run of consecutive lines, nothing else read
+/// volume's, bit for bit); one positioned read per run of consecutive lines, nothing else read
 /// or held.
 ///
 /// # Errors
@@ -162,9 +181,8 @@ pub fn read_lines(
     values.resize(count, 0.0);
     let size = layout.stored.size();
     let (file, _) = super::open(&layout.data)?;
-    let mut reader = BufReader::new(file);
     super::read_line_runs(
-        &mut reader,
+        &file,
         &layout.data,
         layout.offset,
         nx * size,

@@ -822,16 +822,37 @@ pub struct RawLayout {
     pub affine: DMat4,
 }
 
+/// Fills `buf` from byte `offset` of `file`, without moving a shared cursor or reading
+/// ahead (a positioned read: `pread` on Unix).
+///
+/// # Errors
+/// I/O errors; the file ending before `buf` is full.
+pub(crate) fn read_at(file: &File, offset: u64, buf: &mut [u8]) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        file.read_exact_at(buf, offset)
+    }
+    #[cfg(not(unix))]
+    {
+        use io::Seek;
+        let mut f = file;
+        f.seek(io::SeekFrom::Start(offset))?;
+        f.read_exact(buf)
+    }
+}
+
 /// Reads the lines `wanted` (increasing, each once) of a block of equal lines of
-/// `line_bytes` bytes that starts at byte `offset` of `reader` (`path` names it in
-/// errors): one seek and one read per run of consecutive lines, each run's bytes given
-/// to `take` with the index in `wanted` of its first line. The one line reader of the
-/// formats read line by line ([`npy::read_npy_f64_lines`], [`brick::read_lines`]).
+/// `line_bytes` bytes that starts at byte `offset` of `file` (`path` names it in
+/// errors): one positioned read ([`read_at`]) per run of consecutive lines, each run's
+/// bytes given to `take` with the index in `wanted` of its first line. The one line
+/// reader of the formats read line by line ([`npy::read_npy_f64_lines`],
+/// [`brick::read_lines`]).
 ///
 /// # Errors
 /// I/O errors; `take`'s.
-pub(crate) fn read_line_runs<R: Read + io::Seek>(
-    reader: &mut R,
+pub(crate) fn read_line_runs(
+    file: &File,
     path: &Path,
     offset: u64,
     line_bytes: usize,
@@ -847,9 +868,7 @@ pub(crate) fn read_line_runs<R: Read + io::Seek>(
             end += 1;
         }
         bytes.resize((end - at) * line_bytes, 0);
-        reader
-            .seek(io::SeekFrom::Start(offset + (first * line_bytes) as u64))
-            .and_then(|_| reader.read_exact(&mut bytes))
+        read_at(file, offset + (first * line_bytes) as u64, &mut bytes)
             .map_err(|e| read_error(path, e))?;
         take(at, &bytes)?;
         at = end;

@@ -204,7 +204,7 @@ pub fn npy_float_shape(path: &Path) -> Result<(Vec<usize>, bool)> {
 /// [`read_npy_f64`] of only some lines of a C-order float array, a line being a run of
 /// `shape.last()` values (line `l` holds the values `l·n … l·n + n − 1`): the array's
 /// shape, the lines of `lines` in increasing order (each once) and their values, line
-/// after line. Only those lines are read from the file (one seek per run of
+/// after line. Only those lines are read from the file (one positioned read per run of
 /// consecutive lines) or held.
 ///
 /// # Errors
@@ -241,7 +241,7 @@ pub fn read_npy_f64_lines(
     let mut values = super::reserve::<f64>(wanted.len() * n, path)?;
     values.resize(wanted.len() * n, 0.0);
     super::read_line_runs(
-        &mut reader,
+        reader.get_ref(),
         path,
         h.data_offset,
         n * size,
