@@ -37,6 +37,21 @@ fn on_ranks(
     })
 }
 
+/// Runs `req` on `ranks` threads into `dir/ranks<N>.npy` (removed first).
+fn into_file(
+    dir: &Path,
+    req: &ReconstructRequest,
+    ranks: usize,
+) -> (PathBuf, Vec<voxlab::Result<Distributed>>) {
+    let out = dir.join(format!("ranks{ranks}.npy"));
+    let _ = std::fs::remove_file(&out);
+    let many = ReconstructRequest {
+        out: Some(out.clone()),
+        ..req.clone()
+    };
+    (out, on_ranks(&many, ranks, None))
+}
+
 fn ct(name: &str) -> PathBuf {
     root().join("tests/data/ct").join(name)
 }
@@ -73,24 +88,23 @@ fn temp_files(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// The cone beam the cases project: 24 views of 37 rows × 40 columns.
+const CONE: &[&str] = &[
+    "--geometry",
+    "cone",
+    "--angles",
+    "24",
+    "--cols",
+    "40",
+    "--rows",
+    "37",
+    "--du",
+    "8",
+];
+
 /// The cases, each (name, request without `out`).
 fn cases(dir: &Path) -> Vec<(&'static str, ReconstructRequest)> {
-    let (cone, cone_g) = projected(
-        dir,
-        "cone",
-        &[
-            "--geometry",
-            "cone",
-            "--angles",
-            "24",
-            "--cols",
-            "40",
-            "--rows",
-            "37",
-            "--du",
-            "8",
-        ],
-    );
+    let (cone, cone_g) = projected(dir, "cone", CONE);
     let (short, short_g) = projected(
         dir,
         "short",
@@ -273,13 +287,7 @@ fn one_to_four_ranks_write_the_single_process_file_byte_for_byte() {
         voxlab::jobs::reconstruct::run(&one, &()).unwrap_or_else(|e| panic!("{name}: {e}"));
         let want = std::fs::read(&single).unwrap();
         for ranks in 1..=4 {
-            let out = dir.join(format!("ranks{ranks}.npy"));
-            let _ = std::fs::remove_file(&out);
-            let many = ReconstructRequest {
-                out: Some(out.clone()),
-                ..req.clone()
-            };
-            let results = on_ranks(&many, ranks, None);
+            let (out, results) = into_file(&dir, &req, ranks);
             for r in &results {
                 assert!(r.is_ok(), "{name}, {ranks} ranks: {:?}", r.as_ref().err());
             }
@@ -677,13 +685,7 @@ fn the_iterative_methods_on_one_to_four_ranks_follow_the_single_process_file() {
             let want_bytes = std::fs::read(&single).unwrap();
             let want = read_f32(&single);
             for ranks in 1..=4 {
-                let out = dir.join(format!("ranks{ranks}.npy"));
-                let _ = std::fs::remove_file(&out);
-                let many = ReconstructRequest {
-                    out: Some(out.clone()),
-                    ..req.clone()
-                };
-                let results = on_ranks(&many, ranks, None);
+                let (out, results) = into_file(&dir, &req, ranks);
                 let d = results[0]
                     .as_ref()
                     .unwrap_or_else(|e| panic!("{name}, {backend:?}, {ranks} ranks: {e}"));
@@ -1172,22 +1174,7 @@ fn intensities_with_flat_and_dark_fields_on_ranks_are_the_single_process_file() 
     use voxlab::io::metaimage::{write_metaimage, MetaImageWriteOptions};
     use voxlab::volume::{AnyVolume, Volume};
     let dir = scratch("distributed-flat");
-    let (cone, cone_g) = projected(
-        &dir,
-        "cone",
-        &[
-            "--geometry",
-            "cone",
-            "--angles",
-            "24",
-            "--cols",
-            "40",
-            "--rows",
-            "37",
-            "--du",
-            "8",
-        ],
-    );
+    let (cone, cone_g) = projected(&dir, "cone", CONE);
     let p = voxlab::io::projections::read_projections::<f64>(&cone).unwrap();
     let (a, r, c) = (p.angles, p.rows, p.cols);
     let pixels = r * c;
@@ -1265,12 +1252,7 @@ fn intensities_with_flat_and_dark_fields_on_ranks_are_the_single_process_file() 
             if iterative && ranks > 1 {
                 continue;
             }
-            let out = dir.join(format!("ranks{ranks}.npy"));
-            let many = ReconstructRequest {
-                out: Some(out.clone()),
-                ..req.clone()
-            };
-            let results = on_ranks(&many, ranks, None);
+            let (out, results) = into_file(&dir, &req, ranks);
             let d = results[0]
                 .as_ref()
                 .unwrap_or_else(|e| panic!("{name}, {ranks} ranks: {e}"));

@@ -101,11 +101,9 @@ fn bricks_equal_the_same_box_of_the_whole_volume() {
     }
 }
 
-/// A raw NRRD written by hand whose data is the last bytes of the file
-/// (`byte skip: -1`, after some junk) and big-endian.
-#[test]
-fn a_raw_nrrd_with_byte_skip_minus_one_reads_by_bricks() {
-    let dir = scratch("brick-skip");
+/// `dir/skip.nrrd`, written by hand: 4×3×2 big-endian u16 values (returned) as the
+/// last bytes of the file (`byte skip: -1`, after some junk).
+fn skip_nrrd(dir: &Path) -> (PathBuf, Vec<u16>) {
     let path = dir.join("skip.nrrd");
     let values: Vec<u16> = (0..4 * 3 * 2).map(|i| (i * 2731) as u16).collect();
     let mut bytes = b"NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 3 2\n\
@@ -116,6 +114,14 @@ encoding: raw\nendian: big\nbyte skip: -1\n\n"
         bytes.extend_from_slice(&v.to_be_bytes());
     }
     std::fs::write(&path, bytes).unwrap();
+    (path, values)
+}
+
+/// A raw NRRD written by hand whose data is the last bytes of the file
+/// (`byte skip: -1`, after some junk) and big-endian.
+#[test]
+fn a_raw_nrrd_with_byte_skip_minus_one_reads_by_bricks() {
+    let (path, values) = skip_nrrd(&scratch("brick-skip"));
     for n in 1..=4 {
         check_bricks(&path, n, 0);
     }
@@ -294,16 +300,7 @@ fn detector_lines_are_the_whole_stacks_bit_for_bit() {
     // u8, u16, i16: NRRD ×2 and MetaImage ×2 each; f32: those and .npy.
     assert_eq!(checked, 3 * 4 + 5);
     // Big-endian, data at the end of the file: the lines are the values written.
-    let path = dir.join("skip.nrrd");
-    let values: Vec<u16> = (0..4 * 3 * 2).map(|i| (i * 2731) as u16).collect();
-    let mut bytes = b"NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 3 2\n\
-encoding: raw\nendian: big\nbyte skip: -1\n\n"
-        .to_vec();
-    bytes.extend_from_slice(b"junk");
-    for v in &values {
-        bytes.extend_from_slice(&v.to_be_bytes());
-    }
-    std::fs::write(&path, bytes).unwrap();
+    let (path, values) = skip_nrrd(&dir);
     let got = read_projection_lines::<f64>(&path, &[4, 1]).unwrap();
     assert_eq!(got.ids, [1, 4]);
     let want: Vec<f64> = [4..8, 16..20]

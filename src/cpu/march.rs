@@ -560,23 +560,19 @@ mod simd {
         }
     }
 
-    /// [`Batch::fill`] in sixteen f32 lanes with the trilinear filter. Returns `false`
-    /// (and fills nothing) when a coordinate is out of the range where the scalar path
-    /// floors by truncation; the caller then takes the scalar path.
-    ///
-    /// # Safety
-    /// The CPU must support AVX-512F and [`usable`] must hold.
+    /// Steps `k0 .. k0 + m` of one ray in the sixteen lanes: the ray's step grid in
+    /// every lane, the step indices, and the lanes that hold a step (lanes past the
+    /// batch repeat step `k0`: valid indices, their results unused).
     #[target_feature(enable = "avx512f")]
-    pub unsafe fn fill_f32x16(
-        b: &mut Batch<f32>,
+    #[inline]
+    unsafe fn batch_lanes(
         src: &Source<f32>,
         st: &Steps<f32>,
         k0: usize,
         m: usize,
-    ) -> bool {
+    ) -> (Lanes, __m512i, __mmask16) {
         let lanes = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
         let live: __mmask16 = if m >= BATCH { 0xffff } else { (1u16 << m) - 1 };
-        // Lanes past the batch repeat step k0 (valid indices; their results are unused).
         let k = _mm512_mask_add_epi32(
             _mm512_set1_epi32(k0 as i32),
             live,
@@ -593,6 +589,24 @@ mod simd {
             n: _mm512_set1_epi32(st.n as i32),
             speed: _mm512_set1_ps(src.speed),
         };
+        (g, k, live)
+    }
+
+    /// [`Batch::fill`] in sixteen f32 lanes with the trilinear filter. Returns `false`
+    /// (and fills nothing) when a coordinate is out of the range where the scalar path
+    /// floors by truncation; the caller then takes the scalar path.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F and [`usable`] must hold.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn fill_f32x16(
+        b: &mut Batch<f32>,
+        src: &Source<f32>,
+        st: &Steps<f32>,
+        k0: usize,
+        m: usize,
+    ) -> bool {
+        let (g, k, live) = batch_lanes(src, st, k0, m);
         let c = classify(src, &g, k);
         if c.moderate & live != live {
             return false;
@@ -622,25 +636,7 @@ mod simd {
         value: &mut [f32; BATCH],
         len: &mut [f32; BATCH],
     ) -> bool {
-        let lanes = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
-        let live: __mmask16 = if m >= BATCH { 0xffff } else { (1u16 << m) - 1 };
-        // Lanes past the batch repeat step k0 (valid indices; their results are unused).
-        let k = _mm512_mask_add_epi32(
-            _mm512_set1_epi32(k0 as i32),
-            live,
-            _mm512_set1_epi32(k0 as i32),
-            lanes,
-        );
-        let g = Lanes {
-            o: st.o.0.map(|x| _mm512_set1_ps(x)),
-            d: st.d.0.map(|x| _mm512_set1_ps(x)),
-            t_in: _mm512_set1_ps(st.t_in),
-            t_out: _mm512_set1_ps(st.t_out),
-            t_s: _mm512_set1_ps(st.t_s),
-            dt: _mm512_set1_ps(st.dt),
-            n: _mm512_set1_epi32(st.n as i32),
-            speed: _mm512_set1_ps(src.speed),
-        };
+        let (g, k, live) = batch_lanes(src, st, k0, m);
         let taps = place::<true>(src, &g, k);
         if taps.moderate & live != live {
             return false;
