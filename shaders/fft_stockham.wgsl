@@ -2,8 +2,8 @@
 // N/R and writes its R outputs at stride Ns, so the result comes out in natural order
 // with no bit reversal. Radix 4, with one radix-2 pass first when log2 N is odd.
 // One invocation per butterfly (N/R per line), every pass through the storage buffers;
-// or, for N ≤ LOCAL_MAX_N, one workgroup per line doing every pass in workgroup memory
-// (stockham_local).
+// or, for N ≤ LOCAL_MAX_N, one workgroup per run of neighbouring lines doing every pass
+// in workgroup memory (stockham_local).
 // Orchestration and the CPU twin of every function: src/gpu/fft.rs.
 
 #import fft_params
@@ -85,44 +85,82 @@ fn stockham_radix2(
 }
 
 // ---------------------------------------------------------------------------------
-// Workgroup-memory path: one workgroup per line, N ≤ LOCAL_MAX_N. The line is read from
-// the storage buffer once, every pass runs on the two halves of `local_data` (the same
-// butterflies as above, with the same twiddles), and the result is written once.
+// Workgroup-memory path, N ≤ LOCAL_MAX_N: each workgroup takes LINES = local_lines(N)
+// neighbouring lines, reads them from the storage buffer once, runs every pass on the
+// two halves of `local_data` (the same butterflies as above, with the same twiddles)
+// and writes them once. Along the last axis the lines lie end to end and the
+// workgroup reads LINES·N consecutive values; along a strided axis neighbouring
+// invocations read the same element of neighbouring lines, which are neighbours in
+// memory (16 lines: 128 consecutive bytes), so the reads and writes stay coalesced
+// either way, and a short line keeps every invocation busy.
 // ---------------------------------------------------------------------------------
 
-// Two lines of 1024 complex values: 16 KiB, the smallest workgroup memory WebGPU
+// Two halves of 1024 complex values: 16 KiB, the smallest workgroup memory WebGPU
 // guarantees. Rust twin: src/gpu/fft.rs: LOCAL_MAX_N.
 const LOCAL_MAX_N: u32 = 1024u;
+// At most this many lines per workgroup: 16 complex f32 values are 128 bytes, a
+// cache line of most GPUs. Rust twin: src/gpu/fft.rs: LOCAL_MAX_LINES.
+const LOCAL_MAX_LINES: u32 = 16u;
 var<workgroup> local_data: array<vec2<f32>, 2048>;
 
-// stockham_radix4_butterfly on local_data[src_half …] -> local_data[dst_half …].
+// The lines one workgroup transforms: as many as fill LOCAL_MAX_N values, at most
+// LOCAL_MAX_LINES.
+// mirrors src/gpu/fft.rs: local_lines
+fn local_lines(n: u32) -> u32 {
+    return min(LOCAL_MAX_LINES, LOCAL_MAX_N / n);
+}
+
+// Line l of the workgroup lies in each half at l·n, turned by l·(16 / LINES) places
+// (element i at (i + turn) mod n), so that the neighbouring invocations of a strided
+// read, which store the same element of neighbouring lines, write to different memory
+// banks.
+fn local_turn(l: u32, lines: u32) -> u32 {
+    return l * (LOCAL_MAX_LINES / lines);
+}
+
+// The slot of element i of the line at `base` (a half's start plus l·n) turned by `turn`.
+fn local_slot(base: u32, turn: u32, i: u32) -> u32 {
+    return base + ((i + turn) & (params.n - 1u));
+}
+
+// stockham_radix4_butterfly on the line at src_base -> the line at dst_base.
 // mirrors src/gpu/fft.rs: stockham_radix4_butterfly
-fn local_radix4_butterfly(src_half: u32, dst_half: u32, ns: u32, j: u32) {
+fn local_radix4_butterfly(src_base: u32, dst_base: u32, turn: u32, ns: u32, j: u32) {
     let quarter = params.n / 4u;
     let k = j % ns;
     let step = params.n / (4u * ns);
-    let v0 = local_data[src_half + j];
-    let v1 = cmul(local_data[src_half + j + quarter], twiddles[k * step]);
-    let v2 = cmul(local_data[src_half + j + 2u * quarter], twiddles[2u * k * step]);
-    let v3 = cmul(local_data[src_half + j + 3u * quarter], twiddles[3u * k * step]);
+    let v0 = local_data[local_slot(src_base, turn, j)];
+    let v1 = cmul(local_data[local_slot(src_base, turn, j + quarter)], twiddles[k * step]);
+    let v2 = cmul(local_data[local_slot(src_base, turn, j + 2u * quarter)], twiddles[2u * k * step]);
+    let v3 = cmul(local_data[local_slot(src_base, turn, j + 3u * quarter)], twiddles[3u * k * step]);
     let y = radix4_dft(v0, v1, v2, v3);
-    let out = dst_half + (j / ns) * 4u * ns + k;
-    local_data[out] = y[0];
-    local_data[out + ns] = y[1];
-    local_data[out + 2u * ns] = y[2];
-    local_data[out + 3u * ns] = y[3];
+    let out = (j / ns) * 4u * ns + k;
+    local_data[local_slot(dst_base, turn, out)] = y[0];
+    local_data[local_slot(dst_base, turn, out + ns)] = y[1];
+    local_data[local_slot(dst_base, turn, out + 2u * ns)] = y[2];
+    local_data[local_slot(dst_base, turn, out + 3u * ns)] = y[3];
 }
 
-// stockham_radix2_butterfly on local_data[src_half …] -> local_data[dst_half …].
+// stockham_radix2_butterfly on the line at src_base -> the line at dst_base.
 // mirrors src/gpu/fft.rs: stockham_radix2_butterfly
-fn local_radix2_butterfly(src_half: u32, dst_half: u32, ns: u32, j: u32) {
+fn local_radix2_butterfly(src_base: u32, dst_base: u32, turn: u32, ns: u32, j: u32) {
     let k = j % ns;
     let step = params.n / (2u * ns);
-    let v0 = local_data[src_half + j];
-    let v1 = cmul(local_data[src_half + j + params.n / 2u], twiddles[k * step]);
-    let out = dst_half + (j / ns) * 2u * ns + k;
-    local_data[out] = v0 + v1;
-    local_data[out + ns] = v0 - v1;
+    let v0 = local_data[local_slot(src_base, turn, j)];
+    let v1 = cmul(local_data[local_slot(src_base, turn, j + params.n / 2u)], twiddles[k * step]);
+    let out = (j / ns) * 2u * ns + k;
+    local_data[local_slot(dst_base, turn, out)] = v0 + v1;
+    local_data[local_slot(dst_base, turn, out + ns)] = v0 - v1;
+}
+
+// Item k of the workgroup's LINES·N values as (line, element): line after line along
+// the last axis, element after element (the lines of each side by side) otherwise, so
+// that neighbouring invocations touch neighbouring addresses.
+fn local_item(k: u32, lines: u32) -> vec2<u32> {
+    if (params.stride == 1u) {
+        return vec2<u32>(k >> params.log2n, k & (params.n - 1u));
+    }
+    return vec2<u32>(k % lines, k / lines);
 }
 
 @compute @workgroup_size(64)
@@ -133,21 +171,34 @@ fn stockham_local(
 ) {
     // Uniform across the workgroup (workgroup id and parameters only), so the early
     // return and the barriers below are in uniform control flow.
-    let line = wid.y * nwg.x + wid.x;
-    if (line >= params.batch) {
+    let n = params.n;
+    let lines = local_lines(n);
+    let first = (wid.y * nwg.x + wid.x) * lines;
+    if (first >= params.batch) {
         return;
     }
-    let n = params.n;
-    for (var k = lid; k < n; k += WORKGROUP) {
-        local_data[k] = src[element_address(line, k)];
+    // The last workgroup may hold fewer lines: the missing ones are neither read nor
+    // written (their butterflies run on whatever their slots hold).
+    let held = min(lines, params.batch - first);
+    for (var k = lid; k < lines * n; k += WORKGROUP) {
+        let li = local_item(k, lines);
+        if (li.x < held) {
+            let slot = local_slot(li.x * n, local_turn(li.x, lines), li.y);
+            local_data[slot] = src[element_address(first + li.x, li.y)];
+        }
     }
     workgroupBarrier();
     var src_half = 0u;
     var dst_half = LOCAL_MAX_N;
     var ns = 1u;
+    // Butterfly j of the workgroup is butterfly j mod (n/R) of line j / (n/R).
     if (params.log2n % 2u == 1u) {
-        for (var j = lid; j < n / 2u; j += WORKGROUP) {
-            local_radix2_butterfly(src_half, dst_half, ns, j);
+        let shift = params.log2n - 1u;
+        for (var j = lid; j < lines * n / 2u; j += WORKGROUP) {
+            let l = j >> shift;
+            let base = l * n;
+            let turn = local_turn(l, lines);
+            local_radix2_butterfly(src_half + base, dst_half + base, turn, ns, j & (n / 2u - 1u));
         }
         workgroupBarrier();
         let t = src_half;
@@ -156,8 +207,12 @@ fn stockham_local(
         ns = 2u;
     }
     while (ns < n) {
-        for (var j = lid; j < n / 4u; j += WORKGROUP) {
-            local_radix4_butterfly(src_half, dst_half, ns, j);
+        let shift = params.log2n - 2u;
+        for (var j = lid; j < lines * n / 4u; j += WORKGROUP) {
+            let l = j >> shift;
+            let base = l * n;
+            let turn = local_turn(l, lines);
+            local_radix4_butterfly(src_half + base, dst_half + base, turn, ns, j & (n / 4u - 1u));
         }
         workgroupBarrier();
         let t = src_half;
@@ -165,7 +220,11 @@ fn stockham_local(
         dst_half = t;
         ns *= 4u;
     }
-    for (var k = lid; k < n; k += WORKGROUP) {
-        dst[element_address(line, k)] = local_data[src_half + k] * params.scale;
+    for (var k = lid; k < lines * n; k += WORKGROUP) {
+        let li = local_item(k, lines);
+        if (li.x < held) {
+            let slot = local_slot(src_half + li.x * n, local_turn(li.x, lines), li.y);
+            dst[element_address(first + li.x, li.y)] = local_data[slot] * params.scale;
+        }
     }
 }

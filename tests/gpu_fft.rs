@@ -127,6 +127,11 @@ fn pass_plans_have_the_promised_lengths() {
         assert_eq!(local(l), [StockhamLocal], "log2 N = {l}");
     }
     assert_eq!(fft::LOCAL_MAX_N, 1 << 10);
+    // Lines a workgroup of the workgroup-memory path takes: up to 16 (128 bytes), as
+    // many as fill 1024 values.
+    for (n, lines) in [(2, 16), (64, 16), (128, 8), (256, 4), (512, 2), (1024, 1)] {
+        assert_eq!(fft::local_lines(n), lines, "N = {n}");
+    }
     assert_eq!(local(11), st(11));
     for l in 2..=20 {
         assert_eq!(ss(l).len() as u32, l - 1, "split stream, log2 N = {l}");
@@ -504,14 +509,30 @@ fn oversized_data_is_refused() {
 }
 
 /// The workgroup-memory Stockham path runs the same butterflies on the same twiddles
-/// as the storage-buffer passes: the results agree to the last bit.
+/// as the storage-buffer passes: the results agree to the last bit. The shapes put
+/// several lines in a workgroup along the last axis and along strided ones, lines of a
+/// workgroup across the end of a stride's run (`3×64×5`: stride 5, 16 lines a
+/// workgroup), a last workgroup with fewer lines (`17×64`, `3×64×5`), and Bluestein's
+/// work lines (`12×20`, `64×48`).
 #[test]
 fn workgroup_memory_path_equals_the_global_passes() {
     let Some(ctx) = common::gpu("workgroup_memory_path_equals_the_global_passes") else {
         return;
     };
     let mut rng = common::Rng(0xb17_b17);
-    for shape in [&[2usize][..], &[8, 512], &[16, 32, 8], &[4, 1024]] {
+    let shapes: [&[usize]; 10] = [
+        &[2],
+        &[8, 512],
+        &[16, 32, 8],
+        &[4, 1024],
+        &[17, 64],
+        &[3, 64, 5],
+        &[64, 3, 64],
+        &[5, 2, 3],
+        &[12, 20],
+        &[64, 48],
+    ];
+    for shape in shapes {
         let total: usize = shape.iter().product();
         let x = to_f32(&random_complex(&mut rng, total));
         for dir in [Direction::Forward, Direction::Inverse] {

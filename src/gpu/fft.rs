@@ -18,8 +18,8 @@
 //!   (decimation in time), radix 4 with one radix-2 pass first when `log2 N` is odd:
 //!   no bit reversal, `⌈log2 N / 2⌉` passes, one invocation per butterfly. Lines of
 //!   up to [`LOCAL_MAX_N`] values are read once into workgroup memory, go through
-//!   every pass there (one workgroup per line, one dispatch per axis) and are written
-//!   once; [`GpuFftVariant::StockhamGlobal`] runs every pass through the storage
+//!   every pass there (one workgroup per [`local_lines`] neighbouring lines, one
+//!   dispatch per axis) and are written once; [`GpuFftVariant::StockhamGlobal`] runs every pass through the storage
 //!   buffers at any length. Shader: `shaders/fft_stockham.wgsl`.
 //!
 //! **Axes.** An N-D transform runs the 1-D batches along every axis in turn. Lines
@@ -101,6 +101,20 @@ const WORKGROUP: u32 = 64;
 /// (`LOCAL_MAX_N` in `shaders/fft_stockham.wgsl`).
 pub const LOCAL_MAX_N: usize = 1024;
 
+/// The most lines one workgroup of the workgroup-memory path transforms: 16 complex f32
+/// values are 128 bytes, a cache line of most GPUs (`LOCAL_MAX_LINES` in
+/// `shaders/fft_stockham.wgsl`).
+pub const LOCAL_MAX_LINES: usize = 16;
+
+/// The lines of length `n` (a power of two, at most [`LOCAL_MAX_N`]) one workgroup of
+/// [`FftPass::StockhamLocal`] transforms: as many as fill [`LOCAL_MAX_N`] values, at
+/// most [`LOCAL_MAX_LINES`]. Neighbouring lines: end to end along the last axis, side by
+/// side (the same element of each next to each other in memory) along the others.
+/// mirrors shaders/fft_stockham.wgsl: local_lines
+pub fn local_lines(n: usize) -> usize {
+    LOCAL_MAX_LINES.min(LOCAL_MAX_N / n)
+}
+
 /// Which GPU FFT to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum GpuFftVariant {
@@ -170,8 +184,9 @@ pub enum FftPass {
     Radix2 { span: u32 },
     /// `stockham_radix4` with `Ns = span`.
     Radix4 { span: u32 },
-    /// `stockham_local`: every Stockham pass of a line of at most [`LOCAL_MAX_N`]
-    /// values, in workgroup memory, one workgroup per line.
+    /// `stockham_local`: every Stockham pass of lines of at most [`LOCAL_MAX_N`]
+    /// values, in workgroup memory, one workgroup per [`local_lines`] neighbouring
+    /// lines.
     StockhamLocal,
 }
 
@@ -185,13 +200,13 @@ impl FftPass {
             FftPass::StockhamLocal => "stockham_local",
         }
     }
-    /// Invocations per line.
-    fn items_per_line(self, n: u32) -> u32 {
+    /// Invocations for `batch` lines of length `n`.
+    fn invocations(self, n: usize, batch: usize) -> usize {
         match self {
-            FftPass::SplitStream { .. } | FftPass::SplitStreamLastTwo { .. } => n,
-            FftPass::Radix2 { .. } => n / 2,
-            FftPass::Radix4 { .. } => n / 4,
-            FftPass::StockhamLocal => WORKGROUP,
+            FftPass::SplitStream { .. } | FftPass::SplitStreamLastTwo { .. } => n * batch,
+            FftPass::Radix2 { .. } => n / 2 * batch,
+            FftPass::Radix4 { .. } => n / 4 * batch,
+            FftPass::StockhamLocal => WORKGROUP as usize * batch.div_ceil(local_lines(n)),
         }
     }
     fn stage(self) -> u32 {
@@ -1403,7 +1418,7 @@ impl GpuFftPlan {
                     params.stage = pass.stage();
                     params.span = pass.span();
                     data ^= 1;
-                    let items = pass.items_per_line(n as u32) as usize * batch;
+                    let items = pass.invocations(n, batch);
                     (
                         Slot::Data(data ^ 1),
                         Slot::Data(data),
@@ -1433,7 +1448,7 @@ impl GpuFftPlan {
                         scale: 1.0,
                     };
                     work ^= 1;
-                    let items = pass.items_per_line(m as u32) as usize * batch;
+                    let items = pass.invocations(m, batch);
                     (
                         Slot::Work(work ^ 1),
                         Slot::Work(work),
