@@ -199,7 +199,7 @@ const SPLITS: [(usize, usize); 5] = [(1, 1000), (4, 32), (5, 64), (1000, 32), (3
 
 #[test]
 fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
-    use voxlab::gpu::fbp::{backproject_planned, BackprojectionPlan};
+    use voxlab::gpu::fbp::{backproject_timed, BackprojectionPlan};
     use voxlab::gpu::plan::Pieces;
     let Some(ctx) = common::gpu("gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one")
     else {
@@ -224,8 +224,24 @@ fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
                 },
                 device_bytes: 0,
             };
-            let got = backproject_planned(ctx, &q, &g, &grid, &plan).unwrap();
+            let (got, timings) = backproject_timed(ctx, &q, &g, &grid, &plan).unwrap();
             let what = format!("{name}: {}", plan.describe());
+            // One submission per slab and batch, one dispatch per 32 views of a batch.
+            let per_slab: usize = plan.batches.ranges().map(|b| b.len().div_ceil(32)).sum();
+            assert_eq!(
+                (timings.submissions, timings.dispatches),
+                (
+                    plan.slabs.count() * plan.batches.count(),
+                    plan.slabs.count() * per_slab
+                ),
+                "{what}"
+            );
+            let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+            assert_eq!(timings.kernel.is_some(), timestamps, "{what}");
+            assert!(
+                timings.kernel.is_none_or(|k| k > 0.0),
+                "{what}: {timings:?}"
+            );
             if views % 32 == 0 {
                 let first = got.data.iter().zip(&whole.data).position(|(a, b)| a != b);
                 assert_eq!(first, None, "{what}: differs from the unsplit volume");

@@ -170,7 +170,18 @@ fn many_views_are_split_into_dispatches_and_agree() {
     let grid = Grid::<f64>::phantom(&Phantom::shepp_logan_modified(), [64; 3]).unwrap();
     let g = Geometry::parallel_stack(64, 64, 4.5, 4.5, Geometry::even_angles(300, 180.0)).unwrap();
     let cpu = project_volume(&grid, &g, &ProjectOptions::default()).unwrap();
-    let gpu = gproject::project_volume(ctx, &grid, &g, &ProjectOptions::default()).unwrap();
+    let (gpu, timings) =
+        gproject::project_volume_timed(ctx, &grid, &g, &ProjectOptions::default()).unwrap();
+    // The dispatches' device time, where the adapter has timestamps: some of the time
+    // of the dispatches and readbacks, never more.
+    let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    assert_eq!(timings.kernel.is_some(), timestamps, "{timings:?}");
+    assert!(
+        timings
+            .kernel
+            .is_none_or(|k| k > 0.0 && k <= timings.project),
+        "{timings:?}"
+    );
     let e = common::assert_parity_array(
         "gpu_project_300_views",
         &[cpu.cols, cpu.rows, cpu.angles],

@@ -24,9 +24,11 @@
 //! updates = voxels × views.
 //!
 //! CPU times are the whole reconstruction or projection (filtering included; the
-//! input conversion to f32 is done once, untimed). `gpu::fbp` and `gpu::project` keep
-//! no timestamp queries: their GPU times are wall clock, with set-up (shader
-//! compilation, uploads) inside the end-to-end figure; see each case's note.
+//! input conversion to f32 is done once, untimed). The GPU kernel time is that of the
+//! backprojection's or projection's dispatches on the device, from timestamp queries
+//! ([`crate::gpu::fbp::backproject_timed`], [`crate::gpu::project::ProjectTimings`]);
+//! on an adapter without them, the wall clock of the step. Set-up (shader compilation,
+//! uploads) is inside the end-to-end figure; see each case's note.
 //!
 //! `cargo bench --bench project` and `--bench ct` build their scenes with the same
 //! constructors.
@@ -259,8 +261,8 @@ fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
             crate::gpu::project::project_volume_timed(ctx, &g32b, &gc, &ProjectOptions::default())?;
         Ok(GpuRun {
             output: flat(&p.data),
-            kernel: t.project,
-            kernel_from_timestamps: false,
+            kernel: t.kernel.unwrap_or(t.project),
+            kernel_from_timestamps: t.kernel.is_some(),
             end_to_end: t.total,
             setup: t.setup,
         })
@@ -299,8 +301,9 @@ fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
         ],
         note: format!(
             "Joseph projection of the modified Shepp–Logan phantom on {n}³ voxels, {} beam. \
-             Samples = bilinear samples summed ({:.1} per ray). GPU: kernel = dispatches + \
-             per-chunk readbacks (wall clock); end to end = everything, set-up (shader \
+             Samples = bilinear samples summed ({:.1} per ray). GPU: kernel = the dispatches \
+             on the device (timestamp queries; without them, dispatches + per-chunk \
+             readbacks, wall clock); end to end = everything, set-up (shader \
              compilation, grid and view uploads) included.",
             if cone { "cone" } else { "parallel" },
             samples / rays
@@ -367,12 +370,13 @@ fn prepare_recon(
         let t = Instant::now();
         let q = crate::gpu::ramp::filter_projections(ctx, &p32b, &gc, RampFilter::RamLak)?;
         let tb = Instant::now();
-        let v = crate::gpu::fbp::backproject(ctx, &q, &gc, &grid)?;
+        let plan = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &gc, &grid)?;
+        let (v, timings) = crate::gpu::fbp::backproject_timed(ctx, &q, &gc, &grid, &plan)?;
         let back = tb.elapsed().as_secs_f64();
         Ok(GpuRun {
             output: flat(&v.data),
-            kernel: back,
-            kernel_from_timestamps: false,
+            kernel: timings.kernel.unwrap_or(back),
+            kernel_from_timestamps: timings.kernel.is_some(),
             end_to_end: t.elapsed().as_secs_f64(),
             setup: 0.0,
         })
@@ -405,9 +409,11 @@ fn prepare_recon(
         }],
         note: format!(
             "{note} Ram-Lak ramp filter (FFT) and backprojection, timed together. GPU: \
-             ramp filter and backprojection on the device; kernel = the backprojection \
-             step (wall clock: its shader compilation, upload, dispatches and readback), \
-             end to end = both steps; gpu::fbp keeps no separate set-up (0 here)."
+             ramp filter and backprojection on the device; kernel = the backprojection's \
+             dispatches on the device (timestamp queries; where the adapter has none, the \
+             wall clock of the backprojection step with its shader compilation, upload and \
+             readback), end to end = both steps; gpu::fbp keeps no separate set-up (0 \
+             here)."
         ),
     })
 }

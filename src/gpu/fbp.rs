@@ -1,6 +1,8 @@
 //! FBP and FDK on the GPU: the backprojection of `crate::cpu::fbp` as a WGSL compute
 //! shader (`shaders/fbp_backproject.wgsl`), one invocation per voxel looping over a
-//! chunk of views (several dispatches keep each one short on software drivers).
+//! chunk of views (several dispatches keep each one short on software drivers, all of
+//! a slab's in one submission). [`backproject_timed`] says how long the dispatches took
+//! on the device (timestamp queries, where the adapter has them).
 //!
 //! The view matrices are uploaded as `ViewMatrix<f32>` (WGSL `CtView`), the filtered
 //! projections as one f32 storage buffer. [`fbp`] runs the whole reconstruction on
@@ -155,6 +157,35 @@ pub fn backproject_planned(
     grid: &Grid,
     plan: &BackprojectionPlan,
 ) -> Result<Reconstruction<f32>> {
+    backproject_timed(ctx, filtered, g, grid, plan).map(|(r, _)| r)
+}
+
+/// Where the time of a GPU backprojection went.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BackprojectionTimings {
+    /// Compute dispatches recorded: per slab, one per 32 views of each batch.
+    pub dispatches: usize,
+    /// Submissions waited for: one per slab and batch.
+    pub submissions: usize,
+    /// The dispatches' time on the device, summed over the submissions, from timestamp
+    /// queries; `None` where the adapter has none.
+    pub kernel: Option<f64>,
+}
+
+/// [`backproject_planned`], also saying how many dispatches and submissions it took and
+/// how long the dispatches ran on the device. Each slab and batch is one submission:
+/// one compute pass holding its dispatches (the device orders them and makes each one's
+/// sums visible to the next), between two timestamps.
+///
+/// # Errors
+/// As [`backproject_planned`].
+pub fn backproject_timed(
+    ctx: &GpuContext,
+    filtered: &Projections<f32>,
+    g: &Geometry,
+    grid: &Grid,
+    plan: &BackprojectionPlan,
+) -> Result<(Reconstruction<f32>, BackprojectionTimings)> {
     g.validate()?;
     filtered.check_against(g)?;
     let n = check_dims(grid.dims)?;
@@ -215,6 +246,15 @@ pub fn backproject_planned(
     let a = grid.affine;
     let v4 = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
     let scale = backprojection_scale(g.n_angles()) as f32;
+    let query = ctx
+        .features
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.timestamp_pair());
+    let mut timings = BackprojectionTimings {
+        dispatches: 0,
+        submissions: 0,
+        kernel: query.as_ref().map(|_| 0.0),
+    };
     let mut data = vec![0f32; n];
     for slab in plan.slabs.ranges() {
         let voxels = slab.len() * slice;
@@ -234,54 +274,70 @@ pub fn backproject_planned(
             };
             // The first view the projection buffer holds.
             let base = if resident.is_some() { 0 } else { batch.start };
-            let mut start = batch.start;
-            while start < batch.end {
-                let count = VIEWS_PER_DISPATCH.min(batch.end - start);
-                let params = FbpParams {
-                    origin: v4(a.w_axis.truncate()),
-                    step_i: v4(a.x_axis.truncate()),
-                    step_j: v4(a.y_axis.truncate()),
-                    step_k: v4(a.z_axis.truncate()),
-                    dims: [nx as u32, ny as u32, slab.len() as u32, gx * WORKGROUP],
-                    det: [g.cols as u32, g.rows as u32, start as u32, count as u32],
-                    scale: [scale, 0.0, 0.0, 0.0],
-                    slab: [slab.start as u32, base as u32, 0, 0],
-                };
-                let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("fbp params"),
-                    contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                let bind = ctx.bind_group(
-                    "fbp",
-                    &pipeline.get_bind_group_layout(0),
-                    &[
-                        ubuf.as_entire_binding(),
-                        vbuf.as_entire_binding(),
-                        pbuf.as_entire_binding(),
-                        out.as_entire_binding(),
-                    ],
-                );
-                let mut enc = dev.create_command_encoder(&Default::default());
-                {
-                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("backproject_point"),
-                        timestamp_writes: None,
+            let binds: Vec<wgpu::BindGroup> = batch
+                .clone()
+                .step_by(VIEWS_PER_DISPATCH)
+                .map(|start| {
+                    let count = VIEWS_PER_DISPATCH.min(batch.end - start);
+                    let params = FbpParams {
+                        origin: v4(a.w_axis.truncate()),
+                        step_i: v4(a.x_axis.truncate()),
+                        step_j: v4(a.y_axis.truncate()),
+                        step_k: v4(a.z_axis.truncate()),
+                        dims: [nx as u32, ny as u32, slab.len() as u32, gx * WORKGROUP],
+                        det: [g.cols as u32, g.rows as u32, start as u32, count as u32],
+                        scale: [scale, 0.0, 0.0, 0.0],
+                        slab: [slab.start as u32, base as u32, 0, 0],
+                    };
+                    let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("fbp params"),
+                        contents: bytemuck::bytes_of(&params),
+                        usage: wgpu::BufferUsages::UNIFORM,
                     });
-                    pass.set_pipeline(&pipeline);
-                    pass.set_bind_group(0, &bind, &[]);
+                    ctx.bind_group(
+                        "fbp",
+                        &pipeline.get_bind_group_layout(0),
+                        &[
+                            ubuf.as_entire_binding(),
+                            vbuf.as_entire_binding(),
+                            pbuf.as_entire_binding(),
+                            out.as_entire_binding(),
+                        ],
+                    )
+                })
+                .collect();
+            let mut enc = dev.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("backproject_point"),
+                    timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                        query_set: &q.set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }),
+                });
+                pass.set_pipeline(&pipeline);
+                for bind in &binds {
+                    pass.set_bind_group(0, bind, &[]);
                     pass.dispatch_workgroups(gx, gy, 1);
                 }
-                ctx.queue.submit([enc.finish()]);
-                ctx.wait()?;
-                start += count;
+            }
+            if let Some(q) = &query {
+                q.resolve(&mut enc);
+            }
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait()?;
+            timings.dispatches += binds.len();
+            timings.submissions += 1;
+            if let (Some(q), Some(k)) = (&query, timings.kernel.as_mut()) {
+                *k += q.seconds(ctx)?;
             }
         }
         let bytes = ctx.read_buffer(&out, (voxels * 4) as u64)?;
         data[slab.start * slice..slab.end * slice]
             .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
     }
-    Ok(Reconstruction { grid: *grid, data })
+    Ok((Reconstruction { grid: *grid, data }, timings))
 }
 
 /// FBP/FDK on the GPU in f32: [`crate::gpu::ramp::filter_projections`], then

@@ -419,7 +419,7 @@ impl<'c> GpuJosephPair<'c> {
             let m = chunk.min(n - k0);
             let bufs = [&self.views, x, list, out];
             self.forward_kernel
-                .dispatch(self.ctx, shape, (k0, m), k0 * pv, bufs);
+                .dispatch(self.ctx, shape, (k0, m), k0 * pv, bufs, None);
             k0 += m;
         }
     }
@@ -589,7 +589,7 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
                 let n = chunk.min(views.len() - k0);
                 let bufs = [rays, &self.grid, &self.list, &self.projections_out];
                 self.forward_kernel
-                    .dispatch(self.ctx, shape, (k0, n), 0, bufs);
+                    .dispatch(self.ctx, shape, (k0, n), 0, bufs, None);
                 let got = self.read(&self.projections_out, n * pv)?;
                 let dst = &mut out[k0 * pv..(k0 + n) * pv];
                 if s == 0 {

@@ -11,7 +11,7 @@
 //! must never run one dispatch for many seconds); each chunk is read back as it
 //! finishes.
 
-use super::context::GpuContext;
+use super::context::{GpuContext, TimestampPair};
 use super::plan::{binding_limit, count_of, Pieces};
 use crate::cpu::project::{joseph_views, Grid, JosephView, ProjectOptions};
 use crate::ct::{Geometry, Projections};
@@ -63,6 +63,9 @@ pub struct ProjectTimings {
     pub setup: f64,
     /// Dispatches and readbacks.
     pub project: f64,
+    /// The dispatches alone on the device, from timestamp queries; `None` where the
+    /// adapter has none.
+    pub kernel: Option<f64>,
     /// Everything.
     pub total: f64,
 }
@@ -110,6 +113,8 @@ impl ForwardKernel {
     /// is the grid's `nx, ny, nz` and the detector's `cols, rows`; `buffers` are the
     /// views ([`JosephView<f32>`]), the grid, the list (u32 view indices) and the
     /// output, which receives `[slot − first][row][col]` from value `out_offset` on.
+    /// With `query`, the dispatch is timed on the device (read it once the submission
+    /// has completed).
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -117,6 +122,7 @@ impl ForwardKernel {
         (first, n): (usize, usize),
         out_offset: usize,
         buffers: [&wgpu::Buffer; 4],
+        query: Option<&TimestampPair>,
     ) {
         let dev = &ctx.device;
         let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1);
@@ -157,11 +163,18 @@ impl ForwardKernel {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("project"),
-                timestamp_writes: None,
+                timestamp_writes: query.map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(x, y, 1);
+        }
+        if let Some(q) = query {
+            q.resolve(&mut enc);
         }
         ctx.queue.submit([enc.finish()]);
     }
@@ -325,6 +338,11 @@ pub fn project_volume_planned<R: Real>(
     let chunk = plan.views_per_dispatch.max(1);
     let out = ctx.storage_buffer("projections", (chunk * per_view * 4) as u64)?;
     let mut result = Projections::<f32>::zeros(g)?;
+    let query = ctx
+        .features
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.timestamp_pair());
+    let mut kernel_seconds = query.as_ref().map(|_| 0.0);
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -358,8 +376,12 @@ pub fn project_volume_planned<R: Real>(
         while k0 < g.n_angles() {
             let n = chunk.min(g.n_angles() - k0);
             let shape = [nx, ny, slab.len(), g.cols, g.rows];
-            kernel.dispatch(ctx, shape, (k0, n), 0, [&vbuf, &vol, &list, &out]);
+            let buffers = [&vbuf, &vol, &list, &out];
+            kernel.dispatch(ctx, shape, (k0, n), 0, buffers, query.as_ref());
             let bytes = ctx.read_buffer(&out, (n * per_view * 4) as u64)?;
+            if let (Some(q), Some(k)) = (&query, kernel_seconds.as_mut()) {
+                *k += q.seconds(ctx)?;
+            }
             let got: Vec<f32> = bytemuck::pod_collect_to_vec::<u8, f32>(&bytes);
             let dst = &mut result.data[k0 * per_view..(k0 + n) * per_view];
             if s == 0 {
@@ -381,6 +403,7 @@ pub fn project_volume_planned<R: Real>(
         ProjectTimings {
             setup,
             project,
+            kernel: kernel_seconds,
             total: t0.elapsed().as_secs_f64(),
         },
     ))
