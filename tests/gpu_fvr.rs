@@ -243,8 +243,19 @@ fn gpu_fvr_matches_the_cpu_oracle() {
                 case.kernel.name(),
                 if case.deapodize { ", deapodized" } else { "" }
             );
-            let port = gfvr::fvr_project(ctx, up, case.view, case.kernel, case.deapodize)
-                .unwrap_or_else(|e| panic!("{label}: {e}"));
+            let (port, times) =
+                gfvr::fvr_project_timed(ctx, up, case.view, case.kernel, case.deapodize)
+                    .unwrap_or_else(|e| panic!("{label}: {e}"));
+            // The device time of the slice and the inverse FFT, where the adapter has
+            // timestamps: some of the two waited-for steps' wall time, never more.
+            let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+            assert_eq!(times.kernel.is_some(), timestamps, "{label}: {times:?}");
+            assert!(
+                times
+                    .kernel
+                    .is_none_or(|k| k > 0.0 && k <= times.slice + times.fft),
+                "{label}: {times:?}"
+            );
             tally.check(&label, &oracle, &port);
             images.push(port);
         }

@@ -300,8 +300,8 @@ fn prepare_fvr(n: usize, kernel: Kernel) -> Result<Prepared> {
         let (img, times) = fvr_project_timed(ctx, on_gpu, FVR_VIEW, kernel, true)?;
         Ok(GpuRun {
             output: flat(&img.data),
-            kernel: times.slice + times.fft,
-            kernel_from_timestamps: false,
+            kernel: times.kernel.unwrap_or(times.slice + times.fft),
+            kernel_from_timestamps: times.kernel.is_some(),
             end_to_end: times.total,
             setup: *setup,
         })
@@ -325,8 +325,9 @@ fn prepare_fvr(n: usize, kernel: Kernel) -> Result<Prepared> {
              view): {:.1} ms. CPU f32: the spectrum rounded to complex f32 once (not \
              timed), slice and inverse FFT in f32. GPU set-up = the spectrum made on the \
              GPU (the padded cube uploaded as complex f32, its 3-D FFT on the device) with \
-             the pipelines and the inverse-FFT plan; kernel = slice dispatch + \
-             inverse FFT with readback (wall clock); end to end adds the host crop. The \
+             the pipelines and the inverse-FFT plan; kernel = the slice dispatch and \
+             the inverse FFT's passes on the device (timestamp queries; without them, \
+             both steps with the readback, wall clock); end to end adds the host crop. The \
              spectrum is {} MiB, split into z-slabs where it exceeds the adapter's \
              storage-binding limit (lavapipe: 128 MiB per binding).",
             pre * 1e3,

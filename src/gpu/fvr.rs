@@ -470,7 +470,8 @@ impl GpuFvrSpectrum {
     }
 }
 
-/// Where the time of one GPU view went, in seconds (wall clock, each step waited for).
+/// Where the time of one GPU view went, in seconds (wall clock, each step waited for;
+/// `kernel` from the device's timestamps).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FvrTimings {
     /// Resolving the view and writing its parameters (pipelines, buffers and the FFT
@@ -484,6 +485,9 @@ pub struct FvrTimings {
     pub crop: f64,
     /// Everything.
     pub total: f64,
+    /// The slice dispatch and the inverse FFT's passes on the device, from timestamp
+    /// queries; `None` where the adapter has none.
+    pub kernel: Option<f64>,
 }
 
 /// The padded cube of [`GpuFvrSpectrum::compute`] as complex f32 (`[re, im]`): voxel
@@ -589,6 +593,10 @@ pub fn fvr_project_timed(
     let groups = invocations.div_ceil(WORKGROUP).max(1);
     let x = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
     let y = groups.div_ceil(x);
+    let query = ctx
+        .features
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.timestamp_pair());
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -596,19 +604,32 @@ pub fn fvr_project_timed(
     {
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("extract_slice"),
-            timestamp_writes: None,
+            timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: &q.set,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: Some(1),
+            }),
         });
         pass.set_pipeline(&spectrum.pipeline);
         pass.set_bind_group(0, &spectrum.bind, &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
+    if let Some(q) = &query {
+        q.resolve(&mut enc);
+    }
     ctx.queue.submit([enc.finish()]);
     ctx.wait()?;
     let slice_s = t.elapsed().as_secs_f64();
+    let slice_kernel = query.as_ref().map(|q| q.seconds(ctx)).transpose()?;
 
     let t = Instant::now();
-    let image = fft_plan.execute_buffer(ctx, &spectrum.slice)?.data;
+    let out = fft_plan.execute_buffer(ctx, &spectrum.slice)?;
     let fft = t.elapsed().as_secs_f64();
+    let fft_kernel = out
+        .timings
+        .kernel_from_timestamps
+        .then_some(out.timings.kernel);
+    let image = out.data;
 
     let t = Instant::now();
     let frame = plan.crop(layout, kernel, deapodize, |i| image[i].re as f64);
@@ -621,6 +642,7 @@ pub fn fvr_project_timed(
             fft,
             crop,
             total: t0.elapsed().as_secs_f64(),
+            kernel: slice_kernel.zip(fft_kernel).map(|(a, b)| a + b),
         },
     ))
 }

@@ -83,9 +83,13 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
             let up = t_up.elapsed().as_secs_f64();
             stage(progress, &view_stage, "view", 0, || {
                 let (frame, tm) = fvr_project_timed(ctx, &spectrum, view, a.kernel, a.deapodize)?;
+                let device = tm
+                    .kernel
+                    .map(|k| format!("; slice and inverse FFT on the device {:.3} ms", k * 1e3))
+                    .unwrap_or_default();
                 progress.note(&format!(
                     "GPU ({}): spectrum (upload and 3-D FFT) {up:.3} s; view {:.3} s (setup \
-                     {:.3}, slice {:.3}, inverse FFT and readback {:.3}, crop {:.3})",
+                     {:.3}, slice {:.3}, inverse FFT and readback {:.3}, crop {:.3}{device})",
                     ctx.summary.name, tm.total, tm.setup, tm.slice, tm.fft, tm.crop
                 ));
                 Ok(frame)
