@@ -159,6 +159,9 @@ fn gpu_matches_the_cpu_oracle() {
                 voxlab::metrics::Tolerance::max_abs_rel(tol),
             )
             .max_abs_rel;
+            let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+            assert_eq!(gpu.timings.kernel_from_timestamps, timestamps);
+            assert!(gpu.timings.kernel > 0.0 && gpu.timings.kernel <= gpu.timings.total);
             eprintln!(
                 "{mode:?} {gradient:?} cyl={cylinder} {beam} occ={occ} {storage:?}: max rel {e:.2e}; \
                  fraction cpu {:.3} gpu {:.3}; {} dispatches, kernel {:.3} s",

@@ -345,8 +345,8 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
         Ok(GpuRun {
             output: r.render.image.data,
             kernel: t.kernel,
-            kernel_from_timestamps: false,
-            end_to_end: t.kernel + t.readback,
+            kernel_from_timestamps: t.kernel_from_timestamps,
+            end_to_end: t.total - t.setup,
             setup: t.setup,
         })
     }) as super::GpuFn;
@@ -369,8 +369,10 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
         ],
         note: "Shepp–Logan (modified) from exact cone-beam projections, shaded DVR, step 1 \
                voxel. Samples: the grid box's plain march (what +B, +OC and +M skip counts \
-               as done). GPU: f32 projection storage; its set-up includes the uploads, so \
-               end to end = chunk dispatches + readback (wall clock, no timestamps)."
+               as done). GPU: f32 projection storage; kernel = the chunk dispatches on the \
+               device (timestamp queries; without them, wall clock); its set-up includes \
+               the uploads, so end to end = chunk dispatches + readback + the host's final \
+               blend (wall clock)."
             .into(),
     })
 }

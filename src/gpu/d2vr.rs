@@ -327,8 +327,11 @@ fn half_from_f32(x: f32) -> u16 {
 pub struct D2vrTimings {
     /// Shader, pipeline, buffers and uploads.
     pub setup: f64,
-    /// The chunk dispatches (wall clock, waited for).
+    /// The chunk dispatches: their time on the device from timestamp queries where the
+    /// adapter has them, otherwise the wall clock of the waited-for submissions.
     pub kernel: f64,
+    /// Whether `kernel` comes from timestamp queries.
+    pub kernel_from_timestamps: bool,
     /// Readback and the host's final blend.
     pub readback: f64,
     pub total: f64,
@@ -555,6 +558,10 @@ pub fn render_d2vr(
     let max_n = (diag / settings.step).ceil() as usize + 2;
     let setup = t0.elapsed().as_secs_f64();
 
+    let query = ctx
+        .features
+        .contains(wgpu::Features::TIMESTAMP_QUERY)
+        .then(|| ctx.timestamp_pair());
     let (mut kernel, mut readback) = (0.0, 0.0);
     let mut dispatches = 0;
     let mut acc: Vec<[f32; 4]> = Vec::with_capacity(pixels as usize);
@@ -565,6 +572,9 @@ pub fn render_d2vr(
         // Storage buffers start zeroed in wgpu.
         let acc_buf = ctx.storage_buffer("d2vr accumulation", band_bytes)?;
         let cnt_buf = ctx.storage_buffer("d2vr counts", band_bytes)?;
+        // Every chunk of the band in one compute pass (the device orders the
+        // dispatches and makes each one's sums visible to the next), one submission.
+        let mut binds = Vec::new();
         let mut k0 = 0usize;
         while k0 < max_n {
             let k1 = (k0 + chunk).min(max_n);
@@ -589,28 +599,39 @@ pub fn render_d2vr(
                 cnt_buf.as_entire_binding(),
             ];
             resources.extend(proj_bufs[1..].iter().map(|b| b.as_entire_binding()));
-            let bind = ctx.bind_group("d2vr", &layout, &resources);
-            let mut enc = dev.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("d2vr_chunk"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&pipeline);
-                pass.set_bind_group(0, &bind, &[]);
+            binds.push(ctx.bind_group("d2vr", &layout, &resources));
+            k0 = k1;
+        }
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("d2vr_chunk"),
+                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
+                    query_set: &q.set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }),
+            });
+            pass.set_pipeline(&pipeline);
+            for bind in &binds {
+                pass.set_bind_group(0, bind, &[]);
                 pass.dispatch_workgroups(
                     (w as u32).div_ceil(8),
                     (band.len() as u32).div_ceil(8),
                     1,
                 );
             }
-            ctx.queue.submit([enc.finish()]);
-            // One chunk at a time: keeps each submission short on a software device.
-            ctx.wait()?;
-            dispatches += 1;
-            k0 = k1;
         }
-        kernel += t.elapsed().as_secs_f64();
+        if let Some(q) = &query {
+            q.resolve(&mut enc);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        dispatches += binds.len();
+        kernel += match &query {
+            Some(q) => q.seconds(ctx)?,
+            None => t.elapsed().as_secs_f64(),
+        };
         let t = Instant::now();
         acc.extend_from_slice(bytemuck::cast_slice(
             &ctx.read_buffer(&acc_buf, band_bytes)?,
@@ -662,6 +683,7 @@ pub fn render_d2vr(
         timings: D2vrTimings {
             setup,
             kernel,
+            kernel_from_timestamps: query.is_some(),
             readback,
             total: t0.elapsed().as_secs_f64(),
             dispatches,
