@@ -1,4 +1,5 @@
-// Backprojection for FBP and FDK: one invocation per voxel, a loop over a chunk of views.
+// Backprojection for FBP and FDK: one invocation per VOXELS neighbouring voxels along k,
+// a loop over a chunk of views.
 // Rust twin: src/gpu/fbp.rs (dispatch), src/cpu/fbp.rs (the oracle). The geometry
 // (CtView, project_point, bilinear_zero) is shared/ct_geometry.wgsl.
 
@@ -15,30 +16,50 @@ fn tap(i: u32) -> f32 {
     return proj[i];
 }
 
-// Adds this chunk's share of π/(2A)·Σ_k w_k·bilinear_zero(q_k, col_k, row_k).
+// Voxels one invocation backprojects: neighbours along k, which share the view's
+// matrix and give the loop over views independent sums to overlap.
+// Rust twin: src/gpu/fbp.rs: VOXELS_PER_INVOCATION.
+const VOXELS: u32 = 4u;
+
+// Adds this chunk's share of π/(2A)·Σ_k w_k·bilinear_zero(q_k, col_k, row_k) to up to
+// VOXELS voxels (i, j, k … k + VOXELS − 1), each summed exactly as alone.
 // mirrors src/cpu/fbp.rs: backproject_point
 @compute @workgroup_size(64)
 fn backproject_point(@builtin(global_invocation_id) gid: vec3<u32>) {
     let idx = gid.x + gid.y * params.dims.w;
     let nx = params.dims.x;
     let ny = params.dims.y;
-    if idx >= nx * ny * params.dims.z {
+    let nz = params.dims.z;
+    let runs = (nz + VOXELS - 1u) / VOXELS;
+    if idx >= nx * ny * runs {
         return;
     }
     let i = f32(idx % nx);
     let j = f32((idx / nx) % ny);
-    // The slab's slices are the grid's slices slab.x …: the same voxel position, bit
+    let k0 = (idx / (nx * ny)) * VOXELS;
+    let held = min(VOXELS, nz - k0);
+    // The slab's slices are the grid's slices slab.x …: the same voxel positions, bit
     // for bit, as the unsplit volume's.
-    let k = f32(idx / (nx * ny) + params.slab.x);
-    let p = params.origin.xyz + i * params.step_i.xyz + j * params.step_j.xyz + k * params.step_k.xyz;
+    var p: array<vec3<f32>, 4>;
+    for (var q = 0u; q < VOXELS; q++) {
+        let k = f32(k0 + q + params.slab.x);
+        p[q] = params.origin.xyz + i * params.step_i.xyz + j * params.step_j.xyz + k * params.step_k.xyz;
+    }
     let cols = params.det.x;
     let rows = params.det.y;
-    var acc = 0.0;
+    var acc = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
     for (var v = params.det.z; v < params.det.z + params.det.w; v++) {
-        let r = project_point(views[v], p);
-        if r.w > 0.0 {
-            acc += r.z * bilinear_zero((v - params.slab.y) * cols * rows, cols, rows, r.x, r.y);
+        let view = views[v];
+        let base = (v - params.slab.y) * cols * rows;
+        for (var q = 0u; q < VOXELS; q++) {
+            let r = project_point(view, p[q]);
+            if r.w > 0.0 {
+                acc[q] += r.z * bilinear_zero(base, cols, rows, r.x, r.y);
+            }
         }
     }
-    out_vol[idx] += acc * params.scale.x;
+    let first = idx % (nx * ny) + k0 * nx * ny;
+    for (var q = 0u; q < held; q++) {
+        out_vol[first + q * nx * ny] += acc[q] * params.scale.x;
+    }
 }

@@ -1,8 +1,9 @@
 //! FBP and FDK on the GPU: the backprojection of `crate::cpu::fbp` as a WGSL compute
-//! shader (`shaders/fbp_backproject.wgsl`), one invocation per voxel looping over a
-//! chunk of views (several dispatches keep each one short on software drivers, all of
-//! a slab's in one submission). [`backproject_timed`] says how long the dispatches took
-//! on the device (timestamp queries, where the adapter has them).
+//! shader (`shaders/fbp_backproject.wgsl`). One invocation takes
+//! [`VOXELS_PER_INVOCATION`] neighbouring voxels along k, each summed exactly as alone,
+//! and loops over a chunk of views: several dispatches keep each one short on software
+//! drivers, all of a slab's in one submission. [`backproject_timed`] says how long the
+//! dispatches took on the device (timestamp queries, where the adapter has them).
 //!
 //! The view matrices are uploaded as `ViewMatrix<f32>` (WGSL `CtView`), the filtered
 //! projections as one f32 storage buffer. [`fbp`] runs the whole reconstruction on
@@ -36,6 +37,9 @@ pub struct FbpParams {
 }
 
 const WORKGROUP: u32 = 64;
+/// Voxels (neighbours along k) one invocation backprojects (`VOXELS` in
+/// `shaders/fbp_backproject.wgsl`).
+pub const VOXELS_PER_INVOCATION: usize = 4;
 /// Views per dispatch: bounded work per invocation.
 const VIEWS_PER_DISPATCH: usize = 32;
 
@@ -258,7 +262,8 @@ pub fn backproject_timed(
     let mut data = vec![0f32; n];
     for slab in plan.slabs.ranges() {
         let voxels = slab.len() * slice;
-        let groups = (voxels as u32).div_ceil(WORKGROUP).max(1);
+        let invocations = slab.len().div_ceil(VOXELS_PER_INVOCATION) * slice;
+        let groups = (invocations as u32).div_ceil(WORKGROUP).max(1);
         let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
         let gy = groups.div_ceil(gx);
         // A new buffer per slab: wgpu hands it out zeroed.
