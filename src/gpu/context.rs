@@ -295,6 +295,16 @@ pub struct TimestampPair {
 }
 
 impl TimestampPair {
+    /// The writes that put the first timestamp at the start of a compute pass and the
+    /// second at its end.
+    pub fn pass_writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
     /// Resolves the two timestamps (call after the pass, in the same encoder).
     pub fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.set, 0..2, &self.resolved, 0);
@@ -440,6 +450,47 @@ impl GpuContext {
         })
     }
 
+    /// Two timestamp queries where the adapter has `TIMESTAMP_QUERY`, else `None`.
+    pub fn timestamps(&self) -> Option<TimestampPair> {
+        self.features
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| self.timestamp_pair())
+    }
+
+    /// Records one compute pass of `pipeline` that dispatches `extent` workgroups once
+    /// per bind group of `binds`, in order (the device runs them one after another and
+    /// makes each one's writes visible to the next), submits it and waits. With `query`
+    /// the pass is timed on the device: the seconds between its two timestamps.
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the device fails.
+    pub fn run_pass(
+        &self,
+        (pipeline, label): (&wgpu::ComputePipeline, &str),
+        binds: &[wgpu::BindGroup],
+        extent: [u32; 3],
+        query: Option<&TimestampPair>,
+    ) -> Result<Option<f64>> {
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: query.map(TimestampPair::pass_writes),
+            });
+            pass.set_pipeline(pipeline);
+            for bind in binds {
+                pass.set_bind_group(0, bind, &[]);
+                pass.dispatch_workgroups(extent[0], extent[1], extent[2]);
+            }
+        }
+        if let Some(q) = query {
+            q.resolve(&mut enc);
+        }
+        self.queue.submit([enc.finish()]);
+        self.wait()?;
+        query.map(|q| q.seconds(self)).transpose()
+    }
+
     /// Two timestamp queries (needs `TIMESTAMP_QUERY`).
     pub fn timestamp_pair(&self) -> TimestampPair {
         let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -559,30 +610,10 @@ pub(crate) fn render_bands(
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
         let group = bind(row0, rows, &out_buf, &cnt_buf)?;
         let t_k = Instant::now();
-        let query = times.from_timestamps.then(|| ctx.timestamp_pair());
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups((w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1);
-        }
-        if let Some(q) = &query {
-            q.resolve(&mut enc);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        times.kernel += match &query {
-            Some(q) => q.seconds(ctx)?,
-            None => t_k.elapsed().as_secs_f64(),
-        };
+        let query = ctx.timestamps();
+        let extent = [(w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1];
+        let device = ctx.run_pass((pipeline, label), &[group], extent, query.as_ref())?;
+        times.kernel += device.unwrap_or_else(|| t_k.elapsed().as_secs_f64());
         let t_r = Instant::now();
         let px: Vec<[f32; 4]> =
             bytemuck::cast_slice(&ctx.read_buffer(&out_buf, pix_bytes)?).to_vec();

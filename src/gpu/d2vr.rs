@@ -558,10 +558,7 @@ pub fn render_d2vr(
     let max_n = (diag / settings.step).ceil() as usize + 2;
     let setup = t0.elapsed().as_secs_f64();
 
-    let query = ctx
-        .features
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-        .then(|| ctx.timestamp_pair());
+    let query = ctx.timestamps();
     let (mut kernel, mut readback) = (0.0, 0.0);
     let mut dispatches = 0;
     let mut acc: Vec<[f32; 4]> = Vec::with_capacity(pixels as usize);
@@ -602,36 +599,10 @@ pub fn render_d2vr(
             binds.push(ctx.bind_group("d2vr", &layout, &resources));
             k0 = k1;
         }
-        let mut enc = dev.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("d2vr_chunk"),
-                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
-            });
-            pass.set_pipeline(&pipeline);
-            for bind in &binds {
-                pass.set_bind_group(0, bind, &[]);
-                pass.dispatch_workgroups(
-                    (w as u32).div_ceil(8),
-                    (band.len() as u32).div_ceil(8),
-                    1,
-                );
-            }
-        }
-        if let Some(q) = &query {
-            q.resolve(&mut enc);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
+        let extent = [(w as u32).div_ceil(8), (band.len() as u32).div_ceil(8), 1];
+        let device = ctx.run_pass((&pipeline, "d2vr_chunk"), &binds, extent, query.as_ref())?;
         dispatches += binds.len();
-        kernel += match &query {
-            Some(q) => q.seconds(ctx)?,
-            None => t.elapsed().as_secs_f64(),
-        };
+        kernel += device.unwrap_or_else(|| t.elapsed().as_secs_f64());
         let t = Instant::now();
         acc.extend_from_slice(bytemuck::cast_slice(
             &ctx.read_buffer(&acc_buf, band_bytes)?,

@@ -250,10 +250,7 @@ pub fn backproject_timed(
     let a = grid.affine;
     let v4 = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
     let scale = backprojection_scale(g.n_angles()) as f32;
-    let query = ctx
-        .features
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-        .then(|| ctx.timestamp_pair());
+    let query = ctx.timestamps();
     let mut timings = BackprojectionTimings {
         dispatches: 0,
         submissions: 0,
@@ -311,31 +308,12 @@ pub fn backproject_timed(
                     )
                 })
                 .collect();
-            let mut enc = dev.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("backproject_point"),
-                    timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                        query_set: &q.set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }),
-                });
-                pass.set_pipeline(&pipeline);
-                for bind in &binds {
-                    pass.set_bind_group(0, bind, &[]);
-                    pass.dispatch_workgroups(gx, gy, 1);
-                }
-            }
-            if let Some(q) = &query {
-                q.resolve(&mut enc);
-            }
-            ctx.queue.submit([enc.finish()]);
-            ctx.wait()?;
+            let pass = (&pipeline, "backproject_point");
+            let device = ctx.run_pass(pass, &binds, [gx, gy, 1], query.as_ref())?;
             timings.dispatches += binds.len();
             timings.submissions += 1;
-            if let (Some(q), Some(k)) = (&query, timings.kernel.as_mut()) {
-                *k += q.seconds(ctx)?;
+            if let (Some(d), Some(k)) = (device, timings.kernel.as_mut()) {
+                *k += d;
             }
         }
         let bytes = ctx.read_buffer(&out, (voxels * 4) as u64)?;

@@ -1523,8 +1523,7 @@ impl GpuFftPlan {
                 ctx.storage_buffer("fft Bluestein work b", bytes)?,
             ]);
         }
-        let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        plan.query = timestamps.then(|| ctx.timestamp_pair());
+        plan.query = ctx.timestamps();
         Ok(plan)
     }
 

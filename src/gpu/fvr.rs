@@ -586,41 +586,20 @@ pub fn fvr_project_timed(
     };
 
     let fft_plan = &spectrum.fft;
-    let dev = &ctx.device;
     ctx.queue
         .write_buffer(&spectrum.params, 0, bytemuck::bytes_of(&params));
     let invocations = (m * m) as u32;
     let groups = invocations.div_ceil(WORKGROUP).max(1);
     let x = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
     let y = groups.div_ceil(x);
-    let query = ctx
-        .features
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-        .then(|| ctx.timestamp_pair());
+    let query = ctx.timestamps();
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let mut enc = dev.create_command_encoder(&Default::default());
-    {
-        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("extract_slice"),
-            timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                query_set: &q.set,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: Some(1),
-            }),
-        });
-        pass.set_pipeline(&spectrum.pipeline);
-        pass.set_bind_group(0, &spectrum.bind, &[]);
-        pass.dispatch_workgroups(x, y, 1);
-    }
-    if let Some(q) = &query {
-        q.resolve(&mut enc);
-    }
-    ctx.queue.submit([enc.finish()]);
-    ctx.wait()?;
+    let binds = std::slice::from_ref(&spectrum.bind);
+    let pass = (&spectrum.pipeline, "extract_slice");
+    let slice_kernel = ctx.run_pass(pass, binds, [x, y, 1], query.as_ref())?;
     let slice_s = t.elapsed().as_secs_f64();
-    let slice_kernel = query.as_ref().map(|q| q.seconds(ctx)).transpose()?;
 
     let t = Instant::now();
     let out = fft_plan.execute_buffer(ctx, &spectrum.slice)?;

@@ -146,11 +146,7 @@ pub fn precompute_gradients_in_slabs(
     });
     let pipeline = compute_pipeline(ctx, "gradient_slab", &module, "gradient_slab", &layout)?;
     let out = ctx.storage_buffer("gradient slab", per_slab as u64 * slice_bytes)?;
-    let query = ctx
-        .device
-        .features()
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-        .then(|| ctx.timestamp_pair());
+    let query = ctx.timestamps();
     ctx.wait()?;
     let setup = t0.elapsed().as_secs_f64();
 
@@ -184,33 +180,18 @@ pub fn precompute_gradients_in_slabs(
             ],
         );
         let t_k = Instant::now();
-        let mut enc = dev.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("gradient_slab"),
-                timestamp_writes: query.as_ref().map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(
-                (nx as u32).div_ceil(4),
-                (ny as u32).div_ceil(4),
-                (slices as u32).div_ceil(4),
-            );
-        }
-        if let Some(q) = &query {
-            q.resolve(&mut enc);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        kernel += match &query {
-            Some(q) => q.seconds(ctx)?,
-            None => t_k.elapsed().as_secs_f64(),
-        };
+        let extent = [
+            (nx as u32).div_ceil(4),
+            (ny as u32).div_ceil(4),
+            (slices as u32).div_ceil(4),
+        ];
+        let device = ctx.run_pass(
+            (&pipeline, "gradient_slab"),
+            &[bind],
+            extent,
+            query.as_ref(),
+        )?;
+        kernel += device.unwrap_or_else(|| t_k.elapsed().as_secs_f64());
         let t_r = Instant::now();
         let n = slices * nx * ny;
         let bytes = ctx.read_buffer(&out, (3 * n * 4) as u64)?;

@@ -163,11 +163,7 @@ impl ForwardKernel {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("project"),
-                timestamp_writes: query.map(|q| wgpu::ComputePassTimestampWrites {
-                    query_set: &q.set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }),
+                timestamp_writes: query.map(TimestampPair::pass_writes),
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind, &[]);
@@ -338,10 +334,7 @@ pub fn project_volume_planned<R: Real>(
     let chunk = plan.views_per_dispatch.max(1);
     let out = ctx.storage_buffer("projections", (chunk * per_view * 4) as u64)?;
     let mut result = Projections::<f32>::zeros(g)?;
-    let query = ctx
-        .features
-        .contains(wgpu::Features::TIMESTAMP_QUERY)
-        .then(|| ctx.timestamp_pair());
+    let query = ctx.timestamps();
     let mut kernel_seconds = query.as_ref().map(|_| 0.0);
     let setup = t0.elapsed().as_secs_f64();
 
