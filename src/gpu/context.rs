@@ -597,8 +597,9 @@ pub(crate) fn render_bands(
     mut bind: impl FnMut(usize, usize, &wgpu::Buffer, &wgpu::Buffer) -> Result<wgpu::BindGroup>,
 ) -> Result<BandTimes> {
     let (w, h) = (image.width, image.height);
+    let query = ctx.timestamps();
     let mut times = BandTimes {
-        from_timestamps: ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY),
+        from_timestamps: query.is_some(),
         ..Default::default()
     };
     let mut row0 = 0;
@@ -610,7 +611,6 @@ pub(crate) fn render_bands(
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
         let group = bind(row0, rows, &out_buf, &cnt_buf)?;
         let t_k = Instant::now();
-        let query = ctx.timestamps();
         let extent = [(w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1];
         let device = ctx.run_pass((pipeline, label), &[group], extent, query.as_ref())?;
         times.kernel += device.unwrap_or_else(|| t_k.elapsed().as_secs_f64());

@@ -50,7 +50,7 @@
 //! ping-pong buffer) is built once with the spectrum; a view only writes
 //! 48 bytes of parameters and records the dispatches.
 
-use super::context::GpuContext;
+use super::context::{GpuContext, TimestampPair};
 use super::fft::{GpuFftPlan, GpuFftVariant};
 use crate::cpu::dft::{Direction, Normalization};
 use crate::cpu::fvr::{FvrLayout, FvrSpectrum, FvrView, Kernel, SlicePlan};
@@ -186,6 +186,9 @@ pub struct GpuFvrSpectrum {
     /// placeholder when they exceed one binding (`values_bound` false).
     _values: wgpu::Buffer,
     values_bound: bool,
+    /// Times the slice dispatch on the device, where the adapter has timestamps (made
+    /// once, read per view).
+    query: Option<TimestampPair>,
 }
 
 /// How an `M³` spectrum is bound: `slabs` z-slabs of `depth` whole `M × M` planes
@@ -451,6 +454,7 @@ impl GpuFvrSpectrum {
             fft,
             _values: values_buffer,
             values_bound,
+            query: ctx.timestamps(),
         })
     }
 
@@ -592,13 +596,12 @@ pub fn fvr_project_timed(
     let groups = invocations.div_ceil(WORKGROUP).max(1);
     let x = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
     let y = groups.div_ceil(x);
-    let query = ctx.timestamps();
     let setup = t0.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let binds = std::slice::from_ref(&spectrum.bind);
     let pass = (&spectrum.pipeline, "extract_slice");
-    let slice_kernel = ctx.run_pass(pass, binds, [x, y, 1], query.as_ref())?;
+    let slice_kernel = ctx.run_pass(pass, binds, [x, y, 1], spectrum.query.as_ref())?;
     let slice_s = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
