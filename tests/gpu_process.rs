@@ -200,7 +200,10 @@ fn gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit() {
                     gp::ResamplePlan::in_slabs(dims, to_in, spec.dims, spec.filter, per_piece)
                         .unwrap();
                 assert!(plan.is_split(), "{name}");
-                let split = gp::resample_planned(ctx, &v, spec, &plan).unwrap();
+                let start = std::time::Instant::now();
+                let (split, times) = gp::resample_planned(ctx, &v, spec, &plan).unwrap();
+                // Each output slab of at most 5·28·14 voxels is one dispatch.
+                check_timings(ctx, &times, plan.slabs.count(), start.elapsed());
                 let first = split
                     .grid
                     .data
@@ -230,13 +233,24 @@ fn gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit() {
                 },
                 ..plan
             };
-            let split = match &case {
+            let start = std::time::Instant::now();
+            let (split, times) = match &case {
                 Case::Gaussian(s) => gp::gaussian_planned(ctx, &v, *s, &plan),
                 Case::Median(k) => gp::median_planned(ctx, &v, *k, &plan),
                 Case::Gradient => gp::gradient_magnitude_planned(ctx, &v, &plan),
                 Case::Resample(_) => unreachable!(),
             }
             .unwrap();
+            // A slab of at most 5 + 2·ghost slices of 20·18 voxels is one dispatch per
+            // pass (the median's 5³ window: 2²⁶ / (125·63) = 8,521 voxels per
+            // dispatch); the Gaussian makes three passes.
+            let passes = if matches!(case, Case::Gaussian(_)) {
+                3
+            } else {
+                1
+            };
+            assert_eq!(times.slabs, plan.slabs.count(), "{name}");
+            check_timings(ctx, &times, passes * plan.slabs.count(), start.elapsed());
             let first = split
                 .grid
                 .data
@@ -247,6 +261,38 @@ fn gpu_processing_in_slabs_equals_the_unsplit_volume_bit_for_bit() {
             assert_eq!(split.affine, whole.affine);
         }
     }
+}
+
+/// `times` counts `dispatches`; its kernel time is there exactly when the adapter has
+/// timestamp queries, and lies within the call's wall clock `wall`.
+fn check_timings(
+    ctx: &GpuContext,
+    times: &gp::ProcessTimings,
+    dispatches: usize,
+    wall: std::time::Duration,
+) {
+    assert_eq!(times.dispatches, dispatches, "{times:?}");
+    let timed = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+    assert_eq!(times.kernel.is_some(), timed, "{times:?}");
+    if let Some(k) = times.kernel {
+        assert!(k > 0.0 && k <= wall.as_secs_f64(), "{times:?} in {wall:?}");
+    }
+    assert!(
+        times.setup > 0.0 && times.setup <= wall.as_secs_f64(),
+        "{times:?}"
+    );
+}
+
+#[test]
+fn processing_dispatches_hold_at_most_the_taps_of_one_dispatch() {
+    // 2²⁶ taps of 7 per voxel: 9,586,980 voxels per dispatch.
+    assert_eq!(gp::dispatches(9_586_980, 7), 1);
+    assert_eq!(gp::dispatches(9_586_981, 7), 2);
+    // At most 2²⁴ voxels, even of one tap each.
+    assert_eq!(gp::dispatches(1 << 25, 1), 2);
+    // At least one workgroup of 64, even past 2²⁶ taps per voxel.
+    assert_eq!(gp::dispatches(100, 1 << 30), 2);
+    assert_eq!(gp::dispatches(0, 7), 0);
 }
 
 #[test]

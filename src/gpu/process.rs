@@ -7,7 +7,10 @@
 //! invocation per output voxel, and reads the result back. The work is
 //! split into several dispatches of at most [`WORK_PER_DISPATCH`] kernel taps each,
 //! each submitted and waited for, so that no single dispatch runs long on a software
-//! rasteriser (lavapipe can lose the device past ~10 s).
+//! rasteriser (lavapipe can lose the device past ~10 s). Each operation compiles its
+//! pipeline once per call (not per slab); where the adapter has timestamp queries each
+//! dispatch is timed on the device, and the `*_planned` functions return the sum
+//! ([`ProcessTimings`]).
 //!
 //! What runs where:
 //! - resampling: `shaders/process_resample.wgsl` ports `cpu::filter::axis_taps` and
@@ -32,7 +35,7 @@
 //! f32 rounding); the shader keeps the unsplit map and only offsets the slices it
 //! indexes, so a split result equals the unsplit one bit for bit too.
 
-use super::context::GpuContext;
+use super::context::{GpuContext, TimestampPair};
 use super::plan::{binding_limit, count_of, Pieces};
 use crate::cpu::filter::prepare;
 use crate::cpu::grid::Grid;
@@ -129,14 +132,62 @@ fn upload(ctx: &GpuContext, label: &str, data: &[f32]) -> Result<wgpu::Buffer> {
         }))
 }
 
+/// What one processing call did on the device.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProcessTimings {
+    /// The output slabs (1 when the volume is not split).
+    pub slabs: usize,
+    /// Dispatches, each submitted and waited for: per slab and per pass,
+    /// [`dispatches`] of the pass's output voxels.
+    pub dispatches: usize,
+    /// Shader compilation and pipeline creation (wall clock, once per call).
+    pub setup: f64,
+    /// The dispatches alone on the device, summed, from timestamp queries; `None`
+    /// where the adapter has none.
+    pub kernel: Option<f64>,
+}
+
+impl ProcessTimings {
+    fn new(ctx: &GpuContext) -> Self {
+        ProcessTimings {
+            kernel: ctx
+                .features
+                .contains(wgpu::Features::TIMESTAMP_QUERY)
+                .then_some(0.0),
+            ..Default::default()
+        }
+    }
+
+    fn add_dispatch(&mut self, kernel: Option<f64>) {
+        self.dispatches += 1;
+        if let (Some(total), Some(k)) = (self.kernel.as_mut(), kernel) {
+            *total += k;
+        }
+    }
+}
+
+/// The dispatches [`Op::run_range`] splits `voxels` output voxels of `taps` kernel taps
+/// each into: at most [`WORK_PER_DISPATCH`] taps per dispatch, and between one
+/// workgroup and 2²⁴ voxels.
+pub fn dispatches(voxels: u64, taps: u64) -> usize {
+    voxels.div_ceil(voxels_per_dispatch(taps)) as usize
+}
+
+fn voxels_per_dispatch(taps: u64) -> u64 {
+    (WORK_PER_DISPATCH / taps.max(1)).clamp(WORKGROUP, 1 << 24)
+}
+
 /// One compiled operation.
 struct Op {
     pipeline: wgpu::ComputePipeline,
     params: wgpu::Buffer,
+    query: Option<TimestampPair>,
 }
 
 impl Op {
-    fn new(ctx: &GpuContext, name: &str, entry: &str) -> Result<Self> {
+    /// Compiles `entry` of `shaders/<name>.wgsl`, adding the time to `t.setup`.
+    fn new(ctx: &GpuContext, name: &str, entry: &str, t: &mut ProcessTimings) -> Result<Self> {
+        let start = std::time::Instant::now();
         let module = ctx.shader(entry, &shader_source(name))?;
         let pipeline = ctx
             .device
@@ -154,22 +205,27 @@ impl Op {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        Ok(Op { pipeline, params })
+        t.setup += start.elapsed().as_secs_f64();
+        Ok(Op {
+            pipeline,
+            params,
+            query: ctx.timestamps(),
+        })
     }
 
     /// Runs over every output voxel of `base.out_dims`, in dispatches of at most
-    /// [`WORK_PER_DISPATCH`] taps (`taps` per voxel), each waited for.
+    /// [`WORK_PER_DISPATCH`] taps (`taps` per voxel), each waited for and counted in
+    /// `t`.
     fn run(
         &self,
         ctx: &GpuContext,
         base: ProcessParams,
-        src: &wgpu::Buffer,
-        dst: &wgpu::Buffer,
-        extra: Option<&wgpu::Buffer>,
+        (src, dst, extra): (&wgpu::Buffer, &wgpu::Buffer, Option<&wgpu::Buffer>),
         taps: u64,
+        t: &mut ProcessTimings,
     ) -> Result<()> {
         let [nx, ny, nz, _] = base.out_dims.map(|x| x as u64);
-        self.run_range(ctx, base, (src, dst, extra), taps, 0..nx * ny * nz)
+        self.run_range(ctx, base, (src, dst, extra), (taps, 0..nx * ny * nz), t)
     }
 
     /// [`Self::run`] over the output voxels `voxels` (linear indices) alone.
@@ -178,11 +234,11 @@ impl Op {
         ctx: &GpuContext,
         base: ProcessParams,
         (src, dst, extra): (&wgpu::Buffer, &wgpu::Buffer, Option<&wgpu::Buffer>),
-        taps: u64,
-        voxels: Range<u64>,
+        (taps, voxels): (u64, Range<u64>),
+        t: &mut ProcessTimings,
     ) -> Result<()> {
         let total = voxels.end;
-        let per = (WORK_PER_DISPATCH / taps.max(1)).clamp(WORKGROUP, 1 << 24);
+        let per = voxels_per_dispatch(taps);
         let mut resources = vec![
             self.params.as_entire_binding(),
             src.as_entire_binding(),
@@ -208,18 +264,13 @@ impl Op {
             let groups = count.div_ceil(WORKGROUP);
             let x = groups.min(max_x);
             let y = groups.div_ceil(x);
-            let mut enc = ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("process"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups(x as u32, y as u32, 1);
-            }
-            ctx.queue.submit([enc.finish()]);
-            ctx.wait()?;
+            let kernel = ctx.run_pass(
+                (&self.pipeline, "process"),
+                std::slice::from_ref(&bind),
+                [x as u32, y as u32, 1],
+                self.query.as_ref(),
+            )?;
+            t.add_dispatch(kernel);
             first += count;
         }
         Ok(())
@@ -271,6 +322,20 @@ pub struct ResamplePlan {
 }
 
 impl ResamplePlan {
+    /// The plan for resampling `vol` as `spec` asks, under `limits` ([`Self::new`]
+    /// with the output → input map of [`resample_plan`]).
+    ///
+    /// # Errors
+    /// As [`resample_plan`] and [`Self::new`].
+    pub fn for_volume(
+        limits: &wgpu::Limits,
+        vol: &Volume<f32>,
+        spec: &ResampleSpec,
+    ) -> Result<Self> {
+        let (to_in, _) = resample_plan(vol.dims(), vol.affine(), spec)?;
+        Self::new(limits, vol.dims(), to_in, spec.dims, spec.filter)
+    }
+
     /// The plan for resampling a volume of `in_dims` onto `out_dims` through the
     /// output-index → input-index map `to_in` with `filter`, under `limits`: one piece
     /// when the input and the output each fit a binding; else the most output slices
@@ -433,12 +498,11 @@ fn input_slices(
 /// As the CPU version; also [`Error::Invalid`] for the full sinc,
 /// [`Error::TooLarge`] as [`ResamplePlan::new`], [`Error::Gpu`] on device failure.
 pub fn resample(ctx: &GpuContext, vol: &Volume<f32>, spec: &ResampleSpec) -> Result<Field<f32>> {
-    let (to_in, _) = resample_plan(vol.dims(), vol.affine(), spec)?;
-    let plan = ResamplePlan::new(&ctx.limits, vol.dims(), to_in, spec.dims, spec.filter)?;
-    resample_planned(ctx, vol, spec, &plan)
+    let plan = ResamplePlan::for_volume(&ctx.limits, vol, spec)?;
+    Ok(resample_planned(ctx, vol, spec, &plan)?.0)
 }
 
-/// [`resample`] in the slabs of `plan`.
+/// [`resample`] in the slabs of `plan`, with what it did on the device.
 ///
 /// # Errors
 /// As [`resample`]; [`Error::Invalid`] for a plan made for other output dimensions.
@@ -447,7 +511,7 @@ pub fn resample_planned(
     vol: &Volume<f32>,
     spec: &ResampleSpec,
     plan: &ResamplePlan,
-) -> Result<Field<f32>> {
+) -> Result<(Field<f32>, ProcessTimings)> {
     let (code, radius, taps) = filter_code(spec.filter)?;
     let (to_in, affine) = resample_plan(vol.dims(), vol.affine(), spec)?;
     if plan.slabs.total != spec.dims[2] || plan.inputs.len() != plan.slabs.count() {
@@ -476,7 +540,8 @@ pub fn resample_planned(
         vol.data().to_vec()
     };
     let [m0, m1, m2] = rows(to_in);
-    let op = Op::new(ctx, "process_resample", "resample")?;
+    let mut t = ProcessTimings::new(ctx);
+    let op = Op::new(ctx, "process_resample", "resample", &mut t)?;
     let in_slice = vol.dims()[0] * vol.dims()[1];
     let out_slice = spec.dims[0] * spec.dims[1];
     let mut data = Vec::with_capacity(n_out);
@@ -506,10 +571,11 @@ pub fn resample_planned(
             m2,
         };
         let voxels = first..first + out as u64;
-        op.run_range(ctx, p, (&src, &dst, None), taps, voxels)?;
+        op.run_range(ctx, p, (&src, &dst, None), (taps, voxels), &mut t)?;
         data.extend(read_f32(ctx, &dst, out)?);
     }
-    Ok(field(spec.dims, data, affine))
+    t.slabs = plan.slabs.count();
+    Ok((field(spec.dims, data, affine), t))
 }
 
 /// [`crate::cpu::process::gaussian`] on the GPU (f32): three separable passes.
@@ -517,13 +583,17 @@ pub fn resample_planned(
 /// # Errors
 /// As the CPU version; also [`Error::TooLarge`] past the storage-binding limit,
 /// [`Error::Gpu`] on device failure.
-fn gaussian_whole(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
-    check_sigma(sigma)?;
+fn gaussian_whole(
+    ctx: &GpuContext,
+    op: &Op,
+    vol: &Volume<f32>,
+    sigma: [f64; 3],
+    t: &mut ProcessTimings,
+) -> Result<Field<f32>> {
     let dims = vol.dims();
     let n = vol.len();
     let mut a = upload(ctx, "volume", vol.data())?;
     let mut b = ctx.storage_buffer("gaussian pass", check_binding(ctx, "volume", n)?)?;
-    let op = Op::new(ctx, "process_gaussian", "gaussian_pass")?;
     for (axis, &s) in sigma.iter().enumerate() {
         let w: Vec<f32> = gaussian_weights(s).iter().map(|&x| x as f32).collect();
         let wbuf = upload(ctx, "gaussian weights", &w)?;
@@ -533,19 +603,14 @@ fn gaussian_whole(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Resul
             op: [0, (w.len() / 2) as u32, axis as u32, 0],
             ..Default::default()
         };
-        op.run(ctx, p, &a, &b, Some(&wbuf), w.len() as u64)?;
+        op.run(ctx, p, (&a, &b, Some(&wbuf)), w.len() as u64, t)?;
         std::mem::swap(&mut a, &mut b);
     }
     Ok(field(dims, read_f32(ctx, &a, n)?, vol.affine()))
 }
 
-/// [`crate::cpu::process::median`] on the GPU (f32), windows up to
-/// [`MAX_MEDIAN_SIZE_GPU`].
-///
-/// # Errors
-/// [`Error::Invalid`] for an even `k` or `k` > 5; [`Error::TooLarge`] past the
-/// storage-binding limit; [`Error::Gpu`] on device failure.
-fn median_whole(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
+/// The GPU's median window: odd, from 1 to [`MAX_MEDIAN_SIZE_GPU`].
+fn check_median_size_gpu(k: usize) -> Result<()> {
     check_median_size(k, MAX_MEDIAN_SIZE_GPU).map_err(|_| {
         Error::invalid(
             "median window size",
@@ -554,7 +619,21 @@ fn median_whole(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f
                  (125 values per voxel); use --backend cpu for larger windows"
             ),
         )
-    })?;
+    })
+}
+
+/// [`crate::cpu::process::median`] on the GPU (f32), windows up to
+/// [`MAX_MEDIAN_SIZE_GPU`] (checked by the caller).
+///
+/// # Errors
+/// [`Error::TooLarge`] past the storage-binding limit; [`Error::Gpu`] on device failure.
+fn median_whole(
+    ctx: &GpuContext,
+    op: &Op,
+    vol: &Volume<f32>,
+    k: usize,
+    t: &mut ProcessTimings,
+) -> Result<Field<f32>> {
     let dims = vol.dims();
     let n = vol.len();
     let src = upload(ctx, "volume", vol.data())?;
@@ -566,7 +645,7 @@ fn median_whole(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f
         op: [k as u32, 0, 0, 0],
         ..Default::default()
     };
-    Op::new(ctx, "process_median", "median")?.run(ctx, p, &src, &dst, None, k3 * (k3 / 2 + 1))?;
+    op.run(ctx, p, (&src, &dst, None), k3 * (k3 / 2 + 1), t)?;
     Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
 }
 
@@ -574,7 +653,12 @@ fn median_whole(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f
 ///
 /// # Errors
 /// [`Error::TooLarge`] past the storage-binding limit; [`Error::Gpu`] on device failure.
-fn gradient_magnitude_whole(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
+fn gradient_magnitude_whole(
+    ctx: &GpuContext,
+    op: &Op,
+    vol: &Volume<f32>,
+    t: &mut ProcessTimings,
+) -> Result<Field<f32>> {
     let dims = vol.dims();
     let n = vol.len();
     let src = upload(ctx, "volume", vol.data())?;
@@ -588,7 +672,7 @@ fn gradient_magnitude_whole(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field
         m1,
         m2,
     };
-    Op::new(ctx, "process_gradient", "gradient_magnitude")?.run(ctx, p, &src, &dst, None, 7)?;
+    op.run(ctx, p, (&src, &dst, None), 7, t)?;
     Ok(field(dims, read_f32(ctx, &dst, n)?, vol.affine()))
 }
 
@@ -685,11 +769,13 @@ impl ProcessPlan {
         )
     }
 
-    /// Runs `op` on each input slab of `vol` and gathers the output slabs.
+    /// Runs `op` on each input slab of `vol` and gathers the output slabs; counts the
+    /// slabs in `t`.
     fn run(
         &self,
         vol: &Volume<f32>,
-        op: impl Fn(&Volume<f32>) -> Result<Field<f32>>,
+        t: &mut ProcessTimings,
+        mut op: impl FnMut(&Volume<f32>, &mut ProcessTimings) -> Result<Field<f32>>,
     ) -> Result<Field<f32>> {
         let [nx, ny, nz] = vol.dims();
         if self.slabs.total != nz {
@@ -698,8 +784,9 @@ impl ProcessPlan {
                 format!("made for {} slices, not {nz}", self.slabs.total),
             ));
         }
+        t.slabs = self.slabs.count();
         if !self.is_split() {
-            return op(vol);
+            return op(vol, t);
         }
         let slice = nx * ny;
         let mut data = vec![0f32; vol.len()];
@@ -711,7 +798,7 @@ impl ProcessPlan {
                 vol.affine(),
                 vol.data()[lo * slice..hi * slice].to_vec(),
             )?;
-            let out = op(&part)?;
+            let out = op(&part, t)?;
             let from = (slab.start - lo) * slice;
             data[slab.start * slice..slab.end * slice]
                 .copy_from_slice(&out.grid.data[from..from + slab.len() * slice]);
@@ -729,10 +816,10 @@ impl ProcessPlan {
 pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
     check_sigma(sigma)?;
     let plan = ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
-    gaussian_planned(ctx, vol, sigma, &plan)
+    Ok(gaussian_planned(ctx, vol, sigma, &plan)?.0)
 }
 
-/// [`gaussian`] in the slabs of `plan`.
+/// [`gaussian`] in the slabs of `plan`, with what it did on the device.
 ///
 /// # Errors
 /// As [`gaussian`].
@@ -741,8 +828,12 @@ pub fn gaussian_planned(
     vol: &Volume<f32>,
     sigma: [f64; 3],
     plan: &ProcessPlan,
-) -> Result<Field<f32>> {
-    plan.run(vol, |v| gaussian_whole(ctx, v, sigma))
+) -> Result<(Field<f32>, ProcessTimings)> {
+    check_sigma(sigma)?;
+    let mut t = ProcessTimings::new(ctx);
+    let op = Op::new(ctx, "process_gaussian", "gaussian_pass", &mut t)?;
+    let f = plan.run(vol, &mut t, |v, t| gaussian_whole(ctx, &op, v, sigma, t))?;
+    Ok((f, t))
 }
 
 /// [`crate::cpu::process::median`] on the GPU (f32), windows up to
@@ -753,10 +844,10 @@ pub fn gaussian_planned(
 /// [`ProcessPlan::new`]; [`Error::Gpu`] on device failure.
 pub fn median(ctx: &GpuContext, vol: &Volume<f32>, k: usize) -> Result<Field<f32>> {
     let plan = ProcessPlan::median(&ctx.limits, vol.dims(), k)?;
-    median_planned(ctx, vol, k, &plan)
+    Ok(median_planned(ctx, vol, k, &plan)?.0)
 }
 
-/// [`median`] in the slabs of `plan`.
+/// [`median`] in the slabs of `plan`, with what it did on the device.
 ///
 /// # Errors
 /// As [`median`].
@@ -765,8 +856,12 @@ pub fn median_planned(
     vol: &Volume<f32>,
     k: usize,
     plan: &ProcessPlan,
-) -> Result<Field<f32>> {
-    plan.run(vol, |v| median_whole(ctx, v, k))
+) -> Result<(Field<f32>, ProcessTimings)> {
+    check_median_size_gpu(k)?;
+    let mut t = ProcessTimings::new(ctx);
+    let op = Op::new(ctx, "process_median", "median", &mut t)?;
+    let f = plan.run(vol, &mut t, |v, t| median_whole(ctx, &op, v, k, t))?;
+    Ok((f, t))
 }
 
 /// [`crate::cpu::process::gradient_magnitude`] on the GPU (f32), in the slabs of
@@ -776,10 +871,10 @@ pub fn median_planned(
 /// [`Error::TooLarge`] as [`ProcessPlan::new`]; [`Error::Gpu`] on device failure.
 pub fn gradient_magnitude(ctx: &GpuContext, vol: &Volume<f32>) -> Result<Field<f32>> {
     let plan = ProcessPlan::gradient_magnitude(&ctx.limits, vol.dims())?;
-    gradient_magnitude_planned(ctx, vol, &plan)
+    Ok(gradient_magnitude_planned(ctx, vol, &plan)?.0)
 }
 
-/// [`gradient_magnitude`] in the slabs of `plan`.
+/// [`gradient_magnitude`] in the slabs of `plan`, with what it did on the device.
 ///
 /// # Errors
 /// As [`gradient_magnitude`].
@@ -787,6 +882,9 @@ pub fn gradient_magnitude_planned(
     ctx: &GpuContext,
     vol: &Volume<f32>,
     plan: &ProcessPlan,
-) -> Result<Field<f32>> {
-    plan.run(vol, |v| gradient_magnitude_whole(ctx, v))
+) -> Result<(Field<f32>, ProcessTimings)> {
+    let mut t = ProcessTimings::new(ctx);
+    let op = Op::new(ctx, "process_gradient", "gradient_magnitude", &mut t)?;
+    let f = plan.run(vol, &mut t, |v, t| gradient_magnitude_whole(ctx, &op, v, t))?;
+    Ok((f, t))
 }

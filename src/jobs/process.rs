@@ -204,7 +204,7 @@ fn prepare(
 /// As [`run`] up to the work; [`Error::TooLarge`] for a job that cannot fit even
 /// split.
 pub fn plan(a: &ProcessRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
-    use crate::gpu::process::ProcessPlan;
+    use crate::gpu::process::{ProcessPlan, ResamplePlan};
     let (vol, sigma, spec, what) = prepare(a, progress)?;
     let voxels = vol.len() as u64;
     let out_voxels = spec.map_or(voxels, |s| s.dims.iter().product::<usize>() as u64);
@@ -231,7 +231,7 @@ pub fn plan(a: &ProcessRequest, progress: &dyn Progress) -> Result<super::plan::
                 // Resampling: each output slab and the input slices it reads.
                 None => {
                     let spec = spec.as_ref().expect("spec");
-                    let r = resample_split(ctx, &vol, spec)?;
+                    let r = ResamplePlan::for_volume(&ctx.limits, &vol, spec)?;
                     let input = r.largest_input() as u64 * slice;
                     let out = (r.slabs.per_piece * spec.dims[0] * spec.dims[1]) as u64 * 4;
                     let split = if r.is_split() {
@@ -287,27 +287,27 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
                 match a.op {
                     Op::Resample => {
                         let spec = spec.expect("spec");
-                        let plan = resample_split(ctx, &vol, &spec)?;
+                        let plan = gp::ResamplePlan::for_volume(&ctx.limits, &vol, &spec)?;
                         if plan.is_split() {
                             progress.note(&plan.describe());
                         }
-                        gp::resample_planned(ctx, &vol, &spec, &plan)
+                        gp::resample_planned(ctx, &vol, &spec, &plan).map(|(f, _)| f)
                     }
                     Op::Gaussian => {
                         let sigma = sigma.expect("sigma");
                         let plan = gp::ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
                         note_split(progress, &plan);
-                        gp::gaussian_planned(ctx, &vol, sigma, &plan)
+                        gp::gaussian_planned(ctx, &vol, sigma, &plan).map(|(f, _)| f)
                     }
                     Op::Median => {
                         let plan = gp::ProcessPlan::median(&ctx.limits, vol.dims(), a.size)?;
                         note_split(progress, &plan);
-                        gp::median_planned(ctx, &vol, a.size, &plan)
+                        gp::median_planned(ctx, &vol, a.size, &plan).map(|(f, _)| f)
                     }
                     Op::GradientMagnitude => {
                         let plan = gp::ProcessPlan::gradient_magnitude(&ctx.limits, vol.dims())?;
                         note_split(progress, &plan);
-                        gp::gradient_magnitude_planned(ctx, &vol, &plan)
+                        gp::gradient_magnitude_planned(ctx, &vol, &plan).map(|(f, _)| f)
                     }
                 }
             }
@@ -333,16 +333,6 @@ pub fn run(a: &ProcessRequest, progress: &dyn Progress) -> Result<Processed> {
         seconds: t.elapsed().as_secs_f64(),
         engine,
     })
-}
-
-/// How the GPU resamples `vol` under the context's limits.
-fn resample_split(
-    ctx: &crate::gpu::GpuContext,
-    vol: &crate::volume::Volume<f32>,
-    spec: &cp::ResampleSpec,
-) -> Result<crate::gpu::process::ResamplePlan> {
-    let (to_in, _) = cp::resample_plan(vol.dims(), vol.affine(), spec)?;
-    crate::gpu::process::ResamplePlan::new(&ctx.limits, vol.dims(), to_in, spec.dims, spec.filter)
 }
 
 /// Tells the user how a split GPU operation is cut.
