@@ -119,9 +119,11 @@ fn tap_weight(filter_kind: u32, f: f32, m: u32) -> f32 {
 
 // p in the whole volume's index space; a brick's texture starts at params.brick.xyz
 // (0 for a whole volume). mirrors src/cpu/field.rs: BrickField::value (the subtraction
-// is exact for the points a brick samples).
+// is exact for the points a brick samples). volume_value (generated with sample_tex)
+// maps a compact texture's normalised sample back to the raw value; otherwise it is
+// the identity.
 fn sample_value(p: vec3<f32>) -> f32 {
-    return sample_tex(volume, p - params.brick.xyz).x;
+    return volume_value(sample_tex(volume, p - params.brick.xyz).x);
 }
 
 // ---------------------------------------------------------------- gradients

@@ -93,7 +93,7 @@ fn every_generated_shader_validates() {
                     precompute_gradients: precompute,
                     ..RenderSettings::default()
                 };
-                let src = voxlab::gpu::raycast::raycast_shader(&s);
+                let src = voxlab::gpu::raycast::raycast_shader(&s, None);
                 let module = naga::front::wgsl::parse_str(&src)
                     .unwrap_or_else(|e| panic!("{filter:?}: {}", e.emit_to_string(&src)));
                 naga::valid::Validator::new(
@@ -104,6 +104,33 @@ fn every_generated_shader_validates() {
                 .unwrap_or_else(|e| panic!("{filter:?} {gradient:?}: {e:?}"));
                 n += 1;
             }
+        }
+    }
+    // The hardware paths over compact (8/16-bit normalised) volume textures.
+    for compact in [(255, 0), (65535, 0), (65535, -32768)] {
+        let (range, offset) = compact;
+        let c = voxlab::gpu::raycast::CompactVolume { range, offset };
+        for filter in [Filter::Trilinear, Filter::BsplineFast] {
+            let s = RenderSettings {
+                filter,
+                hardware_filtering: true,
+                ..RenderSettings::default()
+            };
+            let src = voxlab::gpu::raycast::raycast_shader(&s, Some(c));
+            let map = match compact {
+                (255, 0) => "return s * 255.0;",
+                (65535, 0) => "return s * 65535.0;",
+                _ => "return s * 65535.0 - 32768.0;",
+            };
+            assert!(src.contains(map), "{c:?}");
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("{c:?}: {}", e.emit_to_string(&src)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{c:?} {filter:?}: {e:?}"));
         }
     }
     let prepare = voxlab::gpu::raycast::prepare_shader();
@@ -129,7 +156,7 @@ fn mode_shader_variants_validate() {
                 filter,
                 ..RenderSettings::default()
             };
-            let src = voxlab::gpu::raycast::raycast_shader(&s);
+            let src = voxlab::gpu::raycast::raycast_shader(&s, None);
             assert!(src.contains("fn cast_mida(") && src.contains("fn in_shadow("));
             let module = naga::front::wgsl::parse_str(&src)
                 .unwrap_or_else(|e| panic!("{mode:?} {filter:?}: {}", e.emit_to_string(&src)));

@@ -178,6 +178,25 @@ const HARDWARE_DVR: Tolerance = Tolerance {
     ..Tolerance::NONE
 };
 
+/// A compact (`R16Unorm`) texture's hardware frame against the `R32Float` texture's on
+/// lavapipe, which filters both in f32: the only difference is the normalised texel
+/// `u / 65535` rounded to f32 (2⁻²⁴ relative) and mapped back with `· range + offset`,
+/// about 65535 · 2⁻²⁴ ≈ 3.9e-3 raw units per texel. Scalar modes relative to the
+/// image's peak, DVR on [0, 1] RGBA through the `phantom` preset's opacity bands.
+/// Measured (u8, u16, i16 phantoms of 26×29×24, 48×36): MIP max |Δ|/peak 1.2e-7 (u8),
+/// 1.3e-7 (u16), 5.6e-7 (i16: its peak, 10 000, is a sixth of the type's range),
+/// RMSE/peak ≤ 6.8e-8; DVR max |Δ| ≤ 2.6e-6, RMSE ≤ 8.3e-8. Bounds: about 4–7× the worst.
+const COMPACT_SCALAR: Tolerance = Tolerance {
+    max_abs: 4e-6,
+    rmse: 4e-7,
+    ..Tolerance::NONE
+};
+const COMPACT_DVR: Tolerance = Tolerance {
+    max_abs: 1e-5,
+    rmse: 4e-7,
+    ..Tolerance::NONE
+};
+
 /// Renders a case on the oracle and the GPU and checks parity of the image and of the
 /// samples-per-ray image.
 fn check(name: &str, case: Case, n: usize, size: usize, tol: Tolerance) {
@@ -438,7 +457,8 @@ fn a_session_renders_every_frame_like_a_one_shot_render() {
         ("first settings again", tf1.clone(), turned(240.0), base.clone(), (0, 3, 1)),
     ];
     let mut session = RaycastSession::new(ctx, &vol).unwrap();
-    assert_eq!(session.stats().volume_uploads, 1);
+    // The first frame uploads the volume.
+    assert_eq!(session.stats().volume_uploads, 0);
     let mut before = made(session.stats());
     for (i, (what, tf, cam, s)) in frames
         .iter()
@@ -488,6 +508,175 @@ fn a_session_renders_every_frame_like_a_one_shot_render() {
         };
         let e = common::assert_parity(&name, &cpu.image, &got.output.image, tol);
         eprintln!("{what}: max |Δ| {:.2e} against the oracle", e.max_abs);
+    }
+}
+
+/// The Shepp–Logan head as an integer volume: `round(v · scale) + offset`.
+fn integer_phantom(dims: [usize; 3], scale: f64, offset: f64) -> Vec<f64> {
+    let ph = Phantom::shepp_logan_modified().sample(dims).unwrap();
+    ph.data()
+        .iter()
+        .map(|&v| (f64::from(v) * scale).round() + offset)
+        .collect()
+}
+
+/// Hardware-filtered frames of u8, u16 and i16 volumes read an `R16Unorm` texture (2
+/// bytes per voxel, and nothing else of the volume on the device), give
+/// the f64 oracle's image within the hardware path's bounds, and on lavapipe (which
+/// filters in f32) the `R32Float` texture's image within rounding. An exact frame then
+/// adds the `R32Float` texture. The skipping grid, built on the CPU when the session has
+/// no `R32Float` texture, equals the GPU-built one (the frames agree bit for bit).
+#[test]
+fn hardware_frames_of_integer_volumes_read_compact_textures() {
+    use voxlab::gpu::raycast::{CompactVolume, RaycastSession};
+    use voxlab::Volume;
+    let Some(ctx) = common::gpu("hardware_frames_of_integer_volumes_read_compact_textures") else {
+        return;
+    };
+    let dims = [26, 29, 24];
+    let n = (dims[0] * dims[1] * dims[2]) as u64;
+    let norm16 = ctx
+        .features
+        .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
+    // (name, volume, scale, offset, compact form)
+    let mut cases: Vec<(&str, AnyVolume, f64, f64, Option<CompactVolume>)> = vec![(
+        "u8",
+        Volume::new(
+            dims,
+            [1.0; 3],
+            integer_phantom(dims, 250.0, 0.0)
+                .iter()
+                .map(|&v| v as u8)
+                .collect(),
+        )
+        .unwrap()
+        .into(),
+        250.0,
+        0.0,
+        norm16.then_some(CompactVolume {
+            range: 255,
+            offset: 0,
+        }),
+    )];
+    let u16s = integer_phantom(dims, 60000.0, 0.0)
+        .iter()
+        .map(|&v| v as u16)
+        .collect();
+    let i16s = integer_phantom(dims, 20000.0, -10000.0)
+        .iter()
+        .map(|&v| v as i16)
+        .collect();
+    cases.push((
+        "u16",
+        Volume::new(dims, [1.0; 3], u16s).unwrap().into(),
+        60000.0,
+        0.0,
+        norm16.then_some(CompactVolume {
+            range: 65535,
+            offset: 0,
+        }),
+    ));
+    cases.push((
+        "i16",
+        Volume::new(dims, [1.0; 3], i16s).unwrap().into(),
+        20000.0,
+        -10000.0,
+        norm16.then_some(CompactVolume {
+            range: 65535,
+            offset: -32768,
+        }),
+    ));
+    let cam = Camera::orbit(
+        DVec3::new(12.5, 14.0, 11.5),
+        [26.0, 29.0, 24.0],
+        Orbit {
+            azimuth_deg: 30.0,
+            elevation_deg: 20.0,
+            distance_mm: Some(80.0),
+        },
+        Projection::Perspective { fov_y_deg: 30.0 },
+        48,
+        36,
+    )
+    .unwrap();
+    for (name, vol, scale, offset, compact) in cases {
+        assert_eq!(CompactVolume::of(ctx, &vol), compact, "{name}");
+        let mut tf = TransferFunction::preset("phantom").unwrap();
+        tf.window = voxlab::transfer::WindowMap {
+            a: 1.0 / scale,
+            b: -offset / scale,
+        };
+        for mode in [Mode::Dvr, Mode::Mip] {
+            let hw = RenderSettings {
+                mode,
+                hardware_filtering: true,
+                sample_count: true,
+                ..RenderSettings::default()
+            };
+            let what = format!("{name} {mode:?}");
+            let mut fast = RaycastSession::new(ctx, &vol).unwrap();
+            let got = fast.render(&tf, &cam, &hw, &|_, _| {}).unwrap().output;
+            let bytes = compact.map_or(4, |_| CompactVolume::BYTES_PER_VOXEL);
+            assert_eq!(
+                (fast.stats().volume_uploads, fast.stats().volume_bytes),
+                (1, bytes * n),
+                "{what}"
+            );
+            let mut wide = RaycastSession::new(ctx, &vol).unwrap();
+            wide.set_compact_textures(false);
+            let want = wide.render(&tf, &cam, &hw, &|_, _| {}).unwrap().output;
+            assert_eq!(wide.stats().volume_bytes, 4 * n, "{what}");
+            let cpu =
+                voxlab::cpu::raycast::render::<f64>(&vol, &tf, &cam, &hw, &|_, _| {}).unwrap();
+            let peak = cpu.image.data.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+            let (hardware, lavapipe) = match mode {
+                Mode::Dvr => (HARDWARE_DVR, COMPACT_DVR),
+                _ => (HARDWARE_SCALAR.scaled(peak), COMPACT_SCALAR.scaled(peak)),
+            };
+            common::assert_parity(
+                &format!("compact_{name}_{mode:?}"),
+                &cpu.image,
+                &got.image,
+                hardware,
+            );
+            let e = common::assert_parity(
+                &format!("compact_vs_r32_{name}_{mode:?}"),
+                &want.image,
+                &got.image,
+                if ctx.summary.is_cpu() {
+                    lavapipe
+                } else {
+                    hardware
+                },
+            );
+            eprintln!(
+                "{what}: compact against R32Float max |Δ| {:.2e}, rmse {:.2e}",
+                e.max_abs, e.rmse
+            );
+            // An exact frame reads the R32Float texture: uploaded now, beside the other.
+            let exact = RenderSettings {
+                hardware_filtering: false,
+                ..hw.clone()
+            };
+            fast.render(&tf, &cam, &exact, &|_, _| {}).unwrap();
+            let stats = fast.stats();
+            let both = if compact.is_some() {
+                (2, (4 + bytes) * n)
+            } else {
+                (1, 4 * n)
+            };
+            assert_eq!((stats.volume_uploads, stats.volume_bytes), both, "{what}");
+            // A session whose skipping grid came from the R32Float texture on the GPU
+            // (the exact frame first) draws the hardware frame bit for bit as the one
+            // whose grid the CPU built.
+            let mut gpu_grid = RaycastSession::new(ctx, &vol).unwrap();
+            gpu_grid.render(&tf, &cam, &exact, &|_, _| {}).unwrap();
+            let again = gpu_grid.render(&tf, &cam, &hw, &|_, _| {}).unwrap().output;
+            assert!(
+                frame_bits(&again) == frame_bits(&got),
+                "{what}: skipping grids differ"
+            );
+        }
     }
 }
 

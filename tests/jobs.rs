@@ -395,7 +395,8 @@ fn a_repeated_gpu_render_uploads_the_volume_once() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("the volume uploaded 1 time(s) for 3 frames"),
+        // 24³ f32 voxels: 55,296 bytes.
+        stderr(&o).contains("the volume uploaded 1 time(s) (54.0 KiB on the device) for 3 frames"),
         "{}",
         stderr(&o)
     );

@@ -619,13 +619,15 @@ class PreparedScene:
 
     It holds the library's own copy of the volume, taken when it was prepared (later
     changes to the caller's array do not reach it). On the GPU it keeps a render
-    session: the volume is uploaded once, and each :meth:`render` makes again only what
-    its options changed since the last frame (a new camera uploads nothing; a new
-    transfer function uploads its lookup table; a new filter, mode or shading compiles
-    its shader once). Each frame equals :func:`render` of the same volume and options,
-    bit for bit. ``result.info["gpu_session"]`` counts what the session has done
-    (``volume_uploads``, ``table_uploads``, ``pipelines_compiled``, ``prepare_passes``,
-    ``frames``), ``result.gpu_timings`` what the frame did (``upload`` is 0 for a frame
+    session: the volume is uploaded once (by the first frame; a hardware-filtered frame
+    of a uint8, uint16 or int16 volume uploads it as a 16-bit texture, an exact frame as
+    float32), and each :meth:`render` makes again only what its options changed since
+    the last frame (a new camera uploads nothing; a new transfer function uploads its
+    lookup table; a new filter, mode or shading compiles its shader once). Each frame
+    equals :func:`render` of the same volume and options, bit for bit.
+    ``result.info["gpu_session"]`` counts what the session has done
+    (``volume_uploads``, ``volume_bytes`` on the device, ``table_uploads``,
+    ``pipelines_compiled``, ``prepare_passes``, ``frames``), ``result.gpu_timings`` what the frame did (``upload`` is 0 for a frame
     that uploaded nothing). On the CPU backends the conversion is kept for frames of
     the same filter and gradients (another filter converts again).
 

@@ -59,6 +59,33 @@ pub fn raycast_scene(n: usize, size: usize) -> Result<(AnyVolume, TransferFuncti
     Ok((vol, tf, cam))
 }
 
+/// The suffix of the variants whose phantom is quantised to u16 ([`u16_scene`]).
+pub const U16_SUFFIX: &str = "-u16";
+
+/// [`raycast_scene`] with the phantom quantised to u16, `round(v · 60000)`, and the
+/// transfer function's window map scaled to match (`a = 1/60000`): the same picture,
+/// an integer volume, which the GPU's hardware path samples from a 16-bit texture
+/// (`gpu::raycast::CompactVolume`).
+///
+/// # Errors
+/// As [`raycast_scene`].
+pub fn u16_scene(n: usize, size: usize) -> Result<(AnyVolume, TransferFunction, Camera)> {
+    const SCALE: f64 = 60000.0;
+    let (vol, mut tf, cam) = raycast_scene(n, size)?;
+    let v = vol.to_f32();
+    let data = v
+        .data()
+        .iter()
+        .map(|&x| (f64::from(x) * SCALE).round() as u16)
+        .collect();
+    let vol = crate::volume::Volume::with_affine(v.dims(), v.affine(), data)?.into();
+    tf.window = crate::transfer::WindowMap {
+        a: 1.0 / SCALE,
+        b: 0.0,
+    };
+    Ok((vol, tf, cam))
+}
+
 /// The ray caster's benchmark variants, by name: the settings of each.
 pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
     let with = |f: &dyn Fn(&mut RenderSettings)| {
@@ -80,6 +107,11 @@ pub fn raycast_variants() -> Vec<(&'static str, RenderSettings)> {
         ),
         (
             "dvr-shaded-hardware-trilinear",
+            with(&|s| s.hardware_filtering = true),
+        ),
+        // The same on a u16 volume: the hardware path samples a 16-bit texture.
+        (
+            "dvr-shaded-hardware-trilinear-u16",
             with(&|s| s.hardware_filtering = true),
         ),
         // The cubic B-spline: 64 taps, 8 manual trilinear fetches, 8 texture-unit
@@ -298,6 +330,7 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-unshaded-trilinear", 24, 32),
             ("dvr-shaded-catmull-rom", 24, 32),
             ("dvr-shaded-hardware-trilinear", 24, 32),
+            ("dvr-shaded-hardware-trilinear-u16", 24, 32),
             ("mip-trilinear", 24, 32),
             ("minip-trilinear", 24, 32),
             ("xray-trilinear", 24, 32),
@@ -315,6 +348,8 @@ fn raycast_grid(suite: Suite) -> Vec<(&'static str, usize, usize)> {
             ("dvr-unshaded-trilinear", 256, 512),
             ("dvr-shaded-catmull-rom", 256, 512),
             ("dvr-shaded-hardware-trilinear", 256, 512),
+            ("dvr-shaded-hardware-trilinear-u16", 256, 512),
+            ("dvr-shaded-hardware-trilinear-u16", 512, 1024),
             ("dvr-shaded-bspline", 256, 512),
             ("dvr-shaded-cubic-bspline-fast", 256, 512),
             ("dvr-shaded-cubic-bspline-fast-hardware", 256, 512),
@@ -400,6 +435,8 @@ fn prepare_raycast(
 ) -> Result<Prepared> {
     let (vol, tf, cam) = if name.starts_with("microct") {
         microct_scene(size)?
+    } else if name.ends_with(U16_SUFFIX) {
+        u16_scene(n, size)?
     } else {
         raycast_scene(n, size)?
     };
@@ -436,6 +473,9 @@ fn prepare_raycast(
     }) as super::GpuFn;
     let subject = if name.starts_with("microct") {
         "the bundled micro-CT bone scan (128³ u8), `microct-bone` TF"
+    } else if name.ends_with(U16_SUFFIX) {
+        "Shepp–Logan (modified) quantised to u16 (round(v · 60000); the GPU's hardware \
+         path samples a 16-bit texture), `phantom` TF windowed to match"
     } else {
         "Shepp–Logan (modified), `phantom` TF"
     };

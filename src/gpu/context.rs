@@ -400,6 +400,35 @@ impl GpuContext {
         );
     }
 
+    /// Uploads voxels (x fastest) of a one-channel `format` (`R8Unorm`, `R16Unorm`, …),
+    /// given as their texel bytes, into a 3D texture.
+    ///
+    /// # Errors
+    /// As [`Self::upload_volume_r32`]; [`Error::Invalid`] when `bytes` is not one texel
+    /// per voxel.
+    pub fn upload_volume_texels(
+        &self,
+        dims: [usize; 3],
+        format: wgpu::TextureFormat,
+        bytes: &[u8],
+    ) -> Result<wgpu::Texture> {
+        let texel = format.block_copy_size(None).unwrap_or(0) as usize;
+        if texel == 0 || bytes.len() != dims.iter().product::<usize>() * texel {
+            return Err(Error::invalid(
+                "volume texels",
+                format!("{} bytes for {dims:?} voxels of {format:?}", bytes.len()),
+            ));
+        }
+        let tex = self.texture_3d(
+            "volume",
+            dims,
+            format,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        )?;
+        self.write_texture_3d(&tex, dims, bytes, texel);
+        Ok(tex)
+    }
+
     /// Uploads f32 voxels (x fastest) into an `R32Float` 3D texture.
     pub fn upload_volume_r32(&self, dims: [usize; 3], data: &[f32]) -> Result<wgpu::Texture> {
         let tex = self.texture_3d(

@@ -65,15 +65,16 @@ pub fn min_max_buffer(
     block: usize,
     radius: usize,
 ) -> Result<wgpu::Buffer> {
-    min_max_buffer_with(ctx, &mut None, volume, values, block, radius)
+    min_max_buffer_with(ctx, &mut None, Some(volume), values, block, radius)
 }
 
 /// [`min_max_buffer`] with the pipeline kept in `pipeline`: compiled there on first use
-/// (and left `None` when the CPU builds the grid).
+/// (and left `None` when the CPU builds the grid). Without `volume` (no `R32Float`
+/// texture of the values on the device) the CPU builds it.
 pub fn min_max_buffer_with(
     ctx: &GpuContext,
     pipeline: &mut Option<MinMaxPipeline>,
-    volume: &wgpu::Texture,
+    volume: Option<&wgpu::Texture>,
     values: &Grid<f32>,
     block: usize,
     radius: usize,
@@ -82,7 +83,8 @@ pub fn min_max_buffer_with(
     let cells = cell_count(dims, block);
     let n_cells = cells[0] * cells[1] * cells[2];
     let foot = (block + 2 * radius + 2).min(dims.into_iter().max().unwrap_or(1));
-    if ctx.summary.is_cpu() && foot.pow(3) / 64 > MAX_PER_INVOCATION {
+    let too_long = ctx.summary.is_cpu() && foot.pow(3) / 64 > MAX_PER_INVOCATION;
+    let Some(volume) = volume.filter(|_| !too_long) else {
         let g = crate::cpu::skip::min_max_grid(values, block, radius);
         return Ok(ctx
             .device
@@ -91,7 +93,7 @@ pub fn min_max_buffer_with(
                 contents: bytemuck::cast_slice(&g.minmax),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             }));
-    }
+    };
     let dev = &ctx.device;
     let MinMaxPipeline { layout, pipeline } = match pipeline {
         Some(p) => p,

@@ -505,10 +505,11 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
                 let uploads: Vec<String> =
                     f.gpu_uploads.iter().map(|u| format!("{u:.4}")).collect();
                 eprintln!(
-                    "GPU session: the volume uploaded {} time(s) for {} frames, {} table \
-                     upload(s), {} pipeline(s) compiled, {} set-up pass(es); upload seconds \
-                     per frame: {}",
+                    "GPU session: the volume uploaded {} time(s) ({} on the device) for {} \
+                     frames, {} table upload(s), {} pipeline(s) compiled, {} set-up \
+                     pass(es); upload seconds per frame: {}",
                     g.volume_uploads,
+                    voxlab::gpu::plan::human_bytes(g.volume_bytes),
                     g.frames,
                     g.table_uploads,
                     g.pipelines_compiled,
