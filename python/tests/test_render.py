@@ -257,6 +257,20 @@ def test_gpu_renders_match_the_oracle(gpu):
     np.testing.assert_allclose(x, a.astype(np.float64).sum(axis=0), rtol=0, atol=5e-5 * a.shape[0])
 
 
+def test_hardware_frames_of_a_uint16_volume_hold_two_bytes_per_voxel(gpu):
+    # A uint16 volume: hardware-filtered frames read a 16-bit texture alone; an exact
+    # frame adds the float32 one.
+    v = np.round(voxlab.phantom("shepp-logan-modified", 24).array * 60000).astype(np.uint16)
+    scene = gpu.prepare(v, width=32, height=24)
+    n = v.size
+    fast = scene.render(azimuth=30.0, hardware_filtering=True).info["gpu_session"]
+    assert (fast["volume_uploads"], fast["volume_bytes"]) == (1, 2 * n), fast
+    scene.render(azimuth=30.0, hardware_filtering=True, mode="mip")
+    assert scene.session_stats()["volume_bytes"] == 2 * n
+    exact = scene.render(azimuth=30.0).info["gpu_session"]
+    assert (exact["volume_uploads"], exact["volume_bytes"]) == (2, 6 * n), exact
+
+
 def test_a_prepared_gpu_scene_renders_like_render_and_uploads_once(gpu):
     v = voxlab.phantom("shepp-logan-modified", 32)
     scene = gpu.prepare(v, width=40, height=30, samples=True)
