@@ -680,6 +680,64 @@ fn hardware_frames_of_integer_volumes_read_compact_textures() {
     }
 }
 
+/// `render --dry-run`'s device plan counts the volume textures a frame reads: 4 bytes a
+/// voxel (R32Float) on the exact path, 2 (R16Unorm) on the hardware path of a u16
+/// volume, 6 when a hardware frame also makes pre-classified colours on the GPU (and 16
+/// for those colours, an `Rgba32Float` volume; as many again for precomputed gradients).
+#[test]
+fn the_render_plan_counts_the_volume_textures_a_frame_reads() {
+    use voxlab::jobs::input::VolumeInput;
+    use voxlab::jobs::render::{plan, RenderRequest, SceneRequest};
+    let Some(ctx) = common::gpu("the_render_plan_counts_the_volume_textures_a_frame_reads") else {
+        return;
+    };
+    let dims = [20, 18, 16];
+    let n = (dims[0] * dims[1] * dims[2]) as u64;
+    let v: AnyVolume = voxlab::Volume::new(
+        dims,
+        [1.0; 3],
+        integer_phantom(dims, 60000.0, 0.0)
+            .iter()
+            .map(|&x| x as u16)
+            .collect(),
+    )
+    .unwrap()
+    .into();
+    let peak = |hardware: bool, classification: Classification, gradients: bool| {
+        let req = RenderRequest {
+            scene: SceneRequest {
+                input: VolumeInput {
+                    source: "array".into(),
+                    memory: Some(std::sync::Arc::new(v.clone())),
+                    ..VolumeInput::default()
+                },
+                width: Some(8),
+                height: Some(8),
+                hardware_filtering: hardware,
+                classification,
+                precompute_gradients: gradients,
+                ..SceneRequest::default()
+            },
+            backend: voxlab::jobs::Backend::Gpu,
+            ..RenderRequest::default()
+        };
+        plan(&req, &()).unwrap().device.unwrap().peak_bytes
+    };
+    // The image's output buffers: 20 bytes a pixel.
+    let image = 8 * 8 * 20;
+    let norm16 = ctx
+        .features
+        .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
+    let (post, pre) = (Classification::Post, Classification::Pre);
+    assert_eq!(peak(false, post, false), 4 * n + image);
+    assert_eq!(peak(false, pre, false), (4 + 16) * n + image);
+    assert_eq!(peak(false, post, true), (4 + 16) * n + image);
+    let (hw, hw_pre) = if norm16 { (2, 6) } else { (4, 4) };
+    assert_eq!(peak(true, post, false), hw * n + image);
+    assert_eq!(peak(true, pre, false), (hw_pre + 16) * n + image);
+    assert_eq!(peak(true, pre, true), (hw_pre + 32) * n + image);
+}
+
 /// Orbiting the camera with everything else unchanged uploads nothing and prepares
 /// nothing after the first frame, and the first frame reports the volume's upload.
 #[test]

@@ -306,6 +306,11 @@ impl CompactVolume {
         bytemuck::cast_slice(&t).to_vec()
     }
 
+    /// Whether sessions use compact textures: unless `VOXLAB_GPU_F32_TEXTURES=1`.
+    pub fn enabled() -> bool {
+        std::env::var_os("VOXLAB_GPU_F32_TEXTURES").is_none_or(|v| v != "1")
+    }
+
     /// WGSL of `volume_value(s)`: the raw value of a sample `s` of the texture.
     pub fn wgsl(self) -> String {
         let range = self.range;
@@ -314,6 +319,35 @@ impl CompactVolume {
             o => format!("    return s * {range}.0 - {}.0;\n", -o),
         }
     }
+}
+
+/// Whether a frame of `settings` samples pre-classified colours.
+pub fn preclassifies(settings: &RenderSettings) -> bool {
+    matches!(settings.mode, Mode::Dvr | Mode::Mida)
+        && settings.classification == Classification::Pre
+}
+
+/// Whether a frame of `settings` reads the precomputed gradient volume.
+pub fn reads_gradient_volume(settings: &RenderSettings) -> bool {
+    settings.mode.rgba()
+        && (settings.shading.enabled || settings.transfer_2d.is_some())
+        && settings.precompute_gradients
+}
+
+/// The textures of the volume's raw values that a frame of `settings` reads, for a
+/// volume whose compact form (where sessions use one) is `compact`: whether the
+/// `R32Float` one (the exact path, and the set-up passes that make pre-classified
+/// colours or gradients on the GPU), and the compact one on the hardware path. A
+/// prefiltered filter reads neither: it samples the B-spline coefficients.
+pub fn volume_textures(
+    settings: &RenderSettings,
+    compact: Option<CompactVolume>,
+) -> (bool, Option<CompactVolume>) {
+    let prefiltered = settings.filter.prefiltered();
+    let compact = compact.filter(|_| settings.hardware_filtering && !prefiltered);
+    let exact = !prefiltered
+        && (compact.is_none() || preclassifies(settings) || reads_gradient_volume(settings));
+    (exact, compact)
 }
 
 /// WGSL of `sample_tex(t, p)` with only the render's reconstruction path (the filter
@@ -529,12 +563,9 @@ pub fn raycast_params(
             filter_id(settings.filter)?,
         ],
         flags: [
-            (matches!(settings.mode, Mode::Dvr | Mode::Mida)
-                && settings.classification == Classification::Pre) as u32,
+            preclassifies(settings) as u32,
             (settings.mode.rgba() && s.enabled) as u32,
-            (settings.mode.rgba()
-                && (s.enabled || settings.transfer_2d.is_some())
-                && settings.precompute_gradients) as u32,
+            reads_gradient_volume(settings) as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
         ],
         flags2: [gradient, hardware as u32, 0, camera.height as u32],
@@ -1075,7 +1106,7 @@ impl<'c> RaycastSession<'c> {
             grid,
             volume: None,
             compact_kind: CompactVolume::of(ctx, volume),
-            compact_on: std::env::var_os("VOXLAB_GPU_F32_TEXTURES").is_none_or(|v| v != "1"),
+            compact_on: CompactVolume::enabled(),
             compact: None,
             filterable,
             layout,
@@ -1135,13 +1166,6 @@ impl<'c> RaycastSession<'c> {
     /// `VOXLAB_GPU_F32_TEXTURES=1`) or the `R32Float` one.
     pub fn set_compact_textures(&mut self, on: bool) {
         self.compact_on = on;
-    }
-
-    /// The compact texture a frame of `settings` samples, if any: hardware filtering
-    /// of the raw values (not of B-spline coefficients) of an 8- or 16-bit volume.
-    fn compact_for(&self, settings: &RenderSettings) -> Option<CompactVolume> {
-        let hardware = settings.hardware_filtering && !settings.filter.prefiltered();
-        self.compact_kind.filter(|_| hardware && self.compact_on)
     }
 
     /// Uploads the volume's textures that a frame needs and the session lacks: the
@@ -1270,7 +1294,8 @@ impl<'c> RaycastSession<'c> {
         let precomputed = params.flags[2] == 1;
         let skipping = params.accel[0] == 1;
         let prefiltered = settings.filter.prefiltered();
-        let compact = self.compact_for(settings);
+        let (exact, compact) =
+            volume_textures(settings, self.compact_kind.filter(|_| self.compact_on));
         let pipeline = self.raycast_pipeline(raycast_shader(settings, compact))?;
         let setup = t_start.elapsed().as_secs_f64();
 
@@ -1279,10 +1304,7 @@ impl<'c> RaycastSession<'c> {
         // lookup tables whose entries changed.
         let t_up = Instant::now();
         let uploads_before = self.stats.table_uploads + self.stats.volume_uploads;
-        self.upload_volume(
-            !prefiltered && (compact.is_none() || pre || precomputed),
-            compact,
-        )?;
+        self.upload_volume(exact, compact)?;
         let table = |label, entries: &[u8]| {
             dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),

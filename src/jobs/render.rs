@@ -643,9 +643,10 @@ pub struct Rendering {
 /// `voxlab render --dry-run`: what [`run`] would hold and how it would split, after
 /// loading the input (for its size) and checking the request, rendering nothing. The
 /// host side is the volume in the working precision and the image; the device side
-/// (GPU) the volume texture (or the largest brick's, past the 3-D texture limit:
-/// [`crate::gpu::raycast::brick_plan`]), a precomputed gradient texture and the image's
-/// output buffers.
+/// (GPU) the volume's textures that a frame reads (or the largest brick's, past the 3-D
+/// texture limit: [`crate::gpu::raycast::brick_plan`]; see
+/// [`crate::gpu::raycast::volume_textures`]), the pre-classified colours and
+/// precomputed gradients where the frame reads them, and the image's output buffers.
 ///
 /// # Errors
 /// As [`run`] up to the rendering; a volume that cannot be cut into bricks that fit.
@@ -682,10 +683,26 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
             } else {
                 (voxels, Vec::new())
             };
-            let gradients = if settings.precompute_gradients { 16 } else { 0 };
+            // Rgba32Float volumes: pre-classified colours, precomputed gradients. The
+            // raw values: R32Float and/or, on the hardware path, 16-bit texels; a
+            // prefiltered filter's coefficients: R32Float.
+            use crate::gpu::raycast::{
+                preclassifies, reads_gradient_volume, volume_textures, CompactVolume,
+            };
+            let rgba =
+                16 * (preclassifies(&settings) as u64 + reads_gradient_volume(&settings) as u64);
+            let compact =
+                CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
+            let volume = match volume_textures(&settings, compact) {
+                _ if settings.filter.prefiltered() => 4,
+                (exact, compact) => {
+                    4 * exact as u64 + compact.map_or(0, |_| CompactVolume::BYTES_PER_VOXEL)
+                }
+            };
             let out = w * h * 20;
-            let peak = texels * (4 + gradients) + out;
-            let device = super::plan::DevicePlan::on(ctx, peak, out.max(texels * 4));
+            let peak = texels * (volume + rgba) + out;
+            // The largest single texture: R32Float (4 bytes a texel) where there is one.
+            let device = super::plan::DevicePlan::on(ctx, peak, out.max(texels * volume.min(4)));
             // The host keeps the volume as f32 (and each brick's copy).
             (voxels * 4 + texels * 4 + image, Some(device), split)
         }
