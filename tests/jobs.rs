@@ -400,4 +400,13 @@ fn a_repeated_gpu_render_uploads_the_volume_once() {
         "{}",
         stderr(&o)
     );
+    // The frames' ray casting on the device, within each frame's wall time.
+    let e = stderr(&o);
+    let ms = |prefix: &str, unit: &str| -> f64 {
+        let at = e.find(prefix).unwrap_or_else(|| panic!("{prefix}: {e}")) + prefix.len();
+        e[at..].split(unit).next().unwrap().trim().parse().unwrap()
+    };
+    let kernel = ms("GPU ray casting per frame: median", "ms");
+    let frame = ms("per frame: median", "s of") * 1e3;
+    assert!(kernel > 0.0 && kernel <= frame, "{e}");
 }

@@ -605,6 +605,11 @@ pub struct FrameTimes {
     /// GPU only: the host-to-device upload seconds of each frame (the first carries the
     /// volume's upload; frames that upload nothing report 0).
     pub gpu_uploads: Vec<f64>,
+    /// GPU only: the median seconds of the frames' ray casting on the device (timestamp
+    /// queries; without them, the waited dispatches' wall clock), and whether it came
+    /// from timestamps.
+    pub gpu_kernel_median: Option<f64>,
+    pub gpu_kernel_from_timestamps: bool,
 }
 
 /// How a stereo pair was made.
@@ -814,7 +819,7 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
             let prepared = renderer.prepare(&scene, &settings)?;
             let prepare = since(t_prep);
             let mut times = Vec::with_capacity(n as usize);
-            let mut uploads = Vec::new();
+            let (mut uploads, mut kernels) = (Vec::new(), Vec::new());
             let mut last: Option<Rendered> = None;
             let rows = n as usize * h as usize;
             for f in 0..n as usize {
@@ -826,15 +831,22 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
                 })?;
                 times.push(since(t_f));
                 uploads.extend(r.gpu_timings.map(|t| t.upload));
+                kernels.extend(r.gpu_timings.map(|t| t.kernel));
                 last = Some(r);
             }
             times.sort_by(f64::total_cmp);
+            kernels.sort_by(f64::total_cmp);
             let frames = FrameTimes {
                 median: times[times.len() / 2],
                 frames: times.len(),
                 prepare,
                 gpu_session: last.as_ref().and_then(|r| r.gpu_session),
                 gpu_uploads: uploads,
+                gpu_kernel_median: kernels.get(kernels.len() / 2).copied(),
+                gpu_kernel_from_timestamps: last
+                    .as_ref()
+                    .and_then(|r| r.gpu_timings)
+                    .is_some_and(|t| t.kernel_from_timestamps),
             };
             let last = last.expect("at least one frame");
             result.output = last.output;

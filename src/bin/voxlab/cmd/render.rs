@@ -185,7 +185,9 @@ pub struct RenderArgs {
     pub convergence: Option<f64>,
     /// Render the frame N times and report the median time per frame, the volume
     /// prepared once (checked, converted, bounded for skipping) as an interactive
-    /// renderer does; the timing quoted against other renderers' frame times.
+    /// renderer does; the timing quoted against other renderers' frame times. On the
+    /// GPU it also prints the session's counters and the median ray casting per frame
+    /// on the device (frames per second).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: Option<u32>,
     #[command(flatten)]
@@ -515,6 +517,18 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
                     g.pipelines_compiled,
                     g.prepare_passes,
                     uploads.join(" ")
+                );
+            }
+            if let Some(k) = f.gpu_kernel_median {
+                eprintln!(
+                    "GPU ray casting per frame: median {:.3} ms ({:.1} frames/s){}",
+                    k * 1e3,
+                    1.0 / k,
+                    if f.gpu_kernel_from_timestamps {
+                        " on the device (timestamps)"
+                    } else {
+                        " (wall clock of the waited dispatches)"
+                    }
                 );
             }
         }
