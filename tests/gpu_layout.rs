@@ -75,6 +75,18 @@ fn probe_params_layout_agrees() {
     assert_eq!(offs, vec![0, 4, 8, 12]);
 }
 
+/// Parses and validates a complete WGSL module with naga; panics naming `what`.
+fn validate_wgsl(src: &str, what: &str) {
+    let module = naga::front::wgsl::parse_str(src)
+        .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+}
+
 /// Every shader variant the ray caster can generate parses and validates.
 #[test]
 fn every_generated_shader_validates() {
@@ -94,14 +106,7 @@ fn every_generated_shader_validates() {
                     ..RenderSettings::default()
                 };
                 let src = voxlab::gpu::raycast::raycast_shader(&s, None);
-                let module = naga::front::wgsl::parse_str(&src)
-                    .unwrap_or_else(|e| panic!("{filter:?}: {}", e.emit_to_string(&src)));
-                naga::valid::Validator::new(
-                    naga::valid::ValidationFlags::all(),
-                    naga::valid::Capabilities::all(),
-                )
-                .validate(&module)
-                .unwrap_or_else(|e| panic!("{filter:?} {gradient:?}: {e:?}"));
+                validate_wgsl(&src, &format!("{filter:?} {gradient:?}"));
                 n += 1;
             }
         }
@@ -123,24 +128,10 @@ fn every_generated_shader_validates() {
                 _ => "return s * 65535.0 - 32768.0;",
             };
             assert!(src.contains(map), "{c:?}");
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{c:?}: {}", e.emit_to_string(&src)));
-            naga::valid::Validator::new(
-                naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::all(),
-            )
-            .validate(&module)
-            .unwrap_or_else(|e| panic!("{c:?} {filter:?}: {e:?}"));
+            validate_wgsl(&src, &format!("{c:?} {filter:?}"));
         }
     }
-    let prepare = voxlab::gpu::raycast::prepare_shader();
-    let module = naga::front::wgsl::parse_str(&prepare).unwrap();
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap();
+    validate_wgsl(&voxlab::gpu::raycast::prepare_shader(), "raycast_prepare");
     assert_eq!(n, 48);
 }
 
@@ -158,14 +149,7 @@ fn mode_shader_variants_validate() {
             };
             let src = voxlab::gpu::raycast::raycast_shader(&s, None);
             assert!(src.contains("fn cast_mida(") && src.contains("fn in_shadow("));
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{mode:?} {filter:?}: {}", e.emit_to_string(&src)));
-            naga::valid::Validator::new(
-                naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::all(),
-            )
-            .validate(&module)
-            .unwrap_or_else(|e| panic!("{mode:?} {filter:?}: {e:?}"));
+            validate_wgsl(&src, &format!("{mode:?} {filter:?}"));
         }
     }
 }

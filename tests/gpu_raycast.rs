@@ -520,6 +520,23 @@ fn integer_phantom(dims: [usize; 3], scale: f64, offset: f64) -> Vec<f64> {
         .collect()
 }
 
+/// [`integer_phantom`] as a volume of `T` (unit spacing).
+fn typed_phantom<T: voxlab::Voxel>(
+    dims: [usize; 3],
+    scale: f64,
+    offset: f64,
+    to: fn(f64) -> T,
+) -> AnyVolume
+where
+    voxlab::Volume<T>: Into<AnyVolume>,
+{
+    let data = integer_phantom(dims, scale, offset)
+        .into_iter()
+        .map(to)
+        .collect();
+    voxlab::Volume::new(dims, [1.0; 3], data).unwrap().into()
+}
+
 /// Hardware-filtered frames of u8, u16 and i16 volumes read an `R16Unorm` texture (2
 /// bytes per voxel, and nothing else of the volume on the device), give
 /// the f64 oracle's image within the hardware path's bounds, and on lavapipe (which
@@ -529,7 +546,6 @@ fn integer_phantom(dims: [usize; 3], scale: f64, offset: f64) -> Vec<f64> {
 #[test]
 fn hardware_frames_of_integer_volumes_read_compact_textures() {
     use voxlab::gpu::raycast::{CompactVolume, RaycastSession};
-    use voxlab::Volume;
     let Some(ctx) = common::gpu("hardware_frames_of_integer_volumes_read_compact_textures") else {
         return;
     };
@@ -538,54 +554,31 @@ fn hardware_frames_of_integer_volumes_read_compact_textures() {
     let norm16 = ctx
         .features
         .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
+    let compact = |range, offset| norm16.then_some(CompactVolume { range, offset });
     // (name, volume, scale, offset, compact form)
-    let mut cases: Vec<(&str, AnyVolume, f64, f64, Option<CompactVolume>)> = vec![(
-        "u8",
-        Volume::new(
-            dims,
-            [1.0; 3],
-            integer_phantom(dims, 250.0, 0.0)
-                .iter()
-                .map(|&v| v as u8)
-                .collect(),
-        )
-        .unwrap()
-        .into(),
-        250.0,
-        0.0,
-        norm16.then_some(CompactVolume {
-            range: 255,
-            offset: 0,
-        }),
-    )];
-    let u16s = integer_phantom(dims, 60000.0, 0.0)
-        .iter()
-        .map(|&v| v as u16)
-        .collect();
-    let i16s = integer_phantom(dims, 20000.0, -10000.0)
-        .iter()
-        .map(|&v| v as i16)
-        .collect();
-    cases.push((
-        "u16",
-        Volume::new(dims, [1.0; 3], u16s).unwrap().into(),
-        60000.0,
-        0.0,
-        norm16.then_some(CompactVolume {
-            range: 65535,
-            offset: 0,
-        }),
-    ));
-    cases.push((
-        "i16",
-        Volume::new(dims, [1.0; 3], i16s).unwrap().into(),
-        20000.0,
-        -10000.0,
-        norm16.then_some(CompactVolume {
-            range: 65535,
-            offset: -32768,
-        }),
-    ));
+    let cases: [(&str, AnyVolume, f64, f64, Option<CompactVolume>); 3] = [
+        (
+            "u8",
+            typed_phantom(dims, 250.0, 0.0, |v| v as u8),
+            250.0,
+            0.0,
+            compact(255, 0),
+        ),
+        (
+            "u16",
+            typed_phantom(dims, 60000.0, 0.0, |v| v as u16),
+            60000.0,
+            0.0,
+            compact(65535, 0),
+        ),
+        (
+            "i16",
+            typed_phantom(dims, 20000.0, -10000.0, |v| v as i16),
+            20000.0,
+            -10000.0,
+            compact(65535, -32768),
+        ),
+    ];
     let cam = Camera::orbit(
         DVec3::new(12.5, 14.0, 11.5),
         [26.0, 29.0, 24.0],
@@ -693,16 +686,7 @@ fn the_render_plan_counts_the_volume_textures_a_frame_reads() {
     };
     let dims = [20, 18, 16];
     let n = (dims[0] * dims[1] * dims[2]) as u64;
-    let v: AnyVolume = voxlab::Volume::new(
-        dims,
-        [1.0; 3],
-        integer_phantom(dims, 60000.0, 0.0)
-            .iter()
-            .map(|&x| x as u16)
-            .collect(),
-    )
-    .unwrap()
-    .into();
+    let v = typed_phantom(dims, 60000.0, 0.0, |x| x as u16);
     let peak = |hardware: bool, classification: Classification, gradients: bool| {
         let req = RenderRequest {
             scene: SceneRequest {
