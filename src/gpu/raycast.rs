@@ -888,7 +888,8 @@ pub struct SessionStats {
     pub frames: usize,
     /// Uploads of the volume: one per texture of it, each at the first frame that
     /// reads it (the `R32Float` one; the [`CompactVolume`] one for hardware-filtered
-    /// frames of an 8- or 16-bit volume).
+    /// frames of an 8- or 16-bit volume; none for a prefiltered filter, which samples
+    /// the B-spline coefficients, a set-up product).
     pub volume_uploads: usize,
     /// Bytes of the volume's textures on the device now.
     pub volume_bytes: u64,
@@ -1173,6 +1174,7 @@ impl<'c> RaycastSession<'c> {
     fn upload_volume(&mut self, exact: bool, compact: Option<CompactVolume>) -> Result<()> {
         let (ctx, dims) = (self.ctx, self.dims);
         let voxels = self.grid.data.len() as u64;
+        let before = self.stats.volume_uploads;
         if exact && self.volume.is_none() {
             self.volume = Some(ctx.upload_volume_r32(dims, &self.grid.data)?);
             self.stats.volume_uploads += 1;
@@ -1184,6 +1186,10 @@ impl<'c> RaycastSession<'c> {
             self.compact = Some(ctx.upload_volume_texels(dims, format, &texels)?);
             self.stats.volume_uploads += 1;
             self.stats.volume_bytes += CompactVolume::BYTES_PER_VOXEL * voxels;
+        }
+        if self.stats.volume_uploads > before {
+            // Submit the staged copies now, so that the frame's upload time holds them.
+            ctx.queue.submit(std::iter::empty::<wgpu::CommandBuffer>());
         }
         Ok(())
     }
