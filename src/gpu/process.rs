@@ -166,7 +166,7 @@ impl ProcessTimings {
     }
 }
 
-/// The dispatches [`Op::run_range`] splits `voxels` output voxels of `taps` kernel taps
+/// The dispatches a processing pass splits `voxels` output voxels of `taps` kernel taps
 /// each into: at most [`WORK_PER_DISPATCH`] taps per dispatch, and between one
 /// workgroup and 2²⁴ voxels.
 pub fn dispatches(voxels: u64, taps: u64) -> usize {
