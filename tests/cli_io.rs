@@ -80,6 +80,67 @@ fn raw_input_is_read_as_described() {
 }
 
 #[test]
+fn a_phantom_is_written_as_a_scanner_would_store_it() {
+    use voxlab::phantom::Phantom;
+    use voxlab::AnyVolume;
+    let d = scratch("phantom-types");
+    let p = d.join("u16.npy");
+    let out = ok(&voxlab(&[
+        "phantom",
+        "shepp-logan-modified:9,8,7",
+        "--type",
+        "u16",
+        "--scale",
+        "60000",
+        "--out",
+        s(&p),
+    ]));
+    assert!(out.contains("9×8×7 u16"), "{out}");
+    let want: Vec<u16> = Phantom::shepp_logan_modified()
+        .sample([9, 8, 7])
+        .unwrap()
+        .data()
+        .iter()
+        .map(|&v| (f64::from(v) * 60000.0).round() as u16)
+        .collect();
+    match voxlab::io::read_volume(&p).unwrap() {
+        AnyVolume::U16(v) => assert_eq!(v.data(), &want[..]),
+        other => panic!("{:?}", other.kind()),
+    }
+    assert!(want.iter().any(|&v| v > 50000) && want.iter().any(|&v| v == 0));
+    // i16 saturates: the sphere's 1 × 80000 is stored as 32767, the air as 0.
+    let q = d.join("i16.npy");
+    ok(&voxlab(&[
+        "phantom",
+        "sphere:6",
+        "--type",
+        "i16",
+        "--scale",
+        "80000",
+        "--out",
+        s(&q),
+    ]));
+    match voxlab::io::read_volume(&q).unwrap() {
+        AnyVolume::I16(v) => {
+            assert!(v.data().iter().all(|&x| x == 0 || x == i16::MAX));
+            assert!(v.data().contains(&i16::MAX) && v.data().contains(&0));
+        }
+        other => panic!("{:?}", other.kind()),
+    }
+    for (flag, value, named) in [("--scale", "-1", "--scale"), ("--type", "u32", "--type")] {
+        let r = d.join("refused.npy");
+        let arg = format!("{flag}={value}");
+        let o = voxlab(&["phantom", "sphere:6", &arg, "--out", s(&r)]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(named),
+            "{}",
+            stderr(&o)
+        );
+        assert!(!r.exists());
+    }
+}
+
+#[test]
 fn voxel_limit_from_option_and_environment() {
     let d = scratch("limit");
     let p = d.join("v.nrrd");
