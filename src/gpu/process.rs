@@ -769,13 +769,27 @@ impl ProcessPlan {
         )
     }
 
-    /// Runs `op` on each input slab of `vol` and gathers the output slabs; counts the
-    /// slabs in `t`.
+    /// Compiles `(shader, entry)` once, runs `whole` with it on each input slab of
+    /// `vol`, gathers the output slabs, and returns them with what it did.
     fn run(
         &self,
+        ctx: &GpuContext,
         vol: &Volume<f32>,
-        t: &mut ProcessTimings,
-        mut op: impl FnMut(&Volume<f32>, &mut ProcessTimings) -> Result<Field<f32>>,
+        (shader, entry): (&str, &str),
+        mut whole: impl FnMut(&Op, &Volume<f32>, &mut ProcessTimings) -> Result<Field<f32>>,
+    ) -> Result<(Field<f32>, ProcessTimings)> {
+        let mut t = ProcessTimings::new(ctx);
+        let op = Op::new(ctx, shader, entry, &mut t)?;
+        let f = self.run_slabs(vol, |v| whole(&op, v, &mut t))?;
+        t.slabs = self.slabs.count();
+        Ok((f, t))
+    }
+
+    /// Runs `op` on each input slab of `vol` and gathers the output slabs.
+    fn run_slabs(
+        &self,
+        vol: &Volume<f32>,
+        mut op: impl FnMut(&Volume<f32>) -> Result<Field<f32>>,
     ) -> Result<Field<f32>> {
         let [nx, ny, nz] = vol.dims();
         if self.slabs.total != nz {
@@ -784,9 +798,8 @@ impl ProcessPlan {
                 format!("made for {} slices, not {nz}", self.slabs.total),
             ));
         }
-        t.slabs = self.slabs.count();
         if !self.is_split() {
-            return op(vol, t);
+            return op(vol);
         }
         let slice = nx * ny;
         let mut data = vec![0f32; vol.len()];
@@ -798,7 +811,7 @@ impl ProcessPlan {
                 vol.affine(),
                 vol.data()[lo * slice..hi * slice].to_vec(),
             )?;
-            let out = op(&part, t)?;
+            let out = op(&part)?;
             let from = (slab.start - lo) * slice;
             data[slab.start * slice..slab.end * slice]
                 .copy_from_slice(&out.grid.data[from..from + slab.len() * slice]);
@@ -830,10 +843,12 @@ pub fn gaussian_planned(
     plan: &ProcessPlan,
 ) -> Result<(Field<f32>, ProcessTimings)> {
     check_sigma(sigma)?;
-    let mut t = ProcessTimings::new(ctx);
-    let op = Op::new(ctx, "process_gaussian", "gaussian_pass", &mut t)?;
-    let f = plan.run(vol, &mut t, |v, t| gaussian_whole(ctx, &op, v, sigma, t))?;
-    Ok((f, t))
+    plan.run(
+        ctx,
+        vol,
+        ("process_gaussian", "gaussian_pass"),
+        |op, v, t| gaussian_whole(ctx, op, v, sigma, t),
+    )
 }
 
 /// [`crate::cpu::process::median`] on the GPU (f32), windows up to
@@ -858,10 +873,9 @@ pub fn median_planned(
     plan: &ProcessPlan,
 ) -> Result<(Field<f32>, ProcessTimings)> {
     check_median_size_gpu(k)?;
-    let mut t = ProcessTimings::new(ctx);
-    let op = Op::new(ctx, "process_median", "median", &mut t)?;
-    let f = plan.run(vol, &mut t, |v, t| median_whole(ctx, &op, v, k, t))?;
-    Ok((f, t))
+    plan.run(ctx, vol, ("process_median", "median"), |op, v, t| {
+        median_whole(ctx, op, v, k, t)
+    })
 }
 
 /// [`crate::cpu::process::gradient_magnitude`] on the GPU (f32), in the slabs of
@@ -883,8 +897,10 @@ pub fn gradient_magnitude_planned(
     vol: &Volume<f32>,
     plan: &ProcessPlan,
 ) -> Result<(Field<f32>, ProcessTimings)> {
-    let mut t = ProcessTimings::new(ctx);
-    let op = Op::new(ctx, "process_gradient", "gradient_magnitude", &mut t)?;
-    let f = plan.run(vol, &mut t, |v, t| gradient_magnitude_whole(ctx, &op, v, t))?;
-    Ok((f, t))
+    plan.run(
+        ctx,
+        vol,
+        ("process_gradient", "gradient_magnitude"),
+        |op, v, t| gradient_magnitude_whole(ctx, op, v, t),
+    )
 }

@@ -295,15 +295,14 @@ impl CompactVolume {
     /// Bytes per voxel on the device.
     pub const BYTES_PER_VOXEL: u64 = 2;
 
-    /// The texel bytes of `values` (the volume's integers, exact in f32; x fastest).
-    pub fn texels(self, values: &[f32]) -> Vec<u8> {
+    /// The texels of `values` (the volume's integers, exact in f32; x fastest).
+    pub fn texels(self, values: &[f32]) -> Vec<u16> {
         use rayon::prelude::*;
         let (off, factor) = (self.offset as f32, (65535 / self.range) as f32);
-        let t: Vec<u16> = values
+        values
             .par_iter()
             .map(|&v| ((v - off) * factor) as u16)
-            .collect();
-        bytemuck::cast_slice(&t).to_vec()
+            .collect()
     }
 
     /// Whether sessions use compact textures: unless `VOXLAB_GPU_F32_TEXTURES=1`.
@@ -1183,7 +1182,8 @@ impl<'c> RaycastSession<'c> {
         if let (Some(c), None) = (compact, &self.compact) {
             let texels = c.texels(&self.grid.data);
             let format = CompactVolume::FORMAT;
-            self.compact = Some(ctx.upload_volume_texels(dims, format, &texels)?);
+            let bytes = bytemuck::cast_slice(&texels);
+            self.compact = Some(ctx.upload_volume_texels(dims, format, bytes)?);
             self.stats.volume_uploads += 1;
             self.stats.volume_bytes += CompactVolume::BYTES_PER_VOXEL * voxels;
         }
