@@ -10,11 +10,12 @@
 // projections (angle, row, col), col fastest, as f32 bits or f16 pairs, in one storage
 // binding (3) or in runs of whole views over several (3, 8, 9, …), and defines
 // `fn tap(i: u32) -> f32`, element i of the projections in their storage precision,
-// which shared/ct_geometry.wgsl's bilinear_zero reads.
+// which shared/ct_bilinear.wgsl's bilinear_zero reads.
 // An image larger than one binding of accumulators runs in bands of rows
 // [chunk.z, chunk.z + chunk.w); acc and counts hold the band.
 
 #import ct_geometry
+#import ct_bilinear
 #import raycast_params
 #import d2vr_params
 #import classify

@@ -42,7 +42,7 @@
 //! Every reconstruction in voxlab (FBP, FDK, D²VR) sums, over the views, a weight times
 //! the zero-padded bilinear interpolation of a (filtered) projection at the point's
 //! detector position: [`ViewMatrix::project`] and [`bilinear_zero`] are that per-element
-//! work, mirrored by `shaders/shared/ct_geometry.wgsl`.
+//! work, mirrored by `shaders/shared/ct_geometry.wgsl` and `ct_bilinear.wgsl`.
 //!
 //! # Intensities
 //! A scanner's raw projections are intensities; [`flat_field`] turns them into line
@@ -849,7 +849,7 @@ impl<R: Real> ViewMatrix<R> {
 /// `np.interp(..., left=0, right=0)`, which scikit-image's `iradon` uses, jumps to zero
 /// at the last node instead; the two differ only in that one-pixel margin.)
 ///
-/// mirrors shaders/shared/ct_geometry.wgsl: bilinear_zero
+/// mirrors shaders/shared/ct_bilinear.wgsl: bilinear_zero
 #[inline(always)]
 pub fn bilinear_zero<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -> R {
     let Some(([a, b, c, d], tx, ty)) = bilinear_taps(img, cols, rows, x, y) else {

@@ -41,6 +41,118 @@ fn gpu_backprojection_matches_the_f64_oracle() {
     }
 }
 
+/// The largest difference of two of the 4 × 4 detector values around (col, row)
+/// (zeros outside the detector): the steepest a bilinear value may change within the
+/// cell of (col, row) and the cells next to it, where a texture unit's rounded
+/// coordinate may land.
+fn local_spread(q: &Projections<f64>, view: usize, col: f64, row: f64) -> f64 {
+    let v = q.view(view);
+    let (c0, r0) = (col.floor() as i64, row.floor() as i64);
+    let (mut hi, mut lo) = (f64::NEG_INFINITY, f64::INFINITY);
+    for r in r0 - 1..=r0 + 2 {
+        for c in c0 - 1..=c0 + 2 {
+            let inside = c >= 0 && r >= 0 && c < q.cols as i64 && r < q.rows as i64;
+            let x = if inside {
+                v[r as usize * q.cols + c as usize]
+            } else {
+                0.0
+            };
+            hi = hi.max(x);
+            lo = lo.min(x);
+        }
+    }
+    hi - lo
+}
+
+/// The hardware path (projections in a texture array, bilinear by the texture unit)
+/// against the f64 oracle, voxel by voxel, within what a texture unit with 8-bit
+/// interpolation weights may add: each weight off by ≤ 2⁻⁸ moves a bilinear value by
+/// ≤ 2⁻⁸ × the local spread per axis, so voxel p may be off by
+/// π/(2A) · Σ_k w_k(p) · spread_k(p) · 2⁻⁷, plus the exact path's f32 bound. On a CPU
+/// adapter (lavapipe filters in f32) it is also held to the exact GPU path: there the
+/// only difference is the normalised coordinate `(x + 1.5)/(cols + 2)` rounded to f32.
+#[test]
+fn hardware_backprojection_is_within_the_texture_units_bound() {
+    use voxlab::gpu::fbp::{backproject_planned, BackprojectionPlan, ProjectionSampling};
+    let Some(ctx) = common::gpu("hardware_backprojection_is_within_the_texture_units_bound") else {
+        return;
+    };
+    if !ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
+        let (_, g, grid) = common::ct_cases(10, 10).remove(0);
+        let hardware = ProjectionSampling::Hardware;
+        let plan = BackprojectionPlan::sampled(&ctx.limits, &g, &grid, hardware).unwrap();
+        let q = common::random_projections_f32(&g, 3);
+        let e = backproject_planned(ctx, &q, &g, &grid, &plan).unwrap_err();
+        assert!(e.to_string().contains("FLOAT32_FILTERABLE"), "{e}");
+        return;
+    }
+    for (name, g, grid) in common::ct_cases(45, 37) {
+        let q32 = common::random_projections_f32(&g, 5);
+        let q = Projections::new(
+            q32.angles,
+            q32.rows,
+            q32.cols,
+            q32.data.iter().map(|&v| v as f64).collect(),
+        )
+        .unwrap();
+        let want = backproject(&q, &g, &grid, &none).unwrap();
+        let plan =
+            BackprojectionPlan::sampled(&ctx.limits, &g, &grid, ProjectionSampling::Hardware)
+                .unwrap();
+        let got = backproject_planned(ctx, &q32, &g, &grid, &plan).unwrap();
+        let exact = voxlab::gpu::fbp::backproject(ctx, &q32, &g, &grid).unwrap();
+        let scale = want.data.iter().fold(0f64, |m, v| m.max(v.abs()));
+        let views = g.view_matrices::<f64>();
+        let per_scale = std::f64::consts::PI / (2.0 * g.n_angles() as f64);
+        let [nx, ny, nz] = grid.dims;
+        let (mut worst, mut worst_share) = (0f64, 0f64);
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let p = grid.point(i, j, k).to_array();
+                    let mut sum = 0.0;
+                    for (v, m) in views.iter().enumerate() {
+                        if let Some((c, r, w)) = m.project(p) {
+                            sum += w * local_spread(&q, v, c, r);
+                        }
+                    }
+                    let bound = per_scale * sum / 128.0 + 1e-5 * scale;
+                    let at = i + nx * (j + ny * k);
+                    let d = (got.data[at] as f64 - want.data[at]).abs();
+                    assert!(
+                        d <= bound,
+                        "{name}: voxel ({i}, {j}, {k}) off by {d:e}, over the texture \
+                         unit's bound {bound:e}"
+                    );
+                    worst = worst.max(d);
+                    worst_share = worst_share.max(d / bound);
+                }
+            }
+        }
+        let from_exact = got
+            .data
+            .iter()
+            .zip(&exact.data)
+            .fold(0f32, |m, (a, b)| m.max((a - b).abs())) as f64;
+        eprintln!(
+            "hardware backprojection {name} on {}: max |Δ| {worst:.2e} ({:.1e} of the \
+             scale, {worst_share:.1e} of the bound), {:.1e} of the scale from the exact \
+             GPU path",
+            ctx.summary.name,
+            worst / scale,
+            from_exact / scale
+        );
+        if ctx.summary.is_cpu() {
+            // Measured on lavapipe: 4.8e-7 (cone) … 7.4e-7 (stack) of the scale; the
+            // bound is about 5× the worst.
+            assert!(
+                from_exact <= 4e-6 * scale,
+                "{name}: {from_exact:e} from the exact GPU path (scale {scale:e})"
+            );
+        }
+    }
+}
+
 #[test]
 fn gpu_fbp_of_shepp_logan_matches_the_cpu() {
     use voxlab::cpu::fbp::fbp;
@@ -199,60 +311,66 @@ const SPLITS: [(usize, usize); 5] = [(1, 1000), (4, 32), (5, 64), (1000, 32), (3
 
 #[test]
 fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
-    use voxlab::gpu::fbp::{backproject_timed, BackprojectionPlan};
+    use voxlab::gpu::fbp::{backproject_timed, BackprojectionPlan, ProjectionSampling};
     use voxlab::gpu::plan::Pieces;
     let Some(ctx) = common::gpu("gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one")
     else {
         return;
     };
+    let mut samplings = vec![ProjectionSampling::Exact];
+    if ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
+        samplings.push(ProjectionSampling::Hardware);
+    }
     for (name, g, grid) in common::ct_cases(75, 70) {
         let q = common::random_projections_f32(&g, 11);
-        let whole = voxlab::gpu::fbp::backproject(ctx, &q, &g, &grid).unwrap();
-        assert!(!BackprojectionPlan::new(&ctx.limits, &g, &grid)
-            .unwrap()
-            .is_split());
-        let scale = whole.data.iter().fold(0f32, |m, v| m.max(v.abs()));
-        for (slices, views) in SPLITS {
-            let plan = BackprojectionPlan {
-                slabs: Pieces {
-                    total: grid.dims[2],
-                    per_piece: slices.min(grid.dims[2]),
-                },
-                batches: Pieces {
-                    total: g.n_angles(),
-                    per_piece: views.min(g.n_angles()),
-                },
-                device_bytes: 0,
-            };
-            let (got, timings) = backproject_timed(ctx, &q, &g, &grid, &plan).unwrap();
-            let what = format!("{name}: {}", plan.describe());
-            // One submission per slab and batch, one dispatch per 32 views of a batch.
-            let per_slab: usize = plan.batches.ranges().map(|b| b.len().div_ceil(32)).sum();
-            assert_eq!(
-                (timings.submissions, timings.dispatches),
-                (
-                    plan.slabs.count() * plan.batches.count(),
-                    plan.slabs.count() * per_slab
-                ),
-                "{what}"
-            );
-            let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
-            assert_eq!(timings.kernel.is_some(), timestamps, "{what}");
-            assert!(
-                timings.kernel.is_none_or(|k| k > 0.0),
-                "{what}: {timings:?}"
-            );
-            if views % 32 == 0 {
-                let first = got.data.iter().zip(&whole.data).position(|(a, b)| a != b);
-                assert_eq!(first, None, "{what}: differs from the unsplit volume");
-            } else {
-                // Sums of 7 views instead of 32: a reassociation of f32 additions.
-                let worst = got
-                    .data
-                    .iter()
-                    .zip(&whole.data)
-                    .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
-                assert!(worst <= 1e-5 * scale, "{what}: {worst} of {scale}");
+        for &sampling in &samplings {
+            let unsplit = BackprojectionPlan::sampled(&ctx.limits, &g, &grid, sampling).unwrap();
+            assert!(!unsplit.is_split());
+            let whole = backproject_timed(ctx, &q, &g, &grid, &unsplit).unwrap().0;
+            let scale = whole.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+            for (slices, views) in SPLITS {
+                let plan = BackprojectionPlan {
+                    slabs: Pieces {
+                        total: grid.dims[2],
+                        per_piece: slices.min(grid.dims[2]),
+                    },
+                    batches: Pieces {
+                        total: g.n_angles(),
+                        per_piece: views.min(g.n_angles()),
+                    },
+                    device_bytes: 0,
+                    sampling,
+                };
+                let (got, timings) = backproject_timed(ctx, &q, &g, &grid, &plan).unwrap();
+                let what = format!("{name}: {}", plan.describe());
+                // One submission per slab and batch, one dispatch per 32 views of a batch.
+                let per_slab: usize = plan.batches.ranges().map(|b| b.len().div_ceil(32)).sum();
+                assert_eq!(
+                    (timings.submissions, timings.dispatches),
+                    (
+                        plan.slabs.count() * plan.batches.count(),
+                        plan.slabs.count() * per_slab
+                    ),
+                    "{what}"
+                );
+                let timestamps = ctx.features.contains(wgpu::Features::TIMESTAMP_QUERY);
+                assert_eq!(timings.kernel.is_some(), timestamps, "{what}");
+                assert!(
+                    timings.kernel.is_none_or(|k| k > 0.0),
+                    "{what}: {timings:?}"
+                );
+                if views % 32 == 0 {
+                    let first = got.data.iter().zip(&whole.data).position(|(a, b)| a != b);
+                    assert_eq!(first, None, "{what}: differs from the unsplit volume");
+                } else {
+                    // Sums of 7 views instead of 32: a reassociation of f32 additions.
+                    let worst = got
+                        .data
+                        .iter()
+                        .zip(&whole.data)
+                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                    assert!(worst <= 1e-5 * scale, "{what}: {worst} of {scale}");
+                }
             }
         }
     }
@@ -260,7 +378,7 @@ fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
 
 #[test]
 fn the_backprojection_plan_cuts_what_exceeds_a_binding_and_refuses_what_cannot_fit() {
-    use voxlab::gpu::fbp::BackprojectionPlan;
+    use voxlab::gpu::fbp::{BackprojectionPlan, ProjectionSampling};
     // 40 × 30 detector, 100 views; a 21 × 15 × 18 grid: slices of 1,260 bytes, views
     // of 4,800 bytes.
     let (_, g, grid) = common::ct_cases(10, 100).remove(2);
@@ -287,6 +405,47 @@ fn the_backprojection_plan_cuts_what_exceeds_a_binding_and_refuses_what_cannot_f
     assert!(e.to_string().contains("one view (4800 bytes)"), "{e}");
     let e = BackprojectionPlan::new(&limits(1_000), &g, &grid).unwrap_err();
     assert!(e.to_string().contains("slice of the volume"), "{e}");
+
+    // Projections in textures: a view is (40 + 2) × (30 + 2) texels, 5,376 bytes, and a
+    // batch at most the adapter's texture-array layers.
+    let hardware = |limits: &wgpu::Limits| {
+        BackprojectionPlan::sampled(limits, &g, &grid, ProjectionSampling::Hardware)
+    };
+    let p = hardware(&limits(1 << 27)).unwrap();
+    assert!(!p.is_split());
+    assert_eq!(
+        p.device_bytes,
+        100 * 64 + 100 * 5_376 + 21 * 15 * 18 * 4,
+        "matrices, the views with their borders, the volume"
+    );
+    // 192,000 bytes hold 35 bordered views: batches of 32.
+    let p = hardware(&limits(192_000)).unwrap();
+    assert_eq!((p.batches.per_piece, p.batches.count()), (32, 4));
+    assert_eq!(
+        p.describe(),
+        "backprojection in 1 slab of 18 slices × 4 batches of 32 views, projections in \
+         textures"
+    );
+    let layers = |n: u32| wgpu::Limits {
+        max_texture_array_layers: n,
+        ..limits(1 << 27)
+    };
+    let p = hardware(&layers(64)).unwrap();
+    assert_eq!((p.batches.per_piece, p.batches.count()), (64, 2));
+    let p = hardware(&layers(20)).unwrap();
+    assert_eq!((p.batches.per_piece, p.batches.count()), (20, 5));
+    // A detector whose bordered image exceeds the 2-D texture size: refused, naming
+    // the way out; the exact path still plans it.
+    let small = wgpu::Limits {
+        max_texture_dimension_2d: 41,
+        ..limits(1 << 27)
+    };
+    let e = hardware(&small).unwrap_err();
+    assert!(
+        e.to_string().contains("40 × 30") && e.to_string().contains("2-D texture size of 41"),
+        "{e}"
+    );
+    assert!(BackprojectionPlan::new(&small, &g, &grid).is_ok());
 }
 
 /// Views given by vectors filtered in chunks (each chunk reads its views' weights

@@ -156,7 +156,7 @@ fn mode_shader_variants_validate() {
 
 #[test]
 fn ct_view_layout_agrees() {
-    // ct_geometry.wgsl reads the importer's `tap`: lay it out inside a complete module.
+    // ct_bilinear.wgsl reads the importer's `tap`: lay it out inside a complete module.
     let (span, members) = wgsl_struct_layout(&voxlab::gpu::fbp::shader_source(), "CtView");
     assert_eq!(span as usize, size_of::<voxlab::ct::ViewMatrix<f32>>());
     let offs: Vec<u32> = members.iter().map(|m| m.1).collect();
@@ -267,6 +267,26 @@ fn fbp_params_layout_agrees() {
         assert_eq!((*name, *off as u32), (wname.as_str(), *woff));
     }
     assert_eq!(members.len(), rust.len());
+}
+
+/// Both ways of reading the filtered projections make a valid backprojector, and only
+/// the exact one carries the storage buffer and shared/ct_bilinear.wgsl.
+#[test]
+fn both_backprojector_variants_validate() {
+    use voxlab::gpu::fbp::{sampled_shader_source, ProjectionSampling};
+    for (sampling, buffer) in [
+        (ProjectionSampling::Exact, true),
+        (ProjectionSampling::Hardware, false),
+    ] {
+        let src = sampled_shader_source(sampling);
+        validate_wgsl(&src, &format!("backprojection {sampling:?}"));
+        assert_eq!(src.contains("fn bilinear_zero("), buffer, "{sampling:?}");
+        assert_eq!(
+            src.contains("texture_2d_array<f32>"),
+            !buffer,
+            "{sampling:?}"
+        );
+    }
 }
 
 #[test]
@@ -529,14 +549,14 @@ fn every_resolved_stage_validates() {
         .unwrap_or_else(|e| panic!("{}: {}", m.path, e.emit_to_string(&src)));
         n += 1;
     }
-    // raycast, d2vr and fvr_slice need generated modules.
+    // raycast, d2vr, fvr_slice and fbp_backproject need generated modules.
     assert_eq!(
         n,
         MODULES
             .iter()
             .filter(|m| m.source.contains("@compute"))
             .count()
-            - 3
+            - 4
     );
 }
 

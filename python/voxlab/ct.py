@@ -82,6 +82,7 @@ def reconstruct(
     circle: bool = True,
     short_scan: bool = False,
     backend: str = "cpu",
+    hardware_filtering: bool = False,
     method: str = "fbp",
     iterations: Optional[int] = None,
     subsets: Optional[int] = None,
@@ -101,7 +102,10 @@ def reconstruct(
     on the same grid: ``voxlab reconstruct`` in memory. ``size``: the image side N
     (parallel; default the detector count) or the volume N³ (cone; default the
     detector columns); ``spacing`` in mm; ``short_scan``: Parker's weights for a cone
-    beam over less than a full turn (FBP/FDK only).
+    beam over less than a full turn (FBP/FDK only). ``hardware_filtering`` (with
+    ``backend="gpu"``, FBP/FDK only): the backprojection samples the filtered
+    projections through the GPU's texture unit instead of the exact interpolation
+    (real GPUs quantise the filter weights to about 8 bits; docs/parity.md).
 
     ``method``: ``"fbp"`` (the default), or ``"sirt"``, ``"cgls"``, ``"os-sart"``,
     ``"tv"`` on Joseph's matched projector pair (docs/iterative.md), with
@@ -133,7 +137,8 @@ def reconstruct(
     """
     g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
     req = {"filter": filter, "size": size, "spacing": spacing, "no_circle": not circle,
-           "short_scan": bool(short_scan), "backend": backend, "method": method,
+           "short_scan": bool(short_scan), "backend": backend,
+           "hardware_filtering": bool(hardware_filtering), "method": method,
            "iterations": iterations, "subsets": subsets, "subset_order": subset_order,
            "relaxation": relaxation, "tv_weight": tv_weight,
            "nonnegative": bool(nonnegative), "init": init, "tolerance": float(tolerance)}

@@ -39,9 +39,10 @@ use crate::cpu::fbp::{fbp, rtk_grid, skimage_grid, Grid as FbpGrid};
 use crate::cpu::project::{
     joseph_views, pixel_ray, project_phantom, project_volume, Grid, JosephView, ProjectOptions,
 };
-use crate::cpu::ramp::RampFilter;
+use crate::cpu::ramp::{FilterMethod, RampFilter};
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::Result;
+use crate::gpu::fbp::ProjectionSampling;
 use crate::gpu::GpuContext;
 use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
@@ -236,12 +237,18 @@ pub fn cases(suite: Suite) -> Vec<Case> {
         ));
     }
     for &(n, views) in fdks {
-        out.push(Case::new(
-            "fdk",
-            "cone-ramlak",
-            format!("{n}³ from {views} × {n}²"),
-            move || prepare_fdk(n, views),
-        ));
+        for sampling in [ProjectionSampling::Exact, ProjectionSampling::Hardware] {
+            let name = match sampling {
+                ProjectionSampling::Exact => "cone-ramlak",
+                ProjectionSampling::Hardware => "cone-ramlak-hardware",
+            };
+            out.push(Case::new(
+                "fdk",
+                name,
+                format!("{n}³ from {views} × {n}²"),
+                move || prepare_fdk(n, views, sampling),
+            ));
+        }
     }
     out
 }
@@ -342,6 +349,22 @@ pub fn recon_tol(n: usize) -> Tolerance {
     Tolerance::max_abs_rel((1.5e-7 * n as f64).max(1e-5)).with_rel_l2((1e-7 * n as f64).max(5e-6))
 }
 
+/// The hardware path's tolerance: [`crate::gpu::fbp::hardware_error_bound`] for
+/// weights of 8 fractional bits (NVIDIA's) on the f64-filtered projections, plus the
+/// exact path's [`recon_tol`] taken against a peak of 2 (the modified Shepp–Logan's
+/// densities are at most 1, and its FDK overshoots them by a few per cent), as one
+/// bound on max |Δ|.
+fn hardware_recon_tol(
+    n: usize,
+    p: &Projections<f64>,
+    g: &Geometry,
+    grid: &FbpGrid,
+) -> Result<Tolerance> {
+    let q = crate::cpu::ramp::filter_projections(p, g, RampFilter::RamLak, FilterMethod::Fft)?;
+    let bound = crate::gpu::fbp::hardware_error_bound(&q, g, grid, 8);
+    Ok(Tolerance::max_abs(bound + 2.0 * recon_tol(n).max_abs_rel))
+}
+
 fn to_f32(p: &Projections<f64>) -> Result<Projections<f32>> {
     Projections::new(
         p.angles,
@@ -353,7 +376,8 @@ fn to_f32(p: &Projections<f64>) -> Result<Projections<f32>> {
 
 fn none(_: usize, _: usize) {}
 
-/// FBP or FDK of `p` onto `grid`: the prepared closures.
+/// FBP or FDK of `p` onto `grid`: the prepared closures; the GPU backprojection reads
+/// the projections as `sampling` says.
 fn prepare_recon(
     n: usize,
     p: Projections<f64>,
@@ -361,7 +385,12 @@ fn prepare_recon(
     grid: FbpGrid,
     work: f64,
     note: String,
+    sampling: ProjectionSampling,
 ) -> Result<Prepared> {
+    let tol_gpu = match sampling {
+        ProjectionSampling::Exact => recon_tol(n),
+        ProjectionSampling::Hardware => hardware_recon_tol(n, &p, &g, &grid)?,
+    };
     let p32 = Arc::new(to_f32(&p)?);
     let p32b = Arc::clone(&p32);
     let g = Arc::new(g);
@@ -370,7 +399,7 @@ fn prepare_recon(
         let t = Instant::now();
         let q = crate::gpu::ramp::filter_projections(ctx, &p32b, &gc, RampFilter::RamLak)?;
         let tb = Instant::now();
-        let plan = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &gc, &grid)?;
+        let plan = crate::gpu::fbp::BackprojectionPlan::sampled(&ctx.limits, &gc, &grid, sampling)?;
         let (v, timings) = crate::gpu::fbp::backproject_timed(ctx, &q, &gc, &grid, &plan)?;
         let back = tb.elapsed().as_secs_f64();
         Ok(GpuRun {
@@ -402,7 +431,7 @@ fn prepare_recon(
         })),
         gpu: Some(Box::new(gpu)),
         tol_f32: recon_tol(n),
-        tol_gpu: recon_tol(n),
+        tol_gpu,
         work: vec![Work {
             amount: work,
             unit: Unit::VoxelUpdates,
@@ -425,10 +454,10 @@ fn prepare_fbp(n: usize, views: usize) -> Result<Prepared> {
         "Parallel FBP of exact Shepp–Logan projections ({views} views over 180°, {n} bins \
          of 1 mm) onto scikit-image's {n}² grid. Voxel updates = {n}² × {views}."
     );
-    prepare_recon(n, p, g, grid, work, note)
+    prepare_recon(n, p, g, grid, work, note, ProjectionSampling::Exact)
 }
 
-fn prepare_fdk(n: usize, views: usize) -> Result<Prepared> {
+fn prepare_fdk(n: usize, views: usize, sampling: ProjectionSampling) -> Result<Prepared> {
     let (p, g, grid) = fdk_scene(n, views)?;
     let work = (n * n * n * views) as f64;
     let note = format!(
@@ -436,5 +465,14 @@ fn prepare_fdk(n: usize, views: usize) -> Result<Prepared> {
          detector, SID 1000 mm, SDD 1500 mm) onto RTK's centred {n}³ grid. Voxel updates \
          = {n}³ × {views}."
     );
-    prepare_recon(n, p, g, grid, work, note)
+    let note = match sampling {
+        ProjectionSampling::Exact => note,
+        ProjectionSampling::Hardware => format!(
+            "{note} GPU: the backprojection samples the filtered projections from a 2-D \
+             texture array through the texture unit (hardware bilinear; gpu::fbp::\
+             ProjectionSampling::Hardware); the GPU bound is max |Δ| ≤ \
+             gpu::fbp::hardware_error_bound for 8-bit weights."
+        ),
+    };
+    prepare_recon(n, p, g, grid, work, note, sampling)
 }

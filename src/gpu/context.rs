@@ -355,6 +355,19 @@ impl GpuContext {
                 format!("{dims:?}: a 3D texture holds 1 … {max} texels per axis on this adapter"),
             ));
         }
+        self.new_texture(label, dims, wgpu::TextureDimension::D3, format, usage)
+    }
+
+    /// A texture of one mip level, refused with [`Error::Gpu`] when the device is out
+    /// of memory (the caller checked the size limits).
+    fn new_texture(
+        &self,
+        label: &str,
+        dims: [usize; 3],
+        dimension: wgpu::TextureDimension,
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> Result<wgpu::Texture> {
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let tex = self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
@@ -365,7 +378,7 @@ impl GpuContext {
             },
             mip_level_count: 1,
             sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
+            dimension,
             format,
             usage,
             view_formats: &[],
@@ -376,6 +389,79 @@ impl GpuContext {
                 "out of GPU memory for {label} {dims:?}: {e}"
             ))),
         }
+    }
+
+    /// An `R32Float` 2-D texture array of `[width, height, layers]` texels the host
+    /// writes ([`Self::write_layers`]) and shaders sample; wgpu hands it out zeroed.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] past the adapter's 2-D texture size or array layers;
+    /// [`Error::Gpu`] out of GPU memory.
+    pub fn texture_layers(&self, label: &str, dims: [usize; 3]) -> Result<wgpu::Texture> {
+        let side = self.limits.max_texture_dimension_2d as usize;
+        let layers = self.limits.max_texture_array_layers as usize;
+        if dims[0] == 0 || dims[1] == 0 || dims[0] > side || dims[1] > side {
+            return Err(Error::too_large(
+                label,
+                format!(
+                    "{} × {} texels: a 2-D texture holds 1 … {side} texels per axis on this \
+                     adapter",
+                    dims[0], dims[1]
+                ),
+            ));
+        }
+        if dims[2] == 0 || dims[2] > layers {
+            return Err(Error::too_large(
+                label,
+                format!(
+                    "{} layers: a texture array holds 1 … {layers} on this adapter",
+                    dims[2]
+                ),
+            ));
+        }
+        self.new_texture(
+            label,
+            dims,
+            wgpu::TextureDimension::D2,
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        )
+    }
+
+    /// Writes `data` (`extent[0]` values fastest, then `extent[1]` rows, then
+    /// `extent[2]` layers) into the `R32Float` texture array `tex` at texel `origin`
+    /// (x, y, first layer).
+    pub fn write_layers(
+        &self,
+        tex: &wgpu::Texture,
+        origin: [usize; 3],
+        extent: [usize; 3],
+        data: &[f32],
+    ) {
+        debug_assert_eq!(data.len(), extent.iter().product::<usize>());
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: tex,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: origin[0] as u32,
+                    y: origin[1] as u32,
+                    z: origin[2] as u32,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(data),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some((extent[0] * 4) as u32),
+                rows_per_image: Some(extent[1] as u32),
+            },
+            wgpu::Extent3d {
+                width: extent[0] as u32,
+                height: extent[1] as u32,
+                depth_or_array_layers: extent[2] as u32,
+            },
+        );
     }
 
     fn write_texture_3d(&self, tex: &wgpu::Texture, dims: [usize; 3], bytes: &[u8], texel: usize) {

@@ -5,8 +5,12 @@
 //! drivers, all of a slab's in one submission. [`backproject_timed`] says how long the
 //! dispatches took on the device (timestamp queries, where the adapter has them).
 //!
-//! The view matrices are uploaded as `ViewMatrix<f32>` (WGSL `CtView`), the filtered
-//! projections as one f32 storage buffer. [`fbp`] runs the whole reconstruction on
+//! The view matrices are uploaded as `ViewMatrix<f32>` (WGSL `CtView`). The filtered
+//! projections are read one of two ways ([`ProjectionSampling`]): exactly, from an f32
+//! storage buffer with the bilinear interpolation written out in the shader (the
+//! oracle's twin, the default), or through the texture unit, from an `R32Float` 2-D
+//! texture array with a linear sampler (the fast path of real GPUs, whose filter
+//! weights carry about 8 fractional bits). [`fbp`] runs the whole reconstruction on
 //! the GPU: ramp filtering with [`crate::gpu::ramp::filter_projections`] (cosine
 //! pre-weighting, batched FFTs, the response, cropping), then [`backproject`].
 
@@ -43,10 +47,146 @@ pub const VOXELS_PER_INVOCATION: usize = 4;
 /// Views per dispatch: bounded work per invocation.
 const VIEWS_PER_DISPATCH: usize = 32;
 
+/// How the backprojection reads the filtered projections.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ProjectionSampling {
+    /// An f32 storage buffer and the bilinear interpolation of `cpu::fbp` written out
+    /// in the shader (`shaders/shared/ct_bilinear.wgsl`): the twin held to the oracle
+    /// within f32 rounding.
+    #[default]
+    Exact,
+    /// An `R32Float` 2-D texture array, one layer per view with a border of one zero
+    /// texel all round, sampled by the texture unit (`textureSampleLevel`, linear,
+    /// clamp to edge): the border gives the exact path's zeros outside the detector.
+    /// Real GPUs round each of the two interpolation weights to about 8 fractional
+    /// bits (lavapipe filters in full f32). Needs `FLOAT32_FILTERABLE`.
+    Hardware,
+}
+
+impl ProjectionSampling {
+    /// Texels of one view: the detector, with the hardware path's border.
+    pub fn view_texels(self, g: &Geometry) -> usize {
+        match self {
+            ProjectionSampling::Exact => g.rows * g.cols,
+            ProjectionSampling::Hardware => (g.rows + 2) * (g.cols + 2),
+        }
+    }
+}
+
+/// The most a voxel of the hardware path ([`ProjectionSampling::Hardware`]) may differ
+/// from the exact path's on a texture unit whose interpolation weights carry `bits`
+/// fractional bits (8 on NVIDIA), in units of the reconstruction.
+///
+/// A bilinear value is linear in each weight, and its slope along either axis is at
+/// most `D_k`, the largest difference of two texels in one 2 × 2 cell of view `k`
+/// (its zero border included). Each weight is off by at most `2^−bits`, so a sample is
+/// off by at most `D_k · 2^(1−bits)`, and a voxel by at most
+/// `π/(2A) · Σ_k w_k · D_k · 2^(1−bits)`, with `w_k` the view's distance weight, which
+/// is largest at a corner of the grid's box (its denominator is affine in the point).
+/// Infinite when a corner lies at or behind a cone-beam source.
+pub fn hardware_error_bound<R: crate::real::Real>(
+    filtered: &Projections<R>,
+    g: &Geometry,
+    grid: &Grid,
+    bits: u32,
+) -> f64 {
+    let (cols, rows) = (filtered.cols, filtered.rows);
+    let d = grid.dims;
+    let mut corners = Vec::with_capacity(8);
+    for i in [0, d[0].saturating_sub(1)] {
+        for j in [0, d[1].saturating_sub(1)] {
+            for k in [0, d[2].saturating_sub(1)] {
+                corners.push(grid.point(i, j, k).to_array());
+            }
+        }
+    }
+    let at = |v: &[R], c: isize, r: isize| -> f64 {
+        if c < 0 || r < 0 || c >= cols as isize || r >= rows as isize {
+            0.0
+        } else {
+            v[r as usize * cols + c as usize].f64()
+        }
+    };
+    let mut sum = 0.0;
+    for (k, m) in g.view_matrices::<f64>().iter().enumerate() {
+        let mut w_max = 0f64;
+        for &p in &corners {
+            match m.project(p) {
+                Some((_, _, w)) => w_max = w_max.max(w),
+                None => return f64::INFINITY,
+            }
+        }
+        let v = filtered.view(k);
+        let mut spread = 0f64;
+        for r in -1..rows as isize {
+            for c in -1..cols as isize {
+                let t = [
+                    at(v, c, r),
+                    at(v, c + 1, r),
+                    at(v, c, r + 1),
+                    at(v, c + 1, r + 1),
+                ];
+                let hi = t.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+                let lo = t.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+                spread = spread.max(hi - lo);
+            }
+        }
+        sum += w_max * spread;
+    }
+    backprojection_scale(g.n_angles()) * sum * 2f64.powi(1 - bits as i32)
+}
+
+/// The generated module `fbp_projection`: the binding of the filtered projections
+/// (binding 2; the hardware path's sampler at 4) and `fn projection(v: u32, x: f32,
+/// y: f32) -> f32`, view `v` of those bound at detector column `x`, row `y`, zero
+/// outside the detector.
+pub fn projection_wgsl(sampling: ProjectionSampling) -> String {
+    match sampling {
+        ProjectionSampling::Exact => "\
+// Generated by src/gpu/fbp.rs: projection_wgsl (exact). The filtered projections
+// (view, row, col), col fastest, in one f32 storage buffer.
+#import ct_bilinear
+@group(0) @binding(2) var<storage, read> proj: array<f32>;
+// Element i of the filtered projections, for shared/ct_bilinear.wgsl: bilinear_zero.
+fn tap(i: u32) -> f32 {
+    return proj[i];
+}
+fn projection(v: u32, x: f32, y: f32) -> f32 {
+    let cols = params.det.x;
+    let rows = params.det.y;
+    return bilinear_zero(v * cols * rows, cols, rows, x, y);
+}
+"
+        .into(),
+        ProjectionSampling::Hardware => "\
+// Generated by src/gpu/fbp.rs: projection_wgsl (hardware). One layer per view of
+// (cols + 2) × (rows + 2) texels: detector pixel (c, r) at texel (c + 1, r + 1), a
+// border of zeros all round, so clamping to the edge reads zero outside the detector.
+@group(0) @binding(2) var proj: texture_2d_array<f32>;
+@group(0) @binding(4) var proj_sampler: sampler;
+fn projection(v: u32, x: f32, y: f32) -> f32 {
+    let size = vec2<f32>(f32(params.det.x + 2u), f32(params.det.y + 2u));
+    // Texel (c + 1, r + 1)'s centre is at normalised ((c + 1.5), (r + 1.5)) / size.
+    let uv = (vec2<f32>(x, y) + 1.5) / size;
+    return textureSampleLevel(proj, proj_sampler, uv, v, 0.0).x;
+}
+"
+        .into(),
+    }
+}
+
 /// The shader source: `shaders/fbp_backproject.wgsl` and its imports (the shared CT
-/// geometry and `FbpParams`).
+/// geometry and `FbpParams`), reading the projections exactly.
 pub fn shader_source() -> String {
-    super::shaders::resolve("fbp_backproject")
+    sampled_shader_source(ProjectionSampling::Exact)
+}
+
+/// The shader source reading the projections as `sampling` says.
+pub fn sampled_shader_source(sampling: ProjectionSampling) -> String {
+    super::shaders::resolve_with(
+        "fbp_backproject",
+        &[("fbp_projection", &projection_wgsl(sampling))],
+    )
 }
 
 /// How [`backproject`] cuts a job to fit the planner's limits
@@ -54,7 +194,9 @@ pub fn shader_source() -> String {
 /// batches of whole views.
 ///
 /// A batch holds a multiple of the views one dispatch sums (32) wherever at least 32
-/// views fit one binding, and each slab's voxels sit where the unsplit volume's do
+/// views fit one binding (and, sampled by the texture unit, one texture array: at most
+/// the adapter's `max_texture_array_layers`), and each slab's voxels sit where the
+/// unsplit volume's do
 /// (the shader takes the slab's first slice), so a split reconstruction equals the
 /// unsplit one bit for bit. Only where fewer than 32 views fit a binding do the
 /// per-dispatch sums regroup (a float reassociation).
@@ -67,15 +209,35 @@ pub struct BackprojectionPlan {
     /// The largest device allocation of the job at once: the view matrices, one batch
     /// and one slab (bytes).
     pub device_bytes: u64,
+    /// How the projections are read (and so stored on the device).
+    pub sampling: ProjectionSampling,
 }
 
 impl BackprojectionPlan {
-    /// The plan for `g` onto `grid` under `limits` (the context's, or lower ones).
+    /// The plan for `g` onto `grid` under `limits` (the context's, or lower ones),
+    /// reading the projections exactly.
     ///
     /// # Errors
     /// [`Error::TooLarge`] when one slice of the volume or one view's projection alone
     /// exceeds a binding.
     pub fn new(limits: &wgpu::Limits, g: &Geometry, grid: &Grid) -> Result<Self> {
+        Self::sampled(limits, g, grid, ProjectionSampling::Exact)
+    }
+
+    /// [`Self::new`] for projections read as `sampling` says. The hardware path's
+    /// batches are texture arrays: at most `max_texture_array_layers` views, and no
+    /// more bytes than a binding, so that the planner's lowered limits split both
+    /// paths alike.
+    ///
+    /// # Errors
+    /// As [`Self::new`]; for [`ProjectionSampling::Hardware`] also a detector (with
+    /// its border) past the adapter's 2-D texture size.
+    pub fn sampled(
+        limits: &wgpu::Limits,
+        g: &Geometry,
+        grid: &Grid,
+        sampling: ProjectionSampling,
+    ) -> Result<Self> {
         let limit = binding_limit(limits);
         let [nx, ny, nz] = grid.dims;
         // Voxel indices are u32 in the shader: a slab holds fewer than 2³² voxels.
@@ -89,13 +251,31 @@ impl BackprojectionPlan {
             slab_limit,
             1,
         )?;
-        let view_bytes = (g.rows * g.cols) as u64 * 4;
+        let view_bytes = sampling.view_texels(g) as u64 * 4;
+        let batch_limit = match sampling {
+            ProjectionSampling::Exact => slab_limit,
+            ProjectionSampling::Hardware => {
+                let side = limits.max_texture_dimension_2d as usize;
+                if g.cols + 2 > side || g.rows + 2 > side {
+                    return Err(Error::too_large(
+                        "GPU filtered projections texture",
+                        format!(
+                            "a detector of {} × {} pixels and its border exceed the \
+                             adapter's 2-D texture size of {side} texels: read the \
+                             projections exactly (no --hardware-filtering)",
+                            g.cols, g.rows
+                        ),
+                    ));
+                }
+                slab_limit.min(limits.max_texture_array_layers.max(1) as u64 * view_bytes)
+            }
+        };
         let batches = Pieces::plan(
             "GPU filtered projections",
             "view",
             g.n_angles(),
             view_bytes,
-            slab_limit,
+            batch_limit,
             VIEWS_PER_DISPATCH,
         )?;
         let matrices = (g.n_angles() * size_of::<ViewMatrix<f32>>()) as u64;
@@ -105,6 +285,7 @@ impl BackprojectionPlan {
             device_bytes: matrices
                 + batches.per_piece as u64 * view_bytes
                 + slabs.per_piece as u64 * slice_bytes,
+            sampling,
         })
     }
 
@@ -114,10 +295,14 @@ impl BackprojectionPlan {
     }
 
     /// One line for the user: "backprojection in 4 slabs of 16 slices × 2 batches of
-    /// 64 views".
+    /// 64 views" (", projections in textures" on the hardware path).
     pub fn describe(&self) -> String {
+        let textures = match self.sampling {
+            ProjectionSampling::Exact => "",
+            ProjectionSampling::Hardware => ", projections in textures",
+        };
         format!(
-            "backprojection in {} of {} × {} of {}",
+            "backprojection in {} of {} × {} of {}{textures}",
             count_of(self.slabs.count(), "slab"),
             count_of(self.slabs.per_piece, "slice"),
             count_of(self.batches.count(), "batch"),
@@ -205,8 +390,18 @@ pub fn backproject_timed(
             ),
         ));
     }
+    let sampling = plan.sampling;
+    if sampling == ProjectionSampling::Hardware
+        && !ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE)
+    {
+        return Err(Error::Gpu(
+            "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
+             which this adapter lacks"
+                .into(),
+        ));
+    }
     let limit = binding_limit(&ctx.limits);
-    let batch_bytes = (plan.batches.per_piece * g.rows * g.cols * 4) as u64;
+    let batch_bytes = (plan.batches.per_piece * sampling.view_texels(g) * 4) as u64;
     let slab_bytes = (plan.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;
     if batch_bytes.max(slab_bytes) > limit {
         return Err(Error::too_large(
@@ -225,20 +420,57 @@ pub fn backproject_timed(
         usage: wgpu::BufferUsages::STORAGE,
     });
     let per_view = g.rows * g.cols;
-    let upload = |views: std::ops::Range<usize>| {
-        dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("fbp projections"),
-            contents: bytemuck::cast_slice(
-                &filtered.data[views.start * per_view..views.end * per_view],
-            ),
-            usage: wgpu::BufferUsages::STORAGE,
+    let upload = |views: std::ops::Range<usize>| -> Result<HeldProjections> {
+        let data = &filtered.data[views.start * per_view..views.end * per_view];
+        Ok(match sampling {
+            ProjectionSampling::Exact => {
+                HeldProjections::Buffer(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("fbp projections"),
+                    contents: bytemuck::cast_slice(data),
+                    usage: wgpu::BufferUsages::STORAGE,
+                }))
+            }
+            ProjectionSampling::Hardware => {
+                let tex = ctx.texture_layers(
+                    "GPU filtered projections texture",
+                    [g.cols + 2, g.rows + 2, views.len()],
+                )?;
+                // Inside the zero border, a dispatch's worth of views per write.
+                for (i, run) in data.chunks(VIEWS_PER_DISPATCH * per_view).enumerate() {
+                    let n = run.len() / per_view;
+                    ctx.write_layers(
+                        &tex,
+                        [1, 1, i * VIEWS_PER_DISPATCH],
+                        [g.cols, g.rows, n],
+                        run,
+                    );
+                }
+                HeldProjections::Texture(tex.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2Array),
+                    ..Default::default()
+                }))
+            }
         })
     };
     // One batch stays on the device for every slab; several are sent again per slab.
-    let resident = (!plan.batches.is_split()).then(|| upload(0..g.n_angles()));
+    let resident = if plan.batches.is_split() {
+        None
+    } else {
+        Some(upload(0..g.n_angles())?)
+    };
+    let sampler = (sampling == ProjectionSampling::Hardware).then(|| {
+        dev.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("fbp projections"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        })
+    });
     let [nx, ny, _] = grid.dims;
     let slice = nx * ny;
-    let module = ctx.shader("fbp_backproject.wgsl", &shader_source())?;
+    let module = ctx.shader("fbp_backproject.wgsl", &sampled_shader_source(sampling))?;
     let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("backproject_point"),
         layout: None,
@@ -270,7 +502,7 @@ pub fn backproject_timed(
             let pbuf = match &resident {
                 Some(b) => b,
                 None => {
-                    sent = upload(batch.clone());
+                    sent = upload(batch.clone())?;
                     &sent
                 }
             };
@@ -296,16 +528,16 @@ pub fn backproject_timed(
                         contents: bytemuck::bytes_of(&params),
                         usage: wgpu::BufferUsages::UNIFORM,
                     });
-                    ctx.bind_group(
-                        "fbp",
-                        &pipeline.get_bind_group_layout(0),
-                        &[
-                            ubuf.as_entire_binding(),
-                            vbuf.as_entire_binding(),
-                            pbuf.as_entire_binding(),
-                            out.as_entire_binding(),
-                        ],
-                    )
+                    let mut entries = vec![
+                        ubuf.as_entire_binding(),
+                        vbuf.as_entire_binding(),
+                        pbuf.binding(),
+                        out.as_entire_binding(),
+                    ];
+                    if let Some(s) = &sampler {
+                        entries.push(wgpu::BindingResource::Sampler(s));
+                    }
+                    ctx.bind_group("fbp", &pipeline.get_bind_group_layout(0), &entries)
                 })
                 .collect();
             let pass = (&pipeline, "backproject_point");
@@ -321,6 +553,22 @@ pub fn backproject_timed(
             .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
     }
     Ok((Reconstruction { grid: *grid, data }, timings))
+}
+
+/// The filtered projections of a batch on the device, as the plan's sampling reads
+/// them.
+enum HeldProjections {
+    Buffer(wgpu::Buffer),
+    Texture(wgpu::TextureView),
+}
+
+impl HeldProjections {
+    fn binding(&self) -> wgpu::BindingResource<'_> {
+        match self {
+            HeldProjections::Buffer(b) => b.as_entire_binding(),
+            HeldProjections::Texture(v) => wgpu::BindingResource::TextureView(v),
+        }
+    }
 }
 
 /// FBP/FDK on the GPU in f32: [`crate::gpu::ramp::filter_projections`], then

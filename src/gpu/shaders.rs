@@ -28,7 +28,7 @@
 //! What a module may use without importing it: the bindings and the `params` uniform
 //! of the stage that imports it (each shared module's header says which members it
 //! reads), and functions the stage defines for it (`gradient_voxel.wgsl` calls the
-//! stage's `volume`, `ct_geometry.wgsl` its `tap`).
+//! stage's `volume`, `ct_bilinear.wgsl` its `tap`).
 
 use std::collections::HashSet;
 use std::fmt;
@@ -101,6 +101,7 @@ registry! {
     CAMERA = "camera" => "shared/camera.wgsl",
     CLASSIFY = "classify" => "shared/classify.wgsl",
     CLASSIFY2D = "classify2d" => "shared/classify2d.wgsl",
+    CT_BILINEAR = "ct_bilinear" => "shared/ct_bilinear.wgsl",
     CT_GEOMETRY = "ct_geometry" => "shared/ct_geometry.wgsl",
     D2VR_PARAMS = "d2vr_params" => "shared/d2vr_params.wgsl",
     FBP_PARAMS = "fbp_params" => "shared/fbp_params.wgsl",
@@ -149,6 +150,10 @@ pub static GENERATED: &[Generated] = &[
     Generated {
         name: "fvr_slabs",
         by: "src/gpu/fvr.rs: slab_bindings_wgsl",
+    },
+    Generated {
+        name: "fbp_projection",
+        by: "src/gpu/fbp.rs: projection_wgsl",
     },
     Generated {
         name: "d2vr_tap",

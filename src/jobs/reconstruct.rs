@@ -124,6 +124,12 @@ pub struct ReconstructRequest {
     /// Cone beam over less than a full turn: Parker's short-scan weights.
     pub short_scan: bool,
     pub backend: Backend,
+    /// GPU FBP/FDK only: the backprojection samples the filtered projections through
+    /// the texture unit (a 2-D texture array, hardware bilinear filtering) instead of
+    /// the exact interpolation written out in the shader
+    /// ([`crate::gpu::fbp::ProjectionSampling`]). Real GPUs round the filter weights
+    /// to about 8 fractional bits (docs/parity.md).
+    pub hardware_filtering: bool,
     /// Write the reconstruction here: `.npy` (float32), `.nrrd`/`.nhdr` (the grid's
     /// affine) or `.png` (2-D images only). Checked before the work starts.
     pub out: Option<PathBuf>,
@@ -400,6 +406,21 @@ pub(super) fn check_request(a: &ReconstructRequest) -> Result<Option<Phantom>> {
             ));
         }
     }
+    if a.hardware_filtering {
+        if a.method != ReconstructMethod::Fbp {
+            return Err(Error::invalid(
+                "--hardware-filtering",
+                "samples the FBP/FDK backprojection's projections: not for an iterative \
+                 --method",
+            ));
+        }
+        if a.backend != Backend::Gpu {
+            return Err(Error::invalid(
+                "--hardware-filtering",
+                "is the GPU's texture unit: give --backend gpu",
+            ));
+        }
+    }
     if a.method == ReconstructMethod::Fbp {
         let given = [
             ("--iterations", a.iterations.is_some()),
@@ -577,13 +598,18 @@ pub fn reconstruct(
                     p32 = crate::gpu::parker::weigh(ctx, &p32, &g)?;
                 }
                 let ramp = crate::gpu::ramp::RampPlan::new(&ctx.limits, &g)?;
-                let plan = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &g, &grid)?;
+                let plan = backprojection_plan(a, ctx, &g, &grid)?;
                 for line in gpu_split_lines(&ramp, &plan, g.n_angles()) {
                     progress.note(&line);
                 }
                 let q = crate::gpu::ramp::filter_projections(ctx, &p32, &g, a.filter)?;
                 let r = crate::gpu::fbp::backproject_planned(ctx, &q, &g, &grid, &plan)?;
-                (widen(r), format!("gpu ({})", ctx.summary.name))
+                let how = if a.hardware_filtering {
+                    ", projections filtered by the texture unit"
+                } else {
+                    ""
+                };
+                (widen(r), format!("gpu ({}){how}", ctx.summary.name))
             }
             (Backend::CpuF32, _) => {
                 let mut p32 = p.narrow()?;
@@ -782,10 +808,11 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
     let (backend, host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
             let ramp = crate::gpu::ramp::RampPlan::new(&ctx.limits, &g)?;
-            let bp = crate::gpu::fbp::BackprojectionPlan::new(&ctx.limits, &g, &grid)?;
+            let bp = backprojection_plan(a, ctx, &g, &grid)?;
             let split = gpu_split_lines(&ramp, &bp, g.n_angles());
             let largest = (bp.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;
-            let largest = largest.max((bp.batches.per_piece * g.rows * g.cols * 4) as u64);
+            let view_bytes = bp.sampling.view_texels(&g) as u64 * 4;
+            let largest = largest.max(bp.batches.per_piece as u64 * view_bytes);
             let device = DevicePlan::on(ctx, ramp.device_bytes.max(bp.device_bytes), largest);
             // f64 input (and its padded copy), f32 copy and filtered f32, the f32
             // result and its f64 widening.
@@ -818,6 +845,23 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
         split,
         writes,
     })
+}
+
+/// The GPU backprojection's plan for `a` (its sampling from `--hardware-filtering`)
+/// under the context's limits.
+fn backprojection_plan(
+    a: &ReconstructRequest,
+    ctx: &crate::gpu::GpuContext,
+    g: &Geometry,
+    grid: &Grid,
+) -> Result<crate::gpu::fbp::BackprojectionPlan> {
+    use crate::gpu::fbp::{BackprojectionPlan, ProjectionSampling};
+    let sampling = if a.hardware_filtering {
+        ProjectionSampling::Hardware
+    } else {
+        ProjectionSampling::Exact
+    };
+    BackprojectionPlan::sampled(&ctx.limits, g, grid, sampling)
 }
 
 /// The lines a split GPU FBP/FDK prints (none when it runs in one piece).

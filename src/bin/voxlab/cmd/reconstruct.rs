@@ -74,6 +74,12 @@ pub struct ReconstructArgs {
     /// iterative methods on Joseph's pair), or auto (iterative methods: cpu).
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
     pub backend: Backend,
+    /// GPU FBP/FDK only: the backprojection samples the filtered projections through
+    /// the texture unit (a 2-D texture array, hardware bilinear filtering) instead of
+    /// the exact interpolation written out in the shader (real GPUs quantise its
+    /// weights to about 8 bits; docs/parity.md).
+    #[arg(long)]
+    pub hardware_filtering: bool,
     /// Output: .npy (float32; (n, n), (rows, n, n) or (N, N, N)), .nrrd/.nhdr (volume
     /// with the grid's affine, mm in the CT frame) or .png (2-D images only, windowed
     /// to the value range).
@@ -160,6 +166,7 @@ pub fn run(a: ReconstructArgs) -> Result<ExitCode> {
         no_circle: a.no_circle,
         short_scan: a.short_scan,
         backend: a.backend,
+        hardware_filtering: a.hardware_filtering,
         out: Some(a.out.clone()),
         truth: a.truth.clone(),
         error_map: a.error_map.clone(),
