@@ -140,6 +140,91 @@ fn a_phantom_is_written_as_a_scanner_would_store_it() {
     }
 }
 
+/// `convert --scale`: a [0, 1] f32 volume to u16 keeps its detail (round(v · S),
+/// saturated), the input's type when no --type is given; a bad scale is refused before
+/// anything is read or written.
+#[test]
+fn convert_scales_values_before_the_type() {
+    use voxlab::phantom::Phantom;
+    use voxlab::AnyVolume;
+    let d = scratch("convert-scale");
+    let f = d.join("f32.nrrd");
+    ok(&voxlab(&[
+        "phantom",
+        "shepp-logan-modified:9,8,7",
+        "--out",
+        s(&f),
+    ]));
+    let truth: Vec<f64> = Phantom::shepp_logan_modified()
+        .sample([9, 8, 7])
+        .unwrap()
+        .data()
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let u = d.join("u16.nrrd");
+    ok(&voxlab(&[
+        "convert",
+        s(&f),
+        s(&u),
+        "--type",
+        "u16",
+        "--scale",
+        "65535",
+    ]));
+    match voxlab::io::read_volume(&u).unwrap() {
+        AnyVolume::U16(v) => {
+            let want: Vec<u16> = truth
+                .iter()
+                .map(|&x| (x * 65535.0).round() as u16)
+                .collect();
+            assert_eq!(v.data(), &want[..]);
+        }
+        other => panic!("{:?}", other.kind()),
+    }
+    // No --type: an f32 input stays f32, each value times 2.
+    let g = d.join("twice.nrrd");
+    ok(&voxlab(&["convert", s(&f), s(&g), "--scale", "2"]));
+    match voxlab::io::read_volume(&g).unwrap() {
+        AnyVolume::F32(v) => {
+            for (a, b) in v.data().iter().zip(&truth) {
+                assert_eq!(*a, (b * 2.0) as f32);
+            }
+        }
+        other => panic!("{:?}", other.kind()),
+    }
+    // u8 saturates at 255.
+    let b = d.join("u8.nrrd");
+    ok(&voxlab(&[
+        "convert",
+        s(&f),
+        s(&b),
+        "--type",
+        "u8",
+        "--scale",
+        "1000",
+    ]));
+    match voxlab::io::read_volume(&b).unwrap() {
+        AnyVolume::U8(v) => {
+            for (a, t) in v.data().iter().zip(&truth) {
+                assert_eq!(*a, (t * 1000.0).round().clamp(0.0, 255.0) as u8);
+            }
+        }
+        other => panic!("{:?}", other.kind()),
+    }
+    for bad in ["0", "-3", "nan", "inf"] {
+        let r = d.join("refused.nrrd");
+        let arg = format!("--scale={bad}");
+        let o = voxlab(&["convert", s(&f), s(&r), &arg]);
+        assert!(
+            !o.status.success() && stderr(&o).contains("--scale"),
+            "{bad}: {}",
+            stderr(&o)
+        );
+        assert!(!r.exists());
+    }
+}
+
 #[test]
 fn voxel_limit_from_option_and_environment() {
     let d = scratch("limit");

@@ -36,6 +36,10 @@ pub struct ConvertRequest {
     /// Replace NaN and infinite voxels as rendering does, so that an integer type or
     /// resampling can take them (`--replace-non-finite`).
     pub replace_non_finite: bool,
+    /// Multiply every value by this (finite, positive) before the type conversion, as
+    /// a scanner stores intensities: `--type u16 --scale 65535` keeps a [0, 1] volume's
+    /// detail ([`quantise`]). `None`: the values as they are.
+    pub scale: Option<f64>,
 }
 
 impl Default for ConvertRequest {
@@ -48,7 +52,37 @@ impl Default for ConvertRequest {
             filter: Filter::Trilinear,
             voxel_type: None,
             replace_non_finite: false,
+            scale: None,
         }
+    }
+}
+
+/// `vol` as a volume of `kind`: each value times `scale`, rounded and saturated into an
+/// integer type (`round(v · scale)`), as a scanner stores intensities; for f32 the
+/// product itself (computed in f64, stored in f32).
+///
+/// # Errors
+/// A `scale` that is not finite and positive.
+pub fn quantise(vol: &AnyVolume, kind: VoxelKind, scale: f64) -> Result<AnyVolume> {
+    check_scale(scale)?;
+    let v = vol.to_f32();
+    let data = v
+        .data()
+        .iter()
+        .map(|&x| (f64::from(x) * scale) as f32)
+        .collect();
+    let scaled: AnyVolume = crate::volume::Volume::with_affine(v.dims(), v.affine(), data)?.into();
+    Ok(scaled.convert_to(kind))
+}
+
+fn check_scale(scale: f64) -> Result<()> {
+    if scale.is_finite() && scale > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            "--scale",
+            format!("{scale}: the scale must be finite and positive"),
+        ))
     }
 }
 
@@ -83,6 +117,9 @@ pub fn run(c: &ConvertRequest, progress: &dyn Progress) -> Result<AnyVolume> {
         ));
     }
     let kind = c.voxel_type.as_deref().map(voxel_kind).transpose()?;
+    if let Some(scale) = c.scale {
+        check_scale(scale)?;
+    }
     let mut vol = if c.input.load.non_finite == super::input::NonFinite::Error {
         c.input.load(progress)?
     } else {
@@ -155,8 +192,10 @@ pub fn run(c: &ConvertRequest, progress: &dyn Progress) -> Result<AnyVolume> {
         })?
         .into();
     }
-    if let Some(k) = kind {
-        vol = vol.convert_to(k);
+    match (c.scale, kind) {
+        (Some(scale), k) => vol = quantise(&vol, k.unwrap_or(vol.kind()), scale)?,
+        (None, Some(k)) => vol = vol.convert_to(k),
+        (None, None) => {}
     }
     Ok(vol)
 }

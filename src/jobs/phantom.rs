@@ -1,8 +1,8 @@
 //! `voxlab phantom`: an analytic phantom sampled on a grid ([`crate::phantom`]).
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::phantom::Phantom;
-use crate::volume::{AnyVolume, Volume, VoxelKind};
+use crate::volume::{AnyVolume, VoxelKind};
 
 /// A sampled phantom.
 #[derive(Clone, Debug)]
@@ -35,18 +35,5 @@ pub fn run(spec: &str) -> Result<Sampled> {
 /// # Errors
 /// A `scale` that is not finite and positive.
 pub fn quantised(p: &Sampled, kind: VoxelKind, scale: f64) -> Result<AnyVolume> {
-    if !(scale.is_finite() && scale > 0.0) {
-        return Err(Error::invalid(
-            "--scale",
-            format!("{scale}: the scale must be finite and positive"),
-        ));
-    }
-    let v = p.volume.to_f32();
-    let data = v
-        .data()
-        .iter()
-        .map(|&x| (f64::from(x) * scale) as f32)
-        .collect();
-    let scaled: AnyVolume = Volume::with_affine(v.dims(), v.affine(), data)?.into();
-    Ok(scaled.convert_to(kind))
+    super::convert::quantise(&p.volume, kind, scale)
 }

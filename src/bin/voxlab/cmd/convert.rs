@@ -35,6 +35,11 @@ pub struct ConvertArgs {
     /// integer types). Default: the input's type, or f32 after resampling.
     #[arg(long = "type")]
     pub voxel_type: Option<String>,
+    /// Multiply every value by S (finite, positive) before the type conversion:
+    /// round(v·S), saturated, for an integer --type (a [0, 1] volume to u16 with
+    /// --scale 65535); the input's type when --type is not given.
+    #[arg(long, value_name = "S")]
+    pub scale: Option<f64>,
     /// Replace NaN and infinite voxels as rendering does (NaN and -inf by the smallest
     /// finite value, +inf by the largest). Without it, convert keeps every value: a
     /// float output keeps them, and an integer --type or resampling is refused.
@@ -52,6 +57,7 @@ pub fn run(c: ConvertArgs) -> Result<ExitCode> {
         filter: c.filter,
         voxel_type: c.voxel_type.clone(),
         replace_non_finite: c.replace_non_finite,
+        scale: c.scale,
     };
     let term = Terminal::bars();
     let vol = voxlab::jobs::convert::run(&req, &term)?;
