@@ -73,13 +73,14 @@ fn local_spread(q: &Projections<f64>, view: usize, col: f64, row: f64) -> f64 {
 /// only difference is the normalised coordinate `(x + 1.5)/(cols + 2)` rounded to f32.
 #[test]
 fn hardware_backprojection_is_within_the_texture_units_bound() {
-    use voxlab::gpu::fbp::{backproject_planned, BackprojectionPlan, ProjectionSampling};
+    use voxlab::gpu::fbp::{backproject_planned, BackprojectionPlan};
+    use voxlab::gpu::plan::Sampling;
     let Some(ctx) = common::gpu("hardware_backprojection_is_within_the_texture_units_bound") else {
         return;
     };
     if !ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
         let (_, g, grid) = common::ct_cases(10, 10).remove(0);
-        let hardware = ProjectionSampling::Hardware;
+        let hardware = Sampling::Hardware;
         let plan = BackprojectionPlan::sampled(&ctx.limits, &g, &grid, hardware).unwrap();
         let q = common::random_projections_f32(&g, 3);
         let e = backproject_planned(ctx, &q, &g, &grid, &plan).unwrap_err();
@@ -96,9 +97,7 @@ fn hardware_backprojection_is_within_the_texture_units_bound() {
         )
         .unwrap();
         let want = backproject(&q, &g, &grid, &none).unwrap();
-        let plan =
-            BackprojectionPlan::sampled(&ctx.limits, &g, &grid, ProjectionSampling::Hardware)
-                .unwrap();
+        let plan = BackprojectionPlan::sampled(&ctx.limits, &g, &grid, Sampling::Hardware).unwrap();
         let got = backproject_planned(ctx, &q32, &g, &grid, &plan).unwrap();
         let exact = voxlab::gpu::fbp::backproject(ctx, &q32, &g, &grid).unwrap();
         let scale = want.data.iter().fold(0f64, |m, v| m.max(v.abs()));
@@ -311,15 +310,16 @@ const SPLITS: [(usize, usize); 5] = [(1, 1000), (4, 32), (5, 64), (1000, 32), (3
 
 #[test]
 fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
-    use voxlab::gpu::fbp::{backproject_timed, BackprojectionPlan, ProjectionSampling};
+    use voxlab::gpu::fbp::{backproject_timed, BackprojectionPlan};
     use voxlab::gpu::plan::Pieces;
+    use voxlab::gpu::plan::Sampling;
     let Some(ctx) = common::gpu("gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one")
     else {
         return;
     };
-    let mut samplings = vec![ProjectionSampling::Exact];
+    let mut samplings = vec![Sampling::Exact];
     if ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
-        samplings.push(ProjectionSampling::Hardware);
+        samplings.push(Sampling::Hardware);
     }
     for (name, g, grid) in common::ct_cases(75, 70) {
         let q = common::random_projections_f32(&g, 11);
@@ -378,7 +378,8 @@ fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
 
 #[test]
 fn the_backprojection_plan_cuts_what_exceeds_a_binding_and_refuses_what_cannot_fit() {
-    use voxlab::gpu::fbp::{BackprojectionPlan, ProjectionSampling};
+    use voxlab::gpu::fbp::BackprojectionPlan;
+    use voxlab::gpu::plan::Sampling;
     // 40 × 30 detector, 100 views; a 21 × 15 × 18 grid: slices of 1,260 bytes, views
     // of 4,800 bytes.
     let (_, g, grid) = common::ct_cases(10, 100).remove(2);
@@ -408,9 +409,8 @@ fn the_backprojection_plan_cuts_what_exceeds_a_binding_and_refuses_what_cannot_f
 
     // Projections in textures: a view is (40 + 2) × (30 + 2) texels, 5,376 bytes, and a
     // batch at most the adapter's texture-array layers.
-    let hardware = |limits: &wgpu::Limits| {
-        BackprojectionPlan::sampled(limits, &g, &grid, ProjectionSampling::Hardware)
-    };
+    let hardware =
+        |limits: &wgpu::Limits| BackprojectionPlan::sampled(limits, &g, &grid, Sampling::Hardware);
     let p = hardware(&limits(1 << 27)).unwrap();
     assert!(!p.is_split());
     assert_eq!(

@@ -273,11 +273,9 @@ fn fbp_params_layout_agrees() {
 /// the exact one carries the storage buffer and shared/ct_bilinear.wgsl.
 #[test]
 fn both_backprojector_variants_validate() {
-    use voxlab::gpu::fbp::{sampled_shader_source, ProjectionSampling};
-    for (sampling, buffer) in [
-        (ProjectionSampling::Exact, true),
-        (ProjectionSampling::Hardware, false),
-    ] {
+    use voxlab::gpu::fbp::sampled_shader_source;
+    use voxlab::gpu::plan::Sampling;
+    for (sampling, buffer) in [(Sampling::Exact, true), (Sampling::Hardware, false)] {
         let src = sampled_shader_source(sampling);
         validate_wgsl(&src, &format!("backprojection {sampling:?}"));
         assert_eq!(src.contains("fn bilinear_zero("), buffer, "{sampling:?}");
@@ -286,6 +284,20 @@ fn both_backprojector_variants_validate() {
             !buffer,
             "{sampling:?}"
         );
+    }
+}
+
+/// Both ways of reading Joseph's grid make a valid projector, and only the exact one
+/// carries the storage buffer and shared/joseph_bilinear.wgsl.
+#[test]
+fn both_projector_variants_validate() {
+    use voxlab::gpu::plan::Sampling;
+    use voxlab::gpu::project::sampled_shader_source;
+    for (sampling, buffer) in [(Sampling::Exact, true), (Sampling::Hardware, false)] {
+        let src = sampled_shader_source(sampling);
+        validate_wgsl(&src, &format!("projection {sampling:?}"));
+        assert_eq!(src.contains("fn slice_bilinear("), buffer, "{sampling:?}");
+        assert_eq!(src.contains("texture_3d<f32>"), !buffer, "{sampling:?}");
     }
 }
 
@@ -549,14 +561,14 @@ fn every_resolved_stage_validates() {
         .unwrap_or_else(|e| panic!("{}: {}", m.path, e.emit_to_string(&src)));
         n += 1;
     }
-    // raycast, d2vr, fvr_slice and fbp_backproject need generated modules.
+    // raycast, d2vr, fvr_slice, fbp_backproject and project need generated modules.
     assert_eq!(
         n,
         MODULES
             .iter()
             .filter(|m| m.source.contains("@compute"))
             .count()
-            - 4
+            - 5
     );
 }
 

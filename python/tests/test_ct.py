@@ -54,6 +54,38 @@ def test_hardware_filtered_fdk_equals_the_command_line(tmp_path, cli, gpu):
                         hardware_filtering=True, method="sirt")
 
 
+def test_hardware_filtered_joseph_equals_the_command_line(tmp_path, cli, gpu):
+    v = voxlab.phantom("shepp-logan", 24)
+    path = tmp_path / "v.nrrd"
+    voxlab.write(path, v)
+    p = tmp_path / "p.npy"
+    cli("project", path, "--geometry", "cone", "--angles", "12", "--cols", "40", "--rows",
+        "30", "--du", "8", "--backend", "gpu", "--hardware-filtering", "--out", p)
+    scene = dict(beam="cone", angles=12, cols=40, rows=30, du=8)
+    got = vct.project(v, backend="gpu", hardware_filtering=True, **scene)
+    assert "texture unit" in got.info["what"]
+    np.testing.assert_array_equal(got.projections, np.load(p))
+    exact = vct.project(v, **scene)
+    # The texture unit's three weights, each off by at most 2^-8 on real GPUs, move a
+    # sample by at most 3 * D / 256 (D: the largest spread of a 2x2x2 cell, zero
+    # border included), and a ray by that times the length it sums over, at most
+    # sqrt(3) * 24 voxels of this isotropic grid. tests/gpu_ct_project.rs holds a
+    # tighter bound pixel by pixel, and the CPU adapter's f32 agreement.
+    a = np.pad(np.asarray(v.array, dtype=np.float64), 1)
+    cells = [a[i:a.shape[0] - 1 + i, j:a.shape[1] - 1 + j, k:a.shape[2] - 1 + k]
+             for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    spread = (np.max(cells, axis=0) - np.min(cells, axis=0)).max()
+    voxel = np.linalg.norm(np.asarray(v.affine)[:3, :3], axis=0).max()
+    peak = np.abs(exact.projections).max()
+    bound = 3 * spread / 256 * np.sqrt(3) * 24 * voxel + 1e-5 * peak
+    assert peak > 1.0
+    assert np.abs(got.projections - exact.projections).max() <= bound
+    with pytest.raises(voxlab.InvalidError, match="hardware-filtering.*backend gpu"):
+        vct.project(v, hardware_filtering=True, **scene)
+    with pytest.raises(voxlab.InvalidError, match="hardware-filtering.*analytic"):
+        vct.project("phantom:shepp-logan", backend="gpu", hardware_filtering=True, **scene)
+
+
 def test_joseph_projection_of_an_array_equals_the_command_line_on_its_file(tmp_path, cli):
     v = voxlab.phantom("spheres", (20, 18, 6))
     path = tmp_path / "v.nrrd"

@@ -51,7 +51,10 @@ def project(
     ``spacing=``, or a path: Joseph's method), with the job's options ``beam``
     (``"parallel"`` | ``"cone"``), ``angles``, ``range``, ``angles_file``, ``cols``,
     ``rows``, ``du``, ``dv``, ``sid``, ``sdd``, ``method`` (``"analytic"`` |
-    ``"joseph"``), ``layout`` (``"auto"`` | ``"stack"`` | ``"skimage"``)."""
+    ``"joseph"``), ``layout`` (``"auto"`` | ``"stack"`` | ``"skimage"``),
+    ``hardware_filtering`` (with ``backend="gpu"`` and Joseph's method: the grid sampled
+    through the texture unit, whose weights real GPUs round to about 8 bits; see
+    docs/parity.md)."""
     spacing = options.pop("spacing", None)
     affine = options.pop("affine", None)
     req: Dict[str, Any] = dict(options, backend=backend)

@@ -42,7 +42,8 @@ use crate::cpu::project::{
 use crate::cpu::ramp::{FilterMethod, RampFilter};
 use crate::ct::{Beam, Geometry, Projections};
 use crate::error::Result;
-use crate::gpu::fbp::ProjectionSampling;
+use crate::gpu::plan::Sampling;
+use crate::gpu::project::ProjectionPlan;
 use crate::gpu::GpuContext;
 use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
@@ -218,13 +219,21 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     };
     let mut out = Vec::new();
     for &(n, views) in project {
-        for cone in [false, true] {
-            let name = if cone { "cone" } else { "parallel" };
+        for (cone, sampling) in [
+            (false, Sampling::Exact),
+            (true, Sampling::Exact),
+            (true, Sampling::Hardware),
+        ] {
+            let name = match (cone, sampling) {
+                (false, _) => "parallel",
+                (true, Sampling::Exact) => "cone",
+                (true, Sampling::Hardware) => "cone-hardware",
+            };
             out.push(Case::new(
                 "project",
                 name,
                 format!("{n}³ → {views} × {n}²"),
-                move || prepare_project(n, views, cone),
+                move || prepare_project(n, views, cone, sampling),
             ));
         }
     }
@@ -237,10 +246,10 @@ pub fn cases(suite: Suite) -> Vec<Case> {
         ));
     }
     for &(n, views) in fdks {
-        for sampling in [ProjectionSampling::Exact, ProjectionSampling::Hardware] {
+        for sampling in [Sampling::Exact, Sampling::Hardware] {
             let name = match sampling {
-                ProjectionSampling::Exact => "cone-ramlak",
-                ProjectionSampling::Hardware => "cone-ramlak-hardware",
+                Sampling::Exact => "cone-ramlak",
+                Sampling::Hardware => "cone-ramlak-hardware",
             };
             out.push(Case::new(
                 "fdk",
@@ -253,19 +262,29 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     out
 }
 
-fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
+fn prepare_project(n: usize, views: usize, cone: bool, sampling: Sampling) -> Result<Prepared> {
     let (g64, g) = project_scene(n, views, cone)?;
     let g32 = Grid::<f32>::new(g64.dims, g64.affine, g64.to_f32())?;
     let rays = (g.n_angles() * g.rows * g.cols) as f64;
     let samples = joseph_samples(g64.dims, g64.affine, &g);
     let tol = project_tol(&g, n);
+    let tol_gpu = match sampling {
+        Sampling::Exact => tol,
+        Sampling::Hardware => hardware_project_tol(&g64, &g, tol),
+    };
     let g = Arc::new(g);
     let (ga, gb, gc) = (Arc::clone(&g), Arc::clone(&g), g);
     let g32 = Arc::new(g32);
     let g32b = Arc::clone(&g32);
     let gpu = move |ctx: &GpuContext| -> Result<GpuRun> {
-        let (p, t) =
-            crate::gpu::project::project_volume_timed(ctx, &g32b, &gc, &ProjectOptions::default())?;
+        let plan = ProjectionPlan::sampled(&ctx.limits, &gc, g32b.dims, sampling)?;
+        let (p, t) = crate::gpu::project::project_volume_planned(
+            ctx,
+            &g32b,
+            &gc,
+            &ProjectOptions::default(),
+            &plan,
+        )?;
         Ok(GpuRun {
             output: flat(&p.data),
             kernel: t.kernel.unwrap_or(t.project),
@@ -295,7 +314,7 @@ fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
         })),
         gpu: Some(Box::new(gpu)),
         tol_f32: tol,
-        tol_gpu: tol,
+        tol_gpu,
         work: vec![
             Work {
                 amount: rays,
@@ -314,7 +333,15 @@ fn prepare_project(n: usize, views: usize, cone: bool) -> Result<Prepared> {
              compilation, grid and view uploads) included.",
             if cone { "cone" } else { "parallel" },
             samples / rays
-        ),
+        ) + match sampling {
+            Sampling::Exact => "",
+            Sampling::Hardware => {
+                " GPU: the projector samples the grid from a 3-D texture through the \
+                 texture unit (hardware trilinear; gpu::plan::Sampling::Hardware); the \
+                 GPU bound is max |Δ| ≤ gpu::project::hardware_error_bound for 8-bit \
+                 weights."
+            }
+        },
     })
 }
 
@@ -333,6 +360,17 @@ pub fn project_tol(g: &Geometry, n: usize) -> Tolerance {
         Beam::Parallel => n as f64,
     };
     Tolerance::max_abs_rel((3e-7 * d).max(5e-5)).with_rel_l2((3e-8 * d).max(7e-6))
+}
+
+/// The hardware projector's tolerance: [`crate::gpu::project::hardware_error_bound`]
+/// for weights of 8 fractional bits (NVIDIA's), plus the exact path's `exact` taken
+/// against the largest value a ray can reach ([`crate::gpu::project::longest_ray`]
+/// times the largest voxel), as one bound on max |Δ|.
+fn hardware_project_tol(grid: &Grid<f64>, g: &Geometry, exact: Tolerance) -> Tolerance {
+    let bound = crate::gpu::project::hardware_error_bound(grid, g, 8);
+    let top = grid.data.iter().fold(0f64, |m, v| m.max(v.abs()));
+    let reach = crate::gpu::project::longest_ray(grid, g) * top;
+    Tolerance::max_abs(bound + exact.max_abs_rel * reach)
 }
 
 /// Tolerance of FBP/FDK in f32 (CPU and GPU) against the f64 oracle for an `n²` image
@@ -385,11 +423,11 @@ fn prepare_recon(
     grid: FbpGrid,
     work: f64,
     note: String,
-    sampling: ProjectionSampling,
+    sampling: Sampling,
 ) -> Result<Prepared> {
     let tol_gpu = match sampling {
-        ProjectionSampling::Exact => recon_tol(n),
-        ProjectionSampling::Hardware => hardware_recon_tol(n, &p, &g, &grid)?,
+        Sampling::Exact => recon_tol(n),
+        Sampling::Hardware => hardware_recon_tol(n, &p, &g, &grid)?,
     };
     let p32 = Arc::new(to_f32(&p)?);
     let p32b = Arc::clone(&p32);
@@ -454,10 +492,10 @@ fn prepare_fbp(n: usize, views: usize) -> Result<Prepared> {
         "Parallel FBP of exact Shepp–Logan projections ({views} views over 180°, {n} bins \
          of 1 mm) onto scikit-image's {n}² grid. Voxel updates = {n}² × {views}."
     );
-    prepare_recon(n, p, g, grid, work, note, ProjectionSampling::Exact)
+    prepare_recon(n, p, g, grid, work, note, Sampling::Exact)
 }
 
-fn prepare_fdk(n: usize, views: usize, sampling: ProjectionSampling) -> Result<Prepared> {
+fn prepare_fdk(n: usize, views: usize, sampling: Sampling) -> Result<Prepared> {
     let (p, g, grid) = fdk_scene(n, views)?;
     let work = (n * n * n * views) as f64;
     let note = format!(
@@ -466,11 +504,11 @@ fn prepare_fdk(n: usize, views: usize, sampling: ProjectionSampling) -> Result<P
          = {n}³ × {views}."
     );
     let note = match sampling {
-        ProjectionSampling::Exact => note,
-        ProjectionSampling::Hardware => format!(
+        Sampling::Exact => note,
+        Sampling::Hardware => format!(
             "{note} GPU: the backprojection samples the filtered projections from a 2-D \
-             texture array through the texture unit (hardware bilinear; gpu::fbp::\
-             ProjectionSampling::Hardware); the GPU bound is max |Δ| ≤ \
+             texture array through the texture unit (hardware bilinear; gpu::plan::\
+             Sampling::Hardware); the GPU bound is max |Δ| ≤ \
              gpu::fbp::hardware_error_bound for 8-bit weights."
         ),
     };

@@ -333,7 +333,7 @@ pub fn pixel_ray<R: Real>(v: &JosephView<R>, col: R, row: R) -> ([R; 3], [R; 3],
 /// `y` (stride `sb`, size `nb`). The same taps and zero rule as
 /// [`crate::ct::bilinear_zero`].
 ///
-/// mirrors shaders/project.wgsl: slice_bilinear
+/// mirrors shaders/shared/joseph_bilinear.wgsl: slice_bilinear
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn slice_bilinear<R: Real>(

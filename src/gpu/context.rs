@@ -236,6 +236,20 @@ impl GpuContext {
             .collect::<String>()
     }
 
+    /// Refuses, with [`Error::Gpu`], an adapter whose texture unit cannot filter f32
+    /// textures (`FLOAT32_FILTERABLE`): every hardware-filtering path asks first.
+    pub fn require_float32_filtering(&self) -> Result<()> {
+        if self.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
+            Ok(())
+        } else {
+            Err(Error::Gpu(
+                "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
+                 which this adapter lacks"
+                    .into(),
+            ))
+        }
+    }
+
     /// Compiles WGSL, turning validation errors into [`Error::Gpu`] with the message.
     pub fn shader(&self, label: &str, source: &str) -> Result<wgpu::ShaderModule> {
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);

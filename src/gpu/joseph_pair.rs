@@ -28,7 +28,7 @@
 
 use super::context::GpuContext;
 use super::plan::{binding_limit, count_of, Pieces};
-use super::project::{views_per_dispatch, ForwardKernel, SAMPLES_PER_DISPATCH};
+use super::project::{views_per_dispatch, ForwardKernel, GridBinding, SAMPLES_PER_DISPATCH};
 use crate::cpu::iterative::MatchedPair;
 use crate::cpu::project::{joseph_views, view_axes, JosephFootprint, JosephView};
 use crate::ct::Geometry;
@@ -417,9 +417,10 @@ impl<'c> GpuJosephPair<'c> {
         let mut k0 = 0;
         while k0 < n {
             let m = chunk.min(n - k0);
-            let bufs = [&self.views, x, list, out];
+            let bufs = [&self.views, list, out];
+            let grid = GridBinding::Buffer(x);
             self.forward_kernel
-                .dispatch(self.ctx, shape, (k0, m), k0 * pv, bufs, None);
+                .dispatch(self.ctx, shape, (k0, m), k0 * pv, bufs, grid, None);
             k0 += m;
         }
     }
@@ -587,9 +588,10 @@ impl MatchedPair<f32> for GpuJosephPair<'_> {
             let mut k0 = 0;
             while k0 < views.len() {
                 let n = chunk.min(views.len() - k0);
-                let bufs = [rays, &self.grid, &self.list, &self.projections_out];
+                let bufs = [rays, &self.list, &self.projections_out];
+                let grid = GridBinding::Buffer(&self.grid);
                 self.forward_kernel
-                    .dispatch(self.ctx, shape, (k0, n), 0, bufs, None);
+                    .dispatch(self.ctx, shape, (k0, n), 0, bufs, grid, None);
                 let got = self.read(&self.projections_out, n * pv)?;
                 let dst = &mut out[k0 * pv..(k0 + n) * pv];
                 if s == 0 {

@@ -111,6 +111,24 @@ pub fn binding_limit(limits: &wgpu::Limits) -> u64 {
         .min(limits.max_buffer_size)
 }
 
+/// How a GPU job reads the data it interpolates: the filtered projections of the
+/// FBP/FDK backprojection (`gpu::fbp`), the grid of Joseph's projection
+/// (`gpu::project`). The plan carries it, because the two ways hold the data in
+/// different device objects (a storage buffer, a texture with a zero border).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Sampling {
+    /// An f32 storage buffer and the CPU's interpolation written out in the shader:
+    /// the twin held to the f64 oracle within f32 rounding.
+    #[default]
+    Exact,
+    /// An `R32Float` texture with a border of one zero texel all round, read by the
+    /// texture unit (`textureSampleLevel`, linear, clamp to edge): the border gives the
+    /// exact path's zeros outside the data. Real GPUs round each interpolation weight
+    /// to about 8 fractional bits (lavapipe filters in full f32), so each family states
+    /// a bound for it (docs/parity.md). Needs `FLOAT32_FILTERABLE`.
+    Hardware,
+}
+
 /// An axis of `total` units cut into consecutive pieces of at most `per_piece` units.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pieces {

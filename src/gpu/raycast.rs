@@ -998,7 +998,6 @@ pub struct RaycastSession<'c> {
     compact_kind: Option<CompactVolume>,
     compact_on: bool,
     compact: Option<wgpu::Texture>,
-    filterable: bool,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
@@ -1108,7 +1107,6 @@ impl<'c> RaycastSession<'c> {
             compact_kind: CompactVolume::of(ctx, volume),
             compact_on: CompactVolume::enabled(),
             compact: None,
-            filterable,
             layout,
             sampler,
             dummy,
@@ -1264,12 +1262,8 @@ impl<'c> RaycastSession<'c> {
             None => (dims, self.affine, self.range),
         };
         check_loop_limit(ctx, ray_dims, settings)?;
-        if settings.hardware_filtering && !self.filterable {
-            return Err(Error::Gpu(
-                "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
-                 which this adapter lacks"
-                    .into(),
-            ));
+        if settings.hardware_filtering {
+            ctx.require_float32_filtering()?;
         }
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
         let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;

@@ -28,7 +28,7 @@
 //! What a module may use without importing it: the bindings and the `params` uniform
 //! of the stage that imports it (each shared module's header says which members it
 //! reads), and functions the stage defines for it (`gradient_voxel.wgsl` calls the
-//! stage's `volume`, `ct_bilinear.wgsl` its `tap`).
+//! stage's `volume`, `ct_bilinear.wgsl` its `tap`, `joseph_bilinear.wgsl` its `vol`).
 
 use std::collections::HashSet;
 use std::fmt;
@@ -113,6 +113,7 @@ registry! {
     GRADIENT_VOXEL = "gradient_voxel" => "shared/gradient_voxel.wgsl",
     ITERATIVE_PARAMS = "iterative_params" => "shared/iterative_params.wgsl",
     JOSEPH = "joseph" => "shared/joseph.wgsl",
+    JOSEPH_BILINEAR = "joseph_bilinear" => "shared/joseph_bilinear.wgsl",
     MODES = "modes" => "shared/modes.wgsl",
     MODES_CAST = "modes_cast" => "shared/modes_cast.wgsl",
     MULTI_PARAMS = "multi_params" => "shared/multi_params.wgsl",
@@ -154,6 +155,10 @@ pub static GENERATED: &[Generated] = &[
     Generated {
         name: "fbp_projection",
         by: "src/gpu/fbp.rs: projection_wgsl",
+    },
+    Generated {
+        name: "joseph_volume",
+        by: "src/gpu/project.rs: volume_wgsl",
     },
     Generated {
         name: "d2vr_tap",

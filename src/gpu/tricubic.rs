@@ -49,13 +49,8 @@ pub fn sample_fast(
             format!("{} points exceed one dispatch's {MAX_POINTS}", points.len()),
         ));
     }
-    let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
-    if hardware && !filterable {
-        return Err(Error::Gpu(
-            "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
-             which this adapter lacks"
-                .into(),
-        ));
+    if hardware {
+        ctx.require_float32_filtering()?;
     }
     let dev = &ctx.device;
     let module = ctx.shader(

@@ -86,6 +86,11 @@ pub struct ProjectRequest {
     pub method: Option<Method>,
     /// Who computes Joseph's method; the analytic method runs on the CPU in f64 only.
     pub backend: Backend,
+    /// GPU Joseph only: the projector samples the grid through the texture unit (a 3-D
+    /// texture, hardware trilinear filtering) instead of the exact interpolation
+    /// written out in the shader ([`crate::gpu::plan::Sampling`]). Real GPUs round the
+    /// filter weights to about 8 fractional bits (docs/parity.md).
+    pub hardware_filtering: bool,
     pub layout: LayoutChoice,
 }
 
@@ -106,6 +111,7 @@ impl Default for ProjectRequest {
             sdd: None,
             method: None,
             backend: Backend::Cpu,
+            hardware_filtering: false,
             layout: LayoutChoice::Auto,
         }
     }
@@ -188,6 +194,29 @@ pub fn geometry(a: &ProjectRequest) -> Result<Geometry> {
     }
 }
 
+/// How the GPU projector reads the grid: refuses hardware filtering off the GPU or
+/// for the analytic method.
+fn sampling(a: &ProjectRequest, method: Method) -> Result<crate::gpu::plan::Sampling> {
+    use crate::gpu::plan::Sampling;
+    if !a.hardware_filtering {
+        return Ok(Sampling::Exact);
+    }
+    if method != Method::Joseph {
+        return Err(Error::invalid(
+            "--hardware-filtering",
+            "samples the grid of Joseph's method: not for the analytic projection (add \
+             --method joseph)",
+        ));
+    }
+    if a.backend != Backend::Gpu {
+        return Err(Error::invalid(
+            "--hardware-filtering",
+            "is the GPU's texture unit: give --backend gpu",
+        ));
+    }
+    Ok(Sampling::Hardware)
+}
+
 /// A phantom and the grid it is sampled on.
 type NamedPhantom = (crate::phantom::Phantom, [usize; 3]);
 
@@ -218,6 +247,7 @@ fn phantom_and_method(a: &ProjectRequest) -> Result<(Option<NamedPhantom>, Metho
 pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
     let g = geometry(a)?;
     let (phantom, method) = phantom_and_method(a)?;
+    let sampling = sampling(a, method)?;
     let values = (g.n_angles() * g.rows * g.cols) as u64;
     let plan = |backend: String, host: u64, device, split| super::plan::MemoryPlan {
         job: format!(
@@ -245,8 +275,8 @@ pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::
     let engine = Engine::open(a.backend)?;
     Ok(match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
-            let p = crate::gpu::project::ProjectionPlan::new(&ctx.limits, &g, dims)?;
-            let slab = (p.slabs.per_piece * dims[0] * dims[1] * 4) as u64;
+            let p = crate::gpu::project::ProjectionPlan::sampled(&ctx.limits, &g, dims, sampling)?;
+            let slab = p.slab_bytes(dims);
             let chunk = (p.views_per_dispatch * g.rows * g.cols * 4) as u64;
             let split = if p.is_split() {
                 vec![p.describe()]
@@ -295,6 +325,7 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
         ));
     }
     let (phantom, method) = phantom_and_method(a)?;
+    let sampling = sampling(a, method)?;
 
     let views = g.n_angles();
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -358,10 +389,11 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                     let engine = Engine::open(a.backend)?;
                     match (engine.backend(), engine.gpu()) {
                         (Backend::Gpu, Some(ctx)) => {
-                            let plan = crate::gpu::project::ProjectionPlan::new(
+                            let plan = crate::gpu::project::ProjectionPlan::sampled(
                                 &ctx.limits,
                                 &g,
                                 grid.dims,
+                                sampling,
                             )?;
                             if plan.is_split() {
                                 progress.note(&plan.describe());
@@ -370,8 +402,14 @@ pub fn run(a: &ProjectRequest, progress: &dyn Progress) -> Result<Projected> {
                                 ctx, &grid, &g, &options, &plan,
                             )?
                             .0;
+                            let how = match sampling {
+                                crate::gpu::plan::Sampling::Exact => "",
+                                crate::gpu::plan::Sampling::Hardware => {
+                                    ", grid filtered by the texture unit"
+                                }
+                            };
                             (
-                                format!("{name} joseph, gpu ({})", ctx.summary.name),
+                                format!("{name} joseph, gpu ({}){how}", ctx.summary.name),
                                 p.widen(),
                                 Backend::Gpu,
                             )

@@ -127,7 +127,7 @@ pub struct ReconstructRequest {
     /// GPU FBP/FDK only: the backprojection samples the filtered projections through
     /// the texture unit (a 2-D texture array, hardware bilinear filtering) instead of
     /// the exact interpolation written out in the shader
-    /// ([`crate::gpu::fbp::ProjectionSampling`]). Real GPUs round the filter weights
+    /// ([`crate::gpu::plan::Sampling`]). Real GPUs round the filter weights
     /// to about 8 fractional bits (docs/parity.md).
     pub hardware_filtering: bool,
     /// Write the reconstruction here: `.npy` (float32), `.nrrd`/`.nhdr` (the grid's
@@ -811,7 +811,7 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
             let bp = backprojection_plan(a, ctx, &g, &grid)?;
             let split = gpu_split_lines(&ramp, &bp, g.n_angles());
             let largest = (bp.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;
-            let view_bytes = bp.sampling.view_texels(&g) as u64 * 4;
+            let view_bytes = crate::gpu::fbp::view_texels(bp.sampling, &g) as u64 * 4;
             let largest = largest.max(bp.batches.per_piece as u64 * view_bytes);
             let device = DevicePlan::on(ctx, ramp.device_bytes.max(bp.device_bytes), largest);
             // f64 input (and its padded copy), f32 copy and filtered f32, the f32
@@ -855,11 +855,12 @@ fn backprojection_plan(
     g: &Geometry,
     grid: &Grid,
 ) -> Result<crate::gpu::fbp::BackprojectionPlan> {
-    use crate::gpu::fbp::{BackprojectionPlan, ProjectionSampling};
+    use crate::gpu::fbp::BackprojectionPlan;
+    use crate::gpu::plan::Sampling;
     let sampling = if a.hardware_filtering {
-        ProjectionSampling::Hardware
+        Sampling::Hardware
     } else {
-        ProjectionSampling::Exact
+        Sampling::Exact
     };
     BackprojectionPlan::sampled(&ctx.limits, g, grid, sampling)
 }

@@ -71,6 +71,12 @@ pub struct ProjectArgs {
     /// analytic method runs on the CPU in f64 only.
     #[arg(long, value_parser = choice::<Backend>(), default_value = "cpu")]
     pub backend: Backend,
+    /// GPU Joseph only: the projector samples the grid through the texture unit (a 3-D
+    /// texture, hardware trilinear filtering) instead of the exact interpolation
+    /// written out in the shader (real GPUs quantise its weights to about 8 bits;
+    /// docs/parity.md).
+    #[arg(long)]
+    pub hardware_filtering: bool,
     /// File layout: stack (angle, row, col); skimage (detector, angle), one row only;
     /// auto: skimage for a one-row parallel beam, else stack.
     #[arg(long, value_parser = choice::<LayoutChoice>(), default_value = "auto")]
@@ -119,6 +125,7 @@ pub fn run(a: ProjectArgs) -> Result<ExitCode> {
         sdd: a.sdd,
         method: a.method,
         backend: a.backend,
+        hardware_filtering: a.hardware_filtering,
         layout: a.layout,
     };
     let term = Terminal::bars();
