@@ -236,6 +236,20 @@ impl GpuContext {
             .collect::<String>()
     }
 
+    /// A sampler that clamps to the edge on every axis and filters with `filter`
+    /// (the texture unit's trilinear or bilinear filter with `Linear`).
+    pub fn clamp_sampler(&self, label: &str, filter: wgpu::FilterMode) -> wgpu::Sampler {
+        self.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some(label),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: filter,
+            min_filter: filter,
+            ..Default::default()
+        })
+    }
+
     /// Refuses, with [`Error::Gpu`], an adapter whose texture unit cannot filter f32
     /// textures (`FLOAT32_FILTERABLE`): every hardware-filtering path asks first.
     pub fn require_float32_filtering(&self) -> Result<()> {

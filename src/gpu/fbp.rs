@@ -436,16 +436,8 @@ pub fn backproject_timed(
     } else {
         Some(upload(0..g.n_angles())?)
     };
-    let sampler = (sampling == Sampling::Hardware).then(|| {
-        dev.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("fbp projections"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        })
-    });
+    let sampler = (sampling == Sampling::Hardware)
+        .then(|| ctx.clamp_sampler("fbp projections", wgpu::FilterMode::Linear));
     let [nx, ny, _] = grid.dims;
     let slice = nx * ny;
     let module = ctx.shader("fbp_backproject.wgsl", &sampled_shader_source(sampling))?;

@@ -559,17 +559,8 @@ pub fn project_volume_planned<R: Real>(
         usage: wgpu::BufferUsages::STORAGE,
     });
     let kernel = ForwardKernel::sampled(ctx, plan.sampling)?;
-    let sampler = (plan.sampling == Sampling::Hardware).then(|| {
-        dev.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("projection grid"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        })
-    });
+    let sampler = (plan.sampling == Sampling::Hardware)
+        .then(|| ctx.clamp_sampler("projection grid", wgpu::FilterMode::Linear));
     let per_view = g.rows * g.cols;
     let chunk = plan.views_per_dispatch.max(1);
     let out = ctx.storage_buffer("projections", (chunk * per_view * 4) as u64)?;

@@ -1071,15 +1071,7 @@ impl<'c> RaycastSession<'c> {
         } else {
             wgpu::FilterMode::Nearest
         };
-        let sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("linear clamp"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: filter_mode,
-            min_filter: filter_mode,
-            ..Default::default()
-        });
+        let sampler = ctx.clamp_sampler("linear clamp", filter_mode);
         let dummy = ctx.rgba_texture([1, 1, 1], false)?;
         let zeros = |label, bytes: &[u8]| {
             dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -89,15 +89,7 @@ pub fn sample_fast(
         usage: wgpu::BufferUsages::STORAGE,
     });
     let out = ctx.storage_buffer("tricubic values", 4 * n as u64)?;
-    let sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some("linear clamp"),
-        address_mode_u: wgpu::AddressMode::ClampToEdge,
-        address_mode_v: wgpu::AddressMode::ClampToEdge,
-        address_mode_w: wgpu::AddressMode::ClampToEdge,
-        mag_filter: wgpu::FilterMode::Linear,
-        min_filter: wgpu::FilterMode::Linear,
-        ..Default::default()
-    });
+    let sampler = ctx.clamp_sampler("linear clamp", wgpu::FilterMode::Linear);
     let mut resources = vec![
         count.as_entire_binding(),
         wgpu::BindingResource::TextureView(&view),
