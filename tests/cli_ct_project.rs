@@ -237,6 +237,27 @@ fn bad_arguments_are_clear_errors() {
     assert!(!out.exists());
 }
 
+/// Joseph on the GPU: the 32³ Shepp–Logan grid through 12 cone-beam views of 40 × 30
+/// pixels of 8 mm (the scene of the split and texture tests).
+const GPU_CONE_32: [&str; 16] = [
+    "project",
+    "phantom:shepp-logan:32",
+    "--geometry",
+    "cone",
+    "--angles",
+    "12",
+    "--cols",
+    "40",
+    "--rows",
+    "30",
+    "--du",
+    "8",
+    "--method",
+    "joseph",
+    "--backend",
+    "gpu",
+];
+
 #[test]
 fn a_split_gpu_projection_says_so_and_matches_the_unsplit_one() {
     if common::gpu("a_split_gpu_projection_says_so_and_matches_the_unsplit_one").is_none() {
@@ -244,26 +265,8 @@ fn a_split_gpu_projection_says_so_and_matches_the_unsplit_one() {
     }
     let d = scratch("project-split");
     let run = |out: &std::path::Path, binding: Option<&str>, dry: bool| {
-        let mut args = vec![
-            "project",
-            "phantom:shepp-logan:32",
-            "--geometry",
-            "cone",
-            "--angles",
-            "12",
-            "--cols",
-            "40",
-            "--rows",
-            "30",
-            "--du",
-            "8",
-            "--method",
-            "joseph",
-            "--backend",
-            "gpu",
-            "--out",
-            s(out),
-        ];
+        let mut args = GPU_CONE_32.to_vec();
+        args.extend_from_slice(&["--out", s(out)]);
         if dry {
             args.push("--dry-run");
         }
@@ -313,26 +316,8 @@ fn hardware_filtering_samples_the_grid_from_a_texture() {
         return;
     }
     let d = scratch("project-hardware");
-    let base = [
-        "project",
-        "phantom:shepp-logan:32",
-        "--geometry",
-        "cone",
-        "--angles",
-        "12",
-        "--cols",
-        "40",
-        "--rows",
-        "30",
-        "--du",
-        "8",
-        "--method",
-        "joseph",
-        "--backend",
-        "gpu",
-    ];
     let run = |out: &std::path::Path, extra: &[&str], binding: Option<&str>| {
-        let mut args = base.to_vec();
+        let mut args = GPU_CONE_32.to_vec();
         args.extend_from_slice(&["--out", s(out)]);
         args.extend_from_slice(extra);
         let o = common::voxlab_with_binding(&args, binding);
