@@ -71,17 +71,20 @@ fn plane_sample(pl: Planes, s: u32) -> f32 {
 // k + 1), a border of zeros all round, so clamping to the edge reads zero outside.
 @group(0) @binding(2) var vol: texture_3d<f32>;
 @group(0) @binding(5) var vol_sampler: sampler;
+// v on axis `axis` (0 x, 1 y, 2 z), zero on the others: selects, so that no private
+// array is indexed at run time (a GPU would keep it in memory, not registers).
+fn on_axis(axis: u32, v: f32) -> vec3<f32> {
+    return select(vec3<f32>(0.0), vec3<f32>(v), vec3<u32>(0u, 1u, 2u) == vec3<u32>(axis));
+}
 fn plane_sample(pl: Planes, s: u32) -> f32 {
     let sr = f32(s);
-    var x = array<f32, 3>(0.0, 0.0, 0.0);
-    x[pl.m] = sr;
-    x[pl.a] = pl.xa0 + sr * pl.ka;
-    x[pl.b] = pl.xb0 + sr * pl.kb;
+    let x = on_axis(pl.m, sr) + on_axis(pl.a, pl.xa0 + sr * pl.ka)
+        + on_axis(pl.b, pl.xb0 + sr * pl.kb);
     // Texel i + 1's centre is at normalised (i + 1.5) / size. The driving axis sits on
     // a texel centre, so the unit interpolates within the plane (up to its weights'
     // rounding).
     let size = vec3<f32>(f32(p.nx + 2u), f32(p.ny + 2u), f32(p.nz + 2u));
-    let uvw = (vec3<f32>(x[0], x[1], x[2]) + 1.5) / size;
+    let uvw = (x + 1.5) / size;
     return textureSampleLevel(vol, vol_sampler, uvw, 0.0).x;
 }
 "
