@@ -76,6 +76,25 @@ impl Grid {
         self.affine
             .transform_point3(DVec3::new(i as f64, j as f64, k as f64))
     }
+
+    /// The CT-world positions of the eight corners of the box of voxel centres
+    /// `0..nx` × `j` × `k`: where a quantity affine in the point (a cone beam's depth)
+    /// takes its extremes over the box.
+    pub fn corners(&self, j: std::ops::Range<usize>, k: std::ops::Range<usize>) -> [[f64; 3]; 8] {
+        let last = |r: &std::ops::Range<usize>| r.end.saturating_sub(1).max(r.start);
+        let mut out = [[0.0; 3]; 8];
+        for (n, c) in out.iter_mut().enumerate() {
+            let i = if n & 1 == 0 {
+                0
+            } else {
+                self.dims[0].saturating_sub(1)
+            };
+            let jj = if n & 2 == 0 { j.start } else { last(&j) };
+            let kk = if n & 4 == 0 { k.start } else { last(&k) };
+            *c = self.point(i, jj, kk).to_array();
+        }
+        out
+    }
 }
 
 /// scikit-image's `iradon` output grid for an `n × n` image (1 mm = 1 detector bin):
@@ -183,15 +202,7 @@ fn check_inputs<R: Copy + Default>(filtered: &Projections<R>, g: &Geometry) -> R
 /// bilinear taps and rounding; the whole view when a corner lies at or behind the
 /// source.
 pub fn region_rows(g: &Geometry, grid: &Grid, region: &Region) -> Vec<std::ops::Range<usize>> {
-    let d = grid.dims;
-    let mut corners = Vec::with_capacity(8);
-    for i in [0, d[0] - 1] {
-        for j in [region.j.start, region.j.end - 1] {
-            for k in [region.k.start, region.k.end - 1] {
-                corners.push(grid.point(i, j, k).to_array());
-            }
-        }
-    }
+    let corners = grid.corners(region.j.clone(), region.k.clone());
     g.view_matrices::<f64>()
         .iter()
         .map(|m| {

@@ -75,15 +75,7 @@ pub fn hardware_error_bound<R: crate::real::Real>(
     bits: u32,
 ) -> f64 {
     let (cols, rows) = (filtered.cols, filtered.rows);
-    let d = grid.dims;
-    let mut corners = Vec::with_capacity(8);
-    for i in [0, d[0].saturating_sub(1)] {
-        for j in [0, d[1].saturating_sub(1)] {
-            for k in [0, d[2].saturating_sub(1)] {
-                corners.push(grid.point(i, j, k).to_array());
-            }
-        }
-    }
+    let corners = grid.corners(0..grid.dims[1], 0..grid.dims[2]);
     let at = |v: &[R], c: isize, r: isize| -> f64 {
         if c < 0 || r < 0 || c >= cols as isize || r >= rows as isize {
             0.0

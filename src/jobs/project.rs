@@ -283,10 +283,17 @@ pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::
             } else {
                 Vec::new()
             };
-            // The f64 grid and one f32 slab; the f32 projections and their f64 copy.
+            // The f64 grid and one f32 slab (and, for a texture, the slab again inside
+            // its zero border); the f32 projections and their f64 copy.
+            let slab_host = match sampling {
+                crate::gpu::plan::Sampling::Exact => slab,
+                crate::gpu::plan::Sampling::Hardware => {
+                    (p.slabs.per_piece * dims[0] * dims[1] * 4) as u64 + slab
+                }
+            };
             plan(
                 format!("gpu ({})", ctx.summary.name),
-                voxels * 8 + slab + values * 12,
+                voxels * 8 + slab_host + values * 12,
                 Some(super::plan::DevicePlan::on(
                     ctx,
                     p.device_bytes,
