@@ -56,12 +56,19 @@ pub fn volume_wgsl(sampling: Sampling) -> String {
 // storage buffer, read by shared/joseph_bilinear.wgsl: slice_bilinear.
 #import joseph_bilinear
 @group(0) @binding(2) var<storage, read> vol: array<f32>;
+// Axis `axis`'s index stride and length in the grid: selects, so that no private
+// array is indexed at run time (a GPU would keep it in memory, not registers).
+fn axis_stride(axis: u32) -> u32 {
+    return select(select(p.nx * p.ny, p.nx, axis == 1u), 1u, axis == 0u);
+}
+fn axis_len(axis: u32) -> u32 {
+    return select(select(p.nz, p.ny, axis == 1u), p.nx, axis == 0u);
+}
 fn plane_sample(pl: Planes, s: u32) -> f32 {
-    let stride = array<u32, 3>(1u, p.nx, p.nx * p.ny);
-    let dims = array<u32, 3>(p.nx, p.ny, p.nz);
     let sr = f32(s);
-    return slice_bilinear(s * stride[pl.m], stride[pl.a], dims[pl.a], stride[pl.b],
-                          dims[pl.b], pl.xa0 + sr * pl.ka, pl.xb0 + sr * pl.kb);
+    return slice_bilinear(s * axis_stride(pl.m), axis_stride(pl.a), axis_len(pl.a),
+                          axis_stride(pl.b), axis_len(pl.b), pl.xa0 + sr * pl.ka,
+                          pl.xb0 + sr * pl.kb);
 }
 "
         .into(),
