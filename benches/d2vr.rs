@@ -1,5 +1,5 @@
 //! `cargo bench --bench d2vr`: D²VR (`cpu::d2vr` in f32, `gpu::d2vr` with f32 and f16
-//! projection storage) at the sizes of Xu & Mueller's Table 1 — 128 cone-beam
+//! projection storage, and f32 projections in textures filtered by the texture unit) at the sizes of Xu & Mueller's Table 1 — 128 cone-beam
 //! projections of 128², a 128³-equivalent virtual grid, a 256² image — and at half that
 //! ("half": 64 × 64², 64³, 128²), shaded DVR of the modified Shepp–Logan head, with the
 //! paper's columns: GFS (density only, gradients by central differences), GFR
@@ -22,6 +22,7 @@ use voxlab::bench::d2vr::{
 };
 use voxlab::cpu::d2vr::render_d2vr;
 use voxlab::gpu::d2vr::{self as gd2vr, ProjStorage};
+use voxlab::gpu::plan::Sampling;
 use voxlab::gpu::GpuContext;
 
 fn main() {
@@ -41,8 +42,8 @@ fn main() {
     } else {
         vec![HALF, TABLE1]
     };
-    println!("| case | variant | CPU f32 (s) | GPU f32 (s) | GPU f16 (s) | reconstructed | GPU vs CPU (f32 / f16) |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| case | variant | CPU f32 (s) | GPU f32 (s) | GPU f32 textures (s) | GPU f16 (s) | reconstructed | GPU vs CPU (f32 / textures / f16) |");
+    println!("|---|---|---|---|---|---|---|---|");
     for c in configs {
         if !args.wants(c.name) {
             continue;
@@ -61,13 +62,20 @@ fn main() {
             };
             let (_, cpu_out) = cpu_run();
             let cpu_t = median_min_max((0..args.runs).map(|_| cpu_run().0).collect()).0;
-            let mut gpu_t = [f64::NAN; 2];
-            let mut gpu_err = [f64::NAN; 2];
+            let mut gpu_t = [f64::NAN; 3];
+            let mut gpu_err = [f64::NAN; 3];
+            let formats = [
+                (ProjStorage::F32, Sampling::Exact),
+                (ProjStorage::F32, Sampling::Hardware),
+                (ProjStorage::F16, Sampling::Exact),
+            ];
             if let Some(ctx) = ctx {
-                for (i, st) in [ProjStorage::F32, ProjStorage::F16].into_iter().enumerate() {
-                    let run =
-                        || gd2vr::render_d2vr(ctx, q, g, grid, tf, cam, &s, &o, m, st).unwrap();
-                    let first = run();
+                for (i, (st, sm)) in formats.into_iter().enumerate() {
+                    let run = || gd2vr::render_d2vr(ctx, q, g, grid, tf, cam, &s, &o, m, st, sm);
+                    // An adapter that cannot filter f32 textures leaves the column empty.
+                    let Ok(first) = run() else {
+                        continue;
+                    };
                     let a = &cpu_out.render.image.data;
                     let peak = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
                     gpu_err[i] = a
@@ -76,12 +84,16 @@ fn main() {
                         .map(|(x, y)| (x - y).abs())
                         .fold(0.0, f64::max)
                         / peak;
-                    gpu_t[i] =
-                        median_min_max((0..args.runs).map(|_| run().timings.total).collect()).0;
+                    gpu_t[i] = median_min_max(
+                        (0..args.runs)
+                            .map(|_| run().unwrap().timings.total)
+                            .collect(),
+                    )
+                    .0;
                 }
             }
             println!(
-                "| {} ({}×{}², {}³, {}²) | {} | {cpu_t:.3} | {:.3} | {:.3} | {:.1} % | {:.1e} / {:.1e} |",
+                "| {} ({}×{}², {}³, {}²) | {} | {cpu_t:.3} | {:.3} | {:.3} | {:.3} | {:.1} % | {:.1e} / {:.1e} / {:.1e} |",
                 c.name,
                 c.views,
                 c.detector,
@@ -90,9 +102,11 @@ fn main() {
                 v.name,
                 gpu_t[0],
                 gpu_t[1],
+                gpu_t[2],
                 100.0 * cpu_out.stats.fraction(),
                 gpu_err[0],
-                gpu_err[1]
+                gpu_err[1],
+                gpu_err[2]
             );
         }
     }

@@ -6,16 +6,17 @@
 // llvmpipe's 65535-iteration limit (see shaders/raycast.wgsl): the host sizes chunks.
 // Same sample positions, step rule, classification, shading and compositing as
 // src/cpu/raycast.rs: cast_ray with the field of src/cpu/d2vr.rs: ProjectionField.
-// The generated module d2vr_tap (src/gpu/d2vr.rs: tap_wgsl) binds the filtered
-// projections (angle, row, col), col fastest, as f32 bits or f16 pairs, in one storage
-// binding (3) or in runs of whole views over several (3, 8, 9, …), and defines
-// `fn tap(i: u32) -> f32`, element i of the projections in their storage precision,
-// which shared/ct_bilinear.wgsl's bilinear_zero reads.
+// The generated module d2vr_projections (src/gpu/d2vr.rs: projections_wgsl) binds the
+// filtered projections in runs of whole views (binding 3, then 8, 9, …) and defines
+// `fn projection(k: u32, x: f32, y: f32) -> f32`, view k at detector column x, row y,
+// zero outside the detector, and `fn projection_grad(k, x, y) -> vec3<f32>`, that
+// value and its derivatives along x and y. Exact: storage buffers of f32 bits or f16
+// pairs read through shared/ct_bilinear.wgsl. Hardware: bordered 2-D texture arrays;
+// the value filtered by the texture unit, the gradient's four taps gathered.
 // An image larger than one binding of accumulators runs in bands of rows
 // [chunk.z, chunk.z + chunk.w); acc and counts hold the band.
 
 #import ct_geometry
-#import ct_bilinear
 #import raycast_params
 #import d2vr_params
 #import classify
@@ -23,7 +24,7 @@
 #import camera
 #import shading
 #import opacity
-#import d2vr_tap
+#import d2vr_projections
 
 @group(0) @binding(0) var<uniform> params: RaycastParams;
 @group(0) @binding(1) var<uniform> dp: D2vrParams;
@@ -37,36 +38,13 @@
 // reconstructions.
 @group(0) @binding(7) var<storage, read_write> counts: array<vec4<u32>>;
 
-// mirrors src/cpu/d2vr.rs: bilinear_zero_grad — (q, ∂q/∂x, ∂q/∂y)
-fn bilinear_zero_grad(base: u32, x: f32, y: f32) -> vec3<f32> {
-    let cols = dp.det.x;
-    let rows = dp.det.y;
-    let fx = floor(x);
-    let fy = floor(y);
-    if (!(fx >= -1.0 && fx < f32(cols) && fy >= -1.0 && fy < f32(rows))) {
-        return vec3<f32>(0.0);
-    }
-    let tx = x - fx;
-    let ty = y - fy;
-    let ix = i32(fx);
-    let iy = i32(fy);
-    let a = tap_zero(base, cols, rows, ix, iy);
-    let b = tap_zero(base, cols, rows, ix + 1, iy);
-    let c = tap_zero(base, cols, rows, ix, iy + 1);
-    let d = tap_zero(base, cols, rows, ix + 1, iy + 1);
-    let top = a * (1.0 - tx) + b * tx;
-    let bottom = c * (1.0 - tx) + d * tx;
-    return vec3<f32>(top * (1.0 - ty) + bottom * ty, (b - a) * (1.0 - ty) + (d - c) * ty, bottom - top);
-}
-
 // mirrors src/cpu/d2vr.rs: ProjectionField::reconstruct_sample
 fn reconstruct_sample(w: vec3<f32>) -> f32 {
-    let n = dp.det.x * dp.det.y;
     var sum = 0.0;
     for (var k = 0u; k < dp.det.z; k++) {
         let pr = project_point(views[k], w);
         if (pr.w != 0.0) {
-            sum = sum + pr.z * bilinear_zero(k * n, dp.det.x, dp.det.y, pr.x, pr.y);
+            sum = sum + pr.z * projection(k, pr.x, pr.y);
         }
     }
     return sum * dp.cylinder.w;
@@ -74,7 +52,6 @@ fn reconstruct_sample(w: vec3<f32>) -> f32 {
 
 // mirrors src/cpu/d2vr.rs: ProjectionField::reconstruct_gradient
 fn reconstruct_gradient(w: vec3<f32>) -> vec3<f32> {
-    let n = dp.det.x * dp.det.y;
     let ph = vec4<f32>(w, 1.0);
     var g = vec3<f32>(0.0);
     for (var k = 0u; k < dp.det.z; k++) {
@@ -88,7 +65,7 @@ fn reconstruct_gradient(w: vec3<f32>) -> vec3<f32> {
         let row = dot(v.r1, ph) * inv;
         let s = v.r3.x * inv;
         let wt = s * s;
-        let q = bilinear_zero_grad(k * n, col, row);
+        let q = projection_grad(k, col, row);
         let dcol = (v.r0.xyz - col * v.r2.xyz) * inv;
         let drow = (v.r1.xyz - row * v.r2.xyz) * inv;
         let dw = -2.0 * wt * v.r2.xyz * inv;

@@ -10,23 +10,11 @@ use voxlab::camera::{Camera, Orbit, Projection};
 use voxlab::cpu::adaptive::{self, medical_tf, AdaptiveSettings, Sampling};
 use voxlab::cpu::grid::Grid;
 use voxlab::AnyVolume;
-use wgpu::naga;
-
-fn validate(src: &str) {
-    let module =
-        naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{e:?}"));
-}
 
 #[test]
 fn adaptive_shaders_validate() {
     for name in ["adaptive_importance", "adaptive", "preintegrate"] {
-        validate(&voxlab::gpu::shaders::resolve(name));
+        common::validate_wgsl(&voxlab::gpu::shaders::resolve(name), name);
     }
 }
 

@@ -12,8 +12,8 @@ use d2vr_scene as sc;
 use std::mem::{offset_of, size_of};
 use voxlab::cpu::d2vr::{self as cd2vr, D2vrGradient, D2vrOptions, OccupancyMask};
 use voxlab::gpu::d2vr::{self as gd2vr, D2vrParams, D2vrSplit, ProjStorage};
+use voxlab::gpu::plan::Sampling;
 use voxlab::settings::{Compositing, Mode, RenderSettings};
-use wgpu::naga;
 
 /// Largest `max |gpu − cpu| / max |cpu|` for f32 storage. The GPU reconstructs every
 /// sample in f32 (64 views); a DVR pixel amplifies a value error by the TF's slope, and
@@ -50,17 +50,20 @@ fn d2vr_params_layout_agrees() {
 
 #[test]
 fn d2vr_shader_validates() {
-    for storage in [ProjStorage::F32, ProjStorage::F16] {
-        for parts in [1, 2, 3, gd2vr::MAX_PROJECTION_PARTS] {
-            let src = gd2vr::shader_source(storage, parts);
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-            naga::valid::Validator::new(
-                naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::all(),
-            )
-            .validate(&module)
-            .unwrap_or_else(|e| panic!("{storage:?} {parts}: {e:?}"));
+    for sampling in [Sampling::Exact, Sampling::Hardware] {
+        for storage in [ProjStorage::F32, ProjStorage::F16] {
+            for parts in [1, 2, 3, gd2vr::MAX_PROJECTION_PARTS] {
+                let src = gd2vr::shader_source(storage, sampling, parts);
+                common::validate_wgsl(&src, &format!("{sampling:?} {storage:?} {parts}"));
+                // Only the exact path carries the storage read; only the hardware one
+                // the textures, one per part.
+                let exact = sampling == Sampling::Exact;
+                assert_eq!(src.contains("fn bilinear_zero("), exact);
+                assert_eq!(
+                    src.matches("texture_2d_array<f32>;").count(),
+                    if exact { 0 } else { parts }
+                );
+            }
         }
     }
 }
@@ -77,6 +80,24 @@ fn f16_rounding_matches_ieee() {
         (0.333_333_34, 0x3555),
     ] {
         assert_eq!(gd2vr::f16_bits(x), bits, "{x}");
+    }
+    // Decoding is exact: every half float but NaN comes back to its own bits, and the
+    // known values to themselves.
+    for h in 0..=u16::MAX {
+        let v = gd2vr::f32_from_f16_bits(h);
+        if v.is_nan() {
+            assert_eq!(h & 0x7c00, 0x7c00, "{h:#06x}");
+            continue;
+        }
+        assert_eq!(gd2vr::f16_bits(v), h, "{h:#06x} → {v}");
+    }
+    for (bits, x) in [
+        (0x3c00u16, 1.0f32),
+        (0xc000, -2.0),
+        (0x7bff, 65504.0),
+        (0x0001, 2f32.powi(-24)),
+    ] {
+        assert_eq!(gd2vr::f32_from_f16_bits(bits), x);
     }
 }
 
@@ -106,33 +127,72 @@ fn settings(mode: Mode) -> RenderSettings {
     }
 }
 
+/// One row of [`CASES`] set up on the shared scene (`sc::phantom`, `sc::grid`,
+/// `sc::tf`, a `SIDE`² camera): its geometry, the f32 filtered projections the GPU
+/// reads, the occupancy mask, the options and settings, and the f64 oracle's render.
+struct Row {
+    g: voxlab::ct::Geometry,
+    q32: voxlab::ct::Projections<f32>,
+    mask: Option<OccupancyMask>,
+    o: D2vrOptions,
+    s: RenderSettings,
+    cpu: cd2vr::D2vrOutput,
+}
+
+fn row(&(mode, gradient, cylinder, beam, occ): &Case) -> Row {
+    let (ph, grid) = (sc::phantom(), sc::grid());
+    let g = if beam == "cone" {
+        sc::cone()
+    } else {
+        sc::parallel()
+    };
+    let q = sc::filtered(&ph, &g);
+    let mask =
+        occ.then(|| OccupancyMask::from_projections(&sc::raw(&ph, &g), &g, &grid, 1e-9).unwrap());
+    let o = D2vrOptions {
+        gradient,
+        cylinder,
+        value_range: (0.0, 1.5),
+    };
+    let s = settings(mode);
+    let cpu = cd2vr::render_d2vr(
+        &q,
+        &g,
+        &grid,
+        &sc::tf(),
+        &sc::camera(SIDE),
+        &s,
+        &o,
+        mask.as_ref(),
+        &|_, _| {},
+    )
+    .unwrap();
+    Row {
+        q32: sc::to_f32(&q),
+        g,
+        mask,
+        o,
+        s,
+        cpu,
+    }
+}
+
 #[test]
 fn gpu_matches_the_cpu_oracle() {
     let Some(ctx) = common::gpu("gpu_matches_the_cpu_oracle") else {
         return;
     };
-    let ph = sc::phantom();
-    let cam = sc::camera(SIDE);
-    let grid = sc::grid();
-    let tf = sc::tf();
-    for &(mode, gradient, cylinder, beam, occ) in CASES {
-        let g = if beam == "cone" {
-            sc::cone()
-        } else {
-            sc::parallel()
-        };
-        let q = sc::filtered(&ph, &g);
-        let q32 = sc::to_f32(&q);
-        let mask = occ
-            .then(|| OccupancyMask::from_projections(&sc::raw(&ph, &g), &g, &grid, 1e-9).unwrap());
-        let o = D2vrOptions {
-            gradient,
-            cylinder,
-            value_range: (0.0, 1.5),
-        };
-        let s = settings(mode);
-        let cpu = cd2vr::render_d2vr(&q, &g, &grid, &tf, &cam, &s, &o, mask.as_ref(), &|_, _| {})
-            .unwrap();
+    let (cam, grid, tf) = (sc::camera(SIDE), sc::grid(), sc::tf());
+    for case in CASES {
+        let &(mode, gradient, cylinder, beam, occ) = case;
+        let Row {
+            g,
+            q32,
+            mask,
+            o,
+            s,
+            cpu,
+        } = row(case);
         for storage in [ProjStorage::F32, ProjStorage::F16] {
             let gpu = gd2vr::render_d2vr(
                 ctx,
@@ -145,6 +205,7 @@ fn gpu_matches_the_cpu_oracle() {
                 &o,
                 mask.as_ref(),
                 storage,
+                Sampling::Exact,
             )
             .unwrap();
             let tol = if storage == ProjStorage::F32 {
@@ -183,6 +244,115 @@ fn gpu_matches_the_cpu_oracle() {
     }
 }
 
+/// The paper's reconstruction, projections in textures filtered by the texture unit
+/// (`Sampling::Hardware`), over the parity table in both storage precisions: MIP and
+/// X-ray images within `gd2vr::hardware_error_bound` for 8-bit weights (times the
+/// longest chord for X-ray) plus the exact path's tolerance, on any adapter; on a CPU
+/// adapter (whose texture unit filters in f32) every image, DVR included, within a hair
+/// of the exact GPU path's, GFR's gathered gradient with it. The same samples are
+/// reconstructed as on the exact path. An adapter without `FLOAT32_FILTERABLE` refuses
+/// f32 textures and still filters f16 ones.
+#[test]
+fn hardware_sampling_is_within_the_texture_units_bound() {
+    let Some(ctx) = common::gpu("hardware_sampling_is_within_the_texture_units_bound") else {
+        return;
+    };
+    let f32_filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+    let (cam, grid, tf) = (sc::camera(SIDE), sc::grid(), sc::tf());
+    // The longest chord through the grid's box, mm (X-ray integrates over it).
+    let d = grid.dims.map(|n| n as f64);
+    let chord = grid
+        .affine
+        .transform_vector3(glam::DVec3::new(d[0], d[1], d[2]))
+        .length();
+    for case in CASES {
+        let &(mode, gradient, cylinder, beam, occ) = case;
+        let Row {
+            g,
+            q32,
+            mask,
+            o,
+            s,
+            cpu,
+        } = row(case);
+        let peak = cpu
+            .render
+            .image
+            .data
+            .iter()
+            .fold(0f64, |m, v| m.max(v.abs()));
+        for storage in [ProjStorage::F32, ProjStorage::F16] {
+            let case = format!("{mode:?} {gradient:?} cyl={cylinder} {beam} occ={occ} {storage:?}");
+            let run = |sampling| {
+                gd2vr::render_d2vr(
+                    ctx,
+                    &q32,
+                    &g,
+                    &grid,
+                    &tf,
+                    &cam,
+                    &s,
+                    &o,
+                    mask.as_ref(),
+                    storage,
+                    sampling,
+                )
+            };
+            if storage == ProjStorage::F32 && !f32_filterable {
+                let e = run(Sampling::Hardware).unwrap_err();
+                assert!(e.to_string().contains("FLOAT32_FILTERABLE"), "{case}: {e}");
+                continue;
+            }
+            let hw = run(Sampling::Hardware).unwrap();
+            let exact = run(Sampling::Exact).unwrap();
+            let max_diff =
+                |a: &[f64], b: &[f64]| a.iter().zip(b).fold(0f64, |m, (x, y)| m.max((x - y).abs()));
+            let (got, want) = (&hw.render.image.data, &cpu.render.image.data);
+            let off = max_diff(got, want);
+            let from_exact = max_diff(got, &exact.render.image.data);
+            let tol = if storage == ProjStorage::F32 {
+                TOL_F32
+            } else {
+                TOL_F16
+            };
+            let field = gd2vr::hardware_error_bound(&q32, &g, &grid, storage, 8);
+            let bound = match mode {
+                Mode::Mip | Mode::Minip => Some(field + tol * peak),
+                Mode::Xray => Some(field * chord + tol * peak),
+                _ => None,
+            };
+            eprintln!(
+                "hardware {case} on {}: {:.1e} of the peak from the oracle{}, {:.1e} from the \
+                 exact GPU path",
+                ctx.summary.name,
+                off / peak,
+                bound.map_or(String::new(), |b| format!(" (bound {:.1e})", b / peak)),
+                from_exact / peak
+            );
+            if let Some(b) = bound {
+                assert!(
+                    off <= b,
+                    "{case}: {off:e} over the texture unit's bound {b:e}"
+                );
+                // Nothing but the values differs: the same samples, the same culling.
+                assert_eq!(hw.stats, exact.stats, "{case}");
+            }
+            assert_eq!(hw.stats.box_samples, exact.stats.box_samples, "{case}");
+            if ctx.summary.is_cpu() {
+                // Measured on lavapipe: 1.0e-7 (X-ray) … 4.8e-6 (DVR GFS, f16) of the
+                // peak; the bound is 4× the worst. (A texture coordinate a quarter
+                // texel off gives 4.1e-2 … 2.3e-1, which the MIP bound alone catches
+                // too: 1.3e-1 … 2.3e-1 against 3.2e-2 … 8.4e-2; gathered taps in the
+                // wrong order give 2.8e-1 on DVR GFR.)
+                assert!(
+                    from_exact <= 2e-5 * peak,
+                    "{case}: {from_exact:e} from the exact GPU path (peak {peak:e})"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn gpu_refuses_back_to_front() {
     let Some(ctx) = common::gpu("gpu_refuses_back_to_front") else {
@@ -204,6 +374,7 @@ fn gpu_refuses_back_to_front() {
         &o,
         None,
         ProjStorage::F32,
+        Sampling::Exact,
     );
     assert!(r.is_err());
 }
@@ -221,12 +392,26 @@ fn limits(bytes: u64) -> wgpu::Limits {
 fn the_split_plan_cuts_whole_views_and_rows_and_refuses_what_cannot_fit() {
     // 64 views of 48 × 48 values: 9216 bytes a view in f32, 4608 in f16 pairs.
     let g = sc::cone();
-    let one = D2vrSplit::new(&limits(1 << 27), &g, ProjStorage::F32, (128, 128)).unwrap();
+    let one = D2vrSplit::new(
+        &limits(1 << 27),
+        &g,
+        ProjStorage::F32,
+        Sampling::Exact,
+        (128, 128),
+    )
+    .unwrap();
     assert_eq!((one.views.count(), one.rows.count()), (1, 1));
     assert!(one.describe().is_empty());
     // 150 000 bytes: 16 whole views a binding (147 456 bytes), 73 rows of 128 pixels
     // (2048 bytes each) a band.
-    let s = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F32, (128, 128)).unwrap();
+    let s = D2vrSplit::new(
+        &limits(150_000),
+        &g,
+        ProjStorage::F32,
+        Sampling::Exact,
+        (128, 128),
+    )
+    .unwrap();
     assert_eq!((s.views.per_piece, s.views.count()), (16, 4));
     assert_eq!((s.rows.per_piece, s.rows.count()), (73, 2));
     assert_eq!(s.part_bytes(16), 147_456);
@@ -239,7 +424,14 @@ fn the_split_plan_cuts_whole_views_and_rows_and_refuses_what_cannot_fit() {
             "D²VR image in 2 bands of 73 rows"
         ]
     );
-    let h = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F16, (128, 128)).unwrap();
+    let h = D2vrSplit::new(
+        &limits(150_000),
+        &g,
+        ProjStorage::F16,
+        Sampling::Exact,
+        (128, 128),
+    )
+    .unwrap();
     assert_eq!((h.views.per_piece, h.views.count()), (32, 2));
     assert_eq!(h.part_bytes(32), 147_456);
     // f16 pairs of an odd number of values round up to whole words.
@@ -252,29 +444,112 @@ fn the_split_plan_cuts_whole_views_and_rows_and_refuses_what_cannot_fit() {
     )
     .unwrap();
     // 15 values a view: two views are 30 values (60 bytes), one is 8 words.
-    let o = D2vrSplit::new(&limits(64), &odd, ProjStorage::F16, (4, 4)).unwrap();
+    let o = D2vrSplit::new(&limits(64), &odd, ProjStorage::F16, Sampling::Exact, (4, 4)).unwrap();
     assert_eq!((o.views.per_piece, o.views.count()), (2, 4));
     assert_eq!(o.part_bytes(2), 60);
     assert_eq!(o.part_bytes(1), 32);
     // 40 000 bytes: 4 views a binding in f32 is 16 bindings, more than the renderer
     // binds; in f16, 8 views a binding is 8.
-    let e = D2vrSplit::new(&limits(40_000), &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    let e = D2vrSplit::new(
+        &limits(40_000),
+        &g,
+        ProjStorage::F32,
+        Sampling::Exact,
+        (32, 32),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("16 storage bindings"), "{e}");
-    let f = D2vrSplit::new(&limits(40_000), &g, ProjStorage::F16, (32, 32)).unwrap();
+    let f = D2vrSplit::new(
+        &limits(40_000),
+        &g,
+        ProjStorage::F16,
+        Sampling::Exact,
+        (32, 32),
+    )
+    .unwrap();
     assert_eq!(f.views.count(), gd2vr::MAX_PROJECTION_PARTS);
     // An adapter with fewer storage buffers per stage binds fewer.
     let few = wgpu::Limits {
         max_storage_buffers_per_shader_stage: 7,
         ..limits(150_000)
     };
-    let e = D2vrSplit::new(&few, &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    let e = D2vrSplit::new(&few, &g, ProjStorage::F32, Sampling::Exact, (32, 32)).unwrap_err();
     assert!(e.to_string().contains("more than the 2"), "{e}");
     // One view, or one image row, larger than a binding.
-    let e = D2vrSplit::new(&limits(9000), &g, ProjStorage::F32, (32, 32)).unwrap_err();
+    let e = D2vrSplit::new(
+        &limits(9000),
+        &g,
+        ProjStorage::F32,
+        Sampling::Exact,
+        (32, 32),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("one view (9216 bytes)"), "{e}");
-    let e = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F16, (10_000, 2)).unwrap_err();
+    let e = D2vrSplit::new(
+        &limits(150_000),
+        &g,
+        ProjStorage::F16,
+        Sampling::Exact,
+        (10_000, 2),
+    )
+    .unwrap_err();
     assert!(
         e.to_string().contains("one image row (160000 bytes)"),
+        "{e}"
+    );
+}
+
+/// The hardware path's plan: bordered views in texture arrays, cut by the binding
+/// limit (so that `VOXLAB_GPU_MAX_BINDING` splits both paths alike) and by the array's
+/// layers, a detector wider than a 2-D texture refused, and the adapter's sampled
+/// textures per stage obeyed.
+#[test]
+fn the_hardware_split_plan_binds_bordered_texture_arrays() {
+    // 64 views of 48 × 48 values: 50 × 50 texels with the border, 10 000 bytes a view
+    // in R32Float, 5000 in R16Float.
+    let g = sc::cone();
+    let hw = Sampling::Hardware;
+    let one = D2vrSplit::new(&limits(1 << 27), &g, ProjStorage::F32, hw, (32, 32)).unwrap();
+    assert_eq!((one.views.count(), one.view_bytes), (1, 10_000));
+    assert_eq!(one.part_bytes(64), 640_000);
+    assert_eq!(one.device_bytes(), 640_000 + 2 * 32 * 32 * 16);
+    assert!(one.describe().is_empty());
+    // 150 000 bytes: 15 views an array (the exact path fits 16 unbordered ones).
+    let s = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F32, hw, (32, 32)).unwrap();
+    assert_eq!((s.views.per_piece, s.views.count()), (15, 5));
+    assert_eq!(
+        s.describe(),
+        ["D²VR projections in 5 bindings of 15 views (one texture array each)"]
+    );
+    let h = D2vrSplit::new(&limits(150_000), &g, ProjStorage::F16, hw, (32, 32)).unwrap();
+    assert_eq!(
+        (h.views.per_piece, h.views.count(), h.view_bytes),
+        (30, 3, 5000)
+    );
+    assert_eq!(h.part_bytes(30), 150_000);
+    // An array holds at most max_texture_array_layers views.
+    let layered = wgpu::Limits {
+        max_texture_array_layers: 10,
+        ..limits(1 << 27)
+    };
+    let l = D2vrSplit::new(&layered, &g, ProjStorage::F32, hw, (32, 32)).unwrap();
+    assert_eq!((l.views.per_piece, l.views.count()), (10, 7));
+    // A bordered view wider than a 2-D texture.
+    let narrow = wgpu::Limits {
+        max_texture_dimension_2d: 49,
+        ..limits(1 << 27)
+    };
+    let e = D2vrSplit::new(&narrow, &g, ProjStorage::F32, hw, (32, 32)).unwrap_err();
+    assert!(e.to_string().contains("2-D texture size of 49"), "{e}");
+    assert!(D2vrSplit::new(&narrow, &g, ProjStorage::F32, Sampling::Exact, (32, 32)).is_ok());
+    // Fewer sampled textures per stage than the arrays needed.
+    let few = wgpu::Limits {
+        max_sampled_textures_per_shader_stage: 2,
+        ..limits(150_000)
+    };
+    let e = D2vrSplit::new(&few, &g, ProjStorage::F32, hw, (32, 32)).unwrap_err();
+    assert!(
+        e.to_string().contains("5 texture arrays") && e.to_string().contains("more than the 2"),
         "{e}"
     );
 }
@@ -318,7 +593,16 @@ fn split_renders_equal_the_unsplit_bit_for_bit() {
             value_range: (0.0, 1.5),
         };
         let s = settings(mode);
-        for storage in [ProjStorage::F32, ProjStorage::F16] {
+        let f32_filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
+        for (storage, sampling) in [
+            (ProjStorage::F32, Sampling::Exact),
+            (ProjStorage::F16, Sampling::Exact),
+            (ProjStorage::F32, Sampling::Hardware),
+            (ProjStorage::F16, Sampling::Hardware),
+        ] {
+            if storage == ProjStorage::F32 && sampling == Sampling::Hardware && !f32_filterable {
+                continue;
+            }
             let run = |c: &voxlab::gpu::GpuContext| {
                 gd2vr::render_d2vr(
                     c,
@@ -331,11 +615,12 @@ fn split_renders_equal_the_unsplit_bit_for_bit() {
                     &o,
                     mask.as_ref(),
                     storage,
+                    sampling,
                 )
                 .unwrap()
             };
             let (whole, split) = (run(ctx), run(&small));
-            let case = format!("{mode:?} {gradient:?} {beam} occ={occ} {storage:?}");
+            let case = format!("{mode:?} {gradient:?} {beam} occ={occ} {storage:?} {sampling:?}");
             assert_eq!(whole.split.views.count(), 1, "{case}");
             assert!(split.split.views.count() > 1, "{case}: {:?}", split.split);
             assert_eq!(split.split.rows.count(), 2, "{case}");

@@ -19,7 +19,6 @@ use rustfft::num_complex::Complex;
 use std::mem::{offset_of, size_of};
 use voxlab::cpu::dft::{dft_1d, dft_nd, Direction, Normalization};
 use voxlab::gpu::fft::{self, FftParams, FftPass, GpuFftVariant};
-use wgpu::naga;
 
 type C = Complex<f64>;
 
@@ -280,14 +279,7 @@ fn every_fft_shader_validates() {
         .into_iter()
         .chain([("Bluestein".to_string(), bluestein)]);
     for (variant, src) in sources {
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{variant}: {}", e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{variant}: {e:?}"));
+        common::validate_wgsl(&src, &variant);
     }
 }
 
@@ -650,14 +642,7 @@ fn a_device_buffer_transforms_like_host_data() {
 #[test]
 fn two_real_shader_validates() {
     let src = voxlab::gpu::shaders::resolve("fft_two_real");
-    let module = naga::front::wgsl::parse_str(&src)
-        .unwrap_or_else(|e| panic!("fft_two_real.wgsl: {}", e.emit_to_string(&src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("fft_two_real.wgsl: {e:?}"));
+    common::validate_wgsl(&src, "fft_two_real.wgsl");
 }
 
 /// `gpu::fft::two_real_ffts` against the exact DFT of each real line (up to

@@ -15,7 +15,6 @@ use voxlab::frame::Frame;
 use voxlab::gpu::fvr::{self as gfvr, FvrParams, GpuFvrSpectrum};
 use voxlab::phantom::Phantom;
 use voxlab::Volume;
-use wgpu::naga;
 
 /// Largest relative L2 error `‖gpu − cpu‖₂ / ‖cpu‖₂` allowed. The GPU samples an f32
 /// copy of the f64 spectrum with f32 weights and runs an f32 FFT. Measured on lavapipe
@@ -72,14 +71,7 @@ fn fvr_params_layout_agrees() {
 fn the_slice_shader_validates_for_every_slab_count() {
     for slabs in 1..=gfvr::MAX_SLABS {
         let src = gfvr::shader_source(slabs);
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{slabs} slabs: {}", e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{slabs} slabs: {e:?}"));
+        common::validate_wgsl(&src, &format!("{slabs} slabs"));
     }
 }
 

@@ -10,7 +10,6 @@ use common::wgsl_struct_layout;
 
 use std::mem::{offset_of, size_of};
 use voxlab::gpu::raycast::{RaycastParams, PARAMS_WGSL};
-use wgpu::naga;
 
 #[test]
 fn raycast_params_layout_agrees() {
@@ -75,17 +74,7 @@ fn probe_params_layout_agrees() {
     assert_eq!(offs, vec![0, 4, 8, 12]);
 }
 
-/// Parses and validates a complete WGSL module with naga; panics naming `what`.
-fn validate_wgsl(src: &str, what: &str) {
-    let module = naga::front::wgsl::parse_str(src)
-        .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{what}: {e:?}"));
-}
+use common::validate_wgsl;
 
 /// Every shader variant the ray caster can generate parses and validates.
 #[test]
@@ -238,14 +227,7 @@ fn transpose_params_and_joseph_footprint_layouts_agree() {
 
 #[test]
 fn project_shader_validates() {
-    let src = voxlab::gpu::project::shader_source();
-    let module = naga::front::wgsl::parse_str(&src).expect("project.wgsl parses");
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .expect("project.wgsl validates");
+    validate_wgsl(&voxlab::gpu::project::shader_source(), "project.wgsl");
 }
 
 #[test]
@@ -431,29 +413,13 @@ fn sart_ray_layout_agrees() {
 /// The Parker shader parses and validates.
 #[test]
 fn parker_shader_validates() {
-    let src = voxlab::gpu::parker::shader_source();
-    let module =
-        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    validate_wgsl(&voxlab::gpu::parker::shader_source(), "parker.wgsl");
 }
 
 /// The gradient-volume shader parses and validates.
 #[test]
 fn gradient_shader_validates() {
-    let src = voxlab::gpu::gradient::shader_source();
-    let module =
-        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    validate_wgsl(&voxlab::gpu::gradient::shader_source(), "gradient.wgsl");
 }
 
 /// Every processing shader parses and validates.
@@ -461,15 +427,7 @@ fn gradient_shader_validates() {
 fn process_shaders_validate() {
     use voxlab::gpu::process::*;
     for name in SHADERS {
-        let src = shader_source(name);
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        validate_wgsl(&shader_source(name), name);
     }
 }
 
@@ -528,15 +486,7 @@ fn multi_params_layout_agrees() {
 /// The multi-volume shader parses and validates.
 #[test]
 fn multi_shader_validates() {
-    let src = voxlab::gpu::multi::multi_shader();
-    let module =
-        naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::all(),
-    )
-    .validate(&module)
-    .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+    validate_wgsl(&voxlab::gpu::multi::multi_shader(), "multi.wgsl");
 }
 
 /// Every registered module with an entry point (a stage) that imports no generated
@@ -550,15 +500,7 @@ fn every_resolved_stage_validates() {
         if try_resolve(m.name, &[]).is_err() {
             continue;
         }
-        let src = resolve(m.name);
-        let module = naga::front::wgsl::parse_str(&src)
-            .unwrap_or_else(|e| panic!("{}: {}", m.path, e.emit_to_string(&src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{}: {}", m.path, e.emit_to_string(&src)));
+        validate_wgsl(&resolve(m.name), m.path);
         n += 1;
     }
     // raycast, d2vr, fvr_slice, fbp_backproject and project need generated modules.

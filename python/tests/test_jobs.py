@@ -92,6 +92,40 @@ def test_d2vr_of_projections_in_memory_equals_the_command_line_on_their_file(tmp
         voxlab.d2vr(p.projections[:, :, :15], geometry=p.geometry, grid=16)
 
 
+def test_hardware_filtered_d2vr_equals_the_command_line(tmp_path, cli, gpu):
+    # A parallel beam (distance weight 1) and no ramp filter, so that the values the
+    # texture unit interpolates are the projections over the detector spacing, and the
+    # bound can be computed here from the array alone.
+    du = 256 / 24
+    p = voxlab.ct.project("phantom:shepp-logan-modified", beam="parallel", angles=16,
+                          cols=24, rows=24, du=du)
+    np.save(tmp_path / "p.npy", p.projections)
+    (tmp_path / "p.json").write_text(json.dumps(p.geometry))
+    # f16 textures filter on every adapter (f32 ones need FLOAT32_FILTERABLE).
+    scene = dict(filter="none", mode="mip", grid=24, size=32, backend="gpu",
+                 f16_projections=True)
+    out = tmp_path / "d.npy"
+    cli("d2vr", tmp_path / "p.npy", "--geometry", tmp_path / "p.json", "--filter", "none",
+        "--mode", "mip", "--grid", "24", "--size", "32", "--backend", "gpu-f16",
+        "--hardware-filtering", "--out", out)
+    got = voxlab.d2vr(p, hardware_filtering=True, **scene)
+    np.testing.assert_array_equal(got.image, np.load(out))
+    exact = voxlab.d2vr(p, **scene)
+    # Each of a bilinear filter's two weights off by at most 2^-8 on real GPUs moves a
+    # view's value by at most 2 * D_k / 256 (D_k: the largest spread of a 2x2 cell of
+    # view k, zero border included); a sample, and so a MIP pixel, by at most
+    # pi / (2 A) times their sum.
+    q = np.pad(np.asarray(p.projections, dtype=np.float64) / du, ((0, 0), (1, 1), (1, 1)))
+    cells = [q[:, i:q.shape[1] - 1 + i, j:q.shape[2] - 1 + j] for i in (0, 1) for j in (0, 1)]
+    spread = (np.max(cells, axis=0) - np.min(cells, axis=0)).max(axis=(1, 2))
+    peak = np.abs(exact.image).max()
+    bound = np.pi / (2 * len(spread)) * (2 * spread / 256).sum() + 1e-5 * peak
+    assert peak > 0.5
+    assert np.abs(got.image - exact.image).max() <= bound
+    with pytest.raises(voxlab.InvalidError, match="hardware-filtering.*backend gpu"):
+        voxlab.d2vr(p, hardware_filtering=True, grid=24, size=32)
+
+
 # --- Spectral adaptive sampling -------------------------------------------------------
 
 def test_adaptive_report_equals_the_command_lines_table(tmp_path, cli):

@@ -118,7 +118,11 @@ def d2vr(
     keywords: ``beam``, ``angles``, ``detector``, ``filter``, ``grid``, ``spacing``,
     ``mode``, ``tf``, ``gradient`` (``gfs`` | ``gfr``), ``no_cylinder``,
     ``occupancy``, ``ert``, ``step``, ``size``, ``azimuth``, ``elevation``,
-    ``range``."""
+    ``range``; with ``backend="gpu"``, ``f16_projections`` (hold the filtered
+    projections as 16-bit floats) and ``hardware_filtering`` (hold them in textures and
+    let the texture unit interpolate every value, as the paper does; real GPUs round
+    its weights to about 8 bits, so the image differs from the exact path's within the
+    bound docs/d2vr.md states for MIP, MinIP and X-ray)."""
     req: Dict[str, Any] = dict(options, backend=backend)
     geometry = req.pop("geometry", None)
     stack = None

@@ -2,7 +2,10 @@
 // interpolation with zeros outside the detector, in the shader's own arithmetic. The
 // reads go through the importer's `fn tap(i: u32) -> f32`, element i of its
 // projections (a storage buffer of f32, or of f16 pairs in D²VR), so both shaders
-// share one bilinear_zero.
+// share one bilinear_zero. The cell and the weights are shared/bilinear_cell.wgsl's,
+// which D²VR's texture path uses on gathered taps.
+
+#import bilinear_cell
 
 // The projection value at detector pixel (i, j) of the `cols × rows` image at `base`,
 // zero outside it.
@@ -13,23 +16,35 @@ fn tap_zero(base: u32, cols: u32, rows: u32, i: i32, j: i32) -> f32 {
     return tap(base + u32(j) * cols + u32(i));
 }
 
+// The four taps of the cell whose first tap is `corner`: (i, j), (i+1, j), (i, j+1),
+// (i+1, j+1), zero outside the image.
+fn taps_zero(base: u32, cols: u32, rows: u32, corner: vec2<i32>) -> vec4<f32> {
+    let i = corner.x;
+    let j = corner.y;
+    return vec4<f32>(
+        tap_zero(base, cols, rows, i, j),
+        tap_zero(base, cols, rows, i + 1, j),
+        tap_zero(base, cols, rows, i, j + 1),
+        tap_zero(base, cols, rows, i + 1, j + 1),
+    );
+}
+
 // Bilinear interpolation with zeros outside the `cols × rows` image at `base`.
 // mirrors src/ct.rs: bilinear_zero
 fn bilinear_zero(base: u32, cols: u32, rows: u32, x: f32, y: f32) -> f32 {
-    let fx = floor(x);
-    let fy = floor(y);
-    if (!(fx >= -1.0 && fx < f32(cols) && fy >= -1.0 && fy < f32(rows))) {
+    let c = bilinear_cell(cols, rows, x, y);
+    if (!c.inside) {
         return 0.0;
     }
-    let tx = x - fx;
-    let ty = y - fy;
-    let ix = i32(fx);
-    let iy = i32(fy);
-    let a = tap_zero(base, cols, rows, ix, iy);
-    let b = tap_zero(base, cols, rows, ix + 1, iy);
-    let c = tap_zero(base, cols, rows, ix, iy + 1);
-    let d = tap_zero(base, cols, rows, ix + 1, iy + 1);
-    let top = a * (1.0 - tx) + b * tx;
-    let bottom = c * (1.0 - tx) + d * tx;
-    return top * (1.0 - ty) + bottom * ty;
+    return bilinear_mix(taps_zero(base, cols, rows, c.corner), c.t);
+}
+
+// (q, ∂q/∂x, ∂q/∂y) of the same interpolation.
+// mirrors src/cpu/d2vr.rs: bilinear_zero_grad
+fn bilinear_zero_grad(base: u32, cols: u32, rows: u32, x: f32, y: f32) -> vec3<f32> {
+    let c = bilinear_cell(cols, rows, x, y);
+    if (!c.inside) {
+        return vec3<f32>(0.0);
+    }
+    return bilinear_mix_grad(taps_zero(base, cols, rows, c.corner), c.t);
 }

@@ -31,6 +31,7 @@ use crate::cpu::project::project_phantom;
 use crate::cpu::ramp::{filter_projections, FilterMethod, RampFilter};
 use crate::ct::{Geometry, Projections};
 use crate::error::Result;
+use crate::gpu::plan::Sampling;
 use crate::metrics::Tolerance;
 use crate::phantom::Phantom;
 use crate::settings::{Mode, RenderSettings};
@@ -78,24 +79,29 @@ pub const TINY: D2vrConfig = D2vrConfig {
     image: 32,
 };
 
-/// One variant: name, gradient, bounding cylinder, ERT threshold, occupancy mask.
+/// One variant: name, mode, gradient, bounding cylinder, ERT threshold, occupancy
+/// mask, and how the GPU reads the projections.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct D2vrVariant {
     pub name: &'static str,
+    pub mode: Mode,
     pub gradient: D2vrGradient,
     pub cylinder: bool,
     pub ert: f64,
     pub mask: bool,
+    pub sampling: Sampling,
 }
 
-/// The paper's columns and the occupancy mask.
+/// The paper's columns (shaded DVR) and the occupancy mask, every one exact.
 pub fn d2vr_variants() -> Vec<D2vrVariant> {
     let v = |name, gradient, cylinder, ert, mask| D2vrVariant {
         name,
+        mode: Mode::Dvr,
         gradient,
         cylinder,
         ert,
         mask,
+        sampling: Sampling::Exact,
     };
     use D2vrGradient::{Gfr, Gfs};
     vec![
@@ -105,6 +111,27 @@ pub fn d2vr_variants() -> Vec<D2vrVariant> {
         v("GFS+B+OC", Gfs, true, 0.95, false),
         v("GFR+B+OC", Gfr, true, 0.95, false),
         v("GFR+B+OC+M", Gfr, true, 0.95, true),
+    ]
+}
+
+/// The texture pair: the MIP of the field inside the bounding cylinder, read exactly
+/// and through the texture unit ([`Sampling::Hardware`], the paper's own
+/// reconstruction). MIP, because a MIP pixel moves by no more than one sample, which
+/// [`crate::gpu::d2vr::hardware_error_bound`] bounds; a shaded DVR pixel passes the
+/// error through the transfer function (`cargo bench --bench d2vr` measures it).
+pub fn d2vr_texture_variants() -> Vec<D2vrVariant> {
+    let v = |name, sampling| D2vrVariant {
+        name,
+        mode: Mode::Mip,
+        gradient: D2vrGradient::Gfr,
+        cylinder: true,
+        ert: 1.0,
+        mask: false,
+        sampling,
+    };
+    vec![
+        v("MIP+B", Sampling::Exact),
+        v("MIP+B-hardware", Sampling::Hardware),
     ]
 }
 
@@ -192,7 +219,7 @@ pub fn d2vr_scene(c: &D2vrConfig) -> Result<D2vrScene> {
 pub fn d2vr_settings(v: &D2vrVariant) -> (RenderSettings, D2vrOptions) {
     (
         RenderSettings {
-            mode: Mode::Dvr,
+            mode: v.mode,
             step: 1.0,
             ert_threshold: v.ert,
             ..RenderSettings::default()
@@ -224,10 +251,15 @@ const GFS_F32: Tolerance = Tolerance::max_abs_rel(1e-2).with_rel_l2(1e-4);
 /// 5.8e-3 / 1.2e-2 (half), 1.4e-2 / 9.2e-3 (table1 GFR+B+OC), 1.0e-6 / 1.1e-6 (quick);
 /// rel L2 ≤ 1.3e-4. Bound: about 4× the worst.
 const GFR_F32: Tolerance = Tolerance::max_abs_rel(5e-2).with_rel_l2(5e-4);
+/// MIP (the texture pair's exact half): a pixel is one sample, so f32 moves it by the
+/// rounding of one reconstruction. Measured on lavapipe (f32 CPU / GPU): max 2.2e-6 /
+/// 3.4e-6 (quick), 1.4e-5 / 1.8e-5 (half), 1.8e-5 / 2.4e-5 (table1); rel L2 ≤ 4.1e-6.
+/// Bound: about 4× the worst.
+const MIP_F32: Tolerance = Tolerance::max_abs_rel(1e-4).with_rel_l2(2e-5);
 
 /// Every D²VR case of a suite.
 pub fn cases(suite: Suite) -> Vec<Case> {
-    let all = d2vr_variants();
+    let all = [d2vr_variants(), d2vr_texture_variants()].concat();
     let pick = |names: &[&str]| -> Vec<D2vrVariant> {
         all.iter()
             .filter(|v| names.contains(&v.name))
@@ -238,10 +270,22 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     // docs/bench/d2vr-lavapipe.md: half ≈ 0.1–0.35 s per variant, table1 +B+OC ≈ 0.6–0.8 s;
     // table1 without the cylinder and ERT (4–10 s per run) is left out.
     let plan: Vec<(D2vrConfig, Vec<D2vrVariant>)> = match suite {
-        Suite::Quick => vec![(TINY, pick(&["GFS", "GFR+B+OC+M"]))],
+        Suite::Quick => vec![(
+            TINY,
+            pick(&["GFS", "GFR+B+OC+M", "MIP+B", "MIP+B-hardware"]),
+        )],
         Suite::Full => vec![
             (HALF, all.clone()),
-            (TABLE1, pick(&["GFS+B+OC", "GFR+B+OC", "GFR+B+OC+M"])),
+            (
+                TABLE1,
+                pick(&[
+                    "GFS+B+OC",
+                    "GFR+B+OC",
+                    "GFR+B+OC+M",
+                    "MIP+B",
+                    "MIP+B-hardware",
+                ]),
+            ),
         ],
     };
     let mut out = Vec::new();
@@ -261,12 +305,29 @@ pub fn cases(suite: Suite) -> Vec<Case> {
     out
 }
 
-/// The tolerance of a variant's f32 paths (CPU and GPU alike).
+/// The tolerance of a variant's f32 paths (CPU and the exact GPU alike).
 pub fn d2vr_tolerance(v: &D2vrVariant) -> Tolerance {
-    match v.gradient {
-        D2vrGradient::Gfs => GFS_F32,
-        D2vrGradient::Gfr => GFR_F32,
+    match (v.mode, v.gradient) {
+        (Mode::Mip, _) => MIP_F32,
+        (_, D2vrGradient::Gfs) => GFS_F32,
+        (_, D2vrGradient::Gfr) => GFR_F32,
     }
+}
+
+/// The hardware MIP's tolerance: [`crate::gpu::d2vr::hardware_error_bound`] for
+/// weights of 8 fractional bits (NVIDIA's) on the f32 projections the GPU holds, plus
+/// the exact path's [`MIP_F32`] taken against a peak of 2 (the modified Shepp–Logan's
+/// densities are at most 1, and its FDK overshoots them by a few per cent), as one
+/// bound on max |Δ|.
+fn hardware_mip_tol(scene: &D2vrScene) -> Tolerance {
+    let bound = crate::gpu::d2vr::hardware_error_bound(
+        &scene.filtered_f32,
+        &scene.geometry,
+        &scene.grid,
+        crate::gpu::d2vr::ProjStorage::F32,
+        8,
+    );
+    Tolerance::max_abs(bound + 2.0 * MIP_F32.max_abs_rel)
 }
 
 fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
@@ -277,6 +338,10 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
         None
     };
     let (settings, options) = d2vr_settings(v);
+    let tol_gpu = match v.sampling {
+        Sampling::Exact => d2vr_tolerance(v),
+        Sampling::Hardware => hardware_mip_tol(&scene),
+    };
     let samples = box_samples(
         scene.grid.dims,
         scene.grid.affine,
@@ -327,6 +392,7 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
         })
     }) as super::CpuFn;
     let a = all;
+    let sampling = v.sampling;
     let gpu = Box::new(move |ctx: &crate::gpu::GpuContext| {
         let (s, m, st, o) = &*a;
         let r = crate::gpu::d2vr::render_d2vr(
@@ -340,6 +406,7 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
             o,
             m.as_ref(),
             crate::gpu::d2vr::ProjStorage::F32,
+            sampling,
         )?;
         let t = r.timings;
         Ok(GpuRun {
@@ -350,13 +417,12 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
             setup: t.setup,
         })
     }) as super::GpuFn;
-    let tol = d2vr_tolerance(v);
     Ok(Prepared {
         cpu_f64,
         cpu_f32: Some(cpu_f32),
         gpu: Some(gpu),
-        tol_f32: tol,
-        tol_gpu: tol,
+        tol_f32: d2vr_tolerance(v),
+        tol_gpu,
         work: vec![
             Work {
                 amount: (config.image * config.image) as f64,
@@ -367,12 +433,24 @@ fn prepare(config: &D2vrConfig, v: &D2vrVariant) -> Result<Prepared> {
                 unit: Unit::Samples,
             },
         ],
-        note: "Shepp–Logan (modified) from exact cone-beam projections, shaded DVR, step 1 \
-               voxel. Samples: the grid box's plain march (what +B, +OC and +M skip counts \
-               as done). GPU: f32 projection storage; kernel = the chunk dispatches on the \
-               device (timestamp queries; without them, wall clock); its set-up includes \
-               the uploads, so end to end = chunk dispatches + readback + the host's final \
-               blend (wall clock)."
-            .into(),
+        note: format!(
+            "Shepp–Logan (modified) from exact cone-beam projections, {}, step 1 voxel. \
+             Samples: the grid box's plain march (what +B, +OC and +M skip counts as done). \
+             GPU: f32 projection storage{}; kernel = the chunk dispatches on the device \
+             (timestamp queries; without them, wall clock); its set-up includes the \
+             uploads, so end to end = chunk dispatches + readback + the host's final blend \
+             (wall clock).",
+            match v.mode {
+                Mode::Mip => "MIP",
+                _ => "shaded DVR",
+            },
+            match v.sampling {
+                Sampling::Exact => "",
+                Sampling::Hardware =>
+                    " in 2-D texture arrays, every value filtered by the texture unit \
+                     (gpu::plan::Sampling::Hardware); the GPU bound is max |Δ| ≤ \
+                     gpu::d2vr::hardware_error_bound for 8-bit weights",
+            }
+        ),
     })
 }

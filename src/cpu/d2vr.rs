@@ -300,7 +300,7 @@ pub struct D2vrOutput {
 /// `(q, ∂q/∂x, ∂q/∂y)` of the bilinear patch of the cell `(floor x, floor y)` (taps
 /// outside the image are zero, as in the value).
 ///
-/// mirrors shaders/d2vr.wgsl: bilinear_zero_grad
+/// mirrors shaders/shared/ct_bilinear.wgsl: bilinear_zero_grad
 #[inline(always)]
 pub fn bilinear_zero_grad<R: Real>(img: &[R], cols: usize, rows: usize, x: R, y: R) -> [R; 3] {
     let Some(([a, b, c, d], tx, ty)) = crate::ct::bilinear_taps(img, cols, rows, x, y) else {

@@ -419,13 +419,19 @@ impl GpuContext {
         }
     }
 
-    /// An `R32Float` 2-D texture array of `[width, height, layers]` texels the host
-    /// writes ([`Self::write_layers`]) and shaders sample; wgpu hands it out zeroed.
+    /// A 2-D texture array of `format` (`R32Float`, `R16Float`) and `[width, height,
+    /// layers]` texels the host writes ([`Self::write_layers`]) and shaders sample; wgpu
+    /// hands it out zeroed.
     ///
     /// # Errors
     /// [`Error::TooLarge`] past the adapter's 2-D texture size or array layers;
     /// [`Error::Gpu`] out of GPU memory.
-    pub fn texture_layers(&self, label: &str, dims: [usize; 3]) -> Result<wgpu::Texture> {
+    pub fn texture_layers(
+        &self,
+        label: &str,
+        format: wgpu::TextureFormat,
+        dims: [usize; 3],
+    ) -> Result<wgpu::Texture> {
         let side = self.limits.max_texture_dimension_2d as usize;
         let layers = self.limits.max_texture_array_layers as usize;
         if dims[0] == 0 || dims[1] == 0 || dims[0] > side || dims[1] > side {
@@ -451,20 +457,21 @@ impl GpuContext {
             label,
             dims,
             wgpu::TextureDimension::D2,
-            wgpu::TextureFormat::R32Float,
+            format,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         )
     }
 
-    /// Writes `data` (`extent[0]` values fastest, then `extent[1]` rows, then
-    /// `extent[2]` layers) into the `R32Float` texture array `tex` at texel `origin`
-    /// (x, y, first layer).
-    pub fn write_layers(
+    /// Writes `data` (`extent[0]` texels fastest, then `extent[1]` rows, then
+    /// `extent[2]` layers; `T` of the texel's size: `f32` for `R32Float`, the `u16`
+    /// bits for `R16Float`) into the texture array `tex` at texel `origin` (x, y, first
+    /// layer).
+    pub fn write_layers<T: bytemuck::Pod>(
         &self,
         tex: &wgpu::Texture,
         origin: [usize; 3],
         extent: [usize; 3],
-        data: &[f32],
+        data: &[T],
     ) {
         debug_assert_eq!(data.len(), extent.iter().product::<usize>());
         self.queue.write_texture(
@@ -481,7 +488,7 @@ impl GpuContext {
             bytemuck::cast_slice(data),
             wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some((extent[0] * 4) as u32),
+                bytes_per_row: Some((extent[0] * std::mem::size_of::<T>()) as u32),
                 rows_per_image: Some(extent[1] as u32),
             },
             wgpu::Extent3d {

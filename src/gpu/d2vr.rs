@@ -16,22 +16,38 @@
 //! packs them as IEEE half floats, two per word (`pack2x16float` layout), halving the
 //! memory and bandwidth. The reconstruction and everything after it stays f32.
 //!
+//! # Sampling ([`Sampling`])
+//! [`Sampling::Exact`] (the default) reads the projections from storage buffers with
+//! the bilinear interpolation written out in the shader (`shaders/shared/ct_bilinear.wgsl`,
+//! the oracle's twin). [`Sampling::Hardware`] is the paper's own reconstruction: each
+//! view is a layer of a 2-D texture array (`R32Float`, or `R16Float` for f16 storage)
+//! with a border of one zero texel, and the texture unit filters every value
+//! (`textureSampleLevel`, linear, clamp to edge: the border is the exact path's zeros).
+//! A texture unit cannot filter GFR's gradient, so that path gathers the cell's four
+//! texels (`textureGather`, exact) and weighs them in the shader, as the exact path
+//! does. Real GPUs round each filter weight to about 8 fractional bits; a reconstructed
+//! value then differs from the exact path's by at most [`hardware_error_bound`] (MIP and
+//! MinIP images by as much, X-ray images by that times the ray's length; DVR passes it
+//! through the transfer function and is measured, not bounded).
+//!
 //! The final background blend is done on the host in f64 from the accumulated
 //! `(C, A)`, exactly as `cpu::raycast::cast_ray` ends.
 //!
 //! # Past one binding ([`D2vrSplit`])
 //! Every sample reads every view, so the projections cannot be cut into passes the
 //! way a backprojection's are (the classification needs the whole sum). They are
-//! bound instead as up to [`MAX_PROJECTION_PARTS`] storage bindings of whole views
-//! each (binding 3, then 8, 9, …), and the shader's `tap` picks the binding by the
-//! element's index ([`tap_wgsl`]): every tap reads the same value, so the image is
-//! the unsplit one bit for bit. The per-pixel accumulators (32 bytes a pixel) are cut
+//! bound instead as up to [`MAX_PROJECTION_PARTS`] storage bindings (or texture
+//! arrays) of whole views each (binding 3, then 8, 9, …), and the shader picks the
+//! binding by the element's index or the view's ([`projections_wgsl`]): every tap reads
+//! the same value, so the image is the unsplit one bit for bit. A texture array holds
+//! at most `max_texture_array_layers` views and, so that `VOXLAB_GPU_MAX_BINDING`
+//! splits both paths alike, at most a binding's bytes. The per-pixel accumulators (32 bytes a pixel) are cut
 //! into bands of rows, each a dispatch series of its own (every pixel is cast alone).
 //! `VOXLAB_GPU_MAX_BINDING` lowers the limit the split plans against (docs/gpu.md).
 
 use super::context::{GpuContext, LLVMPIPE_LOOP_LIMIT};
 use super::params::RaycastParams;
-use super::plan::Pieces;
+use super::plan::{Held, Pieces, Sampling};
 use super::raycast::raycast_params;
 use crate::camera::Camera;
 use crate::cpu::d2vr::{
@@ -77,7 +93,8 @@ pub struct D2vrParams {
     pub cylinder: [f32; 4],
     /// cols, rows, views, storage (0 f32, 1 f16).
     pub det: [u32; 4],
-    /// gradient (0 GFS, 1 GFR), cylinder, occupancy, values per projection binding.
+    /// gradient (0 GFS, 1 GFR), cylinder, occupancy, and per projection binding the
+    /// values it holds (exact) or the views (texture layers, hardware).
     pub flags: [u32; 4],
     /// samples [x, y) of this dispatch, the band's first row and its rows.
     pub chunk: [u32; 4],
@@ -91,67 +108,170 @@ pub const MAX_PROJECTION_PARTS: usize = 8;
 /// the two accumulators).
 const OTHER_STORAGE_BUFFERS: u32 = 5;
 
+impl ProjStorage {
+    /// Bytes of one texel of the hardware path's texture (`R32Float`, `R16Float`).
+    fn texel_bytes(self) -> u64 {
+        match self {
+            ProjStorage::F32 => 4,
+            ProjStorage::F16 => 2,
+        }
+    }
+}
+
 /// Accumulator bytes per pixel in each of the two buffers (`vec4<f32>`, `vec4<u32>`).
 const ACC_BYTES_PER_PIXEL: u64 = 16;
 
-/// The generated module `d2vr_tap`: the storage bindings of the filtered projections
-/// in `parts` runs of whole views (`proj` at binding 3 when there is one; else
-/// `proj0` at 3 and `proj1` … at 8, 9, …, each holding `dp.flags.w` values) and
-/// `fn tap(i: u32) -> f32`, projection element `i` in `storage`'s precision.
-pub fn tap_wgsl(storage: ProjStorage, parts: usize) -> String {
+/// The generated module `d2vr_projections`: the filtered projections of `parts` runs
+/// of whole views at binding 3, then 8, 9, … (the hardware path's sampler after
+/// them), with `fn projection(k: u32, x: f32, y: f32) -> f32`, view `k` at detector
+/// column `x`, row `y` (zero outside the detector), and `fn projection_grad(k: u32, x:
+/// f32, y: f32) -> vec3<f32>`, that value and its derivatives along `x` and `y`.
+///
+/// Exact: storage buffers of `storage`'s words (each holding `dp.flags.w` values) read
+/// by `shaders/shared/ct_bilinear.wgsl`. Hardware: 2-D texture arrays (each holding
+/// `dp.flags.w` views) with a zero border; the value filtered by the texture unit, the
+/// gradient from the cell's four gathered texels and
+/// `shaders/shared/bilinear_cell.wgsl`.
+pub fn projections_wgsl(storage: ProjStorage, sampling: Sampling, parts: usize) -> String {
     assert!(
         (1..=MAX_PROJECTION_PARTS).contains(&parts),
         "1 … {MAX_PROJECTION_PARTS} projection bindings"
     );
-    let mut s = String::from(
-        "// Generated by src/gpu/d2vr.rs: tap_wgsl. The filtered projections (angle, row,\n\
-         // col), col fastest: f32 bits, or f16 pairs.\n",
-    );
-    // The word holding element j of a binding, and how the value is read from it.
-    let (word, value) = match storage {
-        ProjStorage::F32 => ("j", "return bitcast<f32>(w);"),
-        ProjStorage::F16 => (
-            "j >> 1u",
-            "let v = unpack2x16float(w);\n    return select(v.x, v.y, (j & 1u) == 1u);",
-        ),
+    let binding = |k: usize| if k == 0 { 3 } else { 7 + k };
+    // `switch` over the parts: `call(name)` is the statement reading part `name`.
+    let by_part = |call: &dyn Fn(&str) -> String| -> String {
+        if parts == 1 {
+            return format!("    {}\n", call("proj"));
+        }
+        let mut s = String::from("    switch part {\n");
+        for k in 0..parts {
+            let case = if k + 1 == parts {
+                "default".to_string()
+            } else {
+                format!("case {k}u")
+            };
+            s += &format!("        {case}: {{ {} }}\n", call(&format!("proj{k}")));
+        }
+        s + "    }\n"
     };
-    if parts == 1 {
-        s += "@group(0) @binding(3) var<storage, read> proj: array<u32>;\n";
-        s += &format!(
-            "fn tap(i: u32) -> f32 {{\n    let j = i;\n    let w = proj[{word}];\n    \
-             {value}\n}}\n"
-        );
-        return s;
+    let name = |k: usize| {
+        if parts == 1 {
+            "proj".to_string()
+        } else {
+            format!("proj{k}")
+        }
+    };
+    match sampling {
+        Sampling::Exact => {
+            let mut s = String::from(
+                "// Generated by src/gpu/d2vr.rs: projections_wgsl (exact). The filtered\n\
+                 // projections (angle, row, col), col fastest: f32 bits, or f16 pairs.\n\
+                 #import ct_bilinear\n",
+            );
+            for k in 0..parts {
+                s += &format!(
+                    "@group(0) @binding({}) var<storage, read> {}: array<u32>;\n",
+                    binding(k),
+                    name(k)
+                );
+            }
+            // The word holding element j of a binding, and how the value is read.
+            let (word, value) = match storage {
+                ProjStorage::F32 => ("j", "return bitcast<f32>(w);"),
+                ProjStorage::F16 => (
+                    "j >> 1u",
+                    "let v = unpack2x16float(w);\n    return select(v.x, v.y, (j & 1u) == 1u);",
+                ),
+            };
+            s += "// Element i of the projections, for shared/ct_bilinear.wgsl.\n";
+            if parts == 1 {
+                s += &format!(
+                    "fn tap(i: u32) -> f32 {{\n    let j = i;\n    let w = proj[{word}];\n    \
+                     {value}\n}}\n"
+                );
+            } else {
+                s += "// Word w of binding part.\nfn proj_word(part: u32, w: u32) -> u32 {\n";
+                s += &by_part(&|p| format!("return {p}[w];"));
+                s += "}\n";
+                s += &format!(
+                    "fn tap(i: u32) -> f32 {{\n    let part = i / dp.flags.w;\n    \
+                     let j = i - part * dp.flags.w;\n    let w = proj_word(part, {word});\n    \
+                     {value}\n}}\n"
+                );
+            }
+            s += "fn projection(k: u32, x: f32, y: f32) -> f32 {\n    \
+                  return bilinear_zero(k * dp.det.x * dp.det.y, dp.det.x, dp.det.y, x, y);\n}\n\
+                  fn projection_grad(k: u32, x: f32, y: f32) -> vec3<f32> {\n    \
+                  return bilinear_zero_grad(k * dp.det.x * dp.det.y, dp.det.x, dp.det.y, x, y);\n}\n";
+            s
+        }
+        Sampling::Hardware => {
+            let mut s = String::from(
+                "// Generated by src/gpu/d2vr.rs: projections_wgsl (hardware). One layer per\n\
+                 // view of (cols + 2) × (rows + 2) texels: detector pixel (c, r) at texel\n\
+                 // (c + 1, r + 1), a border of zeros all round, so clamping to the edge reads\n\
+                 // zero outside the detector.\n\
+                 #import bilinear_cell\n",
+            );
+            for k in 0..parts {
+                s += &format!(
+                    "@group(0) @binding({}) var {}: texture_2d_array<f32>;\n",
+                    binding(k),
+                    name(k)
+                );
+            }
+            s += &format!(
+                "@group(0) @binding({}) var proj_sampler: sampler;\n",
+                binding(parts)
+            );
+            s += "// Layer `layer` of texture array `part`, filtered at uv.\n\
+                  fn proj_filtered(part: u32, uv: vec2<f32>, layer: u32) -> f32 {\n";
+            s += &by_part(&|p| {
+                format!("return textureSampleLevel({p}, proj_sampler, uv, layer, 0.0).x;")
+            });
+            s += "}\n// The 2 × 2 texels around uv, in textureGather's order: (i, j+1), \
+                  (i+1, j+1), (i+1, j), (i, j).\n\
+                  fn proj_gathered(part: u32, uv: vec2<f32>, layer: u32) -> vec4<f32> {\n";
+            s += &by_part(&|p| format!("return textureGather(0, {p}, proj_sampler, uv, layer);"));
+            s += "}\n";
+            s += "fn projection(k: u32, x: f32, y: f32) -> f32 {\n    \
+                  let part = k / dp.flags.w;\n    \
+                  let size = vec2<f32>(f32(dp.det.x + 2u), f32(dp.det.y + 2u));\n    \
+                  // Texel (c + 1, r + 1)'s centre is at normalised (c + 1.5, r + 1.5) / size.\n    \
+                  let uv = (vec2<f32>(x, y) + 1.5) / size;\n    \
+                  return proj_filtered(part, uv, k - part * dp.flags.w);\n}\n";
+            s += "fn projection_grad(k: u32, x: f32, y: f32) -> vec3<f32> {\n    \
+                  let c = bilinear_cell(dp.det.x, dp.det.y, x, y);\n    \
+                  if (!c.inside) {\n        return vec3<f32>(0.0);\n    }\n    \
+                  let part = k / dp.flags.w;\n    \
+                  let size = vec2<f32>(f32(dp.det.x + 2u), f32(dp.det.y + 2u));\n    \
+                  // The texels of detector pixels corner and corner + 1 are corner + 1 and\n    \
+                  // corner + 2; the point between their centres is corner + 2, half a texel\n    \
+                  // from any other choice.\n    \
+                  let uv = (vec2<f32>(c.corner) + 2.0) / size;\n    \
+                  let g = proj_gathered(part, uv, k - part * dp.flags.w);\n    \
+                  return bilinear_mix_grad(vec4<f32>(g.w, g.z, g.x, g.y), c.t);\n}\n";
+            s
+        }
     }
-    for k in 0..parts {
-        let binding = if k == 0 { 3 } else { 7 + k };
-        s += &format!("@group(0) @binding({binding}) var<storage, read> proj{k}: array<u32>;\n");
-    }
-    s +=
-        "// Word w of binding part.\nfn proj_word(part: u32, w: u32) -> u32 {\n    switch part {\n";
-    for k in 0..parts - 1 {
-        s += &format!("        case {k}u: {{ return proj{k}[w]; }}\n");
-    }
-    s += &format!(
-        "        default: {{ return proj{}[w]; }}\n    }}\n}}\n",
-        parts - 1
-    );
-    s += &format!(
-        "fn tap(i: u32) -> f32 {{\n    let part = i / dp.flags.w;\n    \
-         let j = i - part * dp.flags.w;\n    let w = proj_word(part, {word});\n    \
-         {value}\n}}\n"
-    );
-    s
 }
 
-/// The complete WGSL module for a storage precision and a number of projection
-/// bindings: `shaders/d2vr.wgsl` and its imports, with [`tap_wgsl`].
-pub fn shader_source(storage: ProjStorage, parts: usize) -> String {
-    super::shaders::resolve_with("d2vr", &[("d2vr_tap", &tap_wgsl(storage, parts))])
+/// The complete WGSL module for a storage precision, a sampling and a number of
+/// projection bindings: `shaders/d2vr.wgsl` and its imports, with
+/// [`projections_wgsl`].
+pub fn shader_source(storage: ProjStorage, sampling: Sampling, parts: usize) -> String {
+    super::shaders::resolve_with(
+        "d2vr",
+        &[(
+            "d2vr_projections",
+            &projections_wgsl(storage, sampling, parts),
+        )],
+    )
 }
 
 /// How a D²VR render fits the planner's limits (module docs): the filtered projections
-/// in runs of whole views, one storage binding each, and the image in bands of rows.
+/// in runs of whole views, one storage binding or texture array each, and the image in
+/// bands of rows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct D2vrSplit {
     /// The views, cut into the projection bindings.
@@ -161,36 +281,59 @@ pub struct D2vrSplit {
     /// Values (detector pixels) per view.
     pub per_view: usize,
     pub storage: ProjStorage,
+    pub sampling: Sampling,
+    /// Device bytes of one view: its values in `storage`'s precision, with the
+    /// hardware path's zero border.
+    pub view_bytes: u64,
     /// Image width in pixels.
     pub width: usize,
 }
 
 impl D2vrSplit {
-    /// The split for `geometry`'s projections stored as `storage` and a `width ×
-    /// height` image under `limits`.
+    /// The split for `geometry`'s projections stored as `storage`, read as `sampling`
+    /// says, and a `width × height` image under `limits`.
     ///
     /// # Errors
-    /// [`Error::TooLarge`] when one view or one image row exceeds a binding, or the
-    /// views need more bindings than the adapter offers (at most
-    /// [`MAX_PROJECTION_PARTS`]).
+    /// [`Error::TooLarge`] when one view or one image row exceeds a binding, the views
+    /// need more bindings than the adapter offers (at most [`MAX_PROJECTION_PARTS`]),
+    /// or (hardware) a bordered view is wider than a 2-D texture.
     pub fn new(
         limits: &wgpu::Limits,
         geometry: &Geometry,
         storage: ProjStorage,
+        sampling: Sampling,
         (width, height): (usize, usize),
     ) -> Result<Self> {
         let limit = crate::gpu::plan::binding_limit(limits);
         let per_view = geometry.rows * geometry.cols;
-        // An f16 binding of v views holds ⌈v·n/2⌉ words: at most 2 bytes past v·n·2.
-        let (unit, room) = match storage {
-            ProjStorage::F32 => (4 * per_view as u64, limit),
-            ProjStorage::F16 => (2 * per_view as u64, limit.saturating_sub(2)),
+        let (view_bytes, room) = match (sampling, storage) {
+            (Sampling::Exact, ProjStorage::F32) => (4 * per_view as u64, limit),
+            // An f16 binding of v views holds ⌈v·n/2⌉ words: at most 2 bytes past v·n·2.
+            (Sampling::Exact, ProjStorage::F16) => (2 * per_view as u64, limit.saturating_sub(2)),
+            (Sampling::Hardware, _) => {
+                let side = limits.max_texture_dimension_2d as usize;
+                let (c, r) = (geometry.cols + 2, geometry.rows + 2);
+                if c > side || r > side {
+                    return Err(Error::too_large(
+                        "D²VR projections texture",
+                        format!(
+                            "a detector of {} × {} pixels with its zero border exceeds the \
+                             adapter's 2-D texture size of {side} texels: use the exact path \
+                             (without hardware filtering)",
+                            geometry.cols, geometry.rows
+                        ),
+                    ));
+                }
+                let unit = storage.texel_bytes() * (c * r) as u64;
+                let layers = limits.max_texture_array_layers.max(1) as u64;
+                (unit, limit.min(layers * unit))
+            }
         };
         let views = Pieces::plan(
             "D²VR projections",
             "view",
             geometry.n_angles(),
-            unit,
+            view_bytes,
             room,
             1,
         )?;
@@ -204,20 +347,29 @@ impl D2vrSplit {
                 ),
             ));
         }
-        let most = MAX_PROJECTION_PARTS.min(
-            limits
-                .max_storage_buffers_per_shader_stage
-                .saturating_sub(OTHER_STORAGE_BUFFERS) as usize,
-        );
+        let (offered, kind) = match sampling {
+            Sampling::Exact => (
+                limits
+                    .max_storage_buffers_per_shader_stage
+                    .saturating_sub(OTHER_STORAGE_BUFFERS),
+                "storage bindings",
+            ),
+            Sampling::Hardware => (
+                limits.max_sampled_textures_per_shader_stage,
+                "texture arrays",
+            ),
+        };
+        let most = MAX_PROJECTION_PARTS.min(offered as usize);
         if views.count() > most {
             return Err(Error::too_large(
                 "D²VR projections",
                 format!(
-                    "{} views of {per_view} values need {} storage bindings of at most {limit} \
-                     bytes, more than the {most} the renderer binds: use fewer or smaller \
-                     projections, 16-bit storage (gpu-f16), or the CPU",
+                    "{} views of {per_view} values need {} {kind} of at most {} views, more \
+                     than the {most} the renderer binds: use fewer or smaller projections, \
+                     16-bit storage (gpu-f16), or the CPU",
                     geometry.n_angles(),
-                    views.count()
+                    views.count(),
+                    views.per_piece
                 ),
             ));
         }
@@ -234,16 +386,17 @@ impl D2vrSplit {
             rows,
             per_view,
             storage,
+            sampling,
+            view_bytes,
             width,
         })
     }
 
     /// The bytes of the projection binding holding `views` views.
     pub fn part_bytes(&self, views: usize) -> u64 {
-        let values = (views * self.per_view) as u64;
-        match self.storage {
-            ProjStorage::F32 => 4 * values,
-            ProjStorage::F16 => 4 * values.div_ceil(2),
+        match (self.sampling, self.storage) {
+            (Sampling::Exact, ProjStorage::F16) => 4 * ((views * self.per_view) as u64).div_ceil(2),
+            _ => views as u64 * self.view_bytes,
         }
     }
 
@@ -259,19 +412,23 @@ impl D2vrSplit {
         ACC_BYTES_PER_PIXEL * (self.rows.per_piece * self.width) as u64
     }
 
-    /// The largest single buffer.
+    /// The largest single buffer or texture.
     pub fn largest_buffer(&self) -> u64 {
         self.part_bytes(self.views.per_piece).max(self.band_bytes())
     }
 
-    /// One line per axis that is cut ("D²VR projections in 3 bindings of 40 views");
-    /// empty when the render runs in one piece.
+    /// One line per axis that is cut ("D²VR projections in 3 bindings of 40 views (one
+    /// storage binding each)"); empty when the render runs in one piece.
     pub fn describe(&self) -> Vec<String> {
         use crate::gpu::plan::count_of;
         let mut lines = Vec::new();
         if self.views.is_split() {
+            let each = match self.sampling {
+                Sampling::Exact => "storage binding",
+                Sampling::Hardware => "texture array",
+            };
             lines.push(format!(
-                "D²VR projections in {} of {} views (one storage binding each)",
+                "D²VR projections in {} of {} views (one {each} each)",
                 count_of(self.views.count(), "binding"),
                 self.views.per_piece
             ));
@@ -287,9 +444,72 @@ impl D2vrSplit {
     }
 }
 
+/// The most a reconstructed sample of the hardware path ([`Sampling::Hardware`]) may
+/// differ from the exact path's on a texture unit whose filter weights carry `bits`
+/// fractional bits (8 on NVIDIA), in the field's units: FDK's bound
+/// ([`crate::gpu::fbp::filtered_backprojection_bound`]) over the grid's box grown by
+/// one and a half voxels (samples lie within half a voxel of it, GFS's neighbours one
+/// voxel further), from the values the texture holds (rounded to f16 for
+/// [`ProjStorage::F16`]). A MIP or MinIP pixel moves by at most as much, an X-ray pixel
+/// by at most that times its ray's length in the box. Infinite when the box reaches a
+/// cone-beam source.
+pub fn hardware_error_bound(
+    filtered: &Projections<f32>,
+    geometry: &Geometry,
+    grid: &D2vrGrid,
+    storage: ProjStorage,
+    bits: u32,
+) -> f64 {
+    let held;
+    let q = match storage {
+        ProjStorage::F32 => filtered,
+        ProjStorage::F16 => {
+            held = Projections {
+                angles: filtered.angles,
+                rows: filtered.rows,
+                cols: filtered.cols,
+                data: filtered
+                    .data
+                    .iter()
+                    .map(|&v| f32_from_f16_bits(f16_bits(v)))
+                    .collect(),
+            };
+            &held
+        }
+    };
+    let corners: Vec<[f64; 3]> = (0..8)
+        .map(|n| {
+            let at = |axis: usize| {
+                if n >> axis & 1 == 0 {
+                    -1.5
+                } else {
+                    grid.dims[axis] as f64 + 0.5
+                }
+            };
+            grid.affine
+                .transform_point3(glam::DVec3::new(at(0), at(1), at(2)))
+                .to_array()
+        })
+        .collect();
+    crate::gpu::fbp::filtered_backprojection_bound(q, geometry, &corners, bits)
+}
+
 /// Rounds to IEEE binary16 bits (round to nearest even), as `pack2x16float` does.
 pub fn f16_bits(x: f32) -> u16 {
     half_from_f32(x)
+}
+
+/// The value of IEEE binary16 bits, exactly (every half float is an f32).
+pub fn f32_from_f16_bits(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0f32 } else { 1.0 };
+    let exp = ((h >> 10) & 0x1f) as i32;
+    let man = (h & 0x3ff) as f32;
+    match exp {
+        0 => sign * man * 2f32.powi(-24),
+        0x1f if man == 0.0 => sign * f32::INFINITY,
+        0x1f => f32::NAN,
+        _ => sign * (1.0 + man / 1024.0) * 2f32.powi(exp - 15),
+    }
 }
 
 fn half_from_f32(x: f32) -> u16 {
@@ -349,12 +569,14 @@ pub struct GpuD2vrOutput {
     pub split: D2vrSplit,
 }
 
-/// [`crate::cpu::d2vr::render_d2vr`] on the GPU (front-to-back compositing only).
+/// [`crate::cpu::d2vr::render_d2vr`] on the GPU (front-to-back compositing only), the
+/// projections held as `storage` and read as `sampling` says (module docs).
 ///
 /// # Errors
 /// As the CPU version; [`Error::Invalid`] for back-to-front compositing,
 /// [`Error::TooLarge`] when the projections or the image cannot fit even split
-/// ([`D2vrSplit::new`]), [`Error::Gpu`] on device failure.
+/// ([`D2vrSplit::new`]), [`Error::Gpu`] on device failure or, for f32 projections
+/// filtered by the texture unit, an adapter without `FLOAT32_FILTERABLE`.
 #[allow(clippy::too_many_arguments)]
 pub fn render_d2vr(
     ctx: &GpuContext,
@@ -367,6 +589,7 @@ pub fn render_d2vr(
     options: &D2vrOptions,
     occupancy: Option<&OccupancyMask>,
     storage: ProjStorage,
+    sampling: Sampling,
 ) -> Result<GpuD2vrOutput> {
     let t0 = Instant::now();
     check_inputs(settings, options, grid)?;
@@ -455,13 +678,20 @@ pub fn render_d2vr(
     };
 
     let (w, h) = (camera.width, camera.height);
-    let split = D2vrSplit::new(&ctx.limits, geometry, storage, (w, h))?;
+    let split = D2vrSplit::new(&ctx.limits, geometry, storage, sampling, (w, h))?;
+    // R16Float filters on every adapter; R32Float needs the feature.
+    if sampling == Sampling::Hardware && storage == ProjStorage::F32 {
+        ctx.require_float32_filtering()?;
+    }
     let base = D2vrParams {
         flags: [
             base.flags[0],
             base.flags[1],
             base.flags[2],
-            (split.views.per_piece * split.per_view) as u32,
+            match sampling {
+                Sampling::Exact => (split.views.per_piece * split.per_view) as u32,
+                Sampling::Hardware => split.views.per_piece as u32,
+            },
         ],
         ..base
     };
@@ -489,18 +719,43 @@ pub fn render_d2vr(
         })
     };
     let storage_ro = wgpu::BufferUsages::STORAGE;
-    let proj_bufs: Vec<wgpu::Buffer> = split
-        .views
-        .ranges()
-        .map(|r| {
-            let values = &filtered.data[r.start * split.per_view..r.end * split.per_view];
-            init(
+    let (cols, rows) = (geometry.cols, geometry.rows);
+    let upload = |r: std::ops::Range<usize>| -> Result<Held> {
+        let values = &filtered.data[r.start * split.per_view..r.end * split.per_view];
+        if sampling == Sampling::Exact {
+            return Ok(Held::Buffer(init(
                 "d2vr projections",
                 bytemuck::cast_slice(&words_of(values)),
                 storage_ro,
-            )
-        })
-        .collect();
+            )));
+        }
+        let (label, format) = (
+            "d2vr projections texture",
+            match storage {
+                ProjStorage::F32 => wgpu::TextureFormat::R32Float,
+                ProjStorage::F16 => wgpu::TextureFormat::R16Float,
+            },
+        );
+        let tex = ctx.texture_layers(label, format, [cols + 2, rows + 2, r.len()])?;
+        // Inside the zero border.
+        let extent = [cols, rows, r.len()];
+        match storage {
+            ProjStorage::F32 => ctx.write_layers(&tex, [1, 1, 0], extent, values),
+            ProjStorage::F16 => {
+                let bits: Vec<u16> = values.iter().map(|&v| half_from_f32(v)).collect();
+                ctx.write_layers(&tex, [1, 1, 0], extent, &bits)
+            }
+        }
+        Ok(Held::Texture(tex.create_view(
+            &wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            },
+        )))
+    };
+    let held: Vec<Held> = split.views.ranges().map(upload).collect::<Result<_>>()?;
+    let sampler = (sampling == Sampling::Hardware)
+        .then(|| ctx.clamp_sampler("d2vr projections", wgpu::FilterMode::Linear));
     let views = geometry.view_matrices::<f32>();
     let views_buf = init("d2vr views", bytemuck::cast_slice(&views), storage_ro);
     let lut_host: Vec<[f32; 4]> = lut.entries.clone();
@@ -518,7 +773,10 @@ pub fn render_d2vr(
     );
     let pixels = (w * h) as u64;
 
-    let module = ctx.shader("d2vr.wgsl", &shader_source(storage, split.views.count()))?;
+    let module = ctx.shader(
+        "d2vr.wgsl",
+        &shader_source(storage, sampling, split.views.count()),
+    )?;
     let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("d2vr_chunk"),
         layout: None,
@@ -584,18 +842,22 @@ pub fn render_d2vr(
                 bytemuck::bytes_of(&p),
                 wgpu::BufferUsages::UNIFORM,
             );
-            // Bindings 0–7, then the projections' further bindings (8, 9, …).
+            // Bindings 0–7, then the projections' further bindings (8, 9, …) and the
+            // hardware path's sampler.
             let mut resources = vec![
                 rp_buf.as_entire_binding(),
                 dp_buf.as_entire_binding(),
                 views_buf.as_entire_binding(),
-                proj_bufs[0].as_entire_binding(),
+                held[0].binding(),
                 lut_buf.as_entire_binding(),
                 occ_buf.as_entire_binding(),
                 acc_buf.as_entire_binding(),
                 cnt_buf.as_entire_binding(),
             ];
-            resources.extend(proj_bufs[1..].iter().map(|b| b.as_entire_binding()));
+            resources.extend(held[1..].iter().map(Held::binding));
+            if let Some(s) = &sampler {
+                resources.push(wgpu::BindingResource::Sampler(s));
+            }
             binds.push(ctx.bind_group("d2vr", &layout, &resources));
             k0 = k1;
         }

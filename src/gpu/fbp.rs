@@ -19,7 +19,7 @@ use crate::cpu::ramp::RampFilter;
 use crate::ct::ViewMatrix;
 use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
-use crate::gpu::plan::{binding_limit, count_of, Pieces, Sampling};
+use crate::gpu::plan::{binding_limit, count_of, Held, Pieces, Sampling};
 use crate::gpu::GpuContext;
 use crate::volume::check_dims;
 use wgpu::util::DeviceExt;
@@ -74,8 +74,26 @@ pub fn hardware_error_bound<R: crate::real::Real>(
     grid: &Grid,
     bits: u32,
 ) -> f64 {
+    filtered_backprojection_bound(
+        filtered,
+        g,
+        &grid.corners(0..grid.dims[1], 0..grid.dims[2]),
+        bits,
+    )
+}
+
+/// `π/(2A) · Σ_k w_k · D_k · 2^(1−bits)` ([`hardware_error_bound`]) for points in the
+/// box with these eight world `corners`: the most a backprojection `π/(2A) Σ_k w_k
+/// q_k(x_k, y_k)` of `filtered` at such a point moves when a texture unit rounds each
+/// bilinear weight to `bits` fractional bits. Shared by FDK's voxels and D²VR's samples
+/// (`gpu::d2vr::hardware_error_bound`).
+pub fn filtered_backprojection_bound<R: crate::real::Real>(
+    filtered: &Projections<R>,
+    g: &Geometry,
+    corners: &[[f64; 3]],
+    bits: u32,
+) -> f64 {
     let (cols, rows) = (filtered.cols, filtered.rows);
-    let corners = grid.corners(0..grid.dims[1], 0..grid.dims[2]);
     let at = |v: &[R], c: isize, r: isize| -> f64 {
         if c < 0 || r < 0 || c >= cols as isize || r >= rows as isize {
             0.0
@@ -86,7 +104,7 @@ pub fn hardware_error_bound<R: crate::real::Real>(
     let mut sum = 0.0;
     for (k, m) in g.view_matrices::<f64>().iter().enumerate() {
         let mut w_max = 0f64;
-        for &p in &corners {
+        for &p in corners {
             match m.project(p) {
                 Some((_, _, w)) => w_max = w_max.max(w),
                 None => return f64::INFINITY,
@@ -390,11 +408,11 @@ pub fn backproject_timed(
         usage: wgpu::BufferUsages::STORAGE,
     });
     let per_view = g.rows * g.cols;
-    let upload = |views: std::ops::Range<usize>| -> Result<HeldProjections> {
+    let upload = |views: std::ops::Range<usize>| -> Result<Held> {
         let data = &filtered.data[views.start * per_view..views.end * per_view];
         Ok(match sampling {
             Sampling::Exact => {
-                HeldProjections::Buffer(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                Held::Buffer(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("fbp projections"),
                     contents: bytemuck::cast_slice(data),
                     usage: wgpu::BufferUsages::STORAGE,
@@ -403,6 +421,7 @@ pub fn backproject_timed(
             Sampling::Hardware => {
                 let tex = ctx.texture_layers(
                     "GPU filtered projections texture",
+                    wgpu::TextureFormat::R32Float,
                     [g.cols + 2, g.rows + 2, views.len()],
                 )?;
                 // Inside the zero border, a dispatch's worth of views per write.
@@ -415,7 +434,7 @@ pub fn backproject_timed(
                         run,
                     );
                 }
-                HeldProjections::Texture(tex.create_view(&wgpu::TextureViewDescriptor {
+                Held::Texture(tex.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::D2Array),
                     ..Default::default()
                 }))
@@ -515,22 +534,6 @@ pub fn backproject_timed(
             .copy_from_slice(&bytemuck::pod_collect_to_vec::<u8, f32>(&bytes));
     }
     Ok((Reconstruction { grid: *grid, data }, timings))
-}
-
-/// The filtered projections of a batch on the device, as the plan's sampling reads
-/// them.
-enum HeldProjections {
-    Buffer(wgpu::Buffer),
-    Texture(wgpu::TextureView),
-}
-
-impl HeldProjections {
-    fn binding(&self) -> wgpu::BindingResource<'_> {
-        match self {
-            HeldProjections::Buffer(b) => b.as_entire_binding(),
-            HeldProjections::Texture(v) => wgpu::BindingResource::TextureView(v),
-        }
-    }
 }
 
 /// FBP/FDK on the GPU in f32: [`crate::gpu::ramp::filter_projections`], then

@@ -112,8 +112,8 @@ pub fn binding_limit(limits: &wgpu::Limits) -> u64 {
 }
 
 /// How a GPU job reads the data it interpolates: the filtered projections of the
-/// FBP/FDK backprojection (`gpu::fbp`), the grid of Joseph's projection
-/// (`gpu::project`). The plan carries it, because the two ways hold the data in
+/// FBP/FDK backprojection (`gpu::fbp`) and of D²VR (`gpu::d2vr`), the grid of Joseph's
+/// projection (`gpu::project`). The plan carries it, because the two ways hold the data in
 /// different device objects (a storage buffer, a texture with a zero border).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Sampling {
@@ -127,6 +127,23 @@ pub enum Sampling {
     /// to about 8 fractional bits (lavapipe filters in full f32), so each family states
     /// a bound for it (docs/parity.md). Needs `FLOAT32_FILTERABLE`.
     Hardware,
+}
+
+/// Data a job interpolates, on the device as its [`Sampling`] reads it: a storage
+/// buffer (exact) or a view of a texture with its zero border (hardware).
+pub enum Held {
+    Buffer(wgpu::Buffer),
+    Texture(wgpu::TextureView),
+}
+
+impl Held {
+    /// The resource a bind group binds.
+    pub fn binding(&self) -> wgpu::BindingResource<'_> {
+        match self {
+            Held::Buffer(b) => b.as_entire_binding(),
+            Held::Texture(v) => wgpu::BindingResource::TextureView(v),
+        }
+    }
 }
 
 /// An axis of `total` units cut into consecutive pieces of at most `per_piece` units.

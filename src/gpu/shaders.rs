@@ -98,6 +98,7 @@ registry! {
     SKIP_MINMAX = "skip_minmax" => "skip_minmax.wgsl",
     TRICUBIC_POINTS = "tricubic_points" => "tricubic_points.wgsl",
     ADAPTIVE_PARAMS = "adaptive_params" => "shared/adaptive_params.wgsl",
+    BILINEAR_CELL = "bilinear_cell" => "shared/bilinear_cell.wgsl",
     CAMERA = "camera" => "shared/camera.wgsl",
     CLASSIFY = "classify" => "shared/classify.wgsl",
     CLASSIFY2D = "classify2d" => "shared/classify2d.wgsl",
@@ -161,8 +162,8 @@ pub static GENERATED: &[Generated] = &[
         by: "src/gpu/project.rs: volume_wgsl",
     },
     Generated {
-        name: "d2vr_tap",
-        by: "src/gpu/d2vr.rs: shader_source",
+        name: "d2vr_projections",
+        by: "src/gpu/d2vr.rs: projections_wgsl",
     },
 ];
 

@@ -76,6 +76,11 @@ pub struct D2vrRequest {
     pub backend: Backend,
     /// GPU: keep the filtered projections as 16-bit floats (half the memory).
     pub f16_projections: bool,
+    /// GPU: hold the filtered projections in 2-D texture arrays and let the texture
+    /// unit interpolate every value (the paper's reconstruction; real GPUs round its
+    /// weights to about 8 bits, docs/d2vr.md) instead of the exact interpolation
+    /// written out in the shader.
+    pub hardware_filtering: bool,
     /// A projection stack already in memory with its geometry (a NumPy array, the
     /// output of the project job), used instead of reading `input`, which then only
     /// names it in messages.
@@ -107,6 +112,7 @@ impl Default for D2vrRequest {
             range: [0.0, 1.0],
             backend: Backend::CpuF32,
             f16_projections: false,
+            hardware_filtering: false,
             memory: None,
         }
     }
@@ -212,13 +218,14 @@ pub fn plan(a: &D2vrRequest) -> Result<super::plan::MemoryPlan> {
     host += mask;
     let (device, split) = match engine.gpu() {
         Some(ctx) => {
-            use crate::gpu::d2vr::{D2vrSplit, ProjStorage};
-            let storage = if a.f16_projections {
-                ProjStorage::F16
-            } else {
-                ProjStorage::F32
-            };
-            let s = D2vrSplit::new(&ctx.limits, &g, storage, (a.size, a.size))?;
+            let (storage, sampling) = gpu_format(a);
+            let s = crate::gpu::d2vr::D2vrSplit::new(
+                &ctx.limits,
+                &g,
+                storage,
+                sampling,
+                (a.size, a.size),
+            )?;
             // The f32 copy the upload packs, and the accumulators read back.
             host += 4 * values + 32 * pixels;
             let matrices = 48 * g.n_angles() as u64;
@@ -250,7 +257,31 @@ fn check_request(a: &D2vrRequest) -> Result<()> {
             "16-bit projections are a GPU storage format (use the gpu backend)",
         ));
     }
+    if a.hardware_filtering && a.backend != Backend::Gpu {
+        return Err(Error::invalid(
+            "--hardware-filtering",
+            "is the GPU's texture unit: give --backend gpu or gpu-f16",
+        ));
+    }
     Ok(())
+}
+
+/// How the GPU holds and reads the filtered projections.
+fn gpu_format(a: &D2vrRequest) -> (crate::gpu::d2vr::ProjStorage, crate::gpu::plan::Sampling) {
+    use crate::gpu::d2vr::ProjStorage;
+    use crate::gpu::plan::Sampling;
+    (
+        if a.f16_projections {
+            ProjStorage::F16
+        } else {
+            ProjStorage::F32
+        },
+        if a.hardware_filtering {
+            Sampling::Hardware
+        } else {
+            Sampling::Exact
+        },
+    )
 }
 
 /// Renders.
@@ -319,12 +350,8 @@ fn run_on<R: Real + rustfft::FftNum>(
     let t = std::time::Instant::now();
     let (render, stats) = match engine.gpu() {
         Some(ctx) => {
-            use crate::gpu::d2vr::{render_d2vr as gpu_d2vr, ProjStorage};
-            let storage = if a.f16_projections {
-                ProjStorage::F16
-            } else {
-                ProjStorage::F32
-            };
+            use crate::gpu::d2vr::render_d2vr as gpu_d2vr;
+            let (storage, sampling) = gpu_format(a);
             let q32 = Projections::new(
                 q.angles,
                 q.rows,
@@ -342,7 +369,11 @@ fn run_on<R: Real + rustfft::FftNum>(
                 &options,
                 mask.as_ref(),
                 storage,
+                sampling,
             )?;
+            if a.hardware_filtering {
+                progress.note("D²VR projections in textures, filtered by the texture unit");
+            }
             for line in o.split.describe() {
                 progress.note(&line);
             }

@@ -330,6 +330,20 @@ where
     report.stats
 }
 
+/// Parses and validates a complete WGSL module with naga (no device), panicking with
+/// `what` and naga's message when it does not.
+pub fn validate_wgsl(src: &str, what: &str) {
+    use wgpu::naga;
+    let module = naga::front::wgsl::parse_str(src)
+        .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(src)));
+}
+
 /// The size and member offsets of WGSL struct `name` as naga lays it out, for the
 /// layout tests that hold a `#[repr(C)]` parameter struct against its WGSL copy.
 pub fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {

@@ -81,6 +81,12 @@ pub struct D2vrArgs {
     /// projections), gpu-f16 (16-bit projections on the GPU), or auto.
     #[arg(long, default_value = "cpu-f32")]
     pub backend: String,
+    /// GPU only: hold the filtered projections in 2-D texture arrays and let the
+    /// texture unit interpolate every value, as the paper does (GFR's gradient gathers
+    /// the four texels; real GPUs quantise the filter's weights to about 8 bits,
+    /// docs/d2vr.md), instead of the exact interpolation written out in the shader.
+    #[arg(long)]
+    pub hardware_filtering: bool,
     /// Print the memory plan (host bytes, device bytes against the adapter's limits,
     /// and how the GPU would bind the projections and band the image) from the
     /// geometry, and render and write nothing.
@@ -124,6 +130,7 @@ pub fn run(a: D2vrArgs) -> Result<ExitCode> {
         range: [a.range[0], a.range[1]],
         backend,
         f16_projections,
+        hardware_filtering: a.hardware_filtering,
         memory: None,
     };
     if a.dry_run {
