@@ -2,11 +2,12 @@
 # GPU checks on a machine that has a GPU but no Rust toolchain (and no network).
 #
 #   bash scripts/gpu_bundle.sh pack [main|tests]...   # here, with cargo
-#   bash scripts/gpu_bundle.sh run  [bench|fft|cufft|tests]... # there, in a copy of the repo
+#   bash scripts/gpu_bundle.sh run  [bench|fft|d2vr|cufft|tests]... # there, in a copy of the repo
 #
 # pack builds release programs, strips them and compresses them into
 # target/gpu-bundle/<part>.tar.xz (copy that folder with the repository):
-#   main   target/release/voxlab and the `fft` cargo bench program (about 9 MB);
+#   main   target/release/voxlab and the `fft` and `d2vr` cargo bench programs (about
+#          12 MB);
 #   tests  the GPU and CLI test programs, tests/gpu_*.rs and tests/cli_*.rs (about 21 MB;
 #          the CLI tests run main's voxlab).
 # Without arguments it packs both.
@@ -15,6 +16,9 @@
 # $VOXLAB_BUNDLE_OUT (default target/gpu-bundle-out):
 #   bench  `voxlab bench --suite full` on the GPU (--require-gpu) -> <adapter>.md/.json/.svg
 #   fft    `cargo bench --bench fft`'s program                     -> fft-bench.txt
+#   d2vr   `cargo bench --bench d2vr`'s program (shaded D²VR, exact, f16 and from
+#          textures, each one's error against the CPU; a few minutes, most of them the
+#          CPU's: VOXLAB_BENCH_RUNS=1 shortens it)                -> d2vr-bench.txt
 #   cufft  scripts/peers/gpu_fft_peers.py (needs CuPy)             -> cufft.json, cufft.md
 #   tests  every packed test program, 8 threads, 180 s each        -> tests.txt (a table)
 #          (VOXLAB_BUNDLE_TESTS='gpu_fft*' picks programs by name)
@@ -45,8 +49,10 @@ pack_part() {
     main)
         cargo build --release --bin voxlab
         strip -o "$stage/release/voxlab" target/release/voxlab
-        cargo bench --no-run --bench fft --message-format=json 2>/dev/null | executables |
-            while read -r exe; do strip -o "$stage/release/fft-bench" "$exe"; done
+        for b in fft d2vr; do
+            cargo bench --no-run --bench "$b" --message-format=json 2>/dev/null | executables |
+                while read -r exe; do strip -o "$stage/release/$b-bench" "$exe"; done
+        done
         ;;
     tests)
         local args=()
@@ -118,20 +124,21 @@ run)
         case $w in
         bench) target/release/voxlab bench --suite full --require-gpu --out "$out" ;;
         fft) target/release/fft-bench --bench 2>&1 | tee "$out/fft-bench.txt" ;;
+        d2vr) target/release/d2vr-bench --bench 2>&1 | tee "$out/d2vr-bench.txt" ;;
         cufft)
             python3 scripts/peers/gpu_fft_peers.py --runs 20 --out "$out/cufft.json" |
                 tee "$out/cufft.md"
             ;;
         tests) run_tests "$out" ;;
         *)
-            echo "gpu_bundle.sh run: unknown step '$w' (bench, fft, cufft, tests)" >&2
+            echo "gpu_bundle.sh run: unknown step '$w' (bench, fft, d2vr, cufft, tests)" >&2
             exit 2
             ;;
         esac
     done
     ;;
 *)
-    sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'
     [ "$cmd" = "-h" ] || [ "$cmd" = "--help" ] || exit 2
     ;;
 esac

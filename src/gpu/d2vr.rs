@@ -418,11 +418,12 @@ impl D2vrSplit {
     }
 
     /// One line per axis that is cut ("D²VR projections in 3 bindings of 40 views (one
-    /// storage binding each)"); empty when the render runs in one piece.
+    /// storage binding each)"), and on the hardware path always the projections' line
+    /// (it says they are in textures); empty when an exact render runs in one piece.
     pub fn describe(&self) -> Vec<String> {
         use crate::gpu::plan::count_of;
         let mut lines = Vec::new();
-        if self.views.is_split() {
+        if self.views.is_split() || self.sampling == Sampling::Hardware {
             let each = match self.sampling {
                 Sampling::Exact => "storage binding",
                 Sampling::Hardware => "texture array",
