@@ -7,7 +7,7 @@
 # pack builds release programs, strips them and compresses them into
 # target/gpu-bundle/<part>.tar.xz (copy that folder with the repository):
 #   main   target/release/voxlab and the `fft` and `d2vr` cargo bench programs (about
-#          12 MB);
+#          9 MB);
 #   tests  the GPU and CLI test programs, tests/gpu_*.rs and tests/cli_*.rs (about 21 MB;
 #          the CLI tests run main's voxlab).
 # Without arguments it packs both.
