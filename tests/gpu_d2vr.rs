@@ -247,7 +247,7 @@ fn gpu_matches_the_cpu_oracle() {
 /// The paper's reconstruction, projections in textures filtered by the texture unit
 /// (`Sampling::Hardware`), over the parity table in both storage precisions: MIP and
 /// X-ray images pixel by pixel within [`pixel_bounds`] (8-bit weights; on lavapipe at
-/// most 2.6e-3 of it is used, the widest 1.5e-2 … 2.5e-2 of the peak) plus the exact
+/// most 2.6e-3 of it is used, the widest 1.5e-2 … 2.9e-2 of the peak) plus the exact
 /// path's tolerance, on any adapter, and those bounds within the library's
 /// `gd2vr::hardware_error_bound` (times the longest chord for X-ray); on a CPU
 /// adapter (whose texture unit filters in f32) every image, DVR included, within a hair
@@ -384,7 +384,8 @@ fn hardware_sampling_is_within_the_texture_units_bound() {
 /// fall), on a detector two pixels wider on every side (so that the cells reaching one
 /// pixel past the edge are inside it; its bounding cylinder is wider, which only adds
 /// samples to a sum of non-negative terms). `storage` rounds the taps as the texture
-/// holds them.
+/// holds them; for f16 every pixel of `S` also carries `2⁻¹¹` of its view's largest
+/// value over `2 · 2⁻⁸`, a unit's half-precision result (the library's allowance).
 fn pixel_bounds(row: &Row, storage: ProjStorage) -> Vec<f64> {
     let g = &row.g;
     let (cols, rows, views) = (g.cols, g.rows, g.n_angles());
@@ -396,6 +397,11 @@ fn pixel_bounds(row: &Row, storage: ProjStorage) -> Vec<f64> {
     let mut s = vec![0f64; views * wide * high];
     for k in 0..views {
         let view = &row.q32.data[k * cols * rows..(k + 1) * cols * rows];
+        let top = view.iter().fold(0f64, |m, &v| m.max(held(v).abs()));
+        let rounded = match storage {
+            ProjStorage::F32 => 0.0,
+            ProjStorage::F16 => top * 2f64.powi(-11) / (2.0 / 256.0),
+        };
         let at = |i: isize, j: isize| {
             if i < 0 || j < 0 || i >= cols as isize || j >= rows as isize {
                 0.0
@@ -421,7 +427,7 @@ fn pixel_bounds(row: &Row, storage: ProjStorage) -> Vec<f64> {
                         m = m.max(spread(i, j));
                     }
                 }
-                s[(k * high + y) * wide + x] = m;
+                s[(k * high + y) * wide + x] = m + rounded;
             }
         }
     }

@@ -451,9 +451,10 @@ impl D2vrSplit {
 /// ([`crate::gpu::fbp::filtered_backprojection_bound`]) over the grid's box grown by
 /// one and a half voxels (samples lie within half a voxel of it, GFS's neighbours one
 /// voxel further), from the values the texture holds (rounded to f16 for
-/// [`ProjStorage::F16`]). A MIP or MinIP pixel moves by at most as much, an X-ray pixel
-/// by at most that times its ray's length in the box. Infinite when the box reaches a
-/// cone-beam source.
+/// [`ProjStorage::F16`], where the bound also allows the unit to return the filtered
+/// value in half precision: `2⁻¹¹` of the view's largest value). A MIP or MinIP pixel
+/// moves by at most as much, an X-ray pixel by at most that times its ray's length in
+/// the box. Infinite when the box reaches a cone-beam source.
 pub fn hardware_error_bound(
     filtered: &Projections<f32>,
     geometry: &Geometry,
@@ -462,8 +463,8 @@ pub fn hardware_error_bound(
     bits: u32,
 ) -> f64 {
     let held;
-    let q = match storage {
-        ProjStorage::F32 => filtered,
+    let (q, rounding) = match storage {
+        ProjStorage::F32 => (filtered, 0.0),
         ProjStorage::F16 => {
             held = Projections {
                 angles: filtered.angles,
@@ -475,7 +476,7 @@ pub fn hardware_error_bound(
                     .map(|&v| f32_from_f16_bits(f16_bits(v)))
                     .collect(),
             };
-            &held
+            (&held, 2f64.powi(-11))
         }
     };
     let corners: Vec<[f64; 3]> = (0..8)
@@ -492,7 +493,7 @@ pub fn hardware_error_bound(
                 .to_array()
         })
         .collect();
-    crate::gpu::fbp::filtered_backprojection_bound(q, geometry, &corners, bits)
+    crate::gpu::fbp::filtered_backprojection_bound(q, geometry, &corners, bits, rounding)
 }
 
 /// Rounds to IEEE binary16 bits (round to nearest even), as `pack2x16float` does.

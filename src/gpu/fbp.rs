@@ -79,19 +79,24 @@ pub fn hardware_error_bound<R: crate::real::Real>(
         g,
         &grid.corners(0..grid.dims[1], 0..grid.dims[2]),
         bits,
+        0.0,
     )
 }
 
-/// `π/(2A) · Σ_k w_k · D_k · 2^(1−bits)` ([`hardware_error_bound`]) for points in the
-/// box with these eight world `corners`: the most a backprojection `π/(2A) Σ_k w_k
-/// q_k(x_k, y_k)` of `filtered` at such a point moves when a texture unit rounds each
-/// bilinear weight to `bits` fractional bits. Shared by FDK's voxels and D²VR's samples
+/// `π/(2A) · Σ_k w_k · (D_k · 2^(1−bits) + M_k · rounding)` for points in the box with
+/// these eight world `corners`: the most a backprojection `π/(2A) Σ_k w_k q_k(x_k, y_k)`
+/// of `filtered` at such a point moves when a texture unit rounds each bilinear weight
+/// to `bits` fractional bits ([`hardware_error_bound`]) and its filtered value by
+/// `rounding` of itself (0 for `R32Float`; `2⁻¹¹` where a unit may return a 16-bit
+/// texture's filtered value in half precision), `M_k` being view `k`'s largest
+/// magnitude. Shared by FDK's voxels and D²VR's samples
 /// (`gpu::d2vr::hardware_error_bound`).
 pub fn filtered_backprojection_bound<R: crate::real::Real>(
     filtered: &Projections<R>,
     g: &Geometry,
     corners: &[[f64; 3]],
     bits: u32,
+    rounding: f64,
 ) -> f64 {
     let (cols, rows) = (filtered.cols, filtered.rows);
     let at = |v: &[R], c: isize, r: isize| -> f64 {
@@ -111,6 +116,7 @@ pub fn filtered_backprojection_bound<R: crate::real::Real>(
             }
         }
         let v = filtered.view(k);
+        let top = v.iter().fold(0f64, |m, x| m.max(x.f64().abs()));
         let mut spread = 0f64;
         for r in -1..rows as isize {
             for c in -1..cols as isize {
@@ -125,9 +131,9 @@ pub fn filtered_backprojection_bound<R: crate::real::Real>(
                 spread = spread.max(hi - lo);
             }
         }
-        sum += w_max * spread;
+        sum += w_max * (spread * 2f64.powi(1 - bits as i32) + top * rounding);
     }
-    backprojection_scale(g.n_angles()) * sum * 2f64.powi(1 - bits as i32)
+    backprojection_scale(g.n_angles()) * sum
 }
 
 /// The generated module `fbp_projection`: the binding of the filtered projections
