@@ -41,27 +41,13 @@ fn gpu_backprojection_matches_the_f64_oracle() {
     }
 }
 
-/// The largest difference of two of the 4 × 4 detector values around (col, row)
-/// (zeros outside the detector): the steepest a bilinear value may change within the
-/// cell of (col, row) and the cells next to it, where a texture unit's rounded
-/// coordinate may land.
+/// The largest spread of the bilinear cell of (col, row) and of the cells next to it
+/// (zeros outside the detector; `common::cells_spread`): the steepest a bilinear value
+/// may change where a texture unit's rounded coordinate may land.
 fn local_spread(q: &Projections<f64>, view: usize, col: f64, row: f64) -> f64 {
     let v = q.view(view);
     let (c0, r0) = (col.floor() as i64, row.floor() as i64);
-    let (mut hi, mut lo) = (f64::NEG_INFINITY, f64::INFINITY);
-    for r in r0 - 1..=r0 + 2 {
-        for c in c0 - 1..=c0 + 2 {
-            let inside = c >= 0 && r >= 0 && c < q.cols as i64 && r < q.rows as i64;
-            let x = if inside {
-                v[r as usize * q.cols + c as usize]
-            } else {
-                0.0
-            };
-            hi = hi.max(x);
-            lo = lo.min(x);
-        }
-    }
-    hi - lo
+    common::cells_spread((q.cols, q.rows), c0 - 1..=c0 + 1, r0 - 1..=r0 + 1, |i| v[i])
 }
 
 /// The hardware path (projections in a texture array, bilinear by the texture unit)

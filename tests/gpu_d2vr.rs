@@ -379,11 +379,12 @@ fn hardware_sampling_is_within_the_texture_units_bound() {
 /// MIP pixel by the largest of its samples' bounds and an X-ray pixel by their sum over
 /// the chord. Those sums are a MIP or X-ray of a field: the CPU oracle renders it from
 /// "projections" `S` that hold, at each detector pixel, the largest spread of the cells
-/// within two pixels of it (so that the bilinear value of `S` anywhere in a cell is at
-/// least the spread of that cell and of its neighbours, where an f32 position may
-/// fall), on a detector two pixels wider on every side (so that the cells reaching one
-/// pixel past the edge are inside it; its bounding cylinder is wider, which only adds
-/// samples to a sum of non-negative terms). `storage` rounds the taps as the texture
+/// it is a tap of and of their neighbours (`common::cells_spread`; so the bilinear
+/// value of `S` anywhere in a cell is at least the spread of that cell and of its
+/// neighbours, where an f32 position may fall), on a detector two pixels wider on every
+/// side (so that the cells reaching one pixel past the edge are inside it; its
+/// bounding cylinder is wider, which only adds samples to a sum of non-negative
+/// terms). `storage` rounds the taps as the texture
 /// holds them; for f16 every pixel of `S` also carries `2⁻¹¹` of its view's largest
 /// value over `2 · 2⁻⁸`, a unit's half-precision result (the library's allowance).
 fn pixel_bounds(row: &Row, storage: ProjStorage) -> Vec<f64> {
@@ -402,31 +403,14 @@ fn pixel_bounds(row: &Row, storage: ProjStorage) -> Vec<f64> {
             ProjStorage::F32 => 0.0,
             ProjStorage::F16 => top * 2f64.powi(-11) / (2.0 / 256.0),
         };
-        let at = |i: isize, j: isize| {
-            if i < 0 || j < 0 || i >= cols as isize || j >= rows as isize {
-                0.0
-            } else {
-                held(view[j as usize * cols + i as usize])
-            }
-        };
-        // The spread of cell (i, j), taps (i..=i+1, j..=j+1), for i in -1..cols.
-        let spread = |i: isize, j: isize| {
-            let t = [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)];
-            let hi = t.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
-            let lo = t.iter().fold(f64::INFINITY, |m, &v| m.min(v));
-            hi - lo
-        };
         for y in 0..high {
             for x in 0..wide {
-                // Pixel (x − 2, y − 2) of the detector: a tap of cells x − 3 ..= x − 2,
-                // whose neighbours are cells x − 4 ..= x − 1.
-                let (p, q) = (x as isize - 2, y as isize - 2);
-                let mut m = 0f64;
-                for j in (q - 2).max(-1)..=(q + 1).min(rows as isize - 1) {
-                    for i in (p - 2).max(-1)..=(p + 1).min(cols as isize - 1) {
-                        m = m.max(spread(i, j));
-                    }
-                }
+                // Pixel (p, q) = (x − 2, y − 2) of the detector is a tap of cells
+                // p − 1 ..= p, whose neighbours reach cells p − 2 ..= p + 1.
+                let (p, q) = (x as i64 - 2, y as i64 - 2);
+                let m = common::cells_spread((cols, rows), p - 2..=p + 1, q - 2..=q + 1, |i| {
+                    held(view[i])
+                });
                 s[(k * high + y) * wide + x] = m + rounded;
             }
         }

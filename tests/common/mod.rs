@@ -369,6 +369,37 @@ pub fn wgsl_struct_layout(src: &str, name: &str) -> (u32, Vec<(String, u32)>) {
 // CT
 // ---------------------------------------------------------------------------------
 
+/// The largest spread (max − min of its four taps) of the bilinear cells `cs × rs` of
+/// a `cols × rows` detector view (`value(i)`, column fastest; zero outside the
+/// detector; cell `(c, r)` has the taps `c ..= c + 1`, `r ..= r + 1`): the steepest a
+/// bilinear value may change anywhere in those cells, which bounds what a texture
+/// unit's rounded weights (and a coordinate rounded into a neighbouring cell) can move
+/// it by, per unit of weight.
+pub fn cells_spread(
+    (cols, rows): (usize, usize),
+    cs: std::ops::RangeInclusive<i64>,
+    rs: std::ops::RangeInclusive<i64>,
+    value: impl Fn(usize) -> f64,
+) -> f64 {
+    let at = |c: i64, r: i64| {
+        if c >= 0 && r >= 0 && c < cols as i64 && r < rows as i64 {
+            value(r as usize * cols + c as usize)
+        } else {
+            0.0
+        }
+    };
+    let mut widest = 0f64;
+    for r in rs {
+        for c in cs.clone() {
+            let t = [at(c, r), at(c + 1, r), at(c, r + 1), at(c + 1, r + 1)];
+            let hi = t.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+            let lo = t.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+            widest = widest.max(hi - lo);
+        }
+    }
+    widest
+}
+
 /// RTK's view axes at gantry angle `a_deg`: `(e_u, e_v, e_w)` (written out here, not
 /// taken from voxlab, so that per-view test geometries are built independently).
 pub fn rtk_axes(a_deg: f64) -> (DVec3, DVec3, DVec3) {
