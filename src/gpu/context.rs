@@ -9,8 +9,12 @@
 //!   (which cap storage bindings at 128 MiB). The device is opened with them; the
 //!   context's [`GpuContext::limits`], which every job plans against, are those lowered
 //!   by `VOXLAB_GPU_MAX_BINDING` and `VOXLAB_GPU_MAX_TEXTURE_3D` ([`super::plan`]).
-//! - Optional features requested when present: `FLOAT32_FILTERABLE` (hardware
-//!   filtering of R32Float textures), `TEXTURE_FORMAT_16BIT_NORM`, `TIMESTAMP_QUERY`.
+//! - Optional features requested when present ([`OPTIONAL_FEATURES`]):
+//!   `FLOAT32_FILTERABLE` (hardware filtering of R32Float textures),
+//!   `TEXTURE_FORMAT_16BIT_NORM` (16-bit volume textures), `TIMESTAMP_QUERY` (kernel
+//!   times). `VOXLAB_GPU_WITHOUT=NAME,…` ([`WITHOUT_ENV`]) withholds some of them, so
+//!   that an adapter that has them (lavapipe has all three) also runs the paths of one
+//!   that lacks them: the refusals and the fallbacks.
 //! - No adapter ⇒ [`Error::NoAdapter`] whose message says how to get one.
 //!
 //! Also the plumbing every family shares, so that families import it from here and
@@ -35,6 +39,45 @@ pub const NO_ADAPTER_HELP: &str = "voxlab needs a Vulkan, Metal or DX12 adapter.
 On Linux without a GPU, install Mesa's software Vulkan driver (lavapipe): \
 `apt-get install mesa-vulkan-drivers` (Debian/Ubuntu). \
 Set VOXLAB_ADAPTER=<name substring> to choose among several adapters.";
+
+/// The optional features voxlab asks for where the adapter offers them, by the names
+/// [`WITHOUT_ENV`] takes. Each has a fallback or a clear refusal where it is missing.
+pub const OPTIONAL_FEATURES: [(&str, wgpu::Features); 3] = [
+    ("FLOAT32_FILTERABLE", wgpu::Features::FLOAT32_FILTERABLE),
+    (
+        "TEXTURE_FORMAT_16BIT_NORM",
+        wgpu::Features::TEXTURE_FORMAT_16BIT_NORM,
+    ),
+    ("TIMESTAMP_QUERY", wgpu::Features::TIMESTAMP_QUERY),
+];
+
+/// The environment variable that withholds optional features from the device: names
+/// of [`OPTIONAL_FEATURES`], separated by commas or spaces.
+pub const WITHOUT_ENV: &str = "VOXLAB_GPU_WITHOUT";
+
+/// The optional features `text` (a [`WITHOUT_ENV`] value) names: case-insensitive,
+/// separated by commas or spaces; empty for an empty text.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the variable and the known names, for any other word.
+pub fn withheld_features(text: &str) -> Result<wgpu::Features> {
+    let mut withheld = wgpu::Features::empty();
+    for word in text.split([',', ' ']).filter(|w| !w.trim().is_empty()) {
+        let word = word.trim();
+        let (_, f) = OPTIONAL_FEATURES
+            .iter()
+            .find(|(name, _)| name.eq_ignore_ascii_case(word))
+            .ok_or_else(|| {
+                let names: Vec<&str> = OPTIONAL_FEATURES.iter().map(|(n, _)| *n).collect();
+                Error::invalid(
+                    WITHOUT_ENV,
+                    format!("'{word}' is not one of {}", names.join(", ")),
+                )
+            })?;
+        withheld |= *f;
+    }
+    Ok(withheld)
+}
 
 /// A printable description of an adapter.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -77,8 +120,11 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// The adapter's own limits, which the device was opened with.
     pub adapter_limits: wgpu::Limits,
-    /// One line per limit the environment lowered (empty when none).
+    /// One line per limit the environment lowered or feature it withheld (empty when
+    /// none).
     pub lowered: Vec<String>,
+    /// The optional features the device was opened with: the adapter's, less those
+    /// [`WITHOUT_ENV`] withholds.
     pub features: wgpu::Features,
 }
 
@@ -160,14 +206,22 @@ impl GpuContext {
                 .next()
                 .ok_or_else(|| Error::NoAdapter(NO_ADAPTER_HELP.to_string()))?,
         };
-        let offered = adapter.features();
-        let features = offered
-            & (wgpu::Features::FLOAT32_FILTERABLE
-                | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
-                | wgpu::Features::TIMESTAMP_QUERY);
+        let optional = OPTIONAL_FEATURES
+            .iter()
+            .fold(wgpu::Features::empty(), |all, (_, f)| all | *f);
+        let offered = adapter.features() & optional;
+        let withheld = withheld_features(&std::env::var(WITHOUT_ENV).unwrap_or_default())?;
+        let features = offered - withheld;
         let adapter_limits = adapter.limits();
-        let (limits, lowered) =
+        let (limits, mut lowered) =
             super::plan::lowered_limits(&adapter_limits, |k| std::env::var(k).ok())?;
+        for (name, f) in OPTIONAL_FEATURES {
+            if offered.contains(f) && withheld.contains(f) {
+                lowered.push(format!(
+                    "{name} withheld by {WITHOUT_ENV} (the adapter has it)"
+                ));
+            }
+        }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("voxlab"),
             required_features: features,
@@ -251,17 +305,43 @@ impl GpuContext {
     }
 
     /// Refuses, with [`Error::Gpu`], an adapter whose texture unit cannot filter f32
-    /// textures (`FLOAT32_FILTERABLE`): every hardware-filtering path asks first.
+    /// textures (`FLOAT32_FILTERABLE`): every hardware-filtering path asks first, in its
+    /// run and in its job's `--dry-run` plan.
     pub fn require_float32_filtering(&self) -> Result<()> {
-        if self.features.contains(wgpu::Features::FLOAT32_FILTERABLE) {
-            Ok(())
-        } else {
-            Err(Error::Gpu(
-                "hardware filtering of f32 textures needs the FLOAT32_FILTERABLE feature, \
-                 which this adapter lacks"
-                    .into(),
-            ))
+        self.require_filtering(
+            super::plan::Sampling::Hardware,
+            wgpu::TextureFormat::R32Float,
+        )
+    }
+
+    /// Refuses, with [`Error::Gpu`], [`Sampling::Hardware`](super::plan::Sampling) of
+    /// `format` texels on a device that cannot filter them: `R32Float` needs
+    /// `FLOAT32_FILTERABLE`; `R16Float` filters everywhere. The exact sampling reads
+    /// storage buffers and needs nothing.
+    pub fn require_filtering(
+        &self,
+        sampling: super::plan::Sampling,
+        format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        let filterable = wgpu::TextureSampleType::Float { filterable: true };
+        if sampling == super::plan::Sampling::Exact
+            || format.sample_type(None, Some(self.features)) == Some(filterable)
+        {
+            return Ok(());
         }
+        Err(Error::Gpu(format!(
+            "hardware filtering of {format:?} textures needs the FLOAT32_FILTERABLE \
+             feature, which this device lacks{}",
+            if self
+                .lowered
+                .iter()
+                .any(|l| l.starts_with("FLOAT32_FILTERABLE withheld"))
+            {
+                format!(" ({WITHOUT_ENV} withholds it)")
+            } else {
+                String::new()
+            }
+        )))
     }
 
     /// Compiles WGSL, turning validation errors into [`Error::Gpu`] with the message.

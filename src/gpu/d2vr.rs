@@ -109,7 +109,16 @@ pub const MAX_PROJECTION_PARTS: usize = 8;
 const OTHER_STORAGE_BUFFERS: u32 = 5;
 
 impl ProjStorage {
-    /// Bytes of one texel of the hardware path's texture (`R32Float`, `R16Float`).
+    /// The hardware path's texture format: `R32Float` (filtered where the device has
+    /// `FLOAT32_FILTERABLE`) or `R16Float` (filtered everywhere).
+    pub fn texture_format(self) -> wgpu::TextureFormat {
+        match self {
+            ProjStorage::F32 => wgpu::TextureFormat::R32Float,
+            ProjStorage::F16 => wgpu::TextureFormat::R16Float,
+        }
+    }
+
+    /// Bytes of one texel of the hardware path's texture.
     fn texel_bytes(self) -> u64 {
         match self {
             ProjStorage::F32 => 4,
@@ -681,10 +690,7 @@ pub fn render_d2vr(
 
     let (w, h) = (camera.width, camera.height);
     let split = D2vrSplit::new(&ctx.limits, geometry, storage, sampling, (w, h))?;
-    // R16Float filters on every adapter; R32Float needs the feature.
-    if sampling == Sampling::Hardware && storage == ProjStorage::F32 {
-        ctx.require_float32_filtering()?;
-    }
+    ctx.require_filtering(sampling, storage.texture_format())?;
     let base = D2vrParams {
         flags: [
             base.flags[0],
@@ -731,14 +737,11 @@ pub fn render_d2vr(
                 storage_ro,
             )));
         }
-        let (label, format) = (
+        let tex = ctx.texture_layers(
             "d2vr projections texture",
-            match storage {
-                ProjStorage::F32 => wgpu::TextureFormat::R32Float,
-                ProjStorage::F16 => wgpu::TextureFormat::R16Float,
-            },
-        );
-        let tex = ctx.texture_layers(label, format, [cols + 2, rows + 2, r.len()])?;
+            storage.texture_format(),
+            [cols + 2, rows + 2, r.len()],
+        )?;
         // Inside the zero border.
         let extent = [cols, rows, r.len()];
         match storage {

@@ -391,9 +391,7 @@ pub fn backproject_timed(
         ));
     }
     let sampling = plan.sampling;
-    if sampling == Sampling::Hardware {
-        ctx.require_float32_filtering()?;
-    }
+    ctx.require_filtering(sampling, wgpu::TextureFormat::R32Float)?;
     let limit = binding_limit(&ctx.limits);
     let batch_bytes = (plan.batches.per_piece * view_texels(sampling, g) * 4) as u64;
     let slab_bytes = (plan.slabs.per_piece * grid.dims[0] * grid.dims[1] * 4) as u64;

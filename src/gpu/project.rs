@@ -244,9 +244,7 @@ impl ForwardKernel {
     /// [`Error::Gpu`] when the shader does not compile, or, for
     /// [`Sampling::Hardware`], when the adapter cannot filter f32 textures.
     pub fn sampled(ctx: &GpuContext, sampling: Sampling) -> Result<Self> {
-        if sampling == Sampling::Hardware {
-            ctx.require_float32_filtering()?;
-        }
+        ctx.require_filtering(sampling, wgpu::TextureFormat::R32Float)?;
         let module = ctx.shader("project.wgsl", &sampled_shader_source(sampling))?;
         let pipeline = ctx
             .device

@@ -1253,10 +1253,7 @@ impl<'c> RaycastSession<'c> {
             Some(b) => (b.whole, b.affine, b.range),
             None => (dims, self.affine, self.range),
         };
-        check_loop_limit(ctx, ray_dims, settings)?;
-        if settings.hardware_filtering {
-            ctx.require_float32_filtering()?;
-        }
+        check_device(ctx, ray_dims, settings)?;
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
         let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;
         if let Some(b) = &self.brick {
@@ -1593,6 +1590,21 @@ impl<'c> RaycastSession<'c> {
 }
 
 /// On a CPU adapter, refuses rays that could run past llvmpipe's loop limit.
+/// What the ray caster needs of the device for `settings` over a volume of `dims`
+/// (the whole volume's, for a brick): the texture unit's f32 filtering for hardware
+/// filtering, and rays within a CPU driver's loop limit ([`LLVMPIPE_LOOP_LIMIT`]). Every
+/// frame checks it, and so does `voxlab render --dry-run`.
+///
+/// # Errors
+/// [`Error::Gpu`] without `FLOAT32_FILTERABLE`; [`Error::Invalid`] naming `step` for rays
+/// longer than the loop limit.
+pub fn check_device(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSettings) -> Result<()> {
+    if settings.hardware_filtering {
+        ctx.require_float32_filtering()?;
+    }
+    check_loop_limit(ctx, dims, settings)
+}
+
 fn check_loop_limit(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSettings) -> Result<()> {
     if !ctx.summary.is_cpu() {
         return Ok(());

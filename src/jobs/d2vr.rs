@@ -219,6 +219,7 @@ pub fn plan(a: &D2vrRequest) -> Result<super::plan::MemoryPlan> {
     let (device, split) = match engine.gpu() {
         Some(ctx) => {
             let (storage, sampling) = gpu_format(a);
+            ctx.require_filtering(sampling, storage.texture_format())?;
             let s = crate::gpu::d2vr::D2vrSplit::new(
                 &ctx.limits,
                 &g,

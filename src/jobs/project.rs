@@ -275,6 +275,7 @@ pub fn plan(a: &ProjectRequest, progress: &dyn Progress) -> Result<super::plan::
     let engine = Engine::open(a.backend)?;
     Ok(match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
+            ctx.require_filtering(sampling, wgpu::TextureFormat::R32Float)?;
             let p = crate::gpu::project::ProjectionPlan::sampled(&ctx.limits, &g, dims, sampling)?;
             let slab = p.slab_bytes(dims);
             let chunk = (p.views_per_dispatch * g.rows * g.cols * 4) as u64;

@@ -862,6 +862,8 @@ fn backprojection_plan(
     } else {
         Sampling::Exact
     };
+    // Here too, so that `--dry-run` refuses what the run would.
+    ctx.require_filtering(sampling, wgpu::TextureFormat::R32Float)?;
     BackprojectionPlan::sampled(&ctx.limits, g, grid, sampling)
 }
 

@@ -668,6 +668,7 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
+            crate::gpu::raycast::check_device(ctx, dims, &settings)?;
             let max = ctx.limits.max_texture_dimension_3d as usize;
             let (texels, split) = if dims.iter().any(|&n| n > max) {
                 crate::cpu::raycast::check_owned_settings(&settings)?;
