@@ -392,3 +392,160 @@ fn render_backend_gpu_matches_the_array() {
         }
     }
 }
+
+/// `--dry-run` refuses what the run refuses, with the same message and before any
+/// work, writing nothing: options checked only deep inside a run (a GPU's median
+/// window, a Dirichlet slice's work, a filter the GPU ray caster lacks) used to pass the
+/// dry run.
+#[test]
+fn every_dry_run_refuses_what_its_run_refuses() {
+    let dir = scratch("cli_dry_run_refusals");
+    let out = dir.join("never.npy");
+    let vol = dir.join("never.nrrd");
+    let (sino, geometry) = (
+        common::ct_data("rtk_joseph32.npy"),
+        common::ct_data("rtk_geometry.json"),
+    );
+    // A volume of 2 mm rows and 1 mm columns and slices (FVR needs isotropic voxels).
+    let aniso = dir.join("aniso.nrrd");
+    let mut nrrd = b"NRRD0004\ntype: float\ndimension: 3\nsizes: 8 8 8\nspace dimension: 3\n\
+space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
+        .to_vec();
+    nrrd.extend((0..512).flat_map(|i| (i as f32).to_le_bytes()));
+    std::fs::write(&aniso, nrrd).unwrap();
+    let recon = [
+        "reconstruct",
+        s(&sino),
+        "--geometry",
+        s(&geometry),
+        "--size",
+        "16",
+        "--out",
+        s(&out),
+    ];
+    let mut cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            [&recon[..], &["--method", "sirt", "--iterations", "0"]].concat(),
+            "invalid --iterations: 0",
+        ),
+        (
+            vec![
+                "process",
+                "phantom:sphere:8",
+                "--op",
+                "gaussian",
+                "--sigma",
+                "0",
+                "--out",
+                s(&vol),
+            ],
+            "invalid Gaussian sigma",
+        ),
+        (
+            vec![
+                "process",
+                "phantom:sphere:8",
+                "--op",
+                "median",
+                "--size",
+                "4",
+                "--out",
+                s(&vol),
+            ],
+            "invalid median window size: 4",
+        ),
+        (
+            vec![
+                "fvr",
+                "phantom:sphere:128",
+                "--kernel",
+                "dirichlet",
+                "--backend",
+                "cpu",
+                "--out",
+                s(&out),
+            ],
+            "Dirichlet slice is too large",
+        ),
+        (
+            vec!["fvr", s(&aniso), "--backend", "cpu", "--out", s(&out)],
+            "only isotropic, unsheared voxels",
+        ),
+        (
+            vec!["d2vr", "phantom:sphere", "--size", "0", "--out", s(&out)],
+            "invalid image size: 0×0",
+        ),
+        (
+            vec![
+                "d2vr",
+                "phantom:sphere",
+                "--tf",
+                "no-such-preset",
+                "--out",
+                s(&out),
+            ],
+            "no-such-preset",
+        ),
+    ];
+    if common::gpu("every_dry_run_refuses_what_its_run_refuses").is_some() {
+        let gpu: Vec<(Vec<&str>, &str)> = vec![
+            (
+                vec![
+                    "render",
+                    "phantom:sphere:8",
+                    "--filter",
+                    "sinc",
+                    "--backend",
+                    "gpu",
+                    "--out",
+                    s(&out),
+                ],
+                "the full sinc runs on the CPU only",
+            ),
+            (
+                vec![
+                    "render",
+                    "phantom:sphere:8",
+                    "--filter",
+                    "catmull-rom",
+                    "--hardware-filtering",
+                    "--backend",
+                    "gpu",
+                    "--out",
+                    s(&out),
+                ],
+                "the sampler filters trilinearly only",
+            ),
+            (
+                vec![
+                    "process",
+                    "phantom:sphere:8",
+                    "--op",
+                    "median",
+                    "--size",
+                    "7",
+                    "--backend",
+                    "gpu",
+                    "--out",
+                    s(&vol),
+                ],
+                "on the GPU the window side must be odd, from 1 to 5",
+            ),
+        ];
+        cases.extend(gpu);
+    }
+    for (args, says) in cases {
+        let run = voxlab(&args);
+        let dry = voxlab(&[&args[..], &["--dry-run"]].concat());
+        for (o, how) in [(&run, "run"), (&dry, "dry run")] {
+            assert_eq!(o.status.code(), Some(1), "{how} of {args:?}: {}", stderr(o));
+            assert!(
+                stderr(o).contains(says),
+                "{how} of {args:?}: no '{says}' in {}",
+                stderr(o)
+            );
+        }
+        assert_eq!(stderr(&run), stderr(&dry), "{args:?}");
+        assert!(!out.exists() && !vol.exists(), "{args:?} wrote");
+    }
+}

@@ -236,15 +236,23 @@ impl FvrLayout {
     /// [`Error::Invalid`] for anisotropic or sheared voxels or a bad padding;
     /// [`Error::TooLarge`] for a cube past the volume limit.
     pub fn new(volume: &Volume<f32>, padding: usize) -> Result<Self> {
-        let dims = volume.dims();
-        let spacing = isotropic_spacing(volume.affine())?;
+        Self::of(volume.dims(), volume.affine(), padding)
+    }
+
+    /// [`FvrLayout::new`] for a volume of `dims` voxels placed by `affine` (index to
+    /// world), from its header alone.
+    ///
+    /// # Errors
+    /// As [`FvrLayout::new`].
+    pub fn of(dims: [usize; 3], affine: DMat4, padding: usize) -> Result<Self> {
+        let spacing = isotropic_spacing(affine)?;
         let m = padded_side(dims, padding)?;
         Ok(FvrLayout {
             m,
             dims,
             offset: dims.map(|n| (m - n) / 2),
             spacing,
-            affine: volume.affine(),
+            affine,
         })
     }
 

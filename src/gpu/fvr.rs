@@ -183,9 +183,8 @@ pub struct GpuFvrSpectrum {
     /// The inverse `M × M` FFT (Bluestein's algorithm when `M` is not a power of two).
     fft: GpuFftPlan,
     /// The volume's values in f32, `[z][y][x]` (the Dirichlet kernel's sum), or a
-    /// placeholder when they exceed one binding (`values_bound` false).
+    /// placeholder when they exceed one binding ([`check_dirichlet`] refuses those).
     _values: wgpu::Buffer,
-    values_bound: bool,
     /// Times the slice dispatch on the device, where the adapter has timestamps (made
     /// once, read per view).
     query: Option<TimestampPair>,
@@ -453,7 +452,6 @@ impl GpuFvrSpectrum {
             bind,
             fft,
             _values: values_buffer,
-            values_bound,
             query: ctx.timestamps(),
         })
     }
@@ -530,6 +528,35 @@ pub fn fvr_project(
     Ok(fvr_project_timed(ctx, spectrum, view, kernel, deapodize)?.0)
 }
 
+/// What a Dirichlet slice of a volume laid out as `layout` needs on the GPU: the work
+/// within [`FvrLayout::check_dirichlet_work`]'s limit, at most [`DIRICHLET_MAX_NX`]
+/// voxels along x, and the volume's f32 values in one storage binding. Each view
+/// checks it, and so does `voxlab fvr --dry-run`, before the spectrum is made.
+///
+/// # Errors
+/// [`Error::TooLarge`] saying which, and that the CPU has none of the last two limits.
+pub fn check_dirichlet(limits: &wgpu::Limits, layout: &FvrLayout) -> Result<()> {
+    layout.check_dirichlet_work()?;
+    let dims = layout.dims();
+    if dims[0] > DIRICHLET_MAX_NX {
+        return Err(Error::too_large(
+            "GPU Dirichlet slice",
+            format!(
+                "{} voxels along x exceed the {DIRICHLET_MAX_NX} the GPU's sum keeps: \
+                 use --backend cpu",
+                dims[0]
+            ),
+        ));
+    }
+    if dims.iter().product::<usize>() as u64 * 4 > crate::gpu::plan::binding_limit(limits) {
+        return Err(Error::too_large(
+            "GPU Dirichlet slice",
+            "the volume's f32 values exceed one storage binding: use --backend cpu",
+        ));
+    }
+    Ok(())
+}
+
 /// [`fvr_project`] with timings.
 ///
 /// # Errors
@@ -545,23 +572,7 @@ pub fn fvr_project_timed(
     let (code, radius) = kernel_code(kernel);
     let layout = &spectrum.layout;
     if kernel == Kernel::Dirichlet {
-        layout.check_dirichlet_work()?;
-        if layout.dims()[0] > DIRICHLET_MAX_NX {
-            return Err(Error::too_large(
-                "GPU Dirichlet slice",
-                format!(
-                    "{} voxels along x exceed the {DIRICHLET_MAX_NX} the GPU's sum keeps: \
-                     use --backend cpu",
-                    layout.dims()[0]
-                ),
-            ));
-        }
-        if !spectrum.values_bound {
-            return Err(Error::too_large(
-                "GPU Dirichlet slice",
-                "the volume's f32 values exceed one storage binding: use --backend cpu",
-            ));
-        }
+        check_dirichlet(&ctx.limits, layout)?;
     }
     let m = layout.side();
     let plan = SlicePlan::new(layout, view)?;

@@ -732,16 +732,19 @@ impl ProcessPlan {
     /// The plan of [`gaussian`]: the z radius of the kernel.
     ///
     /// # Errors
-    /// As [`ProcessPlan::new`].
+    /// [`Error::Invalid`] for a σ [`check_sigma`] refuses; as [`ProcessPlan::new`].
     pub fn gaussian(limits: &wgpu::Limits, dims: [usize; 3], sigma: [f64; 3]) -> Result<Self> {
+        check_sigma(sigma)?;
         Self::new(limits, dims, crate::cpu::process::gaussian_radius(sigma[2]))
     }
 
     /// The plan of [`median`]: half the window.
     ///
     /// # Errors
-    /// As [`ProcessPlan::new`].
+    /// [`Error::Invalid`] for an even `k` or `k` > [`MAX_MEDIAN_SIZE_GPU`]; as
+    /// [`ProcessPlan::new`].
     pub fn median(limits: &wgpu::Limits, dims: [usize; 3], k: usize) -> Result<Self> {
+        check_median_size_gpu(k)?;
         Self::new(limits, dims, k / 2)
     }
 
@@ -827,7 +830,6 @@ impl ProcessPlan {
 /// As the CPU version; also [`Error::TooLarge`] as [`ProcessPlan::new`],
 /// [`Error::Gpu`] on device failure.
 pub fn gaussian(ctx: &GpuContext, vol: &Volume<f32>, sigma: [f64; 3]) -> Result<Field<f32>> {
-    check_sigma(sigma)?;
     let plan = ProcessPlan::gaussian(&ctx.limits, vol.dims(), sigma)?;
     Ok(gaussian_planned(ctx, vol, sigma, &plan)?.0)
 }

@@ -460,6 +460,24 @@ fn filter_id(f: Filter) -> Result<u32> {
     })
 }
 
+/// The GPU ray caster's filters: not the full sinc, and the texture unit for trilinear
+/// and the fast B-splines' trilinear fetches only.
+fn check_filter(settings: &RenderSettings) -> Result<()> {
+    filter_id(settings.filter)?;
+    let fast = Filter::FAST.contains(&settings.filter);
+    if settings.hardware_filtering && settings.filter != Filter::Trilinear && !fast {
+        return Err(Error::invalid(
+            "hardware filtering",
+            format!(
+                "the sampler filters trilinearly only (and serves the 8 trilinear fetches \
+                 of cubic-bspline-fast); the {} filter always runs on the exact path",
+                settings.filter.name()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn v4(v: DVec3, w: f64) -> [f32; 4] {
     [v.x as f32, v.y as f32, v.z as f32, w as f32]
 }
@@ -505,18 +523,7 @@ pub fn raycast_params(
         Mode::Mida => 4,
         Mode::Iso => 5,
     };
-    let hardware = settings.hardware_filtering;
-    let fast = Filter::FAST.contains(&settings.filter);
-    if hardware && settings.filter != Filter::Trilinear && !fast {
-        return Err(Error::invalid(
-            "hardware filtering",
-            format!(
-                "the sampler filters trilinearly only (and serves the 8 trilinear fetches \
-                 of cubic-bspline-fast); the {} filter always runs on the exact path",
-                settings.filter.name()
-            ),
-        ));
-    }
+    check_filter(settings)?;
     let tf2d = match (&settings.transfer_2d, settings.mode) {
         (Some(t), Mode::Dvr) => t.coordinates().uniforms(),
         _ => [[0.0; 4]; 2],
@@ -567,7 +574,12 @@ pub fn raycast_params(
             reads_gradient_volume(settings) as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
         ],
-        flags2: [gradient, hardware as u32, 0, camera.height as u32],
+        flags2: [
+            gradient,
+            settings.hardware_filtering as u32,
+            0,
+            camera.height as u32,
+        ],
         tf2d_a: tf2d[0],
         tf2d_b: tf2d[1],
         ..accel_params(dims, settings, modes_params(settings, value_range))
@@ -1590,15 +1602,18 @@ impl<'c> RaycastSession<'c> {
 }
 
 /// On a CPU adapter, refuses rays that could run past llvmpipe's loop limit.
-/// What the ray caster needs of the device for `settings` over a volume of `dims`
-/// (the whole volume's, for a brick): the texture unit's f32 filtering for hardware
-/// filtering, and rays within a CPU driver's loop limit ([`LLVMPIPE_LOOP_LIMIT`]). Every
-/// frame checks it, and so does `voxlab render --dry-run`.
+/// What the GPU ray caster refuses of `settings` over a volume of `dims` (the whole
+/// volume's, for a brick) on this device: the full sinc, hardware filtering of a filter
+/// the texture unit cannot serve or without the texture unit's f32 filtering, and rays
+/// past a CPU driver's loop limit ([`LLVMPIPE_LOOP_LIMIT`]). Every frame checks it, and
+/// so does `voxlab render --dry-run`.
 ///
 /// # Errors
-/// [`Error::Gpu`] without `FLOAT32_FILTERABLE`; [`Error::Invalid`] naming `step` for rays
-/// longer than the loop limit.
+/// [`Error::Invalid`] naming `filter` or `hardware filtering`; [`Error::Gpu`] without
+/// `FLOAT32_FILTERABLE`; [`Error::Invalid`] naming `step` for rays longer than the loop
+/// limit.
 pub fn check_device(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSettings) -> Result<()> {
+    check_filter(settings)?;
     if settings.hardware_filtering {
         ctx.require_float32_filtering()?;
     }

@@ -196,6 +196,7 @@ fn geometry(a: &D2vrRequest) -> Result<Geometry> {
 /// Bad options or geometry; a GPU render that cannot fit even split.
 pub fn plan(a: &D2vrRequest) -> Result<super::plan::MemoryPlan> {
     check_request(a)?;
+    scene(a)?;
     let g = geometry(a)?;
     g.validate()?;
     let engine = Engine::open(a.backend)?;
@@ -298,13 +299,18 @@ pub fn run(a: &D2vrRequest, progress: &dyn Progress) -> Result<D2vrRendering> {
     }
 }
 
-fn run_on<R: Real + rustfft::FftNum>(
-    a: &D2vrRequest,
-    engine: Engine,
-    progress: &dyn Progress,
-) -> Result<D2vrRendering> {
-    let (raw, g) = projections::<R>(a)?;
-    let q = filter_projections(&raw, &g, a.filter, FilterMethod::Fft)?;
+/// What a render of `a` sees, besides the projections.
+struct Scene {
+    grid: D2vrGrid,
+    camera: Camera,
+    tf: TransferFunction,
+    settings: RenderSettings,
+    options: D2vrOptions,
+}
+
+/// The grid, camera, transfer function and settings of `a`, each checked: [`run`] and
+/// [`plan`] make them before any projection.
+fn scene(a: &D2vrRequest) -> Result<Scene> {
     let n = a.grid;
     let grid = D2vrGrid::centred([n; 3], a.spacing.unwrap_or(256.0 / n.max(1) as f64))?;
     let extent = grid
@@ -327,12 +333,14 @@ fn run_on<R: Real + rustfft::FftNum>(
         a.size,
     )?;
     let tf = TransferFunction::preset_or_file(&a.tf)?;
+    tf.validate()?;
     let settings = RenderSettings {
         mode: a.mode,
         step: a.step,
         ert_threshold: a.ert,
         ..RenderSettings::default()
     };
+    settings.validate()?;
     let options = D2vrOptions {
         gradient: match a.gradient {
             Gradient::Gfs => D2vrGradient::Gfs,
@@ -341,6 +349,29 @@ fn run_on<R: Real + rustfft::FftNum>(
         cylinder: !a.no_cylinder,
         value_range: (a.range[0], a.range[1]),
     };
+    Ok(Scene {
+        grid,
+        camera,
+        tf,
+        settings,
+        options,
+    })
+}
+
+fn run_on<R: Real + rustfft::FftNum>(
+    a: &D2vrRequest,
+    engine: Engine,
+    progress: &dyn Progress,
+) -> Result<D2vrRendering> {
+    let Scene {
+        grid,
+        camera,
+        tf,
+        settings,
+        options,
+    } = scene(a)?;
+    let (raw, g) = projections::<R>(a)?;
+    let q = filter_projections(&raw, &g, a.filter, FilterMethod::Fft)?;
     let mask = if a.occupancy {
         Some(OccupancyMask::from_projections(&raw, &g, &grid, 0.0)?)
     } else {

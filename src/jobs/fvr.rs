@@ -6,7 +6,7 @@
 use super::input::VolumeInput;
 use super::render::ViewRequest;
 use super::{stage, Backend, Engine, Progress};
-use crate::cpu::fvr::{fvr_project, padded_side, FvrSpectrum, FvrView, Kernel};
+use crate::cpu::fvr::{fvr_project, FvrLayout, FvrSpectrum, FvrView, Kernel};
 use crate::error::Result;
 use crate::frame::Frame;
 use serde::{Deserialize, Serialize};
@@ -61,7 +61,7 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
     let view = view_of(a)?;
     let engine = open(a)?;
     let vol = a.input.load(progress)?.to_f32();
-    let m = padded_side(vol.dims(), a.padding)?;
+    let m = check_volume(a, &engine, vol.dims(), vol.affine())?;
     let fft_stage = format!("3-D FFT of the {m}³ padded volume");
     let view_stage = format!("{} slice and 2-D inverse FFT ({m}²)", a.kernel.name());
     let frame = match (engine.backend(), engine.gpu()) {
@@ -108,6 +108,25 @@ pub fn run(a: &FvrRequest, progress: &dyn Progress) -> Result<FvrImage> {
     Ok(FvrImage { frame, engine })
 }
 
+/// What [`run`] and [`plan`] refuse of the volume before any transform: voxels that are
+/// not isotropic, a bad padding, a Dirichlet slice past its limits (the GPU's included).
+/// Returns the padded side.
+fn check_volume(
+    a: &FvrRequest,
+    engine: &Engine,
+    dims: [usize; 3],
+    affine: glam::DMat4,
+) -> Result<usize> {
+    let layout = FvrLayout::of(dims, affine, a.padding)?;
+    if a.kernel == Kernel::Dirichlet {
+        match engine.gpu().filter(|_| engine.backend() == Backend::Gpu) {
+            Some(ctx) => crate::gpu::fvr::check_dirichlet(&ctx.limits, &layout)?,
+            None => layout.check_dirichlet_work()?,
+        }
+    }
+    Ok(layout.side())
+}
+
 /// The view `a` asks for.
 fn view_of(a: &FvrRequest) -> Result<FvrView> {
     Ok(match &a.view.axis {
@@ -140,7 +159,7 @@ pub fn plan(a: &FvrRequest, progress: &dyn Progress) -> Result<super::plan::Memo
     view_of(a)?;
     let engine = open(a)?;
     let vol = a.input.load(progress)?;
-    let m = padded_side(vol.dims(), a.padding)? as u64;
+    let m = check_volume(a, &engine, vol.dims(), vol.affine())? as u64;
     let voxels = vol.dims().iter().product::<usize>() as u64;
     // The CPU: the volume (f32), the padded complex f64 spectrum and the f64 image.
     let mut host = 4 * voxels + 16 * m.pow(3) + 8 * m * m;

@@ -169,7 +169,8 @@ fn prepare(
     a: &ProcessRequest,
     progress: &dyn Progress,
 ) -> Result<(Volume<f32>, Option<[f64; 3]>, Option<ResampleSpec>, String)> {
-    let vol = a.input.load(progress)?.to_f32();
+    // The options first, so that `--dry-run` refuses them too, before any reading (the
+    // GPU's smaller median window: `gpu::process::ProcessPlan::median`).
     let sigma = match (&a.sigma, a.op) {
         (Some(s), _) => Some(three(s, "--sigma")?),
         (None, Op::Gaussian) => {
@@ -177,6 +178,13 @@ fn prepare(
         }
         (None, _) => None,
     };
+    if let (Some(s), Op::Gaussian) = (sigma, a.op) {
+        cp::check_sigma(s)?;
+    }
+    if a.op == Op::Median {
+        cp::check_median_size(a.size, cp::MAX_MEDIAN_SIZE_CPU)?;
+    }
+    let vol = a.input.load(progress)?.to_f32();
     let spec = match a.op {
         Op::Resample => Some(resample_spec(a, &vol)?),
         _ => None,

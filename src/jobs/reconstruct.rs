@@ -755,6 +755,8 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
     let read = (p.data.len() * 8) as u64;
     if let Some(method) = a.method.iterative() {
         let grid = reconstruction_grid(a, &g, progress)?;
+        check_grid(a, &grid, g.beam == Beam::Parallel, g.rows)?;
+        iterative_options(a, method, g.n_angles())?;
         let voxels = grid.dims.iter().product::<usize>() as u64;
         // The projections and their residual, the image and the solver's vectors
         // (SIRT/CGLS/OS-SART keep three image-sized ones, TV its dual field too).

@@ -645,6 +645,25 @@ pub struct Rendering {
     pub camera: Camera,
 }
 
+/// `--repeat`: 1 … 1000 frames of the single-volume caster.
+fn check_repeat(req: &RenderRequest) -> Result<()> {
+    if req.repeat.is_some()
+        && (!req.volumes.is_empty() || req.sampling.is_some() || req.stereo.is_some())
+    {
+        return Err(Error::invalid(
+            "--repeat",
+            "times the single-volume caster; it excludes --stereo, --sampling and extra volumes",
+        ));
+    }
+    match req.repeat {
+        Some(n) if !(1..=1000).contains(&n) => Err(Error::invalid(
+            "--repeat",
+            format!("{n} is not in 1 … 1000"),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// `voxlab render --dry-run`: what [`run`] would hold and how it would split, after
 /// loading the input (for its size) and checking the request, rendering nothing. The
 /// host side is the volume in the working precision and the image; the device side
@@ -658,6 +677,7 @@ pub struct Rendering {
 pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
     let (scene, mut settings) = build_scene(&req.scene, req.samples, progress)?;
     req.scene.accel.apply(&mut settings)?;
+    check_repeat(req)?;
     let dims = scene.volume.dims();
     let voxels = dims.iter().product::<usize>() as u64;
     let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
@@ -733,22 +753,7 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
 pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
     let (scene, mut settings) = build_scene(&req.scene, req.samples, progress)?;
     req.scene.accel.apply(&mut settings)?;
-    if req.repeat.is_some()
-        && (!req.volumes.is_empty() || req.sampling.is_some() || req.stereo.is_some())
-    {
-        return Err(Error::invalid(
-            "--repeat",
-            "times the single-volume caster; it excludes --stereo, --sampling and extra volumes",
-        ));
-    }
-    if let Some(n) = req.repeat {
-        if !(1..=1000).contains(&n) {
-            return Err(Error::invalid(
-                "--repeat",
-                format!("{n} is not in 1 … 1000"),
-            ));
-        }
-    }
+    check_repeat(req)?;
     check_cancel(progress)?;
     if !req.volumes.is_empty() {
         return render_multi(req, &scene, settings, progress);
