@@ -408,10 +408,6 @@ fn hardware_filtering_samples_the_grid_from_a_texture() {
     }
 }
 
-fn ct_data(name: &str) -> std::path::PathBuf {
-    common::root().join("tests/data/ct").join(name)
-}
-
 /// `--geometry-file`: ASTRA's `cone` description projects exactly as the same circle
 /// given by flags (ASTRA's own numbers: angles in radians, distances from the origin);
 /// RTK's XML of an orbit that changes view by view projects with the request's
@@ -421,7 +417,7 @@ fn ct_data(name: &str) -> std::path::PathBuf {
 fn a_geometry_file_gives_the_projection_geometry() {
     let d = scratch("geometry-file");
     let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(ct_data("astra_cone.json")).unwrap())
+        serde_json::from_str(&std::fs::read_to_string(common::ct_data("astra_cone.json")).unwrap())
             .unwrap();
     let num = |k: &str| j[k].as_f64().unwrap();
     let angles: Vec<String> = j["ProjectionAngles"]
@@ -455,7 +451,7 @@ fn a_geometry_file_gives_the_projection_geometry() {
         "project",
         "phantom:shepp-logan-modified",
         "--geometry-file",
-        s(&ct_data("astra_cone.json")),
+        s(&common::ct_data("astra_cone.json")),
         "--out",
         s(&file),
     ]);
@@ -477,7 +473,7 @@ fn a_geometry_file_gives_the_projection_geometry() {
     #[rustfmt::skip]
     let o = voxlab(&[
         "project", "phantom:sphere:32", "--geometry-file",
-        s(&ct_data("rtk_perview_geometry.xml")), "--cols", "48", "--rows", "40", "--du", "3",
+        s(&common::ct_data("rtk_perview_geometry.xml")), "--cols", "48", "--rows", "40", "--du", "3",
         "--out", s(&rtk),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -502,7 +498,7 @@ fn a_geometry_file_gives_the_projection_geometry() {
         "project",
         "phantom:sphere:8",
         "--geometry-file",
-        s(&ct_data("astra_cone.json")),
+        s(&common::ct_data("astra_cone.json")),
         "--sid",
         "500",
         "--out",

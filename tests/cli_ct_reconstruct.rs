@@ -4,17 +4,13 @@
 
 mod common;
 
-use common::{root, s, scratch, stderr, voxlab};
+use common::{s, scratch, stderr, voxlab};
 use glam::DVec3;
 use voxlab::ct::ct_to_phantom;
 use voxlab::io::npy::{read_npy_f64, write_npy_f64};
 
 fn ct(name: &str) -> String {
-    root()
-        .join("tests/data/ct")
-        .join(name)
-        .display()
-        .to_string()
+    common::ct_data(name).display().to_string()
 }
 
 #[test]
@@ -38,7 +34,7 @@ fn the_skimage_example_equals_iradon() {
         let (shape, got, f8) = read_npy_f64(&out).unwrap();
         assert_eq!((shape.as_slice(), f8), (&[64usize, 64][..], false));
         let (_, want, _) =
-            read_npy_f64(&root().join(format!("tests/data/ct/skimage_iradon64_{f}.npy"))).unwrap();
+            read_npy_f64(&common::ct_data(&format!("skimage_iradon64_{f}.npy"))).unwrap();
         let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mut worst = 0.0f64;
         for j in 0..64i64 {
@@ -70,8 +66,7 @@ const BACKENDS: [(&str, f64); 2] = [
 #[test]
 fn f32_backends_equal_iradon() {
     let d = scratch("recon-backends");
-    let (_, want, _) =
-        read_npy_f64(&root().join("tests/data/ct/skimage_iradon64_ramp.npy")).unwrap();
+    let (_, want, _) = read_npy_f64(&common::ct_data("skimage_iradon64_ramp.npy")).unwrap();
     let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     for (backend, bound) in BACKENDS {
         if backend == "gpu" && common::gpu("cli_ct_reconstruct gpu").is_none() {
@@ -125,7 +120,7 @@ fn a_cone_beam_with_rtks_geometry_equals_rtks_fdk() {
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, got, _) = read_npy_f64(&out).unwrap();
     assert_eq!(shape, [32, 32, 32]);
-    let (_, rtk, _) = read_npy_f64(&root().join("tests/data/ct/rtk_fdk32.npy")).unwrap();
+    let (_, rtk, _) = read_npy_f64(&common::ct_data("rtk_fdk32.npy")).unwrap();
     let scale = rtk.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let worst = got
         .iter()
@@ -177,8 +172,8 @@ fn an_rtk_geometry_xml_view_by_view_equals_rtks_fdk() {
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, got, _) = read_npy_f64(&out).unwrap();
     assert_eq!(shape, [32, 32, 32]);
-    let (_, rtk, _) = read_npy_f64(&root().join("tests/data/ct/rtk_perview_fdk32.npy")).unwrap();
-    let (_, truth, _) = read_npy_f64(&root().join("tests/data/ct/rtk_volume32.npy")).unwrap();
+    let (_, rtk, _) = read_npy_f64(&common::ct_data("rtk_perview_fdk32.npy")).unwrap();
+    let (_, truth, _) = read_npy_f64(&common::ct_data("rtk_volume32.npy")).unwrap();
     let rms = |a: &[f64], b: &[f64]| {
         (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
     };
@@ -409,7 +404,7 @@ fn bad_input_gives_clear_errors_and_no_output() {
     );
     // A geometry file that does not fit the stack.
     let g = d.join("g.json");
-    std::fs::copy(root().join("tests/data/ct/rtk_geometry.json"), &g).unwrap();
+    std::fs::copy(common::ct_data("rtk_geometry.json"), &g).unwrap();
     fails(
         &["reconstruct", &radon, "--geometry", s(&g), "--out", s(&out)],
         &out,

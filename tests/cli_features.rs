@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{root, s, scratch, stderr, voxlab_command};
+use common::{s, scratch, stderr, voxlab_command};
 use std::path::Path;
 use std::process::Output;
 
@@ -86,13 +86,7 @@ fn a_withheld_feature_is_reported_and_unknown_names_are_refused() {
 /// The job of each hardware-filtering path, with `--hardware-filtering` and `--dry-run`
 /// to be appended: FDK, Joseph's projection, D²VR and the ray caster.
 fn hardware_jobs(dir: &Path) -> Vec<Vec<String>> {
-    let ct = |name: &str| {
-        root()
-            .join("tests/data/ct")
-            .join(name)
-            .display()
-            .to_string()
-    };
+    let ct = |name: &str| common::ct_data(name).display().to_string();
     let volume = dir.join("head.nrrd");
     let o = without(None, &["phantom", "shepp-logan:24", "--out", s(&volume)]);
     assert!(o.status.success(), "{}", stderr(&o));

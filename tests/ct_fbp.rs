@@ -503,13 +503,12 @@ fn prims_of(ph: &Phantom) -> PhantomKindPrims {
 // Peers: scikit-image's iradon and RTK's FDK on the fixtures of tests/data/ct/.
 
 fn fixture(name: &str) -> (Vec<usize>, Vec<f64>) {
-    let (shape, data, _) =
-        voxlab::io::npy::read_npy_f64(&common::root().join("tests/data/ct").join(name)).unwrap();
+    let (shape, data, _) = voxlab::io::npy::read_npy_f64(&common::ct_data(name)).unwrap();
     (shape, data)
 }
 
 fn skimage_theta() -> Vec<f64> {
-    std::fs::read_to_string(common::root().join("tests/data/ct/skimage_theta.txt"))
+    std::fs::read_to_string(common::ct_data("skimage_theta.txt"))
         .unwrap()
         .lines()
         .map(|l| l.trim().parse().unwrap())

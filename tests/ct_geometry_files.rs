@@ -8,7 +8,7 @@ mod common;
 
 use glam::{DMat3, DVec2, DVec3};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use voxlab::ct::{Geometry, ViewGeometry, ViewVectors};
 use voxlab::io::astra_geometry::parse_astra_geometry;
 use voxlab::io::projections::{
@@ -20,9 +20,7 @@ use voxlab::io::ReadOptions;
 use voxlab::phantom::{Phantom, PhantomKind, Primitive};
 use voxlab::Error;
 
-fn data(name: &str) -> PathBuf {
-    common::root().join("tests/data/ct").join(name)
-}
+use common::ct_data as data;
 
 fn json(name: &str) -> Value {
     serde_json::from_str(&std::fs::read_to_string(data(name)).unwrap()).unwrap()

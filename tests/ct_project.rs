@@ -124,11 +124,7 @@ fn f32_follows_f64() {
 // Peers: scikit-image's radon and RTK's Joseph projector (tests/data/ct/README.md)
 // ---------------------------------------------------------------------------------
 
-fn peer(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/ct")
-        .join(name)
-}
+use common::ct_data as peer;
 
 /// Max |a − b| / max |b| and the RMS difference / max |b| (`metrics::error_stats`,
 /// `b` the reference; ∞ on a NaN/Inf mismatch).

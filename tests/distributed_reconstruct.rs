@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{on_thread_ranks, root, s, scratch, stderr, voxlab};
+use common::{on_thread_ranks, s, scratch, stderr, voxlab};
 use std::path::{Path, PathBuf};
 use voxlab::jobs::distributed::{self, Comm, Distributed};
 use voxlab::jobs::reconstruct::ReconstructRequest;
@@ -52,9 +52,7 @@ fn into_file(
     (out, on_ranks(&many, ranks, None))
 }
 
-fn ct(name: &str) -> PathBuf {
-    root().join("tests/data/ct").join(name)
-}
+use common::ct_data as ct;
 
 /// FDK of RTK's example (32³, 2 mm) into `out`.
 fn rtk(out: PathBuf) -> ReconstructRequest {

@@ -6,15 +6,11 @@
 
 mod common;
 
-use common::{mpirun, root, s, scratch, stderr, voxlab};
+use common::{mpirun, s, scratch, stderr, voxlab};
 use std::path::Path;
 
 fn ct(name: &str) -> String {
-    root()
-        .join("tests/data/ct")
-        .join(name)
-        .display()
-        .to_string()
+    common::ct_data(name).display().to_string()
 }
 
 fn same_file_on_every_rank_count(name: &str, dir: &Path, args: &[&str]) {

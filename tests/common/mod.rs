@@ -17,6 +17,11 @@ pub fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// A fixture of `tests/data/ct/` (the peers' CT data: RTK, ASTRA, scikit-image).
+pub fn ct_data(name: &str) -> PathBuf {
+    root().join("tests/data/ct").join(name)
+}
+
 /// A fresh, empty directory for one test: `<test file>/<name>` under Cargo's
 /// temporary folder for integration tests, so that tests running in parallel (within
 /// one file or across files) never share one.
