@@ -3,7 +3,8 @@
 //! `TIMESTAMP_QUERY`, so that an adapter that has them all (lavapipe does) runs the
 //! paths of one that lacks them: every hardware-filtering job refuses f32 textures, in
 //! its run and in its `--dry-run`, writing nothing; the exact paths and the 16-bit
-//! paths still run and write the same bytes; 16-bit volumes fall back to f32 textures;
+//! paths (D²VR's f16 projections, a u16 volume's compact texture) still run and write
+//! the same bytes; 16-bit volumes fall back to f32 textures;
 //! kernel times come from the clock. And a CPU driver's loop limit, refused by the run
 //! and its `--dry-run` alike.
 
@@ -220,6 +221,99 @@ fn without_f32_filtering_d2vr_filters_its_16_bit_projections() {
         &[&job[..], &["--dry-run", "--out", s(&a)]].concat(),
     );
     assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// Without `FLOAT32_FILTERABLE` the texture unit still filters a u16 volume's compact
+/// `R16Unorm` texture: every hardware-filtered frame that reads only it (DVR, MIP, X-ray,
+/// the fast B-spline's trilinear fetches) is the image the whole adapter renders, byte
+/// for byte; frames that read f32 textures (precomputed gradients, pre-classified
+/// colours, B-spline coefficients, or the volume itself with `VOXLAB_GPU_F32_TEXTURES=1`
+/// or without 16-bit textures) are refused, by the run and its `--dry-run`.
+#[test]
+fn without_f32_filtering_a_u16_volume_renders_from_its_compact_texture() {
+    let Some(ctx) =
+        common::gpu("without_f32_filtering_a_u16_volume_renders_from_its_compact_texture")
+    else {
+        return;
+    };
+    if !ctx
+        .features
+        .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM)
+    {
+        eprintln!("this adapter has no 16-bit textures: every u16 volume reads f32 ones");
+        return;
+    }
+    let dir = scratch("cli_features_compact");
+    let volume = dir.join("head-u16.nrrd");
+    let o = without(
+        None,
+        &[
+            "phantom",
+            "shepp-logan:24",
+            "--type",
+            "u16",
+            "--scale",
+            "60000",
+            "--out",
+            s(&volume),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job = [
+        "render",
+        s(&volume),
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--backend",
+        "gpu",
+        "--hardware-filtering",
+    ];
+    let (a, b) = (dir.join("a.npy"), dir.join("b.npy"));
+    for extra in [
+        &[][..],
+        &["--mode", "mip"],
+        &["--mode", "xray"],
+        &["--filter", "cubic-bspline-fast"],
+    ] {
+        let args = [&job[..], extra].concat();
+        let whole = writes(None, &args, &a);
+        assert!(whole == writes(NO_F32_FILTERING, &args, &b), "{extra:?}");
+    }
+    let never = dir.join("never.npy");
+    for (extra, env) in [
+        (&["--precompute-gradients"][..], None),
+        (&["--classification", "pre"], None),
+        (&["--filter", "cubic-bspline-fast-interp"], None),
+        (&[], Some(("VOXLAB_GPU_F32_TEXTURES", "1"))),
+        (
+            &[],
+            Some((
+                "VOXLAB_GPU_WITHOUT",
+                "FLOAT32_FILTERABLE,TEXTURE_FORMAT_16BIT_NORM",
+            )),
+        ),
+    ] {
+        for dry in [&[][..], &["--dry-run"]] {
+            let args = [&job[..], extra, dry, &["--out", s(&never)]].concat();
+            let mut c = voxlab_command(&args);
+            c.env("VOXLAB_GPU_WITHOUT", "FLOAT32_FILTERABLE")
+                .env_remove("VOXLAB_GPU_F32_TEXTURES");
+            if let Some((k, v)) = env {
+                c.env(k, v);
+            }
+            let o = c.output().unwrap();
+            let err = stderr(&o);
+            assert!(!o.status.success(), "{args:?} {env:?} ran");
+            assert!(
+                err.contains("needs the FLOAT32_FILTERABLE feature")
+                    && err.contains("filters only an 8- or 16-bit volume's compact texture"),
+                "{args:?} {env:?}: {err}"
+            );
+            assert!(!never.exists());
+        }
+    }
 }
 
 /// The device bytes of a `--dry-run` plan ("device: 261.0 KiB at once, …").

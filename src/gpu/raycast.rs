@@ -1010,15 +1010,17 @@ pub struct RaycastSession<'c> {
     compact_kind: Option<CompactVolume>,
     compact_on: bool,
     compact: Option<wgpu::Texture>,
-    layout: wgpu::BindGroupLayout,
-    sampler: wgpu::Sampler,
-    /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
-    dummy: wgpu::Texture,
+    /// What a frame binds: its textures filterable where the device filters f32 ones.
+    frame: FrameLayout,
+    /// On a device without `FLOAT32_FILTERABLE`: what hardware-filtered frames bind,
+    /// every texture filterable (they read only the compact texture: [`check_device`]).
+    compact_filtering: Option<FrameLayout>,
     /// Buffers bound where skipping is off, and where there is no clipping mesh.
     skip_off: (wgpu::Buffer, wgpu::Buffer),
     no_segments: wgpu::Buffer,
-    /// Ray-casting pipelines by shader source, least recently used first.
-    pipelines: Vec<(String, wgpu::ComputePipeline)>,
+    /// Ray-casting pipelines by shader source (and whether over the compact-filtering
+    /// layout), least recently used first.
+    pipelines: Vec<((String, bool), wgpu::ComputePipeline)>,
     prepare_pipelines: Option<PreparePipelines>,
     minmax_pipeline: Option<super::skip::MinMaxPipeline>,
     /// The interpolating B-splines' coefficients, on the host and as a texture.
@@ -1036,6 +1038,53 @@ pub struct RaycastSession<'c> {
     brick: Option<BrickPlacement>,
 }
 
+/// A frame's bind-group layout and sampler: every texture `filterable` (and a linear
+/// sampler) or none (a nearest one, for a device without f32 filtering).
+fn frame_layout(ctx: &GpuContext, filterable: bool) -> (wgpu::BindGroupLayout, wgpu::Sampler) {
+    let dev = &ctx.device;
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("raycast"),
+        entries: &[
+            buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            texture_entry(1, filterable),
+            texture_entry(2, filterable),
+            texture_entry(3, filterable),
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Sampler(if filterable {
+                    wgpu::SamplerBindingType::Filtering
+                } else {
+                    wgpu::SamplerBindingType::NonFiltering
+                }),
+                count: None,
+            },
+            buffer_entry(5, storage(true)),
+            buffer_entry(6, storage(false)),
+            buffer_entry(7, storage(false)),
+            buffer_entry(8, storage(true)),
+            buffer_entry(9, storage(true)),
+            buffer_entry(10, storage(true)),
+            buffer_entry(11, storage(true)),
+        ],
+    });
+    let filter_mode = if filterable {
+        wgpu::FilterMode::Linear
+    } else {
+        wgpu::FilterMode::Nearest
+    };
+    (layout, ctx.clamp_sampler("linear clamp", filter_mode))
+}
+
+/// The layout, sampler and placeholder texture a frame binds.
+struct FrameLayout {
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
+    dummy: wgpu::Texture,
+}
+
 impl<'c> RaycastSession<'c> {
     /// Checks `volume` (finite voxels, each axis within the adapter's 3-D texture
     /// limit) and converts it to f32; its textures are uploaded by the first frame that
@@ -1051,40 +1100,23 @@ impl<'c> RaycastSession<'c> {
         let (dims, range, grid) = checked_f32(ctx, volume)?;
         let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
         let dev = &ctx.device;
-        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("raycast"),
-            entries: &[
-                buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                texture_entry(1, filterable),
-                texture_entry(2, filterable),
-                texture_entry(3, filterable),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Sampler(if filterable {
-                        wgpu::SamplerBindingType::Filtering
-                    } else {
-                        wgpu::SamplerBindingType::NonFiltering
-                    }),
-                    count: None,
-                },
-                buffer_entry(5, storage(true)),
-                buffer_entry(6, storage(false)),
-                buffer_entry(7, storage(false)),
-                buffer_entry(8, storage(true)),
-                buffer_entry(9, storage(true)),
-                buffer_entry(10, storage(true)),
-                buffer_entry(11, storage(true)),
-            ],
-        });
-        let filter_mode = if filterable {
-            wgpu::FilterMode::Linear
-        } else {
-            wgpu::FilterMode::Nearest
-        };
-        let sampler = ctx.clamp_sampler("linear clamp", filter_mode);
+        let (layout, sampler) = frame_layout(ctx, filterable);
         let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+        // Without f32 filtering, hardware-filtered frames that read only the compact
+        // texture bind every texture filterable: an 8-bit placeholder for the others.
+        let compact_filtering = match filterable {
+            true => None,
+            false => {
+                let (layout, sampler) = frame_layout(ctx, true);
+                let dummy =
+                    ctx.upload_volume_texels([1, 1, 1], wgpu::TextureFormat::R8Unorm, &[0])?;
+                Some(FrameLayout {
+                    layout,
+                    sampler,
+                    dummy,
+                })
+            }
+        };
         let zeros = |label, bytes: &[u8]| {
             dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -1111,9 +1143,12 @@ impl<'c> RaycastSession<'c> {
             compact_kind: CompactVolume::of(ctx, volume),
             compact_on: CompactVolume::enabled(),
             compact: None,
-            layout,
-            sampler,
-            dummy,
+            frame: FrameLayout {
+                layout,
+                sampler,
+                dummy,
+            },
+            compact_filtering,
             skip_off,
             no_segments,
             pipelines: Vec::new(),
@@ -1265,7 +1300,8 @@ impl<'c> RaycastSession<'c> {
             Some(b) => (b.whole, b.affine, b.range),
             None => (dims, self.affine, self.range),
         };
-        check_device(ctx, ray_dims, settings)?;
+        let compact_kind = self.compact_kind.filter(|_| self.compact_on);
+        check_device(ctx, ray_dims, settings, compact_kind)?;
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
         let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;
         if let Some(b) = &self.brick {
@@ -1297,7 +1333,11 @@ impl<'c> RaycastSession<'c> {
         let prefiltered = settings.filter.prefiltered();
         let (exact, compact) =
             volume_textures(settings, self.compact_kind.filter(|_| self.compact_on));
-        let pipeline = self.raycast_pipeline(raycast_shader(settings, compact))?;
+        // Without f32 filtering a hardware-filtered frame reads only the compact
+        // texture (check_device refused the others), over the all-filterable layout.
+        let compact_filtered = settings.hardware_filtering && self.compact_filtering.is_some();
+        let pipeline =
+            self.raycast_pipeline(raycast_shader(settings, compact), compact_filtered)?;
         let setup = t_start.elapsed().as_secs_f64();
 
         // Uploads: the volume's textures this frame reads for the first time (the
@@ -1494,9 +1534,14 @@ impl<'c> RaycastSession<'c> {
             .min((1 << 20) / w + 1)
             .max(1);
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let FrameLayout {
+            layout,
+            sampler,
+            dummy,
+        } = self.frame_layout(compact_filtered);
         let textures_of = |c: &Option<Cached<wgpu::Texture>>, used: bool| match c {
             Some(c) if used => view(&c.value),
-            _ => view(&self.dummy),
+            _ => view(dummy),
         };
         let (vol_view, pre_view, grad_view) = (
             view(sampled_tex),
@@ -1508,7 +1553,7 @@ impl<'c> RaycastSession<'c> {
             _ => (&self.skip_off.0, &self.skip_off.1),
         };
         let lut2_buf = &self.lut2.as_ref().expect("uploaded above").value;
-        let (layout, sampler, no_segments) = (&self.layout, &self.sampler, &self.no_segments);
+        let no_segments = &self.no_segments;
         let mut image = Frame::new(w, h, if settings.mode.rgba() { 4 } else { 1 });
         let mut counts = vec![0u32; w * h];
         let bands = render_bands(
@@ -1582,20 +1627,30 @@ impl<'c> RaycastSession<'c> {
         })
     }
 
+    /// What a frame binds: the compact-filtering layout where it is one.
+    fn frame_layout(&self, compact_filtered: bool) -> &FrameLayout {
+        match &self.compact_filtering {
+            Some(f) if compact_filtered => f,
+            _ => &self.frame,
+        }
+    }
+
     /// The index in `self.pipelines` of the ray-casting pipeline of `source`, compiled
     /// when it is not there (dropping the least recently used past [`PIPELINES_KEPT`]).
-    fn raycast_pipeline(&mut self, source: String) -> Result<usize> {
-        if let Some(i) = self.pipelines.iter().position(|(s, _)| *s == source) {
+    fn raycast_pipeline(&mut self, source: String, compact_filtered: bool) -> Result<usize> {
+        let key = (source, compact_filtered);
+        if let Some(i) = self.pipelines.iter().position(|(k, _)| *k == key) {
             let hit = self.pipelines.remove(i);
             self.pipelines.push(hit);
         } else {
             if self.pipelines.len() >= PIPELINES_KEPT {
                 self.pipelines.remove(0);
             }
-            let module = self.ctx.shader("raycast.wgsl", &source)?;
-            let pipeline = compute_pipeline(self.ctx, "raycast", &module, "raycast", &self.layout)?;
+            let module = self.ctx.shader("raycast.wgsl", &key.0)?;
+            let layout = &self.frame_layout(compact_filtered).layout;
+            let pipeline = compute_pipeline(self.ctx, "raycast", &module, "raycast", layout)?;
             self.stats.pipelines_compiled += 1;
-            self.pipelines.push((source, pipeline));
+            self.pipelines.push((key, pipeline));
         }
         Ok(self.pipelines.len() - 1)
     }
@@ -1603,19 +1658,35 @@ impl<'c> RaycastSession<'c> {
 
 /// On a CPU adapter, refuses rays that could run past llvmpipe's loop limit.
 /// What the GPU ray caster refuses of `settings` over a volume of `dims` (the whole
-/// volume's, for a brick) on this device: the full sinc, hardware filtering of a filter
-/// the texture unit cannot serve or without the texture unit's f32 filtering, and rays
-/// past a CPU driver's loop limit ([`LLVMPIPE_LOOP_LIMIT`]). Every frame checks it, and
-/// so does `voxlab render --dry-run`.
+/// volume's, for a brick) whose hardware-filtered frames read `compact` (the session's
+/// [`CompactVolume`] in use, if any) on this device: the full sinc, hardware filtering
+/// of a filter the texture unit cannot serve, hardware filtering of f32 textures
+/// without `FLOAT32_FILTERABLE` (a frame that reads only the compact 16-bit texture
+/// needs no such feature), and rays past a CPU driver's loop limit
+/// ([`LLVMPIPE_LOOP_LIMIT`]). Every frame checks it, and so does `voxlab render
+/// --dry-run`.
 ///
 /// # Errors
 /// [`Error::Invalid`] naming `filter` or `hardware filtering`; [`Error::Gpu`] without
 /// `FLOAT32_FILTERABLE`; [`Error::Invalid`] naming `step` for rays longer than the loop
 /// limit.
-pub fn check_device(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSettings) -> Result<()> {
+pub fn check_device(
+    ctx: &GpuContext,
+    dims: [usize; 3],
+    settings: &RenderSettings,
+    compact: Option<CompactVolume>,
+) -> Result<()> {
     check_filter(settings)?;
-    if settings.hardware_filtering {
-        ctx.require_float32_filtering()?;
+    let compact_only = matches!(volume_textures(settings, compact), (false, Some(_)));
+    if settings.hardware_filtering && !compact_only {
+        ctx.require_float32_filtering().map_err(|e| match e {
+            Error::Gpu(m) => Error::Gpu(format!(
+                "{m}; without it the texture unit filters only an 8- or 16-bit volume's \
+                 compact texture, for frames that read no pre-classified colours, \
+                 precomputed gradients or B-spline coefficients"
+            )),
+            e => e,
+        })?;
     }
     check_loop_limit(ctx, dims, settings)
 }

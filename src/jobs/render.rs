@@ -688,7 +688,6 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
-            crate::gpu::raycast::check_device(ctx, dims, &settings)?;
             let max = ctx.limits.max_texture_dimension_3d as usize;
             let (texels, split) = if dims.iter().any(|&n| n > max) {
                 crate::cpu::raycast::check_owned_settings(&settings)?;
@@ -719,6 +718,7 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
                 16 * (preclassifies(&settings) as u64 + reads_gradient_volume(&settings) as u64);
             let compact =
                 CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
+            crate::gpu::raycast::check_device(ctx, dims, &settings, compact)?;
             let volume = match volume_textures(&settings, compact) {
                 _ if settings.filter.prefiltered() => 4,
                 (exact, compact) => {
