@@ -150,6 +150,11 @@ impl Filter {
             f => f,
         }
     }
+    /// Whether the GPU's texture unit can do the filter's interpolation
+    /// (`hardware_filtering`): trilinear, and the fast B-splines' 8 trilinear fetches.
+    pub fn hardware_filterable(self) -> bool {
+        self == Filter::Trilinear || Filter::FAST.contains(&self)
+    }
     /// Whether the filter samples prefiltered B-spline coefficients instead of the
     /// voxel values (`cpu::filter::prepare`).
     pub fn prefiltered(self) -> bool {

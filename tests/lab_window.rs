@@ -128,6 +128,90 @@ fn the_lab_screenshot_is_what_render_state_draws() {
     }
 }
 
+/// The lab's "texture-unit filtering (GPU)" setting: started from a state with it on,
+/// the lab keeps it, its GPU side draws what `render --state` draws on the GPU with
+/// hardware filtering, byte for byte, and the CPU side (the oracle, which interpolates
+/// exactly) is within the hardware path's tolerance of it.
+#[test]
+fn the_lab_filters_with_the_texture_unit_when_asked() {
+    let dir = scratch("lab-window-hardware");
+    let (start, state, shot) = (
+        dir.join("start.json"),
+        dir.join("state.json"),
+        dir.join("shot.npy"),
+    );
+    let input = voxlab::jobs::input::VolumeInput::new("phantom:shepp-logan-modified:40");
+    let volume = input.load(&()).unwrap();
+    let mut st = ViewState::new(input, &volume, 72, 64).unwrap();
+    st.settings.hardware_filtering = true;
+    st.save(&start).unwrap();
+    let Some(mut cmd) = view_command(
+        "lab window, texture-unit filtering",
+        &[
+            "--state",
+            s(&start),
+            "--frames",
+            "4",
+            "--compare",
+            "--screenshot",
+            s(&shot),
+            "--save-state",
+            s(&state),
+        ],
+    ) else {
+        return;
+    };
+    let o = cmd.output().expect("the lab runs");
+    assert!(o.status.success(), "voxlab view failed: {}", stderr(&o));
+    let saved = ViewState::load(&state).unwrap();
+    assert!(saved.settings.hardware_filtering);
+    let (shape, lab) = npy(&shot);
+    assert_eq!(shape, vec![64, 72, 4]);
+    let render = |backend: &str| {
+        let out = dir.join(format!("{backend}.npy"));
+        let args = [
+            "render",
+            "--state",
+            s(&state),
+            "--backend",
+            backend,
+            "--out",
+            s(&out),
+        ];
+        let o = voxlab_command(&args).output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        npy(&out).1
+    };
+    assert!(
+        render("gpu") == lab,
+        "the GPU render of the state differs from the lab's"
+    );
+    // The exact path's image is another (1,403 of 18,432 values differ on lavapipe).
+    let mut exact = saved.clone();
+    exact.settings.hardware_filtering = false;
+    let exact_state = dir.join("exact.json");
+    exact.save(&exact_state).unwrap();
+    let out = dir.join("exact.npy");
+    let args = [
+        "render",
+        "--state",
+        s(&exact_state),
+        "--backend",
+        "gpu",
+        "--out",
+        s(&out),
+    ];
+    let o = voxlab_command(&args).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(npy(&out).1 != lab, "the lab's GPU side drew the exact path");
+    let stats = error_stats(&render("cpu"), &lab, 0.0);
+    let (_, tol) = voxlab::bench::raycast::raycast_tolerances(&saved.settings);
+    assert!(
+        tol.admits(&stats),
+        "CPU oracle vs the lab: {stats:?} outside {tol:?}"
+    );
+}
+
 #[test]
 fn the_lab_refuses_bad_outputs_before_opening() {
     let dir = scratch("lab-window-bad");

@@ -464,8 +464,7 @@ fn filter_id(f: Filter) -> Result<u32> {
 /// and the fast B-splines' trilinear fetches only.
 fn check_filter(settings: &RenderSettings) -> Result<()> {
     filter_id(settings.filter)?;
-    let fast = Filter::FAST.contains(&settings.filter);
-    if settings.hardware_filtering && settings.filter != Filter::Trilinear && !fast {
+    if settings.hardware_filtering && !settings.filter.hardware_filterable() {
         return Err(Error::invalid(
             "hardware filtering",
             format!(

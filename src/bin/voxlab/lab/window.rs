@@ -556,6 +556,19 @@ impl Lab {
                     ui.selectable_value(&mut s.filter, f, f.name());
                 }
             });
+        // The GPU side only: the CPU oracle interpolates exactly, so the difference view
+        // shows what the texture unit's weights cost.
+        let served = s.filter.hardware_filterable();
+        s.hardware_filtering &= served;
+        ui.add_enabled(
+            served,
+            egui::Checkbox::new(&mut s.hardware_filtering, "texture-unit filtering (GPU)"),
+        )
+        .on_hover_text(
+            "The GPU interpolates with the texture unit (trilinear, or the fast B-splines' \
+             trilinear fetches): faster, and on real GPUs each weight is rounded to about \
+             8 bits. The CPU side stays exact.",
+        );
         egui::ComboBox::from_label("classification")
             .selected_text(s.classification.name())
             .show_ui(ui, |ui| {
