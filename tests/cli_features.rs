@@ -223,6 +223,40 @@ fn without_f32_filtering_d2vr_filters_its_16_bit_projections() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// A u16 Shepp–Logan head of `n`³ voxels written into `dir`, and the arguments of its
+/// hardware-filtered GPU render at `n` × `n` pixels.
+fn u16_head_render(dir: &Path, n: usize) -> Vec<String> {
+    let volume = dir.join("head-u16.nrrd");
+    let spec = format!("shepp-logan:{n}");
+    let args = [
+        "phantom",
+        &spec,
+        "--type",
+        "u16",
+        "--scale",
+        "60000",
+        "--out",
+        s(&volume),
+    ];
+    let o = without(None, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let n = n.to_string();
+    [
+        "render",
+        s(&volume),
+        "--width",
+        &n,
+        "--height",
+        &n,
+        "--backend",
+        "gpu",
+        "--hardware-filtering",
+    ]
+    .iter()
+    .map(|a| a.to_string())
+    .collect()
+}
+
 /// Without `FLOAT32_FILTERABLE` the texture unit still filters a u16 volume's compact
 /// `R16Unorm` texture: every hardware-filtered frame that reads only it (DVR, MIP, X-ray,
 /// the fast B-spline's trilinear fetches) is the image the whole adapter renders, byte
@@ -244,32 +278,8 @@ fn without_f32_filtering_a_u16_volume_renders_from_its_compact_texture() {
         return;
     }
     let dir = scratch("cli_features_compact");
-    let volume = dir.join("head-u16.nrrd");
-    let o = without(
-        None,
-        &[
-            "phantom",
-            "shepp-logan:24",
-            "--type",
-            "u16",
-            "--scale",
-            "60000",
-            "--out",
-            s(&volume),
-        ],
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let job = [
-        "render",
-        s(&volume),
-        "--width",
-        "24",
-        "--height",
-        "24",
-        "--backend",
-        "gpu",
-        "--hardware-filtering",
-    ];
+    let job = u16_head_render(&dir, 24);
+    let job: Vec<&str> = job.iter().map(String::as_str).collect();
     let (a, b) = (dir.join("a.npy"), dir.join("b.npy"));
     for extra in [
         &[][..],
@@ -339,32 +349,8 @@ fn without_16_bit_textures_a_u16_volume_renders_from_f32_textures() {
         return;
     };
     let dir = scratch("cli_features_u16");
-    let volume = dir.join("head-u16.nrrd");
-    let o = without(
-        None,
-        &[
-            "phantom",
-            "shepp-logan:32",
-            "--type",
-            "u16",
-            "--scale",
-            "60000",
-            "--out",
-            s(&volume),
-        ],
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let job = [
-        "render",
-        s(&volume),
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "--backend",
-        "gpu",
-        "--hardware-filtering",
-    ];
+    let job = u16_head_render(&dir, 32);
+    let job: Vec<&str> = job.iter().map(String::as_str).collect();
     let no_norm = Some("TEXTURE_FORMAT_16BIT_NORM");
     let withheld = writes(no_norm, &job, &dir.join("a.npy"));
     let f32_textures = {
