@@ -46,6 +46,27 @@ fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f32>) {
     voxlab::io::npy::read_npy_f32(path).unwrap()
 }
 
+/// `voxlab render --state STATE --backend BACKEND` into `out` (.npy): its shape and
+/// values.
+fn render_state(
+    state: &std::path::Path,
+    backend: &str,
+    out: &std::path::Path,
+) -> (Vec<usize>, Vec<f32>) {
+    let args = [
+        "render",
+        "--state",
+        s(state),
+        "--backend",
+        backend,
+        "--out",
+        s(out),
+    ];
+    let o = voxlab_command(&args).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    npy(out)
+}
+
 #[test]
 fn the_lab_screenshot_is_what_render_state_draws() {
     let dir = scratch("lab-window");
@@ -94,20 +115,7 @@ fn the_lab_screenshot_is_what_render_state_draws() {
     let (shape, lab) = npy(&shot);
     assert_eq!(shape, vec![80, 96, 4]);
     for (backend, exact) in [("gpu", true), ("cpu", false)] {
-        let out = dir.join(format!("{backend}.npy"));
-        let o = voxlab_command(&[
-            "render",
-            "--state",
-            s(&state),
-            "--backend",
-            backend,
-            "--out",
-            s(&out),
-        ])
-        .output()
-        .unwrap();
-        assert!(o.status.success(), "{}", stderr(&o));
-        let (shape2, img) = npy(&out);
+        let (shape2, img) = render_state(&state, backend, &dir.join(format!("{backend}.npy")));
         assert_eq!(shape2, shape);
         let stats = error_stats(&img, &lab, 0.0);
         if exact {
@@ -167,21 +175,8 @@ fn the_lab_filters_with_the_texture_unit_when_asked() {
     assert!(saved.settings.hardware_filtering);
     let (shape, lab) = npy(&shot);
     assert_eq!(shape, vec![64, 72, 4]);
-    let render = |backend: &str| {
-        let out = dir.join(format!("{backend}.npy"));
-        let args = [
-            "render",
-            "--state",
-            s(&state),
-            "--backend",
-            backend,
-            "--out",
-            s(&out),
-        ];
-        let o = voxlab_command(&args).output().unwrap();
-        assert!(o.status.success(), "{}", stderr(&o));
-        npy(&out).1
-    };
+    let render =
+        |backend: &str| render_state(&state, backend, &dir.join(format!("{backend}.npy"))).1;
     assert!(
         render("gpu") == lab,
         "the GPU render of the state differs from the lab's"
@@ -191,19 +186,8 @@ fn the_lab_filters_with_the_texture_unit_when_asked() {
     exact.settings.hardware_filtering = false;
     let exact_state = dir.join("exact.json");
     exact.save(&exact_state).unwrap();
-    let out = dir.join("exact.npy");
-    let args = [
-        "render",
-        "--state",
-        s(&exact_state),
-        "--backend",
-        "gpu",
-        "--out",
-        s(&out),
-    ];
-    let o = voxlab_command(&args).output().unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(npy(&out).1 != lab, "the lab's GPU side drew the exact path");
+    let (_, exact_image) = render_state(&exact_state, "gpu", &dir.join("exact.npy"));
+    assert!(exact_image != lab, "the lab's GPU side drew the exact path");
     let stats = error_stats(&render("cpu"), &lab, 0.0);
     let (_, tol) = voxlab::bench::raycast::raycast_tolerances(&saved.settings);
     assert!(
