@@ -32,6 +32,7 @@
 //! is `step` mm. Shading (optional per volume) uses each volume's gradient mapped to the
 //! world by the inverse transpose of `T_i A_i`'s linear part.
 
+use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::settings::{Classification, Filter, Mode, RenderSettings};
 use crate::transfer::TransferFunction;
@@ -174,6 +175,63 @@ pub fn validate(volumes: &[MultiVolume], settings: &RenderSettings) -> Result<()
         v.volume.check_finite(&format!("volume {i}"))?;
     }
     validate_settings(settings)
+}
+
+/// The most samples a ray through the union of the boxes may take, from the union's
+/// world bounding box and the shortest step (`step / ‖M_0⁻¹‖`).
+pub fn max_samples_per_ray(boxes: &[([usize; 3], DMat4)], step: f64) -> f64 {
+    let (mut lo, mut hi) = (glam::DVec3::splat(f64::INFINITY), glam::DVec3::NEG_INFINITY);
+    for (dims, m) in boxes {
+        for w in crate::volume::box_corners(*dims, *m) {
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+    }
+    let inv = DMat3::from_mat4(boxes[0].1).inverse();
+    let norm = inv
+        .to_cols_array()
+        .iter()
+        .map(|x| x * x)
+        .sum::<f64>()
+        .sqrt();
+    (hi - lo).length() * norm / step + 2.0
+}
+
+/// Refuses a multi-volume render of the boxes `(dims, index → world)` with too many
+/// samples per ray or per frame ([`crate::settings::check_ray_work`] on
+/// [`max_samples_per_ray`]); returns the samples per ray.
+///
+/// # Errors
+/// [`Error::TooLarge`].
+pub fn check_ray_work(
+    boxes: &[([usize; 3], DMat4)],
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Result<f64> {
+    let per_ray = max_samples_per_ray(boxes, settings.step);
+    crate::settings::check_ray_work(
+        "multi-volume render",
+        settings.step,
+        per_ray,
+        camera.width * camera.height,
+    )?;
+    Ok(per_ray)
+}
+
+/// [`validate`] and [`check_ray_work`]: what a multi-volume render of `volumes` through
+/// `camera` checks on any backend before it converts a voxel (the GPU adds its own,
+/// `gpu::multi::check`); `voxlab render --volume … --dry-run` calls it too. Returns the
+/// samples per ray.
+///
+/// # Errors
+/// As [`validate`] and [`check_ray_work`].
+pub fn check(volumes: &[MultiVolume], camera: &Camera, settings: &RenderSettings) -> Result<f64> {
+    validate(volumes, settings)?;
+    let boxes: Vec<_> = volumes
+        .iter()
+        .map(|v| Ok((v.volume.dims(), v.index_to_world()?)))
+        .collect::<Result<_>>()?;
+    check_ray_work(&boxes, camera, settings)
 }
 
 /// The settings a multi-volume render supports.

@@ -408,6 +408,39 @@ impl Default for RenderSettings {
 /// The most samples one ray may take (guards against a tiny step on a huge volume).
 pub const MAX_SAMPLES_PER_RAY: f64 = 1e7;
 
+/// The most samples one frame may take: about a minute of a large GPU's ray casting,
+/// hours of the CPU oracle's (guards against a tiny step on a large image).
+pub const MAX_SAMPLES_PER_FRAME: f64 = 1e12;
+
+/// Refuses a ray march whose cost is absurd, before anything is computed: `per_ray`
+/// (the longest ray's length over the step, `step` voxels) past [`MAX_SAMPLES_PER_RAY`],
+/// or `per_ray` over `rays` rays past [`MAX_SAMPLES_PER_FRAME`]. Every ray caster (CPU
+/// and GPU: single and multi-volume, adaptive, D²VR) calls it for every frame, and so
+/// do their dry runs; `what` names the job in the error.
+///
+/// # Errors
+/// [`Error::TooLarge`] naming `what`, the step, and the samples per ray or per frame.
+pub fn check_ray_work(what: &str, step: f64, per_ray: f64, rays: usize) -> Result<()> {
+    if per_ray.is_nan() || per_ray > MAX_SAMPLES_PER_RAY {
+        return Err(Error::too_large(
+            what,
+            format!("step {step} gives up to {per_ray:.0} samples per ray"),
+        ));
+    }
+    let total = per_ray * rays as f64;
+    if total > MAX_SAMPLES_PER_FRAME {
+        return Err(Error::too_large(
+            what,
+            format!(
+                "step {step} gives up to {total:.1e} samples per frame ({per_ray:.0} per \
+                 ray, {rays} rays; at most {MAX_SAMPLES_PER_FRAME:.0e}): use a larger step \
+                 or a smaller image"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 impl RenderSettings {
     /// Checks every number a user can set.
     pub fn validate(&self) -> Result<()> {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{s, scratch, stderr, voxlab};
+use common::{s, scratch, stderr, voxlab, voxlab_with_binding};
 use std::process::Command;
 
 #[test]
@@ -423,6 +423,27 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
         "--out",
         s(&out),
     ];
+    // 32³ voxels (a diagonal of 55.4) at 1e-4 voxel through 2048² rays: 2.3e12 samples.
+    let tiny_step = [
+        "render",
+        "phantom:sphere:32",
+        "--step",
+        "1e-4",
+        "--width",
+        "2048",
+        "--height",
+        "2048",
+        "--out",
+        s(&out),
+    ];
+    let multi = [
+        "render",
+        "phantom:sphere:8",
+        "--volume",
+        "phantom:sphere:8",
+        "--out",
+        s(&out),
+    ];
     let mut cases: Vec<(Vec<&str>, &str)> = vec![
         (
             [&recon[..], &["--method", "sirt", "--iterations", "0"]].concat(),
@@ -486,6 +507,62 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
             ],
             "no-such-preset",
         ),
+        (
+            [&tiny_step[..], &["--backend", "cpu"]].concat(),
+            "render is too large: step 0.0001 gives up to 2.3e12 samples per frame \
+             (554256 per ray, 4194304 rays; at most 1e12)",
+        ),
+        (
+            [
+                &tiny_step[..],
+                &["--volume", "phantom:sphere:8", "--backend", "cpu"],
+            ]
+            .concat(),
+            "multi-volume render is too large: step 0.0001 gives up to",
+        ),
+        (
+            vec![
+                "d2vr",
+                "phantom:sphere",
+                "--step",
+                "1e-4",
+                "--size",
+                "1024",
+                "--out",
+                s(&out),
+            ],
+            "D²VR is too large: step 0.0001 gives up to",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--sampling",
+                "adaptive",
+                "--mode",
+                "mip",
+                "--out",
+                s(&out),
+            ],
+            "the adaptive caster renders DVR only",
+        ),
+        (
+            [&multi[..], &["--filter", "sinc", "--backend", "cpu"]].concat(),
+            "the full sinc filter is not supported with several volumes",
+        ),
+        (
+            [
+                &multi[..],
+                &[
+                    "--volume",
+                    "phantom:sphere:8",
+                    "--volume",
+                    "phantom:sphere:8",
+                ],
+            ]
+            .concat(),
+            "3 given: at most 2 extra volumes",
+        ),
     ];
     if common::gpu("every_dry_run_refuses_what_its_run_refuses").is_some() {
         let gpu: Vec<(Vec<&str>, &str)> = vec![
@@ -531,12 +608,42 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
                 ],
                 "on the GPU the window side must be odd, from 1 to 5",
             ),
+            (
+                [&tiny_step[..], &["--backend", "gpu"]].concat(),
+                "render is too large: step 0.0001 gives up to 2.3e12 samples per frame",
+            ),
+            (
+                [&multi[..], &["--filter", "catmull-rom", "--backend", "gpu"]].concat(),
+                "the GPU multi-volume caster reconstructs with nearest or trilinear",
+            ),
+            (
+                // 1024² rays of 32 bytes past a 16 MiB binding (the environment's).
+                vec![
+                    "render",
+                    "phantom:sphere:8",
+                    "--sampling",
+                    "adaptive",
+                    "--width",
+                    "1024",
+                    "--height",
+                    "1024",
+                    "--backend",
+                    "gpu",
+                    "--out",
+                    s(&out),
+                ],
+                "rays is too large: 33554432 bytes exceed the adapter's storage-binding \
+                 limit of 16777216 bytes",
+            ),
         ];
         cases.extend(gpu);
     }
     for (args, says) in cases {
-        let run = voxlab(&args);
-        let dry = voxlab(&[&args[..], &["--dry-run"]].concat());
+        // The planner's binding limit lowered to 16 MiB (`VOXLAB_GPU_MAX_BINDING`): the
+        // adaptive caster's rays exceed it, every other case is far below it.
+        let binding = Some("16777216");
+        let run = voxlab_with_binding(&args, binding);
+        let dry = voxlab_with_binding(&[&args[..], &["--dry-run"]].concat(), binding);
         for (o, how) in [(&run, "run"), (&dry, "dry run")] {
             assert_eq!(o.status.code(), Some(1), "{how} of {args:?}: {}", stderr(o));
             assert!(

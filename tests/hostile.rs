@@ -597,3 +597,111 @@ fn data_files_can_be_confined_to_the_headers_folder() {
         vec![3.0; 8]
     );
 }
+
+/// The work limits of every ray march: at most `MAX_SAMPLES_PER_RAY` samples on a ray
+/// and `MAX_SAMPLES_PER_FRAME` in a frame, at the boundary exactly.
+#[test]
+fn the_ray_work_limits_hold_at_their_boundaries() {
+    use voxlab::settings::{check_ray_work, MAX_SAMPLES_PER_FRAME, MAX_SAMPLES_PER_RAY};
+    assert_eq!((MAX_SAMPLES_PER_RAY, MAX_SAMPLES_PER_FRAME), (1e7, 1e12));
+    assert!(check_ray_work("render", 0.5, 1e7, 1).is_ok());
+    assert!(check_ray_work("render", 0.5, 1e6, 1_000_000).is_ok());
+    for (per_ray, rays, says) in [
+        (
+            1e7 + 1.0,
+            1,
+            "step 0.5 gives up to 10000001 samples per ray",
+        ),
+        (
+            1e6,
+            1_000_001,
+            "step 0.5 gives up to 1.0e12 samples per frame (1000000 per ray, 1000001 rays",
+        ),
+        (f64::NAN, 1, "samples per ray"),
+    ] {
+        match check_ray_work("render", 0.5, per_ray, rays) {
+            Err(e @ Error::TooLarge { .. }) => {
+                assert!(e.to_string().contains(says), "{per_ray} × {rays}: {e}")
+            }
+            other => panic!("{per_ray} × {rays}: {other:?}"),
+        }
+    }
+}
+
+/// A frame of too many samples (a tiny step on a large image) is refused by every ray
+/// caster of the library, CPU and GPU, before it converts or uploads anything: without
+/// the limit each of these frames runs for hours (16³ voxels, a diagonal of 27.7, at
+/// 1e-4 voxel through 2048² rays is 1.2e12 samples; the adaptive caster's smallest step
+/// is 1e-3, through 8192² rays 1.9e12). On a GPU nothing else bounded it: a CPU driver's
+/// loop limit refuses such rays, a GPU's does not exist.
+#[test]
+fn every_ray_caster_refuses_a_frame_of_too_many_samples() {
+    use glam::DVec3;
+    use voxlab::camera::{Camera, Orbit, Projection};
+    use voxlab::cpu::adaptive::AdaptiveSettings;
+    use voxlab::multi::MultiVolume;
+    use voxlab::phantom::Phantom;
+    use voxlab::settings::RenderSettings;
+    use voxlab::transfer::TransferFunction;
+    let volume: AnyVolume = Phantom::shepp_logan_modified()
+        .sample([16; 3])
+        .unwrap()
+        .into();
+    let tf = TransferFunction::preset("phantom").unwrap();
+    let camera = |side| {
+        Camera::orbit(
+            DVec3::ZERO,
+            [16.0; 3],
+            Orbit::default(),
+            Projection::Perspective { fov_y_deg: 30.0 },
+            side,
+            side,
+        )
+        .unwrap()
+    };
+    let (big, bigger) = (camera(2048), camera(8192));
+    let settings = RenderSettings {
+        step: 1e-4,
+        ..RenderSettings::default()
+    };
+    let adaptive = AdaptiveSettings {
+        step: 1e-3,
+        t_max: 8.0,
+        ..AdaptiveSettings::default()
+    };
+    let vols = [MultiVolume::new(volume.clone(), tf.clone())];
+    let none = |_: usize, _: usize| {};
+    let refused = |what: &str, r: voxlab::Result<()>| match r {
+        Err(e @ Error::TooLarge { .. }) => {
+            assert!(e.to_string().contains("samples per frame"), "{what}: {e}")
+        }
+        other => panic!("{what}: {other:?}"),
+    };
+    refused(
+        "cpu render",
+        voxlab::cpu::raycast::render::<f32>(&volume, &tf, &big, &settings, &none).map(|_| ()),
+    );
+    refused(
+        "cpu adaptive",
+        voxlab::cpu::adaptive::render::<f32>(&volume, &tf, &bigger, &adaptive).map(|_| ()),
+    );
+    refused(
+        "cpu multi",
+        voxlab::cpu::multi::render::<f32>(&vols, &big, &settings, &none).map(|_| ()),
+    );
+    let Some(ctx) = common::gpu("every_ray_caster_refuses_a_frame_of_too_many_samples") else {
+        return;
+    };
+    refused(
+        "gpu render",
+        voxlab::gpu::raycast::render(ctx, &volume, &tf, &big, &settings, &none).map(|_| ()),
+    );
+    refused(
+        "gpu adaptive",
+        voxlab::gpu::adaptive::render(ctx, &volume, &tf, &bigger, &adaptive).map(|_| ()),
+    );
+    refused(
+        "gpu multi",
+        voxlab::gpu::multi::render(ctx, &vols, &big, &settings, &none).map(|_| ()),
+    );
+}

@@ -547,6 +547,7 @@ pub fn render<R: Real>(
     camera: &Camera,
     settings: &AdaptiveSettings,
 ) -> Result<RenderOutput> {
+    check_cost(volume.dims(), camera, settings)?;
     let scene = prepare::<R>(volume, tf, settings)?;
     render_prepared(&scene, camera, settings)
 }
@@ -607,25 +608,33 @@ pub fn direct_step<R: Real>(scene: &AdaptiveScene<R>, settings: &AdaptiveSetting
     R::of(ds.step[b[0] + ds.blocks[0] * (b[1] + ds.blocks[1] * b[2])])
 }
 
+/// Refuses an adaptive render of the `dims` volume with invalid settings or too many
+/// samples per ray or per frame at its smallest step
+/// ([`crate::settings::check_ray_work`]), before anything is prepared. The CPU and GPU
+/// casters and `voxlab render --sampling … --dry-run` call it.
+pub(crate) fn check_cost(
+    dims: [usize; 3],
+    camera: &Camera,
+    settings: &AdaptiveSettings,
+) -> Result<()> {
+    settings.validate()?;
+    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    crate::settings::check_ray_work(
+        "adaptive render",
+        settings.step,
+        diag / settings.step,
+        camera.width * camera.height,
+    )
+}
+
 /// Renders a prepared scene.
 pub fn render_prepared<R: Real>(
     scene: &AdaptiveScene<R>,
     camera: &Camera,
     settings: &AdaptiveSettings,
 ) -> Result<RenderOutput> {
-    settings.validate()?;
     let dims = scene.grid.dims;
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-    if diag / settings.step > crate::settings::MAX_SAMPLES_PER_RAY {
-        return Err(Error::too_large(
-            "adaptive render",
-            format!(
-                "step {} gives up to {:.0} samples per ray",
-                settings.step,
-                diag / settings.step
-            ),
-        ));
-    }
+    check_cost(dims, camera, settings)?;
     let to_index = scene.affine.inverse();
     let (w, h) = (camera.width, camera.height);
     let mut image = Frame::new(w, h, 4);

@@ -540,24 +540,18 @@ pub fn box_samples(dims: [usize; 3], affine: DMat4, camera: &Camera, step: f64) 
         .sum()
 }
 
-/// Checks the inputs D²VR shares between backends.
+/// Checks the inputs D²VR shares between backends (and its dry run), the samples per
+/// ray and per frame of `camera`'s image included.
 pub(crate) fn check_inputs(
     settings: &RenderSettings,
     options: &D2vrOptions,
     grid: &D2vrGrid,
+    camera: &Camera,
 ) -> Result<()> {
     settings.validate()?;
     let d = grid.dims.map(|n| n as f64);
     let per_ray = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / settings.step;
-    if per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
-        return Err(Error::too_large(
-            "D²VR",
-            format!(
-                "step {} gives up to {per_ray:.0} samples per ray",
-                settings.step
-            ),
-        ));
-    }
+    crate::settings::check_ray_work("D²VR", settings.step, per_ray, camera.width * camera.height)?;
     if settings.mode == Mode::Dvr && settings.classification == Classification::Pre {
         return Err(Error::invalid(
             "classification",
@@ -590,7 +584,7 @@ pub fn render_d2vr<R: Real>(
     occupancy: Option<&OccupancyMask>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<D2vrOutput> {
-    check_inputs(settings, options, grid)?;
+    check_inputs(settings, options, grid, camera)?;
     let field = ProjectionField::new(filtered, geometry, grid, options, occupancy)?;
     let render = render_field(&field, grid.affine, tf, camera, settings, progress)?;
     let (values, gradients) = field.counts();

@@ -70,7 +70,7 @@ pub fn render<R: Real>(
     settings: &RenderSettings,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<RenderOutput> {
-    crate::multi::validate(volumes, settings)?;
+    crate::multi::check(volumes, camera, settings)?;
     let fields: Vec<GridField<R>> = volumes
         .iter()
         .map(|v| {
@@ -97,26 +97,6 @@ pub fn render<R: Real>(
     render_layers(&layers, camera, settings, progress)
 }
 
-/// The most samples a ray through the union of the boxes may take, from the union's
-/// world bounding box and the shortest step (`step / ‖M_0⁻¹‖`).
-pub fn max_samples_per_ray(boxes: &[([usize; 3], DMat4)], step: f64) -> f64 {
-    let (mut lo, mut hi) = (glam::DVec3::splat(f64::INFINITY), glam::DVec3::NEG_INFINITY);
-    for (dims, m) in boxes {
-        for w in crate::volume::box_corners(*dims, *m) {
-            lo = lo.min(w);
-            hi = hi.max(w);
-        }
-    }
-    let inv = DMat3::from_mat4(boxes[0].1).inverse();
-    let norm = inv
-        .to_cols_array()
-        .iter()
-        .map(|x| x * x)
-        .sum::<f64>()
-        .sqrt();
-    (hi - lo).length() * norm / step + 2.0
-}
-
 /// Renders prepared layers (any [`Field`]s, e.g. exact phantoms) in precision `R`.
 pub fn render_layers<R: Real>(
     layers: &[Layer<'_, R>],
@@ -139,16 +119,7 @@ pub fn render_layers<R: Real>(
         .iter()
         .map(|l| (l.field.dims(), l.index_to_world))
         .collect();
-    let per_ray = max_samples_per_ray(&boxes, settings.step);
-    if per_ray.is_nan() || per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
-        return Err(Error::too_large(
-            "multi-volume render",
-            format!(
-                "step {} gives up to {per_ray:.0} samples per ray",
-                settings.step
-            ),
-        ));
-    }
+    crate::multi::check_ray_work(&boxes, camera, settings)?;
     let s = &settings.shading;
     let prepared = layers
         .iter()

@@ -233,19 +233,22 @@ impl<R: Real> Prepared<R> {
     }
 }
 
-/// Refuses renders whose cost is absurd (the full sinc is O(n³) per sample).
-fn check_cost(dims: [usize; 3], camera: &Camera, settings: &RenderSettings) -> Result<()> {
+/// Refuses renders of the `dims` volume whose cost is absurd: too many samples per ray
+/// or per frame ([`crate::settings::check_ray_work`]), or the full sinc (O(n³) per
+/// sample) on too much. The CPU and GPU casters and `voxlab render --dry-run` call it.
+pub(crate) fn check_cost(
+    dims: [usize; 3],
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Result<()> {
     let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
     let per_ray = diag / settings.step;
-    if per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
-        return Err(Error::too_large(
-            "render",
-            format!(
-                "step {} gives up to {per_ray:.0} samples per ray",
-                settings.step
-            ),
-        ));
-    }
+    crate::settings::check_ray_work(
+        "render",
+        settings.step,
+        per_ray,
+        camera.width * camera.height,
+    )?;
     if settings.filter == Filter::Sinc {
         let voxels = (dims[0] * dims[1] * dims[2]) as f64;
         let work = camera.width as f64 * camera.height as f64 * per_ray * voxels;
@@ -426,6 +429,7 @@ pub fn render_owned_with<R: Real, F: Field<R>>(
     kernel: Kernel,
 ) -> Result<Partial> {
     check_owned_settings(settings)?;
+    check_cost(field.dims(), camera, settings)?;
     let s = owned_settings(settings);
     let setup = setup_for(field, affine, tf, &s, kernel, None, Some(own))?;
     let out = cast_image(field, &setup, camera, &s, progress);

@@ -65,16 +65,7 @@ fn init_buffer(
     bytes: &[u8],
     usage: wgpu::BufferUsages,
 ) -> Result<wgpu::Buffer> {
-    if bytes.len() as u64 > ctx.limits.max_storage_buffer_binding_size {
-        return Err(Error::too_large(
-            label,
-            format!(
-                "{} bytes exceed the adapter's storage-binding limit of {} bytes",
-                bytes.len(),
-                ctx.limits.max_storage_buffer_binding_size
-            ),
-        ));
-    }
+    ctx.check_storage(label, bytes.len() as u64)?;
     let pad;
     let contents = if bytes.is_empty() {
         pad = [0u8; 16];
@@ -185,6 +176,59 @@ pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Resu
     }))
 }
 
+/// What a GPU adaptive render of a `dims` volume holds on the device: every buffer
+/// that grows with the volume or the image, as `(label, bytes)`, in the order the render
+/// creates them (the volume, the rays, the two importance volumes of adaptive sampling,
+/// the pixels and sample counts of one band of rows).
+pub fn device_buffers(
+    dims: [usize; 3],
+    camera: &Camera,
+    settings: &AdaptiveSettings,
+) -> Vec<(&'static str, u64)> {
+    let voxels = dims.iter().product::<usize>() as u64;
+    let (w, h) = (camera.width as u64, camera.height as u64);
+    let mut b = vec![("volume", 4 * voxels), ("rays", 32 * w * h)];
+    if settings.sampling == Sampling::Adaptive {
+        b.extend([("importance a", 16 * voxels), ("importance b", 16 * voxels)]);
+    }
+    let rows = rows_per_band(camera.width, camera.height) as u64;
+    b.extend([("pixels", 16 * w * rows), ("samples", 4 * w * rows)]);
+    b
+}
+
+/// Rows of the image per dispatch: bounded work per dispatch.
+fn rows_per_band(w: usize, h: usize) -> usize {
+    (65536 / w.max(1)).clamp(1, h.max(1))
+}
+
+/// Refuses, before anything is uploaded, a GPU adaptive render that the device cannot
+/// run: invalid settings, too many samples per ray or per frame
+/// ([`crate::cpu::adaptive`]'s check), rays past a CPU driver's loop limit, a buffer of
+/// [`device_buffers`] past one storage binding. [`render`] and `voxlab render
+/// --sampling … --dry-run` call it.
+///
+/// # Errors
+/// [`Error::Invalid`] or [`Error::TooLarge`] saying which.
+pub fn check(
+    ctx: &GpuContext,
+    dims: [usize; 3],
+    camera: &Camera,
+    settings: &AdaptiveSettings,
+) -> Result<()> {
+    crate::cpu::adaptive::check_cost(dims, camera, settings)?;
+    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    if ctx.summary.is_cpu() && diag / settings.step + 2.0 > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
+        return Err(Error::invalid(
+            "step",
+            "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
+        ));
+    }
+    for (label, bytes) in device_buffers(dims, camera, settings) {
+        ctx.check_storage(label, bytes)?;
+    }
+    Ok(())
+}
+
 /// Renders on the GPU. Same inputs and outputs as `cpu::adaptive::render`.
 pub fn render(
     ctx: &GpuContext,
@@ -194,17 +238,10 @@ pub fn render(
     settings: &AdaptiveSettings,
 ) -> Result<GpuAdaptiveOutput> {
     let t_start = Instant::now();
-    settings.validate()?;
+    let dims = volume.dims();
+    check(ctx, dims, camera, settings)?;
     tf.validate()?;
     volume.check_finite("volume")?;
-    let dims = volume.dims();
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-    if ctx.summary.is_cpu() && diag / settings.step + 2.0 > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
-        return Err(Error::invalid(
-            "step",
-            "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
-        ));
-    }
     let values = volume.to_f32();
     let grid = Grid::<f32> {
         dims,
@@ -330,7 +367,7 @@ pub fn render(
     };
 
     // Bands of rows: bounded work per dispatch.
-    let rows_per_band = (65536 / w.max(1)).clamp(1, h.max(1));
+    let rows_per_band = rows_per_band(w, h);
     let mut image = Frame::new(w, h, 4);
     let mut counts = vec![0u32; w * h];
     let bands = render_bands(

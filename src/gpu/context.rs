@@ -427,20 +427,29 @@ impl TimestampPair {
 }
 
 impl GpuContext {
-    /// A storage buffer the host can read back, refused with a clear error when it
-    /// exceeds the adapter's limits.
-    pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
-        if bytes > self.limits.max_storage_buffer_binding_size
-            || bytes > self.limits.max_buffer_size
-        {
+    /// Refuses a storage buffer of `bytes` (called `label` in the error) that exceeds
+    /// one binding under the planner's limits ([`crate::gpu::plan::binding_limit`]),
+    /// before anything is allocated; plans call it too.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] naming `label`, the bytes and the limit.
+    pub fn check_storage(&self, label: &str, bytes: u64) -> Result<()> {
+        let limit = crate::gpu::plan::binding_limit(&self.limits);
+        if bytes > limit {
             return Err(Error::too_large(
                 label,
                 format!(
-                    "{bytes} bytes exceed the adapter's storage-binding limit of {} bytes",
-                    self.limits.max_storage_buffer_binding_size
+                    "{bytes} bytes exceed the adapter's storage-binding limit of {limit} bytes"
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// A storage buffer the host can read back, refused with a clear error when it
+    /// exceeds the adapter's limits.
+    pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
+        self.check_storage(label, bytes)?;
         Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(4),

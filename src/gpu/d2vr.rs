@@ -603,7 +603,7 @@ pub fn render_d2vr(
     sampling: Sampling,
 ) -> Result<GpuD2vrOutput> {
     let t0 = Instant::now();
-    check_inputs(settings, options, grid)?;
+    check_inputs(settings, options, grid, camera)?;
     tf.validate()?;
     geometry.validate()?;
     // As on the CPU: the bounding cylinder is that of a circular orbit.

@@ -396,13 +396,7 @@ impl<'c> Steps<'c> {
 /// past one storage binding.
 fn vector(ctx: &GpuContext, label: &str, n: usize) -> Result<wgpu::Buffer> {
     let bytes = (n.max(1) * 4) as u64;
-    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-    if bytes > limit {
-        return Err(Error::too_large(
-            label,
-            format!("{bytes} bytes exceed the adapter's storage-binding limit of {limit} bytes"),
-        ));
-    }
+    ctx.check_storage(label, bytes)?;
     Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes,

@@ -237,17 +237,29 @@ pub fn multi_params(
     Ok(p)
 }
 
-/// Renders a multi-volume scene on the GPU. Same inputs and meaning as
-/// `cpu::multi::render`; returns the image, the sample counts and timings.
-pub fn render(
+/// Rows of a `w`×`h` image per dispatch: at most 8,192 pixels, and a
+/// band's RGBA f32 pixels within one storage binding.
+pub fn rows_per_band(ctx: &GpuContext, w: usize, h: usize) -> usize {
+    let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
+    (max_binding / (w.max(1) * 16))
+        .min(PIXELS_PER_DISPATCH / w.max(1))
+        .clamp(1, h.max(1))
+}
+
+/// Refuses, before anything is converted or uploaded, a GPU multi-volume render the
+/// device cannot run: what every backend refuses ([`crate::multi::check`]), filters and
+/// options this caster lacks, a volume past the 3-D texture limit, rays past a CPU
+/// driver's loop limit. [`render`] and `voxlab render --volume … --dry-run` call it.
+///
+/// # Errors
+/// [`Error::Invalid`] or [`Error::TooLarge`] saying which.
+pub fn check(
     ctx: &GpuContext,
     volumes: &[MultiVolume],
     camera: &Camera,
     settings: &RenderSettings,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<GpuRenderOutput> {
-    let t_start = Instant::now();
-    crate::multi::validate(volumes, settings)?;
+) -> Result<()> {
+    let per_ray = crate::multi::check(volumes, camera, settings)?;
     check_gpu_settings(settings)?;
     let max3d = ctx.limits.max_texture_dimension_3d as usize;
     for (i, v) in volumes.iter().enumerate() {
@@ -259,20 +271,6 @@ pub fn render(
             ));
         }
     }
-    let boxes: Vec<_> = volumes
-        .iter()
-        .map(|v| Ok((v.volume.dims(), v.index_to_world()?)))
-        .collect::<Result<_>>()?;
-    let per_ray = crate::cpu::multi::max_samples_per_ray(&boxes, settings.step);
-    if per_ray.is_nan() || per_ray > crate::settings::MAX_SAMPLES_PER_RAY {
-        return Err(Error::too_large(
-            "multi-volume render",
-            format!(
-                "step {} gives up to {per_ray:.0} samples per ray",
-                settings.step
-            ),
-        ));
-    }
     if ctx.summary.is_cpu() && per_ray > (LLVMPIPE_LOOP_LIMIT - 64) as f64 {
         return Err(Error::invalid(
             "step",
@@ -283,6 +281,20 @@ pub fn render(
             ),
         ));
     }
+    Ok(())
+}
+
+/// Renders a multi-volume scene on the GPU. Same inputs and meaning as
+/// `cpu::multi::render`; returns the image, the sample counts and timings.
+pub fn render(
+    ctx: &GpuContext,
+    volumes: &[MultiVolume],
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<GpuRenderOutput> {
+    let t_start = Instant::now();
+    check(ctx, volumes, camera, settings)?;
 
     // Inputs on the host: raw values in f32, value ranges, lookup tables.
     let values: Vec<_> = volumes.iter().map(|v| v.volume.to_f32()).collect();
@@ -335,10 +347,7 @@ pub fn render(
     let upload = t_up.elapsed().as_secs_f64();
 
     let (w, h) = (camera.width, camera.height);
-    let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
-    let rows_per_tile = (max_binding / (w * 16))
-        .min(PIXELS_PER_DISPATCH / w)
-        .clamp(1, h);
+    let rows_per_tile = rows_per_band(ctx, w, h);
     let views: Vec<_> = textures
         .iter()
         .map(|t| t.create_view(&Default::default()))

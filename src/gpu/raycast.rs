@@ -1280,7 +1280,8 @@ impl<'c> RaycastSession<'c> {
     /// # Errors
     /// Invalid settings or transfer function, options the GPU path refuses (the full
     /// sinc, hardware filtering of other filters or without `FLOAT32_FILTERABLE`, rays
-    /// longer than a CPU driver's loop limit), shader or device errors.
+    /// longer than a CPU driver's loop limit), too many samples per ray or per frame
+    /// ([`crate::settings::check_ray_work`]), shader or device errors.
     pub fn render(
         &mut self,
         tf: &TransferFunction,
@@ -1300,6 +1301,7 @@ impl<'c> RaycastSession<'c> {
             None => (dims, self.affine, self.range),
         };
         let compact_kind = self.compact_kind.filter(|_| self.compact_on);
+        crate::cpu::raycast::check_cost(ray_dims, camera, settings)?;
         check_device(ctx, ray_dims, settings, compact_kind)?;
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
         let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;

@@ -169,6 +169,7 @@ fn cpu_once<R: crate::real::Real>(
     camera: &Camera,
     settings: &AdaptiveSettings,
 ) -> Result<AdaptiveRun> {
+    ca::check_cost(volume.dims(), camera, settings)?;
     let t = Instant::now();
     let scene = ca::prepare::<R>(volume, tf, settings)?;
     let prepare = t.elapsed().as_secs_f64();

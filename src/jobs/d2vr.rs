@@ -349,6 +349,7 @@ fn scene(a: &D2vrRequest) -> Result<Scene> {
         cylinder: !a.no_cylinder,
         value_range: (a.range[0], a.range[1]),
     };
+    crate::cpu::d2vr::check_inputs(&settings, &options, &grid, &camera)?;
     Ok(Scene {
         grid,
         camera,

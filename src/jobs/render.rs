@@ -678,12 +678,17 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
     let (scene, mut settings) = build_scene(&req.scene, req.samples, progress)?;
     req.scene.accel.apply(&mut settings)?;
     check_repeat(req)?;
+    if !req.volumes.is_empty() {
+        return plan_multi(req, &scene, &settings, progress);
+    }
+    if let Some(sampling) = req.sampling {
+        return plan_sampling(req, &scene, &settings, sampling);
+    }
     let dims = scene.volume.dims();
+    crate::cpu::raycast::check_cost(dims, &scene.camera, &settings)?;
     let voxels = dims.iter().product::<usize>() as u64;
     let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
-    let ch = if settings.mode.rgba() { 4 } else { 1 };
-    // The image (f64) and the sample counts on the host.
-    let image = w * h * (8 * ch + 4);
+    let image = image_bytes(&scene.camera, &settings);
     let engine = super::Engine::open(req.backend)?;
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
@@ -884,31 +889,7 @@ fn render_multi(
     settings: RenderSettings,
     progress: &dyn Progress,
 ) -> Result<Rendering> {
-    use crate::multi::{MultiVolume, MAX_VOLUMES};
-    if req.volumes.len() > MAX_VOLUMES - 1 {
-        return Err(Error::invalid(
-            "--volume",
-            format!(
-                "{} given: at most {} extra volumes besides INPUT ({MAX_VOLUMES} in all)",
-                req.volumes.len(),
-                MAX_VOLUMES - 1
-            ),
-        ));
-    }
-    let mut vols = vec![MultiVolume::new(
-        scene.volume.clone(),
-        scene.transfer.clone(),
-    )];
-    for extra in &req.volumes {
-        let input = VolumeInput::new(extra.input.clone()).with_load(req.scene.input.load.clone());
-        let volume = input.load(progress)?;
-        let transfer = match &extra.tf {
-            Some(t) => TransferFunction::preset_or_file(t)?,
-            None => scene.transfer.clone(),
-        };
-        let transform = extra.transform.unwrap_or(crate::multi::IDENTITY);
-        vols.push(MultiVolume::new(volume, transfer).with_transform(transform));
-    }
+    let vols = multi_volumes(req, scene, progress)?;
     let engine = Engine::open(req.backend)?;
     let t = Instant::now();
     let progress_rows = |_: usize, _: usize| {};
@@ -935,20 +916,107 @@ fn render_multi(
     })
 }
 
-/// The scene through the adaptive caster (docs/adaptive-sampling.md).
-fn render_sampling(
+/// `--dry-run` of a render with extra volumes: [`crate::multi::check`] (and on the GPU
+/// [`crate::gpu::multi::check`]) on the loaded volumes, and what the caster holds: each
+/// volume's field in the working precision on the host (f32 copies for the GPU), its
+/// R32Float texture and one band of the image on the device.
+fn plan_multi(
     req: &RenderRequest,
     scene: &Scene,
-    settings: RenderSettings,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<super::plan::MemoryPlan> {
+    let vols = multi_volumes(req, scene, progress)?;
+    let engine = Engine::open(req.backend)?;
+    let voxels: Vec<u64> = vols
+        .iter()
+        .map(|v| v.volume.dims().iter().product::<usize>() as u64)
+        .collect();
+    let all: u64 = voxels.iter().sum();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let image = image_bytes(&scene.camera, settings);
+    let (host, device) = match engine.gpu() {
+        Some(ctx) => {
+            crate::gpu::multi::check(ctx, &vols, &scene.camera, settings)?;
+            // One band's RGBA f32 pixels and u32 counts.
+            let band = (crate::gpu::multi::rows_per_band(ctx, w, h) * w * 20) as u64;
+            let largest = (4 * voxels.iter().max().copied().unwrap_or(0)).max(band);
+            let device = super::plan::DevicePlan::on(ctx, 4 * all + band, largest);
+            (4 * all + image, Some(device))
+        }
+        None => {
+            crate::multi::check(&vols, &scene.camera, settings)?;
+            let real = if engine.backend() == Backend::CpuF32 {
+                4
+            } else {
+                8
+            };
+            (real * all + image, None)
+        }
+    };
+    Ok(super::plan::MemoryPlan {
+        job: format!("render {:?} of {} volumes", settings.mode, vols.len()).to_lowercase(),
+        backend: engine.describe(),
+        host_bytes: host,
+        device,
+        split: Vec::new(),
+        writes: Vec::new(),
+    })
+}
+
+/// The host image of a render: f64 channels and a u32 sample count per pixel.
+fn image_bytes(camera: &Camera, settings: &RenderSettings) -> u64 {
+    let ch = if settings.mode.rgba() { 4 } else { 1 };
+    camera.width as u64 * camera.height as u64 * (8 * ch + 4)
+}
+
+/// INPUT and the `--volume`s, loaded and placed, for the multi-volume caster.
+fn multi_volumes(
+    req: &RenderRequest,
+    scene: &Scene,
+    progress: &dyn Progress,
+) -> Result<Vec<crate::multi::MultiVolume>> {
+    use crate::multi::{MultiVolume, MAX_VOLUMES};
+    if req.volumes.len() > MAX_VOLUMES - 1 {
+        return Err(Error::invalid(
+            "--volume",
+            format!(
+                "{} given: at most {} extra volumes besides INPUT ({MAX_VOLUMES} in all)",
+                req.volumes.len(),
+                MAX_VOLUMES - 1
+            ),
+        ));
+    }
+    let mut vols = vec![MultiVolume::new(
+        scene.volume.clone(),
+        scene.transfer.clone(),
+    )];
+    for extra in &req.volumes {
+        let input = VolumeInput::new(extra.input.clone()).with_load(req.scene.input.load.clone());
+        let volume = input.load(progress)?;
+        let transfer = match &extra.tf {
+            Some(t) => TransferFunction::preset_or_file(t)?,
+            None => scene.transfer.clone(),
+        };
+        let transform = extra.transform.unwrap_or(crate::multi::IDENTITY);
+        vols.push(MultiVolume::new(volume, transfer).with_transform(transform));
+    }
+    Ok(vols)
+}
+
+/// The adaptive caster's settings for `--sampling`: DVR only, the render's step as the
+/// regular and smallest step.
+fn adaptive_settings(
+    settings: &RenderSettings,
     sampling: Sampling,
-) -> Result<Rendering> {
+) -> Result<crate::cpu::adaptive::AdaptiveSettings> {
     if settings.mode != Mode::Dvr {
         return Err(Error::invalid(
             "--sampling",
             "the adaptive caster renders DVR only (--mode dvr)",
         ));
     }
-    let s = crate::cpu::adaptive::AdaptiveSettings {
+    Ok(crate::cpu::adaptive::AdaptiveSettings {
         sampling,
         step: settings.step,
         t_max: settings.step.max(8.0),
@@ -956,7 +1024,72 @@ fn render_sampling(
         background: settings.background,
         sample_count: true,
         ..Default::default()
+    })
+}
+
+/// `--dry-run` of a render with `--sampling`: the adaptive caster's checks
+/// ([`crate::cpu::adaptive`]'s and, on the GPU, [`crate::gpu::adaptive::check`]) in the
+/// run's order, and what it holds: the volume (and the importance volume of adaptive
+/// sampling) in the working precision on the host; on the GPU the f32 volume and rays
+/// packed on the host and [`crate::gpu::adaptive::device_buffers`] on the device.
+fn plan_sampling(
+    req: &RenderRequest,
+    scene: &Scene,
+    settings: &RenderSettings,
+    sampling: Sampling,
+) -> Result<super::plan::MemoryPlan> {
+    let s = adaptive_settings(settings, sampling)?;
+    let engine = Engine::open(req.backend)?;
+    let dims = scene.volume.dims();
+    let voxels = dims.iter().product::<usize>() as u64;
+    let camera = &scene.camera;
+    let image = image_bytes(camera, settings);
+    let (host, device) = match engine.gpu() {
+        Some(ctx) => {
+            crate::gpu::adaptive::check(ctx, dims, camera, &s)?;
+            let buffers = crate::gpu::adaptive::device_buffers(dims, camera, &s);
+            let peak = buffers.iter().map(|b| b.1).sum();
+            let largest = buffers.iter().map(|b| b.1).max().unwrap_or(0);
+            let rays = 32 * camera.width as u64 * camera.height as u64;
+            let device = super::plan::DevicePlan::on(ctx, peak, largest);
+            (4 * voxels + rays + image, Some(device))
+        }
+        None => {
+            crate::cpu::adaptive::check_cost(dims, camera, &s)?;
+            let real = if engine.backend() == Backend::CpuF32 {
+                4
+            } else {
+                8
+            };
+            // The importance volume: three R per voxel.
+            let importance = if sampling == Sampling::Adaptive {
+                3 * real * voxels
+            } else {
+                0
+            };
+            (real * voxels + importance + image, None)
+        }
     };
+    scene.transfer.validate()?;
+    scene.volume.check_finite("volume")?;
+    Ok(super::plan::MemoryPlan {
+        job: format!("render dvr with {sampling:?} sampling").to_lowercase(),
+        backend: engine.describe(),
+        host_bytes: host,
+        device,
+        split: Vec::new(),
+        writes: Vec::new(),
+    })
+}
+
+/// The scene through the adaptive caster (docs/adaptive-sampling.md).
+fn render_sampling(
+    req: &RenderRequest,
+    scene: &Scene,
+    settings: RenderSettings,
+    sampling: Sampling,
+) -> Result<Rendering> {
+    let s = adaptive_settings(&settings, sampling)?;
     let engine = Engine::open(req.backend)?;
     let t = Instant::now();
     let run =
