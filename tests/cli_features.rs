@@ -471,3 +471,64 @@ fn rays_past_a_cpu_drivers_loop_limit_are_refused_by_the_run_and_the_dry_run() {
         }
     }
 }
+
+/// `voxlab compare` checks the GPU's render before the oracle's: a frame the GPU
+/// refuses (here hardware filtering of an f32 volume without `FLOAT32_FILTERABLE`) is
+/// refused at once, with the same message as `--dry-run`, writing nothing; it used to be
+/// refused after the CPU oracle had rendered the frame (1.1e10 samples here: 64³ voxels
+/// at 0.01 voxel through 1024² rays, minutes on two cores; the bound below is the hang
+/// guard). Without the flag the plans print, one per render.
+#[test]
+fn compare_refuses_the_gpus_frame_before_the_oracle_renders() {
+    let Some(ctx) = common::gpu("compare_refuses_the_gpus_frame_before_the_oracle_renders") else {
+        return;
+    };
+    let dir = scratch("cli_features_compare");
+    let never = dir.join("never");
+    let args = [
+        "compare",
+        "phantom:sphere:64",
+        "--width",
+        "1024",
+        "--height",
+        "1024",
+        "--step",
+        "0.01",
+        "--out-dir",
+        s(&never),
+    ];
+    let hw = [&args[..], &["--hardware-filtering"]].concat();
+    let run = |args: &[&str], w: Option<&str>| {
+        let mut c = voxlab_command(args);
+        if let Some(w) = w {
+            c.env("VOXLAB_GPU_WITHOUT", w);
+        }
+        let child = c
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        common::wait_bounded(child, std::time::Duration::from_secs(60), &args.join(" "))
+    };
+    let refused = run(&hw, NO_F32_FILTERING);
+    let dry = run(&[&hw[..], &["--dry-run"]].concat(), NO_F32_FILTERING);
+    for o in [&refused, &dry] {
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(o));
+        assert!(
+            stderr(o).contains("R32Float textures needs the FLOAT32_FILTERABLE feature"),
+            "{}",
+            stderr(o)
+        );
+    }
+    assert_eq!(stderr(&refused), stderr(&dry));
+    assert!(!never.exists(), "compare wrote {}", never.display());
+    // The plans: the oracle's (host only), then the GPU's on this adapter.
+    let o = run(&[&args[..], &["--dry-run"]].concat(), None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let oracle = text.find("dry run: render dvr on cpu (f64 oracle)");
+    let gpu = text.find("device: ");
+    assert!(oracle.is_some() && gpu.is_some() && oracle < gpu, "{text}");
+    assert!(text.contains(&ctx.summary.name), "{text}");
+    assert!(!never.exists(), "the dry run wrote {}", never.display());
+}

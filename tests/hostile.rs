@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{s, scratch, stderr, voxlab, voxlab_command};
+use common::{s, scratch, stderr, voxlab, voxlab_command, wait_bounded};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
@@ -20,21 +20,6 @@ fn volume(seed: u8) -> AnyVolume {
     Volume::new([4, 5, 6], [1.0, 1.0, 1.0], data)
         .unwrap()
         .into()
-}
-
-/// Waits for `child` at most `limit`, killing it (and failing) when it hangs.
-fn wait_bounded(mut child: Child, limit: Duration, what: &str) -> std::process::Output {
-    let t = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t.elapsed() > limit {
-            let _ = child.kill();
-            panic!("{what} hung for {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 fn spawn(args: &[&str]) -> Child {

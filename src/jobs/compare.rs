@@ -1,8 +1,9 @@
 //! `voxlab compare`: the same scene on the CPU f64 oracle and on the GPU, and how far
 //! apart they are ([`crate::metrics`]): the parity harness as a user feature.
 
-use super::render::{build_scene, Renderer, SceneRequest};
-use super::{Backend, Progress};
+use super::plan::MemoryPlan;
+use super::render::{build_scene, plan_frame, Renderer, Scene, SceneRequest};
+use super::{Backend, Engine, Progress};
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
 use crate::gpu::raycast::GpuTimings;
@@ -37,13 +38,36 @@ pub struct Comparison {
     pub image: [usize; 2],
 }
 
+/// The memory plans of the two renders (the oracle's, the GPU's), after the checks
+/// each makes before its work: a frame the GPU would refuse is refused before the
+/// oracle spends minutes on it.
+fn plans(scene: &Scene, settings: &RenderSettings) -> Result<[MemoryPlan; 2]> {
+    let oracle = plan_frame(scene, settings, &Engine::open(Backend::Cpu)?)?;
+    let gpu = plan_frame(scene, settings, &Engine::open(Backend::Gpu)?)?;
+    Ok([oracle, gpu])
+}
+
+/// `voxlab compare --dry-run`: the memory plans of the oracle's render and the GPU's
+/// ([`crate::jobs::render`]'s, one each), after loading the input; renders nothing.
+///
+/// # Errors
+/// Invalid input or settings; no GPU adapter; what either render would refuse before
+/// it starts.
+pub fn plan(c: &CompareRequest, progress: &dyn Progress) -> Result<[MemoryPlan; 2]> {
+    let (scene, mut settings) = build_scene(&c.scene, true, progress)?;
+    c.scene.accel.apply(&mut settings)?;
+    plans(&scene, &settings)
+}
+
 /// Renders the scene on the oracle and the GPU and compares them.
 ///
 /// # Errors
-/// Invalid input or settings; no GPU adapter; [`Error::Cancelled`].
+/// Invalid input or settings; no GPU adapter; what either render refuses (checked for
+/// both before the oracle renders); [`Error::Cancelled`].
 pub fn run(c: &CompareRequest, progress: &dyn Progress) -> Result<Comparison> {
     let (scene, mut settings) = build_scene(&c.scene, true, progress)?;
     c.scene.accel.apply(&mut settings)?;
+    plans(&scene, &settings)?;
     let gpu = Renderer::new(Backend::Gpu)?;
     progress.begin("cpu (f64 oracle)", "rows", scene.camera.height as u64);
     let t = Instant::now();

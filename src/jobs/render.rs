@@ -684,12 +684,27 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
     if let Some(sampling) = req.sampling {
         return plan_sampling(req, &scene, &settings, sampling);
     }
+    plan_frame(&scene, &settings, &super::Engine::open(req.backend)?)
+}
+
+/// The memory plan of a single-volume frame of `scene` on `engine`, after every check
+/// its render makes before the work ([`crate::cpu::raycast`]'s cost, and on the GPU
+/// [`crate::gpu::raycast::check_device`] and the bricks past the 3-D texture limit).
+/// `render --dry-run` and `compare` (before its CPU render, for the GPU's) call it.
+///
+/// # Errors
+/// What the frame's render would refuse before it starts.
+pub(crate) fn plan_frame(
+    scene: &Scene,
+    settings: &RenderSettings,
+    engine: &Engine,
+) -> Result<super::plan::MemoryPlan> {
+    let settings = settings.clone();
     let dims = scene.volume.dims();
     crate::cpu::raycast::check_cost(dims, &scene.camera, &settings)?;
     let voxels = dims.iter().product::<usize>() as u64;
     let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
     let image = image_bytes(&scene.camera, &settings);
-    let engine = super::Engine::open(req.backend)?;
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {

@@ -171,6 +171,25 @@ pub fn split_writes_the_unsplit_file(
     quiet
 }
 
+/// Waits for `child` at most `limit`, killing it (and failing) when it hangs.
+pub fn wait_bounded(
+    mut child: std::process::Child,
+    limit: std::time::Duration,
+    what: &str,
+) -> std::process::Output {
+    let t = std::time::Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        if t.elapsed() > limit {
+            let _ = child.kill();
+            panic!("{what} hung for {limit:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// Runs `voxlab` with `args` (see [`voxlab_command`]).
 pub fn voxlab(args: &[&str]) -> Output {
     voxlab_command(args)

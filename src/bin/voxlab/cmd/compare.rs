@@ -24,6 +24,11 @@ pub struct CompareArgs {
     pub rmse: Option<f64>,
     #[command(flatten)]
     pub accel: AccelArgs,
+    /// Print the memory plans of the oracle's render and the GPU's (host and device
+    /// bytes against the adapter's limits, and the bricks a volume past the 3-D texture
+    /// limit is cut into) after loading the input, and render and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 /// Renders on the oracle and the GPU, writes the evidence, prints the numbers; exit
@@ -35,6 +40,16 @@ pub fn run(c: CompareArgs) -> Result<ExitCode> {
         max_abs: c.max_abs,
         rmse: c.rmse,
     };
+    if c.dry_run {
+        for mut plan in voxlab::jobs::compare::plan(&req, &Terminal::bars())? {
+            plan.writes.push(format!(
+                "{}/{{cpu,gpu,diff}}.png and stats.json",
+                c.out_dir.display()
+            ));
+            print!("{}", plan.describe());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let term = Terminal::bars();
     let cmp = voxlab::jobs::compare::run(&req, &term)?;
     drop(term);
