@@ -209,12 +209,7 @@ pub fn check_ray_work(
     settings: &RenderSettings,
 ) -> Result<f64> {
     let per_ray = max_samples_per_ray(boxes, settings.step);
-    crate::settings::check_ray_work(
-        "multi-volume render",
-        settings.step,
-        per_ray,
-        camera.width * camera.height,
-    )?;
+    crate::settings::check_ray_work("multi-volume render", settings.step, per_ray, camera)?;
     Ok(per_ray)
 }
 

@@ -413,14 +413,21 @@ pub const MAX_SAMPLES_PER_RAY: f64 = 1e7;
 pub const MAX_SAMPLES_PER_FRAME: f64 = 1e12;
 
 /// Refuses a ray march whose cost is absurd, before anything is computed: `per_ray`
-/// (the longest ray's length over the step, `step` voxels) past [`MAX_SAMPLES_PER_RAY`],
-/// or `per_ray` over `rays` rays past [`MAX_SAMPLES_PER_FRAME`]. Every ray caster (CPU
-/// and GPU: single and multi-volume, adaptive, D²VR) calls it for every frame, and so
-/// do their dry runs; `what` names the job in the error.
+/// (the longest ray's length over the step, `step` voxels; for one volume
+/// [`crate::volume::diagonal`]` / step`) past [`MAX_SAMPLES_PER_RAY`], or `per_ray` over
+/// the camera's rays past [`MAX_SAMPLES_PER_FRAME`]. Every ray caster (CPU and GPU:
+/// single and multi-volume, adaptive, D²VR) calls it for every frame, and so do their
+/// dry runs; `what` names the job in the error.
 ///
 /// # Errors
 /// [`Error::TooLarge`] naming `what`, the step, and the samples per ray or per frame.
-pub fn check_ray_work(what: &str, step: f64, per_ray: f64, rays: usize) -> Result<()> {
+pub fn check_ray_work(
+    what: &str,
+    step: f64,
+    per_ray: f64,
+    camera: &crate::camera::Camera,
+) -> Result<()> {
+    let rays = camera.width * camera.height;
     if per_ray.is_nan() || per_ray > MAX_SAMPLES_PER_RAY {
         return Err(Error::too_large(
             what,

@@ -139,6 +139,12 @@ pub fn check_spacing(spacing: [f64; 3]) -> Result<()> {
     }
 }
 
+/// The diagonal of the box of `dims` voxels, in voxels: the longest chord a ray can
+/// cross, so a ray of step `s` voxels takes at most `diagonal / s` samples.
+pub fn diagonal(dims: [usize; 3]) -> f64 {
+    dims.iter().map(|&n| (n as f64).powi(2)).sum::<f64>().sqrt()
+}
+
 /// The eight corners of the box of `dims` voxels (index −½ … n − ½ on each axis)
 /// placed by `affine`, in world coordinates.
 pub fn box_corners(dims: [usize; 3], affine: glam::DMat4) -> [glam::DVec3; 8] {

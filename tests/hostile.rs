@@ -587,30 +587,40 @@ fn data_files_can_be_confined_to_the_headers_folder() {
 /// and `MAX_SAMPLES_PER_FRAME` in a frame, at the boundary exactly.
 #[test]
 fn the_ray_work_limits_hold_at_their_boundaries() {
+    use voxlab::camera::{Camera, Orbit, Projection};
     use voxlab::settings::{check_ray_work, MAX_SAMPLES_PER_FRAME, MAX_SAMPLES_PER_RAY};
     assert_eq!((MAX_SAMPLES_PER_RAY, MAX_SAMPLES_PER_FRAME), (1e7, 1e12));
-    assert!(check_ray_work("render", 0.5, 1e7, 1).is_ok());
-    assert!(check_ray_work("render", 0.5, 1e6, 1_000_000).is_ok());
-    for (per_ray, rays, says) in [
+    let camera = |w, h| {
+        let ortho = Projection::Orthographic {
+            width_mm: 1.0,
+            height_mm: 1.0,
+        };
+        Camera::orbit(glam::DVec3::ZERO, [1.0; 3], Orbit::default(), ortho, w, h).unwrap()
+    };
+    // 1000² = 10⁶ rays; 101 × 9901 = 10⁶ + 1.
+    assert!(check_ray_work("render", 0.5, 1e7, &camera(1, 1)).is_ok());
+    assert!(check_ray_work("render", 0.5, 1e6, &camera(1000, 1000)).is_ok());
+    for (per_ray, (w, h), says) in [
         (
             1e7 + 1.0,
-            1,
+            (1, 1),
             "step 0.5 gives up to 10000001 samples per ray",
         ),
         (
             1e6,
-            1_000_001,
+            (101, 9901),
             "step 0.5 gives up to 1.0e12 samples per frame (1000000 per ray, 1000001 rays",
         ),
-        (f64::NAN, 1, "samples per ray"),
+        (f64::NAN, (1, 1), "samples per ray"),
     ] {
-        match check_ray_work("render", 0.5, per_ray, rays) {
+        match check_ray_work("render", 0.5, per_ray, &camera(w, h)) {
             Err(e @ Error::TooLarge { .. }) => {
-                assert!(e.to_string().contains(says), "{per_ray} × {rays}: {e}")
+                assert!(e.to_string().contains(says), "{per_ray} × {w}×{h}: {e}")
             }
-            other => panic!("{per_ray} × {rays}: {other:?}"),
+            other => panic!("{per_ray} × {w}×{h}: {other:?}"),
         }
     }
+    assert_eq!(voxlab::volume::diagonal([3, 4, 12]), 13.0);
 }
 
 /// A frame of too many samples (a tiny step on a large image) is refused by every ray

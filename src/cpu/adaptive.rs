@@ -618,12 +618,11 @@ pub(crate) fn check_cost(
     settings: &AdaptiveSettings,
 ) -> Result<()> {
     settings.validate()?;
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
     crate::settings::check_ray_work(
         "adaptive render",
         settings.step,
-        diag / settings.step,
-        camera.width * camera.height,
+        crate::volume::diagonal(dims) / settings.step,
+        camera,
     )
 }
 

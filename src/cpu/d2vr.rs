@@ -549,9 +549,8 @@ pub(crate) fn check_inputs(
     camera: &Camera,
 ) -> Result<()> {
     settings.validate()?;
-    let d = grid.dims.map(|n| n as f64);
-    let per_ray = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() / settings.step;
-    crate::settings::check_ray_work("D²VR", settings.step, per_ray, camera.width * camera.height)?;
+    let per_ray = crate::volume::diagonal(grid.dims) / settings.step;
+    crate::settings::check_ray_work("D²VR", settings.step, per_ray, camera)?;
     if settings.mode == Mode::Dvr && settings.classification == Classification::Pre {
         return Err(Error::invalid(
             "classification",

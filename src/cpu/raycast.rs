@@ -241,14 +241,8 @@ pub(crate) fn check_cost(
     camera: &Camera,
     settings: &RenderSettings,
 ) -> Result<()> {
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
-    let per_ray = diag / settings.step;
-    crate::settings::check_ray_work(
-        "render",
-        settings.step,
-        per_ray,
-        camera.width * camera.height,
-    )?;
+    let per_ray = crate::volume::diagonal(dims) / settings.step;
+    crate::settings::check_ray_work("render", settings.step, per_ray, camera)?;
     if settings.filter == Filter::Sinc {
         let voxels = (dims[0] * dims[1] * dims[2]) as f64;
         let work = camera.width as f64 * camera.height as f64 * per_ray * voxels;
@@ -683,9 +677,7 @@ fn packet_source<'a, R: Real, F: Field<R>>(
         e_full: s.base.step / s.base.ref_step,
     };
     // A brick's rays run through the whole grid's box.
-    let d = field.dims();
-    let diag = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64).sqrt();
-    let max_steps = (diag / settings.step).ceil() + 3.0;
+    let max_steps = (crate::volume::diagonal(field.dims()) / settings.step).ceil() + 3.0;
     (max_steps < (1 << 24) as f64 && super::march::packets_usable(&src, max_steps as usize))
         .then_some((src, s))
 }

@@ -216,7 +216,7 @@ pub fn check(
     settings: &AdaptiveSettings,
 ) -> Result<()> {
     crate::cpu::adaptive::check_cost(dims, camera, settings)?;
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    let diag = crate::volume::diagonal(dims);
     if ctx.summary.is_cpu() && diag / settings.step + 2.0 > (LLVMPIPE_LOOP_LIMIT - 16) as f64 {
         return Err(Error::invalid(
             "step",

@@ -816,9 +816,7 @@ pub fn render_d2vr(
         ));
     }
     // The longest ray: the box diagonal in voxels over the step.
-    let d = grid.dims;
-    let diag = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64).sqrt();
-    let max_n = (diag / settings.step).ceil() as usize + 2;
+    let max_n = (crate::volume::diagonal(grid.dims) / settings.step).ceil() as usize + 2;
     let setup = t0.elapsed().as_secs_f64();
 
     let query = ctx.timestamps();

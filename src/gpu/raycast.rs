@@ -1697,7 +1697,7 @@ fn check_loop_limit(ctx: &GpuContext, dims: [usize; 3], settings: &RenderSetting
         return Ok(());
     }
     // The ray march is the only loop per invocation (plus 3 box-slab iterations).
-    let diag = ((dims[0].pow(2) + dims[1].pow(2) + dims[2].pow(2)) as f64).sqrt();
+    let diag = crate::volume::diagonal(dims);
     // Skipping adds one iteration per cell crossed, twice; iso-surfaces loop over the
     // iso-values per step (crossings, their sort) and an opaque surface's shadow ray
     // marches once more.
