@@ -147,12 +147,7 @@ fn extra_volumes_render_on_the_gpu_backend() {
         images.push(read_npy_f32(&npy).unwrap());
     }
     assert_eq!(images[0].0, images[1].0, "shapes");
-    let worst = images[0]
-        .1
-        .iter()
-        .zip(&images[1].1)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = voxlab::metrics::max_abs_error(&images[0].1, &images[1].1);
     assert!(images[0].1.iter().any(|&x| x > 0.1), "an empty image");
     eprintln!("cli gpu vs cpu: max |Δ| {worst:.2e}");
     assert!(worst <= 5e-3, "max |Δ| {worst:.2e}");

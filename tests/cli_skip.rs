@@ -77,11 +77,7 @@ fn clip_box_and_accumulation() {
     );
     // Two accumulated frames differ from one unjittered frame, but only slightly.
     let (acc, _) = render(&d, "acc", &["--jitter", "5", "--accumulate", "2"]);
-    let diff = acc
-        .iter()
-        .zip(&full)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let diff = voxlab::metrics::max_abs_error(&acc, &full);
     assert!(diff > 0.0 && diff < 0.5, "{diff}");
     let (inter, _) = render(&d, "inter", &["--interleaved"]);
     assert_ne!(inter, full);

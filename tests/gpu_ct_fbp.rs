@@ -4,6 +4,7 @@ mod common;
 
 use voxlab::cpu::fbp::{backproject, parallel_stack_grid, rtk_grid};
 use voxlab::ct::{Geometry, Projections};
+use voxlab::metrics::max_abs_error;
 
 fn none(_: usize, _: usize) {}
 
@@ -114,11 +115,7 @@ fn hardware_backprojection_is_within_the_texture_units_bound() {
                 }
             }
         }
-        let from_exact = got
-            .data
-            .iter()
-            .zip(&exact.data)
-            .fold(0f32, |m, (a, b)| m.max((a - b).abs())) as f64;
+        let from_exact = max_abs_error(&got.data, &exact.data);
         eprintln!(
             "hardware backprojection {name} on {}: max |Δ| {worst:.2e} ({:.1e} of the \
              scale, {worst_share:.1e} of the bound), {:.1e} of the scale from the exact \
@@ -350,12 +347,8 @@ fn gpu_backprojection_in_slabs_and_batches_equals_the_unsplit_one() {
                     assert_eq!(first, None, "{what}: differs from the unsplit volume");
                 } else {
                     // Sums of 7 views instead of 32: a reassociation of f32 additions.
-                    let worst = got
-                        .data
-                        .iter()
-                        .zip(&whole.data)
-                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
-                    assert!(worst <= 1e-5 * scale, "{what}: {worst} of {scale}");
+                    let worst = max_abs_error(&got.data, &whole.data);
+                    assert!(worst <= 1e-5 * scale as f64, "{what}: {worst} of {scale}");
                 }
             }
         }

@@ -10,6 +10,7 @@ use glam::{DMat4, DQuat, DVec3};
 use voxlab::cpu::project::{project_volume, Grid, JosephPlanes, ProjectOptions};
 use voxlab::ct::Geometry;
 use voxlab::gpu::project as gproject;
+use voxlab::metrics::max_abs_error;
 use voxlab::phantom::Phantom;
 
 /// Largest `max |gpu − cpu| / max |cpu|`. The GPU rounds the grid and the view
@@ -399,11 +400,7 @@ fn hardware_projection_is_within_the_texture_units_bound() {
             "{}: {worst:e} over the library's bound {library:e}",
             case.name
         );
-        let from_exact = got
-            .data
-            .iter()
-            .zip(&exact.data)
-            .fold(0f32, |m, (a, b)| m.max((a - b).abs())) as f64;
+        let from_exact = max_abs_error(&got.data, &exact.data);
         eprintln!(
             "hardware projection {} on {}: max |Δ| {worst:.2e} ({:.1e} of the peak, \
              {worst_share:.1e} of the bound; library bound {:.1e} of the peak), {:.1e} of \
