@@ -203,10 +203,10 @@ fn adaptive(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (gid.x >= w || gid.y >= params.image.w) {
         return;
     }
+    // The band's rays (rows image.z … image.z + image.w − 1), as its pixels.
     let local = gid.y * w + gid.x;
-    let pix = (params.image.z + gid.y) * w + gid.x;
-    let ro = rays[2u * pix];
-    let rd = rays[2u * pix + 1u];
+    let ro = rays[2u * local];
+    let rd = rays[2u * local + 1u];
     let r = cast_ray(ro.xyz, rd.xyz, ro.w);
     pixels[local] = r.px;
     counts[local] = r.n;

@@ -617,30 +617,31 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
                 "the GPU multi-volume caster reconstructs with nearest or trilinear",
             ),
             (
-                // 1024² rays of 32 bytes past a 16 MiB binding (the environment's).
+                // The importance volume of 128³ voxels (16 bytes each) past a 16 MiB
+                // binding (the environment's).
                 vec![
                     "render",
-                    "phantom:sphere:8",
+                    "phantom:sphere:128",
                     "--sampling",
                     "adaptive",
                     "--width",
-                    "1024",
+                    "16",
                     "--height",
-                    "1024",
+                    "16",
                     "--backend",
                     "gpu",
                     "--out",
                     s(&out),
                 ],
-                "rays is too large: 33554432 bytes exceed the adapter's storage-binding \
-                 limit of 16777216 bytes",
+                "importance a is too large: 33554432 bytes exceed the adapter's \
+                 storage-binding limit of 16777216 bytes",
             ),
         ];
         cases.extend(gpu);
     }
     for (args, says) in cases {
         // The planner's binding limit lowered to 16 MiB (`VOXLAB_GPU_MAX_BINDING`): the
-        // adaptive caster's rays exceed it, every other case is far below it.
+        // adaptive caster's importance volume exceeds it, every other case is far below.
         let binding = Some("16777216");
         let run = voxlab_with_binding(&args, binding);
         let dry = voxlab_with_binding(&[&args[..], &["--dry-run"]].concat(), binding);

@@ -100,3 +100,61 @@ fn render_takes_a_sampling() {
         common::stderr(&out)
     );
 }
+
+/// The GPU adaptive caster uploads each band of rows with its own rays, so an image of
+/// any size fits: under a 1 MiB binding a 2048-pixel row's rays (64 KiB) allow bands of
+/// 16 rows instead of 32, and the image is the same bit for bit, for every sampling.
+/// The volume and the importance volume stay one binding each: past it, the run and
+/// its dry run refuse, naming the buffer.
+#[test]
+fn gpu_adaptive_bands_of_rays_write_the_unbanded_image() {
+    if common::gpu("gpu_adaptive_bands_of_rays_write_the_unbanded_image").is_none() {
+        return;
+    }
+    let dir = scratch("cli_adaptive_bands");
+    for sampling in ["regular", "direct", "adaptive"] {
+        let args = [
+            "render",
+            "phantom:shepp-logan-modified:32",
+            "--width",
+            "2048",
+            "--height",
+            "48",
+            "--sampling",
+            sampling,
+            "--backend",
+            "gpu",
+        ];
+        common::split_writes_the_unsplit_file(&dir, &args, "1MiB", &[]);
+    }
+    // 32³ voxels of 16 bytes: 512 KiB per importance volume, past a 256 KiB binding.
+    let never = dir.join("never.npy");
+    for dry in [&[][..], &["--dry-run"]] {
+        let args = [
+            &[
+                "render",
+                "phantom:shepp-logan-modified:32",
+                "--sampling",
+                "adaptive",
+                "--backend",
+                "gpu",
+                "--out",
+                s(&never),
+            ][..],
+            dry,
+        ]
+        .concat();
+        let o = common::voxlab_with_binding(&args, Some("256KiB"));
+        assert!(!o.status.success(), "{args:?} ran");
+        assert!(
+            common::stderr(&o).contains(
+                "importance a is too large: 524288 bytes exceed the adapter's \
+                 storage-binding limit of 262144 bytes; the adaptive caster holds it in one \
+                 binding"
+            ),
+            "{}",
+            common::stderr(&o)
+        );
+        assert!(!never.exists());
+    }
+}

@@ -41,7 +41,8 @@ pub const PARAMS_WGSL: &str = shaders::ADAPTIVE_PARAMS;
 pub struct AdaptiveTimings {
     /// Shader compilation and pipelines.
     pub setup: f64,
-    /// Uploads of the volume, rays and tables.
+    /// The volume's upload and the rays' computation (each band uploads its own rays
+    /// with its dispatch).
     pub upload: f64,
     /// Pre-integration and importance volume on the device, spectra on the host.
     pub prepare: f64,
@@ -178,27 +179,38 @@ pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Resu
 
 /// What a GPU adaptive render of a `dims` volume holds on the device: every buffer
 /// that grows with the volume or the image, as `(label, bytes)`, in the order the render
-/// creates them (the volume, the rays, the two importance volumes of adaptive sampling,
-/// the pixels and sample counts of one band of rows).
+/// creates them (the volume, the two importance volumes of adaptive sampling, then per
+/// band of rows its rays, pixels and sample counts). The volume and the importance
+/// volumes are not split: each must fit one storage binding.
 pub fn device_buffers(
+    ctx: &GpuContext,
     dims: [usize; 3],
     camera: &Camera,
     settings: &AdaptiveSettings,
 ) -> Vec<(&'static str, u64)> {
     let voxels = dims.iter().product::<usize>() as u64;
-    let (w, h) = (camera.width as u64, camera.height as u64);
-    let mut b = vec![("volume", 4 * voxels), ("rays", 32 * w * h)];
+    let w = camera.width as u64;
+    let mut b = vec![("volume", 4 * voxels)];
     if settings.sampling == Sampling::Adaptive {
         b.extend([("importance a", 16 * voxels), ("importance b", 16 * voxels)]);
     }
-    let rows = rows_per_band(camera.width, camera.height) as u64;
-    b.extend([("pixels", 16 * w * rows), ("samples", 4 * w * rows)]);
+    let rows = rows_per_band(ctx, camera.width, camera.height) as u64;
+    b.extend([
+        ("rays", 32 * w * rows),
+        ("pixels", 16 * w * rows),
+        ("samples", 4 * w * rows),
+    ]);
     b
 }
 
-/// Rows of the image per dispatch: bounded work per dispatch.
-fn rows_per_band(w: usize, h: usize) -> usize {
-    (65536 / w.max(1)).clamp(1, h.max(1))
+/// Rows of a `w`×`h` image per dispatch: at most 65,536 pixels (bounded work per
+/// dispatch), and a band's rays (32 bytes a pixel, its largest buffer) within one
+/// storage binding.
+fn rows_per_band(ctx: &GpuContext, w: usize, h: usize) -> usize {
+    let binding = crate::gpu::plan::binding_limit(&ctx.limits) as usize;
+    (65536 / w.max(1))
+        .min(binding / (32 * w.max(1)))
+        .clamp(1, h.max(1))
 }
 
 /// Refuses, before anything is uploaded, a GPU adaptive render that the device cannot
@@ -223,8 +235,17 @@ pub fn check(
             "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
         ));
     }
-    for (label, bytes) in device_buffers(dims, camera, settings) {
-        ctx.check_storage(label, bytes)?;
+    for (label, bytes) in device_buffers(ctx, dims, camera, settings) {
+        ctx.check_storage(label, bytes).map_err(|e| match e {
+            Error::TooLarge { what, message } => Error::TooLarge {
+                what,
+                message: format!(
+                    "{message}; the adaptive caster holds it in one binding: render on the \
+                     CPU (--backend cpu-f32) or a smaller volume"
+                ),
+            },
+            e => e,
+        })?;
     }
     Ok(())
 }
@@ -268,7 +289,7 @@ pub fn render(
     let pipeline = compute_pipeline(ctx, "adaptive", &module, "adaptive", &layout)?;
     let t_setup = t_start.elapsed().as_secs_f64();
 
-    // Uploads: volume and rays.
+    // Uploads: the volume; the rays, computed here, go up band by band.
     let t_up = Instant::now();
     let storage = wgpu::BufferUsages::STORAGE;
     let vol_buf = init_buffer(ctx, "volume", bytemuck::cast_slice(&grid.data), storage)?;
@@ -289,7 +310,6 @@ pub fn render(
             rays.push([d.x as f32, d.y as f32, d.z as f32, 0.0]);
         }
     }
-    let ray_buf = init_buffer(ctx, "rays", bytemuck::cast_slice(&rays), storage)?;
     ctx.wait()?;
     let upload = t_up.elapsed().as_secs_f64();
 
@@ -367,7 +387,7 @@ pub fn render(
     };
 
     // Bands of rows: bounded work per dispatch.
-    let rows_per_band = rows_per_band(w, h);
+    let rows_per_band = rows_per_band(ctx, w, h);
     let mut image = Frame::new(w, h, 4);
     let mut counts = vec![0u32; w * h];
     let bands = render_bands(
@@ -385,6 +405,9 @@ pub fn render(
                 bytemuck::bytes_of(&params),
                 wgpu::BufferUsages::UNIFORM,
             )?;
+            // Each band its own rays: an image of any size within one binding.
+            let band = &rays[2 * row0 * w..2 * (row0 + rows) * w];
+            let ray_buf = init_buffer(ctx, "rays", bytemuck::cast_slice(band), storage)?;
             Ok(ctx.bind_group(
                 "adaptive",
                 &layout,

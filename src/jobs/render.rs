@@ -1062,7 +1062,7 @@ fn plan_sampling(
     let (host, device) = match engine.gpu() {
         Some(ctx) => {
             crate::gpu::adaptive::check(ctx, dims, camera, &s)?;
-            let buffers = crate::gpu::adaptive::device_buffers(dims, camera, &s);
+            let buffers = crate::gpu::adaptive::device_buffers(ctx, dims, camera, &s);
             let peak = buffers.iter().map(|b| b.1).sum();
             let largest = buffers.iter().map(|b| b.1).max().unwrap_or(0);
             let rays = 32 * camera.width as u64 * camera.height as u64;
