@@ -61,16 +61,7 @@ fn check_loop(ctx: &GpuContext, what: &str, iterations: usize) -> Result<()> {
 
 /// A read-only storage buffer of `data`, refused past one binding.
 fn upload(ctx: &GpuContext, label: &str, data: &[u8]) -> Result<wgpu::Buffer> {
-    let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-    if data.len() as u64 > limit {
-        return Err(Error::too_large(
-            label,
-            format!(
-                "{} bytes exceed one storage binding ({limit} bytes)",
-                data.len()
-            ),
-        ));
-    }
+    ctx.check_storage(label, data.len() as u64)?;
     let zero = [0u8; 16];
     Ok(ctx
         .device
@@ -358,16 +349,7 @@ pub fn iradon_sart(
     let windows_buf = upload(ctx, "SART windows", bytemuck::cast_slice(&windows))?;
     let dev = &ctx.device;
     let rw = |label: &str, data: &[f32]| -> Result<wgpu::Buffer> {
-        let limit = crate::gpu::plan::binding_limit(&ctx.limits);
-        if (data.len() * 4) as u64 > limit {
-            return Err(Error::too_large(
-                label,
-                format!(
-                    "{} bytes exceed one storage binding ({limit} bytes)",
-                    data.len() * 4
-                ),
-            ));
-        }
+        ctx.check_storage(label, (data.len() * 4) as u64)?;
         Ok(dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents: bytemuck::cast_slice(data),
