@@ -699,18 +699,17 @@ pub(crate) fn plan_frame(
     settings: &RenderSettings,
     engine: &Engine,
 ) -> Result<super::plan::MemoryPlan> {
-    let settings = settings.clone();
     let dims = scene.volume.dims();
-    crate::cpu::raycast::check_cost(dims, &scene.camera, &settings)?;
+    crate::cpu::raycast::check_cost(dims, &scene.camera, settings)?;
     let voxels = dims.iter().product::<usize>() as u64;
     let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
-    let image = image_bytes(&scene.camera, &settings);
+    let image = image_bytes(&scene.camera, settings);
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
             let max = ctx.limits.max_texture_dimension_3d as usize;
             let (texels, split) = if dims.iter().any(|&n| n > max) {
-                crate::cpu::raycast::check_owned_settings(&settings)?;
+                crate::cpu::raycast::check_owned_settings(settings)?;
                 let (_, bricks) = crate::gpu::raycast::brick_plan(dims, settings.filter, max)?;
                 let ghost = crate::cpu::field::brick_ghost(settings.filter);
                 let largest = bricks
@@ -735,11 +734,11 @@ pub(crate) fn plan_frame(
                 preclassifies, reads_gradient_volume, volume_textures, CompactVolume,
             };
             let rgba =
-                16 * (preclassifies(&settings) as u64 + reads_gradient_volume(&settings) as u64);
+                16 * (preclassifies(settings) as u64 + reads_gradient_volume(settings) as u64);
             let compact =
                 CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
-            crate::gpu::raycast::check_device(ctx, dims, &settings, compact)?;
-            let volume = match volume_textures(&settings, compact) {
+            crate::gpu::raycast::check_device(ctx, dims, settings, compact)?;
+            let volume = match volume_textures(settings, compact) {
                 _ if settings.filter.prefiltered() => 4,
                 (exact, compact) => {
                     4 * exact as u64 + compact.map_or(0, |_| CompactVolume::BYTES_PER_VOXEL)
