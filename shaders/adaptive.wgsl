@@ -4,6 +4,10 @@
 // src/cpu/preintegrate.rs. The box test is shared/rays.wgsl's intersect_box, opacity
 // correction shared/opacity.wgsl's step_opacity.
 //
+// The volume (R32Float) and the importance volume (Rgba32Float) are 3-D textures read
+// texel by texel (textureLoad, exact): the size past one storage binding is the 3-D
+// texture limit's.
+//
 // Rays come from the host (origin and direction in index space, computed in f64 and
 // rounded to f32 exactly as the CPU's f32 path rounds them), so both start from the
 // same numbers.
@@ -13,10 +17,10 @@
 #import rays
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
-@group(0) @binding(1) var<storage, read> volume: array<f32>;
+@group(0) @binding(1) var volume: texture_3d<f32>;
 @group(0) @binding(2) var<storage, read> preint: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> spectrum: array<f32>;
-@group(0) @binding(4) var<storage, read> importance: array<vec4<f32>>;
+@group(0) @binding(4) var importance: texture_3d<f32>;
 @group(0) @binding(5) var<storage, read> direct: array<f32>;
 @group(0) @binding(6) var<storage, read> rays: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> pixels: array<vec4<f32>>;
@@ -25,7 +29,7 @@
 fn voxel(i: i32, j: i32, k: i32) -> f32 {
     let n = vec3<i32>(params.dims.xyz);
     let c = clamp(vec3<i32>(i, j, k), vec3<i32>(0), n - vec3<i32>(1));
-    return volume[u32(c.x) + params.dims.x * (u32(c.y) + params.dims.y * u32(c.z))];
+    return textureLoad(volume, c, 0).x;
 }
 
 // mirrors src/cpu/filter.rs: sample (trilinear; apply_taps' order, x innermost)
@@ -111,7 +115,7 @@ fn spectrum_lookup(lo: f32, hi: f32) -> f32 {
 fn adaptive_step(p: vec3<f32>, f0: f32, d: vec3<f32>) -> f32 {
     let t_max = params.steps.y;
     let v = nearest_voxel(p);
-    let g = importance[v.x + params.dims.x * (v.y + params.dims.y * v.z)];
+    let g = textureLoad(importance, vec3<i32>(v), 0);
     let gd = abs(d.x) * g.x + abs(d.y) * g.y + abs(d.z) * g.z;
     if (gd <= 0.0) {
         return t_max;

@@ -5,14 +5,16 @@
 #import adaptive_params
 
 @group(0) @binding(0) var<uniform> params: AdaptiveParams;
-@group(0) @binding(1) var<storage, read> volume: array<f32>;
-@group(0) @binding(2) var<storage, read> src: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
+// The volume (R32Float) and the importance volumes (Rgba32Float) are 3-D textures,
+// read texel by texel.
+@group(0) @binding(1) var volume: texture_3d<f32>;
+@group(0) @binding(2) var src: texture_3d<f32>;
+@group(0) @binding(3) var dst: texture_storage_3d<rgba32float, write>;
 
 fn at_clamped(q: vec3<i32>) -> f32 {
     let n = vec3<i32>(params.dims.xyz);
     let c = clamp(q, vec3<i32>(0), n - vec3<i32>(1));
-    return volume[u32(c.x) + params.dims.x * (u32(c.y) + params.dims.y * u32(c.z))];
+    return textureLoad(volume, c, 0).x;
 }
 
 // mirrors src/cpu/adaptive.rs: axis_difference
@@ -35,8 +37,7 @@ fn differences(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let v = vec3<i32>(gid);
-    let i = gid.x + params.dims.x * (gid.y + params.dims.y * gid.z);
-    dst[i] = vec4<f32>(axis_difference(v, 0u), axis_difference(v, 1u), axis_difference(v, 2u), 0.0);
+    textureStore(dst, v, vec4<f32>(axis_difference(v, 0u), axis_difference(v, 1u), axis_difference(v, 2u), 0.0));
 }
 
 // mirrors src/cpu/adaptive.rs: max_filter_axis (all three channels at once)
@@ -58,7 +59,7 @@ fn max_filter(@builtin(global_invocation_id) gid: vec3<u32>) {
     var m = vec4<f32>(0.0);
     for (var x = lo; x <= hi; x++) {
         q[axis] = x;
-        m = max(m, src[q.x + params.dims.x * (q.y + params.dims.y * q.z)]);
+        m = max(m, textureLoad(src, vec3<i32>(q), 0));
     }
-    dst[p.x + params.dims.x * (p.y + params.dims.y * p.z)] = m;
+    textureStore(dst, vec3<i32>(p), m);
 }

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{s, scratch, stderr, voxlab, voxlab_with_binding};
+use common::{s, scratch, stderr, voxlab};
 use std::process::Command;
 
 #[test]
@@ -616,35 +616,12 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
                 [&multi[..], &["--filter", "catmull-rom", "--backend", "gpu"]].concat(),
                 "the GPU multi-volume caster reconstructs with nearest or trilinear",
             ),
-            (
-                // The importance volume of 128³ voxels (16 bytes each) past a 16 MiB
-                // binding (the environment's).
-                vec![
-                    "render",
-                    "phantom:sphere:128",
-                    "--sampling",
-                    "adaptive",
-                    "--width",
-                    "16",
-                    "--height",
-                    "16",
-                    "--backend",
-                    "gpu",
-                    "--out",
-                    s(&out),
-                ],
-                "importance a is too large: 33554432 bytes exceed the adapter's \
-                 storage-binding limit of 16777216 bytes",
-            ),
         ];
         cases.extend(gpu);
     }
     for (args, says) in cases {
-        // The planner's binding limit lowered to 16 MiB (`VOXLAB_GPU_MAX_BINDING`): the
-        // adaptive caster's importance volume exceeds it, every other case is far below.
-        let binding = Some("16777216");
-        let run = voxlab_with_binding(&args, binding);
-        let dry = voxlab_with_binding(&[&args[..], &["--dry-run"]].concat(), binding);
+        let run = voxlab(&args);
+        let dry = voxlab(&[&args[..], &["--dry-run"]].concat());
         for (o, how) in [(&run, "run"), (&dry, "dry run")] {
             assert_eq!(o.status.code(), Some(1), "{how} of {args:?}: {}", stderr(o));
             assert!(

@@ -15,7 +15,8 @@
 //! exactly as the CPU f32 path rounds them, so both march from the same numbers.
 
 use super::context::{
-    buffer_entry, compute_pipeline, render_bands, GpuContext, LLVMPIPE_LOOP_LIMIT,
+    buffer_entry, compute_pipeline, render_bands, rgba_storage_entry, texture_entry, GpuContext,
+    LLVMPIPE_LOOP_LIMIT,
 };
 use super::shaders;
 use crate::camera::Camera;
@@ -83,46 +84,49 @@ fn init_buffer(
         }))
 }
 
-/// The importance volume on the device from a volume buffer (f32 voxels): one
-/// `vec4` per voxel, `(G_x, G_y, G_z, 0)`.
-pub fn importance_buffer(
+/// The importance volume on the device from the volume's R32Float 3-D texture: an
+/// `Rgba32Float` 3-D texture, one texel per voxel, `(G_x, G_y, G_z, 0)`.
+pub fn importance_texture(
     ctx: &GpuContext,
-    volume: &wgpu::Buffer,
+    volume: &wgpu::TextureView,
     dims: [usize; 3],
     t_max: f64,
-) -> Result<wgpu::Buffer> {
+) -> Result<wgpu::Texture> {
     let dev = &ctx.device;
     let module = ctx.shader(
         "adaptive_importance.wgsl",
         &shaders::resolve("adaptive_importance"),
     )?;
-    let ro = wgpu::BufferBindingType::Storage { read_only: true };
-    let rw = wgpu::BufferBindingType::Storage { read_only: false };
     let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("importance"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            buffer_entry(1, ro),
-            buffer_entry(2, ro),
-            buffer_entry(3, rw),
+            texture_entry(1, false),
+            texture_entry(2, false),
+            rgba_storage_entry(3),
         ],
     });
     let diff = compute_pipeline(ctx, "differences", &module, "differences", &layout)?;
     let maxf = compute_pipeline(ctx, "max_filter", &module, "max_filter", &layout)?;
-    let voxels = dims[0] * dims[1] * dims[2];
-    let bytes = (voxels * 16) as u64;
-    let a = ctx.storage_buffer("importance a", bytes)?;
-    let b = ctx.storage_buffer("importance b", bytes)?;
-    let dummy = ctx.storage_buffer("dummy", 16)?;
+    let a = ctx.rgba_texture(dims, true)?;
+    let b = ctx.rgba_texture(dims, true)?;
+    let none = ctx.rgba_texture([1, 1, 1], false)?;
+    let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+    let (av, bv, nv) = (view(&a), view(&b), view(&none));
     let r = importance_radius(t_max) as u32;
     let groups = dims.map(|n| (n as u32).div_ceil(4));
     let mut enc = dev.create_command_encoder(&Default::default());
     // Pass 0: differences into a; passes 1–3: x, y, z max filters, a → b → a → b.
-    let passes: [(&wgpu::ComputePipeline, &wgpu::Buffer, &wgpu::Buffer, u32); 4] = [
-        (&diff, &dummy, &a, 0),
-        (&maxf, &a, &b, 0),
-        (&maxf, &b, &a, 1),
-        (&maxf, &a, &b, 2),
+    let passes: [(
+        &wgpu::ComputePipeline,
+        &wgpu::TextureView,
+        &wgpu::TextureView,
+        u32,
+    ); 4] = [
+        (&diff, &nv, &av, 0),
+        (&maxf, &av, &bv, 0),
+        (&maxf, &bv, &av, 1),
+        (&maxf, &av, &bv, 2),
     ];
     let mut keep = Vec::new();
     for (pipeline, src, dst, axis) in passes {
@@ -142,9 +146,9 @@ pub fn importance_buffer(
             &layout,
             &[
                 pbuf.as_entire_binding(),
-                volume.as_entire_binding(),
-                src.as_entire_binding(),
-                dst.as_entire_binding(),
+                wgpu::BindingResource::TextureView(volume),
+                wgpu::BindingResource::TextureView(src),
+                wgpu::BindingResource::TextureView(dst),
             ],
         );
         {
@@ -162,14 +166,9 @@ pub fn importance_buffer(
 /// The importance volume of `grid` computed on the device and read back (the same
 /// three grids as `cpu::adaptive::importance_volume`).
 pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Result<[Grid<f32>; 3]> {
-    let vol = init_buffer(
-        ctx,
-        "volume",
-        bytemuck::cast_slice(&grid.data),
-        wgpu::BufferUsages::STORAGE,
-    )?;
-    let buf = importance_buffer(ctx, &vol, grid.dims, t_max)?;
-    let bytes = ctx.read_buffer(&buf, (grid.data.len() * 16) as u64)?;
+    let vol = ctx.upload_volume_r32(grid.dims, &grid.data)?;
+    let tex = importance_texture(ctx, &vol.create_view(&Default::default()), grid.dims, t_max)?;
+    let bytes = ctx.read_texture_3d(&tex, grid.dims, 16)?;
     let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     Ok(std::array::from_fn(|a| Grid {
         dims: grid.dims,
@@ -177,30 +176,29 @@ pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Resu
     }))
 }
 
-/// What a GPU adaptive render of a `dims` volume holds on the device: every buffer
-/// that grows with the volume or the image, as `(label, bytes)`, in the order the render
-/// creates them (the volume, the two importance volumes of adaptive sampling, then per
-/// band of rows its rays, pixels and sample counts). The volume and the importance
-/// volumes are not split: each must fit one storage binding.
-pub fn device_buffers(
-    ctx: &GpuContext,
-    dims: [usize; 3],
-    camera: &Camera,
-    settings: &AdaptiveSettings,
-) -> Vec<(&'static str, u64)> {
+/// The 3-D textures a GPU adaptive render of a `dims` volume holds, as `(label,
+/// bytes)` in the order it creates them: the volume (`R32Float`) and, for adaptive
+/// sampling, the two importance volumes (`Rgba32Float`). Not split: each is one texture
+/// within the 3-D texture limit.
+pub fn device_textures(dims: [usize; 3], settings: &AdaptiveSettings) -> Vec<(&'static str, u64)> {
     let voxels = dims.iter().product::<usize>() as u64;
-    let w = camera.width as u64;
-    let mut b = vec![("volume", 4 * voxels)];
+    let mut t = vec![("volume", 4 * voxels)];
     if settings.sampling == Sampling::Adaptive {
-        b.extend([("importance a", 16 * voxels), ("importance b", 16 * voxels)]);
+        t.extend([("importance a", 16 * voxels), ("importance b", 16 * voxels)]);
     }
+    t
+}
+
+/// The storage buffers of one band of rows of a GPU adaptive render, as `(label,
+/// bytes)`: its rays, pixels and sample counts (bands sized to fit one binding).
+pub fn band_buffers(ctx: &GpuContext, camera: &Camera) -> Vec<(&'static str, u64)> {
+    let w = camera.width as u64;
     let rows = rows_per_band(ctx, camera.width, camera.height) as u64;
-    b.extend([
+    vec![
         ("rays", 32 * w * rows),
         ("pixels", 16 * w * rows),
         ("samples", 4 * w * rows),
-    ]);
-    b
+    ]
 }
 
 /// Rows of a `w`×`h` image per dispatch: at most 65,536 pixels (bounded work per
@@ -215,8 +213,9 @@ fn rows_per_band(ctx: &GpuContext, w: usize, h: usize) -> usize {
 
 /// Refuses, before anything is uploaded, a GPU adaptive render that the device cannot
 /// run: invalid settings, too many samples per ray or per frame
-/// ([`crate::cpu::adaptive`]'s check), rays past a CPU driver's loop limit, a buffer of
-/// [`device_buffers`] past one storage binding. [`render`] and `voxlab render
+/// ([`crate::cpu::adaptive`]'s check), rays past a CPU driver's loop limit, a volume past
+/// the 3-D texture limit ([`device_textures`]), a band's buffer past one storage binding
+/// ([`band_buffers`]). [`render`] and `voxlab render
 /// --sampling … --dry-run` call it.
 ///
 /// # Errors
@@ -235,17 +234,21 @@ pub fn check(
             "too many steps per ray for a CPU Vulkan driver (llvmpipe); use a larger step",
         ));
     }
-    for (label, bytes) in device_buffers(ctx, dims, camera, settings) {
-        ctx.check_storage(label, bytes).map_err(|e| match e {
-            Error::TooLarge { what, message } => Error::TooLarge {
-                what,
-                message: format!(
-                    "{message}; the adaptive caster holds it in one binding: render on the \
-                     CPU (--backend cpu-f32) or a smaller volume"
-                ),
-            },
-            e => e,
-        })?;
+    // The volume's textures (the largest first: one check names the axis limit), then
+    // one band's buffers.
+    let way_out = |e| match e {
+        Error::TooLarge { what, message } => Error::TooLarge {
+            what,
+            message: format!(
+                "{message}; the adaptive caster holds it whole: render on the CPU \
+                 (--backend cpu-f32) or a smaller volume"
+            ),
+        },
+        e => e,
+    };
+    ctx.check_texture_3d("volume", dims).map_err(way_out)?;
+    for (label, bytes) in band_buffers(ctx, camera) {
+        ctx.check_storage(label, bytes).map_err(way_out)?;
     }
     Ok(())
 }
@@ -276,10 +279,10 @@ pub fn render(
         label: Some("adaptive"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            buffer_entry(1, ro),
+            texture_entry(1, false),
             buffer_entry(2, ro),
             buffer_entry(3, ro),
-            buffer_entry(4, ro),
+            texture_entry(4, false),
             buffer_entry(5, ro),
             buffer_entry(6, ro),
             buffer_entry(7, rw),
@@ -289,10 +292,11 @@ pub fn render(
     let pipeline = compute_pipeline(ctx, "adaptive", &module, "adaptive", &layout)?;
     let t_setup = t_start.elapsed().as_secs_f64();
 
-    // Uploads: the volume; the rays, computed here, go up band by band.
+    // Uploads: the volume (a 3-D texture); the rays, computed here, go up band by band.
     let t_up = Instant::now();
     let storage = wgpu::BufferUsages::STORAGE;
-    let vol_buf = init_buffer(ctx, "volume", bytemuck::cast_slice(&grid.data), storage)?;
+    let vol_tex = ctx.upload_volume_r32(dims, &grid.data)?;
+    let vol_view = vol_tex.create_view(&Default::default());
     let (w, h) = (camera.width, camera.height);
     let to_index = volume.affine().inverse();
     let mut rays = Vec::with_capacity(2 * w * h);
@@ -326,10 +330,11 @@ pub fn render(
         .map_or(vec![0.0], |s| s.nu.iter().map(|&v| v as f32).collect());
     let spec_buf = init_buffer(ctx, "spectrum", bytemuck::cast_slice(&spec_data), storage)?;
     let importance = if adaptive {
-        importance_buffer(ctx, &vol_buf, dims, settings.t_max)?
+        importance_texture(ctx, &vol_view, dims, settings.t_max)?
     } else {
-        ctx.storage_buffer("no importance", 16)?
+        ctx.rgba_texture([1, 1, 1], false)?
     };
+    let importance_view = importance.create_view(&Default::default());
     let ds = direct.then(|| direct_steps(&grid, tf, settings));
     let direct_data: Vec<f32> = ds
         .as_ref()
@@ -413,10 +418,10 @@ pub fn render(
                 &layout,
                 &[
                     pbuf.as_entire_binding(),
-                    vol_buf.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&vol_view),
                     preint.as_entire_binding(),
                     spec_buf.as_entire_binding(),
-                    importance.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&importance_view),
                     direct_buf.as_entire_binding(),
                     ray_buf.as_entire_binding(),
                     out_buf.as_entire_binding(),

@@ -465,6 +465,16 @@ impl GpuContext {
         format: wgpu::TextureFormat,
         usage: wgpu::TextureUsages,
     ) -> Result<wgpu::Texture> {
+        self.check_texture_3d(label, dims)?;
+        self.new_texture(label, dims, wgpu::TextureDimension::D3, format, usage)
+    }
+
+    /// Refuses a 3-D texture of `dims` texels (called `label` in the error) past the
+    /// planner's 3-D texture limit, before anything is allocated; plans call it too.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] naming `label`, the dimensions and the limit.
+    pub fn check_texture_3d(&self, label: &str, dims: [usize; 3]) -> Result<()> {
         let max = self.limits.max_texture_dimension_3d as usize;
         if dims.iter().any(|&n| n == 0 || n > max) {
             return Err(Error::too_large(
@@ -472,7 +482,58 @@ impl GpuContext {
                 format!("{dims:?}: a 3D texture holds 1 … {max} texels per axis on this adapter"),
             ));
         }
-        self.new_texture(label, dims, wgpu::TextureDimension::D3, format, usage)
+        Ok(())
+    }
+
+    /// Reads a 3-D texture of `dims` texels of `texel` bytes back to the host (x fastest,
+    /// rows unpadded). The texture needs `COPY_SRC`.
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the readback fails.
+    pub fn read_texture_3d(
+        &self,
+        tex: &wgpu::Texture,
+        dims: [usize; 3],
+        texel: usize,
+    ) -> Result<Vec<u8>> {
+        let row = dims[0] * texel;
+        let padded = row.div_ceil(256) * 256;
+        let bytes = (padded * dims[1] * dims[2]) as u64;
+        let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("texture readback"),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: tex,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded as u32),
+                    rows_per_image: Some(dims[1] as u32),
+                },
+            },
+            wgpu::Extent3d {
+                width: dims[0] as u32,
+                height: dims[1] as u32,
+                depth_or_array_layers: dims[2] as u32,
+            },
+        );
+        self.queue.submit([enc.finish()]);
+        let data = self.read_buffer(&buf, bytes)?;
+        Ok(data
+            .chunks(padded)
+            .flat_map(|r| &r[..row])
+            .copied()
+            .collect())
     }
 
     /// A texture of one mip level, refused with [`Error::Gpu`] when the device is out
@@ -651,11 +712,12 @@ impl GpuContext {
         Ok(tex)
     }
 
-    /// An `Rgba32Float` 3D texture, writable from shaders when `storage`.
+    /// An `Rgba32Float` 3D texture, writable from shaders (and readable back) when
+    /// `storage`.
     pub fn rgba_texture(&self, dims: [usize; 3], storage: bool) -> Result<wgpu::Texture> {
         let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
         if storage {
-            usage |= wgpu::TextureUsages::STORAGE_BINDING;
+            usage |= wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC;
         }
         self.texture_3d("rgba volume", dims, wgpu::TextureFormat::Rgba32Float, usage)
     }
@@ -770,6 +832,20 @@ pub fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEnt
             sample_type: wgpu::TextureSampleType::Float { filterable },
             view_dimension: wgpu::TextureViewDimension::D3,
             multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// A write-only `Rgba32Float` 3D storage texture at `binding`, for compute.
+pub fn rgba_storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::Rgba32Float,
+            view_dimension: wgpu::TextureViewDimension::D3,
         },
         count: None,
     }

@@ -1762,16 +1762,7 @@ fn prepare_pipeline<'s>(
                     buffer_entry(0, wgpu::BufferBindingType::Uniform),
                     texture_entry(1, false),
                     buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 3,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::StorageTexture {
-                            access: wgpu::StorageTextureAccess::WriteOnly,
-                            format: wgpu::TextureFormat::Rgba32Float,
-                            view_dimension: wgpu::TextureViewDimension::D3,
-                        },
-                        count: None,
-                    },
+                    super::context::rgba_storage_entry(3),
                 ],
             });
             slot.insert(PreparePipelines {

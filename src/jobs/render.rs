@@ -1045,7 +1045,8 @@ fn adaptive_settings(
 /// ([`crate::cpu::adaptive`]'s and, on the GPU, [`crate::gpu::adaptive::check`]) in the
 /// run's order, and what it holds: the volume (and the importance volume of adaptive
 /// sampling) in the working precision on the host; on the GPU the f32 volume and rays
-/// packed on the host and [`crate::gpu::adaptive::device_buffers`] on the device.
+/// packed on the host, [`crate::gpu::adaptive::device_textures`] and one band's
+/// [`crate::gpu::adaptive::band_buffers`] on the device.
 fn plan_sampling(
     req: &RenderRequest,
     scene: &Scene,
@@ -1061,9 +1062,15 @@ fn plan_sampling(
     let (host, device) = match engine.gpu() {
         Some(ctx) => {
             crate::gpu::adaptive::check(ctx, dims, camera, &s)?;
-            let buffers = crate::gpu::adaptive::device_buffers(ctx, dims, camera, &s);
-            let peak = buffers.iter().map(|b| b.1).sum();
-            let largest = buffers.iter().map(|b| b.1).max().unwrap_or(0);
+            let textures = crate::gpu::adaptive::device_textures(dims, &s);
+            let bands = crate::gpu::adaptive::band_buffers(ctx, camera);
+            let peak = textures.iter().chain(&bands).map(|b| b.1).sum();
+            let largest = textures
+                .iter()
+                .chain(&bands)
+                .map(|b| b.1)
+                .max()
+                .unwrap_or(0);
             let rays = 32 * camera.width as u64 * camera.height as u64;
             let device = super::plan::DevicePlan::on(ctx, peak, largest);
             (4 * voxels + rays + image, Some(device))
