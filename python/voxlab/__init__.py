@@ -743,7 +743,9 @@ def compare(
     """The oracle against a port (``voxlab compare``).
 
     Without ``image``: renders the scene (``volume`` and :func:`render`'s keyword
-    arguments) on the CPU f64 oracle and on the GPU and compares them. With ``image``
+    arguments) on the CPU f64 oracle and on the GPU and compares them; a scene the GPU
+    would refuse (a filter it lacks, a missing device feature, a frame past the work
+    limits) raises before the oracle renders. With ``image``
     (your own renderer's output for the same scene, laid out like voxlab's images):
     renders the oracle and compares ``image`` with it.
     """
