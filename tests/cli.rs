@@ -436,6 +436,14 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
         "--out",
         s(&out),
     ];
+    let median = [
+        "process",
+        "phantom:sphere:8",
+        "--op",
+        "median",
+        "--out",
+        s(&vol),
+    ];
     let multi = [
         "render",
         "phantom:sphere:8",
@@ -463,16 +471,7 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
             "invalid Gaussian sigma",
         ),
         (
-            vec![
-                "process",
-                "phantom:sphere:8",
-                "--op",
-                "median",
-                "--size",
-                "4",
-                "--out",
-                s(&vol),
-            ],
+            [&median[..], &["--size", "4"]].concat(),
             "invalid median window size: 4",
         ),
         (
@@ -594,18 +593,7 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
                 "the sampler filters trilinearly only",
             ),
             (
-                vec![
-                    "process",
-                    "phantom:sphere:8",
-                    "--op",
-                    "median",
-                    "--size",
-                    "7",
-                    "--backend",
-                    "gpu",
-                    "--out",
-                    s(&vol),
-                ],
+                [&median[..], &["--size", "7", "--backend", "gpu"]].concat(),
                 "on the GPU the window side must be odd, from 1 to 5",
             ),
             (

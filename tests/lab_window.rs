@@ -42,6 +42,27 @@ fn view_command(test: &str, args: &[&str]) -> Option<Command> {
     Some(x)
 }
 
+/// Runs the lab (`voxlab view ARGS`) for four frames with the CPU side shown, writing
+/// its screenshot to `shot` (.npy) and its state to `state`, and checks it succeeded;
+/// false when the test has no GPU (and skips).
+fn run_lab(test: &str, args: &[&str], shot: &std::path::Path, state: &std::path::Path) -> bool {
+    let tail = [
+        "--frames",
+        "4",
+        "--compare",
+        "--screenshot",
+        s(shot),
+        "--save-state",
+        s(state),
+    ];
+    let Some(mut cmd) = view_command(test, &[args, &tail].concat()) else {
+        return false;
+    };
+    let o = cmd.output().expect("the lab runs");
+    assert!(o.status.success(), "voxlab view failed: {}", stderr(&o));
+    true
+}
+
 fn npy(path: &std::path::Path) -> (Vec<usize>, Vec<f32>) {
     voxlab::io::npy::read_npy_f32(path).unwrap()
 }
@@ -72,7 +93,7 @@ fn the_lab_screenshot_is_what_render_state_draws() {
     let dir = scratch("lab-window");
     let (shot, state) = (dir.join("shot.npy"), dir.join("state.json"));
     let window = dir.join("window.png");
-    let Some(mut cmd) = view_command(
+    if !run_lab(
         "lab window",
         &[
             "phantom:shepp-logan-modified:48",
@@ -80,21 +101,14 @@ fn the_lab_screenshot_is_what_render_state_draws() {
             "96",
             "--height",
             "80",
-            "--frames",
-            "4",
-            "--compare",
-            "--screenshot",
-            s(&shot),
-            "--save-state",
-            s(&state),
             "--window-screenshot",
             s(&window),
         ],
-    ) else {
+        &shot,
+        &state,
+    ) {
         return;
-    };
-    let o = cmd.output().expect("the lab runs");
-    assert!(o.status.success(), "voxlab view failed: {}", stderr(&o));
+    }
 
     // The state is the lab's default view of the phantom at the asked size.
     let st = ViewState::load(&state).unwrap();
@@ -153,24 +167,14 @@ fn the_lab_filters_with_the_texture_unit_when_asked() {
     let mut st = ViewState::new(input, &volume, 72, 64).unwrap();
     st.settings.hardware_filtering = true;
     st.save(&start).unwrap();
-    let Some(mut cmd) = view_command(
+    if !run_lab(
         "lab window, texture-unit filtering",
-        &[
-            "--state",
-            s(&start),
-            "--frames",
-            "4",
-            "--compare",
-            "--screenshot",
-            s(&shot),
-            "--save-state",
-            s(&state),
-        ],
-    ) else {
+        &["--state", s(&start)],
+        &shot,
+        &state,
+    ) {
         return;
-    };
-    let o = cmd.output().expect("the lab runs");
-    assert!(o.status.success(), "voxlab view failed: {}", stderr(&o));
+    }
     let saved = ViewState::load(&state).unwrap();
     assert!(saved.settings.hardware_filtering);
     let (shape, lab) = npy(&shot);
