@@ -452,6 +452,18 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
         "--out",
         s(&out),
     ];
+    // 64³ (a diagonal of 110.9) at adaptive's least step, 1e-3 voxel, through 4096²
+    // rays: 1.9e12 samples.
+    let adaptive_tiny_step = [
+        "adaptive",
+        "phantom:sphere:64",
+        "--step",
+        "1e-3",
+        "--size",
+        "4096",
+        "--out",
+        s(&out),
+    ];
     let mut cases: Vec<(Vec<&str>, &str)> = vec![
         (
             [&recon[..], &["--method", "sirt", "--iterations", "0"]].concat(),
@@ -562,6 +574,22 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
             .concat(),
             "3 given: at most 2 extra volumes",
         ),
+        (
+            [&adaptive_tiny_step[..], &["--backend", "cpu"]].concat(),
+            "adaptive render is too large: step 0.001 gives up to 1.9e12 samples per frame \
+             (110851 per ray, 16777216 rays; at most 1e12)",
+        ),
+        (
+            vec![
+                "adaptive",
+                "phantom:sphere:8",
+                "--runs",
+                "0",
+                "--out",
+                s(&out),
+            ],
+            "invalid --runs: must lie in 1..=100",
+        ),
     ];
     if common::gpu("every_dry_run_refuses_what_its_run_refuses").is_some() {
         let gpu: Vec<(Vec<&str>, &str)> = vec![
@@ -603,6 +631,10 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
             (
                 [&multi[..], &["--filter", "catmull-rom", "--backend", "gpu"]].concat(),
                 "the GPU multi-volume caster reconstructs with nearest or trilinear",
+            ),
+            (
+                [&adaptive_tiny_step[..], &["--backend", "gpu"]].concat(),
+                "adaptive render is too large: step 0.001 gives up to 1.9e12 samples",
             ),
         ];
         cases.extend(gpu);

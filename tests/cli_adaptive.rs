@@ -49,6 +49,35 @@ fn adaptive_writes_table_json_and_images() {
     assert!(md.contains("| adaptive |"), "{md}");
 }
 
+/// `adaptive --dry-run` loads the volume, checks the three renders and prints the plan:
+/// on the f64 oracle the volume and the importance volume (8 + 3 × 8 bytes a voxel:
+/// 1 MiB at 32³), one frame's RGBA image and counts (44 bytes a pixel) and the two
+/// frames kept (40 bytes a pixel): 1,556,480 bytes at 64². Nothing is written.
+#[test]
+fn adaptive_dry_run_plans_and_writes_nothing() {
+    let dir = scratch("cli_adaptive_dry").join("never");
+    let out = voxlab(&[
+        "adaptive",
+        "phantom:sphere:32",
+        "--size",
+        "64",
+        "--backend",
+        "cpu",
+        "--out",
+        s(&dir),
+        "--dry-run",
+    ]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("dry run: adaptive (regular, direct and adaptive sampling) on cpu")
+            && text.contains("host:   1.5 MiB at the peak")
+            && text.contains("table.md and table.json"),
+        "{text}"
+    );
+    assert!(!dir.exists(), "the dry run made {}", dir.display());
+}
+
 #[test]
 fn adaptive_refuses_bad_options() {
     let dir = scratch("cli_adaptive_bad");
@@ -106,7 +135,8 @@ fn render_takes_a_sampling() {
 /// is bounded by one storage binding: under a 1 MiB binding a 72³ volume (1.4 MiB of
 /// f32, 5.7 MiB of importance) renders, a 2048-pixel row's rays (64 KiB) allow bands of
 /// 16 rows instead of 32, and the image is the same bit for bit, for every sampling.
-/// Past the 3-D texture limit the run and its dry run refuse alike, naming the volume.
+/// Past the 3-D texture limit the run and its dry run refuse alike, naming the volume,
+/// in `render --sampling` and in `adaptive`.
 #[test]
 fn gpu_adaptive_textures_and_bands_write_the_unsplit_image() {
     if common::gpu("gpu_adaptive_textures_and_bands_write_the_unsplit_image").is_none() {
@@ -129,37 +159,33 @@ fn gpu_adaptive_textures_and_bands_write_the_unsplit_image() {
         common::split_writes_the_unsplit_file(&dir, &args, "1MiB", &[]);
     }
     let never = dir.join("never.npy");
-    let mut said = Vec::new();
-    for dry in [&[][..], &["--dry-run"]] {
-        let args = [
-            &[
-                "render",
-                "phantom:shepp-logan-modified:32",
-                "--sampling",
-                "adaptive",
-                "--backend",
-                "gpu",
-                "--out",
-                s(&never),
-            ][..],
-            dry,
-        ]
-        .concat();
-        let o = common::voxlab_command(&args)
-            .env("VOXLAB_GPU_MAX_TEXTURE_3D", "16")
-            .output()
-            .unwrap();
-        assert!(!o.status.success(), "{args:?} ran");
-        let err = common::stderr(&o);
-        assert!(
-            err.contains(
-                "volume is too large: [32, 32, 32]: a 3D texture holds 1 … 16 texels per axis \
+    let render = [
+        "render",
+        "phantom:shepp-logan-modified:32",
+        "--sampling",
+        "adaptive",
+    ];
+    let adaptive = ["adaptive", "phantom:shepp-logan-modified:32"];
+    for command in [&render[..], &adaptive[..]] {
+        let mut said = Vec::new();
+        for dry in [&[][..], &["--dry-run"]] {
+            let args = [command, &["--backend", "gpu", "--out", s(&never)][..], dry].concat();
+            let o = common::voxlab_command(&args)
+                .env("VOXLAB_GPU_MAX_TEXTURE_3D", "16")
+                .output()
+                .unwrap();
+            assert!(!o.status.success(), "{args:?} ran");
+            let err = common::stderr(&o);
+            assert!(
+                err.contains(
+                    "volume is too large: [32, 32, 32]: a 3D texture holds 1 … 16 texels per axis \
                  on this adapter; the adaptive caster holds it whole"
-            ),
-            "{err}"
-        );
-        assert!(!never.exists());
-        said.push(err);
+                ),
+                "{err}"
+            );
+            assert!(!never.exists());
+            said.push(err);
+        }
+        assert_eq!(said[0], said[1], "{command:?}");
     }
-    assert_eq!(said[0], said[1]);
 }

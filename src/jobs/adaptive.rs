@@ -182,11 +182,68 @@ fn cpu_once<R: crate::real::Real>(
     })
 }
 
-/// Runs the comparison.
+/// What one frame of the adaptive caster holds, after every check its render makes
+/// before the work, in the run's order: on the CPU [`ca::check_cost`], the volume (and
+/// the importance volume of adaptive sampling: three reals a voxel) in the working
+/// precision; on the GPU [`crate::gpu::adaptive::check`], the f32 volume and the rays
+/// packed on the host, [`crate::gpu::adaptive::device_textures`] and one band's
+/// [`crate::gpu::adaptive::band_buffers`] on the device. `image` is the output's host
+/// bytes. `render --dry-run --sampling` and `adaptive --dry-run` call it.
 ///
 /// # Errors
-/// Invalid options or input; GPU errors; [`Error::Cancelled`].
-pub fn run(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Comparison> {
+/// What the frame's render would refuse before it starts.
+pub(crate) fn frame_plan(
+    engine: &Engine,
+    volume: &AnyVolume,
+    tf: &TransferFunction,
+    camera: &Camera,
+    s: &AdaptiveSettings,
+    image: u64,
+) -> Result<(u64, Option<super::plan::DevicePlan>)> {
+    let dims = volume.dims();
+    let voxels = dims.iter().product::<usize>() as u64;
+    let planned = match engine.gpu() {
+        Some(ctx) => {
+            crate::gpu::adaptive::check(ctx, dims, camera, s)?;
+            let textures = crate::gpu::adaptive::device_textures(dims, s);
+            let bands = crate::gpu::adaptive::band_buffers(ctx, camera);
+            let sizes = || textures.iter().chain(&bands).map(|b| b.1);
+            let rays = 32 * camera.width as u64 * camera.height as u64;
+            let device =
+                super::plan::DevicePlan::on(ctx, sizes().sum(), sizes().max().unwrap_or(0));
+            (4 * voxels + rays + image, Some(device))
+        }
+        None => {
+            ca::check_cost(dims, camera, s)?;
+            let real = if engine.backend() == Backend::CpuF32 {
+                4
+            } else {
+                8
+            };
+            let importance = if s.sampling == Sampling::Adaptive {
+                3 * real * voxels
+            } else {
+                0
+            };
+            (real * voxels + importance + image, None)
+        }
+    };
+    tf.validate()?;
+    volume.check_finite("volume")?;
+    Ok(planned)
+}
+
+/// What [`run`] and [`plan`] share: the request checked, the volume loaded, the
+/// transfer function shifted, the camera and the engine.
+struct Setup {
+    base: AdaptiveSettings,
+    volume: AnyVolume,
+    tf: TransferFunction,
+    camera: Camera,
+    engine: Engine,
+}
+
+fn setup(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Setup> {
     if a.runs == 0 || a.runs > 100 {
         return Err(Error::invalid("--runs", "must lie in 1..=100"));
     }
@@ -227,7 +284,72 @@ pub fn run(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Comparison> {
         a.backend,
         &[Backend::Cpu, Backend::CpuF32, Backend::Gpu],
     )?;
+    Ok(Setup {
+        base,
+        volume,
+        tf,
+        camera,
+        engine,
+    })
+}
 
+/// `voxlab adaptive --dry-run`: what [`run`] would hold, after loading the input and
+/// checking the request as the run does, rendering nothing: each sampling's frame
+/// ([`frame_plan`]; they render one after another, so the plan is the largest) and the
+/// three images and sample-count images the comparison keeps.
+///
+/// # Errors
+/// As [`run`] up to its first render, and what any of the three renders would refuse
+/// before it starts.
+pub fn plan(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<super::plan::MemoryPlan> {
+    let Setup {
+        base,
+        volume,
+        tf,
+        camera,
+        engine,
+    } = setup(a, progress)?;
+    // Each frame's RGBA image and counts (f64), and the u32 counts while it renders.
+    let pixels = (camera.width * camera.height) as u64;
+    let image = pixels * (8 * 4 + 8 + 4);
+    let kept = (Sampling::ALL.len() as u64 - 1) * pixels * (8 * 4 + 8);
+    let mut host = 0;
+    let mut device: Option<super::plan::DevicePlan> = None;
+    for sampling in Sampling::ALL {
+        let s = AdaptiveSettings {
+            sampling,
+            ..base.clone()
+        };
+        let (h, d) = frame_plan(&engine, &volume, &tf, &camera, &s, image)?;
+        host = host.max(h + kept);
+        if let Some(d) = d {
+            if device.as_ref().is_none_or(|x| d.peak_bytes > x.peak_bytes) {
+                device = Some(d);
+            }
+        }
+    }
+    Ok(super::plan::MemoryPlan {
+        job: "adaptive (regular, direct and adaptive sampling)".to_string(),
+        backend: engine.describe(),
+        host_bytes: host,
+        device,
+        split: Vec::new(),
+        writes: Vec::new(),
+    })
+}
+
+/// Runs the comparison.
+///
+/// # Errors
+/// Invalid options or input; GPU errors; [`Error::Cancelled`].
+pub fn run(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Comparison> {
+    let Setup {
+        base,
+        volume,
+        tf,
+        camera,
+        engine,
+    } = setup(a, progress)?;
     let mut outputs: Vec<(Sampling, RenderOutput, f64, f64)> = Vec::new();
     for (k, sampling) in Sampling::ALL.into_iter().enumerate() {
         let s = AdaptiveSettings {

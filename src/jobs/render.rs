@@ -1041,12 +1041,8 @@ fn adaptive_settings(
     })
 }
 
-/// `--dry-run` of a render with `--sampling`: the adaptive caster's checks
-/// ([`crate::cpu::adaptive`]'s and, on the GPU, [`crate::gpu::adaptive::check`]) in the
-/// run's order, and what it holds: the volume (and the importance volume of adaptive
-/// sampling) in the working precision on the host; on the GPU the f32 volume and rays
-/// packed on the host, [`crate::gpu::adaptive::device_textures`] and one band's
-/// [`crate::gpu::adaptive::band_buffers`] on the device.
+/// `--dry-run` of a render with `--sampling`: the adaptive caster's frame plan
+/// ([`super::adaptive::frame_plan`], the checks in the run's order).
 fn plan_sampling(
     req: &RenderRequest,
     scene: &Scene,
@@ -1055,48 +1051,19 @@ fn plan_sampling(
 ) -> Result<super::plan::MemoryPlan> {
     let s = adaptive_settings(settings, sampling)?;
     let engine = Engine::open(req.backend)?;
-    let dims = scene.volume.dims();
-    let voxels = dims.iter().product::<usize>() as u64;
-    let camera = &scene.camera;
-    let image = image_bytes(camera, settings);
-    let (host, device) = match engine.gpu() {
-        Some(ctx) => {
-            crate::gpu::adaptive::check(ctx, dims, camera, &s)?;
-            let textures = crate::gpu::adaptive::device_textures(dims, &s);
-            let bands = crate::gpu::adaptive::band_buffers(ctx, camera);
-            let peak = textures.iter().chain(&bands).map(|b| b.1).sum();
-            let largest = textures
-                .iter()
-                .chain(&bands)
-                .map(|b| b.1)
-                .max()
-                .unwrap_or(0);
-            let rays = 32 * camera.width as u64 * camera.height as u64;
-            let device = super::plan::DevicePlan::on(ctx, peak, largest);
-            (4 * voxels + rays + image, Some(device))
-        }
-        None => {
-            crate::cpu::adaptive::check_cost(dims, camera, &s)?;
-            let real = if engine.backend() == Backend::CpuF32 {
-                4
-            } else {
-                8
-            };
-            // The importance volume: three R per voxel.
-            let importance = if sampling == Sampling::Adaptive {
-                3 * real * voxels
-            } else {
-                0
-            };
-            (real * voxels + importance + image, None)
-        }
-    };
-    scene.transfer.validate()?;
-    scene.volume.check_finite("volume")?;
+    let image = image_bytes(&scene.camera, settings);
+    let (host_bytes, device) = super::adaptive::frame_plan(
+        &engine,
+        &scene.volume,
+        &scene.transfer,
+        &scene.camera,
+        &s,
+        image,
+    )?;
     Ok(super::plan::MemoryPlan {
         job: format!("render dvr with {sampling:?} sampling").to_lowercase(),
         backend: engine.describe(),
-        host_bytes: host,
+        host_bytes,
         device,
         split: Vec::new(),
         writes: Vec::new(),

@@ -58,6 +58,11 @@ pub struct AdaptiveArgs {
     /// Timed renders per sampling (the median is reported).
     #[arg(long, default_value_t = 3)]
     pub runs: usize,
+    /// Print the memory plan (host bytes, and on the GPU device bytes against the
+    /// adapter's limits) after loading the input and checking the request, and render
+    /// and write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 /// Runs the comparison and writes the report into `a.out`.
@@ -82,6 +87,15 @@ pub fn run(a: AdaptiveArgs) -> Result<ExitCode> {
         block: a.block,
         runs: a.runs,
     };
+    if a.dry_run {
+        let mut plan = voxlab::jobs::adaptive::plan(&req, &Terminal::bars())?;
+        let dir = a.out.display();
+        plan.writes.push(format!(
+            "{dir}/{{regular,direct,adaptive}}.png, {dir}/samples-*.png, table.md and table.json"
+        ));
+        print!("{}", plan.describe());
+        return Ok(ExitCode::SUCCESS);
+    }
     let term = Terminal::bars();
     let c = voxlab::jobs::adaptive::run(&req, &term)?;
     drop(term);
