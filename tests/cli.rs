@@ -654,3 +654,60 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
         assert!(!out.exists() && !vol.exists(), "{args:?} wrote");
     }
 }
+
+/// The adaptive and multi-volume GPU casters hold their volumes whole: past the device
+/// memory a job may fill (`VOXLAB_GPU_MEMORY`) the run and its dry run refuse alike,
+/// before uploading, with the numbers and a way out; nothing is written. (The ray
+/// caster cuts such a volume into bricks: `tests/gpu_distributed_render.rs`.)
+#[test]
+fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
+    if common::gpu("gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory").is_none() {
+        return;
+    }
+    let dir = scratch("cli_device_memory");
+    let out = dir.join("never.png");
+    // Adaptive sampling of 32³ into 64²: the volume (4 bytes a voxel) and two
+    // importance volumes (16 each), 1,179,648 bytes, and one band of 64 rows' rays,
+    // pixels and counts (52 bytes a pixel), 212,992: 1.3 MiB.
+    let size = ["--width", "64", "--height", "64"];
+    for (args, says) in [
+        (
+            [
+                &["render", "phantom:sphere:32", "--sampling", "adaptive"][..],
+                &size,
+            ]
+            .concat(),
+            "adaptive render is too large: 1.3 MiB on the device exceed the 64.0 KiB of \
+             device memory a job may fill (VOXLAB_GPU_MEMORY)",
+        ),
+        (
+            vec!["adaptive", "phantom:sphere:32", "--size", "64"],
+            "exceed the 64.0 KiB of device memory a job may fill (VOXLAB_GPU_MEMORY); the \
+             adaptive caster holds it whole",
+        ),
+        (
+            vec![
+                "render",
+                "phantom:sphere:8",
+                "--volume",
+                "phantom:sphere:32",
+            ],
+            "multi-volume render is too large: ",
+        ),
+    ] {
+        let mut said = Vec::new();
+        for dry in [&[][..], &["--dry-run"]] {
+            let a = [&args[..], &["--backend", "gpu", "--out", s(&out)], dry].concat();
+            let o = common::voxlab_command(&a)
+                .env("VOXLAB_GPU_MEMORY", "64KiB")
+                .output()
+                .unwrap();
+            assert_eq!(o.status.code(), Some(1), "{a:?}");
+            let e = stderr(&o);
+            assert!(e.contains(says), "{a:?}: {e}");
+            assert!(!out.exists(), "{a:?} wrote");
+            said.push(e);
+        }
+        assert_eq!(said[0], said[1], "{args:?}");
+    }
+}

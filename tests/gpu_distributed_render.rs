@@ -82,8 +82,9 @@ fn gpu_ranks_render_the_single_process_gpu_image() {
     }
 }
 
-/// One GPU, a volume past the 3-D texture limit: bricks rendered one after another and
-/// composited on the host (`gpu::raycast::render_bricked`), against the unsplit render.
+/// One GPU, a volume past the 3-D texture limit or the device memory: bricks rendered one
+/// after another and composited on the host (`gpu::raycast::render_bricked`), against
+/// the unsplit render.
 #[test]
 fn bricks_past_the_texture_limit_render_the_unsplit_image() {
     let Some(ctx) = gpu("bricks_past_the_texture_limit_render_the_unsplit_image") else {
@@ -111,15 +112,24 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
             .output
             .image;
         let top = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        for limit in [28, 20] {
-            let (_, bricks) = brick_plan(volume.dims(), filter, limit).unwrap();
-            let (got, n) =
-                render_bricked(ctx, &volume, &tf, &camera, &settings, limit, &|_, _| {}).unwrap();
-            assert_eq!(n, bricks.len());
+        // Texels per axis (28, 20), and texels in all (a device memory of 9,000 f32
+        // texels: 37 × 29 × 23 = 24,679 voxels do not fit).
+        for (limit, most) in [(28, None), (20, None), (64, Some(9000))] {
+            let (tree, bricks) = brick_plan(volume.dims(), filter, limit, most).unwrap();
+            let ghost = voxlab::cpu::field::brick_ghost(filter);
+            for b in &bricks {
+                let g = b.with_ghost(ghost, volume.dims());
+                assert!(g.dims().iter().all(|&n| n <= limit), "{g:?}");
+                assert!(most.is_none_or(|m| g.voxels() as u64 <= m), "{g:?}");
+            }
+            let cut = (&tree, &bricks[..]);
+            let got =
+                render_bricked(ctx, &volume, &tf, &camera, &settings, cut, &|_, _| {}).unwrap();
+            let n = bricks.len();
             assert!(n > 1, "{mode:?}: the limit {limit} splits the volume");
             let worst = max_abs_error(&got.output.image.data, &want.data);
             eprintln!(
-                "{mode:?}, {n} bricks of ≤ {limit}: max |Δ| {worst:.3e} (image max {top:.3})"
+                "{mode:?}, {n} bricks of ≤ {limit} ({most:?}): max |Δ| {worst:.3e} (image max {top:.3})"
             );
             if exact {
                 assert!(worst == 0.0, "{mode:?}, {n} bricks: {worst:e}");
@@ -132,28 +142,30 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         }
     }
     // A limit below the ghost voxels cannot be met.
-    let e = brick_plan(volume.dims(), Filter::Trilinear, 6)
+    let e = brick_plan(volume.dims(), Filter::Trilinear, 6, None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("cannot be cut into bricks"), "{e}");
 }
 
-/// `voxlab render --backend gpu` under a lowered 3-D texture limit: `--dry-run` prints
-/// the brick split and writes nothing; the render says how it split and writes the
-/// unsplit MIP byte for byte.
+/// `voxlab render --backend gpu` under a lowered 3-D texture limit and under a lowered
+/// device memory: `--dry-run` prints the brick split and writes nothing; the render says
+/// how it split and writes the unsplit MIP byte for byte. A 48³ f32 volume's texture
+/// (432 KiB) and the 64² image's buffers (80 KiB) exceed 256 KiB of device memory; the
+/// bricks hold at most (256 − 80) KiB / 4 bytes = 45,056 texels with their ghost voxels.
 #[test]
-fn the_command_splits_past_the_texture_limit_and_says_so() {
-    if gpu("the_command_splits_past_the_texture_limit_and_says_so").is_none() {
+fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
+    if gpu("the_command_splits_past_the_texture_limit_and_the_memory_and_says_so").is_none() {
         return;
     }
     let dir = scratch("gpu-bricked-cli");
     let (one, split) = (dir.join("one.npy"), dir.join("split.npy"));
-    let args = |out: &std::path::Path| {
+    let args = |out: &std::path::Path, mode: &str| {
         vec![
             "render".to_string(),
             "phantom:shepp-logan-modified:48".into(),
             "--mode".into(),
-            "mip".into(),
+            mode.into(),
             "--backend".into(),
             "gpu".into(),
             "--width".into(),
@@ -164,24 +176,84 @@ fn the_command_splits_past_the_texture_limit_and_says_so() {
             out.display().to_string(),
         ]
     };
-    let run = |a: &[String], limit: Option<&str>| {
+    let run = |a: &[String], limit: Option<(&str, &str)>| {
         let a: Vec<&str> = a.iter().map(String::as_str).collect();
         let mut c = common::voxlab_command(&a);
-        if let Some(l) = limit {
-            c.env("VOXLAB_GPU_MAX_TEXTURE_3D", l);
+        if let Some((k, v)) = limit {
+            c.env(k, v);
         }
-        let o = c.output().unwrap();
+        c.output().unwrap()
+    };
+    let text = |o: &std::process::Output| {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
     };
-    let mut dry = args(&split);
-    dry.push("--dry-run".into());
-    let text = run(&dry, Some("32"));
-    assert!(text.contains("split:  ray casting in"), "{text}");
-    assert!(text.contains("3-D texture 32 per axis"), "{text}");
-    assert!(!split.exists());
-    run(&args(&one), None);
-    let text = run(&args(&split), Some("32"));
-    assert!(text.contains("voxlab: ray casting in"), "{text}");
-    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&split).unwrap());
+    text(&run(&args(&one, "mip"), None));
+    for (limit, why) in [
+        (
+            ("VOXLAB_GPU_MAX_TEXTURE_3D", "32"),
+            "exceeds the 3-D texture limit of 32 texels per axis",
+        ),
+        (
+            ("VOXLAB_GPU_MEMORY", "256KiB"),
+            "textures and the image's buffers, 512.0 KiB, exceed the 256.0 KiB of device \
+             memory a job may fill",
+        ),
+    ] {
+        let mut dry = args(&split, "mip");
+        dry.push("--dry-run".into());
+        let said = text(&run(&dry, Some(limit)));
+        assert!(said.contains("split:  ray casting in"), "{said}");
+        assert!(said.contains(why), "{limit:?}: {said}");
+        assert!(!split.exists());
+        let said = text(&run(&args(&split, "mip"), Some(limit)));
+        assert!(
+            said.contains("voxlab: ray casting in") && said.contains(why),
+            "{said}"
+        );
+        assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&split).unwrap());
+        std::fs::remove_file(&split).unwrap();
+        // What bricks cannot composite (MIDA), and a renderer session's frames
+        // (`--repeat`, the volume whole), are refused by the run and its dry run alike,
+        // saying why the volume is cut.
+        let mut mip_repeat = args(&split, "mip");
+        mip_repeat.extend(["--repeat".into(), "2".into()]);
+        for (a, says) in [
+            (
+                args(&split, "mida"),
+                "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
+                 the whole ray); ",
+            ),
+            (
+                mip_repeat,
+                "invalid --repeat: times the frames of one renderer session, which holds the \
+                 volume whole, but this frame needs ray casting in ",
+            ),
+        ] {
+            let mut said = Vec::new();
+            for dry in [false, true] {
+                let mut a = a.clone();
+                if dry {
+                    a.push("--dry-run".into());
+                }
+                let o = run(&a, Some(limit));
+                assert_eq!(o.status.code(), Some(1), "{a:?}");
+                let e = String::from_utf8_lossy(&o.stderr).into_owned();
+                assert!(e.contains(says) && e.contains(why), "{e}");
+                assert!(!split.exists());
+                said.push(e);
+            }
+            assert_eq!(said[0], said[1]);
+        }
+    }
+    assert_eq!(
+        text(&run(
+            &["info".into(), "--gpu".into()],
+            Some(("VOXLAB_GPU_MEMORY", "256KiB"))
+        ))
+        .lines()
+        .filter(|l| l.starts_with("memory:"))
+        .collect::<Vec<_>>(),
+        ["memory:       256.0 KiB for a job (VOXLAB_GPU_MEMORY)"]
+    );
 }

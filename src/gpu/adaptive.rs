@@ -213,7 +213,8 @@ fn rows_per_band(ctx: &GpuContext, w: usize, h: usize) -> usize {
 
 /// Refuses, before anything is uploaded, a GPU adaptive render that the device cannot
 /// run: invalid settings, too many samples per ray or per frame
-/// ([`crate::cpu::adaptive`]'s check), rays past a CPU driver's loop limit, a volume past
+/// ([`crate::cpu::adaptive`]'s check), rays past a CPU driver's loop limit, textures and
+/// buffers past the device memory a job may fill ([`GpuContext::check_memory`]), a volume past
 /// the 3-D texture limit ([`device_textures`]), a band's buffer past one storage binding
 /// ([`band_buffers`]). [`render`] and `voxlab render
 /// --sampling … --dry-run` call it.
@@ -247,10 +248,16 @@ pub fn check(
         e => e,
     };
     ctx.check_texture_3d("volume", dims).map_err(way_out)?;
-    for (label, bytes) in band_buffers(ctx, camera) {
-        ctx.check_storage(label, bytes).map_err(way_out)?;
+    let bands = band_buffers(ctx, camera);
+    for (label, bytes) in &bands {
+        ctx.check_storage(label, *bytes).map_err(way_out)?;
     }
-    Ok(())
+    let held = device_textures(dims, settings)
+        .iter()
+        .chain(&bands)
+        .map(|b| b.1)
+        .sum();
+    ctx.check_memory("adaptive render", held).map_err(way_out)
 }
 
 /// Renders on the GPU. Same inputs and outputs as `cpu::adaptive::render`.

@@ -126,6 +126,9 @@ pub struct GpuContext {
     /// The optional features the device was opened with: the adapter's, less those
     /// [`WITHOUT_ENV`] withholds.
     pub features: wgpu::Features,
+    /// The device memory a job may fill at once, where known
+    /// ([`super::plan::DeviceMemory`]).
+    pub memory: Option<super::plan::DeviceMemory>,
 }
 
 /// The process's one wgpu instance. It is created once and never dropped: on NVIDIA's
@@ -230,6 +233,8 @@ impl GpuContext {
         }))
         .map_err(|e| Error::Gpu(format!("could not open the device: {e}")))?;
         let summary = AdapterSummary::from_info(&adapter.get_info());
+        let (memory, note) = super::plan::device_memory(&summary.name, |k| std::env::var(k).ok())?;
+        lowered.extend(note);
         Ok(GpuContext {
             adapter,
             device,
@@ -239,6 +244,7 @@ impl GpuContext {
             adapter_limits,
             lowered,
             features,
+            memory,
         })
     }
 
@@ -259,6 +265,7 @@ impl GpuContext {
              vendor/device: {:#06x}/{:#06x}\n\
              limits:       3D texture {} per axis, storage binding {}, buffer {},\n              \
              workgroup {} invocations ({}×{}×{}), {} KiB workgroup memory\n\
+             memory:       {}\n\
              features:     FLOAT32_FILTERABLE {}, TEXTURE_FORMAT_16BIT_NORM {}, TIMESTAMP_QUERY {}",
             s.name,
             s.backend,
@@ -280,6 +287,17 @@ impl GpuContext {
             l.max_compute_workgroup_size_y,
             l.max_compute_workgroup_size_z,
             l.max_compute_workgroup_storage_size >> 10,
+            match &self.memory {
+                Some(m) => format!(
+                    "{} for a job ({})",
+                    super::plan::human_bytes(m.bytes),
+                    m.source
+                ),
+                None => format!(
+                    "not known (wgpu does not report it; {} sets what a job may fill)",
+                    super::plan::MEMORY_ENV
+                ),
+            },
             f(wgpu::Features::FLOAT32_FILTERABLE),
             f(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM),
             f(wgpu::Features::TIMESTAMP_QUERY),
@@ -444,6 +462,28 @@ impl GpuContext {
             ));
         }
         Ok(())
+    }
+
+    /// Refuses `bytes` held on the device at once (called `label` in the error) past the
+    /// device memory the planner lets a job fill ([`GpuContext::memory`]), before
+    /// anything is allocated; nothing is refused where the memory is not known.
+    ///
+    /// # Errors
+    /// [`Error::TooLarge`] naming `label`, the bytes, the memory and where its figure
+    /// comes from.
+    pub fn check_memory(&self, label: &str, bytes: u64) -> Result<()> {
+        match &self.memory {
+            Some(m) if bytes > m.bytes => Err(Error::too_large(
+                label,
+                format!(
+                    "{} on the device exceed the {} of device memory a job may fill ({})",
+                    crate::gpu::plan::human_bytes(bytes),
+                    crate::gpu::plan::human_bytes(m.bytes),
+                    m.source
+                ),
+            )),
+            _ => Ok(()),
+        }
     }
 
     /// A storage buffer the host can read back, refused with a clear error when it

@@ -271,6 +271,17 @@ pub fn check(
             ));
         }
     }
+    ctx.check_memory("multi-volume render", device_bytes(ctx, volumes, camera).0)
+        .map_err(|e| match e {
+            Error::TooLarge { what, message } => Error::TooLarge {
+                what,
+                message: format!(
+                    "{message}; the multi-volume caster holds every volume whole: render on \
+                     the CPU (--backend cpu-f32)"
+                ),
+            },
+            e => e,
+        })?;
     if ctx.summary.is_cpu() && per_ray > (LLVMPIPE_LOOP_LIMIT - 64) as f64 {
         return Err(Error::invalid(
             "step",
@@ -282,6 +293,21 @@ pub fn check(
         ));
     }
     Ok(())
+}
+
+/// What a GPU multi-volume render holds on the device: every volume's `R32Float`
+/// texture and one band's RGBA f32 pixels and u32 counts, as `(at once, the largest
+/// single object)` in bytes.
+pub fn device_bytes(ctx: &GpuContext, volumes: &[MultiVolume], camera: &Camera) -> (u64, u64) {
+    let (w, h) = (camera.width, camera.height);
+    let band = (rows_per_band(ctx, w, h) * w * 20) as u64;
+    let textures = volumes
+        .iter()
+        .map(|v| 4 * v.volume.dims().iter().product::<usize>() as u64);
+    (
+        textures.clone().sum::<u64>() + band,
+        textures.max().unwrap_or(0).max(band),
+    )
 }
 
 /// Renders a multi-volume scene on the GPU. Same inputs and meaning as

@@ -11,6 +11,9 @@
 //! | `VOXLAB_GPU_MAX_BINDING` | `max_storage_buffer_binding_size` | bytes, or with a `KiB`/`MiB`/`GiB` suffix |
 //! | `VOXLAB_GPU_MAX_TEXTURE_3D` | `max_texture_dimension_3d` | texels per axis |
 //!
+//! A third, `VOXLAB_GPU_MEMORY`, sets the device memory a job may fill, which wgpu does
+//! not report ([`DeviceMemory`]).
+//!
 //! They only ever lower a limit (a value above the adapter's is the adapter's), and they
 //! are read once, when the process opens its device ([`GpuContext::new`]); the device
 //! itself is opened with the adapter's full limits. A value that is not a positive
@@ -32,6 +35,81 @@ use std::ops::Range;
 pub const MAX_BINDING_ENV: &str = "VOXLAB_GPU_MAX_BINDING";
 /// The environment variable that lowers the planner's 3-D texture limit (texels/axis).
 pub const MAX_TEXTURE_3D_ENV: &str = "VOXLAB_GPU_MAX_TEXTURE_3D";
+
+/// The environment variable that sets the device memory the planner lets a job fill
+/// ([`DeviceMemory`]; bytes, or with a `KiB`/`MiB`/`GiB` suffix).
+pub const MEMORY_ENV: &str = "VOXLAB_GPU_MEMORY";
+
+/// The share of a known part's data-sheet memory the planner fills; the rest is left to
+/// the driver, the display and other processes.
+pub const DATA_SHEET_SHARE: f64 = 0.9;
+
+/// The device memory the planner lets one job hold at once. wgpu does not report a
+/// device's memory, so it comes from the data sheet of a part the roofline's table
+/// knows ([`super::peak`]; [`DATA_SHEET_SHARE`] of it), or from [`MEMORY_ENV`], which
+/// sets it for an adapter the table does not know and lowers it for one it does.
+/// Unknown otherwise: then only the bindings and the 3-D texture limit cut a job, and
+/// an allocation past the memory fails when it is made.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DeviceMemory {
+    /// Bytes a job may hold on the device at once.
+    pub bytes: u64,
+    /// Where the figure comes from ("90 % of the NVIDIA H200 (SXM, HBM3e)'s 141 GB").
+    pub source: String,
+}
+
+/// The planner's [`DeviceMemory`] for the adapter named `name`, with [`MEMORY_ENV`] as
+/// `var` returns it, and a line when the variable set or lowered it.
+///
+/// # Errors
+/// [`Error::Invalid`] naming the variable when its value is not a positive byte count.
+pub fn device_memory(
+    name: &str,
+    var: impl Fn(&str) -> Option<String>,
+) -> Result<(Option<DeviceMemory>, Option<String>)> {
+    let sheet = super::peak::peak_of(name).map(|p| DeviceMemory {
+        bytes: (p.memory_gb * 1e9 * DATA_SHEET_SHARE) as u64,
+        source: format!(
+            "{:.0} % of the {}'s {} GB",
+            100.0 * DATA_SHEET_SHARE,
+            p.part,
+            p.memory_gb
+        ),
+    });
+    let Some(text) = var(MEMORY_ENV).filter(|s| !s.trim().is_empty()) else {
+        return Ok((sheet, None));
+    };
+    let bytes = parse_bytes(&text).ok_or_else(|| {
+        Error::invalid(
+            MEMORY_ENV,
+            format!("'{text}' is not a positive byte count (for example 8GiB or 8589934592)"),
+        )
+    })?;
+    Ok(match sheet {
+        Some(m) if m.bytes <= bytes => (Some(m), None),
+        Some(m) => (
+            Some(DeviceMemory {
+                bytes,
+                source: MEMORY_ENV.to_string(),
+            }),
+            Some(format!(
+                "device memory lowered to {bytes} bytes by {MEMORY_ENV} (the data sheet's: \
+                 {}, {})",
+                m.bytes, m.source
+            )),
+        ),
+        None => (
+            Some(DeviceMemory {
+                bytes,
+                source: MEMORY_ENV.to_string(),
+            }),
+            Some(format!(
+                "device memory set to {bytes} bytes by {MEMORY_ENV} (wgpu does not report \
+                 this adapter's)"
+            )),
+        ),
+    })
+}
 
 /// Parses a byte count: digits, optionally followed by `K`/`KiB`, `M`/`MiB`, `G`/`GiB`
 /// (powers of 1024), case-insensitive. `None` for anything else or for zero.
@@ -242,6 +320,40 @@ mod tests {
         for bad in ["", "0", "-1", "1.5M", "12 parsecs", "99999999999999999999"] {
             assert_eq!(parse_bytes(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn device_memory_comes_from_the_data_sheet_or_the_variable() {
+        let none = |_: &str| None;
+        let set = |v: &'static str| move |k: &str| (k == MEMORY_ENV).then(|| v.to_string());
+        // A part the table knows: 90 % of its data sheet's 141 GB.
+        let (m, note) = device_memory("NVIDIA H200", none).unwrap();
+        let m = m.unwrap();
+        assert_eq!(m.bytes, 126_900_000_000);
+        assert_eq!(m.source, "90 % of the NVIDIA H200 (SXM, HBM3e)'s 141 GB");
+        assert_eq!(note, None);
+        // The variable lowers it, and never raises it.
+        let (m, note) = device_memory("NVIDIA H200", set("64GiB")).unwrap();
+        assert_eq!(m.unwrap().bytes, 64 << 30);
+        assert!(note.unwrap().contains("lowered to 68719476736 bytes"));
+        let (m, note) = device_memory("NVIDIA H200", set("1024GiB")).unwrap();
+        assert_eq!(m.unwrap().bytes, 126_900_000_000);
+        assert_eq!(note, None);
+        // An adapter the table does not know: unknown, or what the variable says.
+        let lavapipe = "llvmpipe (LLVM 15.0.6, 256 bits)";
+        assert_eq!(device_memory(lavapipe, none).unwrap(), (None, None));
+        let (m, note) = device_memory(lavapipe, set("1MiB")).unwrap();
+        assert_eq!(m.unwrap().bytes, 1 << 20);
+        assert!(note
+            .unwrap()
+            .contains("set to 1048576 bytes by VOXLAB_GPU_MEMORY"));
+        let e = device_memory(lavapipe, set("lots"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("VOXLAB_GPU_MEMORY") && e.contains("'lots'"),
+            "{e}"
+        );
     }
 
     #[test]

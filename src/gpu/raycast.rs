@@ -709,8 +709,8 @@ pub fn render_owned(
 }
 
 /// The bricks a volume of `dims` is cut into so that each, with the ghost voxels of
-/// `filter`, fits `max_texels` per axis: the k-d tree of `io::brick` for the fewest
-/// bricks that fit (one when the volume fits whole).
+/// `filter`, fits `max_texels` per axis and, where given, `max_voxels` in all: the k-d
+/// tree of `io::brick` for the fewest bricks that fit (one when the volume fits whole).
 ///
 /// # Errors
 /// No cut fits (a limit below the filter's ghost voxels).
@@ -718,13 +718,13 @@ pub fn brick_plan(
     dims: [usize; 3],
     filter: Filter,
     max_texels: usize,
+    max_voxels: Option<u64>,
 ) -> Result<(crate::io::brick::KdTree, Vec<crate::io::brick::Brick>)> {
     let ghost = crate::cpu::field::brick_ghost(filter);
     let fits = |b: &crate::io::brick::Brick| {
-        b.with_ghost(ghost, dims)
-            .dims()
-            .iter()
-            .all(|&n| n <= max_texels)
+        let g = b.with_ghost(ghost, dims);
+        g.dims().iter().all(|&n| n <= max_texels)
+            && max_voxels.is_none_or(|m| g.voxels() as u64 <= m)
     };
     let mut n = 1;
     loop {
@@ -733,45 +733,143 @@ pub fn brick_plan(
             Ok((tree, bricks)) if bricks.iter().all(fits) => return Ok((tree, bricks)),
             Ok(_) if n < 1 << 16 => n += 1,
             _ => {
+                let voxels = max_voxels
+                    .map(|m| format!(" and {m} texels in all"))
+                    .unwrap_or_default();
                 return Err(Error::too_large(
                     "volume",
                     format!(
                         "{dims:?} cannot be cut into bricks of at most {max_texels} texels \
-                         per axis with the {} filter's {ghost} ghost voxels",
+                         per axis{voxels} with the {} filter's {ghost} ghost voxels",
                         filter.name()
                     ),
-                ))
+                ));
             }
         }
     }
 }
 
-/// Renders a volume larger than the adapter's 3-D texture (`max_texels` per axis, the
-/// adapter's limit or `VOXLAB_GPU_MAX_TEXTURE_3D`) on one GPU: cut into the bricks of
-/// [`brick_plan`], each rendered as a placed session ([`render_owned`]), the pieces
-/// composited on the host in each pixel's visibility order (`cpu::composite`). The
-/// same samples as one unsplit render: MIP and MinIP equal it exactly, X-ray and DVR
-/// up to the regrouping of their sums by brick. Returns the output and the number of
-/// bricks.
+/// The device bytes a frame's volume textures take per voxel: the raw values
+/// (`R32Float` and/or, on the hardware path, a 16-bit [`CompactVolume`]; a prefiltered
+/// filter's coefficients, `R32Float`) and the `Rgba32Float` pre-classified colours and
+/// precomputed gradients where the frame reads them ([`volume_textures`]).
+pub fn texture_bytes_per_voxel(settings: &RenderSettings, compact: Option<CompactVolume>) -> u64 {
+    let rgba = 16 * (preclassifies(settings) as u64 + reads_gradient_volume(settings) as u64);
+    let values = match volume_textures(settings, compact) {
+        _ if settings.filter.prefiltered() => 4,
+        (exact, compact) => {
+            4 * exact as u64 + compact.map_or(0, |_| CompactVolume::BYTES_PER_VOXEL)
+        }
+    };
+    values + rgba
+}
+
+/// The device bytes of a `camera` image's output buffers (RGBA f32 and a count a
+/// pixel), at most.
+pub fn output_bytes(camera: &Camera) -> u64 {
+    camera.width as u64 * camera.height as u64 * 20
+}
+
+/// How a frame's volume is cut into bricks to fit the device ([`volume_split`]).
+pub struct VolumeSplit {
+    /// The k-d tree and its bricks ([`brick_plan`]).
+    pub tree: crate::io::brick::KdTree,
+    pub bricks: Vec<crate::io::brick::Brick>,
+    /// The texels of the largest brick with its ghost voxels.
+    pub largest: u64,
+    /// What the job prints: "ray casting in 4 bricks (…, why)".
+    pub line: String,
+}
+
+/// Whether and how a frame of a `dims` volume is cut into bricks on `ctx`: when an axis
+/// exceeds the planner's 3-D texture limit, or when the volume's textures
+/// ([`texture_bytes_per_voxel`]) and the image's buffers exceed the device memory a job
+/// may fill ([`GpuContext::memory`]). `None` when the volume fits whole. Renders
+/// (`jobs::renderer::Renderer`) and their `--dry-run` plans both ask it.
 ///
 /// # Errors
-/// As [`render_owned`]; [`brick_plan`]'s.
+/// A frame bricks cannot composite ([`crate::cpu::raycast::check_owned_settings`]:
+/// MIDA, iso-surfaces, pre-classification, filters of unbounded reach), naming why the
+/// volume must be cut; no cut that fits ([`brick_plan`]).
+pub fn volume_split(
+    ctx: &GpuContext,
+    dims: [usize; 3],
+    settings: &RenderSettings,
+    compact: Option<CompactVolume>,
+    camera: &Camera,
+) -> Result<Option<VolumeSplit>> {
+    let max = ctx.limits.max_texture_dimension_3d as usize;
+    let per_voxel = texture_bytes_per_voxel(settings, compact).max(1);
+    let out = output_bytes(camera);
+    let whole = dims.iter().product::<usize>() as u64 * per_voxel + out;
+    let memory = ctx.memory.as_ref().filter(|m| whole > m.bytes);
+    let why = if dims.iter().any(|&n| n > max) {
+        format!("the {dims:?} volume exceeds the 3-D texture limit of {max} texels per axis")
+    } else if let Some(m) = memory {
+        format!(
+            "the {dims:?} volume's textures and the image's buffers, {}, exceed the {} of \
+             device memory a job may fill",
+            crate::gpu::plan::human_bytes(whole),
+            crate::gpu::plan::human_bytes(m.bytes)
+        )
+    } else {
+        return Ok(None);
+    };
+    crate::cpu::raycast::check_owned_settings(settings).map_err(|e| match e {
+        Error::Invalid { what, message } => Error::Invalid {
+            what,
+            message: format!("{message}; {why}, so it renders in bricks"),
+        },
+        e => e,
+    })?;
+    let max_voxels = ctx
+        .memory
+        .as_ref()
+        .map(|m| m.bytes.saturating_sub(out) / per_voxel);
+    let (tree, bricks) = brick_plan(dims, settings.filter, max, max_voxels)?;
+    let ghost = crate::cpu::field::brick_ghost(settings.filter);
+    let largest = bricks
+        .iter()
+        .map(|b| b.with_ghost(ghost, dims).voxels() as u64)
+        .max()
+        .unwrap_or(0);
+    let line = format!(
+        "ray casting in {} bricks ({why}; the largest brick with its {ghost} ghost voxels \
+         holds {largest} texels)",
+        bricks.len()
+    );
+    Ok(Some(VolumeSplit {
+        tree,
+        bricks,
+        largest,
+        line,
+    }))
+}
+
+/// Renders a volume cut into `bricks` (the leaves of `tree`, from [`brick_plan`]; past
+/// the 3-D texture limit or the device memory, [`volume_split`]) on one GPU: each brick
+/// rendered as a placed session ([`render_owned`]) in turn, so the device holds one
+/// brick at a time, the pieces composited on the host in each pixel's visibility order
+/// (`cpu::composite`). The same samples as one unsplit render: MIP and MinIP equal it
+/// exactly, X-ray and DVR up to the regrouping of their sums by brick.
+///
+/// # Errors
+/// As [`render_owned`].
 pub fn render_bricked(
     ctx: &GpuContext,
     volume: &AnyVolume,
     tf: &TransferFunction,
     camera: &Camera,
     settings: &RenderSettings,
-    max_texels: usize,
+    (tree, bricks): (&crate::io::brick::KdTree, &[crate::io::brick::Brick]),
     progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<(GpuRenderOutput, usize)> {
+) -> Result<GpuRenderOutput> {
     let t_start = Instant::now();
     settings.validate()?;
     tf.validate()?;
     crate::cpu::raycast::check_owned_settings(settings)?;
     volume.check_finite("volume")?;
     let dims = volume.dims();
-    let (tree, bricks) = brick_plan(dims, settings.filter, max_texels)?;
     let ghost = crate::cpu::field::brick_ghost(settings.filter);
     let r = volume.value_range();
     let range = (r.min, r.max);
@@ -842,7 +940,7 @@ pub fn render_bricked(
                 };
                 let hit = pieces[0].2.get(p).copied().unwrap_or(false);
                 let (px, n) = crate::cpu::composite::composite_pixel(
-                    &tree,
+                    tree,
                     d.to_array(),
                     settings,
                     hit,
@@ -856,14 +954,11 @@ pub fn render_bricked(
             }
         });
     timings.total = t_start.elapsed().as_secs_f64();
-    Ok((
-        GpuRenderOutput {
-            output: RenderOutput::from_counts(image, &counts, settings.sample_count),
-            timings,
-            hits: None,
-        },
-        bricks.len(),
-    ))
+    Ok(GpuRenderOutput {
+        output: RenderOutput::from_counts(image, &counts, settings.sample_count),
+        timings,
+        hits: None,
+    })
 }
 
 /// A volume's dimensions, value range and f32 grid.
@@ -1303,6 +1398,22 @@ impl<'c> RaycastSession<'c> {
         let compact_kind = self.compact_kind.filter(|_| self.compact_on);
         crate::cpu::raycast::check_cost(ray_dims, camera, settings)?;
         check_device(ctx, ray_dims, settings, compact_kind)?;
+        // What this session's textures (its brick's, when placed) and the image's
+        // buffers take, against the device memory: a session holds its volume whole.
+        let held = dims.iter().product::<usize>() as u64
+            * texture_bytes_per_voxel(settings, compact_kind)
+            + output_bytes(camera);
+        ctx.check_memory("the ray caster's volume textures", held)
+            .map_err(|e| match e {
+                Error::TooLarge { what, message } => Error::TooLarge {
+                    what,
+                    message: format!(
+                        "{message}; a renderer session holds its volume whole: render the \
+                         frame on its own, which cuts the volume into bricks"
+                    ),
+                },
+                e => e,
+            })?;
         let lut = tf.lut(settings.lut_size).to_real::<f32>();
         let mut params = raycast_params(ray_dims, ray_affine, &lut, ray_range, camera, settings)?;
         if let Some(b) = &self.brick {

@@ -295,7 +295,7 @@ fn setup(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Setup> {
 
 /// `voxlab adaptive --dry-run`: what [`run`] would hold, after loading the input and
 /// checking the request as the run does, rendering nothing: each sampling's frame
-/// ([`frame_plan`]; they render one after another, so the plan is the largest) and the
+/// (`frame_plan`; they render one after another, so the plan is the largest) and the
 /// three images and sample-count images the comparison keeps.
 ///
 /// # Errors

@@ -24,6 +24,8 @@ pub struct DevicePlan {
     pub max_texture_3d: u32,
     /// The limits the environment lowered, one line each.
     pub lowered: Vec<String>,
+    /// The device memory a job may fill, where known (bytes).
+    pub memory_bytes: Option<u64>,
 }
 
 impl DevicePlan {
@@ -37,6 +39,7 @@ impl DevicePlan {
             adapter_max_binding_bytes: ctx.adapter_limits.max_storage_buffer_binding_size,
             max_texture_3d: ctx.limits.max_texture_dimension_3d,
             lowered: ctx.lowered.clone(),
+            memory_bytes: ctx.memory.as_ref().map(|m| m.bytes),
         }
     }
 }
@@ -72,13 +75,16 @@ impl MemoryPlan {
         if let Some(d) = &self.device {
             s += &format!(
                 "device: {} at once, the largest buffer {}, on {}\n\
-                 limits: storage binding {} (adapter: {}), 3-D texture {} per axis\n",
+                 limits: storage binding {} (adapter: {}), 3-D texture {} per axis{}\n",
                 human_bytes(d.peak_bytes),
                 human_bytes(d.largest_buffer_bytes),
                 d.adapter,
                 human_bytes(d.max_binding_bytes),
                 human_bytes(d.adapter_max_binding_bytes),
-                d.max_texture_3d
+                d.max_texture_3d,
+                d.memory_bytes
+                    .map(|m| format!(", device memory {}", human_bytes(m)))
+                    .unwrap_or_default()
             );
             for l in &d.lowered {
                 s += &format!("        {l}\n");

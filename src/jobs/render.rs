@@ -668,8 +668,8 @@ fn check_repeat(req: &RenderRequest) -> Result<()> {
 /// loading the input (for its size) and checking the request, rendering nothing. The
 /// host side is the volume in the working precision and the image; the device side
 /// (GPU) the volume's textures that a frame reads (or the largest brick's, past the 3-D
-/// texture limit: [`crate::gpu::raycast::brick_plan`]; see
-/// [`crate::gpu::raycast::volume_textures`]), the pre-classified colours and
+/// texture limit or the device memory: [`crate::gpu::raycast::volume_split`]; see
+/// [`crate::gpu::raycast::texture_bytes_per_voxel`]), the pre-classified colours and
 /// precomputed gradients where the frame reads them, and the image's output buffers.
 ///
 /// # Errors
@@ -684,12 +684,41 @@ pub fn plan(req: &RenderRequest, progress: &dyn Progress) -> Result<super::plan:
     if let Some(sampling) = req.sampling {
         return plan_sampling(req, &scene, &settings, sampling);
     }
-    plan_frame(&scene, &settings, &super::Engine::open(req.backend)?)
+    let engine = super::Engine::open(req.backend)?;
+    let plan = plan_frame(&scene, &settings, &engine)?;
+    if req.repeat.is_some() {
+        check_session_fits(&scene, &settings, &engine)?;
+    }
+    Ok(plan)
+}
+
+/// Refuses `--repeat` (frames of one renderer session, which holds its volume whole) on
+/// a GPU where the frame's volume is cut into bricks
+/// ([`crate::gpu::raycast::volume_split`]).
+fn check_session_fits(scene: &Scene, settings: &RenderSettings, engine: &Engine) -> Result<()> {
+    let Some(ctx) = engine.gpu() else {
+        return Ok(());
+    };
+    use crate::gpu::raycast::CompactVolume;
+    let compact = CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
+    let dims = scene.volume.dims();
+    match crate::gpu::raycast::volume_split(ctx, dims, settings, compact, &scene.camera)? {
+        Some(cut) => Err(Error::invalid(
+            "--repeat",
+            format!(
+                "times the frames of one renderer session, which holds the volume whole, but \
+                 this frame needs {}: render it without --repeat",
+                cut.line
+            ),
+        )),
+        None => Ok(()),
+    }
 }
 
 /// The memory plan of a single-volume frame of `scene` on `engine`, after every check
 /// its render makes before the work ([`crate::cpu::raycast`]'s cost, and on the GPU
-/// [`crate::gpu::raycast::check_device`] and the bricks past the 3-D texture limit).
+/// [`crate::gpu::raycast::check_device`] and the bricks past the 3-D texture limit or
+/// the device memory).
 /// `render --dry-run` and `compare` (before its CPU render, for the GPU's) call it.
 ///
 /// # Errors
@@ -702,52 +731,29 @@ pub(crate) fn plan_frame(
     let dims = scene.volume.dims();
     crate::cpu::raycast::check_cost(dims, &scene.camera, settings)?;
     let voxels = dims.iter().product::<usize>() as u64;
-    let (w, h) = (scene.camera.width as u64, scene.camera.height as u64);
     let image = image_bytes(&scene.camera, settings);
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
-            let max = ctx.limits.max_texture_dimension_3d as usize;
-            let (texels, split) = if dims.iter().any(|&n| n > max) {
-                crate::cpu::raycast::check_owned_settings(settings)?;
-                let (_, bricks) = crate::gpu::raycast::brick_plan(dims, settings.filter, max)?;
-                let ghost = crate::cpu::field::brick_ghost(settings.filter);
-                let largest = bricks
-                    .iter()
-                    .map(|b| b.with_ghost(ghost, dims).voxels() as u64)
-                    .max()
-                    .unwrap_or(0);
-                let line = format!(
-                    "ray casting in {} bricks (the {dims:?} volume exceeds the 3-D texture \
-                     limit of {max} texels per axis; the largest brick with its {ghost} ghost \
-                     voxels holds {largest} texels)",
-                    bricks.len()
-                );
-                (largest, vec![line])
-            } else {
-                (voxels, Vec::new())
-            };
-            // Rgba32Float volumes: pre-classified colours, precomputed gradients. The
-            // raw values: R32Float and/or, on the hardware path, 16-bit texels; a
-            // prefiltered filter's coefficients: R32Float.
-            use crate::gpu::raycast::{
-                preclassifies, reads_gradient_volume, volume_textures, CompactVolume,
-            };
-            let rgba =
-                16 * (preclassifies(settings) as u64 + reads_gradient_volume(settings) as u64);
+            use crate::gpu::raycast::{output_bytes, texture_bytes_per_voxel, CompactVolume};
             let compact =
                 CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
-            crate::gpu::raycast::check_device(ctx, dims, settings, compact)?;
-            let volume = match volume_textures(settings, compact) {
-                _ if settings.filter.prefiltered() => 4,
-                (exact, compact) => {
-                    4 * exact as u64 + compact.map_or(0, |_| CompactVolume::BYTES_PER_VOXEL)
-                }
+            let cut =
+                crate::gpu::raycast::volume_split(ctx, dims, settings, compact, &scene.camera)?;
+            let (texels, split) = match cut {
+                Some(c) => (c.largest, vec![c.line]),
+                None => (voxels, Vec::new()),
             };
-            let out = w * h * 20;
-            let peak = texels * (volume + rgba) + out;
-            // The largest single texture: R32Float (4 bytes a texel) where there is one.
-            let device = super::plan::DevicePlan::on(ctx, peak, out.max(texels * volume.min(4)));
+            crate::gpu::raycast::check_device(ctx, dims, settings, compact)?;
+            let out = output_bytes(&scene.camera);
+            let per_voxel = texture_bytes_per_voxel(settings, compact);
+            // The largest single object: the output or the volume's values (at most 4
+            // bytes a texel; a 16-bit compact texture alone 2).
+            let device = super::plan::DevicePlan::on(
+                ctx,
+                texels * per_voxel + out,
+                out.max(texels * per_voxel.min(4)),
+            );
             // The host keeps the volume as f32 (and each brick's copy).
             (voxels * 4 + texels * 4 + image, Some(device), split)
         }
@@ -840,6 +846,7 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
                     "times one frame; it excludes --accumulate",
                 ));
             }
+            check_session_fits(&scene, &settings, &renderer.engine())?;
             let t_prep = Instant::now();
             let prepared = renderer.prepare(&scene, &settings)?;
             let prepare = since(t_prep);
@@ -942,20 +949,16 @@ fn plan_multi(
 ) -> Result<super::plan::MemoryPlan> {
     let vols = multi_volumes(req, scene, progress)?;
     let engine = Engine::open(req.backend)?;
-    let voxels: Vec<u64> = vols
+    let all: u64 = vols
         .iter()
         .map(|v| v.volume.dims().iter().product::<usize>() as u64)
-        .collect();
-    let all: u64 = voxels.iter().sum();
-    let (w, h) = (scene.camera.width, scene.camera.height);
+        .sum();
     let image = image_bytes(&scene.camera, settings);
     let (host, device) = match engine.gpu() {
         Some(ctx) => {
             crate::gpu::multi::check(ctx, &vols, &scene.camera, settings)?;
-            // One band's RGBA f32 pixels and u32 counts.
-            let band = (crate::gpu::multi::rows_per_band(ctx, w, h) * w * 20) as u64;
-            let largest = (4 * voxels.iter().max().copied().unwrap_or(0)).max(band);
-            let device = super::plan::DevicePlan::on(ctx, 4 * all + band, largest);
+            let (peak, largest) = crate::gpu::multi::device_bytes(ctx, &vols, &scene.camera);
+            let device = super::plan::DevicePlan::on(ctx, peak, largest);
             (4 * all + image, Some(device))
         }
         None => {

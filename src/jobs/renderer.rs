@@ -106,17 +106,21 @@ impl Renderer {
             (Backend::Gpu, Some(ctx)) => {
                 settings.validate()?;
                 tf.validate()?;
-                let max = ctx.limits.max_texture_dimension_3d as usize;
-                if v.dims().iter().any(|&n| n > max) {
-                    // Past the 3-D texture limit: bricks, composited on the host.
-                    let (g, n) = crate::gpu::raycast::render_bricked(
-                        ctx, v, tf, cam, settings, max, progress,
+                use crate::gpu::raycast::{volume_split, CompactVolume};
+                let compact = CompactVolume::of(ctx, v).filter(|_| CompactVolume::enabled());
+                if let Some(cut) = volume_split(ctx, v.dims(), settings, compact, cam)? {
+                    // Past the 3-D texture limit or the device memory: bricks, one on
+                    // the device at a time, composited on the host.
+                    let g = crate::gpu::raycast::render_bricked(
+                        ctx,
+                        v,
+                        tf,
+                        cam,
+                        settings,
+                        (&cut.tree, &cut.bricks),
+                        progress,
                     )?;
-                    split = Some(format!(
-                        "ray casting in {n} bricks (the {:?} volume exceeds the 3-D texture \
-                         limit of {max} texels per axis)",
-                        v.dims()
-                    ));
+                    split = Some(cut.line);
                     (g.output, Some(g.timings), None)
                 } else {
                     let mut session = RaycastSession::new(ctx, v)?;
