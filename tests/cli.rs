@@ -667,8 +667,9 @@ fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
     let dir = scratch("cli_device_memory");
     let out = dir.join("never.png");
     // Adaptive sampling of 32³ into 64²: the volume (4 bytes a voxel) and two
-    // importance volumes (16 each), 1,179,648 bytes, and one band of 64 rows' rays,
-    // pixels and counts (52 bytes a pixel), 212,992: 1.3 MiB.
+    // importance volumes (16 each), 1,179,648 bytes, and one band's rays, pixels and
+    // counts (52 bytes a pixel): 64 KiB of memory make the binding 8 KiB, the rays of 4
+    // rows (32 bytes a pixel), so 13,312 bytes: 1.1 MiB.
     let size = ["--width", "64", "--height", "64"];
     for (args, says) in [
         (
@@ -677,7 +678,7 @@ fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
                 &size,
             ]
             .concat(),
-            "adaptive render is too large: 1.3 MiB on the device exceed the 64.0 KiB of \
+            "adaptive render is too large: 1.1 MiB on the device exceed the 64.0 KiB of \
              device memory a job may fill (VOXLAB_GPU_MEMORY)",
         ),
         (

@@ -526,6 +526,12 @@ fn short_scan_cone_beam_with_parker_weights() {
 /// RTK's example at 64³ on the GPU under a 256 KiB binding: 16-slice slabs of 16 KiB
 /// slices, 32-view batches of 7,680-byte views, 8-view ramp chunks.
 fn rtk_on_the_gpu(out: &std::path::Path, binding: Option<&str>, extra: &[&str]) -> Output {
+    let args = rtk_args(out, extra);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    common::voxlab_with_binding(&args, binding)
+}
+
+fn rtk_args(out: &std::path::Path, extra: &[&str]) -> Vec<String> {
     let mut args = vec![
         "reconstruct".to_string(),
         ct("rtk_joseph32.npy"),
@@ -541,8 +547,7 @@ fn rtk_on_the_gpu(out: &std::path::Path, binding: Option<&str>, extra: &[&str]) 
         s(out).into(),
     ];
     args.extend(extra.iter().map(|a| a.to_string()));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    common::voxlab_with_binding(&args, binding)
+    args
 }
 
 use std::process::Output;
@@ -570,6 +575,25 @@ fn a_split_gpu_fdk_equals_the_unsplit_one_and_says_so() {
         stderr(&o)
     );
     // Bit for bit: the same per-voxel sums in the same order.
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&split).unwrap()
+    );
+    // 2 MiB of device memory: bindings of an eighth of it, the same split.
+    std::fs::remove_file(&split).unwrap();
+    let args = rtk_args(&split, &[]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = common::voxlab_command(&args)
+        .env_remove("VOXLAB_GPU_MAX_BINDING")
+        .env("VOXLAB_GPU_MEMORY", "2MiB")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("backprojection in 4 slabs of 16 slices × 2 batches of 32 views"),
+        "{}",
+        stderr(&o)
+    );
     assert_eq!(
         std::fs::read(&whole).unwrap(),
         std::fs::read(&split).unwrap()

@@ -235,6 +235,8 @@ impl GpuContext {
         let summary = AdapterSummary::from_info(&adapter.get_info());
         let (memory, note) = super::plan::device_memory(&summary.name, |k| std::env::var(k).ok())?;
         lowered.extend(note);
+        let (limits, note) = super::plan::binding_within_memory(limits, memory.as_ref());
+        lowered.extend(note);
         Ok(GpuContext {
             adapter,
             device,

@@ -111,6 +111,34 @@ pub fn device_memory(
     })
 }
 
+/// The most storage bindings of the planner's size a job holds at once (D²VR's
+/// projections and the FVR spectrum: 8): where the device memory is known, the
+/// planner's binding is at most this fraction of it, so that every job's pieces fit.
+pub const BINDINGS_AT_ONCE: u64 = 8;
+
+/// `limits` with the storage binding capped at a [`BINDINGS_AT_ONCE`]th of `memory`,
+/// and a line when that lowers it.
+pub fn binding_within_memory(
+    mut limits: wgpu::Limits,
+    memory: Option<&DeviceMemory>,
+) -> (wgpu::Limits, Option<String>) {
+    let Some(m) = memory else {
+        return (limits, None);
+    };
+    let cap = (m.bytes / BINDINGS_AT_ONCE) & !3;
+    if cap.max(4) >= limits.max_storage_buffer_binding_size {
+        return (limits, None);
+    }
+    let was = limits.max_storage_buffer_binding_size;
+    limits.max_storage_buffer_binding_size = cap.max(4);
+    let note = format!(
+        "storage binding lowered to {} bytes, an {BINDINGS_AT_ONCE}th of the device memory \
+         (a job holds up to {BINDINGS_AT_ONCE} bindings at once; it was {was})",
+        cap.max(4)
+    );
+    (limits, Some(note))
+}
+
 /// Parses a byte count: digits, optionally followed by `K`/`KiB`, `M`/`MiB`, `G`/`GiB`
 /// (powers of 1024), case-insensitive. `None` for anything else or for zero.
 pub fn parse_bytes(text: &str) -> Option<u64> {
@@ -354,6 +382,28 @@ mod tests {
             e.contains("VOXLAB_GPU_MEMORY") && e.contains("'lots'"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_binding_is_at_most_an_eighth_of_a_known_memory() {
+        let limits = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 27,
+            ..wgpu::Limits::default()
+        };
+        let memory = |bytes| DeviceMemory {
+            bytes,
+            source: "test".into(),
+        };
+        // 1 MiB of memory: bindings of 128 KiB.
+        let (l, note) = binding_within_memory(limits.clone(), Some(&memory(1 << 20)));
+        assert_eq!(l.max_storage_buffer_binding_size, 1 << 17);
+        assert!(note.unwrap().contains("lowered to 131072 bytes, an 8th"));
+        // An H200's 126.9 GB: an eighth is past the binding, which stays.
+        let (l, note) = binding_within_memory(limits.clone(), Some(&memory(126_900_000_000)));
+        assert_eq!(l.max_storage_buffer_binding_size, 1 << 27);
+        assert_eq!(note, None);
+        let (l, note) = binding_within_memory(limits, None);
+        assert_eq!((l.max_storage_buffer_binding_size, note), (1 << 27, None));
     }
 
     #[test]
