@@ -155,7 +155,7 @@ fn classify_sample(p: vec3<f32>) -> vec4<f32> {
         }
         return classify(sample_value(p));
     }
-    let s = sample_tex(preclassified, p);
+    let s = sample_tex(preclassified, p - params.brick.xyz);
     let a = min(max(s.w, 0.0), 1.0);
     if (a <= 0.0) {
         return vec4<f32>(0.0);

@@ -99,6 +99,20 @@ fn cases(file: &str) -> Vec<(&'static str, RenderRequest, bool)> {
     r.scene.ert = 1.0;
     r.scene.view.elevation = 60.0;
     out.push(("dvr f32 unshaded", r, false));
+    // Pre-classified: each brick classifies its own voxels and ghosts, sampled at
+    // p − origin; with empty-space skipping over its own cells.
+    let mut r = request(file, Mode::Dvr, Backend::Cpu);
+    r.scene.classification = voxlab::settings::Classification::Pre;
+    r.scene.ert = 1.0;
+    r.scene.view.azimuth = 40.0;
+    out.push(("dvr pre-classified", r, false));
+    let mut r = request(file, Mode::Dvr, Backend::CpuF32);
+    r.scene.classification = voxlab::settings::Classification::Pre;
+    r.scene.ert = 1.0;
+    r.scene.accel.skip_empty = Some(true);
+    r.scene.accel.block_size = Some(4);
+    r.scene.filter = Filter::CatmullRom;
+    out.push(("dvr f32 pre-classified catmull-rom, skipping", r, false));
     out
 }
 

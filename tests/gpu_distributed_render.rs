@@ -99,10 +99,16 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         (Mode::Minip, Filter::CatmullRom, true),
         (Mode::Xray, Filter::Trilinear, false),
         (Mode::Dvr, Filter::Trilinear, false),
+        // Pre-classified (each brick classifies its own voxels on the device).
+        (Mode::Dvr, Filter::Nearest, false),
     ] {
         let mut req = request(file.to_str().unwrap(), mode);
         req.scene.filter = filter;
         req.scene.ert = 1.0;
+        if filter == Filter::Nearest {
+            req.scene.classification = voxlab::settings::Classification::Pre;
+            req.scene.accel.skip_empty = Some(true);
+        }
         let (tf, camera, settings) =
             voxlab::jobs::render::build_view(&req.scene, &volume, false).unwrap();
         let want = RaycastSession::new(ctx, &volume)

@@ -446,13 +446,14 @@ pub fn render_owned_with<R: Real, F: Field<R>>(
     })
 }
 
-/// What a brick renders (`render_owned`): DVR, MIP, MinIP and X-ray (MIDA and
-/// iso-surfaces look along the whole ray), post-classified, with a filter of finite
-/// reach (the B-spline-interpolating and full-sinc filters reach across the whole
-/// volume).
+/// What a brick renders (`render_owned`): DVR (post- or pre-classified: a brick
+/// classifies its own voxels and ghosts, the values the whole grid classifies there),
+/// MIP, MinIP and X-ray (MIDA and iso-surfaces look along the whole ray), with a filter
+/// of finite reach (the B-spline-interpolating and full-sinc filters reach across the
+/// whole volume).
 ///
 /// # Errors
-/// Any other mode, iso-surfaces, pre-classification, those filters.
+/// Any other mode, iso-surfaces, those filters.
 pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
     if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
         || !s.iso_surfaces.is_empty()
@@ -461,12 +462,6 @@ pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
             "--mode",
             "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
              the whole ray)",
-        ));
-    }
-    if s.mode == Mode::Dvr && s.classification == Classification::Pre {
-        return Err(Error::invalid(
-            "--classification pre",
-            "does not go with bricks (post-classification does)",
         ));
     }
     if s.filter.prefiltered() || s.filter == Filter::Sinc {
@@ -510,10 +505,16 @@ fn setup_for<R: Real, F: Field<R>>(
     // World-space gradient = J⁻ᵀ × index-space gradient.
     let normal = M3::from_dmat3(lin.inverse().transpose());
     let lut = tf.lut(settings.lut_size).to_real::<R>();
-    let pre = match (settings.mode, settings.classification, field.voxel_values()) {
-        (Mode::Dvr | Mode::Mida, Classification::Pre, Some(values)) => {
-            Some(preclassify(values, &lut).map(|g| prepare(&g, settings.filter)))
-        }
+    // A brick classifies its own voxels (with their ghosts), placed at its origin.
+    let brick_origin = field.brick().map_or(V3::zero(), |(_, o)| {
+        V3::new(R::of(o[0] as f64), R::of(o[1] as f64), R::of(o[2] as f64))
+    });
+    let voxels = field.voxel_values().or(field.brick().map(|(g, _)| g));
+    let pre = match (settings.mode, settings.classification, voxels) {
+        (Mode::Dvr | Mode::Mida, Classification::Pre, Some(values)) => Some((
+            preclassify(values, &lut).map(|g| prepare(&g, settings.filter)),
+            brick_origin,
+        )),
         (Mode::Dvr | Mode::Mida, Classification::Pre, None) => {
             return Err(Error::invalid(
                 "classification",
@@ -575,12 +576,10 @@ fn setup_for<R: Real, F: Field<R>>(
         Classification::Post => field.sampled_grid(),
         Classification::Pre => field.voxel_values(),
     };
-    // A brick skips through the cells of its own voxels, placed at its origin.
+    // A brick skips through the cells of its own voxels (what its filter samples, or
+    // what it pre-classifies), placed at its origin.
     let (skip_grid, skip_origin) = match (skip_voxels, field.brick()) {
-        (None, Some((g, o))) if settings.classification == Classification::Post => (
-            Some(g),
-            V3::new(R::of(o[0] as f64), R::of(o[1] as f64), R::of(o[2] as f64)),
-        ),
+        (None, Some((g, _))) => (Some(g), brick_origin),
         _ => (skip_voxels, V3::zero()),
     };
     let setup = Setup {

@@ -52,8 +52,10 @@ pub(crate) struct SampleSetup<R> {
     pub(crate) lut: LutR<R>,
     /// The 2D transfer function's table (DVR, post-classification), if any.
     pub(crate) lut2: Option<Lut2R<R>>,
-    /// Pre-classified opacity-weighted colour grids `(αr, αg, αb, α)`, if any.
-    pub(crate) pre: Option<[Grid<R>; 4]>,
+    /// Pre-classified opacity-weighted colour grids `(αr, αg, αb, α)`, if any, and the
+    /// whole grid's voxel their voxel 0 is (a brick's origin, [`super::field::BrickField`];
+    /// zero for a whole grid): `p` is sampled at `p − origin`, exactly.
+    pub(crate) pre: Option<([Grid<R>; 4], V3<R>)>,
     pub(crate) filter: Filter,
     pub(crate) k: ShadingR<R>,
     pub(crate) shade: bool,
@@ -85,7 +87,8 @@ pub(crate) fn classify_sample<R: Real, F: Field<R>>(
             };
             ([c[0], c[1], c[2]], c[3])
         }
-        Some(g) => {
+        Some((g, origin)) => {
+            let p = p - *origin;
             let a = sample(&g[3], s.filter, p).max(R::zero()).min(R::one());
             if a <= R::zero() {
                 return ([R::zero(); 3], R::zero());
