@@ -233,7 +233,8 @@ impl GpuContext {
         }))
         .map_err(|e| Error::Gpu(format!("could not open the device: {e}")))?;
         let summary = AdapterSummary::from_info(&adapter.get_info());
-        let (memory, note) = super::plan::device_memory(&summary.name, |k| std::env::var(k).ok())?;
+        let sheet = super::peak::peak_of(&summary.name).map(|p| (p.part, p.memory_gb));
+        let (memory, note) = super::plan::device_memory(sheet, |k| std::env::var(k).ok())?;
         lowered.extend(note);
         let (limits, note) = super::plan::binding_within_memory(limits, memory.as_ref());
         lowered.extend(note);

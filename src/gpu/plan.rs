@@ -58,23 +58,19 @@ pub struct DeviceMemory {
     pub source: String,
 }
 
-/// The planner's [`DeviceMemory`] for the adapter named `name`, with [`MEMORY_ENV`] as
-/// `var` returns it, and a line when the variable set or lowered it.
+/// The planner's [`DeviceMemory`] for an adapter whose data sheet (`gpu::peak`) gives
+/// `sheet` (the part and its memory in GB), with [`MEMORY_ENV`] as `var` returns it,
+/// and a line when the variable set or lowered it.
 ///
 /// # Errors
 /// [`Error::Invalid`] naming the variable when its value is not a positive byte count.
 pub fn device_memory(
-    name: &str,
+    sheet: Option<(&str, f64)>,
     var: impl Fn(&str) -> Option<String>,
 ) -> Result<(Option<DeviceMemory>, Option<String>)> {
-    let sheet = super::peak::peak_of(name).map(|p| DeviceMemory {
-        bytes: (p.memory_gb * 1e9 * DATA_SHEET_SHARE) as u64,
-        source: format!(
-            "{:.0} % of the {}'s {} GB",
-            100.0 * DATA_SHEET_SHARE,
-            p.part,
-            p.memory_gb
-        ),
+    let sheet = sheet.map(|(part, gb)| DeviceMemory {
+        bytes: (gb * 1e9 * DATA_SHEET_SHARE) as u64,
+        source: format!("{:.0} % of the {part}'s {gb} GB", 100.0 * DATA_SHEET_SHARE),
     });
     let Some(text) = var(MEMORY_ENV).filter(|s| !s.trim().is_empty()) else {
         return Ok((sheet, None));
@@ -355,20 +351,21 @@ mod tests {
         let none = |_: &str| None;
         let set = |v: &'static str| move |k: &str| (k == MEMORY_ENV).then(|| v.to_string());
         // A part the table knows: 90 % of its data sheet's 141 GB.
-        let (m, note) = device_memory("NVIDIA H200", none).unwrap();
+        let h200 = Some(("NVIDIA H200 (SXM, HBM3e)", 141.0));
+        let (m, note) = device_memory(h200, none).unwrap();
         let m = m.unwrap();
         assert_eq!(m.bytes, 126_900_000_000);
         assert_eq!(m.source, "90 % of the NVIDIA H200 (SXM, HBM3e)'s 141 GB");
         assert_eq!(note, None);
         // The variable lowers it, and never raises it.
-        let (m, note) = device_memory("NVIDIA H200", set("64GiB")).unwrap();
+        let (m, note) = device_memory(h200, set("64GiB")).unwrap();
         assert_eq!(m.unwrap().bytes, 64 << 30);
         assert!(note.unwrap().contains("lowered to 68719476736 bytes"));
-        let (m, note) = device_memory("NVIDIA H200", set("1024GiB")).unwrap();
+        let (m, note) = device_memory(h200, set("1024GiB")).unwrap();
         assert_eq!(m.unwrap().bytes, 126_900_000_000);
         assert_eq!(note, None);
         // An adapter the table does not know: unknown, or what the variable says.
-        let lavapipe = "llvmpipe (LLVM 15.0.6, 256 bits)";
+        let lavapipe = None;
         assert_eq!(device_memory(lavapipe, none).unwrap(), (None, None));
         let (m, note) = device_memory(lavapipe, set("1MiB")).unwrap();
         assert_eq!(m.unwrap().bytes, 1 << 20);
