@@ -195,15 +195,17 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
     };
     text(&run(&args(&one, "mip"), None));
-    for (limit, why) in [
+    for (limit, why, limits) in [
         (
             ("VOXLAB_GPU_MAX_TEXTURE_3D", "32"),
             "exceeds the 3-D texture limit of 32 texels per axis",
+            "3-D texture 32 per axis",
         ),
         (
             ("VOXLAB_GPU_MEMORY", "256KiB"),
             "textures and the image's buffers, 512.0 KiB, exceed the 256.0 KiB of device \
              memory a job may fill",
+            ", device memory 256.0 KiB",
         ),
     ] {
         let mut dry = args(&split, "mip");
@@ -211,6 +213,7 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         let said = text(&run(&dry, Some(limit)));
         assert!(said.contains("split:  ray casting in"), "{said}");
         assert!(said.contains(why), "{limit:?}: {said}");
+        assert!(said.contains(limits), "{limit:?}: {said}");
         assert!(!split.exists());
         let said = text(&run(&args(&split, "mip"), Some(limit)));
         assert!(
