@@ -385,7 +385,9 @@ fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
     mesh_pixel = idx;
     ray_hit = false;
     let px = cast_ray(camera_ray(col, row), ray_offset(col, row));
-    out_pixels[idx] = px.value;
+    if (!carries_state()) {
+        out_pixels[idx] = px.value;
+    }
     // A brick's partial image marks the rays that meet the whole volume's box in the
     // top bit of the count (its background is left to the composite).
     var samples = px.samples;
@@ -399,6 +401,12 @@ fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
 struct MeshRanges {
     count: u32,
     range: array<vec2<u32>, 8>,
+}
+
+// Whether this frame's pixels are ray states carried from brick to brick (MIDA in a
+// brick: shaders/shared/modes_cast.wgsl: mida_load, mida_store) rather than colours.
+fn carries_state() -> bool {
+    return params.brick.w == 1.0 && params.image.z == MODE_MIDA;
 }
 
 // Whether the ray being cast meets the volume's box (within the clipping box).

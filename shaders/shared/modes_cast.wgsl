@@ -9,57 +9,112 @@
 
 #import modes
 
-// mirrors src/cpu/modes.rs: cast_mida
+// mirrors src/cpu/modes.rs: MidaState
+struct MidaState {
+    c: vec3<f32>,
+    a: f32,
+    running: f32,
+    best: f32,
+    best_rgba: vec4<f32>,
+    started: bool,
+}
+
+fn mida_start() -> MidaState {
+    return MidaState(vec3<f32>(0.0), 0.0, 0.0, -BIG, vec4<f32>(0.0), false);
+}
+
+// mirrors src/cpu/modes.rs: mida_sample
+fn mida_sample(st: ptr<function, MidaState>, p: vec3<f32>, len: f32, speed: f32, light: vec3<f32>, half_vec: vec3<f32>) {
+    let v = sample_value(p);
+    let sn = (v - params.mode_params.y) * params.mode_params.z;
+    var delta = 0.0;
+    if ((*st).started && sn > (*st).running) {
+        delta = sn - (*st).running;
+    }
+    if ((*st).started) {
+        (*st).running = max((*st).running, sn);
+    } else {
+        (*st).running = sn;
+    }
+    (*st).started = true;
+    let beta = mida_beta(delta, params.mode_params.x);
+    let s = classify_sample(p);
+    if (v > (*st).best) {
+        (*st).best = v;
+        (*st).best_rgba = s;
+    }
+    if (s.w <= 0.0) {
+        (*st).c = beta * (*st).c;
+        (*st).a = beta * (*st).a;
+        return;
+    }
+    let alpha = corrected_alpha(s.w, len, speed);
+    var rgb = s.xyz;
+    if (params.flags.y == 1u) {
+        rgb = shade_sample(p, rgb, light, half_vec);
+    }
+    let w = (1.0 - beta * (*st).a) * alpha;
+    (*st).c = beta * (*st).c + w * rgb;
+    (*st).a = beta * (*st).a + w;
+}
+
+// mirrors src/cpu/modes.rs: mida_finish (unshaded MIP colour, as on the CPU)
+fn mida_finish(st: MidaState) -> vec4<f32> {
+    let gamma = params.mode_params.x;
+    var c = st.c;
+    var a = st.a;
+    if (gamma > 0.0) {
+        c = (1.0 - gamma) * c + gamma * st.best_rgba.w * st.best_rgba.xyz;
+        a = (1.0 - gamma) * a + gamma * st.best_rgba.w;
+    }
+    return over_background(c, a);
+}
+
+// A brick's MIDA state, three vec4 per pixel in out_pixels (carried_pixel):
+// (c, a), (running, best, started, 0), best_rgba. mirrors src/gpu/raycast.rs: carried_mida
+fn mida_load(i: u32) -> MidaState {
+    let x = out_pixels[3u * i + 1u];
+    return MidaState(out_pixels[3u * i].xyz, out_pixels[3u * i].w, x.x, x.y, out_pixels[3u * i + 2u], x.z == 1.0);
+}
+
+fn mida_store(i: u32, st: MidaState) {
+    out_pixels[3u * i] = vec4<f32>(st.c, st.a);
+    out_pixels[3u * i + 1u] = vec4<f32>(st.running, st.best, select(0.0, 1.0, st.started), 0.0);
+    out_pixels[3u * i + 2u] = st.best_rgba;
+}
+
+// mirrors src/cpu/modes.rs: cast_mida. A brick (params.brick.w = 1) takes the run of
+// steps it owns from the state the bricks in front of it left, and leaves the state
+// for the bricks behind (the host finishes the pixel: src/gpu/raycast.rs: render_bricked).
 fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {
     let light = ray_light(ray);
     let half_vec = normalize_or_zero(light - ray.dir);
-    let gamma = params.mode_params.x;
-    var c = vec3<f32>(0.0);
-    var a = 0.0;
-    var running = 0.0;
-    var best = -BIG;
-    var best_p = o;
-    for (var k = 0u; k < n; k++) {
+    let brick = params.brick.w == 1.0;
+    var first = 0u;
+    var last = n - 1u;
+    var st = mida_start();
+    if (brick) {
+        let own = own_range(n, t_in, t_in, t_out, dt, o, d);
+        if (own.x == 0u) {
+            return Pixel(vec4<f32>(0.0), 0u);
+        }
+        first = own.y;
+        last = own.z;
+        st = mida_load(mesh_pixel);
+        if (!st.started) {
+            st = mida_start();
+        }
+    }
+    for (var k = first; k <= last; k++) {
         let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
         let len = segment_length(k, n, t_in, t_in, t_out, dt);
-        let v = sample_value(p);
-        let sn = (v - params.mode_params.y) * params.mode_params.z;
-        var delta = 0.0;
-        if (k > 0u && sn > running) {
-            delta = sn - running;
-        }
-        if (k == 0u) {
-            running = sn;
-        } else {
-            running = max(running, sn);
-        }
-        if (v > best) {
-            best = v;
-            best_p = p;
-        }
-        let beta = mida_beta(delta, gamma);
-        let s = classify_sample(p);
-        if (s.w <= 0.0) {
-            c = beta * c;
-            a = beta * a;
-            continue;
-        }
-        let alpha = corrected_alpha(s.w, len, speed);
-        var rgb = s.xyz;
-        if (params.flags.y == 1u) {
-            rgb = shade_sample(p, rgb, light, half_vec);
-        }
-        let w = (1.0 - beta * a) * alpha;
-        c = beta * c + w * rgb;
-        a = beta * a + w;
+        mida_sample(&st, p, len, speed, light, half_vec);
     }
-    if (gamma > 0.0) {
-        // Unshaded, as on the CPU.
-        let s = classify_sample(best_p);
-        c = (1.0 - gamma) * c + gamma * s.w * s.xyz;
-        a = (1.0 - gamma) * a + gamma * s.w;
+    if (brick) {
+        mida_store(mesh_pixel, st);
+        return Pixel(vec4<f32>(0.0), last + 1u - first);
     }
-    return Pixel(over_background(c, a), n);
+    return Pixel(mida_finish(st), n);
 }
 
 // mirrors src/cpu/modes.rs: in_shadow

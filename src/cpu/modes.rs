@@ -251,6 +251,102 @@ pub fn first_iso_hit<R: Real, F: Field<R>>(
     None
 }
 
+/// A MIDA ray's state after its first samples, front to back: everything a later
+/// sample needs, so that a ray cut into runs (the bricks of a split render, one after
+/// another in the ray's order) ends with the unsplit ray's state.
+/// Mirrors `shaders/shared/modes_cast.wgsl: MidaState`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MidaState<R> {
+    /// The accumulated premultiplied colour and opacity.
+    pub c: [R; 3],
+    pub a: R,
+    /// The running maximum `m` of the normalised values (meaningful once `started`).
+    pub running: R,
+    /// The largest raw value so far and its sample's unshaded colour and opacity: the
+    /// MIP colour of the blend for γ > 0.
+    pub best: R,
+    pub best_rgba: [R; 4],
+    /// Whether the ray has taken a sample.
+    pub started: bool,
+}
+
+impl<R: Real> Default for MidaState<R> {
+    fn default() -> Self {
+        MidaState {
+            c: [R::zero(); 3],
+            a: R::zero(),
+            running: R::zero(),
+            best: R::neg_infinity(),
+            best_rgba: [R::zero(); 4],
+            started: false,
+        }
+    }
+}
+
+/// Takes the MIDA sample at `p` (opacity-correction exponent `e`) into `st`.
+/// Mirrors `shaders/shared/modes_cast.wgsl: mida_sample`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub(crate) fn mida_sample<R: Real, F: Field<R>>(
+    st: &mut MidaState<R>,
+    field: &F,
+    s: &SampleSetup<R>,
+    m: &ModeSetup<R>,
+    p: V3<R>,
+    e: R,
+    (light, half): (V3<R>, V3<R>),
+) {
+    let v = field.value(p);
+    let sn = (v - m.lo) * m.inv_range;
+    let delta = if st.started && sn > st.running {
+        sn - st.running
+    } else {
+        R::zero()
+    };
+    st.running = if st.started { st.running.max(sn) } else { sn };
+    st.started = true;
+    let beta = mida_beta(delta, m.gamma);
+    let (rgb, alpha) = classify_sample(field, s, p);
+    if v > st.best {
+        st.best = v;
+        st.best_rgba = [rgb[0], rgb[1], rgb[2], alpha];
+    }
+    if alpha <= R::zero() {
+        for ch in st.c.iter_mut() {
+            *ch = beta * *ch;
+        }
+        st.a = beta * st.a;
+        return;
+    }
+    let alpha = R::one() - transmit_pow(R::one() - alpha, e);
+    let rgb = if s.shade {
+        shade_sample(field, s, p, rgb, light, half)
+    } else {
+        rgb
+    };
+    let w = (R::one() - beta * st.a) * alpha;
+    for (ch, x) in st.c.iter_mut().zip(rgb) {
+        *ch = beta * *ch + w * x;
+    }
+    st.a = beta * st.a + w;
+}
+
+/// A MIDA ray's pixel from its state after its last sample: for γ > 0 blended with the
+/// MIP colour (unshaded: on a plateau of the maximum, rounding picks which sample holds
+/// it, and the gradient there is ill-defined; the value, and so its colour, is not),
+/// then over the background `bg`. Mirrors `shaders/shared/modes_cast.wgsl: mida_finish`.
+pub fn mida_finish<R: Real>(st: &MidaState<R>, gamma: R, bg: [R; 4]) -> [R; 4] {
+    let (mut c, mut a) = (st.c, st.a);
+    if gamma > R::zero() {
+        let [r, g, b, alpha] = st.best_rgba;
+        for (ch, x) in c.iter_mut().zip([r, g, b]) {
+            *ch = (R::one() - gamma) * *ch + gamma * alpha * x;
+        }
+        a = (R::one() - gamma) * a + gamma * alpha;
+    }
+    over_background(c, a, bg)
+}
+
 /// MIDA along one ray; returns the RGBA pixel and the samples taken.
 /// Mirrors `shaders/shared/modes_cast.wgsl: cast_mida`.
 pub(crate) fn cast_mida<R: Real, F: Field<R>>(
@@ -260,59 +356,14 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
     span: &Span<R>,
     dir: glam::DVec3,
 ) -> ([R; 4], u32) {
-    let (light, half) = light_half(s.light, dir);
-    let mut c = [R::zero(); 3];
-    let mut a = R::zero();
-    let mut running = R::zero();
-    let mut best = R::neg_infinity();
-    let mut best_p = span.o;
+    let lh = light_half(s.light, dir);
+    let mut st = MidaState::default();
     for k in 0..span.n {
         let (p, len) = span.segment(k);
-        let v = field.value(p);
-        let sn = (v - m.lo) * m.inv_range;
-        let delta = if k > 0 && sn > running {
-            sn - running
-        } else {
-            R::zero()
-        };
-        running = if k == 0 { sn } else { running.max(sn) };
-        if v > best {
-            best = v;
-            best_p = p;
-        }
-        let beta = mida_beta(delta, m.gamma);
-        let (rgb, alpha) = classify_sample(field, s, p);
-        if alpha <= R::zero() {
-            for ch in c.iter_mut() {
-                *ch = beta * *ch;
-            }
-            a = beta * a;
-            continue;
-        }
         let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
-        let alpha = R::one() - transmit_pow(R::one() - alpha, e);
-        let rgb = if s.shade {
-            shade_sample(field, s, p, rgb, light, half)
-        } else {
-            rgb
-        };
-        let w = (R::one() - beta * a) * alpha;
-        for ch in 0..3 {
-            c[ch] = beta * c[ch] + w * rgb[ch];
-        }
-        a = beta * a + w;
+        mida_sample(&mut st, field, s, m, p, e, lh);
     }
-    if m.gamma > R::zero() {
-        // Unshaded: on a plateau of the maximum, rounding picks which sample holds it,
-        // and the gradient there is ill-defined; the value (and so its colour) is not.
-        let (rgb, alpha) = classify_sample(field, s, best_p);
-        let g = m.gamma;
-        for ch in 0..3 {
-            c[ch] = (R::one() - g) * c[ch] + g * alpha * rgb[ch];
-        }
-        a = (R::one() - g) * a + g * alpha;
-    }
-    (over_background(c, a, s.bg), span.n as u32)
+    (mida_finish(&st, m.gamma, s.bg), span.n as u32)
 }
 
 /// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples

@@ -455,13 +455,29 @@ pub fn render_owned_with<R: Real, F: Field<R>>(
 /// # Errors
 /// Any other mode, iso-surfaces, those filters.
 pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
-    if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
+    check_split_settings(s, false)
+}
+
+/// [`check_owned_settings`], and MIDA too where `carried`: bricks rendered in turn in
+/// each ray's order, each ray's MIDA state handed from one brick to the next
+/// (`gpu::raycast::render_bricked`, one GPU).
+///
+/// # Errors
+/// As [`check_owned_settings`].
+pub fn check_split_settings(s: &RenderSettings, carried: bool) -> Result<()> {
+    let mida = carried && s.mode == Mode::Mida;
+    if !(matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray) || mida)
         || !s.iso_surfaces.is_empty()
     {
         return Err(Error::invalid(
             "--mode",
-            "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
-             the whole ray)",
+            if carried {
+                "bricks composite DVR, MIP, MinIP, X-ray or MIDA (iso-surfaces look along \
+                 the whole ray)"
+            } else {
+                "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
+                 the whole ray)"
+            },
         ));
     }
     if s.filter.prefiltered() || s.filter == Filter::Sinc {

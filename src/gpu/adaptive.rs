@@ -407,6 +407,7 @@ pub fn render(
         (&pipeline, "adaptive"),
         rows_per_band,
         (&mut image, &mut counts),
+        None,
         &|_, _| {},
         |row0, rows, out_buf, cnt_buf| {
             params.image[2] = row0 as u32;

@@ -489,14 +489,16 @@ impl GpuContext {
         }
     }
 
-    /// A storage buffer the host can read back, refused with a clear error when it
-    /// exceeds the adapter's limits.
+    /// A storage buffer the host can read back (and write), refused with a clear error
+    /// when it exceeds the adapter's limits.
     pub fn storage_buffer(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
         self.check_storage(label, bytes)?;
         Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(4),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         }))
     }
@@ -946,11 +948,16 @@ pub(crate) struct BandTimes {
 /// and sample counts (`u32`); the band is dispatched in 8 × 8 workgroups (one
 /// invocation per pixel), waited for and read back, and `progress(rows done, height)`
 /// is called. Shared by `gpu::raycast`, `gpu::adaptive` and `gpu::multi`.
+///
+/// With `carry` (`k` vec4 per pixel of the image, row-major) the pixel buffer holds each
+/// pixel's `k` vec4, filled from `carry` before the dispatch and read back into it (a
+/// ray's state handed from one brick to the next); `image` is left as it is.
 pub(crate) fn render_bands(
     ctx: &GpuContext,
     (pipeline, label): (&wgpu::ComputePipeline, &str),
     rows_per_band: usize,
     (image, counts): (&mut Frame, &mut [u32]),
+    mut carry: Option<&mut [[f32; 4]]>,
     progress: &(dyn Fn(usize, usize) + Sync),
     mut bind: impl FnMut(usize, usize, &wgpu::Buffer, &wgpu::Buffer) -> Result<wgpu::BindGroup>,
 ) -> Result<BandTimes> {
@@ -963,9 +970,15 @@ pub(crate) fn render_bands(
     let mut row0 = 0;
     while row0 < h {
         let rows = rows_per_band.min(h - row0);
-        let pix_bytes = (rows * w * 16) as u64;
+        let per_pixel = carry.as_ref().map_or(1, |c| c.len() / (w * h).max(1));
+        let band = (row0 * w * per_pixel)..((row0 + rows) * w * per_pixel);
+        let pix_bytes = (rows * w * 16 * per_pixel) as u64;
         let cnt_bytes = (rows * w * 4) as u64;
         let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
+        if let Some(c) = carry.as_ref() {
+            ctx.queue
+                .write_buffer(&out_buf, 0, bytemuck::cast_slice(&c[band.clone()]));
+        }
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
         let group = bind(row0, rows, &out_buf, &cnt_buf)?;
         let t_k = Instant::now();
@@ -978,9 +991,14 @@ pub(crate) fn render_bands(
         let cn: Vec<u32> = bytemuck::cast_slice(&ctx.read_buffer(&cnt_buf, cnt_bytes)?).to_vec();
         times.readback += t_r.elapsed().as_secs_f64();
         let ch = image.channels;
-        for (i, p) in px.iter().enumerate() {
-            let dst = (row0 * w + i) * ch;
-            image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
+        match carry.as_mut() {
+            Some(c) => c[band].copy_from_slice(&px),
+            None => {
+                for (i, p) in px.iter().enumerate() {
+                    let dst = (row0 * w + i) * ch;
+                    image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
+                }
+            }
         }
         counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
         row0 += rows;

@@ -385,6 +385,7 @@ pub fn render(
         (&pipeline, "multi"),
         rows_per_tile,
         (&mut image, &mut counts),
+        None,
         progress,
         |row0, rows, out_buf, cnt_buf| {
             params.flags[2] = row0 as u32;

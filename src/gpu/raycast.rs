@@ -788,9 +788,9 @@ pub struct VolumeSplit {
 /// (`jobs::renderer::Renderer`) and their `--dry-run` plans both ask it.
 ///
 /// # Errors
-/// A frame bricks cannot composite ([`crate::cpu::raycast::check_owned_settings`]:
-/// MIDA, iso-surfaces, pre-classification, filters of unbounded reach), naming why the
-/// volume must be cut; no cut that fits ([`brick_plan`]).
+/// A frame bricks cannot render ([`crate::cpu::raycast::check_split_settings`]:
+/// iso-surfaces, filters of unbounded reach), naming why the volume must be cut; no cut
+/// that fits ([`brick_plan`]).
 pub fn volume_split(
     ctx: &GpuContext,
     dims: [usize; 3],
@@ -815,7 +815,7 @@ pub fn volume_split(
     } else {
         return Ok(None);
     };
-    crate::cpu::raycast::check_owned_settings(settings).map_err(|e| match e {
+    crate::cpu::raycast::check_split_settings(settings, true).map_err(|e| match e {
         Error::Invalid { what, message } => Error::Invalid {
             what,
             message: format!("{message}; {why}, so it renders in bricks"),
@@ -846,15 +846,35 @@ pub fn volume_split(
     }))
 }
 
+/// The vec4 a brick's MIDA ray hands the next brick (`shaders/shared/modes_cast.wgsl:
+/// mida_store`): `(c, a)`, `(running, best, started, 0)`, the best sample's colour.
+pub const CARRIED_VEC4S: usize = 3;
+
+/// A MIDA ray's state from its [`CARRIED_VEC4S`] vec4.
+/// Mirrors `shaders/shared/modes_cast.wgsl: mida_load`.
+pub fn carried_mida(v: &[[f32; 4]]) -> crate::cpu::modes::MidaState<f32> {
+    crate::cpu::modes::MidaState {
+        c: [v[0][0], v[0][1], v[0][2]],
+        a: v[0][3],
+        running: v[1][0],
+        best: v[1][1],
+        best_rgba: v[2],
+        started: v[1][2] == 1.0,
+    }
+}
+
 /// Renders a volume cut into `bricks` (the leaves of `tree`, from [`brick_plan`]; past
 /// the 3-D texture limit or the device memory, [`volume_split`]) on one GPU: each brick
 /// rendered as a placed session ([`render_owned`]) in turn, so the device holds one
-/// brick at a time, the pieces composited on the host in each pixel's visibility order
-/// (`cpu::composite`). The same samples as one unsplit render: MIP and MinIP equal it
-/// exactly, X-ray and DVR up to the regrouping of their sums by brick.
+/// brick at a time. DVR, MIP, MinIP and X-ray: the pieces composited on the host in each
+/// pixel's visibility order (`cpu::composite`); MIP and MinIP equal the unsplit render
+/// exactly, X-ray and DVR up to the regrouping of their sums by brick. MIDA: the bricks
+/// rendered in the rays' order (`cpu::composite::ray_order`), each ray's state
+/// (`cpu::modes::MidaState`) handed from brick to brick on the device and finished on
+/// the host (`cpu::modes::mida_finish`): the unsplit render's samples in its order.
 ///
 /// # Errors
-/// As [`render_owned`].
+/// As [`render_owned`]; MIDA is rendered too.
 pub fn render_bricked(
     ctx: &GpuContext,
     volume: &AnyVolume,
@@ -867,17 +887,25 @@ pub fn render_bricked(
     let t_start = Instant::now();
     settings.validate()?;
     tf.validate()?;
-    crate::cpu::raycast::check_owned_settings(settings)?;
+    crate::cpu::raycast::check_split_settings(settings, true)?;
     volume.check_finite("volume")?;
     let dims = volume.dims();
     let ghost = crate::cpu::field::brick_ghost(settings.filter);
     let r = volume.value_range();
     let range = (r.min, r.max);
+    let (w, h) = (camera.width, camera.height);
+    let carried = settings.mode == Mode::Mida;
+    let mut carry = vec![[0.0f32; 4]; if carried { w * h * CARRIED_VEC4S } else { 0 }];
+    let order: Vec<usize> = if carried {
+        crate::cpu::composite::ray_order(tree, camera, volume.affine())
+    } else {
+        (0..bricks.len()).collect()
+    };
     let mut pieces = Vec::with_capacity(bricks.len());
     let mut timings = GpuTimings::default();
     let mut session: Option<RaycastSession> = None;
-    let (w, h) = (camera.width, camera.height);
-    for (i, b) in bricks.iter().enumerate() {
+    for (i, &bi) in order.iter().enumerate() {
+        let b = &bricks[bi];
         let g = b.with_ghost(ghost, dims);
         let placement = BrickPlacement {
             origin: g.lo,
@@ -897,7 +925,8 @@ pub fn render_bricked(
         let session = session.as_mut().expect("made above");
         session.place(placement)?;
         let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
-        let out = session.render(tf, camera, &s, &rows)?;
+        let state = carried.then_some(&mut carry[..]);
+        let out = session.render_frame(tf, camera, &s, state, &rows)?;
         for (sum, t) in [
             (&mut timings.setup, out.timings.setup),
             (&mut timings.upload, out.timings.upload),
@@ -914,45 +943,70 @@ pub fn render_bricked(
         };
         pieces.push((out.output.image, counts, out.hits.unwrap_or_default()));
     }
-    // The pieces joined pixel by pixel in visibility order.
     let ch = if settings.mode.rgba() { 4 } else { 1 };
     let mut image = Frame::new(w, h, ch);
     let mut counts = vec![0u32; w * h];
-    let to_index = volume.affine().inverse();
     use rayon::prelude::*;
-    image
-        .data
-        .par_chunks_mut(w * ch)
-        .zip(counts.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(row, (px_row, n_row))| {
-            let mut order = Vec::with_capacity(bricks.len());
-            for col in 0..w {
-                let p = row * w + col;
-                let d = to_index.transform_vector3(camera.ray(col, row).dir);
-                let piece = |b: usize| {
-                    let (img, n, _) = &pieces[b];
-                    let mut v = [0.0f32; 4];
-                    for (c, x) in v.iter_mut().take(ch).enumerate() {
-                        *x = img.data[p * ch + c] as f32;
-                    }
-                    (v, n[p])
-                };
+    if carried {
+        // Each ray's state after the last brick, finished as the unsplit render
+        // finishes it.
+        let gamma = settings.mida_gamma as f32;
+        let bg = settings.background.map(|x| x as f32);
+        image
+            .data
+            .par_chunks_mut(ch)
+            .zip(counts.par_iter_mut())
+            .zip(carry.par_chunks(CARRIED_VEC4S))
+            .enumerate()
+            .for_each(|(p, ((px, n), state))| {
+                *n = pieces.iter().map(|(_, c, _)| c[p]).sum();
                 let hit = pieces[0].2.get(p).copied().unwrap_or(false);
-                let (px, n) = crate::cpu::composite::composite_pixel(
-                    tree,
-                    d.to_array(),
-                    settings,
-                    hit,
-                    piece,
-                    &mut order,
-                );
-                for (c, v) in px.iter().take(ch).enumerate() {
-                    px_row[col * ch + c] = *v as f64;
+                let v = if hit {
+                    crate::cpu::modes::mida_finish(&carried_mida(state), gamma, bg)
+                } else {
+                    bg
+                };
+                for (x, v) in px.iter_mut().zip(v) {
+                    *x = v as f64;
                 }
-                n_row[col] = n;
-            }
-        });
+            });
+    } else {
+        // The pieces joined pixel by pixel in visibility order.
+        let to_index = volume.affine().inverse();
+        image
+            .data
+            .par_chunks_mut(w * ch)
+            .zip(counts.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(row, (px_row, n_row))| {
+                let mut order = Vec::with_capacity(bricks.len());
+                for col in 0..w {
+                    let p = row * w + col;
+                    let d = to_index.transform_vector3(camera.ray(col, row).dir);
+                    let piece = |b: usize| {
+                        let (img, n, _) = &pieces[b];
+                        let mut v = [0.0f32; 4];
+                        for (c, x) in v.iter_mut().take(ch).enumerate() {
+                            *x = img.data[p * ch + c] as f32;
+                        }
+                        (v, n[p])
+                    };
+                    let hit = pieces[0].2.get(p).copied().unwrap_or(false);
+                    let (px, n) = crate::cpu::composite::composite_pixel(
+                        tree,
+                        d.to_array(),
+                        settings,
+                        hit,
+                        piece,
+                        &mut order,
+                    );
+                    for (c, v) in px.iter().take(ch).enumerate() {
+                        px_row[col * ch + c] = *v as f64;
+                    }
+                    n_row[col] = n;
+                }
+            });
+    }
     timings.total = t_start.elapsed().as_secs_f64();
     Ok(GpuRenderOutput {
         output: RenderOutput::from_counts(image, &counts, settings.sample_count),
@@ -1376,7 +1430,9 @@ impl<'c> RaycastSession<'c> {
     /// Invalid settings or transfer function, options the GPU path refuses (the full
     /// sinc, hardware filtering of other filters or without `FLOAT32_FILTERABLE`, rays
     /// longer than a CPU driver's loop limit), too many samples per ray or per frame
-    /// ([`crate::settings::check_ray_work`]), shader or device errors.
+    /// ([`crate::settings::check_ray_work`]), shader or device errors; MIDA in a placed
+    /// session (a brick's MIDA rays carry their state from the bricks in front:
+    /// [`render_bricked`]).
     pub fn render(
         &mut self,
         tf: &TransferFunction,
@@ -1384,9 +1440,41 @@ impl<'c> RaycastSession<'c> {
         settings: &RenderSettings,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<GpuRenderOutput> {
+        self.render_frame(tf, camera, settings, None, progress)
+    }
+
+    /// A frame; a brick's MIDA frame takes and leaves each ray's state in `carry`
+    /// ([`CARRIED_VEC4S`] per pixel, [`carried_mida`]) and makes no image.
+    fn render_frame(
+        &mut self,
+        tf: &TransferFunction,
+        camera: &Camera,
+        settings: &RenderSettings,
+        carry: Option<&mut [[f32; 4]]>,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<GpuRenderOutput> {
         let t_start = Instant::now();
         settings.validate()?;
         tf.validate()?;
+        let carries = self.brick.is_some() && settings.mode == Mode::Mida;
+        let pixels = camera.width * camera.height;
+        match carry.as_ref() {
+            None if carries => {
+                return Err(Error::invalid(
+                    "--mode",
+                    "a brick's MIDA rays carry their state from the bricks in front of it: \
+                     render the bricks in turn (gpu::raycast::render_bricked)",
+                ))
+            }
+            Some(c) if !carries || c.len() != pixels * CARRIED_VEC4S => {
+                return Err(Error::Gpu(format!(
+                    "a carried ray state of {} vec4 for {pixels} pixels of a {} frame",
+                    c.len(),
+                    if carries { "MIDA brick" } else { "whole" }
+                )))
+            }
+            _ => {}
+        }
         let ctx = self.ctx;
         let dev = &ctx.device;
         let dims = self.dims;
@@ -1638,6 +1726,8 @@ impl<'c> RaycastSession<'c> {
         let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
         let pixel_bytes = if clip_mesh.is_some() {
             16 * super::clipmesh::SEGMENT_VEC4S
+        } else if carries {
+            16 * CARRIED_VEC4S
         } else {
             16
         };
@@ -1673,6 +1763,7 @@ impl<'c> RaycastSession<'c> {
             (&self.pipelines[pipeline].1, "raycast"),
             rows_per_tile,
             (&mut image, &mut counts),
+            carry,
             progress,
             |row0, rows, out_buf, cnt_buf| {
                 params.flags2[2] = row0 as u32;

@@ -247,18 +247,34 @@ impl KdTree {
     /// otherwise (a ray parallel to the plane never crosses it, so either order is
     /// right). Appends to `order`.
     pub fn front_to_back(&self, d: [f64; 3], order: &mut Vec<usize>) {
+        self.visit(&|axis, _| d[axis] >= 0.0, order);
+    }
+
+    /// The bricks in the order every ray leaving the index-space point `eye` meets
+    /// them (a perspective camera's rays): at each cut the side holding `eye` first.
+    /// A ray from `eye` crosses a cut's plane only away from `eye`'s side, so this one
+    /// order is each ray's own. Appends to `order`.
+    pub fn front_to_back_from(&self, eye: [f64; 3], order: &mut Vec<usize>) {
+        self.visit(&|axis, cut| eye[axis] < cut as f64 - 0.5, order);
+    }
+
+    /// The leaves, at each cut the low side first where `low_first(axis, cut)`.
+    fn visit(&self, low_first: &dyn Fn(usize, usize) -> bool, order: &mut Vec<usize>) {
         match self {
             KdTree::Leaf(b) => order.push(*b),
             KdTree::Cut {
-                axis, low, high, ..
+                axis,
+                cut,
+                low,
+                high,
             } => {
-                let (first, second) = if d[*axis] >= 0.0 {
+                let (first, second) = if low_first(*axis, *cut) {
                     (low, high)
                 } else {
                     (high, low)
                 };
-                first.front_to_back(d, order);
-                second.front_to_back(d, order);
+                first.visit(low_first, order);
+                second.visit(low_first, order);
             }
         }
     }
