@@ -403,10 +403,13 @@ struct MeshRanges {
     range: array<vec2<u32>, 8>,
 }
 
-// Whether this frame's pixels are ray states carried from brick to brick (MIDA in a
-// brick: shaders/shared/modes_cast.wgsl: mida_load, mida_store) rather than colours.
+// Whether this frame's pixels are ray states carried from brick to brick (MIDA and
+// iso-surfaces in a brick: shaders/shared/modes_cast.wgsl: mida_load, iso_load) rather
+// than colours.
 fn carries_state() -> bool {
-    return params.brick.w == 1.0 && params.image.z == MODE_MIDA;
+    let mode = params.image.z;
+    let iso = mode == MODE_ISO || (mode == MODE_DVR && params.iso_flags.x > 0u);
+    return params.brick.w == 1.0 && (mode == MODE_MIDA || iso);
 }
 
 // Whether the ray being cast meets the volume's box (within the clipping box).

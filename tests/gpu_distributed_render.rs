@@ -20,11 +20,12 @@ use voxlab::settings::{Compositing, Filter, Mode};
 /// for other adapters' rounding.
 const GPU_BOUND: f64 = 2e-6;
 
-/// MIDA split into bricks against the unsplit GPU image: the same samples and the same
-/// arithmetic in the same order (each ray's state handed from brick to brick), finished
-/// on the host instead of the device: 0 measured on lavapipe; the bound admits the last
-/// bits of an adapter that fuses the finish's multiply-adds (the host does not).
-const MIDA_BOUND: f64 = 4.0 * f32::EPSILON as f64;
+/// MIDA and iso-surfaces split into bricks against the unsplit GPU image: the same
+/// samples and the same arithmetic in the same order (each ray's state handed from
+/// brick to brick), finished on the host instead of the device: 0 measured on
+/// lavapipe; the bound admits the last bits of an adapter that fuses the finish's
+/// multiply-adds (the host does not).
+const CARRIED_BOUND: f64 = 4.0 * f32::EPSILON as f64;
 
 fn request(input: &str, mode: Mode) -> RenderRequest {
     RenderRequest {
@@ -106,7 +107,12 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
     };
     let gamma = |g: f64| move |s: &mut SceneRequest| s.mida_gamma = g;
     type Case<'a> = (Mode, Filter, f64, &'a dyn Fn(&mut SceneRequest));
-    let cases: [Case; 10] = [
+    let iso = |value: f64, opacity: f64| voxlab::settings::IsoSurface {
+        value,
+        color: [0.9, 0.5 * opacity, 0.2],
+        opacity,
+    };
+    let cases: [Case; 13] = [
         (Mode::Mip, Filter::Trilinear, 0.0, &|_| {}),
         (Mode::Minip, Filter::CatmullRom, 0.0, &|_| {}),
         (Mode::Xray, Filter::Trilinear, GPU_BOUND, &|_| {}),
@@ -115,13 +121,13 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         (Mode::Dvr, Filter::Nearest, GPU_BOUND, &pre),
         // MIDA: each ray's state handed from brick to brick in the ray's order, so the
         // unsplit render's samples and arithmetic in its order, finished on the host.
-        (Mode::Mida, Filter::Trilinear, MIDA_BOUND, &gamma(0.0)),
-        (Mode::Mida, Filter::CatmullRom, MIDA_BOUND, &gamma(-0.5)),
-        (Mode::Mida, Filter::Trilinear, MIDA_BOUND, &gamma(0.6)),
+        (Mode::Mida, Filter::Trilinear, CARRIED_BOUND, &gamma(0.0)),
+        (Mode::Mida, Filter::CatmullRom, CARRIED_BOUND, &gamma(-0.5)),
+        (Mode::Mida, Filter::Trilinear, CARRIED_BOUND, &gamma(0.6)),
         (
             Mode::Mida,
             Filter::Nearest,
-            MIDA_BOUND,
+            CARRIED_BOUND,
             &|s: &mut SceneRequest| {
                 pre(s);
                 s.mida_gamma = 0.3;
@@ -130,11 +136,43 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         (
             Mode::Mida,
             Filter::Trilinear,
-            MIDA_BOUND,
+            CARRIED_BOUND,
             &|s: &mut SceneRequest| {
                 s.ortho = true;
                 s.shading = true;
                 s.mida_gamma = 0.4;
+            },
+        ),
+        // Iso-surfaces, handed on the same way: a crossing between two bricks' samples
+        // is found and shaded by the later brick (its ghost voxels reach a step out).
+        (
+            Mode::Iso,
+            Filter::Trilinear,
+            CARRIED_BOUND,
+            &|s: &mut SceneRequest| {
+                s.iso = vec![iso(200.0, 0.4), iso(600.0, 0.7)];
+            },
+        ),
+        (
+            Mode::Iso,
+            Filter::CatmullRom,
+            CARRIED_BOUND,
+            &|s: &mut SceneRequest| {
+                s.iso = vec![iso(400.0, 1.0)];
+                s.iso_opaque = true;
+                s.iso_refine = false;
+                s.ortho = true;
+                s.step = 3.0;
+                s.precompute_gradients = true;
+            },
+        ),
+        (
+            Mode::Dvr,
+            Filter::Trilinear,
+            CARRIED_BOUND,
+            &|s: &mut SceneRequest| {
+                s.iso = vec![iso(500.0, 0.5)];
+                s.ert = 0.9;
             },
         ),
     ];
@@ -155,8 +193,8 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         // Texels per axis (28, 20), and texels in all (a device memory of 9,000 f32
         // texels: 37 × 29 × 23 = 24,679 voxels do not fit).
         for (limit, most) in [(28, None), (20, None), (64, Some(9000))] {
-            let (tree, bricks) = brick_plan(volume.dims(), filter, limit, most).unwrap();
-            let ghost = voxlab::cpu::field::brick_ghost(filter);
+            let (tree, bricks) = brick_plan(volume.dims(), &settings, limit, most).unwrap();
+            let ghost = voxlab::gpu::raycast::brick_ghost_for(&settings);
             for b in &bricks {
                 let g = b.with_ghost(ghost, volume.dims());
                 assert!(g.dims().iter().all(|&n| n <= limit), "{g:?}");
@@ -178,7 +216,9 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         }
     }
     // A limit below the ghost voxels cannot be met.
-    let e = brick_plan(volume.dims(), Filter::Trilinear, 6, None)
+    let trilinear = voxlab::settings::RenderSettings::default();
+    assert_eq!(trilinear.filter, Filter::Trilinear);
+    let e = brick_plan(volume.dims(), &trilinear, 6, None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("cannot be cut into bricks"), "{e}");
@@ -186,7 +226,8 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
 
 /// `voxlab render --backend gpu` under a lowered 3-D texture limit and under a lowered
 /// device memory: `--dry-run` prints the brick split and writes nothing; the render says
-/// how it split and writes the unsplit MIP byte for byte. A 48³ f32 volume's texture
+/// how it split and writes the unsplit MIP, MIDA and opaque iso-surface images byte for
+/// byte. A 48³ f32 volume's texture
 /// (432 KiB) and the 64² image's buffers (80 KiB) exceed 256 KiB of device memory; the
 /// bricks hold at most (256 − 80) KiB / 4 bytes = 45,056 texels with their ghost voxels.
 #[test]
@@ -225,8 +266,31 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
     };
     let one_mida = dir.join("one-mida.npy");
+    let one_iso = dir.join("one-iso.npy");
+    // Long steps: a crossing between two bricks' samples lies up to 4 voxels outside
+    // the later brick, which shades it (its ghost voxels reach that far; without them 3
+    // pixels differ by 0.049).
+    let with_iso = |mut a: Vec<String>, more: &[&str]| {
+        a.extend(
+            [
+                "--iso",
+                "0.5:#ff0000:1",
+                "--step",
+                "4",
+                "--filter",
+                "catmull-rom",
+            ]
+            .map(String::from),
+        );
+        a.extend(more.iter().map(|s| s.to_string()));
+        a
+    };
     text(&run(&args(&one, "mip"), None));
     text(&run(&args(&one_mida, "mida"), None));
+    text(&run(
+        &with_iso(args(&one_iso, "iso"), &["--iso-opaque"]),
+        None,
+    ));
     for (limit, why, limits) in [
         (
             ("VOXLAB_GPU_MAX_TEXTURE_3D", "32"),
@@ -247,10 +311,14 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         assert!(said.contains(why), "{limit:?}: {said}");
         assert!(said.contains(limits), "{limit:?}: {said}");
         assert!(!split.exists());
-        // MIP composited sort-last, MIDA with each ray's state handed from brick to
-        // brick: both the unsplit image (on lavapipe, byte for byte).
-        for (mode, whole) in [("mip", &one), ("mida", &one_mida)] {
-            let said = text(&run(&args(&split, mode), Some(limit)));
+        // MIP composited sort-last, MIDA and iso-surfaces with each ray's state handed
+        // from brick to brick: each the unsplit image (on lavapipe, byte for byte).
+        for (a, whole) in [
+            (args(&split, "mip"), &one),
+            (args(&split, "mida"), &one_mida),
+            (with_iso(args(&split, "iso"), &["--iso-opaque"]), &one_iso),
+        ] {
+            let said = text(&run(&a, Some(limit)));
             assert!(
                 said.contains("voxlab: ray casting in") && said.contains(why),
                 "{said}"
@@ -261,18 +329,16 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
             );
             std::fs::remove_file(&split).unwrap();
         }
-        // What bricks cannot render (iso-surfaces), and a renderer session's frames
+        // What bricks cannot render (shadow rays), and a renderer session's frames
         // (`--repeat`, the volume whole), are refused by the run and its dry run alike,
         // saying why the volume is cut.
         let mut mip_repeat = args(&split, "mip");
         mip_repeat.extend(["--repeat".into(), "2".into()]);
-        let mut iso = args(&split, "iso");
-        iso.extend(["--iso".into(), "0.5:#ff0000:1".into()]);
         for (a, says) in [
             (
-                iso,
-                "bricks composite DVR, MIP, MinIP, X-ray or MIDA (iso-surfaces look along the \
-                 whole ray); ",
+                with_iso(args(&split, "iso"), &["--iso-opaque", "--shadows"]),
+                "invalid --shadows: a shadow ray crosses the whole volume; bricks draw \
+                 iso-surfaces without shadows; ",
             ),
             (
                 mip_repeat,

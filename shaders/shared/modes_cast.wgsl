@@ -141,101 +141,153 @@ fn in_shadow(p: vec3<f32>, l: vec3<f32>) -> bool {
     return false;
 }
 
-// mirrors src/cpu/modes.rs: cast_iso (dvr: DVR samples between the surfaces)
+// mirrors src/cpu/modes.rs: IsoState
+struct IsoState {
+    c: vec3<f32>,
+    a: f32,
+    t0: f32,
+    v0: f32,
+    started: bool,
+    done: bool,
+}
+
+fn iso_start() -> IsoState {
+    return IsoState(vec3<f32>(0.0), 0.0, 0.0, 0.0, false, false);
+}
+
+// What an iso-surface ray's steps share. mirrors src/cpu/modes.rs: IsoRay
+struct IsoRay {
+    light: vec3<f32>,
+    half_vec: vec3<f32>,
+    l_index: vec3<f32>,
+    dvr: bool,
+}
+
+// Step k's DVR sample composited under st.
+fn iso_dvr_sample(st: ptr<function, IsoState>, k: u32, n: u32, t_in: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>, speed: f32, r: IsoRay) {
+    let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
+    let s = classify_sample(p);
+    if (s.w <= 0.0) {
+        return;
+    }
+    let alpha = corrected_alpha(s.w, segment_length(k, n, t_in, t_in, t_out, dt), speed);
+    var rgb = s.xyz;
+    if (params.flags.y == 1u) {
+        rgb = shade_sample(p, rgb, r.light, r.half_vec);
+    }
+    let w = (1.0 - (*st).a) * alpha;
+    (*st).c = (*st).c + w * rgb;
+    (*st).a = (*st).a + w;
+}
+
+// mirrors src/cpu/modes.rs: iso_step (false: the ray had ended, the step not taken)
+fn iso_step(st: ptr<function, IsoState>, k: u32, n: u32, t_in: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>, speed: f32, r: IsoRay) -> bool {
+    if (k == 0u) {
+        let b0 = segment_bounds(0u, n, t_in, t_out, dt);
+        (*st).t0 = (b0.x + b0.y) * 0.5;
+        (*st).v0 = sample_value(o + d * (*st).t0);
+        (*st).started = true;
+        if (r.dvr) {
+            iso_dvr_sample(st, 0u, n, t_in, t_out, dt, o, d, speed, r);
+        }
+        return true;
+    }
+    if ((*st).a >= params.misc.y || (*st).done) {
+        return false;
+    }
+    let t0 = (*st).t0;
+    let v0 = (*st).v0;
+    let bk = segment_bounds(k, n, t_in, t_out, dt);
+    let t1 = (bk.x + bk.y) * 0.5;
+    let v1 = sample_value(o + d * t1);
+    // The crossings of this interval in depth order (ties: list order).
+    var hit_t = vec4<f32>(0.0);
+    var hit_j = vec4<u32>(0u);
+    var nh = 0u;
+    for (var j = 0u; j < params.iso_flags.x; j++) {
+        let tau = params.iso_values[j];
+        if (crosses(v0, v1, tau)) {
+            let t = iso_hit_t(t0, v0, t1, v1, tau);
+            var q = nh;
+            while (q > 0u && hit_t[q - 1u] > t) {
+                hit_t[q] = hit_t[q - 1u];
+                hit_j[q] = hit_j[q - 1u];
+                q = q - 1u;
+            }
+            hit_t[q] = t;
+            hit_j[q] = j;
+            nh = nh + 1u;
+        }
+    }
+    for (var h = 0u; h < nh; h++) {
+        let iso = iso_color(hit_j[h]);
+        let p = o + d * hit_t[h];
+        var rgb = iso.xyz;
+        if (params.flags.y == 1u) {
+            rgb = shade_sample(p, rgb, r.light, r.half_vec);
+        }
+        if (params.iso_flags.y == 1u) {
+            if (params.iso_flags.z == 1u && in_shadow(p, r.l_index)) {
+                rgb = iso.xyz * params.shading.x;
+            }
+            (*st).c = (*st).c + (1.0 - (*st).a) * rgb;
+            (*st).a = (*st).a + (1.0 - (*st).a);
+            (*st).done = true;
+            return true;
+        }
+        let w = (1.0 - (*st).a) * iso.w;
+        (*st).c = (*st).c + w * rgb;
+        (*st).a = (*st).a + w;
+    }
+    if (r.dvr) {
+        iso_dvr_sample(st, k, n, t_in, t_out, dt, o, d, speed, r);
+    }
+    (*st).t0 = t1;
+    (*st).v0 = v1;
+    return true;
+}
+
+// A brick's iso-surface state, in the first two of its CARRIED_VEC4S vec4 in
+// out_pixels: (c, a), (t0, v0, started, done). mirrors src/gpu/raycast.rs: carried_iso
+fn iso_load(i: u32) -> IsoState {
+    let x = out_pixels[3u * i + 1u];
+    return IsoState(out_pixels[3u * i].xyz, out_pixels[3u * i].w, x.x, x.y, x.z == 1.0, x.w == 1.0);
+}
+
+fn iso_store(i: u32, st: IsoState) {
+    out_pixels[3u * i] = vec4<f32>(st.c, st.a);
+    out_pixels[3u * i + 1u] = vec4<f32>(st.t0, st.v0, select(0.0, 1.0, st.started), select(0.0, 1.0, st.done));
+}
+
+// mirrors src/cpu/modes.rs: cast_iso (dvr: DVR samples between the surfaces). A brick
+// takes the run of steps it owns from the state the bricks in front left, as cast_mida.
 fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {
     let light = ray_light(ray);
-    let half_vec = normalize_or_zero(light - ray.dir);
     let l_index = vec3<f32>(dot(params.to_index_0.xyz, light), dot(params.to_index_1.xyz, light), dot(params.to_index_2.xyz, light));
-    let count = params.iso_flags.x;
-    let opaque = params.iso_flags.y == 1u;
-    let shade = params.flags.y == 1u;
-    var c = vec3<f32>(0.0);
-    var a = 0.0;
-    let b0 = segment_bounds(0u, n, t_in, t_out, dt);
-    var t0 = (b0.x + b0.y) * 0.5;
-    var v0 = sample_value(o + d * t0);
-    var taken = 1u;
-    if (dvr) {
-        let s = classify_sample(segment_point(0u, n, t_in, t_in, t_out, dt, o, d));
-        if (s.w > 0.0) {
-            let p = segment_point(0u, n, t_in, t_in, t_out, dt, o, d);
-            let alpha = corrected_alpha(s.w, segment_length(0u, n, t_in, t_in, t_out, dt), speed);
-            var rgb = s.xyz;
-            if (shade) {
-                rgb = shade_sample(p, rgb, light, half_vec);
-            }
-            let w = (1.0 - a) * alpha;
-            c = c + w * rgb;
-            a = a + w;
+    let r = IsoRay(light, normalize_or_zero(light - ray.dir), l_index, dvr);
+    let brick = params.brick.w == 1.0;
+    var first = 0u;
+    var last = n - 1u;
+    var st = iso_start();
+    if (brick) {
+        let own = own_range(n, t_in, t_in, t_out, dt, o, d);
+        if (own.x == 0u) {
+            return Pixel(vec4<f32>(0.0), 0u);
         }
+        first = own.y;
+        last = own.z;
+        st = iso_load(mesh_pixel);
     }
-    var done = false;
-    for (var k = 1u; k < n; k++) {
-        if (a >= params.misc.y || done) {
+    var taken = 0u;
+    for (var k = first; k <= last; k++) {
+        if (!iso_step(&st, k, n, t_in, t_out, dt, o, d, speed, r)) {
             break;
         }
-        let bk = segment_bounds(k, n, t_in, t_out, dt);
-        let t1 = (bk.x + bk.y) * 0.5;
-        let v1 = sample_value(o + d * t1);
         taken = taken + 1u;
-        // The crossings of this interval in depth order (ties: list order).
-        var hit_t = vec4<f32>(0.0);
-        var hit_j = vec4<u32>(0u);
-        var nh = 0u;
-        for (var j = 0u; j < count; j++) {
-            let tau = params.iso_values[j];
-            if (crosses(v0, v1, tau)) {
-                let t = iso_hit_t(t0, v0, t1, v1, tau);
-                var q = nh;
-                while (q > 0u && hit_t[q - 1u] > t) {
-                    hit_t[q] = hit_t[q - 1u];
-                    hit_j[q] = hit_j[q - 1u];
-                    q = q - 1u;
-                }
-                hit_t[q] = t;
-                hit_j[q] = j;
-                nh = nh + 1u;
-            }
-        }
-        for (var h = 0u; h < nh; h++) {
-            let iso = iso_color(hit_j[h]);
-            let p = o + d * hit_t[h];
-            var rgb = iso.xyz;
-            if (shade) {
-                rgb = shade_sample(p, rgb, light, half_vec);
-            }
-            if (opaque) {
-                if (params.iso_flags.z == 1u && in_shadow(p, l_index)) {
-                    rgb = iso.xyz * params.shading.x;
-                }
-                c = c + (1.0 - a) * rgb;
-                a = a + (1.0 - a);
-                done = true;
-                break;
-            }
-            let w = (1.0 - a) * iso.w;
-            c = c + w * rgb;
-            a = a + w;
-        }
-        if (done) {
-            break;
-        }
-        if (dvr) {
-            let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
-            let s = classify_sample(p);
-            if (s.w > 0.0) {
-                let alpha = corrected_alpha(s.w, segment_length(k, n, t_in, t_in, t_out, dt), speed);
-                var rgb = s.xyz;
-                if (shade) {
-                    rgb = shade_sample(p, rgb, light, half_vec);
-                }
-                let w = (1.0 - a) * alpha;
-                c = c + w * rgb;
-                a = a + w;
-            }
-        }
-        t0 = t1;
-        v0 = v1;
     }
-    return Pixel(over_background(c, a), taken);
+    if (brick) {
+        iso_store(mesh_pixel, st);
+        return Pixel(vec4<f32>(0.0), taken);
+    }
+    return Pixel(over_background(st.c, st.a), taken);
 }

@@ -396,6 +396,149 @@ pub(crate) fn in_shadow<R: Real, F: Field<R>>(
     }
 }
 
+/// An iso-surface ray's state after its first steps, front to back: everything a
+/// later step needs, so that a ray cut into runs (the bricks of a split render, one
+/// after another in the ray's order) ends with the unsplit ray's state.
+/// Mirrors `shaders/shared/modes_cast.wgsl: IsoState`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IsoState<R> {
+    /// The accumulated premultiplied colour and opacity.
+    pub c: [R; 3],
+    pub a: R,
+    /// The last sample's parameter and value (meaningful once `started`).
+    pub t0: R,
+    pub v0: R,
+    /// Whether the ray has taken its first sample.
+    pub started: bool,
+    /// Whether an opaque surface ended the ray.
+    pub done: bool,
+}
+
+impl<R: Real> Default for IsoState<R> {
+    fn default() -> Self {
+        IsoState {
+            c: [R::zero(); 3],
+            a: R::zero(),
+            t0: R::zero(),
+            v0: R::zero(),
+            started: false,
+            done: false,
+        }
+    }
+}
+
+/// What an iso-surface ray's steps share: the light and half vectors, the light in
+/// index space (for shadow rays), whether DVR samples lie between the surfaces.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct IsoRay<R> {
+    pub lh: (V3<R>, V3<R>),
+    pub l_index: V3<R>,
+    pub dvr: bool,
+}
+
+impl<R: Real> IsoRay<R> {
+    pub(crate) fn new(s: &SampleSetup<R>, dir: glam::DVec3, dvr: bool) -> Self {
+        let lh = light_half(s.light, dir);
+        // The light in index space, for shadow rays: J⁻¹ L (headlight: back along the ray).
+        let l_index = V3::<R>::from_dvec(s.to_index.transform_vector3(lh.0.to_dvec()));
+        IsoRay { lh, l_index, dvr }
+    }
+}
+
+/// Step `k`'s DVR sample composited under `st`.
+fn iso_dvr_sample<R: Real, F: Field<R>>(
+    st: &mut IsoState<R>,
+    field: &F,
+    s: &SampleSetup<R>,
+    span: &Span<R>,
+    k: usize,
+    (light, half): (V3<R>, V3<R>),
+) {
+    let (p, len) = span.segment(k);
+    let (rgb, alpha) = classify_sample(field, s, p);
+    if alpha <= R::zero() {
+        return;
+    }
+    let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
+    let alpha = R::one() - transmit_pow(R::one() - alpha, e);
+    let rgb = if s.shade {
+        shade_sample(field, s, p, rgb, light, half)
+    } else {
+        rgb
+    };
+    under(&mut st.c, &mut st.a, rgb, alpha);
+}
+
+/// Takes step `k` of an iso-surface ray into `st`: the first sample (`k = 0`), or the
+/// crossings between the last sample and sample `k` (in depth order, before sample
+/// `k`'s DVR contribution). Returns whether the step was taken: not once the ray has
+/// ended (opacity past the threshold, an opaque surface).
+/// Mirrors `shaders/shared/modes_cast.wgsl: iso_step`.
+pub(crate) fn iso_step<R: Real, F: Field<R>>(
+    st: &mut IsoState<R>,
+    field: &F,
+    s: &SampleSetup<R>,
+    m: &ModeSetup<R>,
+    span: &Span<R>,
+    k: usize,
+    ray: &IsoRay<R>,
+) -> bool {
+    let (light, half) = ray.lh;
+    if k == 0 {
+        st.t0 = span.t_mid(0);
+        st.v0 = field.value(span.o + span.d * st.t0);
+        st.started = true;
+        if ray.dvr {
+            iso_dvr_sample(st, field, s, span, 0, ray.lh);
+        }
+        return true;
+    }
+    if st.a >= s.ert || st.done {
+        return false;
+    }
+    let (t0, v0) = (st.t0, st.v0);
+    let t1 = span.t_mid(k);
+    let v1 = field.value(span.o + span.d * t1);
+    // The crossings of this interval, in depth order (ties: in list order).
+    let mut hits: [(R, usize); MAX_ISO_SURFACES] = [(R::zero(), 0); MAX_ISO_SURFACES];
+    let mut nh = 0;
+    for (j, iso) in m.iso.iter().enumerate() {
+        if crosses(v0, v1, iso.value) {
+            let t = iso_hit_t(t0, v0, t1, v1, iso.value, m.refine);
+            let mut q = nh;
+            while q > 0 && hits[q - 1].0 > t {
+                hits[q] = hits[q - 1];
+                q -= 1;
+            }
+            hits[q] = (t, j);
+            nh += 1;
+        }
+    }
+    for &(t, j) in &hits[..nh] {
+        let iso = &m.iso[j];
+        let p = span.o + span.d * t;
+        let mut rgb = if s.shade {
+            shade_sample(field, s, p, iso.color, light, half)
+        } else {
+            iso.color
+        };
+        if m.opaque {
+            if m.shadows && in_shadow(field, s, &m.iso, p, ray.l_index) {
+                rgb = iso.color.map(|x| x * s.k.ambient);
+            }
+            under(&mut st.c, &mut st.a, rgb, R::one());
+            st.done = true;
+            return true;
+        }
+        under(&mut st.c, &mut st.a, rgb, iso.opacity);
+    }
+    if ray.dvr {
+        iso_dvr_sample(st, field, s, span, k, ray.lh);
+    }
+    (st.t0, st.v0) = (t1, v1);
+    true
+}
+
 /// Iso-surfaces along one ray, with DVR samples in between when `dvr`; returns the
 /// RGBA pixel and the samples taken. Mirrors `shaders/shared/modes_cast.wgsl: cast_iso`.
 pub(crate) fn cast_iso<R: Real, F: Field<R>>(
@@ -406,78 +549,14 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
     dir: glam::DVec3,
     dvr: bool,
 ) -> ([R; 4], u32) {
-    let (light, half) = light_half(s.light, dir);
-    // The light in index space, for shadow rays: J⁻¹ L (headlight: back along the ray).
-    let l_index = {
-        let lw = light.to_dvec();
-        V3::<R>::from_dvec(s.to_index.transform_vector3(lw))
-    };
-    let mut c = [R::zero(); 3];
-    let mut a = R::zero();
-    let mut t0 = span.t_mid(0);
-    let mut v0 = field.value(span.o + span.d * t0);
-    let mut taken = 1u32;
-    let dvr_sample = |k: usize, c: &mut [R; 3], a: &mut R| {
-        let (p, len) = span.segment(k);
-        let (rgb, alpha) = classify_sample(field, s, p);
-        if alpha <= R::zero() {
-            return;
-        }
-        let e = span.exponent(k, len, s.ref_step, s.step / s.ref_step);
-        let alpha = R::one() - transmit_pow(R::one() - alpha, e);
-        let rgb = if s.shade {
-            shade_sample(field, s, p, rgb, light, half)
-        } else {
-            rgb
-        };
-        under(c, a, rgb, alpha);
-    };
-    if dvr {
-        dvr_sample(0, &mut c, &mut a);
-    }
-    'march: for k in 1..span.n {
-        if a >= s.ert {
+    let ray = IsoRay::new(s, dir, dvr);
+    let mut st = IsoState::default();
+    let mut taken = 0u32;
+    for k in 0..span.n {
+        if !iso_step(&mut st, field, s, m, span, k, &ray) {
             break;
         }
-        let t1 = span.t_mid(k);
-        let v1 = field.value(span.o + span.d * t1);
         taken += 1;
-        // The crossings of this interval, in depth order (ties: in list order).
-        let mut hits: [(R, usize); MAX_ISO_SURFACES] = [(R::zero(), 0); MAX_ISO_SURFACES];
-        let mut nh = 0;
-        for (j, iso) in m.iso.iter().enumerate() {
-            if crosses(v0, v1, iso.value) {
-                let t = iso_hit_t(t0, v0, t1, v1, iso.value, m.refine);
-                let mut q = nh;
-                while q > 0 && hits[q - 1].0 > t {
-                    hits[q] = hits[q - 1];
-                    q -= 1;
-                }
-                hits[q] = (t, j);
-                nh += 1;
-            }
-        }
-        for &(t, j) in &hits[..nh] {
-            let iso = &m.iso[j];
-            let p = span.o + span.d * t;
-            let mut rgb = if s.shade {
-                shade_sample(field, s, p, iso.color, light, half)
-            } else {
-                iso.color
-            };
-            if m.opaque {
-                if m.shadows && in_shadow(field, s, &m.iso, p, l_index) {
-                    rgb = iso.color.map(|x| x * s.k.ambient);
-                }
-                under(&mut c, &mut a, rgb, R::one());
-                break 'march;
-            }
-            under(&mut c, &mut a, rgb, iso.opacity);
-        }
-        if dvr {
-            dvr_sample(k, &mut c, &mut a);
-        }
-        (t0, v0) = (t1, v1);
     }
-    (over_background(c, a, s.bg), taken)
+    (over_background(st.c, st.a, s.bg), taken)
 }

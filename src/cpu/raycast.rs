@@ -458,26 +458,28 @@ pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
     check_split_settings(s, false)
 }
 
-/// [`check_owned_settings`], and MIDA too where `carried`: bricks rendered in turn in
-/// each ray's order, each ray's MIDA state handed from one brick to the next
-/// (`gpu::raycast::render_bricked`, one GPU).
+/// [`check_owned_settings`], or where `carried` (bricks rendered in turn in each ray's
+/// order, each ray's state handed from one brick to the next:
+/// `gpu::raycast::render_bricked`, one GPU) every mode, iso-surfaces without shadows.
 ///
 /// # Errors
 /// As [`check_owned_settings`].
 pub fn check_split_settings(s: &RenderSettings, carried: bool) -> Result<()> {
-    let mida = carried && s.mode == Mode::Mida;
-    if !(matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray) || mida)
+    if carried {
+        if s.iso_shadows && s.iso_opaque && (s.mode == Mode::Iso || s.mode == Mode::Dvr) {
+            return Err(Error::invalid(
+                "--shadows",
+                "a shadow ray crosses the whole volume; bricks draw iso-surfaces without \
+                 shadows",
+            ));
+        }
+    } else if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
         || !s.iso_surfaces.is_empty()
     {
         return Err(Error::invalid(
             "--mode",
-            if carried {
-                "bricks composite DVR, MIP, MinIP, X-ray or MIDA (iso-surfaces look along \
-                 the whole ray)"
-            } else {
-                "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along \
-                 the whole ray)"
-            },
+            "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along the \
+             whole ray)",
         ));
     }
     if s.filter.prefiltered() || s.filter == Filter::Sinc {

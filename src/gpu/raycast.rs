@@ -708,19 +708,45 @@ pub fn render_owned(
     })
 }
 
-/// The bricks a volume of `dims` is cut into so that each, with the ghost voxels of
-/// `filter`, fits `max_texels` per axis and, where given, `max_voxels` in all: the k-d
-/// tree of `io::brick` for the fewest bricks that fit (one when the volume fits whole).
+/// Whether a frame's rays carry their state from brick to brick when the volume is cut
+/// ([`render_bricked`]): MIDA and iso-surfaces, which look along the whole ray.
+pub fn carries_state(settings: &RenderSettings) -> bool {
+    draws_iso(settings) || settings.mode == Mode::Mida
+}
+
+/// Whether a frame draws iso-surfaces (mode iso, or DVR with some).
+fn draws_iso(settings: &RenderSettings) -> bool {
+    settings.mode == Mode::Iso || (settings.mode == Mode::Dvr && !settings.iso_surfaces.is_empty())
+}
+
+/// The ghost voxels each brick of a frame's split volume carries:
+/// `cpu::field::brick_ghost` (the filter's and the gradient's reach), and for
+/// iso-surfaces one step more (a crossing between a brick's first sample and the last
+/// of the brick in front is shaded by the later brick, up to a step outside its box).
+pub fn brick_ghost_for(settings: &RenderSettings) -> usize {
+    let step = if draws_iso(settings) {
+        settings.step.ceil().max(1.0) as usize
+    } else {
+        0
+    };
+    crate::cpu::field::brick_ghost(settings.filter) + step
+}
+
+/// The bricks a volume of `dims` is cut into so that each, with the ghost voxels a
+/// frame of `settings` needs ([`brick_ghost_for`]), fits `max_texels` per axis and,
+/// where given, `max_voxels` in all: the k-d tree of `io::brick` for the fewest bricks
+/// that fit (one when the volume fits whole).
 ///
 /// # Errors
-/// No cut fits (a limit below the filter's ghost voxels).
+/// No cut fits (a limit below the ghost voxels).
 pub fn brick_plan(
     dims: [usize; 3],
-    filter: Filter,
+    settings: &RenderSettings,
     max_texels: usize,
     max_voxels: Option<u64>,
 ) -> Result<(crate::io::brick::KdTree, Vec<crate::io::brick::Brick>)> {
-    let ghost = crate::cpu::field::brick_ghost(filter);
+    let ghost = brick_ghost_for(settings);
+    let filter = settings.filter;
     let fits = |b: &crate::io::brick::Brick| {
         let g = b.with_ghost(ghost, dims);
         g.dims().iter().all(|&n| n <= max_texels)
@@ -826,8 +852,8 @@ pub fn volume_split(
         .memory
         .as_ref()
         .map(|m| m.bytes.saturating_sub(out) / per_voxel);
-    let (tree, bricks) = brick_plan(dims, settings.filter, max, max_voxels)?;
-    let ghost = crate::cpu::field::brick_ghost(settings.filter);
+    let (tree, bricks) = brick_plan(dims, settings, max, max_voxels)?;
+    let ghost = brick_ghost_for(settings);
     let largest = bricks
         .iter()
         .map(|b| b.with_ghost(ghost, dims).voxels() as u64)
@@ -846,9 +872,23 @@ pub fn volume_split(
     }))
 }
 
-/// The vec4 a brick's MIDA ray hands the next brick (`shaders/shared/modes_cast.wgsl:
-/// mida_store`): `(c, a)`, `(running, best, started, 0)`, the best sample's colour.
+/// The vec4 a brick's ray hands the next brick: MIDA's (`shaders/shared/modes_cast.wgsl:
+/// mida_store`) `(c, a)`, `(running, best, started, 0)`, the best sample's colour;
+/// iso-surfaces' (`iso_store`) `(c, a)`, `(t0, v0, started, done)` and one unused.
 pub const CARRIED_VEC4S: usize = 3;
+
+/// An iso-surface ray's state from its [`CARRIED_VEC4S`] vec4.
+/// Mirrors `shaders/shared/modes_cast.wgsl: iso_load`.
+pub fn carried_iso(v: &[[f32; 4]]) -> crate::cpu::modes::IsoState<f32> {
+    crate::cpu::modes::IsoState {
+        c: [v[0][0], v[0][1], v[0][2]],
+        a: v[0][3],
+        t0: v[1][0],
+        v0: v[1][1],
+        started: v[1][2] == 1.0,
+        done: v[1][3] == 1.0,
+    }
+}
 
 /// A MIDA ray's state from its [`CARRIED_VEC4S`] vec4.
 /// Mirrors `shaders/shared/modes_cast.wgsl: mida_load`.
@@ -868,13 +908,15 @@ pub fn carried_mida(v: &[[f32; 4]]) -> crate::cpu::modes::MidaState<f32> {
 /// rendered as a placed session ([`render_owned`]) in turn, so the device holds one
 /// brick at a time. DVR, MIP, MinIP and X-ray: the pieces composited on the host in each
 /// pixel's visibility order (`cpu::composite`); MIP and MinIP equal the unsplit render
-/// exactly, X-ray and DVR up to the regrouping of their sums by brick. MIDA: the bricks
-/// rendered in the rays' order (`cpu::composite::ray_order`), each ray's state
-/// (`cpu::modes::MidaState`) handed from brick to brick on the device and finished on
-/// the host (`cpu::modes::mida_finish`): the unsplit render's samples in its order.
+/// exactly, X-ray and DVR up to the regrouping of their sums by brick. MIDA and
+/// iso-surfaces ([`carries_state`]): the bricks rendered in the rays' order
+/// (`cpu::composite::ray_order`), each ray's state (`cpu::modes::MidaState`,
+/// `cpu::modes::IsoState`) handed from brick to brick on the device and finished on
+/// the host (`cpu::modes::mida_finish`, the background): the unsplit render's samples
+/// and arithmetic in its order.
 ///
 /// # Errors
-/// As [`render_owned`]; MIDA is rendered too.
+/// As [`render_owned`], but MIDA and iso-surfaces (without shadows) are rendered.
 pub fn render_bricked(
     ctx: &GpuContext,
     volume: &AnyVolume,
@@ -890,11 +932,11 @@ pub fn render_bricked(
     crate::cpu::raycast::check_split_settings(settings, true)?;
     volume.check_finite("volume")?;
     let dims = volume.dims();
-    let ghost = crate::cpu::field::brick_ghost(settings.filter);
+    let ghost = brick_ghost_for(settings);
     let r = volume.value_range();
     let range = (r.min, r.max);
     let (w, h) = (camera.width, camera.height);
-    let carried = settings.mode == Mode::Mida;
+    let carried = carries_state(settings);
     let mut carry = vec![[0.0f32; 4]; if carried { w * h * CARRIED_VEC4S } else { 0 }];
     let order: Vec<usize> = if carried {
         crate::cpu::composite::ray_order(tree, camera, volume.affine())
@@ -961,10 +1003,15 @@ pub fn render_bricked(
             .for_each(|(p, ((px, n), state))| {
                 *n = pieces.iter().map(|(_, c, _)| c[p]).sum();
                 let hit = pieces[0].2.get(p).copied().unwrap_or(false);
-                let v = if hit {
-                    crate::cpu::modes::mida_finish(&carried_mida(state), gamma, bg)
-                } else {
-                    bg
+                let v = match (hit, settings.mode) {
+                    (false, _) => bg,
+                    (true, Mode::Mida) => {
+                        crate::cpu::modes::mida_finish(&carried_mida(state), gamma, bg)
+                    }
+                    (true, _) => {
+                        let st = carried_iso(state);
+                        crate::cpu::shade::over_background(st.c, st.a, bg)
+                    }
                 };
                 for (x, v) in px.iter_mut().zip(v) {
                     *x = v as f64;
@@ -1430,9 +1477,9 @@ impl<'c> RaycastSession<'c> {
     /// Invalid settings or transfer function, options the GPU path refuses (the full
     /// sinc, hardware filtering of other filters or without `FLOAT32_FILTERABLE`, rays
     /// longer than a CPU driver's loop limit), too many samples per ray or per frame
-    /// ([`crate::settings::check_ray_work`]), shader or device errors; MIDA in a placed
-    /// session (a brick's MIDA rays carry their state from the bricks in front:
-    /// [`render_bricked`]).
+    /// ([`crate::settings::check_ray_work`]), shader or device errors; MIDA and
+    /// iso-surfaces in a placed session (a brick's rays carry their state from the
+    /// bricks in front: [`render_bricked`]).
     pub fn render(
         &mut self,
         tf: &TransferFunction,
@@ -1443,8 +1490,9 @@ impl<'c> RaycastSession<'c> {
         self.render_frame(tf, camera, settings, None, progress)
     }
 
-    /// A frame; a brick's MIDA frame takes and leaves each ray's state in `carry`
-    /// ([`CARRIED_VEC4S`] per pixel, [`carried_mida`]) and makes no image.
+    /// A frame; a brick's MIDA or iso-surface frame ([`carries_state`]) takes and
+    /// leaves each ray's state in `carry` ([`CARRIED_VEC4S`] per pixel, [`carried_mida`],
+    /// [`carried_iso`]) and makes no image.
     fn render_frame(
         &mut self,
         tf: &TransferFunction,
@@ -1456,21 +1504,21 @@ impl<'c> RaycastSession<'c> {
         let t_start = Instant::now();
         settings.validate()?;
         tf.validate()?;
-        let carries = self.brick.is_some() && settings.mode == Mode::Mida;
+        let carries = self.brick.is_some() && carries_state(settings);
         let pixels = camera.width * camera.height;
         match carry.as_ref() {
             None if carries => {
                 return Err(Error::invalid(
                     "--mode",
-                    "a brick's MIDA rays carry their state from the bricks in front of it: \
-                     render the bricks in turn (gpu::raycast::render_bricked)",
+                    "a brick's MIDA and iso-surface rays carry their state from the bricks \
+                     in front of it: render the bricks in turn (gpu::raycast::render_bricked)",
                 ))
             }
             Some(c) if !carries || c.len() != pixels * CARRIED_VEC4S => {
                 return Err(Error::Gpu(format!(
                     "a carried ray state of {} vec4 for {pixels} pixels of a {} frame",
                     c.len(),
-                    if carries { "MIDA brick" } else { "whole" }
+                    if carries { "carrying brick" } else { "whole" }
                 )))
             }
             _ => {}
