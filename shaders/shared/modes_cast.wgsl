@@ -9,6 +9,15 @@
 
 #import modes
 
+// The run of steps a MIDA or iso-surface ray takes: all n of them, or in a brick
+// (params.brick.w = 1) the run it owns; (1, first, last), or x = 0 for none.
+fn carried_run(n: u32, t_in: f32, t_out: f32, dt: f32, o: vec3<f32>, d: vec3<f32>) -> vec3<u32> {
+    if (params.brick.w == 1.0) {
+        return own_range(n, t_in, t_in, t_out, dt, o, d);
+    }
+    return vec3<u32>(1u, 0u, n - 1u);
+}
+
 // mirrors src/cpu/modes.rs: MidaState
 struct MidaState {
     c: vec3<f32>,
@@ -90,29 +99,25 @@ fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f3
     let light = ray_light(ray);
     let half_vec = normalize_or_zero(light - ray.dir);
     let brick = params.brick.w == 1.0;
-    var first = 0u;
-    var last = n - 1u;
+    let run = carried_run(n, t_in, t_out, dt, o, d);
+    if (run.x == 0u) {
+        return Pixel(vec4<f32>(0.0), 0u);
+    }
     var st = mida_start();
     if (brick) {
-        let own = own_range(n, t_in, t_in, t_out, dt, o, d);
-        if (own.x == 0u) {
-            return Pixel(vec4<f32>(0.0), 0u);
-        }
-        first = own.y;
-        last = own.z;
         st = mida_load(mesh_pixel);
         if (!st.started) {
             st = mida_start();
         }
     }
-    for (var k = first; k <= last; k++) {
+    for (var k = run.y; k <= run.z; k++) {
         let p = segment_point(k, n, t_in, t_in, t_out, dt, o, d);
         let len = segment_length(k, n, t_in, t_in, t_out, dt);
         mida_sample(&st, p, len, speed, light, half_vec);
     }
     if (brick) {
         mida_store(mesh_pixel, st);
-        return Pixel(vec4<f32>(0.0), last + 1u - first);
+        return Pixel(vec4<f32>(0.0), run.z + 1u - run.y);
     }
     return Pixel(mida_finish(st), n);
 }
@@ -266,20 +271,16 @@ fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32
     let l_index = vec3<f32>(dot(params.to_index_0.xyz, light), dot(params.to_index_1.xyz, light), dot(params.to_index_2.xyz, light));
     let r = IsoRay(light, normalize_or_zero(light - ray.dir), l_index, dvr);
     let brick = params.brick.w == 1.0;
-    var first = 0u;
-    var last = n - 1u;
+    let run = carried_run(n, t_in, t_out, dt, o, d);
+    if (run.x == 0u) {
+        return Pixel(vec4<f32>(0.0), 0u);
+    }
     var st = iso_start();
     if (brick) {
-        let own = own_range(n, t_in, t_in, t_out, dt, o, d);
-        if (own.x == 0u) {
-            return Pixel(vec4<f32>(0.0), 0u);
-        }
-        first = own.y;
-        last = own.z;
         st = iso_load(mesh_pixel);
     }
     var taken = 0u;
-    for (var k = first; k <= last; k++) {
+    for (var k = run.y; k <= run.z; k++) {
         if (!iso_step(&st, k, n, t_in, t_out, dt, o, d, speed, r)) {
             break;
         }

@@ -458,14 +458,17 @@ pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
     check_split_settings(s, false)
 }
 
-/// [`check_owned_settings`], or where `carried` (bricks rendered in turn in each ray's
-/// order, each ray's state handed from one brick to the next:
-/// `gpu::raycast::render_bricked`, one GPU) every mode, iso-surfaces without shadows.
+/// [`check_owned_settings`], or where `one_device` (the bricks rendered in turn by one
+/// device, with the whole volume at hand: `gpu::raycast::render_bricked`) every mode,
+/// each ray's state handed from one brick to the next, but iso-surfaces without
+/// shadows, and the interpolating B-splines too, their coefficients prefiltered over
+/// the whole volume (not with pre-classification or precomputed gradients, which a
+/// brick prefilters on its own).
 ///
 /// # Errors
-/// As [`check_owned_settings`].
-pub fn check_split_settings(s: &RenderSettings, carried: bool) -> Result<()> {
-    if carried {
+/// As [`check_owned_settings`]; shadows; those combinations.
+pub fn check_split_settings(s: &RenderSettings, one_device: bool) -> Result<()> {
+    if one_device {
         if s.iso_shadows && s.iso_opaque && (s.mode == Mode::Iso || s.mode == Mode::Dvr) {
             return Err(Error::invalid(
                 "--shadows",
@@ -482,14 +485,31 @@ pub fn check_split_settings(s: &RenderSettings, carried: bool) -> Result<()> {
              whole ray)",
         ));
     }
-    if s.filter.prefiltered() || s.filter == Filter::Sinc {
+    let own_prefilter = s.classification == Classification::Pre || s.precompute_gradients;
+    if s.filter.prefiltered() && one_device && own_prefilter {
+        return Err(Error::invalid(
+            "--filter",
+            format!(
+                "{} in bricks samples coefficients prefiltered over the whole volume, but \
+                 pre-classified colours and precomputed gradients would be prefiltered brick \
+                 by brick: post-classify and compute gradients on the fly",
+                s.filter.name()
+            ),
+        ));
+    }
+    if (s.filter.prefiltered() && !one_device) || s.filter == Filter::Sinc {
         return Err(Error::invalid(
             "--filter",
             format!(
                 "{} reaches across the whole volume; bricks take the filters of finite \
                  reach (nearest, trilinear, bspline, catmull-rom, lanczos2-4, \
-                 cubic-bspline-fast)",
-                s.filter.name()
+                 cubic-bspline-fast{})",
+                s.filter.name(),
+                if one_device {
+                    ", bspline-interp, cubic-bspline-fast-interp"
+                } else {
+                    ""
+                }
             ),
         ));
     }

@@ -913,10 +913,13 @@ pub fn carried_mida(v: &[[f32; 4]]) -> crate::cpu::modes::MidaState<f32> {
 /// (`cpu::composite::ray_order`), each ray's state (`cpu::modes::MidaState`,
 /// `cpu::modes::IsoState`) handed from brick to brick on the device and finished on
 /// the host (`cpu::modes::mida_finish`, the background): the unsplit render's samples
-/// and arithmetic in its order.
+/// and arithmetic in its order. The interpolating B-splines sample the whole volume's
+/// coefficients, made once on the host ([`RaycastSession::give_coefficients`]).
 ///
 /// # Errors
-/// As [`render_owned`], but MIDA and iso-surfaces (without shadows) are rendered.
+/// As [`render_owned`], but MIDA, iso-surfaces (without shadows) and the interpolating
+/// B-splines (post-classified, gradients on the fly) are rendered
+/// ([`crate::cpu::raycast::check_split_settings`]).
 pub fn render_bricked(
     ctx: &GpuContext,
     volume: &AnyVolume,
@@ -945,6 +948,25 @@ pub fn render_bricked(
     };
     let mut pieces = Vec::with_capacity(bricks.len());
     let mut timings = GpuTimings::default();
+    // The interpolating B-splines sample coefficients prefiltered along whole lines:
+    // the whole volume's, made once on the host as an unsplit session makes them.
+    let t_coef = Instant::now();
+    let coefficients = match settings.filter.prefiltered() {
+        true => {
+            let grid = Grid::<f32> {
+                dims,
+                data: volume.to_f32().into_data(),
+            };
+            let c = prepare(&grid, settings.filter);
+            Some(crate::volume::Volume::with_affine(
+                dims,
+                volume.affine(),
+                c.data,
+            )?)
+        }
+        false => None,
+    };
+    timings.prepare += t_coef.elapsed().as_secs_f64();
     let mut session: Option<RaycastSession> = None;
     for (i, &bi) in order.iter().enumerate() {
         let b = &bricks[bi];
@@ -966,6 +988,14 @@ pub fn render_bricked(
         }
         let session = session.as_mut().expect("made above");
         session.place(placement)?;
+        if let Some(c) = &coefficients {
+            let c = c.crop(g.lo, g.hi)?;
+            let dims = c.dims();
+            session.give_coefficients(Grid {
+                dims,
+                data: c.into_data(),
+            })?;
+        }
         let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
         let state = carried.then_some(&mut carry[..]);
         let out = session.render_frame(tf, camera, &s, state, &rows)?;
@@ -1220,6 +1250,9 @@ pub struct RaycastSession<'c> {
     minmax_pipeline: Option<super::skip::MinMaxPipeline>,
     /// The interpolating B-splines' coefficients, on the host and as a texture.
     coefficients: Option<(Grid<f32>, wgpu::Texture)>,
+    /// Coefficients a brick was given, prefiltered over the whole volume
+    /// ([`RaycastSession::give_coefficients`]), uploaded by the next frame that needs them.
+    given_coefficients: Option<Grid<f32>>,
     lut: Option<Cached<wgpu::Buffer>>,
     lut2: Option<Cached<wgpu::Buffer>>,
     prefix: Option<Cached<wgpu::Buffer>>,
@@ -1350,6 +1383,7 @@ impl<'c> RaycastSession<'c> {
             prepare_pipelines: None,
             minmax_pipeline: None,
             coefficients: None,
+            given_coefficients: None,
             lut: None,
             lut2: None,
             prefix: None,
@@ -1386,6 +1420,7 @@ impl<'c> RaycastSession<'c> {
         self.compact = None;
         self.stats.volume_bytes = 0;
         self.coefficients = None;
+        self.given_coefficients = None;
         self.preclassified = None;
         self.gradients = None;
         self.minmax = None;
@@ -1423,6 +1458,25 @@ impl<'c> RaycastSession<'c> {
             // Submit the staged copies now, so that the frame's upload time holds them.
             ctx.queue.submit(std::iter::empty::<wgpu::CommandBuffer>());
         }
+        Ok(())
+    }
+
+    /// Gives a placed brick its interpolating B-spline coefficients, the whole volume's
+    /// (prefiltered along whole lines) over the brick's voxels with their ghosts, for
+    /// its frames to sample in place of its own prefilter (which would differ near the
+    /// brick's faces).
+    ///
+    /// # Errors
+    /// A grid of other dimensions than the session's volume.
+    pub fn give_coefficients(&mut self, c: Grid<f32>) -> Result<()> {
+        if c.dims != self.dims {
+            return Err(Error::invalid(
+                "coefficients",
+                format!("{:?} for a {:?} volume", c.dims, self.dims),
+            ));
+        }
+        self.coefficients = None;
+        self.given_coefficients = Some(c);
         Ok(())
     }
 
@@ -1648,8 +1702,12 @@ impl<'c> RaycastSession<'c> {
         let t_prep = Instant::now();
         let passes_before = self.stats.prepare_passes;
         if prefiltered && self.coefficients.is_none() {
-            // A sequential recurrence along every line, on the CPU (module docs).
-            let c = prepare(&self.grid, settings.filter);
+            // A sequential recurrence along every line, on the CPU (module docs), or
+            // the whole volume's, given.
+            let c = match self.given_coefficients.take() {
+                Some(c) => c,
+                None => prepare(&self.grid, settings.filter),
+            };
             let tex = ctx.upload_volume_r32(dims, &c.data)?;
             self.coefficients = Some((c, tex));
             self.stats.prepare_passes += 1;
