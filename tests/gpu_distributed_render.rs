@@ -354,11 +354,18 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         assert!(!split.exists());
         // MIP composited sort-last, MIDA and iso-surfaces with each ray's state handed
         // from brick to brick: each the unsplit image (on lavapipe, byte for byte).
+        // (Under the lowered memory the carried states, 52 bytes a pixel, leave the
+        // 48³ volume hundreds of bricks of a few voxels: MIDA and iso-surfaces run under
+        // the texture limit only.)
+        let carried = limit.0 == "VOXLAB_GPU_MAX_TEXTURE_3D";
         for (a, whole) in [
             (args(&split, "mip"), &one),
             (args(&split, "mida"), &one_mida),
             (with_iso(args(&split, "iso"), &["--iso-opaque"]), &one_iso),
-        ] {
+        ]
+        .into_iter()
+        .filter(|(_, whole)| carried || *whole == &one)
+        {
             let said = text(&run(&a, Some(limit)));
             assert!(
                 said.contains("voxlab: ray casting in") && said.contains(why),

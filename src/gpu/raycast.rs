@@ -790,10 +790,30 @@ pub fn texture_bytes_per_voxel(settings: &RenderSettings, compact: Option<Compac
     values + rgba
 }
 
-/// The device bytes of a `camera` image's output buffers (RGBA f32 and a count a
-/// pixel), at most.
-pub fn output_bytes(camera: &Camera) -> u64 {
-    camera.width as u64 * camera.height as u64 * 20
+/// The device bytes of a `camera` image's output buffers, at most: RGBA f32 and a count
+/// a pixel, or in a brick whose rays carry their state (`carried`, [`carries_state`])
+/// the state's [`CARRIED_VEC4S`] vec4 in place of the RGBA.
+pub fn output_bytes(camera: &Camera, carried: bool) -> u64 {
+    let vec4s = if carried { CARRIED_VEC4S as u64 } else { 1 };
+    camera.width as u64 * camera.height as u64 * (4 + 16 * vec4s)
+}
+
+/// The host bytes a frame split into bricks ([`render_bricked`]) holds beyond the
+/// volume and its bricks: each ray's carried state ([`carries_state`]) and the whole
+/// volume's B-spline coefficients (the interpolating B-splines), f32.
+pub fn split_host_bytes(dims: [usize; 3], camera: &Camera, settings: &RenderSettings) -> u64 {
+    let pixels = camera.width as u64 * camera.height as u64;
+    let carry = if carries_state(settings) {
+        pixels * 16 * CARRIED_VEC4S as u64
+    } else {
+        0
+    };
+    let coefficients = if settings.filter.prefiltered() {
+        dims.iter().product::<usize>() as u64 * 4
+    } else {
+        0
+    };
+    carry + coefficients
 }
 
 /// How a frame's volume is cut into bricks to fit the device ([`volume_split`]).
@@ -826,8 +846,7 @@ pub fn volume_split(
 ) -> Result<Option<VolumeSplit>> {
     let max = ctx.limits.max_texture_dimension_3d as usize;
     let per_voxel = texture_bytes_per_voxel(settings, compact).max(1);
-    let out = output_bytes(camera);
-    let whole = dims.iter().product::<usize>() as u64 * per_voxel + out;
+    let whole = dims.iter().product::<usize>() as u64 * per_voxel + output_bytes(camera, false);
     let memory = ctx.memory.as_ref().filter(|m| whole > m.bytes);
     let why = if dims.iter().any(|&n| n > max) {
         format!("the {dims:?} volume exceeds the 3-D texture limit of {max} texels per axis")
@@ -848,6 +867,7 @@ pub fn volume_split(
         },
         e => e,
     })?;
+    let out = output_bytes(camera, carries_state(settings));
     let max_voxels = ctx
         .memory
         .as_ref()
@@ -1592,7 +1612,7 @@ impl<'c> RaycastSession<'c> {
         // buffers take, against the device memory: a session holds its volume whole.
         let held = dims.iter().product::<usize>() as u64
             * texture_bytes_per_voxel(settings, compact_kind)
-            + output_bytes(camera);
+            + output_bytes(camera, carries);
         ctx.check_memory("the ray caster's volume textures", held)
             .map_err(|e| match e {
                 Error::TooLarge { what, message } => Error::TooLarge {

@@ -735,17 +735,26 @@ pub(crate) fn plan_frame(
     let backend = engine.describe();
     let (host, device, split) = match (engine.backend(), engine.gpu()) {
         (Backend::Gpu, Some(ctx)) => {
-            use crate::gpu::raycast::{output_bytes, texture_bytes_per_voxel, CompactVolume};
+            use crate::gpu::raycast::{
+                carries_state, output_bytes, split_host_bytes, texture_bytes_per_voxel,
+                CompactVolume,
+            };
             let compact =
                 CompactVolume::of(ctx, &scene.volume).filter(|_| CompactVolume::enabled());
             let cut =
                 crate::gpu::raycast::volume_split(ctx, dims, settings, compact, &scene.camera)?;
-            let (texels, split) = match cut {
-                Some(c) => (c.largest, vec![c.line]),
-                None => (voxels, Vec::new()),
+            // A split frame's host also holds the rays' carried states and the whole
+            // volume's coefficients, where it uses them.
+            let (texels, split, extra) = match cut {
+                Some(c) => (
+                    c.largest,
+                    vec![c.line],
+                    split_host_bytes(dims, &scene.camera, settings),
+                ),
+                None => (voxels, Vec::new(), 0),
             };
             crate::gpu::raycast::check_device(ctx, dims, settings, compact)?;
-            let out = output_bytes(&scene.camera);
+            let out = output_bytes(&scene.camera, !split.is_empty() && carries_state(settings));
             let per_voxel = texture_bytes_per_voxel(settings, compact);
             // The largest single object: the output or the volume's values (at most 4
             // bytes a texel; a 16-bit compact texture alone 2).
@@ -755,7 +764,7 @@ pub(crate) fn plan_frame(
                 out.max(texels * per_voxel.min(4)),
             );
             // The host keeps the volume as f32 (and each brick's copy).
-            (voxels * 4 + texels * 4 + image, Some(device), split)
+            (voxels * 4 + texels * 4 + image + extra, Some(device), split)
         }
         (Backend::CpuF32, _) => (voxels * 4 + image, None, Vec::new()),
         _ => (voxels * 8 + image, None, Vec::new()),
