@@ -97,7 +97,7 @@ pub fn importance_texture(
         "adaptive_importance.wgsl",
         &shaders::resolve("adaptive_importance"),
     )?;
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("importance"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -139,7 +139,7 @@ pub fn importance_texture(
             ctx,
             "importance params",
             bytemuck::bytes_of(&params),
-            wgpu::BufferUsages::UNIFORM,
+            super::context::PARAMS_USAGE,
         )?;
         let bind = ctx.bind_group(
             "importance",
@@ -278,11 +278,10 @@ pub fn render(
         dims,
         data: values.data().to_vec(),
     };
-    let dev = &ctx.device;
     let module = ctx.shader("adaptive.wgsl", &shaders::resolve("adaptive"))?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("adaptive"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -416,7 +415,7 @@ pub fn render(
                 ctx,
                 "adaptive params",
                 bytemuck::bytes_of(&params),
-                wgpu::BufferUsages::UNIFORM,
+                super::context::PARAMS_USAGE,
             )?;
             // Each band its own rays: an image of any size within one binding.
             let band = &rays[2 * row0 * w..2 * (row0 + rows) * w];

@@ -150,7 +150,7 @@ impl GpuClipMesh {
         });
         let module = ctx.shader("clipmesh.wgsl", &shader())?;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("clipmesh"),
             entries: &[
                 buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -184,7 +184,7 @@ impl GpuClipMesh {
         let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("clip mesh params"),
             contents: bytemuck::bytes_of(params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let groups = ((w as u32).div_ceil(8), (rows as u32).div_ceil(8));
         // Without the hierarchy, chunks of triangles; with it, dispatches of a walk
@@ -202,7 +202,7 @@ impl GpuClipMesh {
             let cbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("clip mesh chunk"),
                 contents: bytemuck::bytes_of(&range),
-                usage: wgpu::BufferUsages::UNIFORM,
+                usage: super::context::PARAMS_USAGE,
             });
             let bind = ctx.bind_group(
                 "clipmesh",

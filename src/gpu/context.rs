@@ -129,7 +129,15 @@ pub struct GpuContext {
     /// The device memory a job may fill at once, where known
     /// ([`super::plan::DeviceMemory`]).
     pub memory: Option<super::plan::DeviceMemory>,
+    /// Whether the shaders' parameter blocks are bound as read-only storage buffers
+    /// instead of uniform buffers: on a CPU adapter (see [`GpuContext::shader`]).
+    pub params_in_storage: bool,
 }
+
+/// The usage of every parameter block's buffer: bound as a uniform buffer, or as a
+/// read-only storage buffer where [`GpuContext::params_in_storage`].
+pub const PARAMS_USAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::UNIFORM.union(wgpu::BufferUsages::STORAGE);
 
 /// The process's one wgpu instance. It is created once and never dropped: on NVIDIA's
 /// Vulkan driver, destroying an instance on one thread while another thread opens or
@@ -233,6 +241,7 @@ impl GpuContext {
         }))
         .map_err(|e| Error::Gpu(format!("could not open the device: {e}")))?;
         let summary = AdapterSummary::from_info(&adapter.get_info());
+        let summary_is_cpu = summary.is_cpu();
         let sheet = super::peak::peak_of(&summary.name).map(|p| (p.part, p.memory_gb));
         let (memory, note) = super::plan::device_memory(sheet, |k| std::env::var(k).ok())?;
         lowered.extend(note);
@@ -248,6 +257,7 @@ impl GpuContext {
             lowered,
             features,
             memory,
+            params_in_storage: summary_is_cpu,
         })
     }
 
@@ -366,7 +376,22 @@ impl GpuContext {
     }
 
     /// Compiles WGSL, turning validation errors into [`Error::Gpu`] with the message.
+    ///
+    /// Where [`GpuContext::params_in_storage`], every `var<uniform>` becomes a
+    /// `var<storage, read>` (the same layout: WGSL lays a struct out alike in both
+    /// address spaces, the uniform one only adds rules, which naga checks on the
+    /// shaders as written). Lavapipe compiles a shader again, with the values inlined,
+    /// whenever a uniform block its loops read is bound, and keeps every such copy
+    /// (about 1.5 MiB for the ray caster) until the process ends: one per frame of a
+    /// renderer session, one per band of rows. It does not do that for storage
+    /// buffers. Layouts made by [`GpuContext::bind_group_layout`] and buffers made with
+    /// [`PARAMS_USAGE`] follow.
     pub fn shader(&self, label: &str, source: &str) -> Result<wgpu::ShaderModule> {
+        let source = if self.params_in_storage {
+            source.replace("var<uniform>", "var<storage, read>")
+        } else {
+            source.to_string()
+        };
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self
             .device
@@ -457,10 +482,20 @@ impl GpuContext {
     pub fn check_storage(&self, label: &str, bytes: u64) -> Result<()> {
         let limit = crate::gpu::plan::binding_limit(&self.limits);
         if bytes > limit {
+            // Where the planner lowered the limit, the line saying why.
+            let lowered = match self
+                .lowered
+                .iter()
+                .find(|l| l.starts_with("storage binding lowered"))
+            {
+                Some(why) => format!(" ({why})"),
+                None => String::new(),
+            };
             return Err(Error::too_large(
                 label,
                 format!(
-                    "{bytes} bytes exceed the adapter's storage-binding limit of {limit} bytes"
+                    "{bytes} bytes exceed the adapter's storage-binding limit of {limit} \
+                     bytes{lowered}"
                 ),
             ));
         }
@@ -775,6 +810,39 @@ impl GpuContext {
     }
 
     /// A bind group whose entries are `resources` at bindings 0, 1, 2, … in order.
+    /// The bind group layout `desc` describes; a uniform buffer's entry becomes a read-only
+    /// storage buffer's where [`GpuContext::params_in_storage`] (as [`GpuContext::shader`]
+    /// declares it).
+    pub fn bind_group_layout(
+        &self,
+        desc: &wgpu::BindGroupLayoutDescriptor<'_>,
+    ) -> wgpu::BindGroupLayout {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = desc
+            .entries
+            .iter()
+            .map(|e| match e.ty {
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset,
+                    min_binding_size,
+                } if self.params_in_storage => wgpu::BindGroupLayoutEntry {
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset,
+                        min_binding_size,
+                    },
+                    ..*e
+                },
+                _ => *e,
+            })
+            .collect();
+        self.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: desc.label,
+                entries: &entries,
+            })
+    }
+
     pub fn bind_group(
         &self,
         label: &str,

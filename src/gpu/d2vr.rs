@@ -774,7 +774,7 @@ pub fn render_d2vr(
     let rp_buf = init(
         "d2vr raycast params",
         bytemuck::bytes_of(&rp),
-        wgpu::BufferUsages::UNIFORM,
+        super::context::PARAMS_USAGE,
     );
     let pixels = (w * h) as u64;
 
@@ -843,7 +843,7 @@ pub fn render_d2vr(
             let dp_buf = init(
                 "d2vr chunk",
                 bytemuck::bytes_of(&p),
-                wgpu::BufferUsages::UNIFORM,
+                super::context::PARAMS_USAGE,
             );
             // Bindings 0–7, then the projections' further bindings (8, 9, …) and the
             // hardware path's sampler.

@@ -511,7 +511,7 @@ pub fn backproject_timed(
                     let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                         label: Some("fbp params"),
                         contents: bytemuck::bytes_of(&params),
-                        usage: wgpu::BufferUsages::UNIFORM,
+                        usage: super::context::PARAMS_USAGE,
                     });
                     let mut entries = vec![
                         ubuf.as_entire_binding(),

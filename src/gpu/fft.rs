@@ -1333,7 +1333,7 @@ impl GpuFftPlan {
             },
             count: None,
         };
-        let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("fft"),
             entries: &[
                 wgpu::BindGroupLayoutEntry {
@@ -1490,7 +1490,7 @@ impl GpuFftPlan {
                 uniform: dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("fft params"),
                     contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
+                    usage: super::context::PARAMS_USAGE,
                 }),
                 src,
                 dst,
@@ -1745,7 +1745,7 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
     let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("two real params"),
         contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let out = ctx.storage_buffer("two real spectra", (2 * n * 8) as u64)?;
     let mut enc = dev.create_command_encoder(&Default::default());

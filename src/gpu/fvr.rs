@@ -413,7 +413,7 @@ impl GpuFvrSpectrum {
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("fvr params"),
             size: std::mem::size_of::<FvrParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: super::context::PARAMS_USAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let slice = ctx.storage_buffer("fvr slice", (m * m * 8) as u64)?;

@@ -136,7 +136,7 @@ pub fn precompute_gradients_in_slabs(
     }
     let dev = &ctx.device;
     let module = ctx.shader("gradient.wgsl", &shader_source())?;
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("gradient"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -168,7 +168,7 @@ pub fn precompute_gradients_in_slabs(
         let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("gradient params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let bind = ctx.bind_group(
             "gradient",

@@ -193,21 +193,19 @@ impl<'c> Steps<'c> {
         use wgpu::BufferBindingType as T;
         let ro = T::Storage { read_only: true };
         let rw = T::Storage { read_only: false };
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("iterative steps"),
-                entries: &[
-                    buffer_entry(0, T::Uniform),
-                    buffer_entry(1, ro),
-                    buffer_entry(2, ro),
-                    buffer_entry(3, ro),
-                    buffer_entry(4, rw),
-                    buffer_entry(5, rw),
-                    buffer_entry(6, rw),
-                    buffer_entry(7, ro),
-                ],
-            });
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("iterative steps"),
+            entries: &[
+                buffer_entry(0, T::Uniform),
+                buffer_entry(1, ro),
+                buffer_entry(2, ro),
+                buffer_entry(3, ro),
+                buffer_entry(4, rw),
+                buffer_entry(5, rw),
+                buffer_entry(6, rw),
+                buffer_entry(7, ro),
+            ],
+        });
         let module = ctx.shader("iterative.wgsl", &shader_source())?;
         let mut pipelines = HashMap::new();
         for e in ENTRIES {
@@ -263,7 +261,7 @@ impl<'c> Steps<'c> {
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("iterative params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let dummy = &self.dummy_read;
         let read = |b: Option<&'a wgpu::Buffer>| b.unwrap_or(dummy).as_entire_binding();

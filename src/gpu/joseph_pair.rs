@@ -514,7 +514,7 @@ impl<'c> GpuJosephPair<'c> {
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("transpose params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let bind = self.ctx.bind_group(
             "project transpose",

@@ -340,7 +340,7 @@ pub fn render(
     let dev = &ctx.device;
     let module = ctx.shader("multi.wgsl", &multi_shader())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("multi"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -393,7 +393,7 @@ pub fn render(
             let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("multi params"),
                 contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
+                usage: super::context::PARAMS_USAGE,
             });
             Ok(ctx.bind_group(
                 "multi",

@@ -73,7 +73,7 @@ pub fn weigh(ctx: &GpuContext, p: &Projections<f32>, g: &Geometry) -> Result<Pro
         .clamp(1, views);
     let dev = &ctx.device;
     let module = ctx.shader("parker.wgsl", &shader_source())?;
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("parker"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -134,7 +134,7 @@ pub fn weigh(ctx: &GpuContext, p: &Projections<f32>, g: &Geometry) -> Result<Pro
         let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("parker params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let dbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("parker views"),

@@ -31,7 +31,7 @@ pub fn preintegrate_buffer(
     )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("preintegrate"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -45,7 +45,7 @@ pub fn preintegrate_buffer(
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("preintegrate params"),
         contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("lut"),

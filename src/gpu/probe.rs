@@ -40,7 +40,7 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("probe params"),
         contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let xbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("probe x"),

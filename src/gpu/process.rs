@@ -202,7 +202,7 @@ impl Op {
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("process params"),
             size: std::mem::size_of::<ProcessParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: super::context::PARAMS_USAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         t.setup += start.elapsed().as_secs_f64();

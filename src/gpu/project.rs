@@ -303,7 +303,7 @@ impl ForwardKernel {
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("project params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let [views, list, out] = buffers;
         let vol = match grid {

@@ -85,7 +85,7 @@ fn dispatch(
     let dev = &ctx.device;
     let module = ctx.shader("radon.wgsl", &shader_source())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("radon"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -103,7 +103,7 @@ fn dispatch(
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("radon params"),
         contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let out_bytes = (out_len * 4) as u64;
     let out = ctx.storage_buffer("radon output", out_bytes)?;
@@ -398,11 +398,11 @@ pub fn iradon_sart(
     let params_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("SART params"),
         contents: &bytes,
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let module = ctx.shader("radon_sart.wgsl", &sart_shader_source())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("radon sart"),
         entries: &[
             wgpu::BindGroupLayoutEntry {

@@ -238,7 +238,7 @@ pub fn filter_projections(
     // One explicit layout for the three entry points (each uses only some bindings).
     let entry = super::context::buffer_entry;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("ramp"),
         entries: &[
             entry(0, wgpu::BufferBindingType::Uniform),
@@ -311,7 +311,7 @@ pub fn filter_projections(
         let ubuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("ramp params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let mut enc = dev.create_command_encoder(&Default::default());
         let run = |enc: &mut wgpu::CommandEncoder, stage: usize, z: &wgpu::Buffer| {

@@ -746,33 +746,19 @@ pub fn brick_plan(
     max_voxels: Option<u64>,
 ) -> Result<(crate::io::brick::KdTree, Vec<crate::io::brick::Brick>)> {
     let ghost = brick_ghost_for(settings);
-    let filter = settings.filter;
-    let fits = |b: &crate::io::brick::Brick| {
-        let g = b.with_ghost(ghost, dims);
-        g.dims().iter().all(|&n| n <= max_texels)
-            && max_voxels.is_none_or(|m| g.voxels() as u64 <= m)
-    };
-    let mut n = 1;
-    loop {
-        let cut = crate::io::brick::kd_tree(dims, n);
-        match cut {
-            Ok((tree, bricks)) if bricks.iter().all(fits) => return Ok((tree, bricks)),
-            Ok(_) if n < 1 << 16 => n += 1,
-            _ => {
-                let voxels = max_voxels
-                    .map(|m| format!(" and {m} texels in all"))
-                    .unwrap_or_default();
-                return Err(Error::too_large(
-                    "volume",
-                    format!(
-                        "{dims:?} cannot be cut into bricks of at most {max_texels} texels \
-                         per axis{voxels} with the {} filter's {ghost} ghost voxels",
-                        filter.name()
-                    ),
-                ));
-            }
-        }
-    }
+    crate::io::brick::fitting_kd_tree(dims, ghost, max_texels, max_voxels).ok_or_else(|| {
+        let voxels = max_voxels
+            .map(|m| format!(" and {m} texels in all"))
+            .unwrap_or_default();
+        Error::too_large(
+            "volume",
+            format!(
+                "{dims:?} cannot be cut into bricks of at most {max_texels} texels per \
+                 axis{voxels} with the {} filter's {ghost} ghost voxels",
+                settings.filter.name()
+            ),
+        )
+    })
 }
 
 /// The device bytes a frame's volume textures take per voxel: the raw values
@@ -1289,9 +1275,8 @@ pub struct RaycastSession<'c> {
 /// A frame's bind-group layout and sampler: every texture `filterable` (and a linear
 /// sampler) or none (a nearest one, for a device without f32 filtering).
 fn frame_layout(ctx: &GpuContext, filterable: bool) -> (wgpu::BindGroupLayout, wgpu::Sampler) {
-    let dev = &ctx.device;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("raycast"),
         entries: &[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -1897,7 +1882,7 @@ impl<'c> RaycastSession<'c> {
                 let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("raycast params"),
                     contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
+                    usage: super::context::PARAMS_USAGE,
                 });
                 let seg_buf = match &clip_mesh {
                     Some(m) => Some(m.segments(ctx, &params)?),
@@ -2082,9 +2067,8 @@ fn prepare_pipeline<'s>(
     let p = match slot {
         Some(p) => p,
         None => {
-            let dev = &ctx.device;
             let module = ctx.shader("raycast_prepare.wgsl", &prepare_shader())?;
-            let layout = dev.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("prepare"),
                 entries: &[
                     buffer_entry(0, wgpu::BufferBindingType::Uniform),
@@ -2127,7 +2111,7 @@ fn run_prepare(
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("prepare params"),
         contents: bytemuck::bytes_of(params),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let vol_view = volume.create_view(&Default::default());
     let target_view = target.create_view(&Default::default());

@@ -40,16 +40,14 @@ impl MinMaxPipeline {
     /// Compiles the shader and makes the pipeline.
     pub fn new(ctx: &GpuContext) -> Result<Self> {
         let module = ctx.shader("skip_minmax.wgsl", &super::shaders::resolve("skip_minmax"))?;
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("skip minmax"),
-                entries: &[
-                    buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                    texture_entry(1, false),
-                    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
-                ],
-            });
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("skip minmax"),
+            entries: &[
+                buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                texture_entry(1, false),
+                buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
+            ],
+        });
         let pipeline = compute_pipeline(ctx, "skip_minmax", &module, "skip_minmax", &layout)?;
         Ok(MinMaxPipeline { layout, pipeline })
     }
@@ -119,7 +117,7 @@ pub fn min_max_buffer_with(
         let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("skip grid params"),
             contents: bytemuck::bytes_of(&p),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: super::context::PARAMS_USAGE,
         });
         let bind = ctx.bind_group(
             "skip minmax",

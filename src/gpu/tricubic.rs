@@ -78,7 +78,7 @@ pub fn sample_fast(
     let count = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("tricubic count"),
         contents: bytemuck::cast_slice(&[n as u32, 0, 0, 0]),
-        usage: wgpu::BufferUsages::UNIFORM,
+        usage: super::context::PARAMS_USAGE,
     });
     let tex = ctx.upload_volume_r32(grid.dims, &grid.data)?;
     let view = tex.create_view(&Default::default());

@@ -227,6 +227,31 @@ pub fn kd_tree(dims: [usize; 3], n: usize) -> Result<(KdTree, Vec<Brick>)> {
     Ok((tree, out))
 }
 
+/// The k-d tree of [`kd_tree`] with the fewest bricks each of which, with `ghost`
+/// voxels around it (clipped to the volume), holds at most `max_texels` per axis and,
+/// where given, `max_voxels` in all: one brick when the volume fits whole. `None` when
+/// no cut fits (a limit below the ghost voxels). The GPU casters' split planners ask it.
+pub fn fitting_kd_tree(
+    dims: [usize; 3],
+    ghost: usize,
+    max_texels: usize,
+    max_voxels: Option<u64>,
+) -> Option<(KdTree, Vec<Brick>)> {
+    let fits = |b: &Brick| {
+        let g = b.with_ghost(ghost, dims);
+        g.dims().iter().all(|&n| n <= max_texels)
+            && max_voxels.is_none_or(|m| g.voxels() as u64 <= m)
+    };
+    let mut n = 1;
+    loop {
+        match kd_tree(dims, n) {
+            Ok((tree, bricks)) if bricks.iter().all(fits) => return Some((tree, bricks)),
+            Ok(_) if n < 1 << 16 => n += 1,
+            _ => return None,
+        }
+    }
+}
+
 /// A k-d tree of bricks: a leaf names its brick (its index in [`kd_tree`]'s list); a
 /// cut divides a box by the plane between voxel slices `cut − 1` and `cut` of `axis`
 /// (index coordinate `cut − ½`), `low` holding the voxels below it.
