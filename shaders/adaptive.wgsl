@@ -26,10 +26,12 @@
 @group(0) @binding(7) var<storage, read_write> pixels: array<vec4<f32>>;
 @group(0) @binding(8) var<storage, read_write> counts: array<u32>;
 
+// The whole volume's voxel (i, j, k), clamped to the whole volume; the texture holds
+// the brick from params.brick.xyz on (the whole volume from 0 when not split).
 fn voxel(i: i32, j: i32, k: i32) -> f32 {
     let n = vec3<i32>(params.dims.xyz);
     let c = clamp(vec3<i32>(i, j, k), vec3<i32>(0), n - vec3<i32>(1));
-    return textureLoad(volume, c, 0).x;
+    return textureLoad(volume, c - params.brick.xyz, 0).x;
 }
 
 // mirrors src/cpu/filter.rs: sample (trilinear; apply_taps' order, x innermost)
@@ -115,7 +117,7 @@ fn spectrum_lookup(lo: f32, hi: f32) -> f32 {
 fn adaptive_step(p: vec3<f32>, f0: f32, d: vec3<f32>) -> f32 {
     let t_max = params.steps.y;
     let v = nearest_voxel(p);
-    let g = textureLoad(importance, vec3<i32>(v), 0);
+    let g = textureLoad(importance, vec3<i32>(v) - params.brick.xyz, 0);
     let gd = abs(d.x) * g.x + abs(d.y) * g.y + abs(d.z) * g.z;
     if (gd <= 0.0) {
         return t_max;
@@ -143,62 +145,119 @@ fn direct_step(p: vec3<f32>) -> f32 {
     return direct[b.x + params.table.w * (b.y + params.extra.x * b.z)];
 }
 
-struct RayOut {
-    px: vec4<f32>,
-    n: u32,
+// mirrors src/cpu/adaptive.rs: AdaptiveRay
+struct AdaptiveRay {
+    p0: vec3<f32>,
+    dir: vec3<f32>,
+    len: f32,
+    ok: bool,
 }
 
-// mirrors src/cpu/adaptive.rs: cast_ray
-fn cast_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32) -> RayOut {
-    let bg = params.background;
-    let miss = vec4<f32>(bg.x * bg.w, bg.y * bg.w, bg.z * bg.w, bg.w);
+// mirrors src/cpu/adaptive.rs: AdaptiveState
+struct AdaptiveState {
+    c: vec3<f32>,
+    a: f32,
+    s: f32,
+    f0: f32,
+    k: u32,
+    taken: u32,
+    started: bool,
+    done: bool,
+}
+
+// mirrors src/cpu/adaptive.rs: adaptive_ray (the whole volume's box)
+fn adaptive_ray(o: vec3<f32>, d: vec3<f32>, t_min: f32) -> AdaptiveRay {
+    var r = AdaptiveRay(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, false);
     let hi = vec3<f32>(f32(params.dims.x) - 0.5, f32(params.dims.y) - 0.5, f32(params.dims.z) - 0.5);
     let hit = intersect_box(o, d, vec3<f32>(-0.5), hi);
     if (!hit.ok) {
-        return RayOut(miss, 0u);
+        return r;
     }
     let t_in = max(hit.t0, t_min);
     let t_out = hit.t1;
     if (t_out <= t_in) {
-        return RayOut(miss, 0u);
+        return r;
     }
     let speed = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-    let dir = d * (1.0 / speed);
-    let len = (t_out - t_in) * speed;
-    let p0 = o + d * t_in;
-    let step = params.steps.x;
-    let ert = params.steps.w;
+    r.p0 = o + d * t_in;
+    r.dir = d * (1.0 / speed);
+    r.len = (t_out - t_in) * speed;
+    r.ok = true;
+    return r;
+}
+
+// mirrors src/cpu/adaptive.rs: adaptive_start
+fn adaptive_start(ray: AdaptiveRay) -> AdaptiveState {
+    return AdaptiveState(vec3<f32>(0.0), 0.0, 0.0, sample_trilinear(ray.p0), 0u, 1u, true, false);
+}
+
+// mirrors src/cpu/adaptive.rs: adaptive_advance
+fn adaptive_advance(ray: AdaptiveRay, st_in: AdaptiveState) -> AdaptiveState {
+    var st = st_in;
+    let s = st.s;
+    let p = ray.p0 + ray.dir * s;
     let sampling = params.dims.w;
-    var f0 = sample_trilinear(p0);
-    var taken = 1u;
-    var s = 0.0;
-    var k = 0u;
-    var c = vec3<f32>(0.0);
-    var a = 0.0;
-    while (s < len) {
-        let p = p0 + dir * s;
-        var s1 = f32(k + 1u) * step;
-        if (sampling == 1u) {
-            s1 = s + adaptive_step(p, f0, dir);
-        } else if (sampling == 2u) {
-            s1 = s + direct_step(p);
+    var s1 = f32(st.k + 1u) * params.steps.x;
+    if (sampling == 1u) {
+        s1 = s + adaptive_step(p, st.f0, ray.dir);
+    } else if (sampling == 2u) {
+        s1 = s + direct_step(p);
+    }
+    s1 = min(s1, ray.len);
+    let f1 = sample_trilinear(ray.p0 + ray.dir * s1);
+    st.taken += 1u;
+    let e = preint_step(preint_lookup(st.f0, f1), s1 - s);
+    let w = 1.0 - st.a;
+    st.c = st.c + w * e.xyz;
+    st.a = st.a + w * e.w;
+    if (st.a >= params.steps.w) {
+        st.done = true;
+        return st;
+    }
+    st.s = s1;
+    st.f0 = f1;
+    st.k += 1u;
+    return st;
+}
+
+// Whether this dispatch's brick owns the step starting at p (the whole volume's when
+// not split: its faces are open). Each point lies in one brick.
+fn owns(p: vec3<f32>) -> bool {
+    return all(p >= params.own_lo.xyz) && all(p < params.own_hi.xyz);
+}
+
+// The steps of the ray this dispatch owns: from the state the bricks in front of it
+// left (none when not split) while the step's start lies in this brick.
+fn adaptive_run(ray: AdaptiveRay, st_in: AdaptiveState) -> AdaptiveState {
+    var st = st_in;
+    if (!st.started) {
+        if (!owns(ray.p0)) {
+            return st;
         }
-        s1 = min(s1, len);
-        let f1 = sample_trilinear(p0 + dir * s1);
-        taken += 1u;
-        let e = preint_step(preint_lookup(f0, f1), s1 - s);
-        let w = 1.0 - a;
-        c = c + w * e.xyz;
-        a = a + w * e.w;
-        if (a >= ert) {
+        st = adaptive_start(ray);
+    }
+    loop {
+        if (st.done || !(st.s < ray.len) || !owns(ray.p0 + ray.dir * st.s)) {
             break;
         }
-        s = s1;
-        f0 = f1;
-        k += 1u;
+        st = adaptive_advance(ray, st);
     }
-    let t = 1.0 - a;
-    return RayOut(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
+    return st;
+}
+
+// A brick's ray state, three vec4 a pixel (gpu::adaptive::carried_state is the Rust
+// reader): (c, a), (s, f0, k, taken), (started, done, 0, 0).
+fn state_load(local: u32) -> AdaptiveState {
+    let x = pixels[3u * local];
+    let y = pixels[3u * local + 1u];
+    let z = pixels[3u * local + 2u];
+    return AdaptiveState(x.xyz, x.w, y.x, y.y, u32(y.z), u32(y.w), z.x == 1.0, z.y == 1.0);
+}
+
+fn state_store(local: u32, st: AdaptiveState) {
+    pixels[3u * local] = vec4<f32>(st.c, st.a);
+    pixels[3u * local + 1u] = vec4<f32>(st.s, st.f0, f32(st.k), f32(st.taken));
+    pixels[3u * local + 2u] = vec4<f32>(select(0.0, 1.0, st.started), select(0.0, 1.0, st.done), 0.0, 0.0);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -211,7 +270,26 @@ fn adaptive(@builtin(global_invocation_id) gid: vec3<u32>) {
     let local = gid.y * w + gid.x;
     let ro = rays[2u * local];
     let rd = rays[2u * local + 1u];
-    let r = cast_ray(ro.xyz, rd.xyz, ro.w);
-    pixels[local] = r.px;
-    counts[local] = r.n;
+    let ray = adaptive_ray(ro.xyz, rd.xyz, ro.w);
+    let carried = params.brick.w == 1;
+    if (carried) {
+        // A brick: take the state the bricks in front left, run the steps it owns,
+        // leave the state for the bricks behind (the host finishes the pixel).
+        if (ray.ok) {
+            state_store(local, adaptive_run(ray, state_load(local)));
+        }
+        return;
+    }
+    let bg = params.background;
+    if (!ray.ok) {
+        pixels[local] = vec4<f32>(bg.x * bg.w, bg.y * bg.w, bg.z * bg.w, bg.w);
+        counts[local] = 0u;
+        return;
+    }
+    var st = AdaptiveState(vec3<f32>(0.0), 0.0, 0.0, 0.0, 0u, 0u, false, false);
+    st = adaptive_run(ray, st);
+    // mirrors src/cpu/shade.rs: over_background
+    let t = 1.0 - st.a;
+    pixels[local] = vec4<f32>(st.c + t * bg.xyz * bg.w, st.a + t * bg.w);
+    counts[local] = st.taken;
 }

@@ -655,10 +655,12 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
     }
 }
 
-/// The adaptive and multi-volume GPU casters hold their volumes whole: past the device
-/// memory a job may fill (`VOXLAB_GPU_MEMORY`) the run and its dry run refuse alike,
-/// before uploading, with the numbers and a way out; nothing is written. (The ray
-/// caster cuts such a volume into bricks: `tests/gpu_distributed_render.rs`.)
+/// Past the device memory a job may fill (`VOXLAB_GPU_MEMORY`) the multi-volume GPU
+/// caster, which holds its volumes whole, and the adaptive caster, when not even one
+/// brick with its ghost voxels fits, refuse alike in the run and its dry run, before
+/// uploading, with the numbers; nothing is written. (The ray caster and the adaptive
+/// caster cut a volume into bricks where they fit: `tests/gpu_distributed_render.rs`,
+/// `tests/gpu_adaptive.rs`.)
 #[test]
 fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
     if common::gpu("gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory").is_none() {
@@ -666,11 +668,13 @@ fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
     }
     let dir = scratch("cli_device_memory");
     let out = dir.join("never.png");
-    // Adaptive sampling of 32³ into 64²: the volume (4 bytes a voxel) and two
-    // importance volumes (16 each), 1,179,648 bytes, and one band's rays, pixels and
-    // counts (52 bytes a pixel): 64 KiB of memory make the binding 8 KiB, the rays of 4
-    // rows (32 bytes a pixel), so 13,312 bytes: 1.1 MiB.
+    // Adaptive sampling of 32³ into 64²: 64 KiB of memory make the binding 8 KiB, which
+    // the pre-integrated table (256² RGBA f32, 1 MiB) exceeds, checked before the
+    // volume is cut into bricks (where no brick with its 11 ghost voxels each way fits:
+    // `tests/cli_adaptive.rs` under the texture limit, `tests/gpu_adaptive.rs` under
+    // the memory).
     let size = ["--width", "64", "--height", "64"];
+    let table = "preintegrated table is too large: 1048576 bytes exceed";
     for (args, says) in [
         (
             [
@@ -678,14 +682,9 @@ fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
                 &size,
             ]
             .concat(),
-            "adaptive render is too large: 1.1 MiB on the device exceed the 64.0 KiB of \
-             device memory a job may fill (VOXLAB_GPU_MEMORY)",
+            table,
         ),
-        (
-            vec!["adaptive", "phantom:sphere:32", "--size", "64"],
-            "exceed the 64.0 KiB of device memory a job may fill (VOXLAB_GPU_MEMORY); the \
-             adaptive caster holds it whole",
-        ),
+        (vec!["adaptive", "phantom:sphere:32", "--size", "64"], table),
         (
             vec![
                 "render",

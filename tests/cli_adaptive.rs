@@ -135,8 +135,10 @@ fn render_takes_a_sampling() {
 /// is bounded by one storage binding: under a 1 MiB binding a 72³ volume (1.4 MiB of
 /// f32, 5.7 MiB of importance) renders, a 2048-pixel row's rays (64 KiB) allow bands of
 /// 16 rows instead of 32, and the image is the same bit for bit, for every sampling.
-/// Past the 3-D texture limit the run and its dry run refuse alike, naming the volume,
-/// in `render --sampling` and in `adaptive`.
+/// Past the 3-D texture limit it renders in bricks, saying so, and writes the unsplit
+/// file byte for byte (`render --sampling`, every sampling, and `adaptive`, whose dry
+/// run prints the split); under a limit no brick with its ghost voxels fits, the run
+/// and its dry run refuse alike, naming the volume and the limit.
 #[test]
 fn gpu_adaptive_textures_and_bands_write_the_unsplit_image() {
     if common::gpu("gpu_adaptive_textures_and_bands_write_the_unsplit_image").is_none() {
@@ -158,6 +160,101 @@ fn gpu_adaptive_textures_and_bands_write_the_unsplit_image() {
         ];
         common::split_writes_the_unsplit_file(&dir, &args, "1MiB", &[]);
     }
+    // Past the texture limit: 64³ with 11 ghost voxels in bricks of at most 40 texels.
+    let texture_limit = |args: &[&str], out: &std::path::Path, limit: &str| {
+        let args = [args, &["--backend", "gpu", "--out", s(out)][..]].concat();
+        let mut c = common::voxlab_command(&args);
+        if !limit.is_empty() {
+            c.env("VOXLAB_GPU_MAX_TEXTURE_3D", limit);
+        }
+        c.output().unwrap()
+    };
+    for sampling in ["regular", "direct", "adaptive"] {
+        let args = [
+            "render",
+            "phantom:shepp-logan-modified:64",
+            "--width",
+            "40",
+            "--height",
+            "32",
+            "--sampling",
+            sampling,
+        ];
+        let (whole, split) = (dir.join("whole.npy"), dir.join("split.npy"));
+        let a = texture_limit(&args, &whole, "");
+        let b = texture_limit(&args, &split, "40");
+        assert!(
+            a.status.success() && b.status.success(),
+            "{}",
+            common::stderr(&b)
+        );
+        let said = common::stderr(&b);
+        assert!(
+            said.contains(
+                " bricks (the [64, 64, 64] volume exceeds the 3-D texture limit of 40 \
+                 texels per axis; the largest brick with its 11 ghost voxels holds"
+            ),
+            "{sampling}: {said}"
+        );
+        assert!(
+            !common::stderr(&a).contains("bricks"),
+            "{}",
+            common::stderr(&a)
+        );
+        assert_eq!(
+            std::fs::read(&whole).unwrap(),
+            std::fs::read(&split).unwrap(),
+            "{sampling}: the split file differs from the unsplit one"
+        );
+    }
+    let adaptive = [
+        "adaptive",
+        "phantom:shepp-logan-modified:64",
+        "--size",
+        "24",
+        "--runs",
+        "1",
+    ];
+    let plan = texture_limit(
+        &[&adaptive[..], &["--dry-run"]].concat(),
+        &dir.join("p"),
+        "40",
+    );
+    assert!(plan.status.success(), "{}", common::stderr(&plan));
+    assert!(!dir.join("p").exists());
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&plan.stdout),
+        common::stderr(&plan)
+    );
+    for sampling in ["regular", "direct", "adaptive"] {
+        assert!(
+            text.contains(&format!("{sampling} sampling: adaptive ray casting in ")),
+            "{text}"
+        );
+    }
+    let (whole, split) = (dir.join("whole"), dir.join("split"));
+    let a = texture_limit(&adaptive, &whole, "");
+    let b = texture_limit(&adaptive, &split, "40");
+    assert!(
+        a.status.success() && b.status.success(),
+        "{}",
+        common::stderr(&b)
+    );
+    assert!(common::stderr(&b).contains("adaptive sampling: adaptive ray casting in "));
+    // Every image the comparison writes (the tables hold timings).
+    let mut images = 0;
+    for e in std::fs::read_dir(&whole).unwrap() {
+        let name = e.unwrap().file_name();
+        if !name.to_string_lossy().starts_with("table") {
+            let same = std::fs::read(whole.join(&name)).unwrap()
+                == std::fs::read(split.join(&name)).unwrap();
+            assert!(same, "adaptive: {name:?} differs split");
+            images += 1;
+        }
+    }
+    assert!(images >= 3, "{images} images");
+
     let never = dir.join("never.npy");
     let render = [
         "render",
@@ -178,8 +275,8 @@ fn gpu_adaptive_textures_and_bands_write_the_unsplit_image() {
             let err = common::stderr(&o);
             assert!(
                 err.contains(
-                    "volume is too large: [32, 32, 32]: a 3D texture holds 1 … 16 texels per axis \
-                 on this adapter; the adaptive caster holds it whole"
+                    "volume is too large: [32, 32, 32] cannot be cut into bricks of at most 16 \
+                     texels per axis with the 11 ghost voxels of steps up to T_max = 8"
                 ),
                 "{err}"
             );

@@ -156,3 +156,145 @@ pub fn balls_volume() -> AnyVolume {
     .unwrap();
     AnyVolume::F32(v)
 }
+
+/// Past the 3-D texture limit or the device memory the adaptive caster renders in
+/// bricks, handing each ray's state from brick to brick in the rays' order: every
+/// sampling's image and sample counts equal the unsplit render's, bit for bit on
+/// lavapipe (the bound, 4 f32 ulps of the brightest channel, is for adapters that fuse
+/// the finish's multiply-adds, which the host does not). Views along an axis (rays in
+/// the cut planes), oblique, orthographic and perspective, from outside and inside.
+#[test]
+fn bricks_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
+    use voxlab::gpu::adaptive::{brick_ghost, device_tables, render, volume_split};
+    use voxlab::gpu::context::GpuContext;
+    use voxlab::gpu::plan::DeviceMemory;
+    let Some(ctx) = common::gpu("adaptive bricks") else {
+        return;
+    };
+    let (av, tf, _) = scene();
+    let s0 = AdaptiveSettings::default();
+    let ghost = brick_ghost(&s0);
+    // 64³ with 11 ghost voxels: 48 texels per axis cut it into bricks of ≤ 26 voxels.
+    let mut textures = GpuContext::new().unwrap();
+    textures.limits.max_texture_dimension_3d = 48;
+    // The memory of the tables and a 40³ brick's textures (and importance volumes): a
+    // cut by the memory alone.
+    let mut memory = GpuContext::new().unwrap();
+    let cams = [
+        (
+            "perspective",
+            30.0,
+            20.0,
+            None,
+            Projection::Perspective { fov_y_deg: 30.0 },
+        ),
+        (
+            "along x",
+            90.0,
+            0.0,
+            None,
+            Projection::Orthographic {
+                width_mm: 80.0,
+                height_mm: 70.0,
+            },
+        ),
+        (
+            "oblique orthographic",
+            35.0,
+            -50.0,
+            None,
+            Projection::Orthographic {
+                width_mm: 90.0,
+                height_mm: 80.0,
+            },
+        ),
+        // The eye inside the volume, 5 mm from the centre.
+        (
+            "inside",
+            200.0,
+            10.0,
+            Some(5.0),
+            Projection::Perspective { fov_y_deg: 70.0 },
+        ),
+    ];
+    for (cam_name, az, el, dist, proj) in cams {
+        let cam = Camera::orbit(
+            DVec3::splat(31.5),
+            [64.0; 3],
+            Orbit {
+                azimuth_deg: az,
+                elevation_deg: el,
+                distance_mm: dist,
+            },
+            proj,
+            28,
+            24,
+        )
+        .unwrap();
+        for sampling in Sampling::ALL {
+            let s = AdaptiveSettings {
+                sampling,
+                sample_count: true,
+                ..Default::default()
+            };
+            let per_voxel = if sampling == Sampling::Adaptive {
+                36
+            } else {
+                4
+            };
+            // The tables (the pre-integrated one is 1 MiB), a band's buffers (under
+            // 64 KiB here) and a 40³ brick.
+            let tables: u64 = device_tables(av.dims(), &s).iter().map(|t| t.1).sum();
+            let bytes = tables + (64 << 10) + per_voxel * 40 * 40 * 40;
+            memory.memory = Some(DeviceMemory {
+                bytes,
+                source: "the test".into(),
+            });
+            let want = render(ctx, &av, &tf, &cam, &s).unwrap();
+            assert!(want.split.is_none());
+            for (limit, c) in [("texture", &textures), ("memory", &memory)] {
+                let c: &GpuContext = c;
+                let case = format!("adaptive bricks {cam_name} {sampling:?} ({limit})");
+                let cut = volume_split(c, av.dims(), &cam, &s)
+                    .unwrap()
+                    .expect("a split");
+                assert!(cut.bricks.len() >= 8, "{case}: {} bricks", cut.bricks.len());
+                match limit {
+                    "texture" => assert!(cut.largest.iter().all(|&n| n <= 48), "{case}"),
+                    _ => assert!(
+                        cut.largest.iter().product::<usize>() as u64 * per_voxel <= bytes - tables,
+                        "{case}: {:?}",
+                        cut.largest
+                    ),
+                }
+                let got = render(c, &av, &tf, &cam, &s).unwrap();
+                let line = got.split.as_deref().expect("the split's line");
+                assert!(
+                    line.starts_with(&format!(
+                        "adaptive ray casting in {} bricks",
+                        cut.bricks.len()
+                    )) && line.contains(&format!("{ghost} ghost voxels")),
+                    "{case}: {line}"
+                );
+                let peak = want
+                    .output
+                    .image
+                    .data
+                    .iter()
+                    .fold(0.0f64, |m, v| m.max(v.abs()));
+                let bound = 4.0 * f32::EPSILON as f64 * peak.max(1.0);
+                common::assert_parity(
+                    &case,
+                    &want.output.image,
+                    &got.output.image,
+                    voxlab::metrics::Tolerance::max_abs(bound),
+                );
+                assert_eq!(
+                    want.output.samples.as_ref().unwrap().data,
+                    got.output.samples.as_ref().unwrap().data,
+                    "{case}: the samples per ray"
+                );
+            }
+        }
+    }
+}

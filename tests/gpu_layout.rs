@@ -445,6 +445,9 @@ fn adaptive_params_layout_agrees() {
         ("image", offset_of!(AdaptiveParams, image)),
         ("table", offset_of!(AdaptiveParams, table)),
         ("extra", offset_of!(AdaptiveParams, extra)),
+        ("brick", offset_of!(AdaptiveParams, brick)),
+        ("own_lo", offset_of!(AdaptiveParams, own_lo)),
+        ("own_hi", offset_of!(AdaptiveParams, own_hi)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

@@ -19,4 +19,11 @@ struct AdaptiveParams {
     table: vec4<u32>,
     // blocks along y, z; importance passes: axis, max-filter radius
     extra: vec4<u32>,
+    // a brick: the whole volume's voxel at its texture's texel 0; 1 when the rays carry
+    // their state from brick to brick (0 and 0 when not split)
+    brick: vec4<i32>,
+    // the box a brick owns the steps starting in (index coordinates, the whole volume's
+    // faces open: ±f32::MAX); w unused
+    own_lo: vec4<f32>,
+    own_hi: vec4<f32>,
 }

@@ -662,8 +662,115 @@ pub fn render_prepared<R: Real>(
     ))
 }
 
+/// An adaptive ray through the volume's box, in index space: it enters at `p0` and
+/// runs `len` voxels along the unit direction `dir`.
+/// Mirrors `shaders/adaptive.wgsl: AdaptiveRay`.
+#[derive(Clone, Copy, Debug)]
+pub struct AdaptiveRay<R> {
+    pub p0: V3<R>,
+    pub dir: V3<R>,
+    pub len: R,
+}
+
+/// What an adaptive ray carries from one step to the next (and, on the GPU, from one
+/// brick to the next): the colour and opacity composited so far, where the next step
+/// starts (`s` voxels along the ray, step `k`) and the value there (`f0`), the samples
+/// read, whether the first sample was read (`started`) and whether the ray ended by
+/// early termination (`done`). Mirrors `shaders/adaptive.wgsl: AdaptiveState`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AdaptiveState<R> {
+    pub c: [R; 3],
+    pub a: R,
+    pub s: R,
+    pub f0: R,
+    pub k: u32,
+    pub taken: u32,
+    pub started: bool,
+    pub done: bool,
+}
+
+/// The ray from index-space origin `o` along `d` (per unit of `t`, from `t_min`)
+/// through the box of a `dims` volume; `None` when it misses.
+/// Mirrors `shaders/adaptive.wgsl: adaptive_ray`.
+#[inline]
+pub fn adaptive_ray<R: Real>(
+    dims: [usize; 3],
+    o: V3<R>,
+    d: V3<R>,
+    t_min: R,
+) -> Option<AdaptiveRay<R>> {
+    let (t_in, t_out) = intersect_box(o, d, V3::splat(R::of(-0.5)), box_hi(dims))?;
+    let t_in = t_in.max(t_min);
+    if t_out <= t_in {
+        return None;
+    }
+    let speed = d.length();
+    Some(AdaptiveRay {
+        p0: o + d * t_in,
+        dir: d * (R::one() / speed),
+        len: (t_out - t_in) * speed,
+    })
+}
+
+/// The state of `ray` before its first step: the value where it enters, one sample.
+/// Mirrors `shaders/adaptive.wgsl: adaptive_start`.
+#[inline]
+pub fn adaptive_start<R: Real>(scene: &AdaptiveScene<R>, ray: &AdaptiveRay<R>) -> AdaptiveState<R> {
+    AdaptiveState {
+        f0: sample(&scene.grid, Filter::Trilinear, ray.p0),
+        taken: 1,
+        started: true,
+        ..Default::default()
+    }
+}
+
+/// Whether `st` has a step left on `ray`.
+#[inline]
+pub fn adaptive_going<R: Real>(st: &AdaptiveState<R>, ray: &AdaptiveRay<R>) -> bool {
+    !st.done && st.s < ray.len
+}
+
+/// One step of `ray` from `st` (which has one left: [`adaptive_going`]): its length by
+/// the sampling, the value at its end, the pre-integrated segment composited front to
+/// back; `done` once the opacity reaches the early-termination threshold.
+/// Mirrors `shaders/adaptive.wgsl: adaptive_advance`.
+#[inline]
+pub fn adaptive_advance<R: Real>(
+    scene: &AdaptiveScene<R>,
+    settings: &AdaptiveSettings,
+    ray: &AdaptiveRay<R>,
+    st: &mut AdaptiveState<R>,
+) {
+    let AdaptiveRay { p0, dir, len } = *ray;
+    let s = st.s;
+    let p = p0 + dir * s;
+    let s1 = match settings.sampling {
+        Sampling::Regular => R::of((st.k + 1) as f64) * R::of(settings.step),
+        Sampling::Adaptive => s + adaptive_step(scene, settings, p, st.f0, dir),
+        Sampling::Direct => s + direct_step(scene, settings, p),
+    };
+    let s1 = s1.min(len);
+    let f1 = sample(&scene.grid, Filter::Trilinear, p0 + dir * s1);
+    st.taken += 1;
+    let e = scene.preint.step(st.f0, f1, s1 - s);
+    let wgt = R::one() - st.a;
+    for (c, e) in st.c.iter_mut().zip(e) {
+        *c = *c + wgt * e;
+    }
+    st.a = st.a + wgt * e[3];
+    if st.a >= R::of(settings.ert_threshold) {
+        st.done = true;
+        return;
+    }
+    st.s = s1;
+    st.f0 = f1;
+    st.k += 1;
+}
+
 /// One ray from index-space origin `o` along `d` (per unit of `t`): the pixel and the
-/// number of samples read. Mirrors `shaders/adaptive.wgsl: cast_ray`.
+/// number of samples read: the march of `shaders/adaptive.wgsl`'s entry point, finished
+/// over the background as it finishes it.
+/// Mirrors `shaders/adaptive.wgsl: adaptive_run`.
 pub fn cast_ray<R: Real>(
     scene: &AdaptiveScene<R>,
     settings: &AdaptiveSettings,
@@ -671,55 +778,15 @@ pub fn cast_ray<R: Real>(
     d: V3<R>,
     t_min: R,
 ) -> ([R; 4], u32) {
-    let dims = scene.grid.dims;
     let bg = settings.background.map(R::of);
-    let lo = V3::splat(R::of(-0.5));
-    let hi = box_hi(dims);
-    let miss = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
-    let Some((t_in, t_out)) = intersect_box(o, d, lo, hi) else {
-        return (miss, 0);
+    let Some(ray) = adaptive_ray(scene.grid.dims, o, d, t_min) else {
+        return ([bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]], 0);
     };
-    let t_in = t_in.max(t_min);
-    if t_out <= t_in {
-        return (miss, 0);
+    let mut st = adaptive_start(scene, &ray);
+    while adaptive_going(&st, &ray) {
+        adaptive_advance(scene, settings, &ray, &mut st);
     }
-    let speed = d.length();
-    let dir = d * (R::one() / speed);
-    let len = (t_out - t_in) * speed;
-    let p0 = o + d * t_in;
-    let step = R::of(settings.step);
-    let ert = R::of(settings.ert_threshold);
-    let value = |p: V3<R>| sample(&scene.grid, Filter::Trilinear, p);
-    let mut f0 = value(p0);
-    let mut taken = 1u32;
-    let mut s = R::zero();
-    let mut k = 0u32;
-    let mut c = [R::zero(); 3];
-    let mut a = R::zero();
-    while s < len {
-        let p = p0 + dir * s;
-        let s1 = match settings.sampling {
-            Sampling::Regular => R::of((k + 1) as f64) * step,
-            Sampling::Adaptive => s + adaptive_step(scene, settings, p, f0, dir),
-            Sampling::Direct => s + direct_step(scene, settings, p),
-        };
-        let s1 = s1.min(len);
-        let f1 = value(p0 + dir * s1);
-        taken += 1;
-        let e = scene.preint.step(f0, f1, s1 - s);
-        let wgt = R::one() - a;
-        for ch in 0..3 {
-            c[ch] = c[ch] + wgt * e[ch];
-        }
-        a = a + wgt * e[3];
-        if a >= ert {
-            break;
-        }
-        s = s1;
-        f0 = f1;
-        k += 1;
-    }
-    (over_background(c, a, bg), taken)
+    (over_background(st.c, st.a, bg), st.taken)
 }
 
 /// A medical-style transfer function over `[lo, hi]`: transparent up to `threshold`,

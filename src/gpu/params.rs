@@ -91,4 +91,11 @@ pub struct AdaptiveParams {
     pub table: [u32; 4],
     /// Blocks along y, z; importance passes: axis, radius.
     pub extra: [u32; 4],
+    /// A brick: the whole volume's voxel at its texture's texel 0; 1 when the rays carry
+    /// their state from brick to brick (zeros when not split).
+    pub brick: [i32; 4],
+    /// The box a brick owns the steps starting in (index coordinates; the whole
+    /// volume's faces open, `±f32::MAX`).
+    pub own_lo: [f32; 4],
+    pub own_hi: [f32; 4],
 }

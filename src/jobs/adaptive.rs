@@ -136,6 +136,9 @@ pub struct AdaptiveRun {
     pub prepare: f64,
     /// Render seconds (GPU: the kernel).
     pub render: f64,
+    /// How the GPU cut the volume into bricks, when it did
+    /// ([`crate::gpu::adaptive::AdaptiveSplit::line`]).
+    pub split: Option<String>,
 }
 
 /// Renders once on `engine` with the adaptive caster.
@@ -156,6 +159,7 @@ pub fn render_once(
                 output: o.output,
                 prepare: o.timings.prepare,
                 render: o.timings.kernel,
+                split: o.split,
             })
         }
         (Backend::CpuF32, _) => cpu_once::<f32>(volume, tf, camera, settings),
@@ -179,6 +183,7 @@ fn cpu_once<R: crate::real::Real>(
         output,
         prepare,
         render: t.elapsed().as_secs_f64(),
+        split: None,
     })
 }
 
@@ -186,7 +191,8 @@ fn cpu_once<R: crate::real::Real>(
 /// before the work, in the run's order: on the CPU [`ca::check_cost`], the volume (and
 /// the importance volume of adaptive sampling: three reals a voxel) in the working
 /// precision; on the GPU [`crate::gpu::adaptive::check`], the f32 volume and the rays
-/// packed on the host, [`crate::gpu::adaptive::device_textures`] and one band's
+/// packed on the host, [`crate::gpu::adaptive::device_textures`] (of the largest brick
+/// where the volume is split), [`crate::gpu::adaptive::device_tables`] and one band's
 /// [`crate::gpu::adaptive::band_buffers`] on the device. `image` is the output's host
 /// bytes. `render --dry-run --sampling` and `adaptive --dry-run` call it.
 ///
@@ -199,19 +205,36 @@ pub(crate) fn frame_plan(
     camera: &Camera,
     s: &AdaptiveSettings,
     image: u64,
-) -> Result<(u64, Option<super::plan::DevicePlan>)> {
+) -> Result<(u64, Option<super::plan::DevicePlan>, Option<String>)> {
     let dims = volume.dims();
     let voxels = dims.iter().product::<usize>() as u64;
     let planned = match engine.gpu() {
         Some(ctx) => {
-            crate::gpu::adaptive::check(ctx, dims, camera, s)?;
-            let textures = crate::gpu::adaptive::device_textures(dims, s);
-            let bands = crate::gpu::adaptive::band_buffers(ctx, camera);
-            let sizes = || textures.iter().chain(&bands).map(|b| b.1);
-            let rays = 32 * camera.width as u64 * camera.height as u64;
+            let split = crate::gpu::adaptive::check(ctx, dims, camera, s)?;
+            let (tex, carried) = match &split {
+                Some(cut) => (cut.largest, true),
+                None => (dims, false),
+            };
+            let textures = crate::gpu::adaptive::device_textures(tex, s);
+            let bands = crate::gpu::adaptive::band_buffers(ctx, camera, carried);
+            let tables = crate::gpu::adaptive::device_tables(dims, s);
+            let sizes = || textures.iter().chain(&bands).chain(&tables).map(|b| b.1);
+            let pixels = camera.width as u64 * camera.height as u64;
+            // The rays; split, each ray's carried state and a brick's f32 texels.
+            let extra = match &split {
+                Some(_) => {
+                    pixels * 16 * crate::gpu::adaptive::CARRIED_VEC4S as u64
+                        + 4 * tex.iter().product::<usize>() as u64
+                }
+                None => 0,
+            };
             let device =
                 super::plan::DevicePlan::on(ctx, sizes().sum(), sizes().max().unwrap_or(0));
-            (4 * voxels + rays + image, Some(device))
+            (
+                4 * voxels + 32 * pixels + extra + image,
+                Some(device),
+                split.map(|c| c.line),
+            )
         }
         None => {
             ca::check_cost(dims, camera, s)?;
@@ -225,7 +248,7 @@ pub(crate) fn frame_plan(
             } else {
                 0
             };
-            (real * voxels + importance + image, None)
+            (real * voxels + importance + image, None, None)
         }
     };
     tf.validate()?;
@@ -314,13 +337,15 @@ pub fn plan(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<super::plan:
     let image = pixels * (8 * 4 + 8 + 4);
     let kept = (Sampling::ALL.len() as u64 - 1) * pixels * (8 * 4 + 8);
     let mut host = 0;
+    let mut split = Vec::new();
     let mut device: Option<super::plan::DevicePlan> = None;
     for sampling in Sampling::ALL {
         let s = AdaptiveSettings {
             sampling,
             ..base.clone()
         };
-        let (h, d) = frame_plan(&engine, &volume, &tf, &camera, &s, image)?;
+        let (h, d, cut) = frame_plan(&engine, &volume, &tf, &camera, &s, image)?;
+        split.extend(cut.map(|c| format!("{} sampling: {c}", sampling.name())));
         host = host.max(h + kept);
         if let Some(d) = d {
             if device.as_ref().is_none_or(|x| d.peak_bytes > x.peak_bytes) {
@@ -333,7 +358,7 @@ pub fn plan(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<super::plan:
         backend: engine.describe(),
         host_bytes: host,
         device,
-        split: Vec::new(),
+        split,
         writes: Vec::new(),
     })
 }
@@ -367,6 +392,9 @@ pub fn run(a: &AdaptiveRequest, progress: &dyn Progress) -> Result<Comparison> {
         for r in 0..a.runs {
             check_cancel(progress)?;
             let run = render_once(&volume, &tf, &camera, &s, engine)?;
+            if let (0, Some(split)) = (r, &run.split) {
+                progress.note(&format!("{} sampling: {split}", sampling.name()));
+            }
             times.push(run.render);
             prep = run.prepare;
             out = Some(run.output);

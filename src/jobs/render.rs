@@ -793,7 +793,7 @@ pub fn run(req: &RenderRequest, progress: &dyn Progress) -> Result<Rendering> {
         return render_multi(req, &scene, settings, progress);
     }
     if let Some(sampling) = req.sampling {
-        return render_sampling(req, &scene, settings, sampling);
+        return render_sampling(req, &scene, settings, sampling, progress);
     }
     let renderer = Renderer::new(req.backend)?;
     if let Some(why) = renderer.fallback_reason() {
@@ -1064,7 +1064,7 @@ fn plan_sampling(
     let s = adaptive_settings(settings, sampling)?;
     let engine = Engine::open(req.backend)?;
     let image = image_bytes(&scene.camera, settings);
-    let (host_bytes, device) = super::adaptive::frame_plan(
+    let (host_bytes, device, split) = super::adaptive::frame_plan(
         &engine,
         &scene.volume,
         &scene.transfer,
@@ -1077,7 +1077,7 @@ fn plan_sampling(
         backend: engine.describe(),
         host_bytes,
         device,
-        split: Vec::new(),
+        split: split.into_iter().collect(),
         writes: Vec::new(),
     })
 }
@@ -1088,12 +1088,16 @@ fn render_sampling(
     scene: &Scene,
     settings: RenderSettings,
     sampling: Sampling,
+    progress: &dyn Progress,
 ) -> Result<Rendering> {
     let s = adaptive_settings(&settings, sampling)?;
     let engine = Engine::open(req.backend)?;
     let t = Instant::now();
     let run =
         super::adaptive::render_once(&scene.volume, &scene.transfer, &scene.camera, &s, engine)?;
+    if let Some(split) = &run.split {
+        progress.note(split);
+    }
     Ok(Rendering {
         output: run.output,
         engine,
