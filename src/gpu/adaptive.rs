@@ -335,20 +335,11 @@ pub fn volume_split(
         .as_ref()
         .map(|m| m.bytes.saturating_sub(fixed) / per_voxel);
     let ghost = brick_ghost(settings);
-    let (tree, bricks) = crate::io::brick::fitting_kd_tree(dims, ghost, max, max_voxels)
-        .ok_or_else(|| {
-            let voxels = max_voxels
-                .map(|m| format!(" and {m} texels in all"))
-                .unwrap_or_default();
-            Error::too_large(
-                "volume",
-                format!(
-                    "{dims:?} cannot be cut into bricks of at most {max} texels per \
-                     axis{voxels} with the {ghost} ghost voxels of steps up to T_max = {}",
-                    settings.t_max
-                ),
-            )
-        })?;
+    let reach = format!(
+        "the {ghost} ghost voxels of steps up to T_max = {}",
+        settings.t_max
+    );
+    let (tree, bricks) = crate::io::brick::fitting_kd_tree(dims, ghost, max, max_voxels, &reach)?;
     let largest = bricks
         .iter()
         .map(|b| b.with_ghost(ghost, dims).dims())

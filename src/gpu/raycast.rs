@@ -746,19 +746,11 @@ pub fn brick_plan(
     max_voxels: Option<u64>,
 ) -> Result<(crate::io::brick::KdTree, Vec<crate::io::brick::Brick>)> {
     let ghost = brick_ghost_for(settings);
-    crate::io::brick::fitting_kd_tree(dims, ghost, max_texels, max_voxels).ok_or_else(|| {
-        let voxels = max_voxels
-            .map(|m| format!(" and {m} texels in all"))
-            .unwrap_or_default();
-        Error::too_large(
-            "volume",
-            format!(
-                "{dims:?} cannot be cut into bricks of at most {max_texels} texels per \
-                 axis{voxels} with the {} filter's {ghost} ghost voxels",
-                settings.filter.name()
-            ),
-        )
-    })
+    let reach = format!(
+        "the {} filter's {ghost} ghost voxels",
+        settings.filter.name()
+    );
+    crate::io::brick::fitting_kd_tree(dims, ghost, max_texels, max_voxels, &reach)
 }
 
 /// The device bytes a frame's volume textures take per voxel: the raw values

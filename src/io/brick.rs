@@ -229,14 +229,20 @@ pub fn kd_tree(dims: [usize; 3], n: usize) -> Result<(KdTree, Vec<Brick>)> {
 
 /// The k-d tree of [`kd_tree`] with the fewest bricks each of which, with `ghost`
 /// voxels around it (clipped to the volume), holds at most `max_texels` per axis and,
-/// where given, `max_voxels` in all: one brick when the volume fits whole. `None` when
-/// no cut fits (a limit below the ghost voxels). The GPU casters' split planners ask it.
+/// where given, `max_voxels` in all: one brick when the volume fits whole. The GPU
+/// casters' split planners ask it.
+///
+/// # Errors
+/// [`Error::TooLarge`] when no cut fits (a limit below the ghost voxels), naming the
+/// limits and `reach`, what the ghost voxels are for ("the catmull-rom filter's 2 ghost
+/// voxels").
 pub fn fitting_kd_tree(
     dims: [usize; 3],
     ghost: usize,
     max_texels: usize,
     max_voxels: Option<u64>,
-) -> Option<(KdTree, Vec<Brick>)> {
+    reach: &str,
+) -> Result<(KdTree, Vec<Brick>)> {
     let fits = |b: &Brick| {
         let g = b.with_ghost(ghost, dims);
         g.dims().iter().all(|&n| n <= max_texels)
@@ -245,9 +251,20 @@ pub fn fitting_kd_tree(
     let mut n = 1;
     loop {
         match kd_tree(dims, n) {
-            Ok((tree, bricks)) if bricks.iter().all(fits) => return Some((tree, bricks)),
+            Ok((tree, bricks)) if bricks.iter().all(fits) => return Ok((tree, bricks)),
             Ok(_) if n < 1 << 16 => n += 1,
-            _ => return None,
+            _ => {
+                let voxels = max_voxels
+                    .map(|m| format!(" and {m} texels in all"))
+                    .unwrap_or_default();
+                return Err(Error::too_large(
+                    "volume",
+                    format!(
+                        "{dims:?} cannot be cut into bricks of at most {max_texels} texels \
+                         per axis{voxels} with {reach}"
+                    ),
+                ));
+            }
         }
     }
 }
