@@ -34,21 +34,23 @@ const FILTER_NEAREST: u32 = 0u;
 // ln_1p and exp_m1: shaders/shared/opacity.wgsl; clamp_index: shaders/shared/filters.wgsl.
 
 // mirrors src/cpu/filter.rs: sample (nearest, and trilinear = axis_taps + apply_taps:
-// Σ_k w_z[k] Σ_j w_y[j] Σ_i w_x[i] f[i, j, k], x innermost, clamped indices).
-fn sample_grid(t: texture_3d<f32>, n: vec3<u32>, p: vec3<f32>) -> f32 {
+// Σ_k w_z[k] Σ_j w_y[j] Σ_i w_x[i] f[i, j, k], x innermost, clamped indices). Indices
+// are the whole volume's (n voxels), clamped to it, then moved to the texture, which
+// holds the volume from voxel o on (a split render's part of it).
+fn sample_grid(t: texture_3d<f32>, n: vec3<u32>, o: vec3<i32>, p: vec3<f32>) -> f32 {
     if (params.image.w == FILTER_NEAREST) {
         let q = vec3<i32>(floor(p + vec3<f32>(0.5)));
-        return textureLoad(t, vec3<i32>(clamp_index(q.x, n.x), clamp_index(q.y, n.y), clamp_index(q.z, n.z)), 0).x;
+        return textureLoad(t, vec3<i32>(clamp_index(q.x, n.x), clamp_index(q.y, n.y), clamp_index(q.z, n.z)) - o, 0).x;
     }
     let fl = floor(p);
     let f = p - fl;
     let i0 = vec3<i32>(fl);
-    let x0 = clamp_index(i0.x, n.x);
-    let x1 = clamp_index(i0.x + 1, n.x);
-    let y0 = clamp_index(i0.y, n.y);
-    let y1 = clamp_index(i0.y + 1, n.y);
-    let z0 = clamp_index(i0.z, n.z);
-    let z1 = clamp_index(i0.z + 1, n.z);
+    let x0 = clamp_index(i0.x, n.x) - o.x;
+    let x1 = clamp_index(i0.x + 1, n.x) - o.x;
+    let y0 = clamp_index(i0.y, n.y) - o.y;
+    let y1 = clamp_index(i0.y + 1, n.y) - o.y;
+    let z0 = clamp_index(i0.z, n.z) - o.z;
+    let z1 = clamp_index(i0.z + 1, n.z) - o.z;
     let wx0 = 1.0 - f.x;
     let wy0 = 1.0 - f.y;
     let wz0 = 1.0 - f.z;
@@ -65,12 +67,13 @@ fn sample_grid(t: texture_3d<f32>, n: vec3<u32>, p: vec3<f32>) -> f32 {
 // mirrors src/cpu/field.rs: GridField::value
 fn layer_value(i: u32, p: vec3<f32>) -> f32 {
     let n = params.dims[i].xyz;
+    let o = params.origin[i].xyz;
     if (i == 0u) {
-        return sample_grid(volume_0, n, p);
+        return sample_grid(volume_0, n, o, p);
     } else if (i == 1u) {
-        return sample_grid(volume_1, n, p);
+        return sample_grid(volume_1, n, o, p);
     }
-    return sample_grid(volume_2, n, p);
+    return sample_grid(volume_2, n, o, p);
 }
 
 // Volume i's index-space gradient of the reconstructed field (h = 1 voxel).
@@ -253,14 +256,28 @@ struct Pixel {
     samples: u32,
 }
 
+// A ray's state, handed from cell to cell of a split render (src/gpu/multi.rs:
+// CARRIED_VEC4S vec4s a pixel): acc = what it gathered (DVR colour and opacity; MIP and
+// MinIP the extreme and 1 once one was found; X-ray the sum); at = where it is (the
+// next step of the loop, the samples taken, 1 once ended early, the ray's steps n, 0
+// while it met no volume).
+struct Carried {
+    acc: vec4<f32>,
+    at: vec4<f32>,
+}
+
+// Whether this pass takes the step whose midpoint is p (volume 0's index space).
+fn owns(p: vec3<f32>) -> bool {
+    return all(p >= params.own_lo.xyz) && all(p < params.own_hi.xyz);
+}
+
 // mirrors src/cpu/multi.rs: cast_multi
-fn cast_multi(ray: Ray) -> Pixel {
+// The steps of the ray from where `st` left it, while this pass owns them (all of them
+// when the render is not split); finish_multi makes the pixel.
+fn cast_multi(ray: Ray, st_in: Carried) -> Carried {
+    var st = st_in;
     let mode = params.image.z;
     let count = params.flags.x;
-    var miss = vec4<f32>(params.misc.w, 0.0, 0.0, 0.0);
-    if (mode == MODE_DVR) {
-        miss = params.background;
-    }
     let s0 = span_of(0u, ray);
     var s1 = s0;
     s1.hit = false;
@@ -285,77 +302,125 @@ fn cast_multi(ray: Ray) -> Pixel {
         t_in = min(t_in, s2.t_in);
         t_out = max(t_out, s2.t_out);
     }
-    if (!(t_out > t_in)) {
-        return Pixel(miss, 0u);
+    if (!(t_out > t_in) || st.at.z == 1.0) {
+        return st;
     }
     // The step: `step` voxels of volume 0 along the ray (world mm per step).
     let dt = params.misc.x / length(s0.d);
     let n = u32(max(ceil((t_out - t_in) / dt - 1e-3), 1.0));
+    st.at.w = f32(n);
+    var i = u32(st.at.x);
 
     if (mode == MODE_MIP || mode == MODE_MINIP) {
-        var best = vec2<f32>(0.0, 0.0);
+        var best = st.acc.xy;
         let mip = mode == MODE_MIP;
-        for (var k = 0u; k < n; k++) {
-            let tm = segment(k, n, t_in, t_out, dt).x;
+        loop {
+            if (i >= n) {
+                break;
+            }
+            let tm = segment(i, n, t_in, t_out, dt).x;
+            if (!owns(s0.o + s0.d * tm)) {
+                break;
+            }
             best = take_extreme(best, value_at(0u, s0, tm), mip);
             best = take_extreme(best, value_at(1u, s1, tm), mip);
             best = take_extreme(best, value_at(2u, s2, tm), mip);
+            i = i + 1u;
         }
-        let found = best.y == 1.0;
-        let bestv = best.x;
-        if (found) {
-            return Pixel(vec4<f32>(bestv, 0.0, 0.0, 0.0), n);
+        st.acc = vec4<f32>(best, 0.0, 0.0);
+    } else if (mode == MODE_XRAY) {
+        var sum = st.acc.x;
+        loop {
+            if (i >= n) {
+                break;
+            }
+            let seg = segment(i, n, t_in, t_out, dt);
+            if (!owns(s0.o + s0.d * seg.x)) {
+                break;
+            }
+            let f = value_at(0u, s0, seg.x).x + value_at(1u, s1, seg.x).x + value_at(2u, s2, seg.x).x;
+            sum = sum + f * seg.y;
+            i = i + 1u;
+        }
+        st.acc = vec4<f32>(sum, 0.0, 0.0, 0.0);
+    } else {
+        // DVR
+        let view = -ray.dir;
+        var light = view;
+        if (params.light.w == 1.0) {
+            light = params.light.xyz;
+        }
+        let half_vec = normalize_or_zero(light + view);
+        let back_to_front = params.flags.y == 1u;
+        var c = st.acc.xyz;
+        var a = st.acc.w;
+        var taken = u32(st.at.y);
+        loop {
+            if (i >= n) {
+                break;
+            }
+            var k = i;
+            if (back_to_front) {
+                k = n - 1u - i;
+            }
+            let seg = segment(k, n, t_in, t_out, dt);
+            if (!owns(s0.o + s0.d * seg.x)) {
+                break;
+            }
+            i = i + 1u;
+            taken = taken + 1u;
+            let s = combine_sample(s0, s1, s2, seg.x, seg.y, light, half_vec);
+            if (s.w < 0.0) {
+                continue;
+            }
+            let alpha = s.w;
+            if (back_to_front) {
+                c = alpha * s.xyz + (1.0 - alpha) * c;
+                a = alpha + (1.0 - alpha) * a;
+            } else {
+                let w = (1.0 - a) * alpha;
+                c = c + w * s.xyz;
+                a = a + w;
+                if (a >= params.misc.z) {
+                    st.at.z = 1.0;
+                    break;
+                }
+            }
+        }
+        st.acc = vec4<f32>(c, a);
+        st.at.y = f32(taken);
+    }
+    st.at.x = f32(i);
+    return st;
+}
+
+// The pixel and its samples from a ray's state after its last step (the tail of the
+// Rust twin, cast_multi): the background where it met no volume, MIP/MinIP's miss value
+// where it found none, DVR over the background.
+fn finish_multi(st: Carried) -> Pixel {
+    let mode = params.image.z;
+    var miss = vec4<f32>(params.misc.w, 0.0, 0.0, 0.0);
+    if (mode == MODE_DVR) {
+        miss = params.background;
+    }
+    let n = u32(st.at.w);
+    if (n == 0u) {
+        return Pixel(miss, 0u);
+    }
+    if (mode == MODE_MIP || mode == MODE_MINIP) {
+        if (st.acc.y == 1.0) {
+            return Pixel(vec4<f32>(st.acc.x, 0.0, 0.0, 0.0), n);
         }
         return Pixel(miss, n);
     }
     if (mode == MODE_XRAY) {
-        var sum = 0.0;
-        for (var k = 0u; k < n; k++) {
-            let seg = segment(k, n, t_in, t_out, dt);
-            let f = value_at(0u, s0, seg.x).x + value_at(1u, s1, seg.x).x + value_at(2u, s2, seg.x).x;
-            sum = sum + f * seg.y;
-        }
-        return Pixel(vec4<f32>(sum, 0.0, 0.0, 0.0), n);
+        return Pixel(vec4<f32>(st.acc.x, 0.0, 0.0, 0.0), n);
     }
-
-    // DVR
-    let view = -ray.dir;
-    var light = view;
-    if (params.light.w == 1.0) {
-        light = params.light.xyz;
-    }
-    let half_vec = normalize_or_zero(light + view);
-    let back_to_front = params.flags.y == 1u;
-    var c = vec3<f32>(0.0);
-    var a = 0.0;
-    var taken = 0u;
-    for (var i = 0u; i < n; i++) {
-        var k = i;
-        if (back_to_front) {
-            k = n - 1u - i;
-        }
-        let seg = segment(k, n, t_in, t_out, dt);
-        taken = taken + 1u;
-        let s = combine_sample(s0, s1, s2, seg.x, seg.y, light, half_vec);
-        if (s.w < 0.0) {
-            continue;
-        }
-        let alpha = s.w;
-        if (back_to_front) {
-            c = alpha * s.xyz + (1.0 - alpha) * c;
-            a = alpha + (1.0 - alpha) * a;
-        } else {
-            let w = (1.0 - a) * alpha;
-            c = c + w * s.xyz;
-            a = a + w;
-            if (a >= params.misc.z) {
-                break;
-            }
-        }
-    }
+    let c = st.acc.xyz;
+    let a = st.acc.w;
     let t = 1.0 - a;
     let bg = params.background;
-    return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), taken);
+    return Pixel(vec4<f32>(c + t * bg.xyz * bg.w, a + t * bg.w), u32(st.at.y));
 }
 
 @compute @workgroup_size(8, 8)
@@ -366,8 +431,22 @@ fn multi(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let row = params.flags.z + local_row;
-    let px = cast_multi(camera_ray(col, row));
     let idx = local_row * params.image.x + col;
-    out_pixels[idx] = px.value;
-    out_samples[idx] = px.samples;
+    let carried = params.carry.x == 1u;
+    var st = Carried(vec4<f32>(0.0), vec4<f32>(0.0));
+    if (carried) {
+        st = Carried(out_pixels[2u * idx], out_pixels[2u * idx + 1u]);
+    }
+    st = cast_multi(camera_ray(col, row), st);
+    if (params.carry.y == 1u) {
+        let px = finish_multi(st);
+        st.acc = px.value;
+        out_samples[idx] = px.samples;
+    }
+    if (carried) {
+        out_pixels[2u * idx] = st.acc;
+        out_pixels[2u * idx + 1u] = st.at;
+    } else {
+        out_pixels[idx] = st.acc;
+    }
 }

@@ -656,14 +656,14 @@ space directions: (1,0,0) (0,2,0) (0,0,1)\nendian: little\nencoding: raw\n\n"
 }
 
 /// Past the device memory a job may fill (`VOXLAB_GPU_MEMORY`) the multi-volume GPU
-/// caster, which holds its volumes whole, and the adaptive caster, when not even one
-/// brick with its ghost voxels fits, refuse alike in the run and its dry run, before
-/// uploading, with the numbers; nothing is written. (The ray caster and the adaptive
-/// caster cut a volume into bricks where they fit: `tests/gpu_distributed_render.rs`,
-/// `tests/gpu_adaptive.rs`.)
+/// caster, when not even its tables and a band's buffers leave room for a cell, and the
+/// adaptive caster, when not even its tables fit, refuse alike in the run and its dry
+/// run, before uploading, with the numbers; nothing is written. (The casters cut their
+/// volumes where the pieces fit: `tests/gpu_distributed_render.rs`,
+/// `tests/gpu_adaptive.rs`, `tests/gpu_multi.rs`.)
 #[test]
-fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
-    if common::gpu("gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory").is_none() {
+fn gpu_casters_refuse_past_the_device_memory_when_no_piece_fits() {
+    if common::gpu("gpu_casters_refuse_past_the_device_memory_when_no_piece_fits").is_none() {
         return;
     }
     let dir = scratch("cli_device_memory");
@@ -692,7 +692,7 @@ fn gpu_casters_that_hold_volumes_whole_refuse_past_the_device_memory() {
                 "--volume",
                 "phantom:sphere:32",
             ],
-            "multi-volume render is too large: ",
+            "multi-volume render is too large: the lookup tables and a band's buffers alone",
         ),
     ] {
         let mut said = Vec::new();

@@ -152,3 +152,72 @@ fn extra_volumes_render_on_the_gpu_backend() {
     eprintln!("cli gpu vs cpu: max |Δ| {worst:.2e}");
     assert!(worst <= 5e-3, "max |Δ| {worst:.2e}");
 }
+
+/// Past the 3-D texture limit (`VOXLAB_GPU_MAX_TEXTURE_3D`) `render --volume …
+/// --backend gpu` renders in cells, says so, and writes the unsplit file byte for byte
+/// (DVR, shaded by default, and X-ray); the dry run prints the split and writes nothing; a limit no
+/// cell fits is refused alike by the run and the dry run, naming the limit, writing
+/// nothing.
+#[test]
+fn extra_volumes_past_the_texture_limit_render_in_cells() {
+    if common::gpu("extra_volumes_past_the_texture_limit_render_in_cells").is_none() {
+        return;
+    }
+    let d = scratch("cli_multi_cells");
+    let run = |extra: &[&str], out: &std::path::Path, limit: &str| {
+        let mut args = vec!["render", PHANTOM, "--out", s(out), "--backend", "gpu"];
+        args.extend_from_slice(&SIZE);
+        args.extend_from_slice(&[
+            "--volume",
+            PHANTOM,
+            "--transform",
+            "0,-1,0,60,1,0,0,-20,0,0,1,0",
+        ]);
+        args.extend_from_slice(extra);
+        let mut c = common::voxlab_command(&args);
+        if !limit.is_empty() {
+            c.env("VOXLAB_GPU_MAX_TEXTURE_3D", limit);
+        }
+        c.output().unwrap()
+    };
+    let cells = "cells (volume 0, [24, 24, 24], exceeds the 3-D texture limit of 16 texels \
+                 per axis; the largest cell holds";
+    for extra in [&[][..], &["--mode", "xray"]] {
+        let (whole, split) = (d.join("whole.npy"), d.join("split.npy"));
+        let a = run(extra, &whole, "");
+        let b = run(extra, &split, "16");
+        assert!(a.status.success(), "{extra:?}: {}", stderr(&a));
+        assert!(b.status.success(), "{extra:?}: {}", stderr(&b));
+        assert!(stderr(&b).contains(cells), "{extra:?}: {}", stderr(&b));
+        assert!(!stderr(&a).contains("ray casting in"), "{}", stderr(&a));
+        assert_eq!(
+            std::fs::read(&whole).unwrap(),
+            std::fs::read(&split).unwrap(),
+            "{extra:?}: the split file differs from the unsplit one"
+        );
+    }
+    let never = d.join("never.npy");
+    let dry = run(&["--dry-run"], &never, "16");
+    assert!(dry.status.success(), "{}", stderr(&dry));
+    let plan = String::from_utf8_lossy(&dry.stdout);
+    assert!(
+        plan.contains("split:  multi-volume ray casting in ") && plan.contains(cells),
+        "{plan}"
+    );
+    let mut said = Vec::new();
+    for extra in [&[][..], &["--dry-run"]] {
+        let o = run(extra, &never, "2");
+        assert_eq!(o.status.code(), Some(1), "{extra:?}: {}", stderr(&o));
+        said.push(stderr(&o));
+    }
+    assert!(
+        said[0].contains(
+            "scene is too large: the multi-volume scene cannot be cut into cells whose parts \
+             of the volumes fit 2 texels per axis"
+        ),
+        "{}",
+        said[0]
+    );
+    assert_eq!(said[0], said[1]);
+    assert!(!never.exists(), "wrote");
+}

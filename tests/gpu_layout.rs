@@ -478,6 +478,10 @@ fn multi_params_layout_agrees() {
         ("lut", offset_of!(MultiParams, lut)),
         ("dims", offset_of!(MultiParams, dims)),
         ("gradient", offset_of!(MultiParams, gradient)),
+        ("origin", offset_of!(MultiParams, origin)),
+        ("own_lo", offset_of!(MultiParams, own_lo)),
+        ("own_hi", offset_of!(MultiParams, own_hi)),
+        ("carry", offset_of!(MultiParams, carry)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

@@ -318,3 +318,167 @@ fn unsupported_gpu_options_are_refused() {
         "exact trilinear",
     );
 }
+
+/// Past the 3-D texture limit or the device memory the scene renders in cells, each
+/// holding its part of every volume, the rays' states handed from cell to cell: the
+/// unsplit image and samples per ray, bit for bit (the same shader and the same steps in
+/// the same order; only where the samples are read from differs). Every mode, both
+/// compositing orders, shaded (the gradients' ghost voxels) and nearest, from four views:
+/// perspective, orthographic along x (rays in the cutting planes), oblique orthographic,
+/// and perspective from inside the scene; cut by a 20-texel texture limit (every volume
+/// exceeds it) and, separately, by the memory alone.
+#[test]
+fn cells_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
+    use voxlab::gpu::context::GpuContext;
+    use voxlab::gpu::multi::{render, scene_split, CARRIED_VEC4S};
+    use voxlab::gpu::plan::DeviceMemory;
+    let Some(ctx) = common::gpu("multi cells") else {
+        return;
+    };
+    let mut textures = GpuContext::new().unwrap();
+    textures.limits.max_texture_dimension_3d = 20;
+    let mut memory = GpuContext::new().unwrap();
+    let views = [
+        (
+            "perspective",
+            35.0,
+            25.0,
+            None,
+            Projection::Perspective { fov_y_deg: 40.0 },
+        ),
+        (
+            "along x",
+            90.0,
+            0.0,
+            None,
+            Projection::Orthographic {
+                width_mm: 460.0,
+                height_mm: 460.0,
+            },
+        ),
+        (
+            "oblique orthographic",
+            -40.0,
+            -55.0,
+            None,
+            Projection::Orthographic {
+                width_mm: 460.0,
+                height_mm: 460.0,
+            },
+        ),
+        // The eye inside volume 0, 20 mm from the world's origin.
+        (
+            "inside",
+            200.0,
+            10.0,
+            Some(20.0),
+            Projection::Perspective { fov_y_deg: 80.0 },
+        ),
+    ];
+    let cases = [
+        Case { volumes: 3, ..BASE },
+        Case {
+            compositing: Compositing::BackToFront,
+            ..BASE
+        },
+        Case {
+            volumes: 3,
+            shading: true,
+            directional: true,
+            ..BASE
+        },
+        Case {
+            filter: Filter::Nearest,
+            ert: 1.0,
+            ..BASE
+        },
+        Case {
+            mode: Mode::Mip,
+            volumes: 3,
+            ..BASE
+        },
+        Case {
+            mode: Mode::Minip,
+            ..BASE
+        },
+        Case {
+            mode: Mode::Xray,
+            volumes: 3,
+            ..BASE
+        },
+    ];
+    for case in cases {
+        let (vols, _, s) = scene(&case);
+        for (view, az, el, dist, projection) in views {
+            let cam = Camera::orbit(
+                DVec3::ZERO,
+                [300.0; 3],
+                Orbit {
+                    azimuth_deg: az,
+                    elevation_deg: el,
+                    distance_mm: dist.or(Some(650.0)),
+                },
+                projection,
+                56,
+                48,
+            )
+            .unwrap();
+            // The tables, one band of carried states and counts, and 48 KiB of textures
+            // (a fifth of the volumes').
+            let band = (56 * 48 * (16 * CARRIED_VEC4S + 4)) as u64;
+            let luts = (vols.len() * s.lut_size * 16) as u64;
+            let budget = 48 << 10;
+            memory.memory = Some(DeviceMemory {
+                bytes: band + luts + budget,
+                source: "the test".into(),
+            });
+            let want = render(ctx, &vols, &cam, &s, &|_, _| {}).unwrap();
+            assert!(want.split.is_none());
+            for (limit, c) in [("texture", &textures), ("memory", &memory)] {
+                let c: &GpuContext = c;
+                let name = format!("{:?} {} volumes, {view} ({limit})", case.mode, vols.len());
+                let cut = scene_split(c, &vols, &cam, &s).unwrap().expect("a split");
+                assert!(cut.cells.len() >= 4, "{name}: {} cells", cut.cells.len());
+                for part in cut.cells.iter().flat_map(|c| c.parts.iter().flatten()) {
+                    match limit {
+                        "texture" => assert!(part.dims().iter().all(|&n| n <= 20), "{name}"),
+                        _ => assert!(4 * part.voxels() as u64 <= budget, "{name}"),
+                    }
+                }
+                assert!(limit == "texture" || cut.largest <= budget, "{name}");
+                let got = render(c, &vols, &cam, &s, &|_, _| {}).unwrap();
+                let line = got.split.as_deref().expect("the split's line");
+                assert!(
+                    line.starts_with(&format!(
+                        "multi-volume ray casting in {} cells",
+                        cut.cells.len()
+                    )),
+                    "{name}: {line}"
+                );
+                let (a, b) = (&want.output, &got.output);
+                let differ = a
+                    .image
+                    .data
+                    .iter()
+                    .zip(&b.image.data)
+                    .filter(|(x, y)| x != y)
+                    .count();
+                let worst = max_abs_error(&a.image, &b.image);
+                assert_eq!(
+                    differ, 0,
+                    "{name}: {differ} values differ, by up to {worst:.3e}"
+                );
+                assert_eq!(
+                    a.samples.as_ref().unwrap().data,
+                    b.samples.as_ref().unwrap().data,
+                    "{name}: the samples per ray"
+                );
+                let lit = a.image.data.iter().filter(|x| **x != 0.0).count();
+                assert!(
+                    lit * 10 > a.image.data.len(),
+                    "{name}: the view is mostly empty"
+                );
+            }
+        }
+    }
+}

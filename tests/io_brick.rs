@@ -227,6 +227,38 @@ fn kd_bricks_tile_the_volume_in_balanced_boxes() {
     assert!(kd_bricks([4, 4, 4], 0).is_err());
 }
 
+/// `halved_kd_tree` (the multi-volume caster's cells): every brick fits, the bricks tile
+/// the volume (each voxel in exactly one), a volume that fits is not cut, the tree's
+/// leaves are its bricks, and a rule not even one voxel meets gives `None`.
+#[test]
+fn halved_kd_trees_tile_the_volume_in_bricks_that_fit() {
+    use voxlab::io::brick::{halved_kd_tree, KdTree};
+    let dims = [10, 7, 3];
+    let fits = |b: &Brick| b.voxels() <= 20;
+    let (tree, bricks) = halved_kd_tree(dims, &fits).unwrap();
+    let mut owner = vec![0u32; 210];
+    for b in &bricks {
+        assert!(b.voxels() <= 20 && b.voxels() > 0, "{b:?}");
+        for z in b.lo[2]..b.hi[2] {
+            for y in b.lo[1]..b.hi[1] {
+                for x in b.lo[0]..b.hi[0] {
+                    owner[(z * 7 + y) * 10 + x] += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        owner.iter().all(|&n| n == 1),
+        "the bricks do not tile the volume"
+    );
+    let mut order = Vec::new();
+    tree.front_to_back([1.0, 1.0, 1.0], &mut order);
+    assert_eq!(order, (0..bricks.len()).collect::<Vec<_>>());
+    let (whole, one) = halved_kd_tree(dims, &|_: &Brick| true).unwrap();
+    assert_eq!((whole, one), (KdTree::Leaf(0), vec![Brick::all(dims)]));
+    assert!(halved_kd_tree(dims, &|b: &Brick| b.voxels() == 0).is_none());
+}
+
 /// The line sets each stack is read by: one line, the last, every line, every third,
 /// and runs with gaps.
 fn line_sets(total: usize) -> Vec<Vec<usize>> {

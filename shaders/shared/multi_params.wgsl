@@ -36,4 +36,14 @@ struct MultiParams {
     dims: array<vec4<u32>, 3>,
     // Gradient method (0 central, 1 forward), unused ×3.
     gradient: vec4<u32>,
+    // Volume i's voxel held at texel 0 of its texture (a cell's part of the volume when
+    // the render is split; 0 whole); w unused.
+    origin: array<vec4<i32>, 3>,
+    // The box of volume 0's index space whose step midpoints this pass takes,
+    // own_lo <= p < own_hi (±f32 max on open faces; everything when not split).
+    own_lo: vec4<f32>,
+    own_hi: vec4<f32>,
+    // x = 1: read and write each ray's carried state (a split render's cells);
+    // y = 1: finish the pixels (the last cell, or not split); unused ×2.
+    carry: vec4<u32>,
 }

@@ -269,6 +269,45 @@ pub fn fitting_kd_tree(
     }
 }
 
+/// The k-d tree whose bricks each satisfy `fits`, a brick that does not halved at the
+/// middle of its longest axis: the planner of a split whose pieces differ in what they
+/// hold (the multi-volume caster's cells, each holding its own part of every volume).
+/// `None` when a brick one voxel wide on every axis does not fit, or past 65,536 bricks.
+pub fn halved_kd_tree(
+    dims: [usize; 3],
+    fits: &dyn Fn(&Brick) -> bool,
+) -> Option<(KdTree, Vec<Brick>)> {
+    fn halve(b: Brick, fits: &dyn Fn(&Brick) -> bool, out: &mut Vec<Brick>) -> Option<KdTree> {
+        if out.len() >= 1 << 16 {
+            return None;
+        }
+        if fits(&b) {
+            out.push(b);
+            return Some(KdTree::Leaf(out.len() - 1));
+        }
+        let bd = b.dims();
+        let axis = (0..3).max_by_key(|&a| (bd[a], a)).unwrap_or(0);
+        if bd[axis] < 2 {
+            return None;
+        }
+        let cut = b.lo[axis] + bd[axis] / 2;
+        let (mut first, mut second) = (b, b);
+        first.hi[axis] = cut;
+        second.lo[axis] = cut;
+        let low = Box::new(halve(first, fits, out)?);
+        let high = Box::new(halve(second, fits, out)?);
+        Some(KdTree::Cut {
+            axis,
+            cut,
+            low,
+            high,
+        })
+    }
+    let mut out = Vec::new();
+    let tree = halve(Brick::all(dims), fits, &mut out)?;
+    Some((tree, out))
+}
+
 /// A k-d tree of bricks: a leaf names its brick (its index in [`kd_tree`]'s list); a
 /// cut divides a box by the plane between voxel slices `cut − 1` and `cut` of `axis`
 /// (index coordinate `cut − ½`), `low` holding the voxels below it.

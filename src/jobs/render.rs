@@ -925,7 +925,12 @@ fn render_multi(
     let progress_rows = |_: usize, _: usize| {};
     let output = match engine.gpu() {
         Some(ctx) => {
-            crate::gpu::multi::render(ctx, &vols, &scene.camera, &settings, &progress_rows)?.output
+            let r =
+                crate::gpu::multi::render(ctx, &vols, &scene.camera, &settings, &progress_rows)?;
+            if let Some(split) = &r.split {
+                progress.note(split);
+            }
+            r.output
         }
         None if engine.backend() == Backend::CpuF32 => {
             crate::cpu::multi::render::<f32>(&vols, &scene.camera, &settings, &progress_rows)?
@@ -949,7 +954,8 @@ fn render_multi(
 /// `--dry-run` of a render with extra volumes: [`crate::multi::check`] (and on the GPU
 /// [`crate::gpu::multi::check`]) on the loaded volumes, and what the caster holds: each
 /// volume's field in the working precision on the host (f32 copies for the GPU), its
-/// R32Float texture and one band of the image on the device.
+/// R32Float texture (split: the largest cell's parts) and one band of the image on the
+/// device, and the split.
 fn plan_multi(
     req: &RenderRequest,
     scene: &Scene,
@@ -963,12 +969,20 @@ fn plan_multi(
         .map(|v| v.volume.dims().iter().product::<usize>() as u64)
         .sum();
     let image = image_bytes(&scene.camera, settings);
+    let mut split = Vec::new();
     let (host, device) = match engine.gpu() {
         Some(ctx) => {
-            crate::gpu::multi::check(ctx, &vols, &scene.camera, settings)?;
-            let (peak, largest) = crate::gpu::multi::device_bytes(ctx, &vols, &scene.camera);
+            let cut = crate::gpu::multi::check(ctx, &vols, &scene.camera, settings)?;
+            let (peak, largest) =
+                crate::gpu::multi::device_bytes(ctx, &vols, &scene.camera, settings, cut.as_ref());
             let device = super::plan::DevicePlan::on(ctx, peak, largest);
-            (4 * all + image, Some(device))
+            // Split: the carried ray states on the host.
+            let carried = cut.as_ref().map_or(0, |c| {
+                split.push(c.line.clone());
+                (scene.camera.width * scene.camera.height * 16 * crate::gpu::multi::CARRIED_VEC4S)
+                    as u64
+            });
+            (4 * all + image + carried, Some(device))
         }
         None => {
             crate::multi::check(&vols, &scene.camera, settings)?;
@@ -985,7 +999,7 @@ fn plan_multi(
         backend: engine.describe(),
         host_bytes: host,
         device,
-        split: Vec::new(),
+        split,
         writes: Vec::new(),
     })
 }
