@@ -112,7 +112,7 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
         color: [0.9, 0.5 * opacity, 0.2],
         opacity,
     };
-    let cases: [Case; 16] = [
+    let cases: [Case; 19] = [
         (Mode::Mip, Filter::Trilinear, 0.0, &|_| {}),
         (Mode::Minip, Filter::CatmullRom, 0.0, &|_| {}),
         (Mode::Xray, Filter::Trilinear, GPU_BOUND, &|_| {}),
@@ -159,6 +159,29 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
             Filter::BsplineInterp,
             CARRIED_BOUND,
             &gamma(0.2),
+        ),
+        // Pre-classified colours and precomputed gradients, prefiltered along whole
+        // lines too: every brick is given its part of the whole volume's.
+        (Mode::Dvr, Filter::BsplineInterp, GPU_BOUND, &pre),
+        (
+            Mode::Dvr,
+            Filter::BsplineFastInterp,
+            GPU_BOUND,
+            &|s: &mut SceneRequest| {
+                s.shading = true;
+                s.precompute_gradients = true;
+            },
+        ),
+        (
+            Mode::Mida,
+            Filter::BsplineFastInterp,
+            CARRIED_BOUND,
+            &|s: &mut SceneRequest| {
+                pre(s);
+                s.shading = true;
+                s.precompute_gradients = true;
+                s.mida_gamma = -0.3;
+            },
         ),
         // Iso-surfaces, handed on the same way: a crossing between two bricks' samples
         // is found and shaded by the later brick (its ghost voxels reach a step out).
@@ -232,30 +255,6 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
             );
         }
     }
-    // Pre-classified colours would be prefiltered brick by brick: refused.
-    let mut req = request(file.to_str().unwrap(), Mode::Dvr);
-    req.scene.filter = Filter::BsplineInterp;
-    pre(&mut req.scene);
-    let (tf, camera, settings) =
-        voxlab::jobs::render::build_view(&req.scene, &volume, false).unwrap();
-    let (tree, bricks) = brick_plan(volume.dims(), &settings, 28, None).unwrap();
-    let e = render_bricked(
-        ctx,
-        &volume,
-        &tf,
-        &camera,
-        &settings,
-        (&tree, &bricks[..]),
-        &|_, _| {},
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains(
-            "bspline-interp in bricks samples coefficients prefiltered over the whole volume"
-        ),
-        "{e}"
-    );
     // A limit below the ghost voxels cannot be met.
     let trilinear = voxlab::settings::RenderSettings::default();
     assert_eq!(trilinear.filter, Filter::Trilinear);

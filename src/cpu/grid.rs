@@ -47,6 +47,13 @@ impl<R: Real> Grid<R> {
         }
         Grid { dims, data }
     }
+    /// The voxels `lo .. hi` (per axis, within the grid) as a grid of their own.
+    pub fn crop(&self, lo: [usize; 3], hi: [usize; 3]) -> Grid<R> {
+        let [nx, ny, _] = self.dims;
+        Grid::from_fn(std::array::from_fn(|a| hi[a] - lo[a]), |i, j, k| {
+            self.data[(lo[0] + i) + nx * ((lo[1] + j) + ny * (lo[2] + k))]
+        })
+    }
     /// The value at voxel `(i, j, k)` with indices clamped to the grid.
     #[inline(always)]
     pub fn at_clamped(&self, i: isize, j: isize, k: isize) -> R {

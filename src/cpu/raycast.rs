@@ -461,12 +461,11 @@ pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
 /// [`check_owned_settings`], or where `one_device` (the bricks rendered in turn by one
 /// device, with the whole volume at hand: `gpu::raycast::render_bricked`) every mode,
 /// each ray's state handed from one brick to the next, but iso-surfaces without
-/// shadows, and the interpolating B-splines too, their coefficients prefiltered over
-/// the whole volume (not with pre-classification or precomputed gradients, which a
-/// brick prefilters on its own).
+/// shadows, and the interpolating B-splines too, their coefficients (and pre-classified
+/// colours, precomputed gradients) prefiltered over the whole volume.
 ///
 /// # Errors
-/// As [`check_owned_settings`]; shadows; those combinations.
+/// As [`check_owned_settings`]; shadows.
 pub fn check_split_settings(s: &RenderSettings, one_device: bool) -> Result<()> {
     if one_device {
         if s.iso_shadows && s.iso_opaque && (s.mode == Mode::Iso || s.mode == Mode::Dvr) {
@@ -483,18 +482,6 @@ pub fn check_split_settings(s: &RenderSettings, one_device: bool) -> Result<()> 
             "--mode",
             "bricks composite DVR, MIP, MinIP or X-ray (MIDA and iso-surfaces look along the \
              whole ray)",
-        ));
-    }
-    let own_prefilter = s.classification == Classification::Pre || s.precompute_gradients;
-    if s.filter.prefiltered() && one_device && own_prefilter {
-        return Err(Error::invalid(
-            "--filter",
-            format!(
-                "{} in bricks samples coefficients prefiltered over the whole volume, but \
-                 pre-classified colours and precomputed gradients would be prefiltered brick \
-                 by brick: post-classify and compute gradients on the fly",
-                s.filter.name()
-            ),
         ));
     }
     if (s.filter.prefiltered() && !one_device) || s.filter == Filter::Sinc {

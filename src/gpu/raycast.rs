@@ -719,6 +719,57 @@ fn draws_iso(settings: &RenderSettings) -> bool {
     settings.mode == Mode::Iso || (settings.mode == Mode::Dvr && !settings.iso_surfaces.is_empty())
 }
 
+/// A volume's products prefiltered along whole lines, which a brick of it cannot make
+/// from its own voxels: the interpolating B-splines' coefficients, and where a frame
+/// uses them its pre-classified colours (RGBA) and precomputed gradients (x, y, z), each
+/// prefiltered as an unsplit session prefilters it. [`render_bricked`] makes them once
+/// and gives each brick its part ([`RaycastSession::give_prefiltered`]).
+#[derive(Clone, Debug, Default)]
+pub struct Prefiltered {
+    pub coefficients: Option<Grid<f32>>,
+    pub preclassified: Option<[Grid<f32>; 4]>,
+    pub gradients: Option<[Grid<f32>; 3]>,
+}
+
+impl Prefiltered {
+    /// The whole volume's products for frames of `settings` (an interpolating B-spline
+    /// filter) with `tf`: the coefficients, the pre-classified colours when the frame
+    /// pre-classifies, the gradients when it precomputes them.
+    pub fn of_volume(volume: &AnyVolume, tf: &TransferFunction, settings: &RenderSettings) -> Self {
+        let grid = Grid::<f32> {
+            dims: volume.dims(),
+            data: volume.to_f32().into_data(),
+        };
+        let filter = settings.filter;
+        let lut = tf.lut(settings.lut_size).to_real::<f32>();
+        Prefiltered {
+            coefficients: Some(prepare(&grid, filter)),
+            preclassified: (settings.classification == Classification::Pre).then(|| {
+                crate::cpu::raycast::preclassify(&grid, &lut).map(|g| prepare(&g, filter))
+            }),
+            gradients: settings.precompute_gradients.then(|| {
+                crate::cpu::gradient::precompute_gradients(&grid, settings.gradient)
+                    .map(|g| prepare(&g, filter))
+            }),
+        }
+    }
+
+    /// The voxels `lo .. hi` of each product.
+    pub fn crop(&self, lo: [usize; 3], hi: [usize; 3]) -> Self {
+        Prefiltered {
+            coefficients: self.coefficients.as_ref().map(|g| g.crop(lo, hi)),
+            preclassified: self
+                .preclassified
+                .as_ref()
+                .map(|c| c.each_ref().map(|g| g.crop(lo, hi))),
+            gradients: self
+                .gradients
+                .as_ref()
+                .map(|c| c.each_ref().map(|g| g.crop(lo, hi))),
+        }
+    }
+}
+
 /// The ghost voxels each brick of a frame's split volume carries:
 /// `cpu::field::brick_ghost` (the filter's and the gradient's reach), and for
 /// iso-surfaces one step more (a crossing between a brick's first sample and the last
@@ -912,7 +963,8 @@ pub fn carried_mida(v: &[[f32; 4]]) -> crate::cpu::modes::MidaState<f32> {
 /// `cpu::modes::IsoState`) handed from brick to brick on the device and finished on
 /// the host (`cpu::modes::mida_finish`, the background): the unsplit render's samples
 /// and arithmetic in its order. The interpolating B-splines sample the whole volume's
-/// coefficients, made once on the host ([`RaycastSession::give_coefficients`]).
+/// coefficients (and pre-classified colours, precomputed gradients), made once on the
+/// host ([`RaycastSession::give_prefiltered`]).
 ///
 /// # Errors
 /// As [`render_owned`], but MIDA, iso-surfaces (without shadows) and the interpolating
@@ -949,19 +1001,9 @@ pub fn render_bricked(
     // The interpolating B-splines sample coefficients prefiltered along whole lines:
     // the whole volume's, made once on the host as an unsplit session makes them.
     let t_coef = Instant::now();
-    let coefficients = match settings.filter.prefiltered() {
-        true => {
-            let grid = Grid::<f32> {
-                dims,
-                data: volume.to_f32().into_data(),
-            };
-            let c = prepare(&grid, settings.filter);
-            Some(crate::volume::Volume::with_affine(
-                dims,
-                volume.affine(),
-                c.data,
-            )?)
-        }
+    let s = crate::cpu::raycast::owned_settings(settings);
+    let whole = match settings.filter.prefiltered() {
+        true => Some(Prefiltered::of_volume(volume, tf, &s)),
         false => None,
     };
     timings.prepare += t_coef.elapsed().as_secs_f64();
@@ -977,7 +1019,6 @@ pub fn render_bricked(
             affine: volume.affine(),
             range,
         };
-        let s = crate::cpu::raycast::owned_settings(settings);
         let brick = volume.crop(g.lo, g.hi)?;
         // One session for every brick: the pipelines compile once.
         match session.as_mut() {
@@ -986,13 +1027,8 @@ pub fn render_bricked(
         }
         let session = session.as_mut().expect("made above");
         session.place(placement)?;
-        if let Some(c) = &coefficients {
-            let c = c.crop(g.lo, g.hi)?;
-            let dims = c.dims();
-            session.give_coefficients(Grid {
-                dims,
-                data: c.into_data(),
-            })?;
+        if let Some(p) = &whole {
+            session.give_prefiltered(p.crop(g.lo, g.hi))?;
         }
         let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
         let state = carried.then_some(&mut carry[..]);
@@ -1248,9 +1284,9 @@ pub struct RaycastSession<'c> {
     minmax_pipeline: Option<super::skip::MinMaxPipeline>,
     /// The interpolating B-splines' coefficients, on the host and as a texture.
     coefficients: Option<(Grid<f32>, wgpu::Texture)>,
-    /// Coefficients a brick was given, prefiltered over the whole volume
-    /// ([`RaycastSession::give_coefficients`]), uploaded by the next frame that needs them.
-    given_coefficients: Option<Grid<f32>>,
+    /// What a brick was given, prefiltered over the whole volume
+    /// ([`RaycastSession::give_prefiltered`]), uploaded by the next frame that needs it.
+    given: Prefiltered,
     lut: Option<Cached<wgpu::Buffer>>,
     lut2: Option<Cached<wgpu::Buffer>>,
     prefix: Option<Cached<wgpu::Buffer>>,
@@ -1380,7 +1416,7 @@ impl<'c> RaycastSession<'c> {
             prepare_pipelines: None,
             minmax_pipeline: None,
             coefficients: None,
-            given_coefficients: None,
+            given: Prefiltered::default(),
             lut: None,
             lut2: None,
             prefix: None,
@@ -1417,7 +1453,7 @@ impl<'c> RaycastSession<'c> {
         self.compact = None;
         self.stats.volume_bytes = 0;
         self.coefficients = None;
-        self.given_coefficients = None;
+        self.given = Prefiltered::default();
         self.preclassified = None;
         self.gradients = None;
         self.minmax = None;
@@ -1458,22 +1494,35 @@ impl<'c> RaycastSession<'c> {
         Ok(())
     }
 
-    /// Gives a placed brick its interpolating B-spline coefficients, the whole volume's
-    /// (prefiltered along whole lines) over the brick's voxels with their ghosts, for
-    /// its frames to sample in place of its own prefilter (which would differ near the
-    /// brick's faces).
+    /// Gives a placed brick the whole volume's prefiltered products over its voxels
+    /// with their ghosts ([`Prefiltered`]), for its next frame to sample in place of its
+    /// own prefilter (which would differ near the brick's faces).
     ///
     /// # Errors
     /// A grid of other dimensions than the session's volume.
-    pub fn give_coefficients(&mut self, c: Grid<f32>) -> Result<()> {
-        if c.dims != self.dims {
-            return Err(Error::invalid(
-                "coefficients",
-                format!("{:?} for a {:?} volume", c.dims, self.dims),
-            ));
+    pub fn give_prefiltered(&mut self, p: Prefiltered) -> Result<()> {
+        let grids = p
+            .coefficients
+            .iter()
+            .chain(p.preclassified.iter().flatten());
+        for g in grids.chain(p.gradients.iter().flatten()) {
+            if g.dims != self.dims {
+                return Err(Error::invalid(
+                    "prefiltered grid",
+                    format!("{:?} for a {:?} volume", g.dims, self.dims),
+                ));
+            }
         }
-        self.coefficients = None;
-        self.given_coefficients = Some(c);
+        if p.coefficients.is_some() {
+            self.coefficients = None;
+        }
+        if p.preclassified.is_some() {
+            self.preclassified = None;
+        }
+        if p.gradients.is_some() {
+            self.gradients = None;
+        }
+        self.given = p;
         Ok(())
     }
 
@@ -1701,7 +1750,7 @@ impl<'c> RaycastSession<'c> {
         if prefiltered && self.coefficients.is_none() {
             // A sequential recurrence along every line, on the CPU (module docs), or
             // the whole volume's, given.
-            let c = match self.given_coefficients.take() {
+            let c = match self.given.coefficients.take() {
                 Some(c) => c,
                 None => prepare(&self.grid, settings.filter),
             };
@@ -1722,8 +1771,11 @@ impl<'c> RaycastSession<'c> {
             if !fresh(&self.preclassified, &key) {
                 self.preclassified = None;
                 let value = if prefiltered {
-                    let rgba = crate::cpu::raycast::preclassify(&self.grid, &lut)
-                        .map(|g| prepare(&g, settings.filter));
+                    let rgba = match self.given.preclassified.take() {
+                        Some(rgba) => rgba,
+                        None => crate::cpu::raycast::preclassify(&self.grid, &lut)
+                            .map(|g| prepare(&g, settings.filter)),
+                    };
                     ctx.upload_rgba(
                         dims,
                         &interleave(&rgba[0], &rgba[1], &rgba[2], Some(&rgba[3])),
@@ -1747,9 +1799,14 @@ impl<'c> RaycastSession<'c> {
             if !fresh(&self.gradients, &key) {
                 self.gradients = None;
                 let value = if prefiltered {
-                    let g =
-                        crate::cpu::gradient::precompute_gradients(&self.grid, settings.gradient)
-                            .map(|g| prepare(&g, settings.filter));
+                    let g = match self.given.gradients.take() {
+                        Some(g) => g,
+                        None => crate::cpu::gradient::precompute_gradients(
+                            &self.grid,
+                            settings.gradient,
+                        )
+                        .map(|g| prepare(&g, settings.filter)),
+                    };
                     ctx.upload_rgba(dims, &interleave(&g[0], &g[1], &g[2], None))?
                 } else {
                     let (layout, p) = prepare_pipeline(
