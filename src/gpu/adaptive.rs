@@ -87,30 +87,48 @@ fn init_buffer(
         }))
 }
 
+/// The importance volume's two compute pipelines (`shaders/adaptive_importance.wgsl`:
+/// the differences, the max filter along one axis) over their bind group layout:
+/// compiled once for every brick of a split render.
+pub struct ImportancePipelines {
+    layout: wgpu::BindGroupLayout,
+    diff: wgpu::ComputePipeline,
+    maxf: wgpu::ComputePipeline,
+}
+
+impl ImportancePipelines {
+    /// Compiles the pipelines on `ctx`.
+    pub fn new(ctx: &GpuContext) -> Result<Self> {
+        let module = ctx.shader(
+            "adaptive_importance.wgsl",
+            &shaders::resolve("adaptive_importance"),
+        )?;
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("importance"),
+            entries: &[
+                buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                texture_entry(1, false),
+                texture_entry(2, false),
+                rgba_storage_entry(3),
+            ],
+        });
+        let diff = compute_pipeline(ctx, "differences", &module, "differences", &layout)?;
+        let maxf = compute_pipeline(ctx, "max_filter", &module, "max_filter", &layout)?;
+        Ok(ImportancePipelines { layout, diff, maxf })
+    }
+}
+
 /// The importance volume on the device from the volume's R32Float 3-D texture: an
 /// `Rgba32Float` 3-D texture, one texel per voxel, `(G_x, G_y, G_z, 0)`.
 pub fn importance_texture(
     ctx: &GpuContext,
+    pipelines: &ImportancePipelines,
     volume: &wgpu::TextureView,
     dims: [usize; 3],
     t_max: f64,
 ) -> Result<wgpu::Texture> {
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "adaptive_importance.wgsl",
-        &shaders::resolve("adaptive_importance"),
-    )?;
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("importance"),
-        entries: &[
-            buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1, false),
-            texture_entry(2, false),
-            rgba_storage_entry(3),
-        ],
-    });
-    let diff = compute_pipeline(ctx, "differences", &module, "differences", &layout)?;
-    let maxf = compute_pipeline(ctx, "max_filter", &module, "max_filter", &layout)?;
+    let ImportancePipelines { layout, diff, maxf } = pipelines;
     let a = ctx.rgba_texture(dims, true)?;
     let b = ctx.rgba_texture(dims, true)?;
     let none = ctx.rgba_texture([1, 1, 1], false)?;
@@ -126,10 +144,10 @@ pub fn importance_texture(
         &wgpu::TextureView,
         u32,
     ); 4] = [
-        (&diff, &nv, &av, 0),
-        (&maxf, &av, &bv, 0),
-        (&maxf, &bv, &av, 1),
-        (&maxf, &av, &bv, 2),
+        (diff, &nv, &av, 0),
+        (maxf, &av, &bv, 0),
+        (maxf, &bv, &av, 1),
+        (maxf, &av, &bv, 2),
     ];
     let mut keep = Vec::new();
     for (pipeline, src, dst, axis) in passes {
@@ -146,7 +164,7 @@ pub fn importance_texture(
         )?;
         let bind = ctx.bind_group(
             "importance",
-            &layout,
+            layout,
             &[
                 pbuf.as_entire_binding(),
                 wgpu::BindingResource::TextureView(volume),
@@ -170,7 +188,9 @@ pub fn importance_texture(
 /// three grids as `cpu::adaptive::importance_volume`).
 pub fn importance_volume(ctx: &GpuContext, grid: &Grid<f32>, t_max: f64) -> Result<[Grid<f32>; 3]> {
     let vol = ctx.upload_volume_r32(grid.dims, &grid.data)?;
-    let tex = importance_texture(ctx, &vol.create_view(&Default::default()), grid.dims, t_max)?;
+    let pipelines = ImportancePipelines::new(ctx)?;
+    let view = vol.create_view(&Default::default());
+    let tex = importance_texture(ctx, &pipelines, &view, grid.dims, t_max)?;
     let bytes = ctx.read_texture_3d(&tex, grid.dims, 16)?;
     let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     Ok(std::array::from_fn(|a| Grid {
@@ -552,6 +572,8 @@ pub fn render(
     let mut readback = 0.0;
     let mut image = Frame::new(w, h, 4);
     let mut counts = vec![0u32; w * h];
+    // The importance volume's pipelines, compiled by the first brick that needs them.
+    let mut importance_pipelines: Option<ImportancePipelines> = None;
     let mut pass = |texels: &Grid<f32>,
                     mut params: AdaptiveParams,
                     carry: Option<&mut [[f32; 4]]>,
@@ -565,7 +587,11 @@ pub fn render(
         upload += t_up.elapsed().as_secs_f64();
         let t_prep = Instant::now();
         let importance = if adaptive {
-            importance_texture(ctx, &vol_view, texels.dims, settings.t_max)?
+            let pipelines = match &importance_pipelines {
+                Some(p) => p,
+                None => importance_pipelines.insert(ImportancePipelines::new(ctx)?),
+            };
+            importance_texture(ctx, pipelines, &vol_view, texels.dims, settings.t_max)?
         } else {
             ctx.rgba_texture([1, 1, 1], false)?
         };
