@@ -494,7 +494,9 @@ pub fn scene_split(
             "scene",
             format!(
                 "the multi-volume scene cannot be cut into cells whose parts of the volumes \
-                 fit {max} texels per axis{bytes} ({why})"
+                 fit {max} texels per axis{bytes}: a cell one voxel of volume 0 wide needs \
+                 more (of a volume with finer voxels, or with the voxels a sample and its \
+                 gradient read); render on the CPU (--backend cpu-f32) ({why})"
             ),
         ));
     };
