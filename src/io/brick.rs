@@ -58,6 +58,15 @@ impl Brick {
             hi: std::array::from_fn(|a| (self.hi[a] + ghost).min(dims[a])),
         }
     }
+
+    /// The two boxes either side of the plane between slices `at − 1` and `at` of
+    /// `axis` (the low side first).
+    fn cut(&self, axis: usize, at: usize) -> (Brick, Brick) {
+        let (mut low, mut high) = (*self, *self);
+        low.hi[axis] = at;
+        high.lo[axis] = at;
+        (low, high)
+    }
 }
 
 /// Where `path` keeps its samples when it can be read brick by brick (module docs);
@@ -291,9 +300,7 @@ pub fn halved_kd_tree(
             return None;
         }
         let cut = b.lo[axis] + bd[axis] / 2;
-        let (mut first, mut second) = (b, b);
-        first.hi[axis] = cut;
-        second.lo[axis] = cut;
+        let (first, second) = b.cut(axis, cut);
         let low = Box::new(halve(first, fits, out)?);
         let high = Box::new(halve(second, fits, out)?);
         Some(KdTree::Cut {
@@ -380,10 +387,7 @@ fn split(b: Brick, n: usize, out: &mut Vec<Brick>) -> Result<KdTree> {
             ),
         ));
     }
-    let mut first = b;
-    first.hi[axis] = cut;
-    let mut second = b;
-    second.lo[axis] = cut;
+    let (first, second) = b.cut(axis, cut);
     let low = Box::new(split(first, n1, out)?);
     let high = Box::new(split(second, n2, out)?);
     Ok(KdTree::Cut {
