@@ -211,12 +211,9 @@ fn d2vr_chunk(@builtin(global_invocation_id) id: vec3<u32>) {
         counts[idx] = cnt;
         return;
     }
-    let view = -ray.dir;
-    var light = view;
-    if (params.light.w == 1.0) {
-        light = params.light.xyz;
-    }
-    let half_vec = normalize_or_zero(light + view);
+    let lh = light_half(ray.dir);
+    let light = lh.l;
+    let half_vec = lh.h;
     for (var k = dp.chunk.x; k < k1; k++) {
         let b = segment_bounds(k, n, t_in, t_out, dt);
         let p = o + d * ((b.x + b.y) * 0.5);

@@ -5,7 +5,7 @@
 // through apply_taps), src/cpu/gradient.rs (gradient_stencil: central, forward) and
 // src/cpu/raycast.rs (shade_gradient). Each helper names its Rust twin. Shared with
 // the ray caster: camera_ray (shared/camera.wgsl), intersect_box and normalize_or_zero
-// (shared/rays.wgsl), phong (shared/shading.wgsl), clamp_index (shared/filters.wgsl),
+// (shared/rays.wgsl), phong and light_half (shared/shading.wgsl), clamp_index (shared/filters.wgsl),
 // ln_1p and exp_m1 (shared/opacity.wgsl).
 //
 // Loops: llvmpipe stops every loop of an invocation after 65535 iterations in all, so
@@ -345,12 +345,9 @@ fn cast_multi(ray: Ray, st_in: Carried) -> Carried {
         st.acc = vec4<f32>(sum, 0.0, 0.0, 0.0);
     } else {
         // DVR
-        let view = -ray.dir;
-        var light = view;
-        if (params.light.w == 1.0) {
-            light = params.light.xyz;
-        }
-        let half_vec = normalize_or_zero(light + view);
+        let lh = light_half(ray.dir);
+        let light = lh.l;
+        let half_vec = lh.h;
         let back_to_front = params.flags.y == 1u;
         var c = st.acc.xyz;
         var a = st.acc.w;

@@ -265,12 +265,9 @@ fn cast_ray(ray: Ray, u: f32) -> Pixel {
     }
 
     // DVR
-    let view = -ray.dir;
-    var light = view;
-    if (params.light.w == 1.0) {
-        light = params.light.xyz;
-    }
-    let half_vec = normalize_or_zero(light + view);
+    let lh = light_half(ray.dir);
+    let light = lh.l;
+    let half_vec = lh.h;
     let back_to_front = params.flags.w == 1u;
     var c = vec3<f32>(0.0);
     var a = 0.0;

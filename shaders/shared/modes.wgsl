@@ -6,6 +6,7 @@
 
 #import rays
 #import opacity
+#import shading
 
 const MODE_MIDA: u32 = 4u;
 const MODE_ISO: u32 = 5u;
@@ -60,9 +61,3 @@ fn corrected_alpha(a: f32, len: f32, speed: f32) -> f32 {
     return 1.0;
 }
 
-fn ray_light(ray: Ray) -> vec3<f32> {
-    if (params.light.w == 1.0) {
-        return params.light.xyz;
-    }
-    return -ray.dir;
-}

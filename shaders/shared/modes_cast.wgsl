@@ -96,8 +96,9 @@ fn mida_store(i: u32, st: MidaState) {
 // steps it owns from the state the bricks in front of it left, and leaves the state
 // for the bricks behind (the host finishes the pixel: src/gpu/raycast.rs: render_bricked).
 fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32) -> Pixel {
-    let light = ray_light(ray);
-    let half_vec = normalize_or_zero(light - ray.dir);
+    let lh = light_half(ray.dir);
+    let light = lh.l;
+    let half_vec = lh.h;
     let brick = params.brick.w == 1.0;
     let run = carried_run(n, t_in, t_out, dt, o, d);
     if (run.x == 0u) {
@@ -267,9 +268,10 @@ fn iso_store(i: u32, st: IsoState) {
 // mirrors src/cpu/modes.rs: cast_iso (dvr: DVR samples between the surfaces). A brick
 // takes the run of steps it owns from the state the bricks in front left, as cast_mida.
 fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32, n: u32, speed: f32, dvr: bool) -> Pixel {
-    let light = ray_light(ray);
+    let lh = light_half(ray.dir);
+    let light = lh.l;
     let l_index = vec3<f32>(dot(params.to_index_0.xyz, light), dot(params.to_index_1.xyz, light), dot(params.to_index_2.xyz, light));
-    let r = IsoRay(light, normalize_or_zero(light - ray.dir), l_index, dvr);
+    let r = IsoRay(light, lh.h, l_index, dvr);
     let brick = params.brick.w == 1.0;
     let run = carried_run(n, t_in, t_out, dt, o, d);
     if (run.x == 0u) {

@@ -173,7 +173,7 @@ pub fn phong<R: Real>(c: [R; 3], n: V3<R>, l: V3<R>, h: V3<R>, k: &ShadingR<R>) 
 
 /// The light and half vectors of a ray with world direction `dir`: the light `light`
 /// (a headlight, back along the ray, when `None`) and the unit bisector of it and the
-/// view direction `−dir`.
+/// view direction `−dir`. Mirrors `shaders/shared/shading.wgsl: light_half`
 #[inline]
 pub(crate) fn light_half<R: Real>(light: Option<V3<R>>, dir: glam::DVec3) -> (V3<R>, V3<R>) {
     let view = -V3::<R>::from_dvec(dir);
