@@ -264,6 +264,129 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
     assert!(e.contains("cannot be cut into bricks"), "{e}");
 }
 
+/// Opaque iso-surfaces with shadows in bricks: each hit keeps its two endings, and its
+/// shadow ray is marched afterwards through the bricks in the light's order, handed on
+/// from brick to brick (`cpu::modes::shadow_steps`): the unsplit image, for directional
+/// lights, perspective and orthographic, and a perspective camera inside the volume,
+/// whose headlight's shadow rays pass the eye (two sweeps). (A headlight from outside
+/// casts no shadows to speak of: its shadow rays go back along the rays.)
+#[test]
+fn iso_surface_shadows_in_bricks_render_the_unsplit_image() {
+    let Some(ctx) = gpu("iso_surface_shadows_in_bricks_render_the_unsplit_image") else {
+        return;
+    };
+    use voxlab::gpu::raycast::{brick_plan, render_bricked, RaycastSession};
+    let dir = scratch("gpu-bricked-shadows");
+    let file = brick_test_volume(&dir);
+    let volume = VolumeInput::new(file.to_str().unwrap()).read().unwrap();
+    let iso = |value: f64, color: [f64; 3]| voxlab::settings::IsoSurface {
+        value,
+        color,
+        opacity: 1.0,
+    };
+    type Case<'a> = (&'a str, Mode, Filter, &'a dyn Fn(&mut SceneRequest));
+    let cases: [Case; 4] = [
+        (
+            "directional light",
+            Mode::Iso,
+            Filter::Trilinear,
+            &|s: &mut SceneRequest| s.light = Some([-0.6, 0.5, -0.62]),
+        ),
+        (
+            "orthographic, long steps, light from the side",
+            Mode::Iso,
+            Filter::CatmullRom,
+            &|s: &mut SceneRequest| {
+                s.light = Some([-0.2, -0.9, 0.3]);
+                s.ortho = true;
+                s.view.azimuth = 70.0;
+                s.step = 3.0;
+                s.iso_refine = false;
+            },
+        ),
+        (
+            "headlight, from inside the volume",
+            Mode::Iso,
+            Filter::Trilinear,
+            &|s: &mut SceneRequest| {
+                // Under the 22-texel limit (15 bricks) some shadow rays are still
+                // crossing bricks past the eye after the first sweep: two sweeps.
+                s.distance = Some(13.0);
+                s.fov = 100.0;
+                s.view.azimuth = 120.0;
+                s.view.elevation = 60.0;
+                s.iso = vec![iso(600.0, [0.9, 0.6, 0.2])];
+            },
+        ),
+        (
+            "DVR between the surfaces, directional light",
+            Mode::Dvr,
+            Filter::Trilinear,
+            &|s: &mut SceneRequest| {
+                s.light = Some([-0.3, 0.8, 0.5]);
+                s.ert = 0.95;
+            },
+        ),
+    ];
+    for (name, mode, filter, tweak) in cases {
+        let mut req = request(file.to_str().unwrap(), mode);
+        req.scene.filter = filter;
+        req.scene.ert = 1.0;
+        req.scene.shading = true;
+        req.scene.iso = vec![iso(450.0, [0.9, 0.6, 0.2]), iso(900.0, [0.2, 0.5, 0.9])];
+        req.scene.iso_opaque = true;
+        req.scene.shadows = true;
+        tweak(&mut req.scene);
+        let (tf, camera, settings) =
+            voxlab::jobs::render::build_view(&req.scene, &volume, false).unwrap();
+        let unsplit = |settings: &voxlab::settings::RenderSettings| {
+            RaycastSession::new(ctx, &volume)
+                .unwrap()
+                .render(&tf, &camera, settings, &|_, _| {})
+                .unwrap()
+                .output
+                .image
+        };
+        let want = unsplit(&settings);
+        // The shadows are there: pixels differ from the unshadowed image.
+        let mut lit = settings.clone();
+        lit.iso_shadows = false;
+        let lit = unsplit(&lit);
+        let dark = want
+            .data
+            .chunks(4)
+            .zip(lit.data.chunks(4))
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(dark >= 40, "{name}: {dark} pixels in shadow");
+        let top = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (limit, most) in [(28, None), (22, None), (64, Some(9000))] {
+            let (tree, bricks) = brick_plan(volume.dims(), &settings, limit, most).unwrap();
+            let got = render_bricked(
+                ctx,
+                &volume,
+                &tf,
+                &camera,
+                &settings,
+                (&tree, &bricks),
+                &|_, _| {},
+            )
+            .unwrap();
+            let n = bricks.len();
+            assert!(n > 1, "{name}: the limit {limit} splits the volume");
+            let worst = max_abs_error(&got.output.image.data, &want.data);
+            eprintln!(
+                "{name}, {n} bricks of ≤ {limit} ({most:?}): max |Δ| {worst:.3e}, {dark} \
+                 pixels in shadow (image max {top:.3})"
+            );
+            assert!(
+                worst <= CARRIED_BOUND * top.max(1.0),
+                "{name}, {n} bricks: {worst:e}"
+            );
+        }
+    }
+}
+
 /// `voxlab render --backend gpu` under a lowered 3-D texture limit and under a lowered
 /// device memory: `--dry-run` prints the brick split and writes nothing; the render says
 /// how it split and writes the unsplit MIP, MIDA and opaque iso-surface images byte for
@@ -307,6 +430,7 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
     };
     let one_mida = dir.join("one-mida.npy");
     let one_iso = dir.join("one-iso.npy");
+    let one_shadows = dir.join("one-shadows.npy");
     // Long steps: a crossing between two bricks' samples lies up to 4 voxels outside
     // the later brick, which shades it (its ghost voxels reach that far; without them 3
     // pixels differ by 0.049).
@@ -331,6 +455,13 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         &with_iso(args(&one_iso, "iso"), &["--iso-opaque"]),
         None,
     ));
+    let shadows = ["--iso-opaque", "--shadows", "--light", "-0.6,0.5,-0.62"];
+    text(&run(&with_iso(args(&one_shadows, "iso"), &shadows), None));
+    // The shadows are there.
+    assert_ne!(
+        std::fs::read(&one_iso).unwrap(),
+        std::fs::read(&one_shadows).unwrap()
+    );
     for (limit, why, limits) in [
         (
             ("VOXLAB_GPU_MAX_TEXTURE_3D", "32"),
@@ -352,7 +483,8 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
         assert!(said.contains(limits), "{limit:?}: {said}");
         assert!(!split.exists());
         // MIP composited sort-last, MIDA and iso-surfaces with each ray's state handed
-        // from brick to brick: each the unsplit image (on lavapipe, byte for byte).
+        // from brick to brick, and their shadow rays after them: each the unsplit image
+        // (on lavapipe, byte for byte).
         // (Under the lowered memory the carried states, 52 bytes a pixel, leave the
         // 48³ volume hundreds of bricks of a few voxels: MIDA and iso-surfaces run under
         // the texture limit only.)
@@ -361,6 +493,7 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
             (args(&split, "mip"), &one),
             (args(&split, "mida"), &one_mida),
             (with_iso(args(&split, "iso"), &["--iso-opaque"]), &one_iso),
+            (with_iso(args(&split, "iso"), &shadows), &one_shadows),
         ]
         .into_iter()
         .filter(|(_, whole)| carried || *whole == &one)
@@ -371,43 +504,38 @@ fn the_command_splits_past_the_texture_limit_and_the_memory_and_says_so() {
                 "{said}"
             );
             assert_eq!(
+                said.contains(
+                    "; the shadow rays in sweeps through the bricks in the light's order)"
+                ),
+                whole == &one_shadows,
+                "{said}"
+            );
+            assert_eq!(
                 std::fs::read(whole).unwrap(),
                 std::fs::read(&split).unwrap()
             );
             std::fs::remove_file(&split).unwrap();
         }
-        // What bricks cannot render (shadow rays), and a renderer session's frames
-        // (`--repeat`, the volume whole), are refused by the run and its dry run alike,
-        // saying why the volume is cut.
+        // A renderer session's frames (`--repeat`, the volume whole) are refused by the
+        // run and its dry run alike, saying why the volume is cut.
         let mut mip_repeat = args(&split, "mip");
         mip_repeat.extend(["--repeat".into(), "2".into()]);
-        for (a, says) in [
-            (
-                with_iso(args(&split, "iso"), &["--iso-opaque", "--shadows"]),
-                "invalid --shadows: a shadow ray crosses the whole volume; bricks draw \
-                 iso-surfaces without shadows; ",
-            ),
-            (
-                mip_repeat,
-                "invalid --repeat: times the frames of one renderer session, which holds the \
-                 volume whole, but this frame needs ray casting in ",
-            ),
-        ] {
-            let mut said = Vec::new();
-            for dry in [false, true] {
-                let mut a = a.clone();
-                if dry {
-                    a.push("--dry-run".into());
-                }
-                let o = run(&a, Some(limit));
-                assert_eq!(o.status.code(), Some(1), "{a:?}");
-                let e = String::from_utf8_lossy(&o.stderr).into_owned();
-                assert!(e.contains(says) && e.contains(why), "{e}");
-                assert!(!split.exists());
-                said.push(e);
+        let says = "invalid --repeat: times the frames of one renderer session, which holds \
+                    the volume whole, but this frame needs ray casting in ";
+        let mut said = Vec::new();
+        for dry in [false, true] {
+            let mut a = mip_repeat.clone();
+            if dry {
+                a.push("--dry-run".into());
             }
-            assert_eq!(said[0], said[1]);
+            let o = run(&a, Some(limit));
+            assert_eq!(o.status.code(), Some(1), "{a:?}");
+            let e = String::from_utf8_lossy(&o.stderr).into_owned();
+            assert!(e.contains(says) && e.contains(why), "{e}");
+            assert!(!split.exists());
+            said.push(e);
         }
+        assert_eq!(said[0], said[1]);
     }
     assert_eq!(
         text(&run(

@@ -123,31 +123,71 @@ fn cast_mida(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f3
     return Pixel(mida_finish(st), n);
 }
 
+// How a shadow ray's march ended (mirrors src/cpu/modes.rs: ShadowEnd): it left the
+// box (lit), it crossed an iso-value (in shadow), or in a brick its next sample lies in
+// another brick (paused).
+const SHADOW_LIT: u32 = 0u;
+const SHADOW_DARK: u32 = 1u;
+const SHADOW_PAUSED: u32 = 2u;
+
+// A shadow ray's march: the next sample k (from 1) and the first sample's value (once
+// k > 1). mirrors src/cpu/modes.rs: ShadowMarch
+struct ShadowMarch {
+    k: u32,
+    first: f32,
+}
+
+// Whether the brick owns the point q of the whole volume's index space (its faces at
+// half voxels, the volume's outer faces open): each point is owned by one brick.
+// mirrors src/cpu/raycast.rs: Owned::contains
+fn owns_point(q: vec3<f32>) -> bool {
+    return all(q >= params.own_lo.xyz) && all(q < params.own_hi.xyz);
+}
+
+// The samples p + (k + 1) Δ l of the shadow ray from the hit p, from m.k on, until the
+// box's far side t_exit; in a brick (bricked) only while the next sample is its own.
+// mirrors src/cpu/modes.rs: shadow_steps
+fn shadow_steps(m: ptr<function, ShadowMarch>, p: vec3<f32>, l: vec3<f32>, t_exit: f32, bricked: bool) -> u32 {
+    let dt = params.box_hi.w / length(l);
+    let count = params.iso_flags.x;
+    loop {
+        let k = (*m).k;
+        let t = f32(k) * dt;
+        if (k >= 2u && t >= t_exit) {
+            return SHADOW_LIT;
+        }
+        let q = p + l * t;
+        if (bricked && !owns_point(q)) {
+            return SHADOW_PAUSED;
+        }
+        let v = sample_value(q);
+        (*m).k = k + 1u;
+        if (k == 1u) {
+            (*m).first = v;
+            continue;
+        }
+        for (var j = 0u; j < count; j++) {
+            if (crosses((*m).first, v, params.iso_values[j])) {
+                return SHADOW_DARK;
+            }
+        }
+    }
+    return SHADOW_LIT;
+}
+
 // mirrors src/cpu/modes.rs: in_shadow
 fn in_shadow(p: vec3<f32>, l: vec3<f32>) -> bool {
     let hit = intersect_box(p, l, vec3<f32>(-0.5), params.box_hi.xyz);
     if (!hit.ok) {
         return false;
     }
-    let dt = params.box_hi.w / length(l);
-    let first = sample_value(p + l * dt);
-    let count = params.iso_flags.x;
-    for (var k = 2u; ; k++) {
-        let t = f32(k) * dt;
-        if (t >= hit.t1) {
-            return false;
-        }
-        let v = sample_value(p + l * t);
-        for (var j = 0u; j < count; j++) {
-            if (crosses(first, v, params.iso_values[j])) {
-                return true;
-            }
-        }
-    }
-    return false;
+    var m = ShadowMarch(1u, 0.0);
+    return shadow_steps(&m, p, l, hit.t1, false) == SHADOW_DARK;
 }
 
-// mirrors src/cpu/modes.rs: IsoState
+// mirrors src/cpu/modes.rs: IsoState. In a brick, an opaque hit's shadow ray is
+// marched afterwards, through the bricks in the light's order (shadow_pass): the hit
+// keeps both endings, lit in c and in shadow in dark_c, and its point.
 struct IsoState {
     c: vec3<f32>,
     a: f32,
@@ -155,10 +195,15 @@ struct IsoState {
     v0: f32,
     started: bool,
     done: bool,
+    dark_c: vec3<f32>,
+    hit: vec3<f32>,
+    // 1 lit (or no shadows), -1 in shadow, k + 1 the shadow ray's next sample k
+    // (mirrors src/gpu/raycast.rs: CarriedShadow).
+    shadow: f32,
 }
 
 fn iso_start() -> IsoState {
-    return IsoState(vec3<f32>(0.0), 0.0, 0.0, 0.0, false, false);
+    return IsoState(vec3<f32>(0.0), 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), vec3<f32>(0.0), 1.0);
 }
 
 // What an iso-surface ray's steps share. mirrors src/cpu/modes.rs: IsoRay
@@ -233,8 +278,17 @@ fn iso_step(st: ptr<function, IsoState>, k: u32, n: u32, t_in: f32, t_out: f32, 
             rgb = shade_sample(p, rgb, r.light, r.half_vec);
         }
         if (params.iso_flags.y == 1u) {
-            if (params.iso_flags.z == 1u && in_shadow(p, r.l_index)) {
-                rgb = iso.xyz * params.shading.x;
+            if (params.iso_flags.z == 1u) {
+                let dark = iso.xyz * params.shading.x;
+                if (params.brick.w == 1.0) {
+                    // Both endings; the shadow ray is marched through the bricks later.
+                    (*st).dark_c = (*st).c + (1.0 - (*st).a) * dark;
+                    (*st).hit = p;
+                    let box_exit = intersect_box(p, r.l_index, vec3<f32>(-0.5), params.box_hi.xyz);
+                    (*st).shadow = select(1.0, 2.0, box_exit.ok);
+                } else if (in_shadow(p, r.l_index)) {
+                    rgb = dark;
+                }
             }
             (*st).c = (*st).c + (1.0 - (*st).a) * rgb;
             (*st).a = (*st).a + (1.0 - (*st).a);
@@ -253,16 +307,54 @@ fn iso_step(st: ptr<function, IsoState>, k: u32, n: u32, t_in: f32, t_out: f32, 
     return true;
 }
 
-// A brick's iso-surface state, in the first two of its CARRIED_VEC4S vec4 in
-// out_pixels: (c, a), (t0, v0, started, done). mirrors src/gpu/raycast.rs: carried_iso
+// A brick's iso-surface state, the CARRIED_VEC4S vec4 in out_pixels: (c, a); until an
+// opaque surface ends the ray (t0, v0, started, 0), then (dark_c, shadow); (hit, the
+// shadow ray's first value). mirrors src/gpu/raycast.rs: carried_iso
 fn iso_load(i: u32) -> IsoState {
     let x = out_pixels[3u * i + 1u];
-    return IsoState(out_pixels[3u * i].xyz, out_pixels[3u * i].w, x.x, x.y, x.z == 1.0, x.w == 1.0);
+    let y = out_pixels[3u * i + 2u];
+    let c = out_pixels[3u * i].xyz;
+    let a = out_pixels[3u * i].w;
+    if (x.w != 0.0) {
+        return IsoState(c, a, 0.0, 0.0, true, true, x.xyz, y.xyz, x.w);
+    }
+    return IsoState(c, a, x.x, x.y, x.z == 1.0, false, vec3<f32>(0.0), y.xyz, 1.0);
 }
 
 fn iso_store(i: u32, st: IsoState) {
     out_pixels[3u * i] = vec4<f32>(st.c, st.a);
-    out_pixels[3u * i + 1u] = vec4<f32>(st.t0, st.v0, select(0.0, 1.0, st.started), select(0.0, 1.0, st.done));
+    if (st.done) {
+        out_pixels[3u * i + 1u] = vec4<f32>(st.dark_c, st.shadow);
+        out_pixels[3u * i + 2u] = vec4<f32>(st.hit, 0.0);
+    } else {
+        out_pixels[3u * i + 1u] = vec4<f32>(st.t0, st.v0, select(0.0, 1.0, st.started), 0.0);
+    }
+}
+
+// A brick's pass of the shadow rays (params.own_lo.w = 1): each ray whose opaque hit
+// waits on its shadow ray takes the samples of it this brick owns, from where the
+// bricks before left it; the bricks run in the light's order (src/gpu/raycast.rs:
+// render_bricked), and a ray ends lit (shadow 1), in shadow (-1) or waiting at its
+// next sample k (k + 1), its first sample's value in the third vec4's w.
+fn shadow_pass(i: u32, l: vec3<f32>) -> Pixel {
+    let code = out_pixels[3u * i + 1u].w;
+    if (code < 2.0) {
+        return Pixel(vec4<f32>(0.0), 0u);
+    }
+    let y = out_pixels[3u * i + 2u];
+    let p = y.xyz;
+    var m = ShadowMarch(u32(code) - 1u, y.w);
+    let box_exit = intersect_box(p, l, vec3<f32>(-0.5), params.box_hi.xyz);
+    let end = shadow_steps(&m, p, l, box_exit.t1, true);
+    var next = f32(m.k + 1u);
+    if (end == SHADOW_LIT) {
+        next = 1.0;
+    } else if (end == SHADOW_DARK) {
+        next = -1.0;
+    }
+    out_pixels[3u * i + 1u].w = next;
+    out_pixels[3u * i + 2u].w = m.first;
+    return Pixel(vec4<f32>(0.0), 0u);
 }
 
 // mirrors src/cpu/modes.rs: cast_iso (dvr: DVR samples between the surfaces). A brick
@@ -273,6 +365,9 @@ fn cast_iso(ray: Ray, o: vec3<f32>, d: vec3<f32>, t_in: f32, t_out: f32, dt: f32
     let l_index = vec3<f32>(dot(params.to_index_0.xyz, light), dot(params.to_index_1.xyz, light), dot(params.to_index_2.xyz, light));
     let r = IsoRay(light, lh.h, l_index, dvr);
     let brick = params.brick.w == 1.0;
+    if (brick && params.own_lo.w == 1.0) {
+        return shadow_pass(mesh_pixel, l_index);
+    }
     let run = carried_run(n, t_in, t_out, dt, o, d);
     if (run.x == 0u) {
         return Pixel(vec4<f32>(0.0), 0u);

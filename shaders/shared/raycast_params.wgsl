@@ -73,7 +73,8 @@ struct RaycastParams {
     // volume's, dims the brick's.
     brick: vec4<f32>,
     // The faces of the samples the brick owns, lo − 1/2 and hi − 1/2 in the whole
-    // volume's index space (±3.4e38 at the volume's border).
+    // volume's index space (±3.4e38 at the volume's border); own_lo.w = 1 in a pass of
+    // the shadow rays (shaders/shared/modes_cast.wgsl: shadow_pass).
     own_lo: vec4<f32>,
     own_hi: vec4<f32>,
 }

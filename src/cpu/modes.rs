@@ -366,9 +366,78 @@ pub(crate) fn cast_mida<R: Real, F: Field<R>>(
     (mida_finish(&st, m.gamma, s.bg), span.n as u32)
 }
 
+/// How a shadow ray's march ended ([`shadow_steps`]).
+/// Mirrors `shaders/shared/modes_cast.wgsl: SHADOW_LIT`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ShadowEnd {
+    /// It left the box: the hit is lit.
+    Lit,
+    /// A sample lay on another side of an iso-value than the first: in shadow.
+    Dark,
+    /// Its next sample lies outside the points it may take (another brick's).
+    Paused,
+}
+
+/// A shadow ray's march from an opaque hit: the next sample `k` (from 1) and, once
+/// `k > 1`, the first sample's value. A march paused in one brick resumes in the next
+/// with the same state ([`shadow_steps`]).
+/// Mirrors `shaders/shared/modes_cast.wgsl: ShadowMarch`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct ShadowMarch<R> {
+    pub k: usize,
+    pub first: R,
+}
+
+impl<R: Real> ShadowMarch<R> {
+    /// A march about to take its first sample.
+    pub(crate) fn start() -> Self {
+        ShadowMarch {
+            k: 1,
+            first: R::zero(),
+        }
+    }
+}
+
+/// The samples `q_k = p + k Δ L` of the shadow ray from the hit `p` (index space)
+/// toward the light `l`, from `m.k` on: `q_1` is the first, and from `k = 2` on, until
+/// `k Δ` reaches the box's far side `t_exit`, each is compared with it (`step`: the
+/// primary ray's `Δ` in voxels). Takes only the samples `owns` (a brick's,
+/// `cpu::raycast::Owned::contains`; every point for a whole volume).
+/// Mirrors `shaders/shared/modes_cast.wgsl: shadow_steps`.
+pub(crate) fn shadow_steps<R: Real, F: Field<R>>(
+    m: &mut ShadowMarch<R>,
+    field: &F,
+    step: R,
+    iso: &[IsoR<R>],
+    (p, l, t_exit): (V3<R>, V3<R>, R),
+    owns: impl Fn(V3<R>) -> bool,
+) -> ShadowEnd {
+    let dt = step / l.length();
+    loop {
+        let k = m.k;
+        let t = R::of(k as f64) * dt;
+        if k >= 2 && t >= t_exit {
+            return ShadowEnd::Lit;
+        }
+        let q = p + l * t;
+        if !owns(q) {
+            return ShadowEnd::Paused;
+        }
+        let v = field.value(q);
+        m.k = k + 1;
+        if k == 1 {
+            m.first = v;
+            continue;
+        }
+        if iso.iter().any(|iso| crosses(m.first, v, iso.value)) {
+            return ShadowEnd::Dark;
+        }
+    }
+}
+
 /// Whether the point `p` (index space) on an opaque iso-surface is in shadow: samples
 /// `p + (m + 1) Δ L` toward the light until the box is left; in shadow when one lies on
-/// another side of an iso-value than the first.
+/// another side of an iso-value than the first ([`shadow_steps`] over the whole box).
 /// Mirrors `shaders/shared/modes_cast.wgsl: in_shadow`.
 pub(crate) fn in_shadow<R: Real, F: Field<R>>(
     field: &F,
@@ -380,20 +449,8 @@ pub(crate) fn in_shadow<R: Real, F: Field<R>>(
     let Some((_, t_exit)) = intersect_box(p, l, s.lo, s.hi) else {
         return false;
     };
-    let dt = s.step / l.length();
-    let first = field.value(p + l * dt);
-    let mut k = 2usize;
-    loop {
-        let t = R::of(k as f64) * dt;
-        if t >= t_exit {
-            return false;
-        }
-        let v = field.value(p + l * t);
-        if iso.iter().any(|iso| crosses(first, v, iso.value)) {
-            return true;
-        }
-        k += 1;
-    }
+    let mut m = ShadowMarch::start();
+    shadow_steps(&mut m, field, s.step, iso, (p, l, t_exit), |_| true) == ShadowEnd::Dark
 }
 
 /// An iso-surface ray's state after its first steps, front to back: everything a
@@ -559,4 +616,111 @@ pub(crate) fn cast_iso<R: Real, F: Field<R>>(
         taken += 1;
     }
     (over_background(st.c, st.a, s.bg), taken)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu::field::GridField;
+    use crate::cpu::grid::Grid;
+    use crate::cpu::raycast::Owned;
+    use crate::settings::{Filter, GradientMethod};
+
+    /// A shadow ray cut among the bricks of a tiling, each taking the samples it owns
+    /// from where the last left it (the split GPU render's shadow pass), ends as the
+    /// whole ray does, for rays that end lit and in shadow, along axes and obliquely.
+    #[test]
+    fn a_shadow_march_cut_among_bricks_ends_as_the_whole_march() {
+        let dims = [12, 10, 9];
+        // A ball of value 1 in 0, off centre: rays through it cross 0.5 twice.
+        let data = (0..dims[2])
+            .flat_map(|z| (0..dims[1]).flat_map(move |y| (0..dims[0]).map(move |x| (x, y, z))))
+            .map(|(x, y, z)| {
+                let d = [x as f64 - 7.0, y as f64 - 4.0, z as f64 - 5.0];
+                if d.iter().map(|v| v * v).sum::<f64>() < 9.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let field = GridField::new(
+            Grid { dims, data },
+            Filter::Trilinear,
+            GradientMethod::Central,
+            false,
+        );
+        let iso = [IsoR {
+            value: 0.5,
+            color: [1.0; 3],
+            opacity: 1.0,
+        }];
+        let (lo, hi) = (V3::splat(-0.5), V3::new(11.5, 9.5, 8.5));
+        // Bricks of a k-d tiling, uneven.
+        let cuts = |a: usize| match a {
+            0 => vec![0, 5, 8, 12],
+            1 => vec![0, 3, 10],
+            _ => vec![0, 6, 9],
+        };
+        let mut bricks = Vec::new();
+        for (x0, x1) in cuts(0).windows(2).map(|w| (w[0], w[1])) {
+            for (y0, y1) in cuts(1).windows(2).map(|w| (w[0], w[1])) {
+                for (z0, z1) in cuts(2).windows(2).map(|w| (w[0], w[1])) {
+                    bricks.push(Owned::<f64>::new([x0, y0, z0], [x1, y1, z1], dims));
+                }
+            }
+        }
+        let (mut lit, mut dark) = (0, 0);
+        for (p, l, step) in [
+            (V3::new(2.0, 4.0, 5.0), V3::new(1.0, 0.0, 0.0), 1.0),
+            (V3::new(11.0, 4.2, 5.1), V3::new(-1.0, 0.0, 0.0), 0.5),
+            (V3::new(1.3, 1.1, 0.7), V3::new(0.8, 0.4, 0.6), 0.7),
+            (V3::new(1.3, 8.1, 0.7), V3::new(0.8, -0.9, 0.6), 1.3),
+            (V3::new(6.9, 4.0, 5.0), V3::new(0.0, 0.0, 1.0), 0.3),
+            (V3::new(3.0, 8.0, 7.0), V3::new(-0.3, 0.2, -0.1), 2.0),
+            (V3::new(1.0, 9.0, 1.0), V3::new(0.5, 0.2, 0.8), 0.4),
+            (V3::new(11.0, 0.5, 0.5), V3::new(0.0, 0.3, 1.0), 0.9),
+        ] {
+            let whole = in_shadow_of(&field, step, &iso, p, l, (lo, hi));
+            let (_, t_exit) = intersect_box(p, l, lo, hi).unwrap();
+            let mut m = ShadowMarch::start();
+            let mut end = ShadowEnd::Paused;
+            let mut passes = 0;
+            while end == ShadowEnd::Paused {
+                // Every brick in turn, in any order: the one holding the next sample
+                // takes its run of them.
+                for b in &bricks {
+                    let e = shadow_steps(&mut m, &field, step, &iso, (p, l, t_exit), |q| {
+                        b.contains(q)
+                    });
+                    if e != ShadowEnd::Paused {
+                        end = e;
+                        break;
+                    }
+                }
+                passes += 1;
+                assert!(passes <= bricks.len(), "the march makes no progress");
+            }
+            assert_eq!(end == ShadowEnd::Dark, whole, "{p:?} {l:?}");
+            if whole {
+                dark += 1;
+            } else {
+                lit += 1;
+            }
+        }
+        assert!(lit >= 2 && dark >= 2, "{lit} lit, {dark} in shadow");
+    }
+
+    fn in_shadow_of(
+        field: &GridField<f64>,
+        step: f64,
+        iso: &[IsoR<f64>],
+        p: V3<f64>,
+        l: V3<f64>,
+        (lo, hi): (V3<f64>, V3<f64>),
+    ) -> bool {
+        let (_, t_exit) = intersect_box(p, l, lo, hi).unwrap();
+        let mut m = ShadowMarch::start();
+        shadow_steps(&mut m, field, step, iso, (p, l, t_exit), |_| true) == ShadowEnd::Dark
+    }
 }

@@ -316,6 +316,14 @@ impl<R: Real> Owned<R> {
         }
     }
 
+    /// Whether the brick owns the index-space point `p` (a shadow ray's sample).
+    /// Mirrors `shaders/shared/modes_cast.wgsl: owns_point`.
+    pub fn contains(&self, p: V3<R>) -> bool {
+        (0..3).all(|a| {
+            self.lo[a].is_none_or(|b| p.0[a] >= b) && self.hi[a].is_none_or(|b| p.0[a] < b)
+        })
+    }
+
     /// The steps of `steps` whose midpoints the brick owns: one run (each axis's
     /// coordinate of the midpoints is monotone along the ray, so each face keeps a
     /// prefix or a suffix of them), found by bisection against the exact midpoints.
@@ -460,23 +468,17 @@ pub fn check_owned_settings(s: &RenderSettings) -> Result<()> {
 
 /// [`check_owned_settings`], or where `one_device` (the bricks rendered in turn by one
 /// device, with the whole volume at hand: `gpu::raycast::render_bricked`) every mode,
-/// each ray's state handed from one brick to the next, but iso-surfaces without
-/// shadows, and the interpolating B-splines too, their coefficients (and pre-classified
-/// colours, precomputed gradients) prefiltered over the whole volume.
+/// each ray's state handed from one brick to the next (and each opaque iso-surface
+/// hit's shadow ray, afterwards, in the light's order), and the interpolating
+/// B-splines too, their coefficients (and pre-classified colours, precomputed
+/// gradients) prefiltered over the whole volume.
 ///
 /// # Errors
-/// As [`check_owned_settings`]; shadows.
+/// As [`check_owned_settings`]; on one device only the full sinc.
 pub fn check_split_settings(s: &RenderSettings, one_device: bool) -> Result<()> {
-    if one_device {
-        if s.iso_shadows && s.iso_opaque && (s.mode == Mode::Iso || s.mode == Mode::Dvr) {
-            return Err(Error::invalid(
-                "--shadows",
-                "a shadow ray crosses the whole volume; bricks draw iso-surfaces without \
-                 shadows",
-            ));
-        }
-    } else if !matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
-        || !s.iso_surfaces.is_empty()
+    if !one_device
+        && (!matches!(s.mode, Mode::Dvr | Mode::Mip | Mode::Minip | Mode::Xray)
+            || !s.iso_surfaces.is_empty())
     {
         return Err(Error::invalid(
             "--mode",

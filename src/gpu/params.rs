@@ -64,7 +64,8 @@ pub struct RaycastParams {
     /// voxel's index in the whole volume, w = 1 when on.
     pub brick: [f32; 4],
     /// The faces of the samples the brick owns, `lo − ½` and `hi − ½` in the whole
-    /// volume's index space (±f32::MAX where the face is the volume's border).
+    /// volume's index space (±f32::MAX where the face is the volume's border);
+    /// `own_lo[3]` = 1 in a pass of the shadow rays (`gpu::raycast::render_bricked`).
     pub own_lo: [f32; 4],
     pub own_hi: [f32; 4],
 }

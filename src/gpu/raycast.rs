@@ -863,9 +863,9 @@ pub struct VolumeSplit {
 /// (`jobs::renderer::Renderer`) and their `--dry-run` plans both ask it.
 ///
 /// # Errors
-/// A frame bricks cannot render ([`crate::cpu::raycast::check_split_settings`]:
-/// iso-surfaces, filters of unbounded reach), naming why the volume must be cut; no cut
-/// that fits ([`brick_plan`]).
+/// A frame bricks cannot render ([`crate::cpu::raycast::check_split_settings`]: the
+/// full sinc, whose reach is the whole volume), naming why the volume must be cut; no
+/// cut that fits ([`brick_plan`]).
 pub fn volume_split(
     ctx: &GpuContext,
     dims: [usize; 3],
@@ -908,9 +908,14 @@ pub fn volume_split(
         .map(|b| b.with_ghost(ghost, dims).voxels() as u64)
         .max()
         .unwrap_or(0);
+    let shadows = if defers_shadows(settings) {
+        "; the shadow rays in sweeps through the bricks in the light's order"
+    } else {
+        ""
+    };
     let line = format!(
         "ray casting in {} bricks ({why}; the largest brick with its {ghost} ghost voxels \
-         holds {largest} texels)",
+         holds {largest} texels{shadows})",
         bricks.len()
     );
     Ok(Some(VolumeSplit {
@@ -923,19 +928,69 @@ pub fn volume_split(
 
 /// The vec4 a brick's ray hands the next brick: MIDA's (`shaders/shared/modes_cast.wgsl:
 /// mida_store`) `(c, a)`, `(running, best, started, 0)`, the best sample's colour;
-/// iso-surfaces' (`iso_store`) `(c, a)`, `(t0, v0, started, done)` and one unused.
+/// iso-surfaces' (`iso_store`) `(c, a)`, then until an opaque surface ends the ray
+/// `(t0, v0, started, 0)`, after it `(c in shadow, shadow)` and `(hit, first)`:
+/// [`carried_iso`].
 pub const CARRIED_VEC4S: usize = 3;
 
-/// An iso-surface ray's state from its [`CARRIED_VEC4S`] vec4.
+/// An iso-surface ray's state from its [`CARRIED_VEC4S`] vec4. Once an opaque surface
+/// has ended the ray, the second vec4's `w` says how its shadow ray stands: 1 lit (or
+/// no shadows), −1 in shadow (the colour is then the second vec4's `xyz`), `k + 1`
+/// waiting at the shadow ray's sample `k` ([`shadow_waits`]; its hit point and first
+/// sample's value in the third vec4).
 /// Mirrors `shaders/shared/modes_cast.wgsl: iso_load`.
 pub fn carried_iso(v: &[[f32; 4]]) -> crate::cpu::modes::IsoState<f32> {
+    let (ended, shadow) = (v[1][3] != 0.0, v[1][3]);
+    let c = if ended && shadow == -1.0 {
+        &v[1]
+    } else {
+        &v[0]
+    };
     crate::cpu::modes::IsoState {
-        c: [v[0][0], v[0][1], v[0][2]],
+        c: [c[0], c[1], c[2]],
         a: v[0][3],
-        t0: v[1][0],
-        v0: v[1][1],
-        started: v[1][2] == 1.0,
-        done: v[1][3] == 1.0,
+        t0: if ended { 0.0 } else { v[1][0] },
+        v0: if ended { 0.0 } else { v[1][1] },
+        started: ended || v[1][2] == 1.0,
+        done: ended,
+    }
+}
+
+/// Whether a brick's iso-surface ray ([`carried_iso`]) ended on an opaque surface
+/// whose shadow ray has yet to leave the box or meet a surface.
+pub fn shadow_waits(v: &[[f32; 4]]) -> bool {
+    v[1][3] >= 2.0
+}
+
+/// Whether a frame's shadow rays, in bricks, are marched after its rays
+/// ([`render_bricked`]): opaque iso-surfaces with shadows.
+fn defers_shadows(settings: &RenderSettings) -> bool {
+    draws_iso(settings) && settings.iso_opaque && settings.iso_shadows
+}
+
+/// The orders of the bricks (leaves of `tree`) that a frame's shadow rays are marched
+/// in, sweep after sweep until each has ended ([`render_bricked`]). Every shadow ray
+/// goes toward the light: for a directional light all of them along one index-space
+/// direction, so the bricks front to back along it take each in one sweep; for a
+/// headlight back along its own ray (`rays`: the bricks in the rays' order), so the
+/// rays' order reversed, then, for rays that pass the eye of a perspective camera
+/// inside the volume, the rays' order itself. A ray left waiting after a sweep (the
+/// GPU's rounding of a direction across an axis) takes the next.
+fn shadow_orders(
+    tree: &crate::io::brick::KdTree,
+    settings: &RenderSettings,
+    affine: glam::DMat4,
+    rays: &[usize],
+) -> [Vec<usize>; 2] {
+    match settings.shading.light {
+        crate::settings::Light::Direction(l) => {
+            let d = affine.inverse().transform_vector3(DVec3::from_array(l));
+            let mut order = Vec::new();
+            tree.front_to_back(d.to_array(), &mut order);
+            let back = order.iter().rev().copied().collect();
+            [order, back]
+        }
+        crate::settings::Light::Headlight => [rays.iter().rev().copied().collect(), rays.to_vec()],
     }
 }
 
@@ -962,16 +1017,21 @@ pub fn carried_mida(v: &[[f32; 4]]) -> crate::cpu::modes::MidaState<f32> {
 /// (`cpu::composite::ray_order`), each ray's state (`cpu::modes::MidaState`,
 /// `cpu::modes::IsoState`) handed from brick to brick on the device and finished on
 /// the host (`cpu::modes::mida_finish`, the background): the unsplit render's samples
-/// and arithmetic in its order. The interpolating B-splines sample the whole volume's
-/// coefficients (and pre-classified colours, precomputed gradients), made once on the
-/// host ([`RaycastSession::give_prefiltered`]).
+/// and arithmetic in its order. An opaque iso-surface hit with shadows keeps both its
+/// endings, lit and in shadow, and its shadow ray is marched afterwards through the
+/// bricks in the light's order, handed on the same way, sweep after sweep until it
+/// has left the box or met a surface (`cpu::modes::shadow_steps`; one sweep for a
+/// directional light, two for a headlight whose rays pass the eye inside the volume).
+/// The interpolating B-splines sample the whole volume's coefficients (and
+/// pre-classified colours, precomputed gradients), made once on the host
+/// ([`RaycastSession::give_prefiltered`]).
 ///
 /// # Errors
-/// As [`render_owned`], but MIDA, iso-surfaces (without shadows) and the interpolating
-/// B-splines (post-classified, gradients on the fly) are rendered
+/// As [`render_owned`], but MIDA, iso-surfaces (with shadows too) and the
+/// interpolating B-splines are rendered
 /// ([`crate::cpu::raycast::check_split_settings`]).
-pub fn render_bricked(
-    ctx: &GpuContext,
+pub fn render_bricked<'c>(
+    ctx: &'c GpuContext,
     volume: &AnyVolume,
     tf: &TransferFunction,
     camera: &Camera,
@@ -1008,7 +1068,9 @@ pub fn render_bricked(
     };
     timings.prepare += t_coef.elapsed().as_secs_f64();
     let mut session: Option<RaycastSession> = None;
-    for (i, &bi) in order.iter().enumerate() {
+    // Loads brick `bi` (with its ghost voxels) into the one session of every brick:
+    // the pipelines compile once.
+    let load = |session: &mut Option<RaycastSession<'c>>, bi: usize| -> Result<()> {
         let b = &bricks[bi];
         let g = b.with_ghost(ghost, dims);
         let placement = BrickPlacement {
@@ -1020,9 +1082,8 @@ pub fn render_bricked(
             range,
         };
         let brick = volume.crop(g.lo, g.hi)?;
-        // One session for every brick: the pipelines compile once.
         match session.as_mut() {
-            None => session = Some(RaycastSession::new(ctx, &brick)?),
+            None => *session = Some(RaycastSession::new(ctx, &brick)?),
             Some(x) => x.replace_volume(&brick)?,
         }
         let session = session.as_mut().expect("made above");
@@ -1030,24 +1091,69 @@ pub fn render_bricked(
         if let Some(p) = &whole {
             session.give_prefiltered(p.crop(g.lo, g.hi))?;
         }
-        let rows = |done: usize, total: usize| progress(i * total + done, bricks.len() * total);
-        let state = carried.then_some(&mut carry[..]);
-        let out = session.render_frame(tf, camera, &s, state, &rows)?;
+        Ok(())
+    };
+    let add = |timings: &mut GpuTimings, t: &GpuTimings| {
         for (sum, t) in [
-            (&mut timings.setup, out.timings.setup),
-            (&mut timings.upload, out.timings.upload),
-            (&mut timings.prepare, out.timings.prepare),
-            (&mut timings.kernel, out.timings.kernel),
-            (&mut timings.readback, out.timings.readback),
+            (&mut timings.setup, t.setup),
+            (&mut timings.upload, t.upload),
+            (&mut timings.prepare, t.prepare),
+            (&mut timings.kernel, t.kernel),
+            (&mut timings.readback, t.readback),
         ] {
             *sum += t;
         }
-        timings.kernel_from_timestamps = out.timings.kernel_from_timestamps;
+        timings.kernel_from_timestamps = t.kernel_from_timestamps;
+    };
+    // Progress over the bricks' passes: the rays', then as many again for the shadow
+    // rays' first sweep.
+    let deferred = defers_shadows(settings);
+    let passes = bricks.len() * (1 + deferred as usize);
+    for (i, &bi) in order.iter().enumerate() {
+        load(&mut session, bi)?;
+        let session = session.as_mut().expect("loaded");
+        let rows = |done: usize, total: usize| progress(i * total + done, passes * total);
+        let state = carried.then_some(&mut carry[..]);
+        let out = session.render_frame(tf, camera, &s, state, false, &rows)?;
+        add(&mut timings, &out.timings);
         let counts: Vec<u32> = match &out.output.samples {
             Some(f) => f.data.iter().map(|&c| c as u32).collect(),
             None => vec![0; w * h],
         };
         pieces.push((out.output.image, counts, out.hits.unwrap_or_default()));
+    }
+    // The opaque hits' shadow rays, which cross bricks the rays did not: marched
+    // through the bricks in the light's order, each brick taking the samples it owns
+    // from where the last left them (shaders/shared/modes_cast.wgsl: shadow_pass),
+    // sweep after sweep until every one has left the box or met a surface. Each
+    // sweep takes each waiting ray at least one brick further, so there are at most
+    // as many sweeps as bricks; one or two in practice.
+    if deferred {
+        let sweeps = shadow_orders(tree, settings, volume.affine(), &order);
+        let waiting = |carry: &[[f32; 4]]| carry.chunks(CARRIED_VEC4S).any(shadow_waits);
+        let mut pass = bricks.len();
+        'sweeps: for sweep in 0..=bricks.len() {
+            if !waiting(&carry) {
+                break;
+            }
+            if sweep == bricks.len() {
+                return Err(Error::Gpu(format!(
+                    "shadow rays still crossed the bricks after {sweep} sweeps"
+                )));
+            }
+            for &bi in &sweeps[sweep % 2] {
+                if !waiting(&carry) {
+                    break 'sweeps;
+                }
+                load(&mut session, bi)?;
+                let session = session.as_mut().expect("loaded");
+                let at = pass.min(passes - 1);
+                let rows = |done: usize, total: usize| progress(at * total + done, passes * total);
+                let out = session.render_frame(tf, camera, &s, Some(&mut carry), true, &rows)?;
+                add(&mut timings, &out.timings);
+                pass += 1;
+            }
+        }
     }
     let ch = if settings.mode.rgba() { 4 } else { 1 };
     let mut image = Frame::new(w, h, ch);
@@ -1587,18 +1693,21 @@ impl<'c> RaycastSession<'c> {
         settings: &RenderSettings,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<GpuRenderOutput> {
-        self.render_frame(tf, camera, settings, None, progress)
+        self.render_frame(tf, camera, settings, None, false, progress)
     }
 
     /// A frame; a brick's MIDA or iso-surface frame ([`carries_state`]) takes and
     /// leaves each ray's state in `carry` ([`CARRIED_VEC4S`] per pixel, [`carried_mida`],
-    /// [`carried_iso`]) and makes no image.
+    /// [`carried_iso`]) and makes no image. With `shadows`, a brick's iso-surface frame
+    /// marches only the waiting shadow rays' samples it owns
+    /// (`shaders/shared/modes_cast.wgsl: shadow_pass`).
     fn render_frame(
         &mut self,
         tf: &TransferFunction,
         camera: &Camera,
         settings: &RenderSettings,
         carry: Option<&mut [[f32; 4]]>,
+        shadows: bool,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<GpuRenderOutput> {
         let t_start = Instant::now();
@@ -1674,6 +1783,7 @@ impl<'c> RaycastSession<'c> {
                 params.own_lo[a] = face(b.lo[a], b.lo[a] == 0, -f32::MAX);
                 params.own_hi[a] = face(b.hi[a], b.hi[a] >= b.whole[a], f32::MAX);
             }
+            params.own_lo[3] = if shadows && carries { 1.0 } else { 0.0 };
         }
         let pre = params.flags[0] == 1;
         let precomputed = params.flags[2] == 1;
