@@ -198,7 +198,7 @@ struct IsoState {
     dark_c: vec3<f32>,
     hit: vec3<f32>,
     // 1 lit (or no shadows), -1 in shadow, k + 1 the shadow ray's next sample k
-    // (mirrors src/gpu/raycast.rs: CarriedShadow).
+    // (read on the host by src/gpu/raycast.rs: carried_iso, shadow_waits).
     shadow: f32,
 }
 
