@@ -92,6 +92,20 @@ pub struct GpuTimings {
     pub total: f64,
 }
 
+impl GpuTimings {
+    /// Adds another render's times to these (bricks of one frame, frames of an
+    /// accumulation); the kernel time counts as from timestamps only when both were.
+    pub fn add(&mut self, t: &GpuTimings) {
+        self.setup += t.setup;
+        self.upload += t.upload;
+        self.prepare += t.prepare;
+        self.kernel += t.kernel;
+        self.readback += t.readback;
+        self.total += t.total;
+        self.kernel_from_timestamps &= t.kernel_from_timestamps;
+    }
+}
+
 /// What a GPU render returns: the same output as the CPU, and timings.
 #[derive(Clone, Debug)]
 pub struct GpuRenderOutput {
@@ -1057,7 +1071,11 @@ pub fn render_bricked<'c>(
         (0..bricks.len()).collect()
     };
     let mut pieces = Vec::with_capacity(bricks.len());
-    let mut timings = GpuTimings::default();
+    // The bricks' times summed; `total` is the whole render's, set at the end.
+    let mut timings = GpuTimings {
+        kernel_from_timestamps: true,
+        ..GpuTimings::default()
+    };
     // The interpolating B-splines sample coefficients prefiltered along whole lines:
     // the whole volume's, made once on the host as an unsplit session makes them.
     let t_coef = Instant::now();
@@ -1093,18 +1111,6 @@ pub fn render_bricked<'c>(
         }
         Ok(())
     };
-    let add = |timings: &mut GpuTimings, t: &GpuTimings| {
-        for (sum, t) in [
-            (&mut timings.setup, t.setup),
-            (&mut timings.upload, t.upload),
-            (&mut timings.prepare, t.prepare),
-            (&mut timings.kernel, t.kernel),
-            (&mut timings.readback, t.readback),
-        ] {
-            *sum += t;
-        }
-        timings.kernel_from_timestamps = t.kernel_from_timestamps;
-    };
     // Progress over the bricks' passes: the rays', then as many again for the shadow
     // rays' first sweep.
     let deferred = defers_shadows(settings);
@@ -1115,7 +1121,7 @@ pub fn render_bricked<'c>(
         let rows = |done: usize, total: usize| progress(i * total + done, passes * total);
         let state = carried.then_some(&mut carry[..]);
         let out = session.render_frame(tf, camera, &s, state, false, &rows)?;
-        add(&mut timings, &out.timings);
+        timings.add(&out.timings);
         let counts: Vec<u32> = match &out.output.samples {
             Some(f) => f.data.iter().map(|&c| c as u32).collect(),
             None => vec![0; w * h],
@@ -1150,7 +1156,7 @@ pub fn render_bricked<'c>(
                 let at = pass.min(passes - 1);
                 let rows = |done: usize, total: usize| progress(at * total + done, passes * total);
                 let out = session.render_frame(tf, camera, &s, Some(&mut carry), true, &rows)?;
-                add(&mut timings, &out.timings);
+                timings.add(&out.timings);
                 pass += 1;
             }
         }
@@ -2297,4 +2303,29 @@ fn run_prepare(
     }
     ctx.queue.submit([enc.finish()]);
     Ok(target)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::GpuTimings;
+
+    #[test]
+    fn timings_add_field_by_field_and_keep_timestamps_only_when_both_had_them() {
+        let t = |x: f64, ts: bool| GpuTimings {
+            setup: x,
+            upload: 2.0 * x,
+            prepare: 3.0 * x,
+            kernel: 4.0 * x,
+            kernel_from_timestamps: ts,
+            readback: 5.0 * x,
+            total: 6.0 * x,
+        };
+        let mut a = t(1.0, true);
+        a.add(&t(0.5, true));
+        assert_eq!(a, t(1.5, true));
+        a.add(&t(0.5, false));
+        assert_eq!(a, t(2.0, false));
+        a.add(&t(1.0, true));
+        assert_eq!(a, t(3.0, false));
+    }
 }

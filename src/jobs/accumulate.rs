@@ -68,12 +68,7 @@ pub fn render_accumulated_prepared(
                 }
                 a.output.total_samples += r.output.total_samples;
                 if let (Some(x), Some(y)) = (&mut a.gpu_timings, &r.gpu_timings) {
-                    x.setup += y.setup;
-                    x.upload += y.upload;
-                    x.prepare += y.prepare;
-                    x.kernel += y.kernel;
-                    x.readback += y.readback;
-                    x.total += y.total;
+                    x.add(y);
                 }
                 a.gpu_session = r.gpu_session;
                 a
