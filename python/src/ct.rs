@@ -7,7 +7,6 @@ use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMetho
 use pyo3::prelude::*;
 use voxlab::ct::Projections;
 use voxlab::io::projections::{geometry_from_json, geometry_to_json, Layout};
-use voxlab::jobs::input::VolumeInput;
 use voxlab::jobs::project::ProjectRequest;
 use voxlab::jobs::radon::IradonOptions;
 use voxlab::jobs::reconstruct::{reconstruct, ReconstructRequest};
@@ -233,12 +232,7 @@ fn project(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<ProjectParts> {
     let mut req: ProjectRequest = errors::parse_request(py, "project option", request)?;
-    if let Some(v) = &volume {
-        let a = affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY));
-        let vol = arrays::volume(py, v, a)?;
-        let load = req.input.load.clone();
-        req.input = VolumeInput::memory("array", vol).with_load(load);
-    }
+    crate::jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
     let r = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::project::run(&req, p)
     })?;
@@ -307,6 +301,68 @@ impl Field {
     }
 }
 
+/// Projections in memory for the reconstruct job: the stack, its geometry JSON and the
+/// flat and dark fields that make them line integrals.
+pub struct StackInput {
+    stack: (usize, usize, usize, Vec<f64>),
+    geometry: String,
+    flat: Option<Field>,
+    dark: Option<Field>,
+}
+
+impl StackInput {
+    /// The arguments of `reconstruct_stack` (and its dry run), checked: the layout of
+    /// the projections, `dark` only with `flat`.
+    pub fn new(
+        py: Python<'_>,
+        projections: &PyReadonlyArrayDyn<'_, f64>,
+        geometry: &str,
+        flat: Option<Bound<'_, PyAny>>,
+        dark: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let stack = projection_stack(py, projections)?;
+        let flat = Field::from_py(py, "flat", flat)?;
+        let dark = Field::from_py(py, "dark", dark)?;
+        if dark.is_some() && flat.is_none() {
+            return Err(errors::raise(
+                py,
+                "InvalidError",
+                "invalid dark: goes with flat: intensities need the flat field",
+            ));
+        }
+        Ok(StackInput {
+            stack,
+            geometry: geometry.to_string(),
+            flat,
+            dark,
+        })
+    }
+
+    /// The projections as line integrals (converted from intensities when there is a
+    /// flat field, with the conversion's counts) and their geometry.
+    pub fn line_integrals(
+        self,
+    ) -> voxlab::Result<(
+        Projections<f64>,
+        voxlab::ct::Geometry,
+        Option<voxlab::ct::flat_field::IntensityReport>,
+    )> {
+        let (angles, rows, cols, data) = self.stack;
+        let g = geometry_from_json(&self.geometry, std::path::Path::new("geometry"))?;
+        let proj = Projections::new(angles, rows, cols, data)?;
+        let Some(flat) = self.flat else {
+            return Ok((proj, g, None));
+        };
+        let f = flat.image("flat", rows, cols)?;
+        let d = match self.dark {
+            Some(d) => Some(d.image("dark", rows, cols)?),
+            None => None,
+        };
+        let (q, r) = voxlab::ct::flat_field::line_integrals(&proj, &f, d.as_deref())?;
+        Ok((q, g, Some(r)))
+    }
+}
+
 /// The reconstruct job on projections in memory: a float64 `(detector, angle)`
 /// sinogram or `(angle, row, col)` stack with its geometry JSON, the options of a JSON
 /// [`ReconstructRequest`]. With `flat` (and `dark`), the projections are intensities
@@ -326,31 +382,9 @@ fn reconstruct_stack(
     dark: Option<Bound<'_, PyAny>>,
 ) -> PyResult<(Py<PyAny>, [[f64; 4]; 4], String)> {
     let req: ReconstructRequest = errors::parse_request(py, "reconstruct option", request)?;
-    let (angles, rows, cols, data) = projection_stack(py, &projections)?;
-    let flat = Field::from_py(py, "flat", flat)?;
-    let dark = Field::from_py(py, "dark", dark)?;
-    if dark.is_some() && flat.is_none() {
-        return Err(errors::raise(
-            py,
-            "InvalidError",
-            "invalid dark: goes with flat: intensities need the flat field",
-        ));
-    }
-    let geometry = geometry.to_string();
+    let input = StackInput::new(py, &projections, geometry, flat, dark)?;
     let rec = job::run(py, job::callback(&progress), |p| {
-        let g = geometry_from_json(&geometry, std::path::Path::new("geometry"))?;
-        let mut proj = Projections::new(angles, rows, cols, data)?;
-        let mut report = None;
-        if let Some(flat) = flat {
-            let f = flat.image("flat", rows, cols)?;
-            let d = match dark {
-                Some(d) => Some(d.image("dark", rows, cols)?),
-                None => None,
-            };
-            let (q, r) = voxlab::ct::flat_field::line_integrals(&proj, &f, d.as_deref())?;
-            proj = q;
-            report = Some(r);
-        }
+        let (proj, g, report) = input.line_integrals()?;
         let mut done = reconstruct(&req, proj, g, None, p)?;
         done.intensity = report;
         Ok(done)

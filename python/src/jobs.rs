@@ -13,7 +13,7 @@ use voxlab::jobs::process::ProcessRequest;
 use voxlab::volume::AnyVolume;
 
 /// The request's input replaced by an array in memory (its load options kept).
-fn memory(
+pub(crate) fn memory(
     py: Python<'_>,
     input: &mut VolumeInput,
     volume: Option<&Bound<'_, PyAny>>,
@@ -47,6 +47,42 @@ fn fvr(
     Ok((arrays::from_frame(py, &r.frame)?, r.engine.describe()))
 }
 
+/// The projections `d2vr` renders from memory: the stack and its geometry JSON, given
+/// both or neither.
+pub(crate) type D2vrStack = Option<((usize, usize, usize, Vec<f64>), String)>;
+
+/// [`D2vrStack`] from the arguments, checked in pairs.
+pub(crate) fn d2vr_stack(
+    py: Python<'_>,
+    projections: Option<&PyReadonlyArrayDyn<'_, f64>>,
+    geometry: Option<&str>,
+) -> PyResult<D2vrStack> {
+    match (projections, geometry) {
+        (Some(p), Some(g)) => Ok(Some((crate::ct::projection_stack(py, p)?, g.to_string()))),
+        (None, None) => Ok(None),
+        _ => Err(errors::raise(
+            py,
+            "InvalidError",
+            "invalid d2vr option `geometry`: projections in memory need their geometry, \
+             and a geometry needs projections",
+        )),
+    }
+}
+
+/// The projections in memory put into the request (as `input = "projections"` unless it
+/// names something else).
+pub(crate) fn d2vr_memory(req: &mut D2vrRequest, stack: D2vrStack) -> voxlab::Result<()> {
+    if let Some(((angles, rows, cols, data), g)) = stack {
+        let g = voxlab::io::projections::geometry_from_json(&g, std::path::Path::new("geometry"))?;
+        let proj = voxlab::ct::Projections::new(angles, rows, cols, data)?;
+        req.memory = Some(std::sync::Arc::new((proj, g)));
+        if req.input == D2vrRequest::default().input {
+            req.input = "projections".into();
+        }
+    }
+    Ok(())
+}
+
 /// The d2vr job (`voxlab d2vr`): the image (as the CLI's `.npy`), the samples-per-ray
 /// image when the job made one, and the rest as JSON. `projections` (a float64
 /// `(detector, angle)` sinogram or `(angle, row, col)` stack) with its `geometry`
@@ -61,28 +97,9 @@ fn d2vr(
     geometry: Option<&str>,
 ) -> PyResult<(Py<PyAny>, Option<Py<PyAny>>, String)> {
     let mut req: D2vrRequest = errors::parse_request(py, "d2vr option", request)?;
-    let stack = match (&projections, geometry) {
-        (Some(p), Some(g)) => Some((crate::ct::projection_stack(py, p)?, g.to_string())),
-        (None, None) => None,
-        _ => {
-            return Err(errors::raise(
-                py,
-                "InvalidError",
-                "invalid d2vr option `geometry`: projections in memory need their geometry, \
-                 and a geometry needs projections",
-            ))
-        }
-    };
+    let stack = d2vr_stack(py, projections.as_ref(), geometry)?;
     let r = job::run(py, job::callback(&progress), |p| {
-        if let Some(((angles, rows, cols, data), g)) = stack {
-            let g =
-                voxlab::io::projections::geometry_from_json(&g, std::path::Path::new("geometry"))?;
-            let proj = voxlab::ct::Projections::new(angles, rows, cols, data)?;
-            req.memory = Some(std::sync::Arc::new((proj, g)));
-            if req.input == D2vrRequest::default().input {
-                req.input = "projections".into();
-            }
-        }
+        d2vr_memory(&mut req, stack)?;
         voxlab::jobs::d2vr::run(&req, p)
     })?;
     let image = arrays::from_frame(py, &r.render.image)?;

@@ -15,6 +15,7 @@ mod errors;
 mod fft;
 mod job;
 mod jobs;
+mod plan;
 mod render;
 mod volumes;
 
@@ -43,5 +44,6 @@ fn _voxlab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fft::register(m)?;
     ct::register(m)?;
     jobs::register(m)?;
+    plan::register(m)?;
     Ok(())
 }

@@ -21,7 +21,7 @@ use voxlab::volume::AnyVolume;
 
 /// A volume from Python: an array with its affine, or nothing (the request's `input`
 /// names a file or phantom).
-fn memory_input(
+pub(crate) fn memory_input(
     py: Python<'_>,
     scene: &mut SceneRequest,
     volume: Option<(&Bound<'_, PyAny>, [[f64; 4]; 4])>,
@@ -40,7 +40,7 @@ fn memory_input(
 
 /// Transfer functions given in memory (their JSON, parsed here): the scene's
 /// `transfer` and `transfer_2d`, used instead of the request's `tf` and `tf2d`.
-fn memory_transfers(
+pub(crate) fn memory_transfers(
     py: Python<'_>,
     scene: &mut SceneRequest,
     tf: Option<&str>,

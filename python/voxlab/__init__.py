@@ -29,7 +29,7 @@ from __future__ import annotations
 import json as _json
 import os as _os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -62,6 +62,53 @@ VOLUME_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 #: The backends every job knows: the f64 oracle, the same CPU code in f32, the GPU
 #: port, and ``auto`` (a hardware GPU when there is one, else the oracle).
 BACKENDS = ("cpu", "cpu-f32", "gpu", "auto")
+
+
+# ------------------------------------------------------------------------------------
+# Memory plans
+# ------------------------------------------------------------------------------------
+
+
+@dataclass
+class MemoryPlan:
+    """What a job would allocate and how it would cut itself to fit, worked out without
+    doing the work: what ``dry_run=True`` returns (the command line's ``--dry-run``).
+    The job reads its input and makes every check its run makes before the work, so a
+    dry run raises what the run would raise — :class:`TooLargeError` for a job that
+    cannot fit even split — and nothing is rendered, reconstructed or written.
+
+    ``host_bytes``: the job's large host arrays at their peak. ``device`` (GPU backends
+    only): ``adapter``, ``peak_bytes`` (the most held at once), ``largest_buffer_bytes``,
+    the planner's ``max_binding_bytes`` and ``max_texture_3d`` (lowered by
+    ``VOXLAB_GPU_MAX_BINDING`` and ``VOXLAB_GPU_MAX_TEXTURE_3D``, each lowering one line
+    of ``lowered``), the adapter's own ``adapter_max_binding_bytes`` and, where known,
+    ``memory_bytes``. ``split``: how the work is cut, one line per split (``"ray casting
+    in 8 bricks (…)"``), empty when it runs in one piece. ``writes``: the files the job
+    would write (none for the Python functions, which return arrays). ``str(plan)`` is
+    the text ``--dry-run`` prints."""
+
+    job: str
+    backend: str
+    host_bytes: int
+    device: Optional[Dict[str, Any]]
+    split: List[str]
+    writes: List[str]
+    text: str = field(repr=False)
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def _plans(job: str, request: str, *args: Any, **kwargs: Any) -> Tuple[MemoryPlan, ...]:
+    """The memory plans of ``job`` for its JSON request (``_voxlab.plan``)."""
+    return tuple(MemoryPlan(**_json.loads(p))
+                 for p in _voxlab.plan(job, request, *args, **kwargs))
+
+
+def _plan(job: str, request: str, *args: Any, **kwargs: Any) -> MemoryPlan:
+    """The memory plan of a job that makes one."""
+    (plan,) = _plans(job, request, *args, **kwargs)
+    return plan
 
 
 # ------------------------------------------------------------------------------------
@@ -507,8 +554,9 @@ def render(
     backend: str = "cpu",
     samples: bool = False,
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> RenderResult:
+) -> Union[RenderResult, MemoryPlan]:
     """Renders a volume (``voxlab render``): every mode, filter, camera and option of
     the render job, as keyword arguments named like its request fields (the command
     line's options with ``_`` for ``-``): ``mode``, ``tf`` (preset name, JSON file or
@@ -524,11 +572,15 @@ def render(
     ``affine=``), a file path, ``"phantom:NAME[:N]"``, or None (the modified
     Shepp–Logan phantom, 128³). ``backend``: ``cpu`` (the f64 oracle), ``cpu-f32``,
     ``gpu`` or ``auto``. ``samples=True`` also returns the samples-per-ray image.
+    ``dry_run=True`` renders nothing and returns the job's :class:`MemoryPlan` (host
+    and device bytes, and on the GPU the bricks it would cut the volume into).
     """
     req = _Request(options, _REQUEST_KEYS)
     try:
         arr, aff = req.input(volume)
         text = req.json(backend=backend, samples=bool(samples))
+        if dry_run:
+            return _plan("render", text, arr, aff, progress, **req.transfers)
         return _result(_voxlab.render(text, arr, aff, progress, **req.transfers))
     finally:
         req.close()
@@ -738,8 +790,9 @@ def compare(
     max_abs: Optional[float] = None,
     rmse: Optional[float] = None,
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> CompareResult:
+) -> Union[CompareResult, Tuple[MemoryPlan, ...]]:
     """The oracle against a port (``voxlab compare``).
 
     Without ``image``: renders the scene (``volume`` and :func:`render`'s keyword
@@ -748,8 +801,14 @@ def compare(
     limits) raises before the oracle renders. With ``image``
     (your own renderer's output for the same scene, laid out like voxlab's images):
     renders the oracle and compares ``image`` with it.
+
+    ``dry_run=True`` renders nothing and returns the renders' :class:`MemoryPlan`\ s:
+    the oracle's and the GPU's, or with ``image`` the oracle's alone.
     """
     if image is not None:
+        if dry_run:
+            return (render(volume, backend="cpu", progress=progress, dry_run=True,
+                           **options),)
         ref = render(volume, backend="cpu", progress=progress, **options)
         r = compare_images(ref.image, image, max_abs=max_abs, rmse=rmse)
         r.info["cpu_seconds"] = ref.seconds
@@ -762,6 +821,9 @@ def compare(
             extra["max_abs"] = max_abs
         if rmse is not None:
             extra["rmse"] = rmse
+        if dry_run:
+            return _plans("compare", req.json(**extra), arr, aff, progress,
+                          **req.transfers)
         cpu, gpu, heat, meta = _voxlab.compare(req.json(**extra), arr, aff, progress,
                                                 **req.transfers)
     finally:
@@ -780,7 +842,7 @@ from . import ndimage  # noqa: E402
 __all__ = [
     "Volume", "read", "write", "info", "phantom", "phantom_names", "phantom_values",
     "phantom_line_integrals", "TransferFunction", "render", "Renderer", "PreparedScene",
-    "RenderResult",
+    "RenderResult", "MemoryPlan",
     "compare", "compare_images", "CompareResult", "ct", "fft", "transform", "ndimage",
     "fvr", "d2vr", "D2vrResult", "adaptive", "AdaptiveResult", "process", "resample",
     "bench", "BACKENDS",

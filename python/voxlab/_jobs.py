@@ -7,11 +7,11 @@ from __future__ import annotations
 import json as _json
 import os as _os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _voxlab, _as_volume, _json_default, Volume
+from . import _voxlab, _as_volume, _json_default, _plan, MemoryPlan, Volume
 from ._errors import InvalidError
 
 ProgressCallback = Callable[[str, int, int], Any]
@@ -62,8 +62,9 @@ def fvr(
     spacing: Any = None,
     affine: Any = None,
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> np.ndarray:
+) -> Union[np.ndarray, MemoryPlan]:
     """Fourier volume rendering (``voxlab fvr``): the X-ray projection (value × mm) of
     an isotropic volume from one slice of its 3-D spectrum, as the float32 ``(h, w)``
     image the command line writes to ``.npy``. ``kernel``: ``nearest``,
@@ -71,7 +72,8 @@ def fvr(
     ``padding``: the zero-padded cube's side over the largest dimension (1: none, the
     image wraps around: ghosting); ``deapodize``: divide by the kernel's spatial
     transfer; ``view`` (``"+z"`` …) or ``azimuth``/``elevation`` (degrees).
-    ``backend``: cpu, cpu-f32, gpu."""
+    ``backend``: cpu, cpu-f32, gpu. ``dry_run=True``: the job's :class:`MemoryPlan`
+    (the padded spectrum's bytes, and on the GPU its slabs), nothing computed."""
     req: Dict[str, Any] = {"kernel": kernel, "padding": int(padding),
                            "deapodize": bool(deapodize), "backend": backend}
     _view(req, options)
@@ -80,6 +82,8 @@ def fvr(
     arr, aff = _input(req, volume, spacing, affine)
     if load:
         req.setdefault("input", {"source": "array"})["load"] = load
+    if dry_run:
+        return _plan("fvr", _dumps(req), arr, aff, progress)
     image, _engine = _voxlab.fvr(_dumps(req), arr, aff, progress)
     return image
 
@@ -105,8 +109,9 @@ def d2vr(
     *,
     backend: str = "cpu-f32",
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> D2vrResult:
+) -> Union[D2vrResult, MemoryPlan]:
     """D²VR (``voxlab d2vr``): volume rendering straight from projections, with no
     reconstructed grid. ``projections``: ``"phantom:NAME"`` (projected exactly with
     ``beam``, ``angles``, ``detector``), a projection stack file (``.npy``/NRRD with
@@ -122,7 +127,9 @@ def d2vr(
     projections as 16-bit floats) and ``hardware_filtering`` (hold them in textures and
     let the texture unit interpolate every value, as the paper does; real GPUs round
     its weights to about 8 bits, so the image differs from the exact path's within the
-    bound docs/d2vr.md states for MIP, MinIP and X-ray)."""
+    bound docs/d2vr.md states for MIP, MinIP and X-ray). ``dry_run=True``: the job's
+    :class:`MemoryPlan` from the geometry alone (on the GPU, how the projections are
+    cut into pieces), nothing projected or rendered."""
     req: Dict[str, Any] = dict(options, backend=backend)
     geometry = req.pop("geometry", None)
     stack = None
@@ -137,11 +144,15 @@ def d2vr(
             )
         g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
         a = np.ascontiguousarray(np.asarray(stack, dtype=np.float64))
+        if dry_run:
+            return _plan("d2vr", _dumps(req), progress=progress, projections=a, geometry=g)
         image, samples, meta = _voxlab.d2vr(_dumps(req), progress, a, g)
     else:
         req["input"] = _os.fspath(projections)
         if geometry is not None:
             req["geometry"] = _os.fspath(geometry)
+        if dry_run:
+            return _plan("d2vr", _dumps(req), progress=progress)
         image, samples, meta = _voxlab.d2vr(_dumps(req), progress)
     info = _json.loads(meta)
     return D2vrResult(image, samples, info["stats"], info["seconds"], info["engine"],
@@ -171,14 +182,18 @@ def adaptive(
     spacing: Any = None,
     affine: Any = None,
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> AdaptiveResult:
+) -> Union[AdaptiveResult, MemoryPlan]:
     """Spectral adaptive sampling against regular and direct sampling (``voxlab
     adaptive``), with its report. Options as the job's: ``tf``, ``shift``, ``size``,
     ``azimuth``, ``elevation``, ``step``, ``t_max``, ``oversampling``, ``energy``,
-    ``block``, ``runs``."""
+    ``block``, ``runs``. ``dry_run=True``: the job's :class:`MemoryPlan`, nothing
+    rendered."""
     req: Dict[str, Any] = dict(options, backend=backend)
     arr, aff = _input(req, volume, spacing, affine)
+    if dry_run:
+        return _plan("adaptive", _dumps(req), arr, aff, progress)
     report, md, outs, max_count = _voxlab.adaptive(_dumps(req), arr, aff, progress)
     images = {name: img for name, img, _ in outs}
     samples = {name: s for name, _, s in outs}
@@ -193,12 +208,15 @@ def process(
     spacing: Any = None,
     affine: Any = None,
     progress: Optional[ProgressCallback] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> Volume:
+) -> Union[Volume, MemoryPlan]:
     """The process job (``voxlab process``): ``op`` is ``resample``, ``gaussian``,
     ``median`` or ``gradient-magnitude``, with the job's options (``dims``,
     ``spacing_out``, ``index_box``, ``world_box``, ``filter``, ``sigma``, ``size``).
-    Returns a float32 :class:`Volume` with its affine (mm)."""
+    Returns a float32 :class:`Volume` with its affine (mm); with ``dry_run=True``, the
+    job's :class:`MemoryPlan` (on the GPU, the slabs it would cut the volume into),
+    nothing computed."""
     req: Dict[str, Any] = dict(options, op=op, backend=backend)
     if "spacing_out" in req:
         s = req.pop("spacing_out")
@@ -206,6 +224,8 @@ def process(
     if "sigma" in req and req["sigma"] is not None and np.isscalar(req["sigma"]):
         req["sigma"] = [float(req["sigma"])]
     arr, aff = _input(req, volume, spacing, affine)
+    if dry_run:
+        return _plan("process", _dumps(req), arr, aff, progress)
     out, affine_out, meta = _voxlab.process(_dumps(req), arr, aff, progress)
     v = Volume(out, np.array(affine_out, dtype=np.float64), "process")
     v.info = _json.loads(meta)  # type: ignore[attr-defined]
@@ -224,10 +244,12 @@ def resample(
     spacing: Any = None,
     affine: Any = None,
     progress: Optional[ProgressCallback] = None,
-) -> Volume:
+    dry_run: bool = False,
+) -> Union[Volume, MemoryPlan]:
     """Resamples a box of the volume (``voxlab process --op resample``) to ``dims``
     ``(nx, ny, nz)`` or to ``spacing_out`` mm, with any reconstruction filter; the
-    output's affine places every voxel where it sampled (docs/processing.md)."""
+    output's affine places every voxel where it sampled (docs/processing.md).
+    ``dry_run=True``: the job's :class:`MemoryPlan`, nothing computed."""
     opts: Dict[str, Any] = {"filter": filter}
     if dims is not None:
         opts["dims"] = [int(d) for d in dims]
@@ -238,7 +260,7 @@ def resample(
     if world_box is not None:
         opts["world_box"] = [float(x) for x in world_box]
     return process(volume, "resample", backend=backend, spacing=spacing, affine=affine,
-                   progress=progress, **opts)
+                   progress=progress, dry_run=dry_run, **opts)
 
 
 def bench(

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import json as _json
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Dict, Optional, Union
 
 import numpy as np
 
-from . import _voxlab
+from . import _voxlab, _plan, MemoryPlan
 from . import _as_volume, Volume  # noqa: F401  (re-exported names of the package)
 
 __all__ = ["Projected", "project", "reconstruct"]
@@ -44,8 +44,9 @@ def project(
     *,
     backend: str = "cpu",
     progress: Optional[Callable[[str, int, int], Any]] = None,
+    dry_run: bool = False,
     **options: Any,
-) -> Projected:
+) -> Union[Projected, MemoryPlan]:
     """Forward projection (``voxlab project``): a phantom spec (``"phantom:NAME[:N]"``;
     exact line integrals by default) or a volume (:class:`voxlab.Volume`, an array with
     ``spacing=``, or a path: Joseph's method), with the job's options ``beam``
@@ -54,7 +55,8 @@ def project(
     ``"joseph"``), ``layout`` (``"auto"`` | ``"stack"`` | ``"skimage"``),
     ``hardware_filtering`` (with ``backend="gpu"`` and Joseph's method: the grid sampled
     through the texture unit, whose weights real GPUs round to about 8 bits; see
-    docs/parity.md)."""
+    docs/parity.md). ``dry_run=True``: the job's :class:`voxlab.MemoryPlan` (on the
+    GPU, the slabs and view batches it would use), nothing projected."""
     spacing = options.pop("spacing", None)
     affine = options.pop("affine", None)
     req: Dict[str, Any] = dict(options, backend=backend)
@@ -68,6 +70,8 @@ def project(
         arr, m = _as_volume(volume, spacing, affine)
         aff = m.tolist()
         req["input"] = {"source": "array"}
+    if dry_run:
+        return _plan("project", _json.dumps(req), arr, aff, progress)
     stack, geometry, meta = _voxlab.project(_json.dumps(req), arr, aff, progress)
     info = _json.loads(meta)
     layout = info.pop("layout")
@@ -98,7 +102,8 @@ def reconstruct(
     flat: Any = None,
     dark: Any = None,
     progress: Optional[Callable[[str, int, int], Any]] = None,
-) -> Volume:
+    dry_run: bool = False,
+) -> Union[Volume, MemoryPlan]:
     """FBP (parallel beam: scikit-image's images, ``circle`` as iradon's) or FDK (cone
     beam, RTK's centred grid) of ``projections`` with ``geometry`` (a dict, a JSON
     string, or a :class:`Projected`'s ``geometry``), or an iterative reconstruction
@@ -137,6 +142,10 @@ def reconstruct(
     computed it and, for an iterative method, ``iterative``: the ``residual``
     ``‖b − Ax_k‖`` and the ``objective`` for k = 0 (the initial image) … the last
     iteration, ``iterations``, ``converged`` and ``seconds_per_iteration``.
+
+    ``dry_run=True`` reconstructs nothing and returns the job's
+    :class:`voxlab.MemoryPlan`: host bytes, and on the GPU the device bytes and the
+    slabs and view batches the backprojection would use.
     """
     g = geometry if isinstance(geometry, str) else _json.dumps(geometry)
     req = {"filter": filter, "size": size, "spacing": spacing, "no_circle": not circle,
@@ -149,6 +158,9 @@ def reconstruct(
     fields = [f if f is None or isinstance(f, str) or hasattr(f, "__fspath__")
               else np.ascontiguousarray(np.asarray(f, dtype=np.float64))
               for f in (flat, dark)]
+    if dry_run:
+        return _plan("reconstruct", _json.dumps(req), progress=progress, projections=p,
+                     geometry=g, flat=fields[0], dark=fields[1])
     arr, affine, meta = _voxlab.reconstruct_stack(
         p, g, _json.dumps(req), progress, fields[0], fields[1])
     v = Volume(arr, np.array(affine, dtype=np.float64), "reconstruction")

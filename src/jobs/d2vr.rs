@@ -132,11 +132,10 @@ pub struct D2vrRendering {
 /// from a phantom.
 fn projections<R: Real>(a: &D2vrRequest) -> Result<(Projections<R>, Geometry)> {
     if let Some(m) = &a.memory {
-        let (p, g) = m.as_ref();
-        g.validate()?;
-        p.check_against(g)?;
+        let g = geometry(a)?;
+        let p = &m.0;
         let data = p.data.iter().map(|&v| R::of(v)).collect();
-        return Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g.clone()));
+        return Ok((Projections::new(p.angles, p.rows, p.cols, data)?, g));
     }
     let g = geometry(a)?;
     if let Some(name) = a.input.strip_prefix("phantom:") {
@@ -154,7 +153,12 @@ fn projections<R: Real>(a: &D2vrRequest) -> Result<(Projections<R>, Geometry)> {
 /// (`beam`, `angles`, `detector`), or read from the stack's geometry JSON.
 fn geometry(a: &D2vrRequest) -> Result<Geometry> {
     if let Some(m) = &a.memory {
-        return Ok(m.1.clone());
+        // Projections in hand are checked against their geometry here, so that the
+        // dry run ([`plan`]) refuses them as the run does.
+        let (p, g) = m.as_ref();
+        g.validate()?;
+        p.check_against(g)?;
+        return Ok(g.clone());
     }
     if let Some(name) = a.input.strip_prefix("phantom:") {
         crate::phantom::Phantom::by_name(name)?;

@@ -748,6 +748,22 @@ pub fn plan(a: &ReconstructRequest, progress: &dyn Progress) -> Result<MemoryPla
     check_request(a)?;
     let (p, _, header) = read_input(a)?;
     let (g, _) = geometry_for(a, [p.angles, p.rows, p.cols], header.as_ref())?;
+    plan_of(a, p, g, progress)
+}
+
+/// The memory plan of [`reconstruct`] on projections in hand (the Python module's
+/// `reconstruct(…, dry_run=True)`): as [`plan`] after its reading.
+///
+/// # Errors
+/// As [`reconstruct`] up to the work; [`Error::TooLarge`] for a job that cannot fit
+/// even split.
+pub fn plan_of(
+    a: &ReconstructRequest,
+    p: Projections<f64>,
+    g: Geometry,
+    progress: &dyn Progress,
+) -> Result<MemoryPlan> {
+    check_request(a)?;
     p.check_against(&g)?;
     let mut writes: Vec<String> = a.out.iter().map(|o| o.display().to_string()).collect();
     writes.extend(a.error_map.iter().map(|o| o.display().to_string()));
