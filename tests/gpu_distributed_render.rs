@@ -268,7 +268,7 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
 /// shadow ray is marched afterwards through the bricks in the light's order, handed on
 /// from brick to brick (`cpu::modes::shadow_steps`): the unsplit image, for directional
 /// lights, perspective and orthographic, and a perspective camera inside the volume,
-/// whose headlight's shadow rays pass the eye (two sweeps). (A headlight from outside
+/// whose headlight's shadow rays pass the eye (a second sweep). (A headlight from outside
 /// casts no shadows to speak of: its shadow rays go back along the rays.)
 #[test]
 fn iso_surface_shadows_in_bricks_render_the_unsplit_image() {
@@ -309,8 +309,8 @@ fn iso_surface_shadows_in_bricks_render_the_unsplit_image() {
             Mode::Iso,
             Filter::Trilinear,
             &|s: &mut SceneRequest| {
-                // Under the 22-texel limit (15 bricks) some shadow rays are still
-                // crossing bricks past the eye after the first sweep: two sweeps.
+                // Shadow rays that pass the eye: the first sweep (the rays' order
+                // reversed) leaves them waiting, the second (the rays' order) ends them.
                 s.distance = Some(13.0);
                 s.fov = 100.0;
                 s.view.azimuth = 120.0;

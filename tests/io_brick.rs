@@ -227,6 +227,104 @@ fn kd_bricks_tile_the_volume_in_balanced_boxes() {
     assert!(kd_bricks([4, 4, 4], 0).is_err());
 }
 
+/// Each voxel of `dims` in exactly one of `bricks`.
+fn tiles(dims: [usize; 3], bricks: &[Brick]) -> bool {
+    let mut count = vec![0u8; dims.iter().product()];
+    for b in bricks {
+        for k in b.lo[2]..b.hi[2] {
+            for j in b.lo[1]..b.hi[1] {
+                for i in b.lo[0]..b.hi[0] {
+                    count[i + dims[0] * (j + dims[1] * k)] += 1;
+                }
+            }
+        }
+    }
+    count.iter().all(|&c| c == 1)
+}
+
+/// `fitting_kd_tree` (the GPU casters' bricks): every brick with its ghost voxels fits
+/// the limits, the bricks tile the volume, the tree's leaves are the bricks, and there
+/// are never more of them than the fewest proportional k-d cuts that fit (the smallest
+/// `n` whose `kd_bricks` fit, searched here) — fewer where a regular grid fits: a 64³
+/// volume under 32 texels with 3 ghost voxels takes 3 × 3 × 3 bricks of 21–22 voxels a
+/// side, not 60; 128³ under 64 texels likewise 27, not 58.
+#[test]
+fn fitting_kd_trees_take_the_fewest_bricks_that_fit() {
+    use voxlab::io::brick::{fitting_kd_tree, grid_tree};
+    let fits = |dims: [usize; 3], g: usize, max: usize, voxels: Option<u64>| {
+        move |b: &Brick| {
+            let w = b.with_ghost(g, dims);
+            w.dims().iter().all(|&n| n <= max) && voxels.is_none_or(|m| w.voxels() as u64 <= m)
+        }
+    };
+    for (dims, ghost, max, voxels, want) in [
+        ([64, 64, 64], 3, 32, None, Some(27)),
+        ([128, 128, 128], 3, 64, None, Some(27)),
+        ([64, 64, 64], 3, 64, None, Some(1)),
+        ([64, 64, 64], 1, 64, Some(40_000), None),
+        ([48, 48, 48], 2, 28, None, None),
+        ([48, 48, 48], 1, 22, None, None),
+        ([48, 48, 48], 1, 4096, Some(9_000), None),
+        ([37, 29, 23], 2, 16, None, None),
+        ([100, 30, 7], 3, 4096, Some(5_000), None),
+        ([9, 7, 6], 1, 5, None, None),
+    ] {
+        let case = format!("{dims:?}, ghost {ghost}, {max} texels, {voxels:?} in all");
+        let ok = fits(dims, ghost, max, voxels);
+        let (tree, bricks) = fitting_kd_tree(dims, ghost, max, voxels, "ghost").unwrap();
+        assert!(bricks.iter().all(ok), "{case}: {bricks:?}");
+        assert!(
+            tiles(dims, &bricks),
+            "{case}: the bricks do not tile the volume"
+        );
+        let mut order = Vec::new();
+        tree.front_to_back([1.0, 1.0, 1.0], &mut order);
+        assert_eq!(order, (0..bricks.len()).collect::<Vec<_>>(), "{case}");
+        let fewer = (1..bricks.len()).find(|&n| kd_bricks(dims, n).is_ok_and(|b| b.iter().all(ok)));
+        assert_eq!(fewer, None, "{case}: {} bricks", bricks.len());
+        if let Some(n) = want {
+            assert_eq!(bricks.len(), n, "{case}");
+        }
+    }
+    let (_, bricks) = fitting_kd_tree([64; 3], 3, 32, None, "ghost").unwrap();
+    assert!(bricks
+        .iter()
+        .all(|b| b.dims().iter().all(|&n| n == 21 || n == 22)));
+    // A limit below the ghost voxels fits nothing (a brick of the middle voxel is 7
+    // texels wide with them; 7 takes one-voxel bricks), and neither does a memory below
+    // 7³ texels.
+    let e = fitting_kd_tree([64; 3], 3, 6, None, "the filter's 3 ghost voxels").unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("cannot be cut into bricks of at most 6 texels"),
+        "{e}"
+    );
+    assert_eq!(
+        fitting_kd_tree([16; 3], 3, 7, None, "ghost")
+            .unwrap()
+            .1
+            .len(),
+        16 * 16 * 16
+    );
+    assert!(fitting_kd_tree([64; 3], 3, 64, Some(342), "ghost").is_err());
+    assert!(fitting_kd_tree([24; 3], 3, 64, Some(343), "ghost").is_ok());
+    // Two pieces of an axis each have one inner face: 64 under 35 texels with 3 ghost
+    // voxels is 2 × 2 × 2 bricks of 32 + 3.
+    let (_, b) = fitting_kd_tree([64; 3], 3, 35, None, "ghost").unwrap();
+    assert_eq!(b.len(), 8);
+    // The grid itself: 2 × 3 × 1 pieces of a 10 × 7 × 3 volume at ⌊i·n/k⌋.
+    let (_, g) = grid_tree([10, 7, 3], [2, 3, 1]);
+    assert_eq!(g.len(), 6);
+    assert!(tiles([10, 7, 3], &g));
+    let xs: Vec<[usize; 2]> = g.iter().map(|b| [b.lo[0], b.hi[0]]).collect();
+    let ys: Vec<[usize; 2]> = g.iter().map(|b| [b.lo[1], b.hi[1]]).collect();
+    assert!(xs.iter().all(|x| *x == [0, 5] || *x == [5, 10]), "{xs:?}");
+    assert!(
+        ys.iter().all(|y| [[0, 2], [2, 4], [4, 7]].contains(y)),
+        "{ys:?}"
+    );
+}
+
 /// `halved_kd_tree` (the multi-volume caster's cells): every brick fits, the bricks tile
 /// the volume (each voxel in exactly one), a volume that fits is not cut, the tree's
 /// leaves are its bricks, and a rule not even one voxel meets gives `None`.
