@@ -357,6 +357,40 @@ fn halved_kd_trees_tile_the_volume_in_bricks_that_fit() {
     assert!(halved_kd_tree(dims, &|b: &Brick| b.voxels() == 0).is_none());
 }
 
+/// `fewest_kd_tree` (the multi-volume caster's cells): never more cells than the
+/// halvings, every cell fits, the cells tile the volume and the tree's leaves are its
+/// cells; a regular grid where it takes fewer (48³ under 20 voxels a side: 3 × 3 × 3
+/// cells, where halving takes 4 × 4 × 4), the halvings on a tie (64³ under 32: 8).
+#[test]
+fn fewest_kd_trees_take_a_grid_where_it_has_fewer_cells() {
+    use voxlab::io::brick::{fewest_kd_tree, halved_kd_tree};
+    for (dims, side, voxels, want) in [
+        ([48, 48, 48], 20, u64::MAX, Some(27)),
+        ([64, 64, 64], 32, u64::MAX, Some(8)),
+        ([10, 7, 3], 10, 20, None),
+        ([37, 29, 23], 13, 1500, None),
+        ([100, 30, 7], 100, 4000, None),
+    ] {
+        let fits = |b: &Brick| b.dims().iter().all(|&n| n <= side) && b.voxels() as u64 <= voxels;
+        let (tree, cells) = fewest_kd_tree(dims, &fits).unwrap();
+        let halved = halved_kd_tree(dims, &fits).unwrap().1.len();
+        let case = format!("{dims:?} under {side} a side, {voxels} in all");
+        assert!(cells.len() <= halved, "{case}: {} > {halved}", cells.len());
+        assert!(cells.iter().all(|c| fits(c) && c.voxels() > 0), "{case}");
+        assert!(
+            tiles(dims, &cells),
+            "{case}: the cells do not tile the volume"
+        );
+        let mut order = Vec::new();
+        tree.front_to_back([1.0, 1.0, 1.0], &mut order);
+        assert_eq!(order, (0..cells.len()).collect::<Vec<_>>(), "{case}");
+        if let Some(n) = want {
+            assert_eq!(cells.len(), n, "{case}");
+        }
+    }
+    assert!(fewest_kd_tree([4, 4, 4], &|b: &Brick| b.voxels() == 0).is_none());
+}
+
 /// The line sets each stack is read by: one line, the last, every line, every third,
 /// and runs with gaps.
 fn line_sets(total: usize) -> Vec<Vec<usize>> {

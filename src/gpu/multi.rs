@@ -481,7 +481,7 @@ pub fn scene_split(
             .all(|p| p.dims().iter().all(|&n| n <= max))
             && budget.is_none_or(|m| 4 * texels(&ps) <= m)
     };
-    let Some((tree, bricks)) = crate::io::brick::halved_kd_tree(dims, &fits) else {
+    let Some((tree, bricks)) = crate::io::brick::fewest_kd_tree(dims, &fits) else {
         let bytes = budget
             .map(|m| {
                 format!(

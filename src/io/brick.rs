@@ -385,6 +385,70 @@ pub fn grid_tree(dims: [usize; 3], k: [usize; 3]) -> (KdTree, Vec<Brick>) {
     (tree, out)
 }
 
+/// The k-d tree with the fewest bricks that each satisfy `fits`, of two families:
+/// [`halved_kd_tree`]'s halvings, and a regular grid ([`grid_tree`]) with fewer bricks
+/// (the halvings win a tie). `fits` must hold for a box's sub-boxes where it holds for
+/// the box (true of every size limit). `None` where the halvings find none, for then
+/// no grid fits either (a one-voxel cell fails, or it would take more than 65,536): the
+/// multi-volume caster's cells, each holding its own part of every volume.
+pub fn fewest_kd_tree(
+    dims: [usize; 3],
+    fits: &dyn Fn(&Brick) -> bool,
+) -> Option<(KdTree, Vec<Brick>)> {
+    let halved = halved_kd_tree(dims, fits)?;
+    match fewest_grid(dims, fits, halved.1.len()) {
+        Some(k) => Some(grid_tree(dims, k)),
+        None => Some(halved),
+    }
+}
+
+/// The pieces per axis of the regular grid with the fewest bricks, fewer than
+/// `fewer_than`, each of which satisfies `fits`; `None` when no such grid does.
+fn fewest_grid(
+    dims: [usize; 3],
+    fits: &dyn Fn(&Brick) -> bool,
+    fewer_than: usize,
+) -> Option<[usize; 3]> {
+    let every = |k: [usize; 3]| {
+        let at = |a: usize, i: usize| i * dims[a] / k[a];
+        (0..k[2]).all(|z| {
+            (0..k[1]).all(|y| {
+                (0..k[0]).all(|x| {
+                    fits(&Brick {
+                        lo: [at(0, x), at(1, y), at(2, z)],
+                        hi: [at(0, x + 1), at(1, y + 1), at(2, z + 1)],
+                    })
+                })
+            })
+        })
+    };
+    let mut best = None;
+    let mut bound = fewer_than;
+    for kx in 1..=dims[0] {
+        if kx >= bound {
+            break;
+        }
+        for ky in 1..=dims[1] {
+            if kx * ky >= bound {
+                break;
+            }
+            // More pieces along z only make the bricks smaller: the first that fits is
+            // the fewest for this kx, ky.
+            for kz in 1..=dims[2] {
+                if kx * ky * kz >= bound {
+                    break;
+                }
+                if every([kx, ky, kz]) {
+                    bound = kx * ky * kz;
+                    best = Some([kx, ky, kz]);
+                    break;
+                }
+            }
+        }
+    }
+    best
+}
+
 /// The k-d tree whose bricks each satisfy `fits`, a brick that does not halved at the
 /// middle of its longest axis: the planner of a split whose pieces differ in what they
 /// hold (the multi-volume caster's cells, each holding its own part of every volume).
