@@ -345,6 +345,46 @@ impl Camera {
     pub fn ray(&self, col: usize, row: usize) -> Ray {
         self.ray_at(col as f64 + 0.5, row as f64 + 0.5)
     }
+
+    /// Whether a ray of some pixel may meet the convex hull of `points` (world, mm):
+    /// false only when the hull lies wholly in front of a perspective eye (or anywhere,
+    /// orthographic) and its image, the hull of the points' images ([`Camera::ray_at`]
+    /// inverted), falls outside the image by more than a pixel. A conservative test,
+    /// for skipping work no ray reaches (the GPU ray caster's bricks).
+    pub fn may_see(&self, points: &[DVec3]) -> bool {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for &p in points {
+            let d = p - self.eye;
+            let (x, y) = (d.dot(self.right), d.dot(self.up));
+            let (u, v) = match self.projection {
+                Projection::Orthographic {
+                    width_mm,
+                    height_mm,
+                } => (x / width_mm, y / height_mm),
+                Projection::Perspective { fov_y_deg } => {
+                    let z = d.dot(self.forward);
+                    if !(z > 1e-9 * d.length().max(1.0)) {
+                        return true;
+                    }
+                    let h = (0.5 * fov_y_deg.to_radians()).tan();
+                    let aspect = self.width as f64 / self.height as f64;
+                    (x / (2.0 * z * h * aspect), y / (2.0 * z * h))
+                }
+            };
+            // Image coordinates as `ray_at` takes them.
+            let (px, py) = (
+                (u + 0.5) * self.width as f64,
+                (0.5 - v) * self.height as f64,
+            );
+            if !(px.is_finite() && py.is_finite()) {
+                return true;
+            }
+            lo = [lo[0].min(px), lo[1].min(py)];
+            hi = [hi[0].max(px), hi[1].max(py)];
+        }
+        let (w, h) = (self.width as f64, self.height as f64);
+        hi[0] >= -1.0 && lo[0] <= w + 1.0 && hi[1] >= -1.0 && lo[1] <= h + 1.0
+    }
 }
 
 #[cfg(test)]
@@ -372,6 +412,74 @@ mod tests {
         // The centre of the image looks straight ahead.
         let r = c.ray_at(4.0, 4.0);
         assert!((r.dir - DVec3::Y).length() < 1e-12);
+    }
+
+    /// `may_see` is conservative: for boxes it says no ray meets, no pixel's ray meets
+    /// them (every ray of the image tested against the box's slabs); and it does say so
+    /// for boxes off to the side, behind an orthographic view's frame or outside a
+    /// perspective frustum.
+    #[test]
+    fn may_see_never_hides_a_box_a_pixel_ray_meets() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut hidden, mut trials) = (0, 0);
+        for i in 0..400 {
+            let projection = if i % 2 == 0 {
+                Projection::Perspective {
+                    fov_y_deg: 10.0 + 80.0 * next(),
+                }
+            } else {
+                Projection::Orthographic {
+                    width_mm: 10.0 + 60.0 * next(),
+                    height_mm: 10.0 + 40.0 * next(),
+                }
+            };
+            let c = Camera::orbit(
+                DVec3::splat(-20.0),
+                [40.0; 3],
+                Orbit {
+                    azimuth_deg: 360.0 * next(),
+                    elevation_deg: 170.0 * next() - 85.0,
+                    distance_mm: Some(5.0 + 120.0 * next()),
+                },
+                projection,
+                24,
+                18,
+            )
+            .unwrap();
+            for _ in 0..10 {
+                let lo = DVec3::new(next(), next(), next()) * 160.0 - 80.0;
+                let hi = lo + DVec3::new(next(), next(), next()) * 30.0 + 0.5;
+                let corners: Vec<DVec3> = (0..8)
+                    .map(|k| {
+                        DVec3::new(
+                            if k & 1 == 0 { lo.x } else { hi.x },
+                            if k & 2 == 0 { lo.y } else { hi.y },
+                            if k & 4 == 0 { lo.z } else { hi.z },
+                        )
+                    })
+                    .collect();
+                trials += 1;
+                if c.may_see(&corners) {
+                    continue;
+                }
+                hidden += 1;
+                for row in 0..c.height {
+                    for col in 0..c.width {
+                        let r = c.ray(col, row);
+                        let met = crate::real::slab_interval(r.origin, r.dir, lo, hi)
+                            .is_some_and(|(t0, t1)| t1 >= t0.max(r.t_min));
+                        assert!(!met, "{c:?}: pixel ({col}, {row}) meets {lo} … {hi}");
+                    }
+                }
+            }
+        }
+        assert!(hidden * 5 >= trials, "{hidden} of {trials} boxes hidden");
     }
 
     #[test]

@@ -264,6 +264,75 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
     assert!(e.contains("cannot be cut into bricks"), "{e}");
 }
 
+/// A camera that sees part of the volume: the bricks no ray meets
+/// (`gpu::raycast::bricks_in_view`) are skipped, and the image is still the unsplit
+/// one (MIP bit for bit, DVR within the regrouped sums, MIDA and shadowed iso-surfaces
+/// handed from brick to brick through the bricks in view, the shadow rays through
+/// all of them).
+#[test]
+fn bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one() {
+    let Some(ctx) = gpu("bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one") else {
+        return;
+    };
+    use voxlab::gpu::raycast::{brick_plan, bricks_in_view, render_bricked, RaycastSession};
+    let dir = scratch("gpu-bricked-view");
+    let file = brick_test_volume(&dir);
+    let volume = VolumeInput::new(file.to_str().unwrap()).read().unwrap();
+    let shadows = |s: &mut SceneRequest| {
+        s.iso = vec![voxlab::settings::IsoSurface {
+            value: 450.0,
+            color: [0.9, 0.6, 0.2],
+            opacity: 1.0,
+        }];
+        s.iso_opaque = true;
+        s.shadows = true;
+        s.shading = true;
+        s.light = Some([-0.6, 0.5, -0.62]);
+    };
+    type Case<'a> = (Mode, f64, &'a dyn Fn(&mut SceneRequest));
+    let cases: [Case; 4] = [
+        (Mode::Mip, 0.0, &|_| {}),
+        (Mode::Dvr, GPU_BOUND, &|_| {}),
+        (Mode::Mida, CARRIED_BOUND, &|s| s.mida_gamma = 0.3),
+        (Mode::Iso, CARRIED_BOUND, &shadows),
+    ];
+    for (mode, bound, tweak) in cases {
+        let mut req = request(file.to_str().unwrap(), mode);
+        // A narrow view of the volume's middle (the distance given, or the orbit would
+        // step back until the whole volume is in view).
+        req.scene.fov = 14.0;
+        req.scene.distance = Some(60.0);
+        req.scene.view.azimuth = 25.0;
+        tweak(&mut req.scene);
+        let (tf, camera, settings) =
+            voxlab::jobs::render::build_view(&req.scene, &volume, false).unwrap();
+        let want = RaycastSession::new(ctx, &volume)
+            .unwrap()
+            .render(&tf, &camera, &settings, &|_, _| {})
+            .unwrap()
+            .output
+            .image;
+        let top = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(top > 0.0, "{mode:?}: an empty image");
+        let (tree, bricks) = brick_plan(volume.dims(), &settings, 12, None).unwrap();
+        let seen = bricks_in_view(&camera, volume.affine(), &bricks);
+        let skipped = seen.iter().filter(|&&v| !v).count();
+        assert!(
+            skipped > 0 && skipped < bricks.len(),
+            "{mode:?}: {skipped} of {} bricks out of view",
+            bricks.len()
+        );
+        let cut = (&tree, &bricks[..]);
+        let got = render_bricked(ctx, &volume, &tf, &camera, &settings, cut, &|_, _| {}).unwrap();
+        let worst = max_abs_error(&got.output.image.data, &want.data);
+        eprintln!(
+            "{mode:?}: {skipped} of {} bricks out of view, max |Δ| {worst:.3e} (image max {top:.3})",
+            bricks.len()
+        );
+        assert!(worst <= bound * top.max(1.0), "{mode:?}: {worst:e}");
+    }
+}
+
 /// Opaque iso-surfaces with shadows in bricks: each hit keeps its two endings, and its
 /// shadow ray is marched afterwards through the bricks in the light's order, handed on
 /// from brick to brick (`cpu::modes::shadow_steps`): the unsplit image, for directional

@@ -1070,7 +1070,13 @@ pub fn render_bricked<'c>(
     } else {
         (0..bricks.len()).collect()
     };
-    let mut pieces = Vec::with_capacity(bricks.len());
+    // A brick no ray meets adds nothing: its pass is skipped (its piece is empty). One
+    // pass runs even when none is in view, to find that every ray misses.
+    let mut in_view = bricks_in_view(camera, volume.affine(), bricks);
+    if !in_view.iter().any(|&v| v) {
+        in_view[order[0]] = true;
+    }
+    let mut pieces: Vec<Option<Piece>> = (0..bricks.len()).map(|_| None).collect();
     // The bricks' times summed; `total` is the whole render's, set at the end.
     let mut timings = GpuTimings {
         kernel_from_timestamps: true,
@@ -1116,6 +1122,9 @@ pub fn render_bricked<'c>(
     let deferred = defers_shadows(settings);
     let passes = bricks.len() * (1 + deferred as usize);
     for (i, &bi) in order.iter().enumerate() {
+        if !in_view[bi] {
+            continue;
+        }
         load(&mut session, bi)?;
         let session = session.as_mut().expect("loaded");
         let rows = |done: usize, total: usize| progress(i * total + done, passes * total);
@@ -1126,7 +1135,7 @@ pub fn render_bricked<'c>(
             Some(f) => f.data.iter().map(|&c| c as u32).collect(),
             None => vec![0; w * h],
         };
-        pieces.push((out.output.image, counts, out.hits.unwrap_or_default()));
+        pieces[bi] = Some((out.output.image, counts, out.hits.unwrap_or_default()));
     }
     // The opaque hits' shadow rays, which cross bricks the rays did not: marched
     // through the bricks in the light's order, each brick taking the samples it owns
@@ -1164,6 +1173,8 @@ pub fn render_bricked<'c>(
     let ch = if settings.mode.rgba() { 4 } else { 1 };
     let mut image = Frame::new(w, h, ch);
     let mut counts = vec![0u32; w * h];
+    // Whether each ray meets the whole volume's box: every rendered brick says the same.
+    let hits = &pieces.iter().flatten().next().expect("one brick renders").2;
     use rayon::prelude::*;
     if carried {
         // Each ray's state after the last brick, finished as the unsplit render
@@ -1177,8 +1188,8 @@ pub fn render_bricked<'c>(
             .zip(carry.par_chunks(CARRIED_VEC4S))
             .enumerate()
             .for_each(|(p, ((px, n), state))| {
-                *n = pieces.iter().map(|(_, c, _)| c[p]).sum();
-                let hit = pieces[0].2.get(p).copied().unwrap_or(false);
+                *n = pieces.iter().flatten().map(|(_, c, _)| c[p]).sum();
+                let hit = hits.get(p).copied().unwrap_or(false);
                 let v = match (hit, settings.mode) {
                     (false, _) => bg,
                     (true, Mode::Mida) => {
@@ -1207,14 +1218,16 @@ pub fn render_bricked<'c>(
                     let p = row * w + col;
                     let d = to_index.transform_vector3(camera.ray(col, row).dir);
                     let piece = |b: usize| {
-                        let (img, n, _) = &pieces[b];
+                        let Some((img, n, _)) = &pieces[b] else {
+                            return ([0.0f32; 4], 0);
+                        };
                         let mut v = [0.0f32; 4];
                         for (c, x) in v.iter_mut().take(ch).enumerate() {
                             *x = img.data[p * ch + c] as f32;
                         }
                         (v, n[p])
                     };
-                    let hit = pieces[0].2.get(p).copied().unwrap_or(false);
+                    let hit = hits.get(p).copied().unwrap_or(false);
                     let (px, n) = crate::cpu::composite::composite_pixel(
                         tree,
                         d.to_array(),
@@ -1236,6 +1249,39 @@ pub fn render_bricked<'c>(
         timings,
         hits: None,
     })
+}
+
+/// A brick's render in [`render_bricked`]: its image, its rays' sample counts and
+/// whether each ray meets the whole volume's box.
+type Piece = (Frame, Vec<u32>, Vec<bool>);
+
+/// Which of `bricks` (of a volume placed by `affine`) a ray of `camera` may meet:
+/// [`Camera::may_see`] of each brick's box one and a half voxels wider each way than
+/// the samples it owns (faces at half voxels). [`render_bricked`] skips the others'
+/// passes, whose rays would all miss.
+pub fn bricks_in_view(
+    camera: &Camera,
+    affine: glam::DMat4,
+    bricks: &[crate::io::brick::Brick],
+) -> Vec<bool> {
+    bricks
+        .iter()
+        .map(|b| {
+            let corners: Vec<glam::DVec3> = (0..8)
+                .map(|c| {
+                    let at = |a: usize| {
+                        if c >> a & 1 == 0 {
+                            b.lo[a] as f64 - 2.0
+                        } else {
+                            b.hi[a] as f64 + 1.0
+                        }
+                    };
+                    affine.transform_point3(glam::DVec3::new(at(0), at(1), at(2)))
+                })
+                .collect();
+            camera.may_see(&corners)
+        })
+        .collect()
 }
 
 /// A volume's dimensions, value range and f32 grid.
