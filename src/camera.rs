@@ -363,7 +363,7 @@ impl Camera {
                 } => (x / width_mm, y / height_mm),
                 Projection::Perspective { fov_y_deg } => {
                     let z = d.dot(self.forward);
-                    if !(z > 1e-9 * d.length().max(1.0)) {
+                    if z.is_nan() || z <= 1e-9 * d.length().max(1.0) {
                         return true;
                     }
                     let h = (0.5 * fov_y_deg.to_radians()).tan();
