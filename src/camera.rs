@@ -347,11 +347,19 @@ impl Camera {
     }
 
     /// Whether a ray of some pixel may meet the convex hull of `points` (world, mm):
-    /// false only when the hull lies wholly in front of a perspective eye (or anywhere,
-    /// orthographic) and its image, the hull of the points' images ([`Camera::ray_at`]
-    /// inverted), falls outside the image by more than a pixel. A conservative test,
-    /// for skipping work no ray reaches (the GPU ray caster's bricks).
+    /// false when the hull lies wholly behind a perspective eye, or wholly in front of
+    /// it (or anywhere, orthographic) with its image, the hull of the points' images
+    /// ([`Camera::ray_at`] inverted), outside the image by more than a pixel; true
+    /// otherwise. A conservative test, for skipping work no ray reaches (the GPU
+    /// casters' bricks and cells).
     pub fn may_see(&self, points: &[DVec3]) -> bool {
+        if matches!(self.projection, Projection::Perspective { .. })
+            && points
+                .iter()
+                .all(|&p| (p - self.eye).dot(self.forward) < 0.0)
+        {
+            return false;
+        }
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for &p in points {
             let d = p - self.eye;
@@ -416,8 +424,9 @@ mod tests {
 
     /// `may_see` is conservative: for boxes it says no ray meets, no pixel's ray meets
     /// them (every ray of the image tested against the box's slabs); and it does say so
-    /// for boxes off to the side, behind an orthographic view's frame or outside a
-    /// perspective frustum.
+    /// for boxes off to the side of an orthographic view's frame, and outside a
+    /// perspective frustum or behind its eye (cameras from 5 mm to 125 mm of a 40 mm
+    /// box, so some inside it).
     #[test]
     fn may_see_never_hides_a_box_a_pixel_ray_meets() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -427,7 +436,7 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
-        let (mut hidden, mut trials) = (0, 0);
+        let (mut hidden, mut trials, mut behind) = (0, 0, 0);
         for i in 0..400 {
             let projection = if i % 2 == 0 {
                 Projection::Perspective {
@@ -469,6 +478,10 @@ mod tests {
                     continue;
                 }
                 hidden += 1;
+                let perspective = matches!(c.projection, Projection::Perspective { .. });
+                if perspective && corners.iter().all(|&p| (p - c.eye).dot(c.forward) < 0.0) {
+                    behind += 1;
+                }
                 for row in 0..c.height {
                     for col in 0..c.width {
                         let r = c.ray(col, row);
@@ -480,6 +493,10 @@ mod tests {
             }
         }
         assert!(hidden * 5 >= trials, "{hidden} of {trials} boxes hidden");
+        assert!(
+            behind * 20 >= trials,
+            "{behind} of {trials} boxes behind the eye"
+        );
     }
 
     #[test]

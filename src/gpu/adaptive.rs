@@ -649,7 +649,9 @@ pub fn render(
             let ghost = brick_ghost(settings);
             let mut carry = vec![[0.0f32; 4]; w * h * CARRIED_VEC4S];
             let order = crate::cpu::composite::ray_order(&cut.tree, camera, volume.affine());
-            for bi in order {
+            // A brick no ray meets holds none of their steps: skipped.
+            let in_view = super::raycast::bricks_in_view(camera, volume.affine(), &cut.bricks);
+            for bi in order.into_iter().filter(|&bi| in_view[bi]) {
                 let b = &cut.bricks[bi];
                 let g = b.with_ghost(ghost, dims);
                 let c = values.crop(g.lo, g.hi)?;

@@ -302,6 +302,8 @@ fn pixel_bytes(split: bool) -> u64 {
 pub struct MultiSplit {
     pub tree: KdTree,
     pub cells: Vec<MultiCell>,
+    /// The cells' boxes in the reference grid (the tree's leaves, in the cells' order).
+    pub boxes: Vec<Brick>,
     /// The reference grid's index → world (the cells' ray order).
     pub affine: DMat4,
     /// The largest cell's textures, in bytes.
@@ -534,6 +536,7 @@ pub fn scene_split(
     Ok(Some(MultiSplit {
         tree,
         cells,
+        boxes: bricks,
         affine: to0 * DMat4::from_translation(offset),
         largest,
         line,
@@ -762,6 +765,15 @@ pub fn render(
             if settings.mode == Mode::Dvr && settings.compositing == Compositing::BackToFront {
                 order.reverse();
             }
+            // A cell no ray meets holds none of their steps: skipped (one still runs, to
+            // finish the pixels, when none is in view).
+            let in_view = super::raycast::bricks_in_view(camera, cut.affine, &cut.boxes);
+            let shown: Vec<usize> = order.iter().copied().filter(|&ci| in_view[ci]).collect();
+            let order = if shown.is_empty() {
+                vec![order[0]]
+            } else {
+                shown
+            };
             for (j, &ci) in order.iter().enumerate() {
                 let cell = &cut.cells[ci];
                 let parts = cell
