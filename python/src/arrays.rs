@@ -207,3 +207,20 @@ pub fn frame(py: Python<'_>, a: &PyReadonlyArrayDyn<'_, f64>, what: &str) -> PyR
         data: s.to_vec(),
     })
 }
+
+/// A request's input replaced by an array in memory with its affine (rows; the
+/// identity when None), its load options kept; left as it is without an array. Every
+/// job that reads a volume takes its array through here.
+pub fn memory_input(
+    py: Python<'_>,
+    input: &mut voxlab::jobs::input::VolumeInput,
+    array: Option<&Bound<'_, PyAny>>,
+    affine: Option<[[f64; 4]; 4]>,
+) -> PyResult<()> {
+    if let Some(a) = array {
+        let vol = volume(py, a, affine.unwrap_or(rows(DMat4::IDENTITY)))?;
+        let load = input.load.clone();
+        *input = voxlab::jobs::input::VolumeInput::memory("array", vol).with_load(load);
+    }
+    Ok(())
+}

@@ -232,7 +232,7 @@ fn project(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<ProjectParts> {
     let mut req: ProjectRequest = errors::parse_request(py, "project option", request)?;
-    crate::jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
+    arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
     let r = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::project::run(&req, p)
     })?;

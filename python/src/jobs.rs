@@ -8,25 +8,8 @@ use pyo3::prelude::*;
 use voxlab::jobs::adaptive::AdaptiveRequest;
 use voxlab::jobs::d2vr::D2vrRequest;
 use voxlab::jobs::fvr::FvrRequest;
-use voxlab::jobs::input::VolumeInput;
 use voxlab::jobs::process::ProcessRequest;
 use voxlab::volume::AnyVolume;
-
-/// The request's input replaced by an array in memory (its load options kept).
-pub(crate) fn memory(
-    py: Python<'_>,
-    input: &mut VolumeInput,
-    volume: Option<&Bound<'_, PyAny>>,
-    affine: Option<[[f64; 4]; 4]>,
-) -> PyResult<()> {
-    if let Some(v) = volume {
-        let a = affine.unwrap_or(arrays::rows(glam::DMat4::IDENTITY));
-        let vol = arrays::volume(py, v, a)?;
-        let load = input.load.clone();
-        *input = VolumeInput::memory("array", vol).with_load(load);
-    }
-    Ok(())
-}
 
 /// The fvr job (`voxlab fvr`): the X-ray image (value × mm, float32 `(h, w)`) and the
 /// engine, described.
@@ -40,7 +23,7 @@ fn fvr(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<(Py<PyAny>, String)> {
     let mut req: FvrRequest = errors::parse_request(py, "fvr option", request)?;
-    memory(py, &mut req.input, volume.as_ref(), affine)?;
+    arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
     let r = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::fvr::run(&req, p)
     })?;
@@ -145,7 +128,7 @@ fn adaptive(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<AdaptiveParts> {
     let mut req: AdaptiveRequest = errors::parse_request(py, "adaptive option", request)?;
-    memory(py, &mut req.input, volume.as_ref(), affine)?;
+    arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
     let c = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::adaptive::run(&req, p)
     })?;
@@ -177,7 +160,7 @@ fn process(
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<(Py<PyAny>, [[f64; 4]; 4], String)> {
     let mut req: ProcessRequest = errors::parse_request(py, "process option", request)?;
-    memory(py, &mut req.input, volume.as_ref(), affine)?;
+    arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
     let r = job::run(py, job::callback(&progress), |p| {
         voxlab::jobs::process::run(&req, p)
     })?;

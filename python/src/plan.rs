@@ -67,7 +67,7 @@ fn plan(
         "project" => {
             let mut req: voxlab::jobs::project::ProjectRequest =
                 errors::parse_request(py, &what, request)?;
-            jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
+            crate::arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
             vec![job::run(py, progress, |p| {
                 voxlab::jobs::project::plan(&req, p)
             })?]
@@ -91,7 +91,7 @@ fn plan(
         }
         "fvr" => {
             let mut req: voxlab::jobs::fvr::FvrRequest = errors::parse_request(py, &what, request)?;
-            jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
+            crate::arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
             vec![job::run(py, progress, |p| {
                 voxlab::jobs::fvr::plan(&req, p)
             })?]
@@ -108,7 +108,7 @@ fn plan(
         "adaptive" => {
             let mut req: voxlab::jobs::adaptive::AdaptiveRequest =
                 errors::parse_request(py, &what, request)?;
-            jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
+            crate::arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
             vec![job::run(py, progress, |p| {
                 voxlab::jobs::adaptive::plan(&req, p)
             })?]
@@ -116,7 +116,7 @@ fn plan(
         "process" => {
             let mut req: voxlab::jobs::process::ProcessRequest =
                 errors::parse_request(py, &what, request)?;
-            jobs::memory(py, &mut req.input, volume.as_ref(), affine)?;
+            crate::arrays::memory_input(py, &mut req.input, volume.as_ref(), affine)?;
             vec![job::run(py, progress, |p| {
                 voxlab::jobs::process::plan(&req, p)
             })?]

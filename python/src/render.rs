@@ -5,7 +5,7 @@
 use crate::{arrays, errors, job};
 use numpy::PyReadonlyArrayDyn;
 use pyo3::prelude::*;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use voxlab::cpu::raycast::RenderOutput;
 use voxlab::jobs::compare::CompareRequest;
 use voxlab::jobs::input::VolumeInput;
@@ -26,16 +26,8 @@ pub(crate) fn memory_input(
     scene: &mut SceneRequest,
     volume: Option<(&Bound<'_, PyAny>, [[f64; 4]; 4])>,
 ) -> PyResult<()> {
-    if let Some((array, affine)) = volume {
-        let v: AnyVolume = arrays::volume(py, array, affine)?;
-        let load = scene.input.load.clone();
-        scene.input = VolumeInput {
-            source: "array".into(),
-            load,
-            memory: Some(Arc::new(v)),
-        };
-    }
-    Ok(())
+    let (array, affine) = volume.unzip();
+    arrays::memory_input(py, &mut scene.input, array, affine)
 }
 
 /// Transfer functions given in memory (their JSON, parsed here): the scene's
