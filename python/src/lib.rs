@@ -4,7 +4,7 @@
 //! projection stacks; JSON (built from keyword arguments by the Python half) becomes
 //! the jobs' serde requests, so an unknown keyword is the job's own error naming the
 //! field. Every call runs the Rust work on a worker thread with the GIL released
-//! ([`job::run`]); the calling thread waits, delivers progress to a Python callback,
+//! (`job::run`); the calling thread waits, delivers progress to a Python callback,
 //! and checks for Ctrl-C, which cancels the job through [`voxlab::jobs::Progress`].
 //! Library errors become `voxlab.VoxlabError` subclasses with the library's messages,
 //! and a Rust panic becomes `voxlab.InternalError`, never a crash.

@@ -63,7 +63,7 @@ def test_each_jobs_plan_is_the_command_lines_dry_run(tmp_path, cli):
          ["d2vr", p, "--grid", "16", "--size", "24", "--out", o / "d.npy"]),
         (voxlab.adaptive("phantom:marschner-lobb:24", size=24, runs=1, dry_run=True),
          ["adaptive", "phantom:marschner-lobb:24", "--size", "24", "--runs", "1",
-          "--backend", "cpu", "--out", o / "a"]),
+          "--out", o / "a"]),
         (voxlab.process(v, "gaussian", sigma=1.5, dry_run=True),
          ["process", path, "--op", "gaussian", "--sigma", "1.5", "--out", o / "g.nrrd"]),
         (voxlab.resample(v, dims=(30, 20, 10), dry_run=True),

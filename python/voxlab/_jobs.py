@@ -178,7 +178,7 @@ class AdaptiveResult:
 def adaptive(
     volume: Any = None,
     *,
-    backend: str = "cpu",
+    backend: str = "cpu-f32",
     spacing: Any = None,
     affine: Any = None,
     progress: Optional[ProgressCallback] = None,
