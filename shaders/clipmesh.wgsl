@@ -170,11 +170,12 @@ fn add_hit(ray: Ray, tri: u32, behind: ptr<function, u32>, count: ptr<function, 
     (*h)[j] = t;
 }
 
+// The pixel of the ray caster's tile (params.tile) an invocation serves, -1 past it.
 fn pixel_of(id: vec3<u32>) -> i32 {
-    if (id.x >= params.image.x || id.y >= params.flags2.w) {
+    if (id.x >= params.tile.z || id.y >= params.tile.w) {
         return -1;
     }
-    return i32(id.y * params.image.x + id.x);
+    return i32(id.y * params.tile.z + id.x);
 }
 
 @compute @workgroup_size(8, 8)
@@ -194,7 +195,7 @@ fn clip_hits(@builtin(global_invocation_id) id: vec3<u32>) {
             return;
         }
     }
-    let ray = camera_ray(id.x, params.flags2.z + id.y);
+    let ray = camera_ray(params.tile.x + id.x, params.tile.y + id.y);
     var behind = 0u;
     var count = 0u;
     var tmax = -OPEN_END;
@@ -257,7 +258,7 @@ fn clip_segments(@builtin(global_invocation_id) id: vec3<u32>) {
     if (pix < 0) {
         return;
     }
-    let ray = camera_ray(id.x, params.flags2.z + id.y);
+    let ray = camera_ray(params.tile.x + id.x, params.tile.y + id.y);
     let base = u32(pix) * STATE_WORDS;
     let behind = state[base];
     let count = state[base + 1u];

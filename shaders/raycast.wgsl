@@ -372,13 +372,13 @@ fn segment_length(k: u32, n: u32, t_in: f32, t_s: f32, t_out: f32, dt: f32) -> f
 
 @compute @workgroup_size(8, 8)
 fn raycast(@builtin(global_invocation_id) id: vec3<u32>) {
-    let col = id.x;
-    let local_row = id.y;
-    if (col >= params.image.x || local_row >= params.flags2.w) {
+    // One invocation per pixel of the tile (params.tile), its outputs the tile's.
+    if (id.x >= params.tile.z || id.y >= params.tile.w) {
         return;
     }
-    let row = params.flags2.z + local_row;
-    let idx = local_row * params.image.x + col;
+    let col = params.tile.x + id.x;
+    let row = params.tile.y + id.y;
+    let idx = id.y * params.tile.z + id.x;
     mesh_pixel = idx;
     ray_hit = false;
     let px = cast_ray(camera_ray(col, row), ray_offset(col, row));

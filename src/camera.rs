@@ -347,18 +347,27 @@ impl Camera {
     }
 
     /// Whether a ray of some pixel may meet the convex hull of `points` (world, mm):
-    /// false when the hull lies wholly behind a perspective eye, or wholly in front of
-    /// it (or anywhere, orthographic) with its image, the hull of the points' images
-    /// ([`Camera::ray_at`] inverted), outside the image by more than a pixel; true
-    /// otherwise. A conservative test, for skipping work no ray reaches (the GPU
-    /// casters' bricks and cells).
+    /// [`Camera::pixels_seen`] is not `None`. A conservative test, for skipping work no
+    /// ray reaches (the GPU casters' bricks and cells).
     pub fn may_see(&self, points: &[DVec3]) -> bool {
+        self.pixels_seen(points).is_some()
+    }
+
+    /// The pixels whose rays may meet the convex hull of `points` (world, mm), as a
+    /// rectangle of the image; `None` when no ray does. Conservative: `None` when the
+    /// hull lies wholly behind a perspective eye; otherwise the pixels whose centres lie
+    /// within a pixel of the bounding box of the points' images ([`Camera::ray_at`]
+    /// inverted), `None` when there are none; the whole image when a point lies on or
+    /// behind a perspective eye's plane (its image is unbounded). The GPU ray caster
+    /// casts a brick's rays only over its rectangle.
+    pub fn pixels_seen(&self, points: &[DVec3]) -> Option<PixelRect> {
+        let whole = PixelRect::whole(self.width, self.height);
         if matches!(self.projection, Projection::Perspective { .. })
             && points
                 .iter()
                 .all(|&p| (p - self.eye).dot(self.forward) < 0.0)
         {
-            return false;
+            return None;
         }
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for &p in points {
@@ -372,7 +381,7 @@ impl Camera {
                 Projection::Perspective { fov_y_deg } => {
                     let z = d.dot(self.forward);
                     if z.is_nan() || z <= 1e-9 * d.length().max(1.0) {
-                        return true;
+                        return Some(whole);
                     }
                     let h = (0.5 * fov_y_deg.to_radians()).tan();
                     let aspect = self.width as f64 / self.height as f64;
@@ -385,13 +394,66 @@ impl Camera {
                 (0.5 - v) * self.height as f64,
             );
             if !(px.is_finite() && py.is_finite()) {
-                return true;
+                return Some(whole);
             }
             lo = [lo[0].min(px), lo[1].min(py)];
             hi = [hi[0].max(px), hi[1].max(py)];
         }
-        let (w, h) = (self.width as f64, self.height as f64);
-        hi[0] >= -1.0 && lo[0] <= w + 1.0 && hi[1] >= -1.0 && lo[1] <= h + 1.0
+        // Pixel i's centre i + ½ within a pixel of [lo, hi]: i from ⌈lo − 1.5⌉ to
+        // ⌊hi + ½⌋, within the image.
+        let span = |lo: f64, hi: f64, n: usize| {
+            let first = (lo - 1.5).ceil().clamp(0.0, n as f64) as usize;
+            let end = ((hi + 0.5).floor() + 1.0).clamp(0.0, n as f64) as usize;
+            first..end.max(first)
+        };
+        let rect = PixelRect {
+            cols: span(lo[0], hi[0], self.width),
+            rows: span(lo[1], hi[1], self.height),
+        };
+        (!rect.is_empty()).then_some(rect)
+    }
+}
+
+/// A rectangle of an image's pixels: columns `cols` and rows `rows` (half-open ranges,
+/// row 0 at the top).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PixelRect {
+    pub cols: std::ops::Range<usize>,
+    pub rows: std::ops::Range<usize>,
+}
+
+impl PixelRect {
+    /// Every pixel of a `width × height` image.
+    pub fn whole(width: usize, height: usize) -> Self {
+        PixelRect {
+            cols: 0..width,
+            rows: 0..height,
+        }
+    }
+
+    /// Its width in pixels.
+    pub fn width(&self) -> usize {
+        self.cols.len()
+    }
+
+    /// Its height in pixels.
+    pub fn height(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Its pixels.
+    pub fn len(&self) -> usize {
+        self.width() * self.height()
+    }
+
+    /// Whether it holds no pixel.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Whether it holds pixel `(col, row)`.
+    pub fn contains(&self, col: usize, row: usize) -> bool {
+        self.cols.contains(&col) && self.rows.contains(&row)
     }
 }
 
@@ -422,13 +484,14 @@ mod tests {
         assert!((r.dir - DVec3::Y).length() < 1e-12);
     }
 
-    /// `may_see` is conservative: for boxes it says no ray meets, no pixel's ray meets
-    /// them (every ray of the image tested against the box's slabs); and it does say so
-    /// for boxes off to the side of an orthographic view's frame, and outside a
-    /// perspective frustum or behind its eye (cameras from 5 mm to 125 mm of a 40 mm
-    /// box, so some inside it).
+    /// `pixels_seen` is conservative: every pixel whose ray meets a box (every ray of the
+    /// image tested against the box's slabs) lies in the box's rectangle, and none for a
+    /// box it says no ray meets; and it does hide boxes off to the side of an
+    /// orthographic view's frame, and outside a perspective frustum or behind its eye
+    /// (cameras from 5 mm to 125 mm of a 40 mm box, so some inside it), and keeps most
+    /// seen boxes' rectangles smaller than the image.
     #[test]
-    fn may_see_never_hides_a_box_a_pixel_ray_meets() {
+    fn pixels_seen_holds_every_pixel_whose_ray_meets_the_box() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
         let mut next = move || {
             seed ^= seed << 13;
@@ -436,7 +499,7 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
-        let (mut hidden, mut trials, mut behind) = (0, 0, 0);
+        let (mut hidden, mut trials, mut behind, mut cut) = (0, 0, 0, 0);
         for i in 0..400 {
             let projection = if i % 2 == 0 {
                 Projection::Perspective {
@@ -474,25 +537,42 @@ mod tests {
                     })
                     .collect();
                 trials += 1;
-                if c.may_see(&corners) {
-                    continue;
-                }
-                hidden += 1;
-                let perspective = matches!(c.projection, Projection::Perspective { .. });
-                if perspective && corners.iter().all(|&p| (p - c.eye).dot(c.forward) < 0.0) {
-                    behind += 1;
+                let seen = c.pixels_seen(&corners);
+                assert_eq!(c.may_see(&corners), seen.is_some());
+                match &seen {
+                    Some(r) => {
+                        assert!(!r.is_empty() && r.cols.end <= c.width && r.rows.end <= c.height);
+                        cut += (r.len() < c.width * c.height) as usize;
+                    }
+                    None => {
+                        hidden += 1;
+                        let perspective = matches!(c.projection, Projection::Perspective { .. });
+                        if perspective && corners.iter().all(|&p| (p - c.eye).dot(c.forward) < 0.0)
+                        {
+                            behind += 1;
+                        }
+                    }
                 }
                 for row in 0..c.height {
                     for col in 0..c.width {
                         let r = c.ray(col, row);
                         let met = crate::real::slab_interval(r.origin, r.dir, lo, hi)
                             .is_some_and(|(t0, t1)| t1 >= t0.max(r.t_min));
-                        assert!(!met, "{c:?}: pixel ({col}, {row}) meets {lo} … {hi}");
+                        let inside = seen.as_ref().is_some_and(|s| s.contains(col, row));
+                        assert!(
+                            !met || inside,
+                            "{c:?}: pixel ({col}, {row}) meets {lo} … {hi} outside {seen:?}"
+                        );
                     }
                 }
             }
         }
         assert!(hidden * 5 >= trials, "{hidden} of {trials} boxes hidden");
+        assert!(
+            cut * 2 >= trials - hidden,
+            "{cut} of {} seen boxes' rectangles smaller than the image",
+            trials - hidden
+        );
         assert!(
             behind * 20 >= trials,
             "{behind} of {trials} boxes behind the eye"

@@ -242,8 +242,7 @@ fn tile_params(vol: &AnyVolume, cam: &Camera) -> voxlab::gpu::raycast::RaycastPa
     let mut params =
         voxlab::gpu::raycast::raycast_params(vol.dims(), vol.affine(), &lut, (0.0, 1.0), cam, &s)
             .unwrap();
-    params.flags2[2] = 0;
-    params.flags2[3] = cam.height as u32;
+    params.tile = [0, 0, cam.width as u32, cam.height as u32];
     params
 }
 

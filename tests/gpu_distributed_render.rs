@@ -264,17 +264,17 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
     assert!(e.contains("cannot be cut into bricks"), "{e}");
 }
 
-/// A camera that sees part of the volume: the bricks no ray meets
-/// (`gpu::raycast::bricks_in_view`) are skipped, and the image is still the unsplit
-/// one (MIP bit for bit, DVR within the regrouped sums, MIDA and shadowed iso-surfaces
-/// handed from brick to brick through the bricks in view, the shadow rays through
-/// all of them).
+/// A camera that sees part of the volume: the bricks no ray meets are skipped and the
+/// others cast only the rays of their rectangles (`gpu::raycast::bricks_seen`), and the
+/// image is still the unsplit one (MIP bit for bit, DVR within the regrouped sums, MIDA
+/// and shadowed iso-surfaces handed from brick to brick through the bricks in view, the
+/// shadow rays through all of them).
 #[test]
 fn bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one() {
     let Some(ctx) = gpu("bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one") else {
         return;
     };
-    use voxlab::gpu::raycast::{brick_plan, bricks_in_view, render_bricked, RaycastSession};
+    use voxlab::gpu::raycast::{brick_plan, bricks_seen, render_bricked, RaycastSession};
     let dir = scratch("gpu-bricked-view");
     let file = brick_test_volume(&dir);
     let volume = VolumeInput::new(file.to_str().unwrap()).read().unwrap();
@@ -315,18 +315,23 @@ fn bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one() {
         let top = want.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         assert!(top > 0.0, "{mode:?}: an empty image");
         let (tree, bricks) = brick_plan(volume.dims(), &settings, 12, None).unwrap();
-        let seen = bricks_in_view(&camera, volume.affine(), &bricks);
-        let skipped = seen.iter().filter(|&&v| !v).count();
+        let seen = bricks_seen(&camera, volume.affine(), &bricks);
+        let skipped = seen.iter().filter(|v| v.is_none()).count();
         assert!(
             skipped > 0 && skipped < bricks.len(),
             "{mode:?}: {skipped} of {} bricks out of view",
             bricks.len()
         );
+        // The rays the bricks cast: far fewer than every pixel's for every brick seen.
+        let cast: usize = seen.iter().flatten().map(|r| r.len()).sum();
+        let every = (bricks.len() - skipped) * camera.width * camera.height;
+        assert!(cast * 2 < every, "{mode:?}: {cast} rays cast of {every}");
         let cut = (&tree, &bricks[..]);
         let got = render_bricked(ctx, &volume, &tf, &camera, &settings, cut, &|_, _| {}).unwrap();
         let worst = max_abs_error(&got.output.image.data, &want.data);
         eprintln!(
-            "{mode:?}: {skipped} of {} bricks out of view, max |Δ| {worst:.3e} (image max {top:.3})",
+            "{mode:?}: {skipped} of {} bricks out of view, {cast} rays cast of {every}, \
+             max |Δ| {worst:.3e} (image max {top:.3})",
             bricks.len()
         );
         assert!(worst <= bound * top.max(1.0), "{mode:?}: {worst:e}");

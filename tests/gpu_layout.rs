@@ -57,6 +57,7 @@ fn raycast_params_layout_agrees() {
         ("brick", offset_of!(RaycastParams, brick)),
         ("own_lo", offset_of!(RaycastParams, own_lo)),
         ("own_hi", offset_of!(RaycastParams, own_hi)),
+        ("tile", offset_of!(RaycastParams, tile)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

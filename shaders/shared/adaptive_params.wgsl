@@ -13,7 +13,8 @@ struct AdaptiveParams {
     background: vec4<f32>,
     // grid nx, ny, nz; sampling: 0 regular, 1 adaptive, 2 direct
     dims: vec4<u32>,
-    // image width, height; first row of this dispatch, rows in it
+    // width of this dispatch's pixels (the image's, or a brick's rectangle's), image
+    // height; first row of this dispatch, rows in it
     image: vec4<u32>,
     // pre-integration entries per axis n, spectral bins, direct block edge, blocks along x
     table: vec4<u32>,

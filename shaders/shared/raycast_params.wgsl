@@ -37,7 +37,7 @@ struct RaycastParams {
     image: vec4<u32>,
     // pre-classification, shading, precomputed gradients, back-to-front.
     flags: vec4<u32>,
-    // gradient method, hardware trilinear, first row of this tile, rows in this tile.
+    // gradient method, hardware trilinear; zw unused.
     flags2: vec4<u32>,
     // 2D transfer function: value scale, value offset, nv − 1, ng − 1 (classify2d.wgsl).
     tf2d_a: vec4<f32>,
@@ -77,4 +77,7 @@ struct RaycastParams {
     // the shadow rays (shaders/shared/modes_cast.wgsl: shadow_pass).
     own_lo: vec4<f32>,
     own_hi: vec4<f32>,
+    // The pixels of this dispatch (a tile of the image): first column, first row,
+    // columns, rows.
+    tile: vec4<u32>,
 }

@@ -19,7 +19,7 @@ use super::context::{
     LLVMPIPE_LOOP_LIMIT,
 };
 use super::shaders;
-use crate::camera::Camera;
+use crate::camera::{Camera, PixelRect};
 use crate::cpu::adaptive::{
     direct_steps, importance_radius, spectral_table, AdaptiveSettings, AdaptiveState, Sampling,
 };
@@ -574,8 +574,11 @@ pub fn render(
     let mut counts = vec![0u32; w * h];
     // The importance volume's pipelines, compiled by the first brick that needs them.
     let mut importance_pipelines: Option<ImportancePipelines> = None;
+    // One pass casts the rays of the pixels `rect` (the whole image, or a brick's
+    // rectangle); `image` and `counts` are the rectangle's.
     let mut pass = |texels: &Grid<f32>,
                     mut params: AdaptiveParams,
+                    rect: &PixelRect,
                     carry: Option<&mut [[f32; 4]]>,
                     image: &mut Frame,
                     counts: &mut [u32]|
@@ -602,11 +605,14 @@ pub fn render(
         let bands = render_bands(
             ctx,
             (&pipeline, "adaptive"),
-            rows_per_band(ctx, w, h, carried),
+            rows_per_band(ctx, rect.width(), rect.height(), carried),
+            (rect, [w, h]),
             (image, counts),
             carry,
             &|_, _| {},
-            |row0, rows, out_buf, cnt_buf| {
+            |band, out_buf, cnt_buf| {
+                let (row0, rows) = (band.rows.start, band.rows.len());
+                params.image[0] = band.width() as u32;
                 params.image[2] = row0 as u32;
                 params.image[3] = rows as u32;
                 let pbuf = init_buffer(
@@ -615,9 +621,14 @@ pub fn render(
                     bytemuck::bytes_of(&params),
                     super::context::PARAMS_USAGE,
                 )?;
-                // Each band its own rays: an image of any size within one binding.
-                let band = &rays[2 * row0 * w..2 * (row0 + rows) * w];
-                let ray_buf = init_buffer(ctx, "rays", bytemuck::cast_slice(band), storage)?;
+                // Each band its own rays, its pixels': an image of any size within one
+                // binding.
+                let mut band_rays = Vec::with_capacity(2 * band.len());
+                for row in band.rows.clone() {
+                    let first = row * w + band.cols.start;
+                    band_rays.extend_from_slice(&rays[2 * first..2 * (first + band.width())]);
+                }
+                let ray_buf = init_buffer(ctx, "rays", bytemuck::cast_slice(&band_rays), storage)?;
                 Ok(ctx.bind_group(
                     "adaptive",
                     &layout,
@@ -642,16 +653,27 @@ pub fn render(
     };
     let line = match &split {
         None => {
-            pass(&grid, params, None, &mut image, &mut counts)?;
+            pass(
+                &grid,
+                params,
+                &PixelRect::whole(w, h),
+                None,
+                &mut image,
+                &mut counts,
+            )?;
             None
         }
         Some(cut) => {
             let ghost = brick_ghost(settings);
             let mut carry = vec![[0.0f32; 4]; w * h * CARRIED_VEC4S];
             let order = crate::cpu::composite::ray_order(&cut.tree, camera, volume.affine());
-            // A brick no ray meets holds none of their steps: skipped.
-            let in_view = super::raycast::bricks_in_view(camera, volume.affine(), &cut.bricks);
-            for bi in order.into_iter().filter(|&bi| in_view[bi]) {
+            // A brick holds steps of the rays of its rectangle's pixels alone, and none
+            // when no ray meets it: skipped. A ray no brick casts misses the volume.
+            let seen = super::raycast::bricks_seen(camera, volume.affine(), &cut.bricks);
+            for bi in order {
+                let Some(rect) = &seen[bi] else {
+                    continue;
+                };
                 let b = &cut.bricks[bi];
                 let g = b.with_ghost(ghost, dims);
                 let c = values.crop(g.lo, g.hi)?;
@@ -669,7 +691,18 @@ pub fn render(
                         p.own_hi[a] = b.hi[a] as f32 - 0.5;
                     }
                 }
-                pass(&texels, p, Some(&mut carry), &mut image, &mut counts)?;
+                // The pixels stay in `carry`: the rectangle's image and counts are
+                // scratch.
+                let mut scratch = Frame::new(rect.width(), rect.height(), 4);
+                let mut scratch_counts = vec![0u32; rect.len()];
+                pass(
+                    &texels,
+                    p,
+                    rect,
+                    Some(&mut carry),
+                    &mut scratch,
+                    &mut scratch_counts,
+                )?;
             }
             // Each ray's state after the last brick, finished as the unsplit render
             // finishes it.

@@ -173,11 +173,11 @@ impl GpuClipMesh {
         })
     }
 
-    /// The segments of the rays of rows `params.flags2.z ..+ params.flags2.w` (the
-    /// ray caster's tile): [`SEGMENT_VEC4S`] vec4s per pixel, row-major.
+    /// The segments of the rays of the ray caster's tile (`params.tile`: first column,
+    /// first row, columns, rows): [`SEGMENT_VEC4S`] vec4s per pixel, row-major.
     pub fn segments(&self, ctx: &GpuContext, params: &RaycastParams) -> Result<wgpu::Buffer> {
         let dev = &ctx.device;
-        let (w, rows) = (params.image[0] as usize, params.flags2[3] as usize);
+        let (w, rows) = (params.tile[2] as usize, params.tile[3] as usize);
         let pixels = w * rows;
         let state = ctx.storage_buffer("clip mesh hits", (pixels * STATE_WORDS * 4) as u64)?;
         let out = ctx.storage_buffer("clip mesh segments", (pixels * SEGMENT_VEC4S * 16) as u64)?;
@@ -230,7 +230,7 @@ impl GpuClipMesh {
     }
 }
 
-/// The inside segments of every pixel's ray for `params` (one tile: its rows), read
+/// The inside segments of every pixel's ray for `params` (one tile: `params.tile`), read
 /// back: per pixel the count and up to [`MAX_SEGMENTS`] `[t0, t1]` pairs in world mm.
 /// The GPU twin of `cpu::clipmesh::ClipTriangles::segments`, for tests and tools.
 pub fn segments(
@@ -250,7 +250,7 @@ pub fn segments_with_search(
 ) -> Result<Vec<Vec<[f32; 2]>>> {
     let gm = GpuClipMesh::with_search(ctx, mesh, hierarchy)?;
     let buf = gm.segments(ctx, params)?;
-    let pixels = params.image[0] as usize * params.flags2[3] as usize;
+    let pixels = params.tile[2] as usize * params.tile[3] as usize;
     let raw: Vec<[f32; 4]> =
         bytemuck::cast_slice(&ctx.read_buffer(&buf, (pixels * SEGMENT_VEC4S * 16) as u64)?)
             .to_vec();

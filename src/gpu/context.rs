@@ -24,6 +24,7 @@
 //! casters (`render_bands`: the ray caster, the adaptive and the multi-volume casters).
 //! The WGSL itself is assembled by `gpu::shaders`.
 
+use crate::camera::PixelRect;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use std::sync::OnceLock;
@@ -1009,46 +1010,75 @@ pub(crate) struct BandTimes {
     pub readback: f64,
 }
 
-/// The row bands of a per-pixel caster: `image` (RGBA f32 pixels on the device, its
-/// own channel count on the host) and `counts` (one u32 per pixel) in bands of at most
-/// `rows_per_band` rows. For each band `bind(row0, rows, pixels, samples)` makes the
+/// The row bands of a per-pixel caster over the pixels `rect` of a `frame` (width,
+/// height): `image` (RGBA f32 pixels on the device, its own channel count on the
+/// host) and `counts` (one u32 per pixel), both the size of `rect`, in bands of at most
+/// `rows_per_band` of its rows. For each band `bind(band, pixels, samples)` makes the
 /// band's bind group around two new storage buffers, the band's pixels (`vec4<f32>`)
-/// and sample counts (`u32`); the band is dispatched in 8 × 8 workgroups (one
-/// invocation per pixel), waited for and read back, and `progress(rows done, height)`
-/// is called. Shared by `gpu::raycast`, `gpu::adaptive` and `gpu::multi`.
+/// and sample counts (`u32`), row-major over `band` (frame coordinates); the band is
+/// dispatched in 8 × 8 workgroups (one invocation per pixel), waited for and read back,
+/// and `progress(rows done, rows of rect)` is called. Shared by `gpu::raycast` (a
+/// brick's rectangle, `Camera::pixels_seen`), `gpu::adaptive` and `gpu::multi` (whole
+/// frames).
 ///
-/// With `carry` (`k` vec4 per pixel of the image, row-major) the pixel buffer holds each
-/// pixel's `k` vec4, filled from `carry` before the dispatch and read back into it (a
-/// ray's state handed from one brick to the next); `image` is left as it is.
+/// With `carry` (`k` vec4 per pixel of the whole frame, row-major) the pixel buffer
+/// holds each pixel's `k` vec4, filled from `carry` before the dispatch and read back
+/// into it (a ray's state handed from one brick to the next); `image` is left as it is,
+/// and so are the states of pixels outside `rect`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn render_bands(
     ctx: &GpuContext,
     (pipeline, label): (&wgpu::ComputePipeline, &str),
     rows_per_band: usize,
+    (rect, frame): (&PixelRect, [usize; 2]),
     (image, counts): (&mut Frame, &mut [u32]),
     mut carry: Option<&mut [[f32; 4]]>,
     progress: &(dyn Fn(usize, usize) + Sync),
-    mut bind: impl FnMut(usize, usize, &wgpu::Buffer, &wgpu::Buffer) -> Result<wgpu::BindGroup>,
+    mut bind: impl FnMut(&PixelRect, &wgpu::Buffer, &wgpu::Buffer) -> Result<wgpu::BindGroup>,
 ) -> Result<BandTimes> {
-    let (w, h) = (image.width, image.height);
+    let (w, h) = (rect.width(), rect.height());
+    if image.width != w || image.height != h || counts.len() != w * h {
+        return Err(Error::Gpu(format!(
+            "a {}×{} image with {} counts for a {w}×{h} tile",
+            image.width,
+            image.height,
+            counts.len()
+        )));
+    }
     let query = ctx.timestamps();
     let mut times = BandTimes {
         from_timestamps: query.is_some(),
         ..Default::default()
     };
-    let mut row0 = 0;
-    while row0 < h {
-        let rows = rows_per_band.min(h - row0);
-        let per_pixel = carry.as_ref().map_or(1, |c| c.len() / (w * h).max(1));
-        let band = (row0 * w * per_pixel)..((row0 + rows) * w * per_pixel);
+    let frame_width = frame[0];
+    let per_pixel = carry
+        .as_ref()
+        .map_or(1, |c| c.len() / (frame[0] * frame[1]).max(1));
+    // Where row `row` (frame coordinates) of the tile lies in `carry`.
+    let carried_row = |row: usize| {
+        let start = (row * frame_width + rect.cols.start) * per_pixel;
+        start..start + w * per_pixel
+    };
+    let mut done = 0;
+    while done < h {
+        let rows = rows_per_band.min(h - done);
+        let band = PixelRect {
+            cols: rect.cols.clone(),
+            rows: rect.rows.start + done..rect.rows.start + done + rows,
+        };
         let pix_bytes = (rows * w * 16 * per_pixel) as u64;
         let cnt_bytes = (rows * w * 4) as u64;
         let out_buf = ctx.storage_buffer("pixels", pix_bytes)?;
         if let Some(c) = carry.as_ref() {
+            let mut state = Vec::with_capacity(rows * w * per_pixel);
+            for row in band.rows.clone() {
+                state.extend_from_slice(&c[carried_row(row)]);
+            }
             ctx.queue
-                .write_buffer(&out_buf, 0, bytemuck::cast_slice(&c[band.clone()]));
+                .write_buffer(&out_buf, 0, bytemuck::cast_slice(&state));
         }
         let cnt_buf = ctx.storage_buffer("samples", cnt_bytes)?;
-        let group = bind(row0, rows, &out_buf, &cnt_buf)?;
+        let group = bind(&band, &out_buf, &cnt_buf)?;
         let t_k = Instant::now();
         let extent = [(w as u32).div_ceil(8), (rows as u32).div_ceil(8), 1];
         let device = ctx.run_pass((pipeline, label), &[group], extent, query.as_ref())?;
@@ -1060,17 +1090,21 @@ pub(crate) fn render_bands(
         times.readback += t_r.elapsed().as_secs_f64();
         let ch = image.channels;
         match carry.as_mut() {
-            Some(c) => c[band].copy_from_slice(&px),
+            Some(c) => {
+                for (i, row) in band.rows.clone().enumerate() {
+                    c[carried_row(row)].copy_from_slice(&px[i * w * per_pixel..][..w * per_pixel]);
+                }
+            }
             None => {
                 for (i, p) in px.iter().enumerate() {
-                    let dst = (row0 * w + i) * ch;
+                    let dst = (done * w + i) * ch;
                     image.data[dst..dst + ch].copy_from_slice(&p.map(|v| v as f64)[..ch]);
                 }
             }
         }
-        counts[row0 * w..(row0 + rows) * w].copy_from_slice(&cn);
-        row0 += rows;
-        progress(row0, h);
+        counts[done * w..(done + rows) * w].copy_from_slice(&cn);
+        done += rows;
+        progress(done, h);
     }
     Ok(times)
 }

@@ -40,7 +40,7 @@ use super::context::{
     buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, LLVMPIPE_LOOP_LIMIT,
 };
 use super::raycast::GpuTimings;
-use crate::camera::{Camera, Projection};
+use crate::camera::{Camera, PixelRect, Projection};
 use crate::cpu::raycast::RenderOutput;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
@@ -722,10 +722,12 @@ pub fn render(
             ctx,
             (&pipeline, "multi"),
             rows_per_band(ctx, w, h, carried),
+            (&PixelRect::whole(w, h), [w, h]),
             (image, counts),
             carry,
             progress,
-            |row0, rows, out_buf, cnt_buf| {
+            |band, out_buf, cnt_buf| {
+                let (row0, rows) = (band.rows.start, band.rows.len());
                 params.flags[2] = row0 as u32;
                 params.flags[3] = rows as u32;
                 let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -68,6 +68,9 @@ pub struct RaycastParams {
     /// `own_lo[3]` = 1 in a pass of the shadow rays (`gpu::raycast::render_bricked`).
     pub own_lo: [f32; 4],
     pub own_hi: [f32; 4],
+    /// The pixels of this dispatch (a tile of the image): first column, first row,
+    /// columns, rows.
+    pub tile: [u32; 4],
 }
 
 /// Parameters of the adaptive passes; twin of `shaders/shared/adaptive_params.wgsl`
@@ -86,7 +89,9 @@ pub struct AdaptiveParams {
     pub background: [f32; 4],
     /// nx, ny, nz, sampling (0 regular, 1 adaptive, 2 direct).
     pub dims: [u32; 4],
-    /// Width, height, first row, rows.
+    /// Width, height, first row, rows of the dispatch's pixels (a band of the image's
+    /// rows; its width is a brick's rectangle's, `gpu::raycast::bricks_seen`, when the
+    /// volume is cut).
     pub image: [u32; 4],
     /// Pre-integration n, spectral bins, block edge, blocks along x.
     pub table: [u32; 4],

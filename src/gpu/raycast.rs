@@ -52,7 +52,7 @@ use super::context::{
 };
 use super::gradient::gradient_method_id;
 use super::shaders;
-use crate::camera::{Camera, Projection};
+use crate::camera::{Camera, PixelRect, Projection};
 use crate::cpu::filter::prepare;
 use crate::cpu::grid::Grid;
 use crate::cpu::raycast::RenderOutput;
@@ -587,12 +587,8 @@ pub fn raycast_params(
             reads_gradient_volume(settings) as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
         ],
-        flags2: [
-            gradient,
-            settings.hardware_filtering as u32,
-            0,
-            camera.height as u32,
-        ],
+        flags2: [gradient, settings.hardware_filtering as u32, 0, 0],
+        tile: [0, 0, camera.width as u32, camera.height as u32],
         tf2d_a: tf2d[0],
         tf2d_b: tf2d[1],
         ..accel_params(dims, settings, modes_params(settings, value_range))
@@ -1070,12 +1066,10 @@ pub fn render_bricked<'c>(
     } else {
         (0..bricks.len()).collect()
     };
-    // A brick no ray meets adds nothing: its pass is skipped (its piece is empty). One
-    // pass runs even when none is in view, to find that every ray misses.
-    let mut in_view = bricks_in_view(camera, volume.affine(), bricks);
-    if !in_view.iter().any(|&v| v) {
-        in_view[order[0]] = true;
-    }
+    // A brick casts only the rays of the pixels that may meet it (its rectangle); a
+    // brick no ray meets adds nothing: its pass is skipped (its piece is empty). A
+    // pixel no brick casts misses the volume.
+    let seen = bricks_seen(camera, volume.affine(), bricks);
     let mut pieces: Vec<Option<Piece>> = (0..bricks.len()).map(|_| None).collect();
     // The bricks' times summed; `total` is the whole render's, set at the end.
     let mut timings = GpuTimings {
@@ -1122,20 +1116,28 @@ pub fn render_bricked<'c>(
     let deferred = defers_shadows(settings);
     let passes = bricks.len() * (1 + deferred as usize);
     for (i, &bi) in order.iter().enumerate() {
-        if !in_view[bi] {
+        let Some(rect) = &seen[bi] else {
             continue;
-        }
+        };
         load(&mut session, bi)?;
         let session = session.as_mut().expect("loaded");
-        let rows = |done: usize, total: usize| progress(i * total + done, passes * total);
+        // Progress in the image's rows: the rectangle's scaled to them.
+        let rows =
+            |done: usize, total: usize| progress(i * h + done * h / total.max(1), passes * h);
         let state = carried.then_some(&mut carry[..]);
-        let out = session.render_frame(tf, camera, &s, state, false, &rows)?;
+        let out = session.render_frame(tf, camera, &s, state, false, Some(rect), &rows)?;
         timings.add(&out.timings);
         let counts: Vec<u32> = match &out.output.samples {
             Some(f) => f.data.iter().map(|&c| c as u32).collect(),
-            None => vec![0; w * h],
+            None => vec![0; rect.len()],
         };
-        pieces[bi] = Some((out.output.image, counts, out.hits.unwrap_or_default()));
+        let hits = out.hits.unwrap_or_default();
+        pieces[bi] = Some(Piece {
+            rect: rect.clone(),
+            image: out.output.image,
+            counts,
+            hits,
+        });
     }
     // The opaque hits' shadow rays, which cross bricks the rays did not: marched
     // through the bricks in the light's order, each brick taking the samples it owns
@@ -1164,7 +1166,8 @@ pub fn render_bricked<'c>(
                 let session = session.as_mut().expect("loaded");
                 let at = pass.min(passes - 1);
                 let rows = |done: usize, total: usize| progress(at * total + done, passes * total);
-                let out = session.render_frame(tf, camera, &s, Some(&mut carry), true, &rows)?;
+                let out =
+                    session.render_frame(tf, camera, &s, Some(&mut carry), true, None, &rows)?;
                 timings.add(&out.timings);
                 pass += 1;
             }
@@ -1173,8 +1176,20 @@ pub fn render_bricked<'c>(
     let ch = if settings.mode.rgba() { 4 } else { 1 };
     let mut image = Frame::new(w, h, ch);
     let mut counts = vec![0u32; w * h];
-    // Whether each ray meets the whole volume's box: every rendered brick says the same.
-    let hits = &pieces.iter().flatten().next().expect("one brick renders").2;
+    // Whether each ray meets the whole volume's box: every brick that casts it says the
+    // same, and a ray that meets the box meets a brick, whose rectangle holds its pixel.
+    let mut hits = vec![false; w * h];
+    for piece in pieces.iter().flatten() {
+        for (i, row) in piece.rect.rows.clone().enumerate() {
+            let (from, to) = (i * piece.rect.width(), row * w + piece.rect.cols.start);
+            for (hit, &met) in hits[to..]
+                .iter_mut()
+                .zip(&piece.hits[from..][..piece.rect.width()])
+            {
+                *hit |= met;
+            }
+        }
+    }
     use rayon::prelude::*;
     if carried {
         // Each ray's state after the last brick, finished as the unsplit render
@@ -1188,8 +1203,13 @@ pub fn render_bricked<'c>(
             .zip(carry.par_chunks(CARRIED_VEC4S))
             .enumerate()
             .for_each(|(p, ((px, n), state))| {
-                *n = pieces.iter().flatten().map(|(_, c, _)| c[p]).sum();
-                let hit = hits.get(p).copied().unwrap_or(false);
+                let (col, row) = (p % w, p / w);
+                *n = pieces
+                    .iter()
+                    .flatten()
+                    .filter_map(|piece| piece.at(col, row).map(|i| piece.counts[i]))
+                    .sum();
+                let hit = hits[p];
                 let v = match (hit, settings.mode) {
                     (false, _) => bg,
                     (true, Mode::Mida) => {
@@ -1217,17 +1237,21 @@ pub fn render_bricked<'c>(
                 for col in 0..w {
                     let p = row * w + col;
                     let d = to_index.transform_vector3(camera.ray(col, row).dir);
+                    // A brick that did not cast this pixel's ray adds nothing.
                     let piece = |b: usize| {
-                        let Some((img, n, _)) = &pieces[b] else {
+                        let Some((piece, i)) = pieces[b]
+                            .as_ref()
+                            .and_then(|piece| Some((piece, piece.at(col, row)?)))
+                        else {
                             return ([0.0f32; 4], 0);
                         };
                         let mut v = [0.0f32; 4];
                         for (c, x) in v.iter_mut().take(ch).enumerate() {
-                            *x = img.data[p * ch + c] as f32;
+                            *x = piece.image.data[i * ch + c] as f32;
                         }
-                        (v, n[p])
+                        (v, piece.counts[i])
                     };
-                    let hit = hits.get(p).copied().unwrap_or(false);
+                    let hit = hits[p];
                     let (px, n) = crate::cpu::composite::composite_pixel(
                         tree,
                         d.to_array(),
@@ -1251,19 +1275,49 @@ pub fn render_bricked<'c>(
     })
 }
 
-/// A brick's render in [`render_bricked`]: its image, its rays' sample counts and
-/// whether each ray meets the whole volume's box.
-type Piece = (Frame, Vec<u32>, Vec<bool>);
+/// A brick's render in [`render_bricked`] over the pixels of its rectangle: their
+/// image, their rays' sample counts and whether each ray meets the whole volume's box,
+/// row-major over `rect`.
+struct Piece {
+    rect: PixelRect,
+    image: Frame,
+    counts: Vec<u32>,
+    hits: Vec<bool>,
+}
+
+impl Piece {
+    /// Where pixel `(col, row)` of the frame lies in the piece, if it does.
+    fn at(&self, col: usize, row: usize) -> Option<usize> {
+        let r = &self.rect;
+        r.contains(col, row)
+            .then(|| (row - r.rows.start) * r.width() + col - r.cols.start)
+    }
+}
 
 /// Which of `bricks` (of a volume placed by `affine`) a ray of `camera` may meet:
-/// [`Camera::may_see`] of each brick's box one and a half voxels wider each way than
-/// the samples it owns (faces at half voxels). [`render_bricked`] skips the others'
-/// passes, whose rays would all miss.
+/// [`bricks_seen`] is not `None`. The multi-volume and adaptive casters skip the
+/// others' passes, whose rays would all miss.
 pub fn bricks_in_view(
     camera: &Camera,
     affine: glam::DMat4,
     bricks: &[crate::io::brick::Brick],
 ) -> Vec<bool> {
+    bricks_seen(camera, affine, bricks)
+        .iter()
+        .map(Option::is_some)
+        .collect()
+}
+
+/// The pixels of `camera` whose rays may meet each of `bricks` (of a volume placed by
+/// `affine`): [`Camera::pixels_seen`] of each brick's box one and a half voxels wider
+/// each way than the samples it owns (faces at half voxels), `None` for a brick no ray
+/// meets. [`render_bricked`] casts each brick's rays over its rectangle alone and skips
+/// the bricks no ray meets.
+pub fn bricks_seen(
+    camera: &Camera,
+    affine: glam::DMat4,
+    bricks: &[crate::io::brick::Brick],
+) -> Vec<Option<PixelRect>> {
     bricks
         .iter()
         .map(|b| {
@@ -1279,7 +1333,7 @@ pub fn bricks_in_view(
                     affine.transform_point3(glam::DVec3::new(at(0), at(1), at(2)))
                 })
                 .collect();
-            camera.may_see(&corners)
+            camera.pixels_seen(&corners)
         })
         .collect()
 }
@@ -1745,14 +1799,17 @@ impl<'c> RaycastSession<'c> {
         settings: &RenderSettings,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<GpuRenderOutput> {
-        self.render_frame(tf, camera, settings, None, false, progress)
+        self.render_frame(tf, camera, settings, None, false, None, progress)
     }
 
     /// A frame; a brick's MIDA or iso-surface frame ([`carries_state`]) takes and
     /// leaves each ray's state in `carry` ([`CARRIED_VEC4S`] per pixel, [`carried_mida`],
     /// [`carried_iso`]) and makes no image. With `shadows`, a brick's iso-surface frame
     /// marches only the waiting shadow rays' samples it owns
-    /// (`shaders/shared/modes_cast.wgsl: shadow_pass`).
+    /// (`shaders/shared/modes_cast.wgsl: shadow_pass`). With `rect`, only the rays of
+    /// those pixels are cast (and carried): the image, counts and hits are the
+    /// rectangle's.
+    #[allow(clippy::too_many_arguments)]
     fn render_frame(
         &mut self,
         tf: &TransferFunction,
@@ -1760,11 +1817,20 @@ impl<'c> RaycastSession<'c> {
         settings: &RenderSettings,
         carry: Option<&mut [[f32; 4]]>,
         shadows: bool,
+        rect: Option<&PixelRect>,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<GpuRenderOutput> {
         let t_start = Instant::now();
         settings.validate()?;
         tf.validate()?;
+        let whole = PixelRect::whole(camera.width, camera.height);
+        let rect = rect.unwrap_or(&whole);
+        if rect.is_empty() || rect.cols.end > camera.width || rect.rows.end > camera.height {
+            return Err(Error::Gpu(format!(
+                "the pixels {rect:?} of a {}×{} frame",
+                camera.width, camera.height
+            )));
+        }
         let carries = self.brick.is_some() && carries_state(settings);
         let pixels = camera.width * camera.height;
         match carry.as_ref() {
@@ -2043,8 +2109,9 @@ impl<'c> RaycastSession<'c> {
             0.0
         };
 
-        // Ray casting, in bands of rows that fit the storage-binding limit.
-        let (w, h) = (camera.width, camera.height);
+        // Ray casting over the rectangle, in bands of rows that fit the storage-binding
+        // limit.
+        let (w, h) = (rect.width(), rect.height());
         let max_binding = ctx.limits.max_storage_buffer_binding_size as usize;
         let pixel_bytes = if clip_mesh.is_some() {
             16 * super::clipmesh::SEGMENT_VEC4S
@@ -2084,12 +2151,13 @@ impl<'c> RaycastSession<'c> {
             ctx,
             (&self.pipelines[pipeline].1, "raycast"),
             rows_per_tile,
+            (rect, [camera.width, camera.height]),
             (&mut image, &mut counts),
             carry,
             progress,
-            |row0, rows, out_buf, cnt_buf| {
-                params.flags2[2] = row0 as u32;
-                params.flags2[3] = rows as u32;
+            |band, out_buf, cnt_buf| {
+                let (c0, r0) = (band.cols.start as u32, band.rows.start as u32);
+                params.tile = [c0, r0, band.width() as u32, band.height() as u32];
                 let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("raycast params"),
                     contents: bytemuck::bytes_of(&params),
