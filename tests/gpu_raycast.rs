@@ -360,10 +360,47 @@ fn frame_bits(o: &voxlab::cpu::raycast::RenderOutput) -> (Vec<u64>, Vec<u64>) {
     (bits(&o.image), o.samples.as_ref().map_or(Vec::new(), bits))
 }
 
-/// The counters that say what a frame made: (pipelines compiled, tables uploaded,
-/// set-up passes).
+/// The counters that say what a frame made: (pipelines compiled or taken from the
+/// device, which an earlier session on it may have compiled; tables uploaded; set-up
+/// passes).
 fn made(s: voxlab::gpu::raycast::SessionStats) -> (usize, usize, usize) {
-    (s.pipelines_compiled, s.table_uploads, s.prepare_passes)
+    (
+        s.pipelines_compiled + s.pipelines_shared,
+        s.table_uploads,
+        s.prepare_passes,
+    )
+}
+
+/// A second session on the device compiles no ray-casting pipeline the first did: it
+/// takes it from the device (`GpuContext::kept`), and renders the same image bit for
+/// bit. (A context of its own, so no other test's sessions come between.)
+#[test]
+fn a_second_session_takes_the_first_sessions_pipeline() {
+    use voxlab::gpu::raycast::RaycastSession;
+    if common::gpu("a_second_session_takes_the_first_sessions_pipeline").is_none() {
+        return;
+    }
+    let ctx = voxlab::gpu::GpuContext::new().expect("a second context on the test adapter");
+    let (vol, tf, cam, s) = scene(&BASE, 24, 32);
+    let mut first = RaycastSession::new(&ctx, &vol).unwrap();
+    let a = first.render(&tf, &cam, &s, &|_, _| {}).unwrap();
+    let (f, mut second) = (first.stats(), RaycastSession::new(&ctx, &vol).unwrap());
+    let b = second.render(&tf, &cam, &s, &|_, _| {}).unwrap();
+    let g = second.stats();
+    // The first: the ray caster's and the min/max grid's pipelines; the second: the
+    // min/max grid's (a session's own), the ray caster's taken.
+    assert_eq!((f.pipelines_compiled, f.pipelines_shared), (2, 0));
+    assert_eq!((g.pipelines_compiled, g.pipelines_shared), (1, 1));
+    assert!(frame_bits(&a.output) == frame_bits(&b.output));
+    // A frame of another shader compiles it, and the first session then takes it.
+    let mip = RenderSettings {
+        mode: Mode::Mip,
+        ..s.clone()
+    };
+    second.render(&tf, &cam, &mip, &|_, _| {}).unwrap();
+    first.render(&tf, &cam, &mip, &|_, _| {}).unwrap();
+    assert_eq!(second.stats().pipelines_compiled, 2);
+    assert_eq!(first.stats().pipelines_shared, 1);
 }
 
 /// One session renders frames that change the camera, the transfer function, the mode,

@@ -133,7 +133,16 @@ pub struct GpuContext {
     /// Whether the shaders' parameter blocks are bound as read-only storage buffers
     /// instead of uniform buffers: on a CPU adapter (see [`GpuContext::shader`]).
     pub params_in_storage: bool,
+    /// Objects costly to make that every job on the device may share
+    /// ([`GpuContext::kept`]).
+    kept: std::sync::Mutex<Vec<(String, Kept)>>,
 }
+
+/// An object [`GpuContext::kept`] holds.
+type Kept = std::sync::Arc<dyn std::any::Any + Send + Sync>;
+
+/// How many objects [`GpuContext::kept`] holds; the least recently used goes first.
+pub const KEPT_OBJECTS: usize = 24;
 
 /// The usage of every parameter block's buffer: bound as a uniform buffer, or as a
 /// read-only storage buffer where [`GpuContext::params_in_storage`].
@@ -259,6 +268,7 @@ impl GpuContext {
             features,
             memory,
             params_in_storage: summary_is_cpu,
+            kept: Default::default(),
         })
     }
 
@@ -404,6 +414,36 @@ impl GpuContext {
             None => Ok(module),
             Some(e) => Err(Error::Gpu(format!("shader {label} failed to compile: {e}"))),
         }
+    }
+
+    /// The object kept under `key` for every job on this device, made by `make` when
+    /// it is not there (then `true`); at most [`KEPT_OBJECTS`] are kept, the least
+    /// recently used dropped first (those in use live on). For what is costly to make
+    /// and the same for every job that asks: the ray caster's compiled pipelines and
+    /// the layouts they bind, so that a second session (a one-shot render, a brick, a
+    /// call from Python) compiles nothing the first did. The key must name everything
+    /// the object depends on, [`GpuContext::params_in_storage`] included. One thread
+    /// makes at a time.
+    pub(crate) fn kept<T: std::any::Any + Send + Sync>(
+        &self,
+        key: &str,
+        make: impl FnOnce() -> Result<T>,
+    ) -> Result<(std::sync::Arc<T>, bool)> {
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = kept.iter().position(|(k, _)| k == key) {
+            let hit = kept.remove(i);
+            kept.push(hit);
+            if let Ok(t) = kept[kept.len() - 1].1.clone().downcast::<T>() {
+                return Ok((t, false));
+            }
+            kept.pop();
+        }
+        let t = std::sync::Arc::new(make()?);
+        if kept.len() >= KEPT_OBJECTS {
+            kept.remove(0);
+        }
+        kept.push((key.to_string(), t.clone()));
+        Ok((t, true))
     }
 
     /// Waits for all submitted work; device loss becomes [`Error::Gpu`].

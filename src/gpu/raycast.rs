@@ -64,6 +64,7 @@ use crate::settings::{
 use crate::transfer::TransferFunction;
 use crate::volume::AnyVolume;
 use glam::{DMat3, DVec3};
+use std::sync::Arc;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -1381,6 +1382,9 @@ pub struct SessionStats {
     /// Compute pipelines compiled: one per distinct ray-casting shader source, the
     /// pre-classification and gradient passes and the min/max grid's, each once.
     pub pipelines_compiled: usize,
+    /// Ray-casting pipelines taken from the device instead, compiled by an earlier
+    /// session on it ([`GpuContext::kept`]).
+    pub pipelines_shared: usize,
     /// Set-up products made: the B-spline coefficients, the pre-classified colours,
     /// the gradient volume and the skipping's min/max grid, each when its key changed.
     pub prepare_passes: usize,
@@ -1482,16 +1486,17 @@ pub struct RaycastSession<'c> {
     compact_on: bool,
     compact: Option<wgpu::Texture>,
     /// What a frame binds: its textures filterable where the device filters f32 ones.
-    frame: FrameLayout,
+    frame: Arc<FrameLayout>,
     /// On a device without `FLOAT32_FILTERABLE`: what hardware-filtered frames bind,
     /// every texture filterable (they read only the compact texture: [`check_device`]).
-    compact_filtering: Option<FrameLayout>,
+    compact_filtering: Option<Arc<FrameLayout>>,
     /// Buffers bound where skipping is off, and where there is no clipping mesh.
     skip_off: (wgpu::Buffer, wgpu::Buffer),
     no_segments: wgpu::Buffer,
     /// Ray-casting pipelines by shader source (and whether over the compact-filtering
-    /// layout), least recently used first.
-    pipelines: Vec<((String, bool), wgpu::ComputePipeline)>,
+    /// layout), least recently used first; the device keeps them for other sessions
+    /// too ([`GpuContext::kept`]).
+    pipelines: Vec<((String, bool), Arc<wgpu::ComputePipeline>)>,
     prepare_pipelines: Option<PreparePipelines>,
     minmax_pipeline: Option<super::skip::MinMaxPipeline>,
     /// The interpolating B-splines' coefficients, on the host and as a texture.
@@ -1573,21 +1578,38 @@ impl<'c> RaycastSession<'c> {
         let (dims, range, grid) = checked_f32(ctx, volume)?;
         let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
         let dev = &ctx.device;
-        let (layout, sampler) = frame_layout(ctx, filterable);
-        let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+        // The layouts every session on the device binds (its pipelines are made over
+        // them: `raycast_pipeline`).
+        let in_storage = ctx.params_in_storage;
+        let (frame, _) = ctx.kept(
+            &format!("raycast frame layout, filterable {filterable}, {in_storage}"),
+            || {
+                let (layout, sampler) = frame_layout(ctx, filterable);
+                let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+                Ok(FrameLayout {
+                    layout,
+                    sampler,
+                    dummy,
+                })
+            },
+        )?;
         // Without f32 filtering, hardware-filtered frames that read only the compact
         // texture bind every texture filterable: an 8-bit placeholder for the others.
         let compact_filtering = match filterable {
             true => None,
             false => {
-                let (layout, sampler) = frame_layout(ctx, true);
-                let dummy =
-                    ctx.upload_volume_texels([1, 1, 1], wgpu::TextureFormat::R8Unorm, &[0])?;
-                Some(FrameLayout {
-                    layout,
-                    sampler,
-                    dummy,
-                })
+                let key = format!("raycast compact-filtering layout, {in_storage}");
+                let (f, _) = ctx.kept(&key, || {
+                    let (layout, sampler) = frame_layout(ctx, true);
+                    let dummy =
+                        ctx.upload_volume_texels([1, 1, 1], wgpu::TextureFormat::R8Unorm, &[0])?;
+                    Ok(FrameLayout {
+                        layout,
+                        sampler,
+                        dummy,
+                    })
+                })?;
+                Some(f)
             }
         };
         let zeros = |label, bytes: &[u8]| {
@@ -1616,11 +1638,7 @@ impl<'c> RaycastSession<'c> {
             compact_kind: CompactVolume::of(ctx, volume),
             compact_on: CompactVolume::enabled(),
             compact: None,
-            frame: FrameLayout {
-                layout,
-                sampler,
-                dummy,
-            },
+            frame,
             compact_filtering,
             skip_off,
             no_segments,
@@ -2149,7 +2167,7 @@ impl<'c> RaycastSession<'c> {
         let mut counts = vec![0u32; w * h];
         let bands = render_bands(
             ctx,
-            (&self.pipelines[pipeline].1, "raycast"),
+            (self.pipelines[pipeline].1.as_ref(), "raycast"),
             rows_per_tile,
             (rect, [camera.width, camera.height]),
             (&mut image, &mut counts),
@@ -2223,13 +2241,14 @@ impl<'c> RaycastSession<'c> {
     /// What a frame binds: the compact-filtering layout where it is one.
     fn frame_layout(&self, compact_filtered: bool) -> &FrameLayout {
         match &self.compact_filtering {
-            Some(f) if compact_filtered => f,
-            _ => &self.frame,
+            Some(f) if compact_filtered => f.as_ref(),
+            _ => self.frame.as_ref(),
         }
     }
 
-    /// The index in `self.pipelines` of the ray-casting pipeline of `source`, compiled
-    /// when it is not there (dropping the least recently used past [`PIPELINES_KEPT`]).
+    /// The index in `self.pipelines` of the ray-casting pipeline of `source`, taken
+    /// from the device's kept objects or compiled when it is not there (dropping the
+    /// least recently used past [`PIPELINES_KEPT`]).
     fn raycast_pipeline(&mut self, source: String, compact_filtered: bool) -> Result<usize> {
         let key = (source, compact_filtered);
         if let Some(i) = self.pipelines.iter().position(|(k, _)| *k == key) {
@@ -2239,10 +2258,20 @@ impl<'c> RaycastSession<'c> {
             if self.pipelines.len() >= PIPELINES_KEPT {
                 self.pipelines.remove(0);
             }
-            let module = self.ctx.shader("raycast.wgsl", &key.0)?;
+            let ctx = self.ctx;
             let layout = &self.frame_layout(compact_filtered).layout;
-            let pipeline = compute_pipeline(self.ctx, "raycast", &module, "raycast", layout)?;
-            self.stats.pipelines_compiled += 1;
+            let kept = format!(
+                "raycast pipeline, compact filtering {compact_filtered}, {}\n{}",
+                ctx.params_in_storage, key.0
+            );
+            let (pipeline, made) = ctx.kept(&kept, || {
+                let module = ctx.shader("raycast.wgsl", &key.0)?;
+                compute_pipeline(ctx, "raycast", &module, "raycast", layout)
+            })?;
+            match made {
+                true => self.stats.pipelines_compiled += 1,
+                false => self.stats.pipelines_shared += 1,
+            }
             self.pipelines.push((key, pipeline));
         }
         Ok(self.pipelines.len() - 1)

@@ -508,13 +508,17 @@ pub fn run(r: RenderArgs) -> Result<ExitCode> {
                     f.gpu_uploads.iter().map(|u| format!("{u:.4}")).collect();
                 eprintln!(
                     "GPU session: the volume uploaded {} time(s) ({} on the device) for {} \
-                     frames, {} table upload(s), {} pipeline(s) compiled, {} set-up \
+                     frames, {} table upload(s), {} pipeline(s) compiled{}, {} set-up \
                      pass(es); upload seconds per frame: {}",
                     g.volume_uploads,
                     voxlab::gpu::plan::human_bytes(g.volume_bytes),
                     g.frames,
                     g.table_uploads,
                     g.pipelines_compiled,
+                    match g.pipelines_shared {
+                        0 => String::new(),
+                        n => format!(" and {n} taken from the device"),
+                    },
                     g.prepare_passes,
                     uploads.join(" ")
                 );
