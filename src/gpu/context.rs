@@ -424,7 +424,7 @@ impl GpuContext {
     /// call from Python) compiles nothing the first did. The key must name everything
     /// the object depends on, [`GpuContext::params_in_storage`] included. One thread
     /// makes at a time.
-    pub(crate) fn kept<T: std::any::Any + Send + Sync>(
+    pub fn kept<T: std::any::Any + Send + Sync>(
         &self,
         key: &str,
         make: impl FnOnce() -> Result<T>,
