@@ -418,6 +418,42 @@ fn delta_transforms_to_a_constant() {
     }
 }
 
+/// The device keeps the FFT's layouts and pipelines (`GpuContext::kept`): a second
+/// transform of the same kind makes nothing, Bluestein's steps or another variant make
+/// theirs once, and the results are the same bit for bit. (A context of its own, so no other
+/// test's transforms come between.)
+#[test]
+fn a_second_transform_takes_the_first_ones_pipelines() {
+    if common::gpu("a_second_transform_takes_the_first_ones_pipelines").is_none() {
+        return;
+    }
+    let ctx = voxlab::gpu::GpuContext::new().expect("a second context on the test adapter");
+    let mut rng = common::Rng(0x5eed_0029);
+    let x = to_f32(&random_complex(&mut rng, 16 * 8));
+    let run = |shape: &[usize], n: usize, variant| {
+        let (f, i) = (Direction::Forward, Normalization::Unnormalized);
+        fft::fft_nd(&ctx, &x[..n], shape, f, i, variant).unwrap()
+    };
+    assert_eq!(ctx.kept_made(), 0);
+    let first = run(&[16, 8], 128, GpuFftVariant::Stockham);
+    let made = ctx.kept_made();
+    assert!(made >= 2, "the layouts and a pipeline: {made}");
+    let again = run(&[16, 8], 128, GpuFftVariant::Stockham);
+    assert_eq!(ctx.kept_made(), made, "a second transform made something");
+    assert_eq!(first, again);
+    // Bluestein's steps (a prime length) and another variant make theirs, once.
+    run(&[13], 13, GpuFftVariant::Stockham);
+    let bluestein = ctx.kept_made();
+    assert!(bluestein > made);
+    run(&[13], 13, GpuFftVariant::Stockham);
+    assert_eq!(ctx.kept_made(), bluestein);
+    run(&[16, 8], 128, GpuFftVariant::SplitStream);
+    let split = ctx.kept_made();
+    assert!(split > bluestein);
+    run(&[16, 8], 128, GpuFftVariant::SplitStream);
+    assert_eq!(ctx.kept_made(), split);
+}
+
 /// A shape that does not describe the data is a typed error; so is a line length that
 /// does not divide it.
 #[test]

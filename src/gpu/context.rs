@@ -135,7 +135,7 @@ pub struct GpuContext {
     pub params_in_storage: bool,
     /// Objects costly to make that every job on the device may share
     /// ([`GpuContext::kept`]).
-    kept: std::sync::Mutex<Vec<(String, Kept)>>,
+    kept: std::sync::Mutex<(Vec<(String, Kept)>, usize)>,
 }
 
 /// An object [`GpuContext::kept`] holds.
@@ -143,6 +143,14 @@ type Kept = std::sync::Arc<dyn std::any::Any + Send + Sync>;
 
 /// How many objects [`GpuContext::kept`] holds; the least recently used goes first.
 pub const KEPT_OBJECTS: usize = 24;
+
+/// A number no other call returns in this process: for a kept layout, whose pipelines'
+/// keys name it, so that a pipeline is only ever taken with the layout it was made over
+/// (a layout dropped from [`GpuContext::kept`] and made again is another layout).
+pub(crate) fn unique_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
 
 /// The usage of every parameter block's buffer: bound as a uniform buffer, or as a
 /// read-only storage buffer where [`GpuContext::params_in_storage`].
@@ -422,14 +430,15 @@ impl GpuContext {
     /// and the same for every job that asks: the ray caster's compiled pipelines and
     /// the layouts they bind, so that a second session (a one-shot render, a brick, a
     /// call from Python) compiles nothing the first did. The key must name everything
-    /// the object depends on, [`GpuContext::params_in_storage`] included. One thread
-    /// makes at a time.
+    /// the object depends on, [`GpuContext::params_in_storage`] included, and a
+    /// pipeline's the id of the layout it was made over. One thread makes at a time.
     pub fn kept<T: std::any::Any + Send + Sync>(
         &self,
         key: &str,
         make: impl FnOnce() -> Result<T>,
     ) -> Result<(std::sync::Arc<T>, bool)> {
-        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        let mut guard = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        let (kept, made) = &mut *guard;
         if let Some(i) = kept.iter().position(|(k, _)| k == key) {
             let hit = kept.remove(i);
             kept.push(hit);
@@ -439,11 +448,18 @@ impl GpuContext {
             kept.pop();
         }
         let t = std::sync::Arc::new(make()?);
+        *made += 1;
         if kept.len() >= KEPT_OBJECTS {
             kept.remove(0);
         }
         kept.push((key.to_string(), t.clone()));
         Ok((t, true))
+    }
+
+    /// How many objects [`GpuContext::kept`] has made on this device so far (those it
+    /// found kept are not counted).
+    pub fn kept_made(&self) -> usize {
+        self.kept.lock().unwrap_or_else(|e| e.into_inner()).1
     }
 
     /// Waits for all submitted work; device loss becomes [`Error::Gpu`].

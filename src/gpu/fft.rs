@@ -87,6 +87,7 @@ use super::plan::Pieces;
 use crate::cpu::dft::{twiddle, Direction, Normalization};
 use crate::error::{Error, Result};
 use rustfft::num_complex::Complex;
+use std::sync::Arc;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -1165,6 +1166,87 @@ fn transform(
     Ok(out)
 }
 
+/// The bind group layout of every FFT pass (parameters, source, destination, table) and
+/// its pipeline layout: one per device ([`GpuContext::kept`]), so that the pipelines
+/// made over it can be kept for every plan too.
+struct FftLayouts {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::PipelineLayout,
+    /// Named by the keys of the pipelines made over it.
+    id: u64,
+}
+
+impl FftLayouts {
+    fn new(ctx: &GpuContext) -> Self {
+        let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("fft"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(true, 1),
+                storage(false, 2),
+                storage(true, 3),
+            ],
+        });
+        let pipeline = ctx
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("fft"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+        FftLayouts {
+            layout,
+            pipeline,
+            id: super::context::unique_id(),
+        }
+    }
+
+    /// The pipeline of `entry` in the WGSL `source` (named `file`) over these layouts,
+    /// kept by the device for every plan: compiled by the first that asks.
+    fn pipeline(
+        &self,
+        ctx: &GpuContext,
+        file: &str,
+        source: &str,
+        entry: &'static str,
+    ) -> Result<Arc<wgpu::ComputePipeline>> {
+        let key = format!("fft pipeline {entry}, layouts {}\n{source}", self.id);
+        let (pipeline, _) = ctx.kept(&key, || {
+            let module = ctx.shader(file, source)?;
+            Ok(ctx
+                .device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&self.pipeline),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                }))
+        })?;
+        Ok(pipeline)
+    }
+}
+
 /// A GPU FFT made ready once for one shape, direction, normalisation and variant: the
 /// shader module, the pipelines, the twiddle tables, the per-pass parameters and the
 /// second ping-pong buffer are built by [`GpuFftPlan::new`] and reused by every
@@ -1179,10 +1261,11 @@ pub struct GpuFftPlan {
     steps: Vec<Step>,
     /// Which data buffer holds the result after the last step (0: the input's).
     result: usize,
-    layout: wgpu::BindGroupLayout,
-    /// `layout` as a pipeline layout (also used by the two-real split).
-    pipeline_layout: wgpu::PipelineLayout,
-    pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
+    /// The bind group layout and pipeline layout of every FFT pass (also used by the
+    /// two-real split), one per device.
+    layouts: Arc<FftLayouts>,
+    /// The passes' pipelines by entry point, kept by the device for every plan.
+    pipelines: Vec<(&'static str, Arc<wgpu::ComputePipeline>)>,
     /// The tables the steps bind (twiddles, Bluestein's chirps and kernels).
     tables: Vec<wgpu::Buffer>,
     /// The second ping-pong buffer (`None` when there is no pass).
@@ -1323,47 +1406,17 @@ impl GpuFftPlan {
             })
             .collect();
         let dev = &ctx.device;
-        let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("fft"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(true, 1),
-                storage(false, 2),
-                storage(true, 3),
-            ],
-        });
-        let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("fft"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
+        let in_storage = ctx.params_in_storage;
+        let (layouts, _) = ctx.kept(&format!("fft layouts, {in_storage}"), || {
+            Ok(FftLayouts::new(ctx))
+        })?;
         let mut plan = GpuFftPlan {
             shape: shape.to_vec(),
             total,
             factor,
             steps: Vec::with_capacity(planned.len()),
             result: 0,
-            layout,
-            pipeline_layout,
+            layouts,
             pipelines: Vec::new(),
             tables: Vec::new(),
             pong: None,
@@ -1373,21 +1426,19 @@ impl GpuFftPlan {
         if total == 0 || planned.is_empty() {
             return Ok(plan);
         }
-        let variant_module = ctx.shader(
+        // The two shaders' sources; their modules are compiled only for the pipelines
+        // the device does not keep yet.
+        let variant_source = (
             match variant {
                 GpuFftVariant::SplitStream => "fft_split_stream.wgsl",
                 GpuFftVariant::Stockham | GpuFftVariant::StockhamGlobal => "fft_stockham.wgsl",
             },
-            &variant.shader_source(),
-        )?;
-        let bluestein_module = if planned.iter().any(|(_, s)| *s == FftStep::BluesteinLoad) {
-            Some(ctx.shader(
-                "fft_bluestein.wgsl",
-                &super::shaders::resolve("fft_bluestein"),
-            )?)
-        } else {
-            None
-        };
+            variant.shader_source(),
+        );
+        let bluestein_source = (
+            "fft_bluestein.wgsl",
+            super::shaders::resolve("fft_bluestein"),
+        );
         let mut table_keys: Vec<Table> = Vec::new();
         let mut table_of = |key: Table| match table_keys.iter().position(|&k| k == key) {
             Some(i) => i,
@@ -1469,20 +1520,11 @@ impl GpuFftPlan {
             };
             let entry = step.entry_point();
             if !plan.pipelines.iter().any(|(e, _)| *e == entry) {
-                let module = match step {
-                    FftStep::Pass(_) | FftStep::Inner { .. } => &variant_module,
-                    _ => bluestein_module
-                        .as_ref()
-                        .expect("made for Bluestein's steps"),
+                let (file, source) = match step {
+                    FftStep::Pass(_) | FftStep::Inner { .. } => &variant_source,
+                    _ => &bluestein_source,
                 };
-                let pl = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: Some(&plan.pipeline_layout),
-                    module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
+                let pl = plan.layouts.pipeline(ctx, file, source, entry)?;
                 plan.pipelines.push((entry, pl));
             }
             plan.steps.push(Step {
@@ -1573,7 +1615,7 @@ impl GpuFftPlan {
         for (i, step) in self.steps.iter().enumerate() {
             let bind = ctx.bind_group(
                 "fft pass",
-                &self.layout,
+                &self.layouts.layout,
                 &[
                     step.uniform.as_entire_binding(),
                     buffer(step.src).as_entire_binding(),
@@ -1716,18 +1758,10 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
         GpuFftVariant::Stockham,
     )?;
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "fft_two_real.wgsl",
-        &super::shaders::resolve("fft_two_real"),
-    )?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("two_real_split"),
-        layout: Some(&plan.pipeline_layout),
-        module: &module,
-        entry_point: Some("two_real_split"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let source = super::shaders::resolve("fft_two_real");
+    let pipeline = plan
+        .layouts
+        .pipeline(ctx, "fft_two_real.wgsl", &source, "two_real_split")?;
     let z: Vec<[f32; 2]> = a.iter().zip(b).map(|(&x, &y)| [x, y]).collect();
     let zbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("two real z"),
@@ -1753,7 +1787,7 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
     // Binding 3 (twiddles) is unused by the split; it is bound to the input again.
     let bind = ctx.bind_group(
         "two real split",
-        &plan.layout,
+        &plan.layouts.layout,
         &[
             ubuf.as_entire_binding(),
             spectrum.as_entire_binding(),

@@ -1561,6 +1561,8 @@ struct FrameLayout {
     sampler: wgpu::Sampler,
     /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
     dummy: wgpu::Texture,
+    /// Named by the keys of the pipelines made over it.
+    id: u64,
 }
 
 impl<'c> RaycastSession<'c> {
@@ -1590,6 +1592,7 @@ impl<'c> RaycastSession<'c> {
                     layout,
                     sampler,
                     dummy,
+                    id: super::context::unique_id(),
                 })
             },
         )?;
@@ -1607,6 +1610,7 @@ impl<'c> RaycastSession<'c> {
                         layout,
                         sampler,
                         dummy,
+                        id: super::context::unique_id(),
                     })
                 })?;
                 Some(f)
@@ -2147,6 +2151,7 @@ impl<'c> RaycastSession<'c> {
             layout,
             sampler,
             dummy,
+            ..
         } = self.frame_layout(compact_filtered);
         let textures_of = |c: &Option<Cached<wgpu::Texture>>, used: bool| match c {
             Some(c) if used => view(&c.value),
@@ -2259,11 +2264,9 @@ impl<'c> RaycastSession<'c> {
                 self.pipelines.remove(0);
             }
             let ctx = self.ctx;
-            let layout = &self.frame_layout(compact_filtered).layout;
-            let kept = format!(
-                "raycast pipeline, compact filtering {compact_filtered}, {}\n{}",
-                ctx.params_in_storage, key.0
-            );
+            let frame = self.frame_layout(compact_filtered);
+            let layout = &frame.layout;
+            let kept = format!("raycast pipeline, layout {}\n{}", frame.id, key.0);
             let (pipeline, made) = ctx.kept(&kept, || {
                 let module = ctx.shader("raycast.wgsl", &key.0)?;
                 compute_pipeline(ctx, "raycast", &module, "raycast", layout)
