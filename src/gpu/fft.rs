@@ -1178,32 +1178,15 @@ struct FftLayouts {
 
 impl FftLayouts {
     fn new(ctx: &GpuContext) -> Self {
-        let storage = |read_only: bool, binding: u32| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
+        use super::context::buffer_entry;
+        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
         let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("fft"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(true, 1),
-                storage(false, 2),
-                storage(true, 3),
+                buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                buffer_entry(1, storage(true)),
+                buffer_entry(2, storage(false)),
+                buffer_entry(3, storage(true)),
             ],
         });
         let pipeline = ctx
