@@ -1418,10 +1418,15 @@ impl GpuFftPlan {
             },
             variant.shader_source(),
         );
-        let bluestein_source = (
-            "fft_bluestein.wgsl",
-            super::shaders::resolve("fft_bluestein"),
-        );
+        let bluestein_source = planned
+            .iter()
+            .any(|(_, s)| *s == FftStep::BluesteinLoad)
+            .then(|| {
+                (
+                    "fft_bluestein.wgsl",
+                    super::shaders::resolve("fft_bluestein"),
+                )
+            });
         let mut table_keys: Vec<Table> = Vec::new();
         let mut table_of = |key: Table| match table_keys.iter().position(|&k| k == key) {
             Some(i) => i,
@@ -1505,7 +1510,9 @@ impl GpuFftPlan {
             if !plan.pipelines.iter().any(|(e, _)| *e == entry) {
                 let (file, source) = match step {
                     FftStep::Pass(_) | FftStep::Inner { .. } => &variant_source,
-                    _ => &bluestein_source,
+                    _ => bluestein_source
+                        .as_ref()
+                        .expect("resolved for Bluestein's steps"),
                 };
                 let pl = plan.layouts.pipeline(ctx, file, source, entry)?;
                 plan.pipelines.push((entry, pl));
