@@ -15,7 +15,7 @@
 //! exactly as the CPU f32 path rounds them, so both march from the same numbers.
 
 use super::context::{
-    buffer_entry, compute_pipeline, render_bands, rgba_storage_entry, texture_entry, GpuContext,
+    buffer_entry, render_bands, rgba_storage_entry, texture_entry, GpuContext, Kernel,
     LLVMPIPE_LOOP_LIMIT,
 };
 use super::shaders;
@@ -88,8 +88,9 @@ fn init_buffer(
 }
 
 /// The importance volume's two compute pipelines (`shaders/adaptive_importance.wgsl`:
-/// the differences, the max filter along one axis) over their bind group layout:
-/// compiled once for every brick of a split render.
+/// the differences, the max filter along one axis) over their bind group layout, taken
+/// once for every brick of a split render from the device's kept programs
+/// ([`GpuContext::program`]).
 pub struct ImportancePipelines {
     layout: wgpu::BindGroupLayout,
     diff: wgpu::ComputePipeline,
@@ -99,21 +100,24 @@ pub struct ImportancePipelines {
 impl ImportancePipelines {
     /// Compiles the pipelines on `ctx`.
     pub fn new(ctx: &GpuContext) -> Result<Self> {
-        let module = ctx.shader(
+        let program = ctx.program(
             "adaptive_importance.wgsl",
             &shaders::resolve("adaptive_importance"),
-        )?;
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("importance"),
-            entries: &[
+            Some(&[
                 buffer_entry(0, wgpu::BufferBindingType::Uniform),
                 texture_entry(1, false),
                 texture_entry(2, false),
                 rgba_storage_entry(3),
-            ],
-        });
-        let diff = compute_pipeline(ctx, "differences", &module, "differences", &layout)?;
-        let maxf = compute_pipeline(ctx, "max_filter", &module, "max_filter", &layout)?;
+            ]),
+        )?;
+        let (
+            Kernel {
+                layout,
+                pipeline: diff,
+            },
+            _,
+        ) = program.kernel(ctx, "differences")?;
+        let maxf = program.kernel(ctx, "max_filter")?.0.pipeline;
         Ok(ImportancePipelines { layout, diff, maxf })
     }
 }
@@ -452,12 +456,12 @@ pub fn render(
         dims,
         data: values.data().to_vec(),
     };
-    let module = ctx.shader("adaptive.wgsl", &shaders::resolve("adaptive"))?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("adaptive"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "adaptive.wgsl",
+        &shaders::resolve("adaptive"),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             texture_entry(1, false),
             buffer_entry(2, ro),
@@ -467,9 +471,9 @@ pub fn render(
             buffer_entry(6, ro),
             buffer_entry(7, rw),
             buffer_entry(8, rw),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "adaptive", &module, "adaptive", &layout)?;
+        ]),
+        "adaptive",
+    )?;
     let t_setup = t_start.elapsed().as_secs_f64();
 
     // The rays, computed here, go up band by band.
@@ -499,6 +503,8 @@ pub fn render(
     let t_prep = Instant::now();
     let n = settings.preint_size;
     let preint = super::preintegrate::preintegrate_buffer(ctx, tf, n)?;
+    // The table is built before the first band: its time is the set-up's.
+    ctx.wait()?;
     let lut = tf.lut(n).to_real::<f32>();
     let adaptive = settings.sampling == Sampling::Adaptive;
     let direct = settings.sampling == Sampling::Direct;

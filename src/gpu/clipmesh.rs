@@ -39,7 +39,7 @@
 //! The bricks mesh is built on the host (`cpu::clipmesh::bricks_mesh` from the f32
 //! min/max grid) and then intersected here like any other mesh.
 
-use super::context::{buffer_entry, compute_pipeline, GpuContext};
+use super::context::{buffer_entry, GpuContext, Kernel};
 use super::params::RaycastParams;
 use crate::cpu::clipmesh::{ClipTriangles, MAX_SEGMENTS};
 use crate::error::{Error, Result};
@@ -148,23 +148,29 @@ impl GpuClipMesh {
             contents: bytemuck::cast_slice(&node_data),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let module = ctx.shader("clipmesh.wgsl", &shader())?;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("clipmesh"),
-            entries: &[
+        let program = ctx.program(
+            "clipmesh.wgsl",
+            &shader(),
+            Some(&[
                 buffer_entry(0, wgpu::BufferBindingType::Uniform),
                 buffer_entry(1, wgpu::BufferBindingType::Uniform),
                 buffer_entry(2, storage(true)),
                 buffer_entry(3, storage(false)),
                 buffer_entry(4, storage(false)),
                 buffer_entry(5, storage(true)),
-            ],
-        });
-        let pipeline = |entry| compute_pipeline(ctx, entry, &module, entry, &layout);
+            ]),
+        )?;
+        let (
+            Kernel {
+                layout,
+                pipeline: hits,
+            },
+            _,
+        ) = program.kernel(ctx, "clip_hits")?;
         Ok(GpuClipMesh {
-            hits: pipeline("clip_hits")?,
-            finish: pipeline("clip_segments")?,
+            hits,
+            finish: program.kernel(ctx, "clip_segments")?.0.pipeline,
             triangles,
             count,
             node_count: flat.len(),

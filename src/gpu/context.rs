@@ -142,7 +142,70 @@ pub struct GpuContext {
 type Kept = std::sync::Arc<dyn std::any::Any + Send + Sync>;
 
 /// How many objects [`GpuContext::kept`] holds; the least recently used goes first.
-pub const KEPT_OBJECTS: usize = 24;
+pub const KEPT_OBJECTS: usize = 64;
+
+/// A WGSL module and the bind group (group 0) its entry points bind, kept by the device
+/// for every job ([`GpuContext::program`]); each entry point's pipeline is compiled on
+/// its first use and kept with it ([`Program::kernel`]). A job asks for its program
+/// every time it runs and compiles only what no job on the device compiled before.
+pub struct Program {
+    label: String,
+    module: wgpu::ShaderModule,
+    /// The listed layout every entry point binds; `None`: each pipeline's layout is
+    /// derived from its entry point's bindings.
+    layout: Option<wgpu::BindGroupLayout>,
+    kernels: std::sync::Mutex<Vec<(String, Kernel)>>,
+}
+
+/// One entry point's compute pipeline and the layout its bind groups are made over.
+#[derive(Clone, Debug)]
+pub struct Kernel {
+    pub pipeline: wgpu::ComputePipeline,
+    pub layout: wgpu::BindGroupLayout,
+}
+
+impl Program {
+    /// The pipeline of `entry` and its bind group layout, compiled now when no job
+    /// asked for it before (then `true`).
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the pipeline fails validation (a missing entry point, a
+    /// binding the layout lacks).
+    pub fn kernel(&self, ctx: &GpuContext, entry: &str) -> Result<(Kernel, bool)> {
+        let mut kernels = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, k)) = kernels.iter().find(|(e, _)| e == entry) {
+            return Ok((k.clone(), false));
+        }
+        let label = format!("{} {entry}", self.label);
+        let kernel = match &self.layout {
+            Some(layout) => Kernel {
+                pipeline: compute_pipeline(ctx, &label, &self.module, entry, layout)?,
+                layout: layout.clone(),
+            },
+            None => {
+                let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+                let pipeline =
+                    ctx.device
+                        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                            label: Some(&label),
+                            layout: None,
+                            module: &self.module,
+                            entry_point: Some(entry),
+                            compilation_options: Default::default(),
+                            cache: None,
+                        });
+                let layout = pipeline.get_bind_group_layout(0);
+                if let Some(e) = pollster::block_on(scope.pop()) {
+                    return Err(Error::Gpu(format!("pipeline {label} failed: {e}")));
+                }
+                Kernel { pipeline, layout }
+            }
+        };
+        ctx.kept.lock().unwrap_or_else(|e| e.into_inner()).1 += 1;
+        kernels.push((entry.to_string(), kernel.clone()));
+        Ok((kernel, true))
+    }
+}
 
 /// A number no other call returns in this process: for a kept layout, whose pipelines'
 /// keys name it, so that a pipeline is only ever taken with the layout it was made over
@@ -456,8 +519,59 @@ impl GpuContext {
         Ok((t, true))
     }
 
+    /// The program of the WGSL `source` (see [`GpuContext::shader`]) over the bind
+    /// group layout of `entries` ([`GpuContext::bind_group_layout`]), or, with `None`,
+    /// over the layouts its entry points' bindings imply; kept by the device
+    /// ([`GpuContext::kept`], keyed by `label`, the layout and the whole source), its
+    /// pipelines compiled by [`Program::kernel`] as they are first asked for.
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the shader does not compile.
+    pub fn program(
+        &self,
+        label: &str,
+        source: &str,
+        entries: Option<&[wgpu::BindGroupLayoutEntry]>,
+    ) -> Result<std::sync::Arc<Program>> {
+        let key = format!(
+            "program {label}, {}, {entries:?}\n{source}",
+            self.params_in_storage
+        );
+        let (program, _) = self.kept(&key, || {
+            Ok(Program {
+                label: label.to_string(),
+                module: self.shader(label, source)?,
+                layout: entries.map(|entries| {
+                    self.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                        label: Some(label),
+                        entries,
+                    })
+                }),
+                kernels: Default::default(),
+            })
+        })?;
+        Ok(program)
+    }
+
+    /// The pipeline of `entry` in [`GpuContext::program`]`(label, source, entries)`,
+    /// and the layout its bind groups are made over.
+    ///
+    /// # Errors
+    /// [`Error::Gpu`] when the shader does not compile or the pipeline fails
+    /// validation.
+    pub fn kernel(
+        &self,
+        label: &str,
+        source: &str,
+        entries: Option<&[wgpu::BindGroupLayoutEntry]>,
+        entry: &str,
+    ) -> Result<Kernel> {
+        Ok(self.program(label, source, entries)?.kernel(self, entry)?.0)
+    }
+
     /// How many objects [`GpuContext::kept`] has made on this device so far (those it
-    /// found kept are not counted).
+    /// found kept are not counted), with the pipelines kept programs compiled
+    /// ([`Program::kernel`]).
     pub fn kept_made(&self) -> usize {
         self.kept.lock().unwrap_or_else(|e| e.into_inner()).1
     }
@@ -980,7 +1094,7 @@ impl GpuContext {
 }
 
 /// A compute-stage buffer binding.
-pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+pub const fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -994,7 +1108,7 @@ pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGrou
 }
 
 /// A compute-stage 3D float texture binding (`texture_3d<f32>`), filterable or not.
-pub fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
+pub const fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -1008,7 +1122,7 @@ pub fn texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEnt
 }
 
 /// A write-only `Rgba32Float` 3D storage texture at `binding`, for compute.
-pub fn rgba_storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+pub const fn rgba_storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,

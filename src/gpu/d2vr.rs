@@ -778,19 +778,12 @@ pub fn render_d2vr(
     );
     let pixels = (w * h) as u64;
 
-    let module = ctx.shader(
+    let super::context::Kernel { layout, pipeline } = ctx.kernel(
         "d2vr.wgsl",
         &shader_source(storage, sampling, split.views.count()),
+        None,
+        "d2vr_chunk",
     )?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("d2vr_chunk"),
-        layout: None,
-        module: &module,
-        entry_point: Some("d2vr_chunk"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let layout = pipeline.get_bind_group_layout(0);
 
     // Chunk size: per invocation, samples × views × (1 value + 6 GFS neighbours or
     // 1 GFR pass) loop iterations stay under half llvmpipe's limit; per dispatch, the

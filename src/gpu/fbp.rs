@@ -20,7 +20,7 @@ use crate::ct::ViewMatrix;
 use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
 use crate::gpu::plan::{binding_limit, count_of, Held, Pieces, Sampling};
-use crate::gpu::GpuContext;
+use crate::gpu::{context::Kernel, GpuContext};
 use crate::volume::check_dims;
 use wgpu::util::DeviceExt;
 
@@ -455,15 +455,12 @@ pub fn backproject_timed(
         .then(|| ctx.clamp_sampler("fbp projections", wgpu::FilterMode::Linear));
     let [nx, ny, _] = grid.dims;
     let slice = nx * ny;
-    let module = ctx.shader("fbp_backproject.wgsl", &sampled_shader_source(sampling))?;
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("backproject_point"),
-        layout: None,
-        module: &module,
-        entry_point: Some("backproject_point"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "fbp_backproject.wgsl",
+        &sampled_shader_source(sampling),
+        None,
+        "backproject_point",
+    )?;
     let a = grid.affine;
     let v4 = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
     let scale = backprojection_scale(g.n_angles()) as f32;
@@ -522,7 +519,7 @@ pub fn backproject_timed(
                     if let Some(s) = &sampler {
                         entries.push(wgpu::BindingResource::Sampler(s));
                     }
-                    ctx.bind_group("fbp", &pipeline.get_bind_group_layout(0), &entries)
+                    ctx.bind_group("fbp", &layout, &entries)
                 })
                 .collect();
             let pass = (&pipeline, "backproject_point");

@@ -396,20 +396,15 @@ impl GpuFvrSpectrum {
     ) -> Result<Self> {
         let m = layout.side();
         let slabs = buffers.len();
-        let module = ctx.shader(
+        let super::context::Kernel {
+            layout: bind_layout,
+            pipeline,
+        } = ctx.kernel(
             &format!("fvr_slice.wgsl ({slabs} slabs)"),
             &shader_source(slabs),
+            None,
+            "extract_slice",
         )?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("extract_slice"),
-                layout: None,
-                module: &module,
-                entry_point: Some("extract_slice"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("fvr params"),
             size: std::mem::size_of::<FvrParams>() as u64,
@@ -433,7 +428,7 @@ impl GpuFvrSpectrum {
         let mut resources = vec![params.as_entire_binding(), slice.as_entire_binding()];
         resources.extend(buffers.iter().map(|b| b.as_entire_binding()));
         resources.push(values_buffer.as_entire_binding());
-        let bind = ctx.bind_group("fvr slice", &pipeline.get_bind_group_layout(0), &resources);
+        let bind = ctx.bind_group("fvr slice", &bind_layout, &resources);
         let fft = GpuFftPlan::new(
             ctx,
             &[m, m],

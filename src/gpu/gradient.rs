@@ -14,7 +14,7 @@
 //! a power of two (or, for Sobel, nine weighted terms), so the GPU result equals the
 //! CPU's f32 result up to the order of the Sobel sums (`tests/gpu_gradient.rs`).
 
-use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
+use super::context::{buffer_entry, texture_entry, GpuContext, Kernel};
 use crate::cpu::grid::Grid;
 use crate::error::{Error, Result};
 use crate::settings::GradientMethod;
@@ -135,16 +135,16 @@ pub fn precompute_gradients_in_slabs(
         ));
     }
     let dev = &ctx.device;
-    let module = ctx.shader("gradient.wgsl", &shader_source())?;
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("gradient"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "gradient.wgsl",
+        &shader_source(),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             texture_entry(1, false),
             buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "gradient_slab", &module, "gradient_slab", &layout)?;
+        ]),
+        "gradient_slab",
+    )?;
     let out = ctx.storage_buffer("gradient slab", per_slab as u64 * slice_bytes)?;
     let query = ctx.timestamps();
     ctx.wait()?;

@@ -31,7 +31,7 @@
 //! Their CPU f32 and f64 twins are held to the same tolerances in
 //! `tests/gpu_iterative.rs`.
 
-use super::context::{buffer_entry, compute_pipeline, GpuContext};
+use super::context::{buffer_entry, GpuContext, Kernel};
 use super::joseph_pair::GpuJosephPair;
 use crate::cpu::iterative::{
     check_problem, keeps_column_weights, live_axes, subset_order, subset_views, IterativeOptions,
@@ -151,8 +151,7 @@ struct Binds<'a> {
 /// the next projection.
 struct Steps<'c> {
     ctx: &'c GpuContext,
-    layout: wgpu::BindGroupLayout,
-    pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
+    kernels: HashMap<&'static str, Kernel>,
     dummy_read: wgpu::Buffer,
     dummy_write: [wgpu::Buffer; 2],
     scalars: wgpu::Buffer,
@@ -193,9 +192,10 @@ impl<'c> Steps<'c> {
         use wgpu::BufferBindingType as T;
         let ro = T::Storage { read_only: true };
         let rw = T::Storage { read_only: false };
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("iterative steps"),
-            entries: &[
+        let program = ctx.program(
+            "iterative.wgsl",
+            &shader_source(),
+            Some(&[
                 buffer_entry(0, T::Uniform),
                 buffer_entry(1, ro),
                 buffer_entry(2, ro),
@@ -204,12 +204,11 @@ impl<'c> Steps<'c> {
                 buffer_entry(5, rw),
                 buffer_entry(6, rw),
                 buffer_entry(7, ro),
-            ],
-        });
-        let module = ctx.shader("iterative.wgsl", &shader_source())?;
-        let mut pipelines = HashMap::new();
+            ]),
+        )?;
+        let mut kernels = HashMap::new();
         for e in ENTRIES {
-            pipelines.insert(e, compute_pipeline(ctx, e, &module, e, &layout)?);
+            kernels.insert(e, program.kernel(ctx, e)?.0);
         }
         let small = |label: &str| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -237,8 +236,7 @@ impl<'c> Steps<'c> {
         };
         Ok(Steps {
             ctx,
-            layout,
-            pipelines,
+            kernels,
             dummy_read: small("dummy read"),
             dummy_write: [small("dummy write 1"), small("dummy write 2")],
             scalars,
@@ -265,9 +263,10 @@ impl<'c> Steps<'c> {
         });
         let dummy = &self.dummy_read;
         let read = |b: Option<&'a wgpu::Buffer>| b.unwrap_or(dummy).as_entire_binding();
+        let kernel = &self.kernels[entry];
         let bind = self.ctx.bind_group(
             entry,
-            &self.layout,
+            &kernel.layout,
             &[
                 ubuf.as_entire_binding(),
                 read(binds.a),
@@ -291,7 +290,7 @@ impl<'c> Steps<'c> {
             label: Some(entry),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pipelines[entry]);
+        pass.set_pipeline(&kernel.pipeline);
         pass.set_bind_group(0, &bind, &[]);
         pass.dispatch_workgroups(groups.0, groups.1, 1);
     }

@@ -298,16 +298,15 @@ impl<'c> GpuJosephPair<'c> {
         let projections = buffer("projections in", chunk * 4, input);
         let grid_out = ctx.storage_buffer("grid out", (slab * 4) as u64)?;
         let projections_out = ctx.storage_buffer("projections out", (chunk * 4) as u64)?;
-        let module = ctx.shader("joseph_pair_transpose.wgsl", &transpose_source())?;
-        let transpose_pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("project transpose"),
-            layout: None,
-            module: &module,
-            entry_point: Some("transpose"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let transpose_layout = transpose_pipeline.get_bind_group_layout(0);
+        let super::context::Kernel {
+            layout: transpose_layout,
+            pipeline: transpose_pipeline,
+        } = ctx.kernel(
+            "joseph_pair_transpose.wgsl",
+            &transpose_source(),
+            None,
+            "transpose",
+        )?;
         Ok(GpuJosephPair {
             ctx,
             dims,

@@ -37,7 +37,7 @@
 //! backends render them).
 
 use super::context::{
-    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, LLVMPIPE_LOOP_LIMIT,
+    buffer_entry, render_bands, texture_entry, GpuContext, Kernel, LLVMPIPE_LOOP_LIMIT,
 };
 use super::raycast::GpuTimings;
 use crate::camera::{Camera, PixelRect, Projection};
@@ -658,11 +658,11 @@ pub fn render(
     let params = multi_params(volumes, camera, settings, &luts, &ranges)?;
 
     let dev = &ctx.device;
-    let module = ctx.shader("multi.wgsl", &multi_shader())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("multi"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "multi.wgsl",
+        &multi_shader(),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             texture_entry(1, false),
             texture_entry(2, false),
@@ -670,9 +670,9 @@ pub fn render(
             buffer_entry(4, storage(true)),
             buffer_entry(5, storage(false)),
             buffer_entry(6, storage(false)),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "multi", &module, "multi", &layout)?;
+        ]),
+        "multi",
+    )?;
     let table: Vec<[f32; 4]> = luts.iter().flat_map(|l| l.entries.clone()).collect();
     let lut_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("multi luts"),

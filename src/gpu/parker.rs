@@ -8,7 +8,7 @@
 //! weight itself is evaluated in f32 on the device, with a polynomial sine (WGSL's
 //! `sin` may be off by 2⁻¹¹).
 
-use super::context::{buffer_entry, GpuContext};
+use super::context::{buffer_entry, GpuContext, Kernel};
 use crate::cpu::parker::{fan_angle, short_scan};
 use crate::ct::{Geometry, Projections};
 use crate::error::{Error, Result};
@@ -72,29 +72,17 @@ pub fn weigh(ctx: &GpuContext, p: &Projections<f32>, g: &Geometry) -> Result<Pro
         .min((1 << 22) / per_view)
         .clamp(1, views);
     let dev = &ctx.device;
-    let module = ctx.shader("parker.wgsl", &shader_source())?;
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("parker"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "parker.wgsl",
+        &shader_source(),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             buffer_entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
             buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
             buffer_entry(3, wgpu::BufferBindingType::Storage { read_only: true }),
-        ],
-    });
-    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("parker"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("parker_weigh"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("parker_weigh"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+        ]),
+        "parker_weigh",
+    )?;
     // β of every view, computed in f64 and rounded once.
     let betas: Vec<f32> = g
         .angles_deg

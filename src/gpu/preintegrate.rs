@@ -3,7 +3,7 @@
 //! Shader: `shaders/preintegrate.wgsl`; parameters: [`AdaptiveParams`] (the adaptive
 //! caster's block, in `gpu::params`).
 
-use super::context::{buffer_entry, compute_pipeline, GpuContext};
+use super::context::{buffer_entry, GpuContext, Kernel};
 use super::params::AdaptiveParams;
 use crate::error::{Error, Result};
 use crate::transfer::TransferFunction;
@@ -25,21 +25,18 @@ pub fn preintegrate_buffer(
     }
     let lut = tf.lut(n).to_real::<f32>();
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "preintegrate.wgsl",
-        &super::shaders::resolve("preintegrate"),
-    )?;
     let ro = wgpu::BufferBindingType::Storage { read_only: true };
     let rw = wgpu::BufferBindingType::Storage { read_only: false };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("preintegrate"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "preintegrate.wgsl",
+        &super::shaders::resolve("preintegrate"),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             buffer_entry(1, ro),
             buffer_entry(2, rw),
-        ],
-    });
-    let pipeline = compute_pipeline(ctx, "preintegrate", &module, "preintegrate", &layout)?;
+        ]),
+        "preintegrate",
+    )?;
     let mut params = AdaptiveParams::default();
     params.table[0] = n as u32;
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {

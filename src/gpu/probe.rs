@@ -35,7 +35,6 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
     let n =
         u32::try_from(x.len()).map_err(|_| Error::too_large("probe input", "over 2^32 values"))?;
     let dev = &ctx.device;
-    let module = ctx.shader("probe.wgsl", &super::shaders::resolve("probe"))?;
     let params = ProbeParams { a, b, n, _pad: 0 };
     let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("probe params"),
@@ -57,7 +56,6 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
     dispatch_1d(
         ctx,
         "probe",
-        &module,
         "saxpy",
         &[
             pbuf.as_entire_binding(),
@@ -65,7 +63,7 @@ pub fn saxpy_gpu(ctx: &GpuContext, a: f32, b: f32, x: &[f32]) -> Result<Vec<f32>
             ybuf.as_entire_binding(),
         ],
         n,
-    );
+    )?;
     let out = ctx.read_buffer(&ybuf, bytes)?;
     Ok(bytemuck::cast_slice(&out).to_vec())
 }
@@ -98,10 +96,6 @@ pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]
     let n = u32::try_from(inputs.len())
         .map_err(|_| Error::too_large("opacity probe input", "over 2^32 values"))?;
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "opacity_probe.wgsl",
-        &super::shaders::resolve("opacity_probe"),
-    )?;
     let xbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("opacity probe in"),
         contents: bytemuck::cast_slice(inputs),
@@ -111,38 +105,32 @@ pub fn opacity_gpu(ctx: &GpuContext, inputs: &[[f32; 4]]) -> Result<Vec<[f32; 3]
     let ybuf = ctx.storage_buffer("opacity probe out", bytes)?;
     dispatch_1d(
         ctx,
-        "opacity probe",
-        &module,
+        "opacity_probe",
         "main",
         &[xbuf.as_entire_binding(), ybuf.as_entire_binding()],
         n,
-    );
+    )?;
     let out = ctx.read_buffer(&ybuf, bytes)?;
     let out: &[[f32; 4]] = bytemuck::cast_slice(&out);
     Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())
 }
 
-/// Runs `entry` of `module` over `n` invocations (workgroups of 64), the bindings in
-/// group 0 in order, and submits.
+/// Runs `entry` of `shaders/<name>.wgsl` over `n` invocations (workgroups of 64), the
+/// bindings in group 0 in order, and submits.
 fn dispatch_1d(
     ctx: &GpuContext,
-    label: &str,
-    module: &wgpu::ShaderModule,
+    name: &str,
     entry: &str,
     bindings: &[wgpu::BindingResource],
     n: u32,
-) {
-    let pipeline = ctx
-        .device
-        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: None,
-            module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-    let bind = ctx.bind_group(label, &pipeline.get_bind_group_layout(0), bindings);
+) -> Result<()> {
+    let super::context::Kernel { layout, pipeline } = ctx.kernel(
+        &format!("{name}.wgsl"),
+        &super::shaders::resolve(name),
+        None,
+        entry,
+    )?;
+    let bind = ctx.bind_group(name, &layout, bindings);
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
@@ -151,4 +139,5 @@ fn dispatch_1d(
         pass.dispatch_workgroups(n.div_ceil(64), 1, 1);
     }
     ctx.queue.submit([enc.finish()]);
+    Ok(())
 }

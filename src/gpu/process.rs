@@ -179,26 +179,17 @@ fn voxels_per_dispatch(taps: u64) -> u64 {
 
 /// One compiled operation.
 struct Op {
-    pipeline: wgpu::ComputePipeline,
+    kernel: super::context::Kernel,
     params: wgpu::Buffer,
     query: Option<TimestampPair>,
 }
 
 impl Op {
-    /// Compiles `entry` of `shaders/<name>.wgsl`, adding the time to `t.setup`.
+    /// `entry` of `shaders/<name>.wgsl`, from the device's kept programs (compiled
+    /// when no call before compiled it), adding the time to `t.setup`.
     fn new(ctx: &GpuContext, name: &str, entry: &str, t: &mut ProcessTimings) -> Result<Self> {
         let start = std::time::Instant::now();
-        let module = ctx.shader(entry, &shader_source(name))?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+        let kernel = ctx.kernel(&format!("{name}.wgsl"), &shader_source(name), None, entry)?;
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("process params"),
             size: std::mem::size_of::<ProcessParams>() as u64,
@@ -207,7 +198,7 @@ impl Op {
         });
         t.setup += start.elapsed().as_secs_f64();
         Ok(Op {
-            pipeline,
+            kernel,
             params,
             query: ctx.timestamps(),
         })
@@ -247,11 +238,7 @@ impl Op {
         if let Some(e) = extra {
             resources.push(e.as_entire_binding());
         }
-        let bind = ctx.bind_group(
-            "process",
-            &self.pipeline.get_bind_group_layout(0),
-            &resources,
-        );
+        let bind = ctx.bind_group("process", &self.kernel.layout, &resources);
         let max_x = ctx.limits.max_compute_workgroups_per_dimension.max(1) as u64;
         let mut first = voxels.start;
         while first < total {
@@ -265,7 +252,7 @@ impl Op {
             let x = groups.min(max_x);
             let y = groups.div_ceil(x);
             let kernel = ctx.run_pass(
-                (&self.pipeline, "process"),
+                (&self.kernel.pipeline, "process"),
                 std::slice::from_ref(&bind),
                 [x as u32, y as u32, 1],
                 self.query.as_ref(),

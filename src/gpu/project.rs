@@ -220,7 +220,8 @@ pub fn views_per_dispatch(dims: [usize; 3], per_view: usize, limit: u64) -> usiz
     by_work.min(by_bytes).max(1)
 }
 
-/// `shaders/project.wgsl: project`, compiled once; [`Self::dispatch`] projects a run
+/// `shaders/project.wgsl: project`, from the device's kept programs
+/// ([`GpuContext::program`]); [`Self::dispatch`] projects a run
 /// of a view list. Shared by [`project_volume`] and the iterative methods' GPU pair
 /// (`gpu::joseph_pair`).
 pub struct ForwardKernel {
@@ -230,7 +231,7 @@ pub struct ForwardKernel {
 }
 
 impl ForwardKernel {
-    /// Compiles the kernel that reads the grid exactly.
+    /// The kernel that reads the grid exactly.
     ///
     /// # Errors
     /// [`Error::Gpu`] when the shader does not compile.
@@ -238,25 +239,19 @@ impl ForwardKernel {
         Self::sampled(ctx, Sampling::Exact)
     }
 
-    /// Compiles the kernel that reads the grid as `sampling` says.
+    /// The kernel that reads the grid as `sampling` says.
     ///
     /// # Errors
     /// [`Error::Gpu`] when the shader does not compile, or, for
     /// [`Sampling::Hardware`], when the adapter cannot filter f32 textures.
     pub fn sampled(ctx: &GpuContext, sampling: Sampling) -> Result<Self> {
         ctx.require_filtering(sampling, wgpu::TextureFormat::R32Float)?;
-        let module = ctx.shader("project.wgsl", &sampled_shader_source(sampling))?;
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("project"),
-                layout: None,
-                module: &module,
-                entry_point: Some("project"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        let layout = pipeline.get_bind_group_layout(0);
+        let super::context::Kernel { layout, pipeline } = ctx.kernel(
+            "project.wgsl",
+            &sampled_shader_source(sampling),
+            None,
+            "project",
+        )?;
         Ok(ForwardKernel {
             pipeline,
             layout,

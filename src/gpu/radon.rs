@@ -17,7 +17,7 @@
 //! CPU adapter (llvmpipe) that loop is capped at [`LLVMPIPE_LOOP_LIMIT`] iterations,
 //! and longer loops are refused. Every buffer must fit one storage binding.
 
-use super::context::{buffer_entry, GpuContext, LLVMPIPE_LOOP_LIMIT};
+use super::context::{buffer_entry, GpuContext, Kernel, LLVMPIPE_LOOP_LIMIT};
 use crate::cpu::radon::{Angle, Interpolation};
 use crate::error::{Error, Result};
 use wgpu::util::DeviceExt;
@@ -83,19 +83,19 @@ fn dispatch(
     out_len: usize,
 ) -> Result<Vec<f32>> {
     let dev = &ctx.device;
-    let module = ctx.shader("radon.wgsl", &shader_source())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("radon"),
-        entries: &[
+    let Kernel { layout, pipeline } = ctx.kernel(
+        "radon.wgsl",
+        &shader_source(),
+        Some(&[
             buffer_entry(0, wgpu::BufferBindingType::Uniform),
             buffer_entry(1, storage(true)),
             buffer_entry(2, storage(true)),
             buffer_entry(3, storage(true)),
             buffer_entry(4, storage(false)),
-        ],
-    });
-    let pipeline = super::context::compute_pipeline(ctx, entry, &module, entry, &layout)?;
+        ]),
+        entry,
+    )?;
     let groups = (invocations as u32).div_ceil(WORKGROUP).max(1);
     let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
     let gy = groups.div_ceil(gx);
@@ -400,11 +400,11 @@ pub fn iradon_sart(
         contents: &bytes,
         usage: super::context::PARAMS_USAGE,
     });
-    let module = ctx.shader("radon_sart.wgsl", &sart_shader_source())?;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("radon sart"),
-        entries: &[
+    let program = ctx.program(
+        "radon_sart.wgsl",
+        &sart_shader_source(),
+        Some(&[
             wgpu::BindGroupLayoutEntry {
                 binding: 0,
                 visibility: wgpu::ShaderStages::COMPUTE,
@@ -423,21 +423,17 @@ pub fn iradon_sart(
             buffer_entry(4, storage(false)),
             buffer_entry(5, storage(false)),
             buffer_entry(6, storage(false)),
-        ],
-    });
-    let pipelines: std::collections::HashMap<&str, wgpu::ComputePipeline> =
+        ]),
+    )?;
+    let pipelines: std::collections::HashMap<&str, Kernel> =
         ["sart_deviation", "sart_scatter", "sart_apply"]
             .into_iter()
-            .map(|e| {
-                Ok((
-                    e,
-                    super::context::compute_pipeline(ctx, e, &module, e, &layout)?,
-                ))
-            })
+            .map(|e| Ok((e, program.kernel(ctx, e)?.0)))
             .collect::<Result<_>>()?;
+    let layout = &pipelines["sart_apply"].layout;
     let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("radon sart"),
-        layout: &layout,
+        layout,
         entries: &[
             wgpu::BindGroupEntry {
                 binding: 0,
@@ -477,7 +473,7 @@ pub fn iradon_sart(
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
         for &(entry, offset, gx, gy) in &dispatches {
-            pass.set_pipeline(&pipelines[entry]);
+            pass.set_pipeline(&pipelines[entry].pipeline);
             pass.set_bind_group(0, &bind, &[offset]);
             pass.dispatch_workgroups(gx, gy, 1);
         }

@@ -234,39 +234,24 @@ pub fn filter_projections(
         contents: bytemuck::cast_slice(&table),
         usage: wgpu::BufferUsages::STORAGE,
     });
-    let module = ctx.shader("ramp_filter.wgsl", &shader_source())?;
     // One explicit layout for the three entry points (each uses only some bindings).
     let entry = super::context::buffer_entry;
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("ramp"),
-        entries: &[
+    let program = ctx.program(
+        "ramp_filter.wgsl",
+        &shader_source(),
+        Some(&[
             entry(0, wgpu::BufferBindingType::Uniform),
             entry(1, storage(false)),
             entry(2, storage(false)),
             entry(3, storage(true)),
             entry(4, storage(true)),
-        ],
-    });
-    let pipeline_layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("ramp"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipeline = |entry: &'static str| {
-        dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
+        ]),
+    )?;
     let stages = [
-        pipeline("ramp_pad"),
-        pipeline("ramp_multiply"),
-        pipeline("ramp_crop"),
+        program.kernel(ctx, "ramp_pad")?.0,
+        program.kernel(ctx, "ramp_multiply")?.0,
+        program.kernel(ctx, "ramp_crop")?.0,
     ];
     let (cone, sdd) = match g.beam {
         _ if per_view.is_some() => (2, 0.0),
@@ -318,7 +303,7 @@ pub fn filter_projections(
             let p = &stages[stage];
             let bind = ctx.bind_group(
                 "ramp",
-                &layout,
+                &p.layout,
                 &[
                     ubuf.as_entire_binding(),
                     lbuf.as_entire_binding(),
@@ -331,7 +316,7 @@ pub fn filter_projections(
                 label: Some("ramp"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(p);
+            pass.set_pipeline(&p.pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         };

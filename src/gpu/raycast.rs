@@ -48,7 +48,8 @@
 //!   would have to prefilter.
 
 use super::context::{
-    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, LLVMPIPE_LOOP_LIMIT,
+    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, Kernel,
+    LLVMPIPE_LOOP_LIMIT,
 };
 use super::gradient::gradient_method_id;
 use super::shaders;
@@ -1379,15 +1380,26 @@ pub struct SessionStats {
     /// Lookup tables uploaded (the 1-D and 2-D transfer functions' tables, the
     /// skipping's opacity prefix), each when its entries changed.
     pub table_uploads: usize,
-    /// Compute pipelines compiled: one per distinct ray-casting shader source, the
-    /// pre-classification and gradient passes and the min/max grid's, each once.
+    /// Compute pipelines the session compiled: one per distinct ray-casting shader
+    /// source, the pre-classification and gradient passes and the min/max grid's,
+    /// each when no earlier session on the device had compiled it.
     pub pipelines_compiled: usize,
-    /// Ray-casting pipelines taken from the device instead, compiled by an earlier
-    /// session on it ([`GpuContext::kept`]).
+    /// Pipelines taken from the device instead, compiled by an earlier session on it
+    /// ([`GpuContext::kept`], [`GpuContext::program`]).
     pub pipelines_shared: usize,
     /// Set-up products made: the B-spline coefficients, the pre-classified colours,
     /// the gradient volume and the skipping's min/max grid, each when its key changed.
     pub prepare_passes: usize,
+}
+
+impl SessionStats {
+    /// Counts a pipeline the session asked the device for: compiled now, or taken.
+    fn count_pipeline(&mut self, made: bool) {
+        match made {
+            true => self.pipelines_compiled += 1,
+            false => self.pipelines_shared += 1,
+        }
+    }
 }
 
 /// How many ray-casting pipelines (one per generated shader source) a session keeps;
@@ -1411,14 +1423,6 @@ fn table_key(entries: &[[f32; 4]], extra: &[u32]) -> Vec<u32> {
     let mut k: Vec<u32> = bytemuck::cast_slice(entries).to_vec();
     k.extend_from_slice(extra);
     k
-}
-
-/// The set-up passes' shader (`raycast_prepare.wgsl`), its layout and the pipelines
-/// of the entry points used so far.
-struct PreparePipelines {
-    module: wgpu::ShaderModule,
-    layout: wgpu::BindGroupLayout,
-    pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
 }
 
 /// A volume on the device for many frames: the GPU ray caster's persistent state.
@@ -1497,8 +1501,9 @@ pub struct RaycastSession<'c> {
     /// layout), least recently used first; the device keeps them for other sessions
     /// too ([`GpuContext::kept`]).
     pipelines: Vec<((String, bool), Arc<wgpu::ComputePipeline>)>,
-    prepare_pipelines: Option<PreparePipelines>,
-    minmax_pipeline: Option<super::skip::MinMaxPipeline>,
+    /// The set-up passes' and the min/max grid's pipelines used so far
+    /// ([`session_kernel`]).
+    kernels: Vec<(&'static str, Kernel)>,
     /// The interpolating B-splines' coefficients, on the host and as a texture.
     coefficients: Option<(Grid<f32>, wgpu::Texture)>,
     /// What a brick was given, prefiltered over the whole volume
@@ -1647,8 +1652,7 @@ impl<'c> RaycastSession<'c> {
             skip_off,
             no_segments,
             pipelines: Vec::new(),
-            prepare_pipelines: None,
-            minmax_pipeline: None,
+            kernels: Vec::new(),
             coefficients: None,
             given: Prefiltered::default(),
             lut: None,
@@ -2031,14 +2035,9 @@ impl<'c> RaycastSession<'c> {
                         &interleave(&rgba[0], &rgba[1], &rgba[2], Some(&rgba[3])),
                     )?
                 } else {
-                    let (layout, p) = prepare_pipeline(
-                        ctx,
-                        &mut self.prepare_pipelines,
-                        &mut self.stats,
-                        "preclassify",
-                    )?;
+                    let k = prepare_kernel(ctx, &mut self.kernels, &mut self.stats, "preclassify")?;
                     let volume = self.volume.as_ref().expect("uploaded above");
-                    run_prepare(ctx, layout, p, &params, volume, lut_buf, dims)?
+                    run_prepare(ctx, &k, &params, volume, lut_buf, dims)?
                 };
                 self.preclassified = Some(Cached { key, value });
                 self.stats.prepare_passes += 1;
@@ -2059,14 +2058,14 @@ impl<'c> RaycastSession<'c> {
                     };
                     ctx.upload_rgba(dims, &interleave(&g[0], &g[1], &g[2], None))?
                 } else {
-                    let (layout, p) = prepare_pipeline(
+                    let k = prepare_kernel(
                         ctx,
-                        &mut self.prepare_pipelines,
+                        &mut self.kernels,
                         &mut self.stats,
                         "precompute_gradients",
                     )?;
                     let volume = self.volume.as_ref().expect("uploaded above");
-                    run_prepare(ctx, layout, p, &params, volume, lut_buf, dims)?
+                    run_prepare(ctx, &k, &params, volume, lut_buf, dims)?
                 };
                 self.gradients = Some(Cached { key, value });
                 self.stats.prepare_passes += 1;
@@ -2094,18 +2093,18 @@ impl<'c> RaycastSession<'c> {
             ];
             if !fresh(&self.minmax, &key) {
                 self.minmax = None;
-                let had_pipeline = self.minmax_pipeline.is_some();
+                let (kernels, stats) = (&mut self.kernels, &mut self.stats);
                 let value = super::skip::min_max_buffer_with(
                     ctx,
-                    &mut self.minmax_pipeline,
                     exact_tex,
                     sampled_grid,
-                    settings.block_size,
-                    radius,
+                    (settings.block_size, radius),
+                    &mut || {
+                        session_kernel(kernels, stats, "skip_minmax", || {
+                            super::skip::minmax_kernel(ctx)
+                        })
+                    },
                 )?;
-                if !had_pipeline && self.minmax_pipeline.is_some() {
-                    self.stats.pipelines_compiled += 1;
-                }
                 self.minmax = Some(Cached { key, value });
                 self.stats.prepare_passes += 1;
             }
@@ -2271,10 +2270,7 @@ impl<'c> RaycastSession<'c> {
                 let module = ctx.shader("raycast.wgsl", &key.0)?;
                 compute_pipeline(ctx, "raycast", &module, "raycast", layout)
             })?;
-            match made {
-                true => self.stats.pipelines_compiled += 1,
-                false => self.stats.pipelines_shared += 1,
-            }
+            self.stats.count_pipeline(made);
             self.pipelines.push((key, pipeline));
         }
         Ok(self.pipelines.len() - 1)
@@ -2367,51 +2363,51 @@ fn interleave(r: &Grid<f32>, g: &Grid<f32>, b: &Grid<f32>, a: Option<&Grid<f32>>
         .collect()
 }
 
-/// The layout and pipeline of one of `raycast_prepare.wgsl`'s entry points, compiled
-/// into `slot` on first use.
-fn prepare_pipeline<'s>(
+/// The bindings of `raycast_prepare.wgsl`.
+const PREPARE_BINDINGS: [wgpu::BindGroupLayoutEntry; 4] = [
+    buffer_entry(0, wgpu::BufferBindingType::Uniform),
+    texture_entry(1, false),
+    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
+    super::context::rgba_storage_entry(3),
+];
+
+/// The session's pipeline `name` from `kernels`, or, on its first use in the session,
+/// from `get` (the device's kept programs, [`GpuContext::program`]), counted in `stats`
+/// as compiled or taken.
+fn session_kernel(
+    kernels: &mut Vec<(&'static str, Kernel)>,
+    stats: &mut SessionStats,
+    name: &'static str,
+    get: impl FnOnce() -> Result<(Kernel, bool)>,
+) -> Result<Kernel> {
+    if let Some((_, k)) = kernels.iter().find(|(n, _)| *n == name) {
+        return Ok(k.clone());
+    }
+    let (kernel, made) = get()?;
+    stats.count_pipeline(made);
+    kernels.push((name, kernel.clone()));
+    Ok(kernel)
+}
+
+/// The session's pipeline of one of `raycast_prepare.wgsl`'s entry points
+/// ([`session_kernel`]).
+fn prepare_kernel(
     ctx: &GpuContext,
-    slot: &'s mut Option<PreparePipelines>,
+    kernels: &mut Vec<(&'static str, Kernel)>,
     stats: &mut SessionStats,
     entry: &'static str,
-) -> Result<(&'s wgpu::BindGroupLayout, &'s wgpu::ComputePipeline)> {
-    let p = match slot {
-        Some(p) => p,
-        None => {
-            let module = ctx.shader("raycast_prepare.wgsl", &prepare_shader())?;
-            let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("prepare"),
-                entries: &[
-                    buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                    texture_entry(1, false),
-                    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
-                    super::context::rgba_storage_entry(3),
-                ],
-            });
-            slot.insert(PreparePipelines {
-                module,
-                layout,
-                pipelines: Vec::new(),
-            })
-        }
-    };
-    let i = match p.pipelines.iter().position(|(e, _)| *e == entry) {
-        Some(i) => i,
-        None => {
-            let pipeline = compute_pipeline(ctx, entry, &p.module, entry, &p.layout)?;
-            stats.pipelines_compiled += 1;
-            p.pipelines.push((entry, pipeline));
-            p.pipelines.len() - 1
-        }
-    };
-    Ok((&p.layout, &p.pipelines[i].1))
+) -> Result<Kernel> {
+    session_kernel(kernels, stats, entry, || {
+        let bindings = Some(&PREPARE_BINDINGS[..]);
+        ctx.program("raycast_prepare.wgsl", &prepare_shader(), bindings)?
+            .kernel(ctx, entry)
+    })
 }
 
 /// Runs one of `raycast_prepare.wgsl`'s passes into a new RGBA texture.
 fn run_prepare(
     ctx: &GpuContext,
-    layout: &wgpu::BindGroupLayout,
-    pipeline: &wgpu::ComputePipeline,
+    Kernel { layout, pipeline }: &Kernel,
     params: &RaycastParams,
     volume: &wgpu::Texture,
     lut: &wgpu::Buffer,

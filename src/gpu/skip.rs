@@ -6,7 +6,7 @@
 //! f32 grid bit for bit. The per-ray walk runs inside the ray caster
 //! (`shaders/shared/skip.wgsl`).
 
-use super::context::{buffer_entry, compute_pipeline, texture_entry, GpuContext};
+use super::context::{buffer_entry, texture_entry, GpuContext, Kernel};
 use crate::cpu::grid::Grid;
 use crate::cpu::skip::{cell_count, MinMaxGrid};
 use crate::error::Result;
@@ -29,30 +29,6 @@ pub struct SkipGridParams {
 /// (llvmpipe stops every loop of an invocation after 65535 iterations in total).
 const MAX_PER_INVOCATION: usize = 60_000;
 
-/// The compiled grid-building pipeline (`shaders/skip_minmax.wgsl`), for a caller that
-/// builds several grids (a `gpu::raycast::RaycastSession` keeps one).
-pub struct MinMaxPipeline {
-    layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::ComputePipeline,
-}
-
-impl MinMaxPipeline {
-    /// Compiles the shader and makes the pipeline.
-    pub fn new(ctx: &GpuContext) -> Result<Self> {
-        let module = ctx.shader("skip_minmax.wgsl", &super::shaders::resolve("skip_minmax"))?;
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("skip minmax"),
-            entries: &[
-                buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                texture_entry(1, false),
-                buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
-            ],
-        });
-        let pipeline = compute_pipeline(ctx, "skip_minmax", &module, "skip_minmax", &layout)?;
-        Ok(MinMaxPipeline { layout, pipeline })
-    }
-}
-
 /// Builds the grid of `volume` (an `R32Float` texture of `dims`) into a storage buffer
 /// of `[min, max]` pairs (x fastest). Falls back to the CPU build (identical values)
 /// when a cell's footprint is too large for one workgroup's loop on a CPU adapter.
@@ -63,19 +39,37 @@ pub fn min_max_buffer(
     block: usize,
     radius: usize,
 ) -> Result<wgpu::Buffer> {
-    min_max_buffer_with(ctx, &mut None, Some(volume), values, block, radius)
+    let kernel = &mut || Ok(minmax_kernel(ctx)?.0);
+    min_max_buffer_with(ctx, Some(volume), values, (block, radius), kernel)
 }
 
-/// [`min_max_buffer`] with the pipeline kept in `pipeline`: compiled there on first use
-/// (and left `None` when the CPU builds the grid). Without `volume` (no `R32Float`
-/// texture of the values on the device) the CPU builds it.
-pub fn min_max_buffer_with(
+/// The bindings of `shaders/skip_minmax.wgsl`.
+const MINMAX_BINDINGS: [wgpu::BindGroupLayoutEntry; 3] = [
+    buffer_entry(0, wgpu::BufferBindingType::Uniform),
+    texture_entry(1, false),
+    buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
+];
+
+/// The grid's pipeline (`shaders/skip_minmax.wgsl: skip_minmax`) from the device's kept
+/// programs, and whether it was compiled now ([`super::context::Program::kernel`]).
+pub(crate) fn minmax_kernel(ctx: &GpuContext) -> Result<(Kernel, bool)> {
+    ctx.program(
+        "skip_minmax.wgsl",
+        &super::shaders::resolve("skip_minmax"),
+        Some(&MINMAX_BINDINGS),
+    )?
+    .kernel(ctx, "skip_minmax")
+}
+
+/// [`min_max_buffer`] of `(block, radius)`, built on the CPU without `volume` (no
+/// `R32Float` texture of the values on the device); `kernel` gives the pipeline when
+/// the device builds it (a renderer session's own, [`minmax_kernel`]).
+pub(crate) fn min_max_buffer_with(
     ctx: &GpuContext,
-    pipeline: &mut Option<MinMaxPipeline>,
     volume: Option<&wgpu::Texture>,
     values: &Grid<f32>,
-    block: usize,
-    radius: usize,
+    (block, radius): (usize, usize),
+    kernel: &mut dyn FnMut() -> Result<Kernel>,
 ) -> Result<wgpu::Buffer> {
     let dims = values.dims;
     let cells = cell_count(dims, block);
@@ -84,19 +78,17 @@ pub fn min_max_buffer_with(
     let too_long = ctx.summary.is_cpu() && foot.pow(3) / 64 > MAX_PER_INVOCATION;
     let Some(volume) = volume.filter(|_| !too_long) else {
         let g = crate::cpu::skip::min_max_grid(values, block, radius);
-        return Ok(ctx
+        let buffer = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("skip minmax"),
                 contents: bytemuck::cast_slice(&g.minmax),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            }));
+            });
+        return Ok(buffer);
     };
     let dev = &ctx.device;
-    let MinMaxPipeline { layout, pipeline } = match pipeline {
-        Some(p) => p,
-        None => pipeline.insert(MinMaxPipeline::new(ctx)?),
-    };
+    let Kernel { layout, pipeline } = kernel()?;
     let out = ctx.storage_buffer("skip minmax", (n_cells * 8) as u64)?;
     let view = volume.create_view(&Default::default());
     // Slabs of cell rows per submission keep each dispatch short on slow adapters.
@@ -121,7 +113,7 @@ pub fn min_max_buffer_with(
         });
         let bind = ctx.bind_group(
             "skip minmax",
-            layout,
+            &layout,
             &[
                 pbuf.as_entire_binding(),
                 wgpu::BindingResource::TextureView(&view),
@@ -131,7 +123,7 @@ pub fn min_max_buffer_with(
         let mut enc = dev.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(pipeline);
+            pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(cells[0] as u32, cells[1] as u32, nz as u32);
         }

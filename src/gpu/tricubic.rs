@@ -53,27 +53,17 @@ pub fn sample_fast(
         ctx.require_float32_filtering()?;
     }
     let dev = &ctx.device;
-    let module = ctx.shader(
-        "tricubic_points.wgsl",
-        &super::shaders::resolve("tricubic_points"),
-    )?;
     let entry = if hardware {
         "sample_points_hw"
     } else {
         "sample_points_exact"
     };
-    let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("tricubic points"),
-        layout: None,
-        module: &module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(Error::Gpu(format!("pipeline tricubic points failed: {e}")));
-    }
+    let super::context::Kernel { layout, pipeline } = ctx.kernel(
+        "tricubic_points.wgsl",
+        &super::shaders::resolve("tricubic_points"),
+        None,
+        entry,
+    )?;
     let n = points.len();
     let count = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("tricubic count"),
@@ -99,11 +89,7 @@ pub fn sample_fast(
     if hardware {
         resources.push(wgpu::BindingResource::Sampler(&sampler));
     }
-    let bind = ctx.bind_group(
-        "tricubic points",
-        &pipeline.get_bind_group_layout(0),
-        &resources,
-    );
+    let bind = ctx.bind_group("tricubic points", &layout, &resources);
     let mut enc = dev.create_command_encoder(&Default::default());
     {
         let mut pass = enc.begin_compute_pass(&Default::default());
