@@ -268,7 +268,8 @@ fn bricks_past_the_texture_limit_render_the_unsplit_image() {
 /// others cast only the rays of their rectangles (`gpu::raycast::bricks_seen`), and the
 /// image is still the unsplit one (MIP bit for bit, DVR within the regrouped sums, MIDA
 /// and shadowed iso-surfaces handed from brick to brick through the bricks in view, the
-/// shadow rays through all of them).
+/// shadow rays through all of them); turned away, no brick is cast and the image is the
+/// unsplit one.
 #[test]
 fn bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one() {
     let Some(ctx) = gpu("bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one") else {
@@ -335,6 +336,33 @@ fn bricks_out_of_view_are_skipped_and_the_image_is_the_unsplit_one() {
             bricks.len()
         );
         assert!(worst <= bound * top.max(1.0), "{mode:?}: {worst:e}");
+        // Turned away from the volume (the eye outside it): no brick is cast, and the
+        // image is the unsplit one, every pixel missing the volume.
+        let mut away = req.clone();
+        away.scene.distance = None;
+        let (_, mut camera, _) =
+            voxlab::jobs::render::build_view(&away.scene, &volume, false).unwrap();
+        (camera.forward, camera.right) = (-camera.forward, -camera.right);
+        let seen = bricks_seen(&camera, volume.affine(), &bricks);
+        assert!(
+            seen.iter().all(Option::is_none),
+            "{mode:?}: a brick in view"
+        );
+        let want = RaycastSession::new(ctx, &volume)
+            .unwrap()
+            .render(&tf, &camera, &settings, &|_, _| {})
+            .unwrap()
+            .output;
+        let got = render_bricked(ctx, &volume, &tf, &camera, &settings, cut, &|_, _| {}).unwrap();
+        assert!(
+            got.output.image.data == want.image.data,
+            "{mode:?}: the image of no brick differs from the unsplit one"
+        );
+        assert_eq!(got.output.total_samples, 0, "{mode:?}: samples taken");
+        assert_eq!(
+            want.total_samples, 0,
+            "{mode:?}: the unsplit render took samples"
+        );
     }
 }
 
