@@ -422,13 +422,12 @@ fn finish_multi(st: Carried) -> Pixel {
 
 @compute @workgroup_size(8, 8)
 fn multi(@builtin(global_invocation_id) id: vec3<u32>) {
-    let col = id.x;
-    let local_row = id.y;
-    if (col >= params.image.x || local_row >= params.flags.w) {
+    if (id.x >= params.tile.z || id.y >= params.tile.w) {
         return;
     }
-    let row = params.flags.z + local_row;
-    let idx = local_row * params.image.x + col;
+    let col = params.tile.x + id.x;
+    let row = params.tile.y + id.y;
+    let idx = id.y * params.tile.z + id.x;
     let carried = params.carry.x == 1u;
     var st = Carried(vec4<f32>(0.0), vec4<f32>(0.0));
     if (carried) {

@@ -483,6 +483,7 @@ fn multi_params_layout_agrees() {
         ("own_lo", offset_of!(MultiParams, own_lo)),
         ("own_hi", offset_of!(MultiParams, own_hi)),
         ("carry", offset_of!(MultiParams, carry)),
+        ("tile", offset_of!(MultiParams, tile)),
     ];
     assert_eq!(members.len(), rust.len(), "member count");
     for ((wname, woff), (rname, roff)) in members.iter().zip(&rust) {

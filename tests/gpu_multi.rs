@@ -332,7 +332,7 @@ fn cells_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
     use voxlab::gpu::context::GpuContext;
     use voxlab::gpu::multi::{render, scene_split, CARRIED_VEC4S};
     use voxlab::gpu::plan::DeviceMemory;
-    use voxlab::gpu::raycast::bricks_in_view;
+    use voxlab::gpu::raycast::{bricks_in_view, bricks_seen};
     let Some(ctx) = common::gpu("multi cells") else {
         return;
     };
@@ -408,8 +408,9 @@ fn cells_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
             ..BASE
         },
     ];
-    // Cells no ray meets (behind the eye inside the scene) are skipped: counted here.
-    let mut skipped = 0;
+    // Cells no ray meets (behind the eye inside the scene) are skipped, and the others
+    // cast the pixels whose rays may meet them: counted here.
+    let (mut skipped, mut cast, mut every) = (0, 0, 0);
     for case in cases {
         let (vols, _, s) = scene(&case);
         for (view, az, el, dist, projection) in views {
@@ -453,6 +454,9 @@ fn cells_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
                     .iter()
                     .filter(|&&v| !v)
                     .count();
+                let seen = bricks_seen(&cam, cut.affine, &cut.boxes);
+                cast += seen.iter().flatten().map(|r| r.len()).sum::<usize>();
+                every += seen.iter().flatten().count() * cam.width * cam.height;
                 let got = render(c, &vols, &cam, &s, &|_, _| {}).unwrap();
                 let line = got.split.as_deref().expect("the split's line");
                 assert!(
@@ -489,4 +493,6 @@ fn cells_past_the_texture_limit_or_the_memory_render_the_unsplit_image() {
         }
     }
     assert!(skipped > 0, "no cell was out of view");
+    eprintln!("{skipped} cells skipped; the cells in view cast {cast} of {every} rays");
+    assert!(cast * 2 < every, "{cast} rays cast of {every}");
 }

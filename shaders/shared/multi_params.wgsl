@@ -21,7 +21,7 @@ struct MultiParams {
     misc: vec4<f32>,
     // width, height, mode, filter (0 nearest, 1 trilinear).
     image: vec4<u32>,
-    // volumes, back-to-front, first row of this tile, rows in this tile.
+    // volumes, back-to-front, unused ×2.
     flags: vec4<u32>,
     // Rows of volume i's world-to-index affine: to_index[3 i + r].
     to_index: array<vec4<f32>, 9>,
@@ -46,4 +46,7 @@ struct MultiParams {
     // x = 1: read and write each ray's carried state (a split render's cells);
     // y = 1: finish the pixels (the last cell, or not split); unused ×2.
     carry: vec4<u32>,
+    // The pixels this dispatch casts: first column, first row, columns, rows (of the
+    // frame image.xy; one invocation each, row-major in the output buffers).
+    tile: vec4<u32>,
 }

@@ -70,7 +70,7 @@ pub struct MultiParams {
     pub misc: [f32; 4],
     /// Width, height, mode, filter.
     pub image: [u32; 4],
-    /// Volumes, back-to-front, first row of the tile, rows in the tile.
+    /// Volumes, back-to-front, unused ×2.
     pub flags: [u32; 4],
     /// Rows of each volume's world → index affine (`3 i + r`).
     pub to_index: [[f32; 4]; 9],
@@ -94,6 +94,9 @@ pub struct MultiParams {
     /// x = 1: read and write each ray's carried state ([`CARRIED_VEC4S`] vec4 a pixel);
     /// y = 1: finish the pixels (the last cell, or not split); unused ×2.
     pub carry: [u32; 4],
+    /// The pixels a dispatch casts: first column, first row, columns, rows (of the
+    /// frame `image.xy`; one invocation each, row-major in the output buffers).
+    pub tile: [u32; 4],
 }
 
 /// The vec4s a pixel's ray hands the next cell of a split render
@@ -229,7 +232,7 @@ pub fn multi_params(
             volumes.len() as u32,
             (settings.compositing == Compositing::BackToFront) as u32,
             0,
-            camera.height as u32,
+            0,
         ],
         gradient: [
             (settings.gradient == GradientMethod::Forward) as u32,
@@ -240,6 +243,7 @@ pub fn multi_params(
         own_lo: [-f32::MAX; 4],
         own_hi: [f32::MAX; 4],
         carry: [0, 1, 0, 0],
+        tile: [0, 0, camera.width as u32, camera.height as u32],
         ..Default::default()
     };
     let mut base = 0usize;
@@ -688,10 +692,11 @@ pub fn render(
     let mut upload = 0.0;
     let mut times = super::context::BandTimes::default();
     // One pass: the volumes (whole, or a cell's parts from voxel `origin` on) on the
-    // device, then the bands of rows.
+    // device, then the bands of rows of the pixels `rect` (`image` and `counts` its
+    // size).
     let mut pass = |parts: &[Option<(Volume<f32>, [usize; 3])>],
                     mut params: MultiParams,
-                    carry: Option<&mut [[f32; 4]]>,
+                    (rect, carry): (&PixelRect, Option<&mut [[f32; 4]]>),
                     image: &mut Frame,
                     counts: &mut [u32],
                     progress: &(dyn Fn(usize, usize) + Sync)|
@@ -721,15 +726,18 @@ pub fn render(
         let bands = render_bands(
             ctx,
             (&pipeline, "multi"),
-            rows_per_band(ctx, w, h, carried),
-            (&PixelRect::whole(w, h), [w, h]),
+            rows_per_band(ctx, rect.width(), rect.height(), carried),
+            (rect, [w, h]),
             (image, counts),
             carry,
             progress,
             |band, out_buf, cnt_buf| {
-                let (row0, rows) = (band.rows.start, band.rows.len());
-                params.flags[2] = row0 as u32;
-                params.flags[3] = rows as u32;
+                params.tile = [
+                    band.cols.start as u32,
+                    band.rows.start as u32,
+                    band.width() as u32,
+                    band.height() as u32,
+                ];
                 let pbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("multi params"),
                     contents: bytemuck::bytes_of(&params),
@@ -758,7 +766,15 @@ pub fn render(
     let line = match &split {
         None => {
             let whole: Vec<_> = values.into_iter().map(|v| Some((v, [0; 3]))).collect();
-            pass(&whole, params, None, &mut image, &mut counts, progress)?;
+            let whole_frame = (&PixelRect::whole(w, h), None);
+            pass(
+                &whole,
+                params,
+                whole_frame,
+                &mut image,
+                &mut counts,
+                progress,
+            )?;
             None
         }
         Some(cut) => {
@@ -767,15 +783,21 @@ pub fn render(
             if settings.mode == Mode::Dvr && settings.compositing == Compositing::BackToFront {
                 order.reverse();
             }
-            // A cell no ray meets holds none of their steps: skipped (one still runs, to
-            // finish the pixels, when none is in view).
-            let in_view = super::raycast::bricks_in_view(camera, cut.affine, &cut.boxes);
-            let shown: Vec<usize> = order.iter().copied().filter(|&ci| in_view[ci]).collect();
+            // A cell no ray meets holds none of their steps: skipped. The others cast
+            // the pixels whose rays may meet them, but for the last, which casts them all
+            // and finishes each (it runs alone, finishing misses, when none is in view).
+            let seen = super::raycast::bricks_seen(camera, cut.affine, &cut.boxes);
+            let shown: Vec<usize> = order
+                .iter()
+                .copied()
+                .filter(|&ci| seen[ci].is_some())
+                .collect();
             let order = if shown.is_empty() {
                 vec![order[0]]
             } else {
                 shown
             };
+            let whole_frame = PixelRect::whole(w, h);
             for (j, &ci) in order.iter().enumerate() {
                 let cell = &cut.cells[ci];
                 let parts = cell
@@ -787,15 +809,22 @@ pub fn render(
                 let mut p = params;
                 p.own_lo = [cell.own_lo[0], cell.own_lo[1], cell.own_lo[2], 0.0];
                 p.own_hi = [cell.own_hi[0], cell.own_hi[1], cell.own_hi[2], 0.0];
-                p.carry = [1, (j + 1 == order.len()) as u32, 0, 0];
-                pass(
-                    &parts,
-                    p,
-                    Some(&mut carry),
-                    &mut image,
-                    &mut counts,
-                    &|_, _| {},
-                )?;
+                let last = j + 1 == order.len();
+                p.carry = [1, last as u32, 0, 0];
+                match seen[ci].as_ref().filter(|_| !last) {
+                    // The pixels' states alone change: the image and counts are the
+                    // last pass's.
+                    Some(rect) => {
+                        let mut tile = Frame::new(rect.width(), rect.height(), image.channels);
+                        let mut tile_counts = vec![0u32; rect.len()];
+                        let cast = (rect, Some(&mut carry[..]));
+                        pass(&parts, p, cast, &mut tile, &mut tile_counts, &|_, _| {})?;
+                    }
+                    None => {
+                        let cast = (&whole_frame, Some(&mut carry[..]));
+                        pass(&parts, p, cast, &mut image, &mut counts, &|_, _| {})?;
+                    }
+                }
                 progress((j + 1) * h / order.len(), h);
             }
             // The last cell finished each pixel into its first vec4.
