@@ -437,7 +437,7 @@ fn a_second_transform_takes_the_first_ones_pipelines() {
     assert_eq!(ctx.kept_made(), 0);
     let first = run(&[16, 8], 128, GpuFftVariant::Stockham);
     let made = ctx.kept_made();
-    assert!(made >= 2, "the layouts and a pipeline: {made}");
+    assert!(made >= 2, "a program and its pipeline: {made}");
     let again = run(&[16, 8], 128, GpuFftVariant::Stockham);
     assert_eq!(ctx.kept_made(), made, "a second transform made something");
     assert_eq!(first, again);

@@ -82,12 +82,11 @@
     reason = "Keeps the CPU twins easily comparable to the shaders"
 )]
 
-use super::context::GpuContext;
+use super::context::{GpuContext, Kernel};
 use super::plan::Pieces;
 use crate::cpu::dft::{twiddle, Direction, Normalization};
 use crate::error::{Error, Result};
 use rustfft::num_complex::Complex;
-use std::sync::Arc;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -1166,68 +1165,19 @@ fn transform(
     Ok(out)
 }
 
-/// The bind group layout of every FFT pass (parameters, source, destination, table) and
-/// its pipeline layout: one per device ([`GpuContext::kept`]), so that the pipelines
-/// made over it can be kept for every plan too.
-struct FftLayouts {
-    layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::PipelineLayout,
-    /// Named by the keys of the pipelines made over it.
-    id: u64,
-}
+/// The bindings of every FFT pass (parameters, source, destination, table).
+const FFT_BINDINGS: [wgpu::BindGroupLayoutEntry; 4] = [
+    super::context::buffer_entry(0, wgpu::BufferBindingType::Uniform),
+    super::context::buffer_entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
+    super::context::buffer_entry(2, wgpu::BufferBindingType::Storage { read_only: false }),
+    super::context::buffer_entry(3, wgpu::BufferBindingType::Storage { read_only: true }),
+];
 
-impl FftLayouts {
-    fn new(ctx: &GpuContext) -> Self {
-        use super::context::buffer_entry;
-        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("fft"),
-            entries: &[
-                buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                buffer_entry(1, storage(true)),
-                buffer_entry(2, storage(false)),
-                buffer_entry(3, storage(true)),
-            ],
-        });
-        let pipeline = ctx
-            .device
-            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("fft"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-        FftLayouts {
-            layout,
-            pipeline,
-            id: super::context::unique_id(),
-        }
-    }
-
-    /// The pipeline of `entry` in the WGSL `source` (named `file`) over these layouts,
-    /// kept by the device for every plan: compiled by the first that asks.
-    fn pipeline(
-        &self,
-        ctx: &GpuContext,
-        file: &str,
-        source: &str,
-        entry: &'static str,
-    ) -> Result<Arc<wgpu::ComputePipeline>> {
-        let key = format!("fft pipeline {entry}, layouts {}\n{source}", self.id);
-        let (pipeline, _) = ctx.kept(&key, || {
-            let module = ctx.shader(file, source)?;
-            Ok(ctx
-                .device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: Some(&self.pipeline),
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                }))
-        })?;
-        Ok(pipeline)
-    }
+/// The pipeline of `entry` in the WGSL `source` (named `file`) over [`FFT_BINDINGS`],
+/// kept by the device for every plan ([`GpuContext::program`]): compiled by the first
+/// that asks.
+fn fft_kernel(ctx: &GpuContext, file: &str, source: &str, entry: &str) -> Result<Kernel> {
+    Ok(ctx.kernel(file, source, Some(&FFT_BINDINGS), entry)?)
 }
 
 /// A GPU FFT made ready once for one shape, direction, normalisation and variant: the
@@ -1246,9 +1196,8 @@ pub struct GpuFftPlan {
     result: usize,
     /// The bind group layout and pipeline layout of every FFT pass (also used by the
     /// two-real split), one per device.
-    layouts: Arc<FftLayouts>,
     /// The passes' pipelines by entry point, kept by the device for every plan.
-    pipelines: Vec<(&'static str, Arc<wgpu::ComputePipeline>)>,
+    pipelines: Vec<(&'static str, Kernel)>,
     /// The tables the steps bind (twiddles, Bluestein's chirps and kernels).
     tables: Vec<wgpu::Buffer>,
     /// The second ping-pong buffer (`None` when there is no pass).
@@ -1389,17 +1338,12 @@ impl GpuFftPlan {
             })
             .collect();
         let dev = &ctx.device;
-        let in_storage = ctx.params_in_storage;
-        let (layouts, _) = ctx.kept(&format!("fft layouts, {in_storage}"), || {
-            Ok(FftLayouts::new(ctx))
-        })?;
         let mut plan = GpuFftPlan {
             shape: shape.to_vec(),
             total,
             factor,
             steps: Vec::with_capacity(planned.len()),
             result: 0,
-            layouts,
             pipelines: Vec::new(),
             tables: Vec::new(),
             pong: None,
@@ -1514,8 +1458,8 @@ impl GpuFftPlan {
                         .as_ref()
                         .expect("resolved for Bluestein's steps"),
                 };
-                let pl = plan.layouts.pipeline(ctx, file, source, entry)?;
-                plan.pipelines.push((entry, pl));
+                let kernel = fft_kernel(ctx, file, source, entry)?;
+                plan.pipelines.push((entry, kernel));
             }
             plan.steps.push(Step {
                 entry,
@@ -1603,9 +1547,15 @@ impl GpuFftPlan {
         let query = self.query.as_ref();
         let last = self.steps.len() - 1;
         for (i, step) in self.steps.iter().enumerate() {
+            let Kernel { layout, pipeline } = &self
+                .pipelines
+                .iter()
+                .find(|(e, _)| *e == step.entry)
+                .expect("every entry point has a pipeline")
+                .1;
             let bind = ctx.bind_group(
                 "fft pass",
-                &self.layouts.layout,
+                layout,
                 &[
                     step.uniform.as_entire_binding(),
                     buffer(step.src).as_entire_binding(),
@@ -1613,12 +1563,6 @@ impl GpuFftPlan {
                     self.tables[step.table].as_entire_binding(),
                 ],
             );
-            let pipeline = &self
-                .pipelines
-                .iter()
-                .find(|(e, _)| *e == step.entry)
-                .expect("every entry point has a pipeline")
-                .1;
             let (x, y) = workgroups(ctx, step.invocations);
             let mut cpass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(step.entry),
@@ -1749,9 +1693,8 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
     )?;
     let dev = &ctx.device;
     let source = super::shaders::resolve("fft_two_real");
-    let pipeline = plan
-        .layouts
-        .pipeline(ctx, "fft_two_real.wgsl", &source, "two_real_split")?;
+    let Kernel { layout, pipeline } =
+        fft_kernel(ctx, "fft_two_real.wgsl", &source, "two_real_split")?;
     let z: Vec<[f32; 2]> = a.iter().zip(b).map(|(&x, &y)| [x, y]).collect();
     let zbuf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("two real z"),
@@ -1777,7 +1720,7 @@ pub fn two_real_ffts(ctx: &GpuContext, a: &[f32], b: &[f32]) -> Result<TwoSpectr
     // Binding 3 (twiddles) is unused by the split; it is bound to the input again.
     let bind = ctx.bind_group(
         "two real split",
-        &plan.layouts.layout,
+        &layout,
         &[
             ubuf.as_entire_binding(),
             spectrum.as_entire_binding(),
