@@ -1177,7 +1177,7 @@ const FFT_BINDINGS: [wgpu::BindGroupLayoutEntry; 4] = [
 /// kept by the device for every plan ([`GpuContext::program`]): compiled by the first
 /// that asks.
 fn fft_kernel(ctx: &GpuContext, file: &str, source: &str, entry: &str) -> Result<Kernel> {
-    Ok(ctx.kernel(file, source, Some(&FFT_BINDINGS), entry)?)
+    ctx.kernel(file, source, Some(&FFT_BINDINGS), entry)
 }
 
 /// A GPU FFT made ready once for one shape, direction, normalisation and variant: the
