@@ -207,14 +207,6 @@ impl Program {
     }
 }
 
-/// A number no other call returns in this process: for a kept layout, whose pipelines'
-/// keys name it, so that a pipeline is only ever taken with the layout it was made over
-/// (a layout dropped from [`GpuContext::kept`] and made again is another layout).
-pub(crate) fn unique_id() -> u64 {
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-}
-
 /// The usage of every parameter block's buffer: bound as a uniform buffer, or as a
 /// read-only storage buffer where [`GpuContext::params_in_storage`].
 pub const PARAMS_USAGE: wgpu::BufferUsages =
@@ -490,11 +482,11 @@ impl GpuContext {
     /// The object kept under `key` for every job on this device, made by `make` when
     /// it is not there (then `true`); at most [`KEPT_OBJECTS`] are kept, the least
     /// recently used dropped first (those in use live on). For what is costly to make
-    /// and the same for every job that asks: the ray caster's compiled pipelines and
-    /// the layouts they bind, so that a second session (a one-shot render, a brick, a
-    /// call from Python) compiles nothing the first did. The key must name everything
-    /// the object depends on, [`GpuContext::params_in_storage`] included, and a
-    /// pipeline's the id of the layout it was made over. One thread makes at a time.
+    /// and the same for every job that asks: the compiled programs
+    /// ([`GpuContext::program`]), so that a second job (a one-shot render, a brick, a
+    /// call from Python) compiles nothing the first did, and the ray caster's sampler
+    /// and placeholder texture. The key must name everything the object depends on,
+    /// [`GpuContext::params_in_storage`] included. One thread makes at a time.
     pub fn kept<T: std::any::Any + Send + Sync>(
         &self,
         key: &str,

@@ -48,8 +48,7 @@
 //!   would have to prefilter.
 
 use super::context::{
-    buffer_entry, compute_pipeline, render_bands, texture_entry, GpuContext, Kernel,
-    LLVMPIPE_LOOP_LIMIT,
+    buffer_entry, render_bands, texture_entry, GpuContext, Kernel, LLVMPIPE_LOOP_LIMIT,
 };
 use super::gradient::gradient_method_id;
 use super::shaders;
@@ -1490,17 +1489,17 @@ pub struct RaycastSession<'c> {
     compact_on: bool,
     compact: Option<wgpu::Texture>,
     /// What a frame binds: its textures filterable where the device filters f32 ones.
-    frame: Arc<FrameLayout>,
+    frame: Arc<FrameResources>,
     /// On a device without `FLOAT32_FILTERABLE`: what hardware-filtered frames bind,
     /// every texture filterable (they read only the compact texture: [`check_device`]).
-    compact_filtering: Option<Arc<FrameLayout>>,
+    compact_filtering: Option<Arc<FrameResources>>,
     /// Buffers bound where skipping is off, and where there is no clipping mesh.
     skip_off: (wgpu::Buffer, wgpu::Buffer),
     no_segments: wgpu::Buffer,
     /// Ray-casting pipelines by shader source (and whether over the compact-filtering
     /// layout), least recently used first; the device keeps them for other sessions
     /// too ([`GpuContext::kept`]).
-    pipelines: Vec<((String, bool), Arc<wgpu::ComputePipeline>)>,
+    pipelines: Vec<((String, bool), Kernel)>,
     /// The set-up passes' and the min/max grid's pipelines used so far
     /// ([`session_kernel`]).
     kernels: Vec<(&'static str, Kernel)>,
@@ -1522,52 +1521,58 @@ pub struct RaycastSession<'c> {
     brick: Option<BrickPlacement>,
 }
 
-/// A frame's bind-group layout and sampler: every texture `filterable` (and a linear
-/// sampler) or none (a nearest one, for a device without f32 filtering).
-fn frame_layout(ctx: &GpuContext, filterable: bool) -> (wgpu::BindGroupLayout, wgpu::Sampler) {
+/// A frame's bindings: every texture `filterable` (and a filtering sampler) or none
+/// (for a device without f32 filtering).
+fn frame_bindings(filterable: bool) -> [wgpu::BindGroupLayoutEntry; 12] {
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-    let layout = ctx.bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("raycast"),
-        entries: &[
-            buffer_entry(0, wgpu::BufferBindingType::Uniform),
-            texture_entry(1, filterable),
-            texture_entry(2, filterable),
-            texture_entry(3, filterable),
-            wgpu::BindGroupLayoutEntry {
-                binding: 4,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Sampler(if filterable {
-                    wgpu::SamplerBindingType::Filtering
-                } else {
-                    wgpu::SamplerBindingType::NonFiltering
-                }),
-                count: None,
-            },
-            buffer_entry(5, storage(true)),
-            buffer_entry(6, storage(false)),
-            buffer_entry(7, storage(false)),
-            buffer_entry(8, storage(true)),
-            buffer_entry(9, storage(true)),
-            buffer_entry(10, storage(true)),
-            buffer_entry(11, storage(true)),
-        ],
-    });
-    let filter_mode = if filterable {
-        wgpu::FilterMode::Linear
-    } else {
-        wgpu::FilterMode::Nearest
-    };
-    (layout, ctx.clamp_sampler("linear clamp", filter_mode))
+    [
+        buffer_entry(0, wgpu::BufferBindingType::Uniform),
+        texture_entry(1, filterable),
+        texture_entry(2, filterable),
+        texture_entry(3, filterable),
+        wgpu::BindGroupLayoutEntry {
+            binding: 4,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Sampler(if filterable {
+                wgpu::SamplerBindingType::Filtering
+            } else {
+                wgpu::SamplerBindingType::NonFiltering
+            }),
+            count: None,
+        },
+        buffer_entry(5, storage(true)),
+        buffer_entry(6, storage(false)),
+        buffer_entry(7, storage(false)),
+        buffer_entry(8, storage(true)),
+        buffer_entry(9, storage(true)),
+        buffer_entry(10, storage(true)),
+        buffer_entry(11, storage(true)),
+    ]
 }
 
-/// The layout, sampler and placeholder texture a frame binds.
-struct FrameLayout {
-    layout: wgpu::BindGroupLayout,
+/// What a frame binds besides its data, kept by the device for every session: whether
+/// its textures bind filterable ([`frame_bindings`]), the sampler (linear where
+/// filterable, else nearest) and a placeholder texture.
+struct FrameResources {
+    filterable: bool,
     sampler: wgpu::Sampler,
     /// A 1×1×1 texture bound where a frame has no pre-classified or gradient volume.
     dummy: wgpu::Texture,
-    /// Named by the keys of the pipelines made over it.
-    id: u64,
+}
+
+impl FrameResources {
+    fn new(ctx: &GpuContext, filterable: bool, dummy: wgpu::Texture) -> Self {
+        let filter_mode = if filterable {
+            wgpu::FilterMode::Linear
+        } else {
+            wgpu::FilterMode::Nearest
+        };
+        FrameResources {
+            filterable,
+            sampler: ctx.clamp_sampler("linear clamp", filter_mode),
+            dummy,
+        }
+    }
 }
 
 impl<'c> RaycastSession<'c> {
@@ -1585,38 +1590,20 @@ impl<'c> RaycastSession<'c> {
         let (dims, range, grid) = checked_f32(ctx, volume)?;
         let filterable = ctx.features.contains(wgpu::Features::FLOAT32_FILTERABLE);
         let dev = &ctx.device;
-        // The layouts every session on the device binds (its pipelines are made over
-        // them: `raycast_pipeline`).
-        let in_storage = ctx.params_in_storage;
-        let (frame, _) = ctx.kept(
-            &format!("raycast frame layout, filterable {filterable}, {in_storage}"),
-            || {
-                let (layout, sampler) = frame_layout(ctx, filterable);
-                let dummy = ctx.rgba_texture([1, 1, 1], false)?;
-                Ok(FrameLayout {
-                    layout,
-                    sampler,
-                    dummy,
-                    id: super::context::unique_id(),
-                })
-            },
-        )?;
+        // The sampler and placeholder every session on the device binds.
+        let (frame, _) = ctx.kept(&format!("raycast frame, filterable {filterable}"), || {
+            let dummy = ctx.rgba_texture([1, 1, 1], false)?;
+            Ok(FrameResources::new(ctx, filterable, dummy))
+        })?;
         // Without f32 filtering, hardware-filtered frames that read only the compact
         // texture bind every texture filterable: an 8-bit placeholder for the others.
         let compact_filtering = match filterable {
             true => None,
             false => {
-                let key = format!("raycast compact-filtering layout, {in_storage}");
-                let (f, _) = ctx.kept(&key, || {
-                    let (layout, sampler) = frame_layout(ctx, true);
+                let (f, _) = ctx.kept("raycast frame, compact filtering", || {
                     let dummy =
                         ctx.upload_volume_texels([1, 1, 1], wgpu::TextureFormat::R8Unorm, &[0])?;
-                    Ok(FrameLayout {
-                        layout,
-                        sampler,
-                        dummy,
-                        id: super::context::unique_id(),
-                    })
+                    Ok(FrameResources::new(ctx, true, dummy))
                 })?;
                 Some(f)
             }
@@ -2146,12 +2133,8 @@ impl<'c> RaycastSession<'c> {
             .min((1 << 20) / w + 1)
             .max(1);
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let FrameLayout {
-            layout,
-            sampler,
-            dummy,
-            ..
-        } = self.frame_layout(compact_filtered);
+        let FrameResources { sampler, dummy, .. } = self.frame_resources(compact_filtered);
+        let Kernel { layout, pipeline } = &self.pipelines[pipeline].1;
         let textures_of = |c: &Option<Cached<wgpu::Texture>>, used: bool| match c {
             Some(c) if used => view(&c.value),
             _ => view(dummy),
@@ -2171,7 +2154,7 @@ impl<'c> RaycastSession<'c> {
         let mut counts = vec![0u32; w * h];
         let bands = render_bands(
             ctx,
-            (self.pipelines[pipeline].1.as_ref(), "raycast"),
+            (pipeline, "raycast"),
             rows_per_tile,
             (rect, [camera.width, camera.height]),
             (&mut image, &mut counts),
@@ -2242,8 +2225,8 @@ impl<'c> RaycastSession<'c> {
         })
     }
 
-    /// What a frame binds: the compact-filtering layout where it is one.
-    fn frame_layout(&self, compact_filtered: bool) -> &FrameLayout {
+    /// What a frame binds: the compact-filtering resources where it is one.
+    fn frame_resources(&self, compact_filtered: bool) -> &FrameResources {
         match &self.compact_filtering {
             Some(f) if compact_filtered => f.as_ref(),
             _ => self.frame.as_ref(),
@@ -2251,8 +2234,9 @@ impl<'c> RaycastSession<'c> {
     }
 
     /// The index in `self.pipelines` of the ray-casting pipeline of `source`, taken
-    /// from the device's kept objects or compiled when it is not there (dropping the
-    /// least recently used past [`PIPELINES_KEPT`]).
+    /// from the device's kept programs or compiled when it is not there
+    /// ([`GpuContext::program`]; the session drops its least recently used past
+    /// [`PIPELINES_KEPT`]).
     fn raycast_pipeline(&mut self, source: String, compact_filtered: bool) -> Result<usize> {
         let key = (source, compact_filtered);
         if let Some(i) = self.pipelines.iter().position(|(k, _)| *k == key) {
@@ -2263,15 +2247,12 @@ impl<'c> RaycastSession<'c> {
                 self.pipelines.remove(0);
             }
             let ctx = self.ctx;
-            let frame = self.frame_layout(compact_filtered);
-            let layout = &frame.layout;
-            let kept = format!("raycast pipeline, layout {}\n{}", frame.id, key.0);
-            let (pipeline, made) = ctx.kept(&kept, || {
-                let module = ctx.shader("raycast.wgsl", &key.0)?;
-                compute_pipeline(ctx, "raycast", &module, "raycast", layout)
-            })?;
+            let bindings = frame_bindings(self.frame_resources(compact_filtered).filterable);
+            let (kernel, made) = ctx
+                .program("raycast.wgsl", &key.0, Some(&bindings))?
+                .kernel(ctx, "raycast")?;
             self.stats.count_pipeline(made);
-            self.pipelines.push((key, pipeline));
+            self.pipelines.push((key, kernel));
         }
         Ok(self.pipelines.len() - 1)
     }
