@@ -113,3 +113,20 @@ fn opacity_functions_match_f64() {
         assert!(e <= 16.0, "{name}: {e:.1} ulps");
     }
 }
+
+/// An entry point a kept program lacks is a typed error naming it (the device's
+/// validation, caught), not a panic; the program's other entry points still compile.
+#[test]
+fn a_missing_entry_point_is_a_typed_error() {
+    let Some(ctx) = common::gpu("a_missing_entry_point_is_a_typed_error") else {
+        return;
+    };
+    let source = voxlab::gpu::shaders::resolve("probe");
+    let program = ctx.program("probe.wgsl", &source, None).unwrap();
+    let e = program
+        .kernel(ctx, "no_such_entry")
+        .expect_err("the shader has no such entry point");
+    assert!(matches!(e, voxlab::Error::Gpu(_)), "{e:?}");
+    assert!(e.to_string().contains("no_such_entry"), "{e}");
+    program.kernel(ctx, "saxpy").expect("the probe's entry point");
+}
