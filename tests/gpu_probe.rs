@@ -128,5 +128,7 @@ fn a_missing_entry_point_is_a_typed_error() {
         .expect_err("the shader has no such entry point");
     assert!(matches!(e, voxlab::Error::Gpu(_)), "{e:?}");
     assert!(e.to_string().contains("no_such_entry"), "{e}");
-    program.kernel(ctx, "saxpy").expect("the probe's entry point");
+    program
+        .kernel(ctx, "saxpy")
+        .expect("the probe's entry point");
 }
