@@ -791,7 +791,10 @@ fn markdown(r: &Report) -> String {
          (parity: max |Δ| / max |oracle| and relative L2, both within the case's tolerance, \
          no NaN/∞); a backend that fails is marked FAILED and not timed. GPU kernel = the \
          compute passes alone; end to end = upload + passes + readback; set-up (shaders, \
-         pipelines) is apart. Speedups are quoted against CPU f32, the fair baseline: the \
+         pipelines, parameter buffers) is apart: the device keeps the pipelines the warm-up \
+         compiled, so the timed runs' set-up is what a call pays once they are compiled \
+         (the warm-up's seconds, compilation included, are in the JSON's warmup_seconds). \
+         Speedups are quoted against CPU f32, the fair baseline: the \
          f64 oracle is slow by design. Throughput columns are CPU f64 / CPU f32 / GPU kernel.\n",
         r.warmup,
         r.runs,
