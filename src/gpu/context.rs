@@ -18,8 +18,9 @@
 //! - No adapter ⇒ [`Error::NoAdapter`] whose message says how to get one.
 //!
 //! Also the plumbing every family shares, so that families import it from here and
-//! never from each other: [`compute_pipeline`] (a pipeline over one bind group, its
-//! validation errors typed), the bind-group-layout entries [`buffer_entry`] and
+//! never from each other: [`GpuContext::program`] and [`GpuContext::kernel`] (compiled
+//! pipelines the device keeps for every job, their validation errors typed), the
+//! bind-group-layout entries [`buffer_entry`] and
 //! [`texture_entry`], [`LLVMPIPE_LOOP_LIMIT`], and the row-band loop of the per-pixel
 //! casters (`render_bands`: the ray caster, the adaptive and the multi-volume casters).
 //! The WGSL itself is assembled by `gpu::shaders`.
@@ -177,30 +178,7 @@ impl Program {
             return Ok((k.clone(), false));
         }
         let label = format!("{} {entry}", self.label);
-        let kernel = match &self.layout {
-            Some(layout) => Kernel {
-                pipeline: compute_pipeline(ctx, &label, &self.module, entry, layout)?,
-                layout: layout.clone(),
-            },
-            None => {
-                let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-                let pipeline =
-                    ctx.device
-                        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                            label: Some(&label),
-                            layout: None,
-                            module: &self.module,
-                            entry_point: Some(entry),
-                            compilation_options: Default::default(),
-                            cache: None,
-                        });
-                let layout = pipeline.get_bind_group_layout(0);
-                if let Some(e) = pollster::block_on(scope.pop()) {
-                    return Err(Error::Gpu(format!("pipeline {label} failed: {e}")));
-                }
-                Kernel { pipeline, layout }
-            }
-        };
+        let kernel = compute_pipeline(ctx, &label, &self.module, entry, self.layout.as_ref())?;
         ctx.kept.lock().unwrap_or_else(|e| e.into_inner()).1 += 1;
         kernels.push((entry.to_string(), kernel.clone()));
         Ok((kernel, true))
@@ -1127,32 +1105,40 @@ pub const fn rgba_storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// The compute pipeline of `entry` in `module` over the one bind group `layout`;
-/// validation errors become [`Error::Gpu`] naming `label`.
-pub fn compute_pipeline(
+/// The compute pipeline of `entry` in `module` over the one bind group `layout`, or,
+/// with `None`, over the layout its entry point's bindings imply, and the layout its
+/// bind groups are made over; validation errors become [`Error::Gpu`] naming `label`.
+/// [`Program::kernel`] calls it once per entry point and device.
+fn compute_pipeline(
     ctx: &GpuContext,
     label: &str,
     module: &wgpu::ShaderModule,
     entry: &str,
-    layout: &wgpu::BindGroupLayout,
-) -> Result<wgpu::ComputePipeline> {
+    layout: Option<&wgpu::BindGroupLayout>,
+) -> Result<Kernel> {
     let dev = &ctx.device;
     let scope = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pl = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
+    let pl = layout.map(|l| {
+        dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(l)],
+            immediate_size: 0,
+        })
     });
     let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
-        layout: Some(&pl),
+        layout: pl.as_ref(),
         module,
         entry_point: Some(entry),
         compilation_options: Default::default(),
         cache: None,
     });
+    let layout = match layout {
+        Some(l) => l.clone(),
+        None => pipeline.get_bind_group_layout(0),
+    };
     match pollster::block_on(scope.pop()) {
-        None => Ok(pipeline),
+        None => Ok(Kernel { pipeline, layout }),
         Some(e) => Err(Error::Gpu(format!("pipeline {label} failed: {e}"))),
     }
 }
